@@ -1,0 +1,605 @@
+//! The SFA node: optional linear SFA reduction, polynomial expansion, SFA.
+//!
+//! A node is a short pipeline of *stages*. Each stage expands its input to a
+//! degree (1 = no expansion), then applies SFA to a number of outputs:
+//!
+//! * `reduce_to = None`: one stage, `expand(degree)` then SFA to
+//!   `n_components` (linear SFA for degree 1, polynomial SFA otherwise);
+//! * `reduce_to = Some(k)`: the thesis's network node (section 3.4.2): linear
+//!   SFA to `k`, expansion of those `k` signals to `degree`, SFA to
+//!   `n_components`.
+//!
+//! Stages train one after another, each on a full pass over the data
+//! ([`SfaNode::partial_fit`] feeds the stage in training,
+//! [`SfaNode::finish_stage`] solves it and opens the next). Expansions are
+//! formed block by block and never materialised for the whole data set.
+//! If the reduction stage finds fewer than `k` directions above the
+//! tolerance it keeps those it has and reports the rank deficit; the final
+//! stage fails instead ([`SfaError::RankDeficient`]).
+
+use crate::error::{Result, SfaError};
+use crate::expansion::{expanded_dim, Expansion};
+use crate::solve::{self, DEFAULT_TOL};
+use crate::stats::{Accumulator, AccumulatorState};
+use crate::view::{Sample, View};
+use faer::linalg::matmul::matmul;
+use faer::{Accum, Mat, MatRef, Par};
+use rayon::prelude::*;
+
+/// Hyper-parameters of a node.
+#[derive(Clone, Debug, PartialEq)]
+pub struct NodeConfig {
+    /// Number of outputs (slowest first).
+    pub n_components: usize,
+    /// Degree of the polynomial expansion before the final SFA (1 = linear).
+    pub degree: usize,
+    /// Dimension of the linear SFA reduction before the expansion.
+    pub reduce_to: Option<usize>,
+    /// Relative tolerance below which covariance directions are dropped.
+    pub tol: f64,
+}
+
+impl NodeConfig {
+    /// Linear SFA with `n_components` outputs.
+    pub fn linear(n_components: usize) -> Self {
+        NodeConfig {
+            n_components,
+            degree: 1,
+            reduce_to: None,
+            tol: DEFAULT_TOL,
+        }
+    }
+
+    fn validate(&self) -> Result<()> {
+        if self.n_components == 0 {
+            return Err(SfaError::InvalidArgument("n_components must be at least 1".into()));
+        }
+        expanded_dim(1, self.degree)?; // checks the degree
+        if self.reduce_to == Some(0) {
+            return Err(SfaError::InvalidArgument("reduce_to must be at least 1".into()));
+        }
+        if !(self.tol.is_finite() && self.tol >= 0.0 && self.tol < 1.0) {
+            return Err(SfaError::InvalidArgument(format!(
+                "tol must be in [0, 1), got {}",
+                self.tol
+            )));
+        }
+        Ok(())
+    }
+}
+
+/// A solved stage: `y = (expand(x) - mean) @ projection`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SolutionState {
+    /// Mean of the expanded stage input (length `expanded_dim`).
+    pub mean: Vec<f64>,
+    /// Row-major `expanded_dim x n_out` projection.
+    pub projection: Vec<f64>,
+    /// Number of outputs actually produced.
+    pub n_out: usize,
+    /// Delta values of the outputs, ascending.
+    pub delta: Vec<f64>,
+    /// Number of covariance directions kept.
+    pub rank: usize,
+    /// Dropped covariance eigenvalues (the rank deficit is their count).
+    pub dropped: Vec<f64>,
+}
+
+/// Plain-data state of one stage.
+#[derive(Clone, Debug, PartialEq)]
+pub struct StageState {
+    pub degree: usize,
+    /// Requested number of outputs.
+    pub n_out: usize,
+    /// Dimension of the stage input before expansion.
+    pub input_dim: usize,
+    pub solution: Option<SolutionState>,
+    pub stats: Option<AccumulatorState>,
+}
+
+/// Plain-data state of a node (see [`SfaNode::state`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct NodeState {
+    pub config: NodeConfig,
+    /// Number of input features (0 before the first data).
+    pub n_features: usize,
+    /// Index of the stage currently being trained.
+    pub training_stage: usize,
+    pub stages: Vec<StageState>,
+}
+
+#[derive(Clone, Debug)]
+struct Stage {
+    degree: usize,
+    n_out: usize,
+    input_dim: usize,
+    expansion: Option<Expansion>,
+    acc: Option<Accumulator>,
+    solution: Option<SolutionState>,
+}
+
+impl Stage {
+    fn new(input_dim: usize, degree: usize, n_out: usize) -> Result<Self> {
+        let expansion = if degree > 1 {
+            Some(Expansion::new(input_dim, degree)?)
+        } else {
+            None
+        };
+        let ed = expanded_dim(input_dim, degree)?;
+        Ok(Stage {
+            degree,
+            n_out,
+            input_dim,
+            expansion,
+            acc: Some(Accumulator::new(ed)?),
+            solution: None,
+        })
+    }
+
+    fn expanded_dim(&self) -> usize {
+        self.expansion.as_ref().map_or(self.input_dim, |e| e.out_dim())
+    }
+
+    /// Sequential forward pass of `n` rows (row-major, `input_dim` wide).
+    fn apply(&self, input: &[f64], n: usize) -> Vec<f64> {
+        let sol = self.solution.as_ref().expect("stage solved");
+        let ed = self.expanded_dim();
+        let mut e = match &self.expansion {
+            Some(ex) => {
+                let mut out = vec![0.0; n * ed];
+                for (o, x) in out.chunks_mut(ed).zip(input.chunks(self.input_dim)) {
+                    ex.expand_row(x, o);
+                }
+                out
+            }
+            None => input[..n * ed].to_vec(),
+        };
+        for row in e.chunks_mut(ed) {
+            row.iter_mut().zip(&sol.mean).for_each(|(v, m)| *v -= m);
+        }
+        let m = sol.n_out;
+        let mut out = vec![0.0; n * m];
+        {
+            let lhs = MatRef::from_row_major_slice(&e, n, ed);
+            let rhs = MatRef::from_row_major_slice(&sol.projection, ed, m);
+            let dst = faer::MatMut::from_row_major_slice_mut(&mut out, n, m);
+            matmul(dst, Accum::Replace, lhs, rhs, 1.0, Par::Seq);
+        }
+        out
+    }
+
+    fn solve(&mut self, tol: f64, strict: bool) -> Result<()> {
+        let acc = self.acc.as_ref().ok_or_else(|| {
+            SfaError::NotFitted("this stage has no training statistics (they were not saved)".into())
+        })?;
+        let c = acc.covariance()?;
+        let cd = acc.derivative_covariance()?;
+        let ed = self.expanded_dim();
+        if strict && self.n_out > ed {
+            return Err(SfaError::InvalidArgument(format!(
+                "n_components ({}) exceeds the dimension of the (expanded) input ({ed})",
+                self.n_out
+            )));
+        }
+        let g = if strict {
+            solve::solve(cd.as_ref(), c.as_ref(), self.n_out, tol)?
+        } else {
+            solve::solve_up_to(cd.as_ref(), c.as_ref(), self.n_out.min(ed), tol)?
+        };
+        let n_out = g.values.len();
+        let projection = (0..ed)
+            .flat_map(|i| (0..n_out).map(move |j| (i, j)))
+            .map(|(i, j)| g.vectors[(i, j)])
+            .collect();
+        self.solution = Some(SolutionState {
+            mean: acc.mean()?,
+            projection,
+            n_out,
+            delta: g.values.clone(),
+            rank: g.rank,
+            dropped: g.dropped.clone(),
+        });
+        Ok(())
+    }
+}
+
+/// An SFA node. See the module documentation.
+#[derive(Clone, Debug)]
+pub struct SfaNode {
+    config: NodeConfig,
+    n_features: Option<usize>,
+    stages: Vec<Stage>,
+    training_stage: usize,
+}
+
+/// Rows per training block.
+const TRAIN_BLOCK: usize = 8192;
+/// Rows per parallel task in forward passes.
+const TASK_ROWS: usize = 256;
+
+impl SfaNode {
+    /// A new, untrained node.
+    pub fn new(config: NodeConfig) -> Result<Self> {
+        config.validate()?;
+        Ok(SfaNode {
+            config,
+            n_features: None,
+            stages: Vec::new(),
+            training_stage: 0,
+        })
+    }
+
+    /// The node's hyper-parameters.
+    pub fn config(&self) -> &NodeConfig {
+        &self.config
+    }
+
+    /// Number of input features, once known.
+    pub fn n_features(&self) -> Option<usize> {
+        self.n_features
+    }
+
+    /// Number of stages (training passes) the node needs: 1, or 2 with a
+    /// reduction.
+    pub fn n_stages(&self) -> usize {
+        if self.config.reduce_to.is_some() {
+            2
+        } else {
+            1
+        }
+    }
+
+    /// Index of the stage that [`partial_fit`](Self::partial_fit) feeds.
+    pub fn training_stage(&self) -> usize {
+        self.training_stage
+    }
+
+    /// Forgets all training.
+    pub fn reset(&mut self) {
+        self.n_features = None;
+        self.stages.clear();
+        self.training_stage = 0;
+    }
+
+    fn init(&mut self, d: usize) -> Result<()> {
+        if d == 0 {
+            return Err(SfaError::InvalidArgument("input has no features".into()));
+        }
+        let c = &self.config;
+        let stage = match c.reduce_to {
+            Some(k) => {
+                if k > d {
+                    return Err(SfaError::InvalidArgument(format!(
+                        "reduce_to ({k}) exceeds the number of input features ({d})"
+                    )));
+                }
+                Stage::new(d, 1, k)?
+            }
+            None => {
+                let ed = expanded_dim(d, c.degree)?;
+                if c.n_components > ed {
+                    return Err(SfaError::InvalidArgument(format!(
+                        "n_components ({}) exceeds the dimension of the {}input ({ed})",
+                        c.n_components,
+                        if c.degree > 1 { "expanded " } else { "" }
+                    )));
+                }
+                Stage::new(d, c.degree, c.n_components)?
+            }
+        };
+        self.n_features = Some(d);
+        self.stages = vec![stage];
+        self.training_stage = 0;
+        Ok(())
+    }
+
+    fn check_width<T: Sample>(&self, x: &View<'_, T>) -> Result<()> {
+        if let Some(d) = self.n_features {
+            if x.ncols() != d {
+                return Err(SfaError::ShapeMismatch {
+                    what: "number of features (the model was trained on a different width)",
+                    expected: d,
+                    got: x.ncols(),
+                });
+            }
+        }
+        Ok(())
+    }
+
+    /// Feeds a chunk of a time series to the stage in training (see
+    /// [`Accumulator::update`] for the sequence semantics).
+    pub fn partial_fit<T: Sample>(&mut self, x: View<'_, T>, new_sequence: bool) -> Result<()> {
+        if self.n_features.is_none() {
+            self.init(x.ncols())?;
+        }
+        self.check_width(&x)?;
+        let s = self.training_stage;
+        if self.stages[s].acc.is_none() {
+            return Err(SfaError::NotFitted(
+                "the model was saved without training statistics; it cannot be trained further".into(),
+            ));
+        }
+        // Invalidate the stage being trained.
+        self.stages[s].solution = None;
+        if s == 0 && self.stages[0].expansion.is_none() {
+            // Zero-copy path: the accumulator reads the caller's array.
+            return self.stages[0].acc.as_mut().expect("acc").update(x, new_sequence);
+        }
+        let n = x.nrows();
+        if n == 0 {
+            return Ok(());
+        }
+        x.check_finite("input")?;
+        let mut start = 0;
+        while start < n {
+            let end = (start + TRAIN_BLOCK).min(n);
+            let input = self.forward_block(x.rows(start, end), s)?;
+            let stage = &self.stages[s];
+            let nb = end - start;
+            let ed = stage.expanded_dim();
+            let expanded;
+            let data: &[f64] = match &stage.expansion {
+                Some(ex) => {
+                    let mut out = vec![0.0; nb * ed];
+                    ex.expand_block(&input, &mut out);
+                    expanded = out;
+                    &expanded
+                }
+                None => &input,
+            };
+            let v = View::from_slice(data, nb, ed)?;
+            let first = start == 0 && new_sequence;
+            self.stages[s].acc.as_mut().expect("acc").update(v, first)?;
+            start = end;
+        }
+        Ok(())
+    }
+
+    /// Raw rows of `x` pushed through stages `0..upto` (all solved), in
+    /// parallel; row-major output of the width stage `upto` takes as input.
+    fn forward_block<T: Sample>(&self, x: View<'_, T>, upto: usize) -> Result<Vec<f64>> {
+        let n = x.nrows();
+        let d = x.ncols();
+        let width = if upto == 0 {
+            d
+        } else {
+            self.stages[upto - 1]
+                .solution
+                .as_ref()
+                .ok_or_else(|| SfaError::NotFitted("an earlier stage is not solved".into()))?
+                .n_out
+        };
+        let mut out = vec![0.0; n * width];
+        out.par_chunks_mut(TASK_ROWS * width)
+            .enumerate()
+            .for_each(|(c, o)| {
+                let r0 = c * TASK_ROWS;
+                let nr = o.len() / width.max(1);
+                let mut cur = vec![0.0; nr * d];
+                for (k, row) in cur.chunks_mut(d).enumerate() {
+                    x.row_into(r0 + k, None, row);
+                }
+                for st in &self.stages[..upto] {
+                    cur = st.apply(&cur, nr);
+                }
+                o.copy_from_slice(&cur);
+            });
+        Ok(out)
+    }
+
+    /// Solves the stage in training; if it is not the last, opens the next
+    /// stage for the next pass over the data.
+    pub fn finish_stage(&mut self) -> Result<()> {
+        let s = self.training_stage;
+        if self.stages.is_empty() {
+            return Err(SfaError::NotFitted("no training data was given".into()));
+        }
+        let last = s + 1 == self.n_stages();
+        let tol = self.config.tol;
+        self.stages[s].solve(tol, last)?;
+        if !last {
+            let k = self.stages[s].solution.as_ref().expect("solved").n_out;
+            let c = &self.config;
+            let ed = expanded_dim(k, c.degree)?;
+            if c.n_components > ed {
+                return Err(SfaError::InvalidArgument(format!(
+                    "n_components ({}) exceeds the expanded dimension ({ed}) of the {k} reduced signals",
+                    c.n_components
+                )));
+            }
+            self.stages.push(Stage::new(k, c.degree, c.n_components)?);
+            self.training_stage += 1;
+        }
+        Ok(())
+    }
+
+    /// Solves the last stage if it has new data (a no-op when solved).
+    pub fn ensure_solved(&mut self) -> Result<()> {
+        if self.stages.is_empty() {
+            return Err(SfaError::NotFitted("no training data was given".into()));
+        }
+        if self.training_stage + 1 < self.n_stages() {
+            return Err(SfaError::NotFitted(format!(
+                "stage {} of {} is still in training; call finish_stage after each full pass",
+                self.training_stage + 1,
+                self.n_stages()
+            )));
+        }
+        let s = self.training_stage;
+        if self.stages[s].solution.is_none() {
+            self.stages[s].solve(self.config.tol, true)?;
+        }
+        Ok(())
+    }
+
+    /// True when every stage is solved and the node can transform.
+    pub fn is_solved(&self) -> bool {
+        self.stages.len() == self.n_stages() && self.stages.iter().all(|s| s.solution.is_some())
+    }
+
+    fn final_solution(&self) -> Result<&SolutionState> {
+        if !self.is_solved() {
+            return Err(SfaError::NotFitted("call fit (or partial_fit) first".into()));
+        }
+        Ok(self.stages.last().and_then(|s| s.solution.as_ref()).expect("solved"))
+    }
+
+    /// Number of outputs.
+    pub fn n_outputs(&self) -> usize {
+        self.config.n_components
+    }
+
+    /// Applies the trained node: `n x n_components`, row-major, same sample
+    /// type as the input.
+    pub fn transform<T: Sample>(&self, x: View<'_, T>) -> Result<Vec<T>> {
+        let sol = self.final_solution()?;
+        let d = self.n_features.expect("fitted");
+        if x.ncols() != d {
+            return Err(SfaError::ShapeMismatch {
+                what: "number of features (the model was trained on a different width)",
+                expected: d,
+                got: x.ncols(),
+            });
+        }
+        x.check_finite("input")?;
+        let m = sol.n_out;
+        let y = self.forward_block(x, self.stages.len())?;
+        debug_assert_eq!(y.len(), x.nrows() * m);
+        Ok(y.into_iter().map(T::from_f64).collect())
+    }
+
+    /// Delta values of the outputs (ascending).
+    pub fn delta_values(&self) -> Result<&[f64]> {
+        Ok(&self.final_solution()?.delta)
+    }
+
+    /// Total rank deficit over the stages (dropped covariance directions).
+    pub fn rank_deficits(&self) -> Vec<usize> {
+        self.stages
+            .iter()
+            .map(|s| s.solution.as_ref().map_or(0, |x| x.dropped.len()))
+            .collect()
+    }
+
+    /// Effective output count of each solved stage.
+    pub fn stage_outputs(&self) -> Vec<usize> {
+        self.stages
+            .iter()
+            .map(|s| s.solution.as_ref().map_or(0, |x| x.n_out))
+            .collect()
+    }
+
+    /// The training statistics of the stage in training.
+    pub fn statistics(&self) -> Option<&Accumulator> {
+        self.stages.get(self.training_stage).and_then(|s| s.acc.as_ref())
+    }
+
+    /// Plain-data state; `with_statistics` keeps the training statistics so
+    /// training can continue after a round trip.
+    pub fn state(&self, with_statistics: bool) -> NodeState {
+        NodeState {
+            config: self.config.clone(),
+            n_features: self.n_features.unwrap_or(0),
+            training_stage: self.training_stage,
+            stages: self
+                .stages
+                .iter()
+                .map(|s| StageState {
+                    degree: s.degree,
+                    n_out: s.n_out,
+                    input_dim: s.input_dim,
+                    solution: s.solution.clone(),
+                    stats: if with_statistics {
+                        s.acc.as_ref().map(|a| a.state())
+                    } else {
+                        None
+                    },
+                })
+                .collect(),
+        }
+    }
+
+    /// Restores a node from [`state`](Self::state), checking consistency.
+    pub fn from_state(st: &NodeState) -> Result<Self> {
+        let bad = |m: String| Err(SfaError::InvalidState(m));
+        st.config.validate()?;
+        let mut node = SfaNode::new(st.config.clone())?;
+        if st.n_features == 0 {
+            if !st.stages.is_empty() {
+                return bad("stages present but no input width".into());
+            }
+            return Ok(node);
+        }
+        let n_stages = node.n_stages();
+        if st.stages.is_empty() || st.stages.len() > n_stages {
+            return bad(format!("{} stages for a node of {n_stages}", st.stages.len()));
+        }
+        if st.training_stage + 1 != st.stages.len() {
+            return bad("training stage index disagrees with the stage count".into());
+        }
+        let mut input_dim = st.n_features;
+        for (i, ss) in st.stages.iter().enumerate() {
+            let last = i + 1 == n_stages;
+            let want_degree = if last { st.config.degree } else { 1 };
+            let want_out = if last {
+                st.config.n_components
+            } else {
+                st.config.reduce_to.unwrap_or(0)
+            };
+            if ss.degree != want_degree || ss.n_out != want_out || ss.input_dim != input_dim {
+                return bad(format!("stage {i} does not match the node's configuration"));
+            }
+            let mut stage = Stage::new(input_dim, ss.degree, ss.n_out)?;
+            let ed = stage.expanded_dim();
+            stage.acc = match &ss.stats {
+                Some(a) => {
+                    if a.dim != ed {
+                        return bad(format!("stage {i} statistics have dimension {}, expected {ed}", a.dim));
+                    }
+                    Some(Accumulator::from_state(a)?)
+                }
+                None => None,
+            };
+            if let Some(sol) = &ss.solution {
+                let ok = sol.mean.len() == ed
+                    && sol.n_out >= 1
+                    && sol.n_out <= ss.n_out
+                    && (!last || sol.n_out == ss.n_out)
+                    && sol.projection.len() == ed * sol.n_out
+                    && sol.delta.len() == sol.n_out
+                    && sol.rank + sol.dropped.len() == ed
+                    && sol.mean.iter().chain(&sol.projection).chain(&sol.delta).all(|v| v.is_finite());
+                if !ok {
+                    return bad(format!("stage {i} solution has inconsistent shapes or values"));
+                }
+                input_dim = sol.n_out;
+            } else if i + 1 < st.stages.len() {
+                return bad(format!("stage {i} is not solved but a later stage exists"));
+            }
+            if stage.acc.is_none() && ss.solution.is_none() {
+                return bad(format!("stage {i} has neither statistics nor a solution"));
+            }
+            stage.solution = ss.solution.clone();
+            node.stages.push(stage);
+        }
+        node.n_features = Some(st.n_features);
+        node.training_stage = st.training_stage;
+        Ok(node)
+    }
+}
+
+/// Delta to beta: `beta = sqrt(Delta) / (2 pi)` (thesis section 7.2.1),
+/// Delta clipped at 0 against rounding.
+pub fn beta_values(delta: &[f64]) -> Vec<f64> {
+    delta
+        .iter()
+        .map(|d| d.max(0.0).sqrt() / (2.0 * std::f64::consts::PI))
+        .collect()
+}
+
+#[allow(unused)]
+fn _assert_send() {
+    fn s<T: Send + Sync>() {}
+    s::<SfaNode>();
+    let _ = Mat::<f64>::zeros(0, 0);
+}

@@ -1,0 +1,681 @@
+//! Streaming second-order statistics for SFA: sample count, mean, covariance
+//! of the input and (uncentered) covariance of its time derivative.
+//!
+//! # Numerics
+//! * Sums are `f64`, whatever the input type.
+//! * Samples are shifted by a reference point (the first sample seen) before
+//!   outer products are formed, so a large common offset does not cancel
+//!   catastrophically when the mean is removed at the end.
+//! * Outer products run block-wise through faer's triangular (SYRK-like)
+//!   matrix product, in parallel; only the lower triangle is accumulated.
+//!
+//! # Samples, pairs and sequences
+//! The accumulator holds two independent moment sets: *samples* (for mean
+//! and covariance) and *derivative pairs* `(a, b)` with `d = b - a` (for the
+//! derivative covariance). [`Accumulator::update`] feeds a time series: every
+//! row is a sample and every consecutive pair of rows is a derivative pair;
+//! the last row is carried to the next call so chunked feeding equals one
+//! pass, unless the next call starts a new sequence. [`Accumulator::add_samples`]
+//! and [`Accumulator::add_pairs`] take weighted samples and weighted pairs
+//! directly (simulated rotation with multiplicities, graph-based SFA).
+//! Two accumulators merge exactly ([`Accumulator::merge`]).
+//!
+//! # Normalisation
+//! `covariance = sum w (x - mean)(x - mean)^T / sum w` (population
+//! covariance: SFA outputs then have unit variance with `ddof = 0`), and
+//! `derivative_covariance = sum w_p d d^T / sum w_p` (uncentered, the mean
+//! squared derivative of SFA).
+
+use crate::error::{Result, SfaError};
+use crate::view::{Sample, View};
+use faer::linalg::matmul::triangular::{matmul as tri_matmul, BlockStructure};
+use faer::{Accum, Mat, MatRef, Par};
+use rayon::prelude::*;
+
+/// Streaming accumulator of SFA statistics. See the module documentation.
+#[derive(Clone, Debug)]
+pub struct Accumulator {
+    dim: usize,
+    shift: Option<Vec<f64>>,
+    n_samples: u64,
+    weight_sum: f64,
+    sum: Vec<f64>,
+    sxx: Mat<f64>,
+    n_pairs: u64,
+    pair_weight_sum: f64,
+    sum_d: Vec<f64>,
+    sdd: Mat<f64>,
+    first: Option<Vec<f64>>,
+    last: Option<Vec<f64>>,
+}
+
+/// The plain-data state of an [`Accumulator`], for saving and restoring.
+/// Matrices are full symmetric `dim x dim`, row-major.
+#[derive(Clone, Debug, PartialEq)]
+pub struct AccumulatorState {
+    pub dim: usize,
+    /// Reference point the sums are relative to (empty before the first sample).
+    pub shift: Vec<f64>,
+    pub n_samples: u64,
+    pub weight_sum: f64,
+    pub sum: Vec<f64>,
+    pub sxx: Vec<f64>,
+    pub n_pairs: u64,
+    pub pair_weight_sum: f64,
+    pub sum_d: Vec<f64>,
+    pub sdd: Vec<f64>,
+    /// First sample ever seen (empty if none).
+    pub first: Vec<f64>,
+    /// Last sample of the open sequence (empty if none is open).
+    pub last: Vec<f64>,
+}
+
+/// Rows per block for a given width: about 16 MB of f64 per buffer.
+fn block_rows(dim: usize) -> usize {
+    ((1usize << 21) / dim.max(1)).clamp(256, 1 << 16)
+}
+
+/// `dst += rows^T rows` on the lower triangle; `rows` is row-major `n x d`.
+fn syrk_add(dst: &mut Mat<f64>, rows: &[f64], n: usize, d: usize) {
+    if n == 0 {
+        return;
+    }
+    let m = MatRef::from_row_major_slice(rows, n, d);
+    tri_matmul(
+        dst.as_mut(),
+        BlockStructure::TriangularLower,
+        Accum::Add,
+        m.transpose(),
+        BlockStructure::Rectangular,
+        m,
+        BlockStructure::Rectangular,
+        1.0,
+        Par::rayon(0),
+    );
+}
+
+/// Converts rows of `x` into `buf` (row-major f64), subtracting `shift` and
+/// multiplying row `i` by `scale[i]` if given; returns the weighted column sums
+/// (`sum_i w_i (x_i - shift)`, with `w_i = scale_i^2`) or the first non-finite
+/// element.
+fn load_rows<T: Sample>(
+    x: View<'_, T>,
+    shift: &[f64],
+    weights: Option<&[f64]>,
+    buf: &mut [f64],
+    what: &'static str,
+) -> Result<Vec<f64>> {
+    let d = x.ncols();
+    let n = x.nrows();
+    let per = (4096 / d.max(1)).max(1);
+    let partial = buf[..n * d]
+        .par_chunks_mut(per * d)
+        .enumerate()
+        .map(|(c, chunk)| {
+            let r0 = c * per;
+            let mut s = vec![0.0; d];
+            for (k, row) in chunk.chunks_mut(d).enumerate() {
+                let i = r0 + k;
+                x.row_into(i, Some(shift), row);
+                if let Some(j) = row.iter().position(|v| !v.is_finite()) {
+                    return Err((i, j));
+                }
+                match weights {
+                    Some(w) => {
+                        let wi = w[i];
+                        let si = wi.sqrt();
+                        for (acc, v) in s.iter_mut().zip(row.iter_mut()) {
+                            *acc += wi * *v;
+                            *v *= si;
+                        }
+                    }
+                    None => {
+                        for (acc, v) in s.iter_mut().zip(row.iter()) {
+                            *acc += *v;
+                        }
+                    }
+                }
+            }
+            Ok(s)
+        })
+        .collect::<Vec<_>>();
+    let mut total = vec![0.0; d];
+    for p in partial {
+        match p {
+            Ok(s) => total.iter_mut().zip(&s).for_each(|(t, v)| *t += v),
+            Err((row, col)) => return Err(SfaError::NonFinite { what, row, col }),
+        }
+    }
+    Ok(total)
+}
+
+fn check_weights(w: Option<&[f64]>, n: usize, what: &'static str) -> Result<()> {
+    if let Some(w) = w {
+        if w.len() != n {
+            return Err(SfaError::ShapeMismatch {
+                what,
+                expected: n,
+                got: w.len(),
+            });
+        }
+        if let Some(i) = w.iter().position(|v| !(v.is_finite() && *v >= 0.0)) {
+            return Err(SfaError::InvalidArgument(format!(
+                "{what}: weights must be finite and non-negative (index {i} is {})",
+                w[i]
+            )));
+        }
+    }
+    Ok(())
+}
+
+impl Accumulator {
+    /// An empty accumulator for `dim`-dimensional samples.
+    pub fn new(dim: usize) -> Result<Self> {
+        if dim == 0 {
+            return Err(SfaError::InvalidArgument(
+                "statistics need at least one feature".into(),
+            ));
+        }
+        Ok(Accumulator {
+            dim,
+            shift: None,
+            n_samples: 0,
+            weight_sum: 0.0,
+            sum: vec![0.0; dim],
+            sxx: Mat::zeros(dim, dim),
+            n_pairs: 0,
+            pair_weight_sum: 0.0,
+            sum_d: vec![0.0; dim],
+            sdd: Mat::zeros(dim, dim),
+            first: None,
+            last: None,
+        })
+    }
+
+    /// Sample dimension.
+    pub fn dim(&self) -> usize {
+        self.dim
+    }
+    /// Number of samples added (unweighted count).
+    pub fn n_samples(&self) -> u64 {
+        self.n_samples
+    }
+    /// Sum of sample weights (equals `n_samples` for unit weights).
+    pub fn weight_sum(&self) -> f64 {
+        self.weight_sum
+    }
+    /// Number of derivative pairs added (unweighted count).
+    pub fn n_pairs(&self) -> u64 {
+        self.n_pairs
+    }
+    /// Sum of derivative-pair weights.
+    pub fn pair_weight_sum(&self) -> f64 {
+        self.pair_weight_sum
+    }
+
+    fn check_width<T: Sample>(&self, x: &View<'_, T>) -> Result<()> {
+        if x.ncols() != self.dim {
+            return Err(SfaError::ShapeMismatch {
+                what: "number of features",
+                expected: self.dim,
+                got: x.ncols(),
+            });
+        }
+        Ok(())
+    }
+
+    fn ensure_shift<T: Sample>(&mut self, x: &View<'_, T>, what: &'static str) -> Result<()> {
+        if self.shift.is_none() && x.nrows() > 0 {
+            let mut s = vec![0.0; self.dim];
+            x.row_into(0, None, &mut s);
+            if let Some(col) = s.iter().position(|v| !v.is_finite()) {
+                return Err(SfaError::NonFinite { what, row: 0, col });
+            }
+            self.first = Some(s.clone());
+            self.shift = Some(s);
+        }
+        Ok(())
+    }
+
+    /// Ends the open sequence: the next [`update`](Self::update) forms no
+    /// derivative pair with the samples seen so far.
+    pub fn break_sequence(&mut self) {
+        self.last = None;
+    }
+
+    /// Feeds a chunk of a time series (rows are consecutive samples).
+    ///
+    /// Every row is a unit-weight sample; every consecutive pair of rows is a
+    /// unit-weight derivative pair. Unless `new_sequence` is true, the last
+    /// row of the previous call and the first row of this one also form a
+    /// pair, so feeding a series in chunks equals feeding it at once.
+    pub fn update<T: Sample>(&mut self, x: View<'_, T>, new_sequence: bool) -> Result<()> {
+        self.check_width(&x)?;
+        if new_sequence {
+            self.last = None;
+        }
+        let n = x.nrows();
+        if n == 0 {
+            return Ok(());
+        }
+        self.ensure_shift(&x, "input")?;
+        let d = self.dim;
+        let shift = self.shift.clone().expect("shift set");
+        let br = block_rows(d).min(n);
+        let mut buf = vec![0.0; br * d];
+        let mut dbuf = vec![0.0; br * d];
+        // Centered previous sample (carried across blocks and calls).
+        let mut prev: Option<Vec<f64>> = self
+            .last
+            .as_ref()
+            .map(|l| l.iter().zip(&shift).map(|(a, b)| a - b).collect());
+        // Accumulate into local copies so a NaN in a later block leaves `self` untouched.
+        let mut sxx = self.sxx.clone();
+        let mut sdd = self.sdd.clone();
+        let mut sum = self.sum.clone();
+        let mut sum_d = self.sum_d.clone();
+        let mut n_pairs = 0u64;
+        let mut start = 0;
+        while start < n {
+            let end = (start + br).min(n);
+            let nb = end - start;
+            let s = load_rows(x.rows(start, end), &shift, None, &mut buf, "input")
+                .map_err(|e| offset_row(e, start))?;
+            sum.iter_mut().zip(&s).for_each(|(a, b)| *a += b);
+            syrk_add(&mut sxx, &buf[..nb * d], nb, d);
+            // Derivative rows for this block.
+            let (np, first_pair) = match &prev {
+                Some(p) => {
+                    dbuf[..d].iter_mut().zip(buf[..d].iter().zip(p)).for_each(|(o, (a, b))| *o = a - b);
+                    (nb, 1)
+                }
+                None => (nb - 1, 0),
+            };
+            {
+                let src = &buf[..nb * d];
+                dbuf[first_pair * d..np * d]
+                    .par_chunks_mut(d * 256)
+                    .enumerate()
+                    .for_each(|(c, chunk)| {
+                        let r0 = c * 256; // derivative row index within this fill
+                        for (k, row) in chunk.chunks_mut(d).enumerate() {
+                            let t = r0 + k + 1; // sample t minus sample t-1 (block-local)
+                            let (a, b) = (&src[(t - 1) * d..t * d], &src[t * d..(t + 1) * d]);
+                            row.iter_mut().zip(b.iter().zip(a)).for_each(|(o, (bv, av))| *o = bv - av);
+                        }
+                    });
+            }
+            for row in dbuf[..np * d].chunks(d) {
+                sum_d.iter_mut().zip(row).for_each(|(a, b)| *a += b);
+            }
+            syrk_add(&mut sdd, &dbuf[..np * d], np, d);
+            n_pairs += np as u64;
+            prev = Some(buf[(nb - 1) * d..nb * d].to_vec());
+            start = end;
+        }
+        self.sxx = sxx;
+        self.sdd = sdd;
+        self.sum = sum;
+        self.sum_d = sum_d;
+        self.n_samples += n as u64;
+        self.weight_sum += n as f64;
+        self.n_pairs += n_pairs;
+        self.pair_weight_sum += n_pairs as f64;
+        let mut last = vec![0.0; d];
+        x.row_into(n - 1, None, &mut last);
+        self.last = Some(last);
+        Ok(())
+    }
+
+    /// Adds samples with optional non-negative weights (default 1). Forms no
+    /// derivative pairs and does not touch the open sequence.
+    pub fn add_samples<T: Sample>(&mut self, x: View<'_, T>, weights: Option<&[f64]>) -> Result<()> {
+        self.check_width(&x)?;
+        check_weights(weights, x.nrows(), "sample weights")?;
+        let n = x.nrows();
+        if n == 0 {
+            return Ok(());
+        }
+        self.ensure_shift(&x, "samples")?;
+        let d = self.dim;
+        let shift = self.shift.clone().expect("shift set");
+        let br = block_rows(d).min(n);
+        let mut buf = vec![0.0; br * d];
+        let mut sxx = self.sxx.clone();
+        let mut sum = self.sum.clone();
+        let mut start = 0;
+        while start < n {
+            let end = (start + br).min(n);
+            let w = weights.map(|w| &w[start..end]);
+            let s = load_rows(x.rows(start, end), &shift, w, &mut buf, "samples")
+                .map_err(|e| offset_row(e, start))?;
+            sum.iter_mut().zip(&s).for_each(|(a, b)| *a += b);
+            syrk_add(&mut sxx, &buf[..(end - start) * d], end - start, d);
+            start = end;
+        }
+        self.sxx = sxx;
+        self.sum = sum;
+        self.n_samples += n as u64;
+        self.weight_sum += weights.map_or(n as f64, |w| w.iter().sum());
+        Ok(())
+    }
+
+    /// Adds derivative pairs `d_i = b_i - a_i` with optional non-negative
+    /// weights (default 1). Touches neither the sample moments nor the open
+    /// sequence.
+    pub fn add_pairs<T: Sample>(
+        &mut self,
+        a: View<'_, T>,
+        b: View<'_, T>,
+        weights: Option<&[f64]>,
+    ) -> Result<()> {
+        self.check_width(&a)?;
+        self.check_width(&b)?;
+        if a.nrows() != b.nrows() {
+            return Err(SfaError::ShapeMismatch {
+                what: "number of pair ends (rows of b vs rows of a)",
+                expected: a.nrows(),
+                got: b.nrows(),
+            });
+        }
+        let n = a.nrows();
+        check_weights(weights, n, "pair weights")?;
+        if n == 0 {
+            return Ok(());
+        }
+        let d = self.dim;
+        let br = block_rows(d).min(n);
+        let mut buf = vec![0.0; br * d];
+        let mut sdd = self.sdd.clone();
+        let mut sum_d = self.sum_d.clone();
+        let mut start = 0;
+        while start < n {
+            let end = (start + br).min(n);
+            let nb = end - start;
+            let (av, bv) = (a.rows(start, end), b.rows(start, end));
+            let w = weights.map(|w| &w[start..end]);
+            let per = (4096 / d).max(1);
+            let partial = buf[..nb * d]
+                .par_chunks_mut(per * d)
+                .enumerate()
+                .map(|(c, chunk)| {
+                    let mut s = vec![0.0; d];
+                    let mut tmp = vec![0.0; d];
+                    for (k, row) in chunk.chunks_mut(d).enumerate() {
+                        let i = c * per + k;
+                        bv.row_into(i, None, row);
+                        av.row_into(i, None, &mut tmp);
+                        row.iter_mut().zip(&tmp).for_each(|(r, t)| *r -= t);
+                        if let Some(j) = row.iter().position(|v| !v.is_finite()) {
+                            return Err((start + i, j));
+                        }
+                        let wi = w.map_or(1.0, |w| w[i]);
+                        let si = wi.sqrt();
+                        for (acc, v) in s.iter_mut().zip(row.iter_mut()) {
+                            *acc += wi * *v;
+                            *v *= si;
+                        }
+                    }
+                    Ok(s)
+                })
+                .collect::<Vec<_>>();
+            for p in partial {
+                match p {
+                    Ok(s) => sum_d.iter_mut().zip(&s).for_each(|(t, v)| *t += v),
+                    Err((row, col)) => {
+                        return Err(SfaError::NonFinite { what: "pairs", row, col })
+                    }
+                }
+            }
+            syrk_add(&mut sdd, &buf[..nb * d], nb, d);
+            start = end;
+        }
+        self.sdd = sdd;
+        self.sum_d = sum_d;
+        self.n_pairs += n as u64;
+        self.pair_weight_sum += weights.map_or(n as f64, |w| w.iter().sum());
+        Ok(())
+    }
+
+    /// Adds everything `other` accumulated (exact up to rounding). No
+    /// derivative pair is formed between the two; the open sequence of `self`
+    /// stays open. Use [`merge_continuing`](Self::merge_continuing) when
+    /// `other` holds the continuation of `self`'s sequence.
+    pub fn merge(&mut self, other: &Accumulator) -> Result<()> {
+        if other.dim != self.dim {
+            return Err(SfaError::ShapeMismatch {
+                what: "dimension of the merged statistics",
+                expected: self.dim,
+                got: other.dim,
+            });
+        }
+        let Some(ob) = other.shift.as_ref() else {
+            // `other` has no samples; pairs may still be present.
+            self.merge_pairs(other);
+            return Ok(());
+        };
+        if self.shift.is_none() {
+            self.shift = Some(ob.clone());
+            self.first = other.first.clone();
+        }
+        let a = self.shift.as_ref().expect("shift set");
+        let d = self.dim;
+        // Re-reference other's sums from its shift b to our shift a:
+        // x - a = (x - b) + delta, delta = b - a.
+        let delta: Vec<f64> = ob.iter().zip(a).map(|(b, a)| b - a).collect();
+        let w = other.weight_sum;
+        for i in 0..d {
+            for j in 0..=i {
+                let v = other.sxx[(i, j)]
+                    + other.sum[i] * delta[j]
+                    + delta[i] * other.sum[j]
+                    + w * delta[i] * delta[j];
+                self.sxx[(i, j)] += v;
+            }
+            self.sum[i] += other.sum[i] + w * delta[i];
+        }
+        self.n_samples += other.n_samples;
+        self.weight_sum += w;
+        self.merge_pairs(other);
+        Ok(())
+    }
+
+    fn merge_pairs(&mut self, other: &Accumulator) {
+        let d = self.dim;
+        for i in 0..d {
+            for j in 0..=i {
+                self.sdd[(i, j)] += other.sdd[(i, j)];
+            }
+            self.sum_d[i] += other.sum_d[i];
+        }
+        self.n_pairs += other.n_pairs;
+        self.pair_weight_sum += other.pair_weight_sum;
+    }
+
+    /// Merges `other` as the continuation of this accumulator's open
+    /// sequence: also adds the derivative pair from our last sample to
+    /// `other`'s first, and `other`'s open sequence becomes ours. This makes
+    /// splitting one long series across workers exact.
+    pub fn merge_continuing(&mut self, other: &Accumulator) -> Result<()> {
+        let bridge = match (&self.last, &other.first) {
+            (Some(l), Some(f)) => Some((l.clone(), f.clone())),
+            _ => None,
+        };
+        self.merge(other)?;
+        if let Some((l, f)) = bridge {
+            let d = self.dim;
+            self.add_pairs(
+                View::from_slice(&l, 1, d)?,
+                View::from_slice(&f, 1, d)?,
+                None,
+            )?;
+        }
+        self.last = other.last.clone();
+        Ok(())
+    }
+
+    /// Weighted mean of the samples.
+    pub fn mean(&self) -> Result<Vec<f64>> {
+        self.require_samples(1)?;
+        let shift = self.shift.as_ref().expect("shift set");
+        Ok(shift
+            .iter()
+            .zip(&self.sum)
+            .map(|(s, v)| s + v / self.weight_sum)
+            .collect())
+    }
+
+    fn require_samples(&self, needed: usize) -> Result<()> {
+        if (self.n_samples as usize) < needed || self.weight_sum <= 0.0 {
+            return Err(SfaError::TooFewSamples {
+                what: "number of training samples",
+                needed,
+                got: self.n_samples as usize,
+            });
+        }
+        Ok(())
+    }
+
+    /// Population covariance of the samples (full symmetric `dim x dim`).
+    pub fn covariance(&self) -> Result<Mat<f64>> {
+        self.require_samples(2)?;
+        let w = self.weight_sum;
+        let d = self.dim;
+        let mu: Vec<f64> = self.sum.iter().map(|v| v / w).collect();
+        let mut c = Mat::zeros(d, d);
+        for i in 0..d {
+            for j in 0..=i {
+                let v = self.sxx[(i, j)] / w - mu[i] * mu[j];
+                c[(i, j)] = v;
+                c[(j, i)] = v;
+            }
+        }
+        Ok(c)
+    }
+
+    /// Uncentered covariance of the derivative pairs, `sum w d d^T / sum w`.
+    pub fn derivative_covariance(&self) -> Result<Mat<f64>> {
+        if self.n_pairs == 0 || self.pair_weight_sum <= 0.0 {
+            return Err(SfaError::TooFewSamples {
+                what: "number of derivative pairs (consecutive samples of one sequence)",
+                needed: 1,
+                got: 0,
+            });
+        }
+        let w = self.pair_weight_sum;
+        let d = self.dim;
+        let mut c = Mat::zeros(d, d);
+        for i in 0..d {
+            for j in 0..=i {
+                let v = self.sdd[(i, j)] / w;
+                c[(i, j)] = v;
+                c[(j, i)] = v;
+            }
+        }
+        Ok(c)
+    }
+
+    /// Weighted mean of the derivative (diagnostic: near zero on long series).
+    pub fn derivative_mean(&self) -> Result<Vec<f64>> {
+        if self.pair_weight_sum <= 0.0 {
+            return Err(SfaError::TooFewSamples {
+                what: "number of derivative pairs",
+                needed: 1,
+                got: 0,
+            });
+        }
+        Ok(self.sum_d.iter().map(|v| v / self.pair_weight_sum).collect())
+    }
+
+    /// The accumulator's plain-data state.
+    pub fn state(&self) -> AccumulatorState {
+        let d = self.dim;
+        let full = |m: &Mat<f64>| {
+            let mut v = vec![0.0; d * d];
+            for i in 0..d {
+                for j in 0..=i {
+                    v[i * d + j] = m[(i, j)];
+                    v[j * d + i] = m[(i, j)];
+                }
+            }
+            v
+        };
+        AccumulatorState {
+            dim: d,
+            shift: self.shift.clone().unwrap_or_default(),
+            n_samples: self.n_samples,
+            weight_sum: self.weight_sum,
+            sum: self.sum.clone(),
+            sxx: full(&self.sxx),
+            n_pairs: self.n_pairs,
+            pair_weight_sum: self.pair_weight_sum,
+            sum_d: self.sum_d.clone(),
+            sdd: full(&self.sdd),
+            first: self.first.clone().unwrap_or_default(),
+            last: self.last.clone().unwrap_or_default(),
+        }
+    }
+
+    /// Restores an accumulator from [`state`](Self::state), checking shapes
+    /// and values.
+    pub fn from_state(s: &AccumulatorState) -> Result<Self> {
+        let d = s.dim;
+        let bad = |m: String| Err(SfaError::InvalidState(format!("statistics: {m}")));
+        if d == 0 {
+            return bad("dimension is 0".into());
+        }
+        for (name, len, want) in [
+            ("sum", s.sum.len(), d),
+            ("sum_d", s.sum_d.len(), d),
+            ("sxx", s.sxx.len(), d * d),
+            ("sdd", s.sdd.len(), d * d),
+        ] {
+            if len != want {
+                return bad(format!("{name} has {len} values, expected {want}"));
+            }
+        }
+        for (name, v) in [("shift", &s.shift), ("first", &s.first), ("last", &s.last)] {
+            if !(v.is_empty() || v.len() == d) {
+                return bad(format!("{name} has {} values, expected 0 or {d}", v.len()));
+            }
+        }
+        let all = [&s.shift, &s.sum, &s.sxx, &s.sum_d, &s.sdd, &s.first, &s.last];
+        if all.iter().any(|v| v.iter().any(|x| !x.is_finite()))
+            || !s.weight_sum.is_finite()
+            || !s.pair_weight_sum.is_finite()
+            || s.weight_sum < 0.0
+            || s.pair_weight_sum < 0.0
+        {
+            return bad("non-finite or negative values".into());
+        }
+        if (s.n_samples > 0) == s.shift.is_empty() {
+            return bad("sample count and reference point disagree".into());
+        }
+        let mat = |v: &Vec<f64>| Mat::from_fn(d, d, |i, j| v[i * d + j]);
+        Ok(Accumulator {
+            dim: d,
+            shift: (!s.shift.is_empty()).then(|| s.shift.clone()),
+            n_samples: s.n_samples,
+            weight_sum: s.weight_sum,
+            sum: s.sum.clone(),
+            sxx: mat(&s.sxx),
+            n_pairs: s.n_pairs,
+            pair_weight_sum: s.pair_weight_sum,
+            sum_d: s.sum_d.clone(),
+            sdd: mat(&s.sdd),
+            first: (!s.first.is_empty()).then(|| s.first.clone()),
+            last: (!s.last.is_empty()).then(|| s.last.clone()),
+        })
+    }
+}
+
+fn offset_row(e: SfaError, start: usize) -> SfaError {
+    match e {
+        SfaError::NonFinite { what, row, col } => SfaError::NonFinite {
+            what,
+            row: row + start,
+            col,
+        },
+        e => e,
+    }
+}

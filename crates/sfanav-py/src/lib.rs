@@ -1,0 +1,550 @@
+//! Thin pyo3 bindings of `sfa-core`, importable as `sfanav._core`.
+//!
+//! All glue lives in this file: array conversion, error mapping, GIL release
+//! and panic containment. Numerics live in `sfa-core`.
+
+use numpy::ndarray::Array2;
+use numpy::{IntoPyArray, PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray1};
+use pyo3::exceptions::{PyRuntimeError, PyTypeError, PyValueError};
+use pyo3::prelude::*;
+use pyo3::types::{PyDict, PyList};
+use sfa_core::{
+    Accumulator, AccumulatorState, NodeConfig, NodeState, SfaError, SfaNode, SolutionState,
+    StageState, View,
+};
+use std::panic::{catch_unwind, AssertUnwindSafe};
+use std::sync::{Arc, Mutex};
+
+// ---------------------------------------------------------------- errors
+
+fn to_py(e: SfaError) -> PyErr {
+    PyValueError::new_err(e.to_string())
+}
+
+/// Runs `f` with the GIL released, inside the configured thread pool, and
+/// turns a Rust panic into a Python RuntimeError instead of letting it cross.
+fn run<R: Send>(py: Python<'_>, f: impl FnOnce() -> sfa_core::Result<R> + Send) -> PyResult<R> {
+    let pool = POOL.lock().map(|p| p.clone()).unwrap_or(None);
+    let out = py.detach(move || {
+        catch_unwind(AssertUnwindSafe(|| match pool {
+            Some(p) => p.install(f),
+            None => f(),
+        }))
+    });
+    match out {
+        Ok(r) => r.map_err(to_py),
+        Err(p) => {
+            let msg = p
+                .downcast_ref::<String>()
+                .cloned()
+                .or_else(|| p.downcast_ref::<&str>().map(|s| s.to_string()))
+                .unwrap_or_else(|| "unknown panic".into());
+            Err(PyRuntimeError::new_err(format!(
+                "internal error in sfanav's Rust core (please report): {msg}"
+            )))
+        }
+    }
+}
+
+// ---------------------------------------------------------------- threads
+
+static POOL: Mutex<Option<Arc<rayon::ThreadPool>>> = Mutex::new(None);
+
+/// Sets the number of worker threads used by sfanav's Rust core (0 = one per
+/// core, the default).
+#[pyfunction]
+fn set_num_threads(n: usize) -> PyResult<()> {
+    let mut g = POOL
+        .lock()
+        .map_err(|_| PyRuntimeError::new_err("thread pool lock poisoned"))?;
+    if n == 0 {
+        *g = None;
+        return Ok(());
+    }
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(n)
+        .build()
+        .map_err(|e| PyRuntimeError::new_err(format!("cannot build a thread pool: {e}")))?;
+    *g = Some(Arc::new(pool));
+    Ok(())
+}
+
+/// Number of worker threads the core uses.
+#[pyfunction]
+fn get_num_threads() -> usize {
+    match POOL.lock().ok().and_then(|p| p.clone()) {
+        Some(p) => p.current_num_threads(),
+        None => rayon::current_num_threads(),
+    }
+}
+
+// ---------------------------------------------------------------- arrays
+
+/// A borrowed 2-D float array of either precision.
+enum Arr<'py> {
+    F32(numpy::PyReadonlyArray2<'py, f32>),
+    F64(numpy::PyReadonlyArray2<'py, f64>),
+}
+
+fn arr2<'py>(obj: &Bound<'py, PyAny>, name: &str) -> PyResult<Arr<'py>> {
+    if let Ok(a) = obj.cast::<PyArray2<f64>>() {
+        return Ok(Arr::F64(a.try_readonly().map_err(|e| PyValueError::new_err(format!("{name}: {e}")))?));
+    }
+    if let Ok(a) = obj.cast::<PyArray2<f32>>() {
+        return Ok(Arr::F32(a.try_readonly().map_err(|e| PyValueError::new_err(format!("{name}: {e}")))?));
+    }
+    Err(PyTypeError::new_err(format!(
+        "{name} must be a 2-D float32 or float64 NumPy array"
+    )))
+}
+
+fn view_of<'a, T: numpy::Element + sfa_core::Sample>(a: &'a numpy::PyReadonlyArray2<'_, T>) -> View<'a, T> {
+    let v = a.as_array();
+    let (n, d) = v.dim();
+    let s = v.strides();
+    // SAFETY: the readonly borrow keeps the array alive and unaliased by
+    // Rust writers for the view's lifetime; strides are in elements.
+    unsafe { View::from_raw_parts(v.as_ptr(), n, d, s[0], s[1]) }
+}
+
+fn out2<'py, T: numpy::Element>(py: Python<'py>, v: Vec<T>, n: usize, m: usize) -> PyResult<Bound<'py, PyAny>> {
+    let a = Array2::from_shape_vec((n, m), v)
+        .map_err(|e| PyRuntimeError::new_err(format!("internal shape error: {e}")))?;
+    Ok(a.into_pyarray(py).into_any())
+}
+
+fn mat_to_py<'py>(py: Python<'py>, m: faer::Mat<f64>) -> PyResult<Bound<'py, PyAny>> {
+    let (r, c) = (m.nrows(), m.ncols());
+    let v: Vec<f64> = (0..r).flat_map(|i| (0..c).map(move |j| (i, j))).map(|(i, j)| m[(i, j)]).collect();
+    out2(py, v, r, c)
+}
+
+
+fn vec1<'py>(py: Python<'py>, v: Vec<f64>) -> Bound<'py, PyAny> {
+    PyArray1::from_vec(py, v).into_any()
+}
+
+fn opt_weights(w: Option<PyReadonlyArray1<'_, f64>>) -> PyResult<Option<Vec<f64>>> {
+    match w {
+        None => Ok(None),
+        Some(w) => Ok(Some(w.as_array().iter().copied().collect())),
+    }
+}
+
+// ---------------------------------------------------------------- functions
+
+/// expand(x, degree) -> ndarray: all monomials of degree 1..=degree.
+#[pyfunction]
+fn expand<'py>(py: Python<'py>, x: &Bound<'py, PyAny>, degree: usize) -> PyResult<Bound<'py, PyAny>> {
+    let a = arr2(x, "X")?;
+    match &a {
+        Arr::F64(a) => {
+            let v = view_of(a);
+            let e = sfa_core::Expansion::new(v.ncols(), degree).map_err(to_py)?;
+            let od = e.out_dim();
+            let n = v.nrows();
+            let out = run(py, || e.expand(v))?;
+            out2(py, out, n, od)
+        }
+        Arr::F32(a) => {
+            let v = view_of(a);
+            let e = sfa_core::Expansion::new(v.ncols(), degree).map_err(to_py)?;
+            let od = e.out_dim();
+            let n = v.nrows();
+            let out = run(py, || e.expand(v))?;
+            out2(py, out, n, od)
+        }
+    }
+}
+
+/// expanded_dim(n_features, degree) -> int: C(n + d, d) - 1.
+#[pyfunction]
+fn expanded_dim(n_features: usize, degree: usize) -> PyResult<usize> {
+    sfa_core::expanded_dim(n_features, degree).map_err(to_py)
+}
+
+/// solve_generalized(a, b, n, tol) -> (values, vectors, rank, dropped)
+#[pyfunction]
+fn solve_generalized<'py>(
+    py: Python<'py>,
+    a: numpy::PyReadonlyArray2<'py, f64>,
+    b: numpy::PyReadonlyArray2<'py, f64>,
+    n: usize,
+    tol: f64,
+) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyAny>, usize, Bound<'py, PyAny>)> {
+    let to_mat = |x: &numpy::PyReadonlyArray2<'py, f64>| {
+        let v = x.as_array();
+        faer::Mat::from_fn(v.nrows(), v.ncols(), |i, j| v[(i, j)])
+    };
+    let (am, bm) = (to_mat(&a), to_mat(&b));
+    let g = run(py, || sfa_core::solve(am.as_ref(), bm.as_ref(), n, tol))?;
+    Ok((vec1(py, g.values), mat_to_py(py, g.vectors)?, g.rank, vec1(py, g.dropped)))
+}
+
+// ---------------------------------------------------------------- Statistics
+
+/// Streaming SFA statistics (see sfa_core::stats).
+#[pyclass(name = "Statistics", module = "sfanav._core")]
+#[derive(Clone)]
+struct PyStatistics {
+    inner: Accumulator,
+}
+
+#[pymethods]
+impl PyStatistics {
+    #[new]
+    fn new(dim: usize) -> PyResult<Self> {
+        Ok(PyStatistics { inner: Accumulator::new(dim).map_err(to_py)? })
+    }
+
+    #[pyo3(signature = (x, new_sequence=false))]
+    fn update(&mut self, py: Python<'_>, x: &Bound<'_, PyAny>, new_sequence: bool) -> PyResult<()> {
+        let acc = &mut self.inner;
+        match arr2(x, "X")? {
+            Arr::F64(a) => { let v = view_of(&a); run(py, || acc.update(v, new_sequence)) }
+            Arr::F32(a) => { let v = view_of(&a); run(py, || acc.update(v, new_sequence)) }
+        }
+    }
+
+    #[pyo3(signature = (x, weights=None))]
+    fn add_samples(&mut self, py: Python<'_>, x: &Bound<'_, PyAny>, weights: Option<PyReadonlyArray1<'_, f64>>) -> PyResult<()> {
+        let w = opt_weights(weights)?;
+        let acc = &mut self.inner;
+        match arr2(x, "X")? {
+            Arr::F64(a) => { let v = view_of(&a); run(py, || acc.add_samples(v, w.as_deref())) }
+            Arr::F32(a) => { let v = view_of(&a); run(py, || acc.add_samples(v, w.as_deref())) }
+        }
+    }
+
+    #[pyo3(signature = (a, b, weights=None))]
+    fn add_pairs(&mut self, py: Python<'_>, a: &Bound<'_, PyAny>, b: &Bound<'_, PyAny>, weights: Option<PyReadonlyArray1<'_, f64>>) -> PyResult<()> {
+        let w = opt_weights(weights)?;
+        let acc = &mut self.inner;
+        match (arr2(a, "a")?, arr2(b, "b")?) {
+            (Arr::F64(a), Arr::F64(b)) => { let (va, vb) = (view_of(&a), view_of(&b)); run(py, || acc.add_pairs(va, vb, w.as_deref())) }
+            (Arr::F32(a), Arr::F32(b)) => { let (va, vb) = (view_of(&a), view_of(&b)); run(py, || acc.add_pairs(va, vb, w.as_deref())) }
+            _ => Err(PyTypeError::new_err("a and b must have the same dtype")),
+        }
+    }
+
+    fn break_sequence(&mut self) {
+        self.inner.break_sequence();
+    }
+
+    fn merge(&mut self, other: &PyStatistics) -> PyResult<()> {
+        self.inner.merge(&other.inner).map_err(to_py)
+    }
+
+    fn merge_continuing(&mut self, other: &PyStatistics) -> PyResult<()> {
+        self.inner.merge_continuing(&other.inner).map_err(to_py)
+    }
+
+    fn copy(&self) -> Self {
+        self.clone()
+    }
+
+    fn mean<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        Ok(vec1(py, self.inner.mean().map_err(to_py)?))
+    }
+
+    fn covariance<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        mat_to_py(py, self.inner.covariance().map_err(to_py)?)
+    }
+
+    fn derivative_covariance<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        mat_to_py(py, self.inner.derivative_covariance().map_err(to_py)?)
+    }
+
+    fn derivative_mean<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        Ok(vec1(py, self.inner.derivative_mean().map_err(to_py)?))
+    }
+
+    #[getter]
+    fn dim(&self) -> usize { self.inner.dim() }
+    #[getter]
+    fn n_samples(&self) -> u64 { self.inner.n_samples() }
+    #[getter]
+    fn n_pairs(&self) -> u64 { self.inner.n_pairs() }
+    #[getter]
+    fn weight_sum(&self) -> f64 { self.inner.weight_sum() }
+    #[getter]
+    fn pair_weight_sum(&self) -> f64 { self.inner.pair_weight_sum() }
+
+    fn get_state<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        acc_state_to_dict(py, &self.inner.state())
+    }
+
+    #[staticmethod]
+    fn from_state(state: &Bound<'_, PyDict>) -> PyResult<Self> {
+        let s = acc_state_from_dict(state)?;
+        Ok(PyStatistics { inner: Accumulator::from_state(&s).map_err(to_py)? })
+    }
+
+    fn __repr__(&self) -> String {
+        format!(
+            "Statistics(dim={}, n_samples={}, n_pairs={})",
+            self.inner.dim(), self.inner.n_samples(), self.inner.n_pairs()
+        )
+    }
+}
+
+// ---------------------------------------------------------------- state <-> dict
+
+fn get<'py, T: for<'a> FromPyObject<'a, 'py>>(d: &Bound<'py, PyDict>, key: &str) -> PyResult<T>
+where
+    for<'a> <T as FromPyObject<'a, 'py>>::Error: Into<PyErr>,
+{
+    match d.get_item(key)? {
+        Some(v) => v.extract::<T>().map_err(|e| {
+            let e: PyErr = e.into();
+            PyValueError::new_err(format!("invalid model state: field '{key}': {e}"))
+        }),
+        None => Err(PyValueError::new_err(format!("invalid model state: missing field '{key}'"))),
+    }
+}
+
+fn get_vec(d: &Bound<'_, PyDict>, key: &str) -> PyResult<Vec<f64>> {
+    match d.get_item(key)? {
+        Some(v) => {
+            let a = v.cast::<PyArray1<f64>>().map_err(|_| {
+                PyValueError::new_err(format!("invalid model state: field '{key}' must be a 1-D float64 array"))
+            })?;
+            Ok(a.readonly().as_array().iter().copied().collect())
+        }
+        None => Err(PyValueError::new_err(format!("invalid model state: missing field '{key}'"))),
+    }
+}
+
+fn acc_state_to_dict<'py>(py: Python<'py>, s: &AccumulatorState) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    d.set_item("dim", s.dim)?;
+    d.set_item("shift", vec1(py, s.shift.clone()))?;
+    d.set_item("n_samples", s.n_samples)?;
+    d.set_item("weight_sum", s.weight_sum)?;
+    d.set_item("sum", vec1(py, s.sum.clone()))?;
+    d.set_item("sxx", vec1(py, s.sxx.clone()))?;
+    d.set_item("n_pairs", s.n_pairs)?;
+    d.set_item("pair_weight_sum", s.pair_weight_sum)?;
+    d.set_item("sum_d", vec1(py, s.sum_d.clone()))?;
+    d.set_item("sdd", vec1(py, s.sdd.clone()))?;
+    d.set_item("first", vec1(py, s.first.clone()))?;
+    d.set_item("last", vec1(py, s.last.clone()))?;
+    Ok(d)
+}
+
+fn acc_state_from_dict(d: &Bound<'_, PyDict>) -> PyResult<AccumulatorState> {
+    Ok(AccumulatorState {
+        dim: get(d, "dim")?,
+        shift: get_vec(d, "shift")?,
+        n_samples: get(d, "n_samples")?,
+        weight_sum: get(d, "weight_sum")?,
+        sum: get_vec(d, "sum")?,
+        sxx: get_vec(d, "sxx")?,
+        n_pairs: get(d, "n_pairs")?,
+        pair_weight_sum: get(d, "pair_weight_sum")?,
+        sum_d: get_vec(d, "sum_d")?,
+        sdd: get_vec(d, "sdd")?,
+        first: get_vec(d, "first")?,
+        last: get_vec(d, "last")?,
+    })
+}
+
+fn node_state_to_dict<'py>(py: Python<'py>, s: &NodeState) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    d.set_item("n_components", s.config.n_components)?;
+    d.set_item("degree", s.config.degree)?;
+    d.set_item("reduce_to", s.config.reduce_to)?;
+    d.set_item("tol", s.config.tol)?;
+    d.set_item("n_features", s.n_features)?;
+    d.set_item("training_stage", s.training_stage)?;
+    let stages = PyList::empty(py);
+    for st in &s.stages {
+        let sd = PyDict::new(py);
+        sd.set_item("degree", st.degree)?;
+        sd.set_item("n_out", st.n_out)?;
+        sd.set_item("input_dim", st.input_dim)?;
+        match &st.solution {
+            Some(sol) => {
+                let so = PyDict::new(py);
+                so.set_item("mean", vec1(py, sol.mean.clone()))?;
+                so.set_item("projection", vec1(py, sol.projection.clone()))?;
+                so.set_item("n_out", sol.n_out)?;
+                so.set_item("delta", vec1(py, sol.delta.clone()))?;
+                so.set_item("rank", sol.rank)?;
+                so.set_item("dropped", vec1(py, sol.dropped.clone()))?;
+                sd.set_item("solution", so)?;
+            }
+            None => sd.set_item("solution", py.None())?,
+        }
+        match &st.stats {
+            Some(a) => sd.set_item("stats", acc_state_to_dict(py, a)?)?,
+            None => sd.set_item("stats", py.None())?,
+        }
+        stages.append(sd)?;
+    }
+    d.set_item("stages", stages)?;
+    Ok(d)
+}
+
+fn opt_dict<'py>(d: &Bound<'py, PyDict>, key: &str) -> PyResult<Option<Bound<'py, PyDict>>> {
+    match d.get_item(key)? {
+        None => Ok(None),
+        Some(v) if v.is_none() => Ok(None),
+        Some(v) => Ok(Some(v.cast_into::<PyDict>().map_err(|_| {
+            PyValueError::new_err(format!("invalid model state: field '{key}' must be a dict or None"))
+        })?)),
+    }
+}
+
+fn node_state_from_dict(d: &Bound<'_, PyDict>) -> PyResult<NodeState> {
+    let config = NodeConfig {
+        n_components: get(d, "n_components")?,
+        degree: get(d, "degree")?,
+        reduce_to: get(d, "reduce_to")?,
+        tol: get(d, "tol")?,
+    };
+    let list = d
+        .get_item("stages")?
+        .ok_or_else(|| PyValueError::new_err("invalid model state: missing field 'stages'"))?;
+    let list = list
+        .cast_into::<PyList>()
+        .map_err(|_| PyValueError::new_err("invalid model state: 'stages' must be a list"))?;
+    let mut stages = Vec::new();
+    for item in list.iter() {
+        let sd = item
+            .cast_into::<PyDict>()
+            .map_err(|_| PyValueError::new_err("invalid model state: a stage must be a dict"))?;
+        let solution = match opt_dict(&sd, "solution")? {
+            Some(so) => Some(SolutionState {
+                mean: get_vec(&so, "mean")?,
+                projection: get_vec(&so, "projection")?,
+                n_out: get(&so, "n_out")?,
+                delta: get_vec(&so, "delta")?,
+                rank: get(&so, "rank")?,
+                dropped: get_vec(&so, "dropped")?,
+            }),
+            None => None,
+        };
+        let stats = match opt_dict(&sd, "stats")? {
+            Some(a) => Some(acc_state_from_dict(&a)?),
+            None => None,
+        };
+        stages.push(StageState {
+            degree: get(&sd, "degree")?,
+            n_out: get(&sd, "n_out")?,
+            input_dim: get(&sd, "input_dim")?,
+            solution,
+            stats,
+        });
+    }
+    Ok(NodeState {
+        config,
+        n_features: get(d, "n_features")?,
+        training_stage: get(d, "training_stage")?,
+        stages,
+    })
+}
+
+// ---------------------------------------------------------------- SfaNode
+
+/// The SFA node (see sfa_core::node); wrapped by sfanav.SFA.
+#[pyclass(name = "SfaNode", module = "sfanav._core")]
+#[derive(Clone)]
+struct PySfaNode {
+    inner: SfaNode,
+}
+
+#[pymethods]
+impl PySfaNode {
+    #[new]
+    #[pyo3(signature = (n_components, degree=1, reduce_to=None, tol=sfa_core::DEFAULT_TOL))]
+    fn new(n_components: usize, degree: usize, reduce_to: Option<usize>, tol: f64) -> PyResult<Self> {
+        let inner = SfaNode::new(NodeConfig { n_components, degree, reduce_to, tol }).map_err(to_py)?;
+        Ok(PySfaNode { inner })
+    }
+
+    #[pyo3(signature = (x, new_sequence=false))]
+    fn partial_fit(&mut self, py: Python<'_>, x: &Bound<'_, PyAny>, new_sequence: bool) -> PyResult<()> {
+        let node = &mut self.inner;
+        match arr2(x, "X")? {
+            Arr::F64(a) => { let v = view_of(&a); run(py, || node.partial_fit(v, new_sequence)) }
+            Arr::F32(a) => { let v = view_of(&a); run(py, || node.partial_fit(v, new_sequence)) }
+        }
+    }
+
+    fn finish_stage(&mut self, py: Python<'_>) -> PyResult<()> {
+        let node = &mut self.inner;
+        run(py, || node.finish_stage())
+    }
+
+    fn ensure_solved(&mut self, py: Python<'_>) -> PyResult<()> {
+        let node = &mut self.inner;
+        run(py, || node.ensure_solved())
+    }
+
+    fn reset(&mut self) {
+        self.inner.reset();
+    }
+
+    fn transform<'py>(&self, py: Python<'py>, x: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyAny>> {
+        let node = &self.inner;
+        let m = node.n_outputs();
+        match arr2(x, "X")? {
+            Arr::F64(a) => { let v = view_of(&a); let n = v.nrows(); let y = run(py, || node.transform(v))?; out2(py, y, n, m) }
+            Arr::F32(a) => { let v = view_of(&a); let n = v.nrows(); let y = run(py, || node.transform(v))?; out2(py, y, n, m) }
+        }
+    }
+
+    #[getter]
+    fn delta_values<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        Ok(vec1(py, self.inner.delta_values().map_err(to_py)?.to_vec()))
+    }
+
+    #[getter]
+    fn n_features(&self) -> Option<usize> { self.inner.n_features() }
+    #[getter]
+    fn n_stages(&self) -> usize { self.inner.n_stages() }
+    #[getter]
+    fn training_stage(&self) -> usize { self.inner.training_stage() }
+    #[getter]
+    fn is_solved(&self) -> bool { self.inner.is_solved() }
+    #[getter]
+    fn rank_deficits(&self) -> Vec<usize> { self.inner.rank_deficits() }
+    #[getter]
+    fn stage_outputs(&self) -> Vec<usize> { self.inner.stage_outputs() }
+
+    fn statistics(&self) -> Option<PyStatistics> {
+        self.inner.statistics().map(|a| PyStatistics { inner: a.clone() })
+    }
+
+    #[pyo3(signature = (with_statistics=true))]
+    fn get_state<'py>(&self, py: Python<'py>, with_statistics: bool) -> PyResult<Bound<'py, PyDict>> {
+        node_state_to_dict(py, &self.inner.state(with_statistics))
+    }
+
+    #[staticmethod]
+    fn from_state(state: &Bound<'_, PyDict>) -> PyResult<Self> {
+        let s = node_state_from_dict(state)?;
+        Ok(PySfaNode { inner: SfaNode::from_state(&s).map_err(to_py)? })
+    }
+
+    fn copy(&self) -> Self {
+        self.clone()
+    }
+}
+
+// ---------------------------------------------------------------- module
+
+#[pymodule]
+fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    m.add("DEFAULT_TOL", sfa_core::DEFAULT_TOL)?;
+    m.add_function(wrap_pyfunction!(expand, m)?)?;
+    m.add_function(wrap_pyfunction!(expanded_dim, m)?)?;
+    m.add_function(wrap_pyfunction!(solve_generalized, m)?)?;
+    m.add_function(wrap_pyfunction!(set_num_threads, m)?)?;
+    m.add_function(wrap_pyfunction!(get_num_threads, m)?)?;
+    m.add_class::<PyStatistics>()?;
+    m.add_class::<PySfaNode>()?;
+    Ok(())
+}

@@ -1,0 +1,23 @@
+"""sfanav: localization and navigation from a panoramic camera with
+hierarchical Slow Feature Analysis.
+
+The numerics run in a Rust core (``sfanav._core``); this package is the
+NumPy / scikit-learn-style front.
+"""
+
+from ._core import __version__, get_num_threads, set_num_threads
+from .modelfile import load
+from .sfa import SFA, NotFittedError, Statistics, beta_values, expand, expanded_dim
+
+__all__ = [
+    "SFA",
+    "Statistics",
+    "NotFittedError",
+    "beta_values",
+    "expand",
+    "expanded_dim",
+    "load",
+    "set_num_threads",
+    "get_num_threads",
+    "__version__",
+]
