@@ -339,10 +339,21 @@ def main_bench(args: argparse.Namespace) -> int:
                   "or pass --no-sfanav to run the references only", file=sys.stderr)
             return 2
         res["config"]["sfanav_version"] = getattr(sfanav, "__version__", None)
+        get_threads = getattr(sfanav, "get_num_threads", None)
+        res["config"]["sfanav_threads"] = get_threads() if get_threads else None
     n, d, k = args.n, args.d, args.k
     gb = n * d * 8 / 1e9
     print(f"sfanav benchmark: N={n} D={d} K={k} seed={args.seed} repeats={args.repeats} "
           f"(X is {gb:.2f} GB float64; each process holds <= ~2 copies)", flush=True)
+    load = os.getloadavg()[0]
+    res["config"]["loadavg_1min_start"] = load
+    if load > 0.5:
+        print(f"warning: 1-min load average is {load:.2f} before the run: other processes are busy; "
+              f"on {os.cpu_count()} cores multithreaded BLAS/rayon timings can be off by large factors",
+              flush=True)
+    if sfanav is not None:
+        print(f"sfanav {res['config']['sfanav_version']}, {res['config']['sfanav_threads']} threads "
+              f"(build with `maturin develop --release` before timing)", flush=True)
 
     # ---- phase 1: accumulation vs NumPy -----------------------------------
     ref = None
@@ -429,6 +440,8 @@ def main_bench(args: argparse.Namespace) -> int:
                     res["delta_max_reldiff"] = float(rel.max())
                     res["fit_ratio"] = mdp_res["t_fit"] / res["sfanav_fit"]["t"]
 
+    res["config"]["loadavg_1min_end"] = os.getloadavg()[0]
+
     # ---- summary ------------------------------------------------------------
     def status(val, target, higher_is_better=True):
         if val is None:
@@ -465,6 +478,8 @@ def main_bench(args: argparse.Namespace) -> int:
     print(f"== sfanav bench: N={n} D={d} K={k}, best of {args.repeats} ==")
     for name, val, st in rows:
         print(f"  {name:<{w}}  {val:>10}  {st}")
+    print(f"  (load average 1 min: {res['config']['loadavg_1min_start']:.2f} at start, "
+          f"{res['config']['loadavg_1min_end']:.2f} at end)")
     if "mdp_skipped" in res:
         print(f"  MDP comparison skipped: {res['mdp_skipped']}")
     if sfanav is None:
