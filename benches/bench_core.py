@@ -503,21 +503,20 @@ def parse_args(argv=None) -> argparse.Namespace:
             "(target ratio >= 0.8) and full linear SFA fit vs MDP 3.6's SFANode "
             "(target >= 3x, Delta agreement <= 1e-6). Prints ratios measured in one run."
         ),
-        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
     )
     p.add_argument("--n", type=int, default=None, help=f"number of samples T (default {DEFAULT_N}; {QUICK_N} with --quick)")
     p.add_argument("--d", type=int, default=None, help=f"input dimension D (default {DEFAULT_D}; {QUICK_D} with --quick)")
-    p.add_argument("--k", type=int, default=DEFAULT_K, help="number of slow features K for the fit comparison")
-    p.add_argument("--repeats", type=int, default=DEFAULT_REPEATS, help="timed repeats per measurement (best is reported)")
-    p.add_argument("--seed", type=int, default=DEFAULT_SEED, help="seed for the generated data")
+    p.add_argument("--k", type=int, default=DEFAULT_K, help="number of slow features K for the fit comparison (default: %(default)s)")
+    p.add_argument("--repeats", type=int, default=DEFAULT_REPEATS, help="timed repeats per measurement, best is reported (default: %(default)s)")
+    p.add_argument("--seed", type=int, default=DEFAULT_SEED, help="seed for the generated data (default: %(default)s)")
     p.add_argument("--quick", action="store_true", help=f"small problem: N={QUICK_N}, D={QUICK_D} (unless --n/--d given)")
     p.add_argument("--no-mdp", action="store_true", help="skip the MDP comparison")
     p.add_argument("--no-numpy", action="store_true", help="skip the NumPy X.T@X reference")
     p.add_argument("--no-sfanav", action="store_true", help="run the references only (sfanav not imported)")
     p.add_argument("--mdp-venv", default=str(default_mdp_venv()),
-                   help="venv holding MDP 3.6 + NumPy 1.23 (created on first use)")
+                   help="venv holding MDP 3.6 + NumPy 1.23, created on first use (default: %(default)s)")
     p.add_argument("--mdp-base-python", default=sys.executable,
-                   help="interpreter used to create the MDP venv (needs Python <= 3.11 for NumPy 1.23 wheels)")
+                   help="interpreter used to create the MDP venv; needs Python <= 3.11 for NumPy 1.23 wheels (default: %(default)s)")
     p.add_argument("--json", metavar="OUT", help="write all measured numbers and ratios to this JSON file")
     p.add_argument("--strict", action="store_true", help="exit 1 if a target is missed")
     p.add_argument("--_worker", choices=["numpy", "mdp"], help=argparse.SUPPRESS)
