@@ -203,3 +203,19 @@ def test_gil_is_released_during_fit():
     during = [x for x in ticks if t0 < x < t1]
     # With the GIL held for the whole fit the ticker could not run at all.
     assert len(during) >= 3
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_contiguous_float_input_is_not_copied(dtype):
+    import tracemalloc
+
+    X = correlated(100_000, 25, seed=18, dtype=dtype)  # 10-20 MB
+    model = sfanav.SFA(3).fit(X[:1000])
+    tracemalloc.start()
+    sfanav.SFA(3).fit(X)
+    sfanav.Statistics(25).update(X)
+    model.transform(X[:10])
+    _, peak = tracemalloc.get_traced_memory()
+    tracemalloc.stop()
+    # NumPy reports its allocations to tracemalloc: a copy of X would show here.
+    assert peak < X.nbytes / 20, peak
