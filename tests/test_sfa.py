@@ -219,3 +219,15 @@ def test_contiguous_float_input_is_not_copied(dtype):
     tracemalloc.stop()
     # NumPy reports its allocations to tracemalloc: a copy of X would show here.
     assert peak < X.nbytes / 20, peak
+
+
+def test_thread_count_setting():
+    X = correlated(20_000, 8, seed=19)
+    ref = sfanav.SFA(3).fit(X).delta_values_
+    try:
+        sfanav.set_num_threads(1)
+        assert sfanav.get_num_threads() == 1
+        one = sfanav.SFA(3).fit(X).delta_values_
+    finally:
+        sfanav.set_num_threads(0)
+    np.testing.assert_allclose(one, ref, rtol=1e-10)

@@ -172,7 +172,8 @@ class SFA:
         ``new_sequence=True``. With ``reduce_to`` set the model trains in two
         passes: feed every chunk, call :meth:`finish_stage`, feed every chunk
         again. The model is solved lazily when a fitted attribute or
-        :meth:`transform` is used.
+        :meth:`transform` is used. After :meth:`fit`, ``partial_fit`` adds
+        data to the final stage only (a reduction stage stays as fitted).
         """
         X = as_float_2d(X, "X")
         if self._node is None:
