@@ -14,7 +14,9 @@
 
 pub mod error;
 pub mod expansion;
+pub mod network;
 pub mod node;
+pub mod rotation;
 pub mod solve;
 pub mod stats;
 pub mod view;
@@ -25,3 +27,5 @@ pub use node::{beta_values, NodeConfig, NodeState, SfaNode, SolutionState, Stage
 pub use solve::{solve, solve_up_to, GeneralizedEigen, DEFAULT_TOL};
 pub use stats::{Accumulator, AccumulatorState};
 pub use view::{Sample, View};
+pub use network::{LayerGeometry, LayerSpec, Network, NetworkSpec};
+pub use rotation::{LayerTrainer, Path, Rotation};

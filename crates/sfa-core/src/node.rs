@@ -355,6 +355,56 @@ impl SfaNode {
         Ok(())
     }
 
+    /// Feeds a *graph* of samples to the stage in training: every row of `x`
+    /// is a sample with weight `sample_weights[i]` (default 1; 0 makes a row
+    /// usable as a pair end only), and every edge `[a, b]` is a derivative
+    /// pair `x[b] - x[a]` with weight `edge_weights[e]` (default 1). The
+    /// sequence API ([`partial_fit`](Self::partial_fit)) is the special case
+    /// of a path graph. All rows of one call are expanded at once: keep calls
+    /// moderate (e.g. one image's patches).
+    pub fn partial_fit_graph<T: Sample>(
+        &mut self,
+        x: View<'_, T>,
+        sample_weights: Option<&[f64]>,
+        edges: &[[usize; 2]],
+        edge_weights: Option<&[f64]>,
+    ) -> Result<()> {
+        if self.n_features.is_none() {
+            self.init(x.ncols())?;
+        }
+        self.check_width(&x)?;
+        let s = self.training_stage;
+        if self.stages[s].acc.is_none() {
+            return Err(SfaError::NotFitted(
+                "the model was saved without training statistics; it cannot be trained further".into(),
+            ));
+        }
+        let n = x.nrows();
+        if n == 0 {
+            return Ok(());
+        }
+        x.check_finite("input")?;
+        self.stages[s].solution = None;
+        let input = self.forward_block(x, s)?;
+        let stage = &self.stages[s];
+        let ed = stage.expanded_dim();
+        let data = match &stage.expansion {
+            Some(ex) => {
+                let mut out = vec![0.0; n * ed];
+                ex.expand_block(&input, &mut out);
+                out
+            }
+            None => input,
+        };
+        let v = View::from_slice(&data, n, ed)?;
+        // Validate everything before touching the statistics.
+        let mut acc = self.stages[s].acc.clone().expect("acc");
+        acc.add_samples(v, sample_weights)?;
+        acc.add_pairs_indexed(v, edges, edge_weights)?;
+        self.stages[s].acc = Some(acc);
+        Ok(())
+    }
+
     /// Raw rows of `x` pushed through stages `0..upto` (all solved), in
     /// parallel; row-major output of the width stage `upto` takes as input.
     fn forward_block<T: Sample>(&self, x: View<'_, T>, upto: usize) -> Result<Vec<f64>> {

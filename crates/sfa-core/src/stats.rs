@@ -472,6 +472,57 @@ impl Accumulator {
         Ok(())
     }
 
+    /// Adds derivative pairs given as row indices into `x`: pair `i` is
+    /// `x[edges[i][1]] - x[edges[i][0]]`, with optional non-negative weights
+    /// (default 1). This is how graph-structured training (simulated
+    /// rotation with multiplicities, graph-based SFA) feeds pairs without
+    /// materialising both ends.
+    pub fn add_pairs_indexed<T: Sample>(
+        &mut self,
+        x: View<'_, T>,
+        edges: &[[usize; 2]],
+        weights: Option<&[f64]>,
+    ) -> Result<()> {
+        self.check_width(&x)?;
+        let n = edges.len();
+        check_weights(weights, n, "pair weights")?;
+        if let Some(e) = edges.iter().find(|e| e[0] >= x.nrows() || e[1] >= x.nrows()) {
+            return Err(SfaError::InvalidArgument(format!(
+                "pair ({}, {}) refers to a sample outside 0..{}",
+                e[0],
+                e[1],
+                x.nrows()
+            )));
+        }
+        if n == 0 {
+            return Ok(());
+        }
+        let d = self.dim;
+        let m = parallel_moments(n, d, "pairs", |s, e, _cb, db, _sum, sum_d| {
+            let mut tmp = vec![0.0; d];
+            for (k, i) in (s..e).enumerate() {
+                let row = &mut db[k * d..(k + 1) * d];
+                let [ia, ib] = edges[i];
+                x.row_into(ib, None, row);
+                x.row_into(ia, None, &mut tmp);
+                row.iter_mut().zip(&tmp).for_each(|(r, t)| *r -= t);
+                if let Some(j) = first_non_finite(row) {
+                    return Err((i, j));
+                }
+                let w = weights.map_or(1.0, |w| w[i]);
+                let sw = w.sqrt();
+                for (acc, v) in sum_d.iter_mut().zip(row.iter_mut()) {
+                    *acc += w * *v;
+                    *v *= sw;
+                }
+            }
+            Ok((0, e - s))
+        })?;
+        self.absorb(&m);
+        self.pair_weight_sum += weights.map_or(n as f64, |w| w.iter().sum());
+        Ok(())
+    }
+
     /// Adds everything `other` accumulated (exact up to rounding). No
     /// derivative pair is formed between the two; the open sequence of `self`
     /// stays open. Use [`merge_continuing`](Self::merge_continuing) when

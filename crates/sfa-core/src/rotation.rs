@@ -1,0 +1,500 @@
+//! Training and inference under simulated rotation (thesis sections 3.4.1,
+//! 5.1.3; design note `shared/fast-rotation.md`).
+//!
+//! A training panorama (height `H`, width `W`, periodic in columns) is shown
+//! as `K = ceil(W / step)` views: view `k` is the image rolled left by
+//! `k * step` columns, seen through a window of the network's width `V <= W`
+//! (view column `c` is image column `(k * step + c) mod W`). The views of all
+//! images form one sequence; each RF position has its own time series
+//! (derivative pairs: same position, consecutive views; the last view of an
+//! image and the first of the next).
+//!
+//! # Two exact paths
+//! * **Naive** ([`Path::Naive`]): build every view, run the trained lower
+//!   layers on it, gather every RF. Kept for tests and for networks without
+//!   weight sharing.
+//! * **Fast** ([`Path::Fast`], weight sharing only): with a shared node, the
+//!   RF of layer `l` at position `j` in view `k` is the periodic patch at base
+//!   offset `o = (k * step + j * T_l) mod W`, `T_l` the product of the strides
+//!   up to `l`, dilated by `T_{l-1}`. Each layer is evaluated once per image
+//!   at the distinct offsets (a periodic field), and the statistics get each
+//!   offset's multiplicity as a sample weight and each `(o, o + step)` pair's
+//!   multiplicity as a pair weight. Both paths give the same node weights up
+//!   to rounding.
+
+use crate::error::{Result, SfaError};
+use crate::network::{LayerGeometry, Network};
+use crate::view::View;
+use rayon::prelude::*;
+
+/// Simulated rotation: lateral shift step and panorama period.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Rotation {
+    /// Shift between consecutive views, in pixels.
+    pub step: usize,
+    /// Width of the training panoramas (the period `W`); the network's input
+    /// width is the window `V <= W`.
+    pub period: usize,
+}
+
+impl Rotation {
+    /// Number of views per panorama, `ceil(period / step)`.
+    pub fn n_views(&self) -> usize {
+        self.period.div_ceil(self.step)
+    }
+
+    fn check(&self, net: &Network) -> Result<()> {
+        let (_, v, _) = net.input_shape();
+        if self.step == 0 {
+            return Err(SfaError::InvalidArgument("rotation step must be at least 1 pixel".into()));
+        }
+        if self.period < v {
+            return Err(SfaError::InvalidArgument(format!(
+                "panorama width {} is smaller than the network's input width {v}",
+                self.period
+            )));
+        }
+        if self.step > self.period {
+            return Err(SfaError::InvalidArgument(format!(
+                "rotation step {} exceeds the panorama width {}",
+                self.step, self.period
+            )));
+        }
+        Ok(())
+    }
+}
+
+/// Which training path to use.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Path {
+    Naive,
+    Fast,
+}
+
+/// One image's training graph for a layer: patch rows, their sample weights,
+/// weighted pairs inside the image, and which rows start and end the image's
+/// per-position series (for the pairs between consecutive images).
+struct ImageGraph {
+    rows: Vec<f64>,
+    n: usize,
+    weights: Vec<f64>,
+    edges: Vec<[usize; 2]>,
+    edge_weights: Vec<f64>,
+    /// Per series (RF row x RF position): row of the first view.
+    first: Vec<usize>,
+    /// Per series: row of the last view.
+    last: Vec<usize>,
+}
+
+/// Distinct offsets `(k * step + j * t) mod period` for `k < views`,
+/// `j < positions`, sorted, with an index map (usize::MAX where absent).
+fn offset_set(rot: &Rotation, t: usize, positions: usize) -> (Vec<usize>, Vec<usize>) {
+    let w = rot.period;
+    let mut present = vec![false; w];
+    for k in 0..rot.n_views() {
+        for j in 0..positions {
+            present[(k * rot.step + j * t) % w] = true;
+        }
+    }
+    let offs: Vec<usize> = (0..w).filter(|&o| present[o]).collect();
+    let mut idx = vec![usize::MAX; w];
+    for (i, &o) in offs.iter().enumerate() {
+        idx[o] = i;
+    }
+    (offs, idx)
+}
+
+/// Column strides `T_l` (product of strides up to and including `l`).
+fn cum_strides(geom: &[LayerGeometry]) -> Vec<usize> {
+    let mut t = 1;
+    geom.iter()
+        .map(|g| {
+            t *= g.stride_w;
+            t
+        })
+        .collect()
+}
+
+/// A layer's periodic output field of one image: `n_h x |offsets| x n_out`.
+struct Field {
+    data: Vec<f64>,
+    idx: Vec<usize>,
+    n_off: usize,
+    depth: usize,
+}
+
+/// Gathers layer `l`'s periodic patches (rows `0..n_h`, offsets `offs`) of one
+/// image, reading the image (l = 0) or the field below.
+fn periodic_patches(
+    g: &LayerGeometry,
+    dilation: usize,
+    period: usize,
+    image: &[f64],
+    below: Option<&Field>,
+    offs: &[usize],
+) -> Vec<f64> {
+    let mut out = vec![0.0; g.n_h * offs.len() * g.in_dim];
+    let c = g.in_c;
+    for r in 0..g.n_h {
+        for (oi, &o) in offs.iter().enumerate() {
+            let p = &mut out[(r * offs.len() + oi) * g.in_dim..(r * offs.len() + oi + 1) * g.in_dim];
+            let mut w = 0;
+            for dr in 0..g.rf_h {
+                let src_row = r * g.stride_h + dr;
+                for m in 0..g.rf_w {
+                    let col = (o + m * dilation) % period;
+                    let src = match below {
+                        None => &image[(src_row * period + col) * c..(src_row * period + col + 1) * c],
+                        Some(f) => {
+                            let i = f.idx[col];
+                            debug_assert!(i != usize::MAX, "offset {col} missing below");
+                            &f.data[(src_row * f.n_off + i) * f.depth..(src_row * f.n_off + i + 1) * f.depth]
+                        }
+                    };
+                    p[w..w + c].copy_from_slice(src);
+                    w += c;
+                }
+            }
+        }
+    }
+    out
+}
+
+/// Periodic fields of layers `0..upto` of one image (weight sharing only).
+fn periodic_fields(net: &Network, rot: &Rotation, image: &[f64], upto: usize) -> Result<Vec<Field>> {
+    let geom = net.geometry();
+    let t = cum_strides(geom);
+    let mut fields: Vec<Field> = Vec::with_capacity(upto);
+    for l in 0..upto {
+        let g = &geom[l];
+        let (offs, idx) = offset_set(rot, t[l], g.n_w);
+        let dilation = if l == 0 { 1 } else { t[l - 1] };
+        let patches = periodic_patches(g, dilation, rot.period, image, fields.last(), &offs);
+        let n = g.n_h * offs.len();
+        let data = net.apply_nodes(l, &patches, n, |_| 0)?;
+        fields.push(Field { data, idx, n_off: offs.len(), depth: g.n_out });
+    }
+    Ok(fields)
+}
+
+fn fast_graph(net: &Network, rot: &Rotation, image: &[f64], layer: usize) -> Result<ImageGraph> {
+    let geom = net.geometry();
+    let g = &geom[layer];
+    let t = cum_strides(geom);
+    let fields = periodic_fields(net, rot, image, layer)?;
+    let (offs, idx) = offset_set(rot, t[layer], g.n_w);
+    let dilation = if layer == 0 { 1 } else { t[layer - 1] };
+    let rows = periodic_patches(g, dilation, rot.period, image, fields.last(), &offs);
+    let (w, k_views, s) = (rot.period, rot.n_views(), rot.step);
+    let no = offs.len();
+    let mut mult = vec![0.0; no];
+    let mut pmult = vec![0.0; no];
+    for k in 0..k_views {
+        for j in 0..g.n_w {
+            let i = idx[(k * s + j * t[layer]) % w];
+            mult[i] += 1.0;
+            if k + 1 < k_views {
+                pmult[i] += 1.0;
+            }
+        }
+    }
+    let n = g.n_h * no;
+    let mut weights = Vec::with_capacity(n);
+    let (mut edges, mut edge_weights) = (Vec::new(), Vec::new());
+    for r in 0..g.n_h {
+        weights.extend_from_slice(&mult);
+        for (oi, &o) in offs.iter().enumerate() {
+            if pmult[oi] > 0.0 {
+                edges.push([r * no + oi, r * no + idx[(o + s) % w]]);
+                edge_weights.push(pmult[oi]);
+            }
+        }
+    }
+    let (mut first, mut last) = (Vec::new(), Vec::new());
+    for r in 0..g.n_h {
+        for j in 0..g.n_w {
+            first.push(r * no + idx[(j * t[layer]) % w]);
+            last.push(r * no + idx[((k_views - 1) * s + j * t[layer]) % w]);
+        }
+    }
+    Ok(ImageGraph { rows, n, weights, edges, edge_weights, first, last })
+}
+
+/// View `k` of a `h x period x c` image through a window of `v` columns.
+fn view(image: &[f64], h: usize, period: usize, c: usize, v: usize, shift: usize) -> Vec<f64> {
+    let mut out = vec![0.0; h * v * c];
+    for r in 0..h {
+        for col in 0..v {
+            let src = (r * period + (shift + col) % period) * c;
+            out[(r * v + col) * c..(r * v + col + 1) * c].copy_from_slice(&image[src..src + c]);
+        }
+    }
+    out
+}
+
+fn naive_graph(net: &Network, rot: &Rotation, image: &[f64], layer: usize) -> Result<ImageGraph> {
+    let g = &net.geometry()[layer];
+    let (h, v, c) = net.input_shape();
+    let np = g.n_positions();
+    let kv = rot.n_views();
+    let mut rows = vec![0.0; kv * np * g.in_dim];
+    for k in 0..kv {
+        let vw = view(image, h, rot.period, c, v, k * rot.step);
+        let f = net.field_below(&vw, layer)?;
+        for r in 0..g.n_h {
+            for j in 0..g.n_w {
+                let i = k * np + r * g.n_w + j;
+                g.gather(&f, r, j, &mut rows[i * g.in_dim..(i + 1) * g.in_dim]);
+            }
+        }
+    }
+    let mut edges = Vec::new();
+    for k in 0..kv.saturating_sub(1) {
+        for p in 0..np {
+            edges.push([k * np + p, (k + 1) * np + p]);
+        }
+    }
+    let ne = edges.len();
+    Ok(ImageGraph {
+        rows,
+        n: kv * np,
+        weights: vec![1.0; kv * np],
+        edges,
+        edge_weights: vec![1.0; ne],
+        first: (0..np).collect(),
+        last: (0..np).map(|p| (kv - 1) * np + p).collect(),
+    })
+}
+
+/// Trains one layer of a network, pass by pass, on images streamed in
+/// chunks. Usage: for each pass (`n_passes()`), feed every image in order
+/// ([`feed`](Self::feed)), then [`end_pass`](Self::end_pass).
+pub struct LayerTrainer {
+    layer: usize,
+    rot: Rotation,
+    path: Path,
+    pass: usize,
+    /// Last-view patches of the previous image (per series), for the pairs
+    /// between consecutive images.
+    tail: Option<Vec<f64>>,
+    images_seen: usize,
+}
+
+impl LayerTrainer {
+    /// Starts training `layer` (all layers below must be trained).
+    pub fn new(net: &Network, layer: usize, rot: Rotation, path: Path) -> Result<Self> {
+        rot.check(net)?;
+        if layer >= net.n_layers() {
+            return Err(SfaError::InvalidArgument(format!("layer {} does not exist", layer + 1)));
+        }
+        if net.n_trained() < layer {
+            return Err(SfaError::NotFitted(format!(
+                "layer {} cannot train before layers 1..{} are trained",
+                layer + 1,
+                layer
+            )));
+        }
+        let path = if net.spec().weight_sharing { path } else { Path::Naive };
+        Ok(LayerTrainer { layer, rot, path, pass: 0, tail: None, images_seen: 0 })
+    }
+
+    /// Passes over the data this layer needs (2: reduction, then expansion).
+    pub fn n_passes(&self, net: &Network) -> usize {
+        net.nodes(self.layer)[0].n_stages()
+    }
+
+    /// The path in use (naive without weight sharing).
+    pub fn path(&self) -> Path {
+        self.path
+    }
+
+    /// Feeds `n` images (`n x height x period x channels`, row-major), in
+    /// sequence order.
+    pub fn feed(&mut self, net: &mut Network, images: &[f64], n: usize) -> Result<()> {
+        let (h, _, c) = net.input_shape();
+        let size = h * self.rot.period * c;
+        if images.len() != n * size {
+            return Err(SfaError::ShapeMismatch {
+                what: "image data length (n x height x width x channels)",
+                expected: n * size,
+                got: images.len(),
+            });
+        }
+        if let Some(i) = images.iter().position(|v| !v.is_finite()) {
+            return Err(SfaError::InvalidArgument(format!(
+                "training image {} contains NaN or infinity",
+                self.images_seen + i / size
+            )));
+        }
+        let (layer, rot, path) = (self.layer, self.rot, self.path);
+        let graphs: Vec<Result<ImageGraph>> = {
+            let net_ref: &Network = net;
+            images
+                .par_chunks(size)
+                .map(|img| match path {
+                    Path::Fast => fast_graph(net_ref, &rot, img, layer),
+                    Path::Naive => naive_graph(net_ref, &rot, img, layer),
+                })
+                .collect()
+        };
+        let d = net.geometry()[layer].in_dim;
+        for gr in graphs {
+            let gr = gr?;
+            if net.spec().weight_sharing {
+                self.feed_shared(net, gr, d)?;
+            } else {
+                self.feed_individual(net, gr, d)?;
+            }
+            self.images_seen += 1;
+        }
+        Ok(())
+    }
+
+    fn feed_shared(&mut self, net: &mut Network, gr: ImageGraph, d: usize) -> Result<()> {
+        let ns = gr.first.len();
+        let (rows, n, mut weights, mut edges, mut ew) = match self.tail.take() {
+            None => (gr.rows, gr.n, gr.weights, gr.edges, gr.edge_weights),
+            Some(tail) => {
+                // Prepend the previous image's last views as weight-0 rows.
+                let mut rows = tail;
+                rows.extend_from_slice(&gr.rows);
+                let mut w = vec![0.0; ns];
+                w.extend_from_slice(&gr.weights);
+                let mut e: Vec<[usize; 2]> = (0..ns).map(|i| [i, ns + gr.first[i]]).collect();
+                e.extend(gr.edges.iter().map(|[a, b]| [a + ns, b + ns]));
+                let mut ew = vec![1.0; ns];
+                ew.extend_from_slice(&gr.edge_weights);
+                (rows, ns + gr.n, w, e, ew)
+            }
+        };
+        let offset = n - gr.n;
+        let mut tail = vec![0.0; ns * d];
+        for (i, &r) in gr.last.iter().enumerate() {
+            let src = (offset + r) * d;
+            tail[i * d..(i + 1) * d].copy_from_slice(&rows[src..src + d]);
+        }
+        weights.shrink_to_fit();
+        edges.shrink_to_fit();
+        ew.shrink_to_fit();
+        let node = &mut net.nodes_mut(self.layer)[0];
+        node.partial_fit_graph(View::from_slice(&rows, n, d)?, Some(&weights), &edges, Some(&ew))?;
+        self.tail = Some(tail);
+        Ok(())
+    }
+
+    fn feed_individual(&mut self, net: &mut Network, gr: ImageGraph, d: usize) -> Result<()> {
+        // Naive graph: rows are (view, position); each position's rows form
+        // one series continuing across images.
+        let np = gr.first.len();
+        let kv = gr.n / np;
+        let first_image = self.images_seen == 0;
+        let nodes = net.nodes_mut(self.layer);
+        nodes.par_iter_mut().enumerate().try_for_each(|(p, node)| {
+            let mut x = vec![0.0; kv * d];
+            for k in 0..kv {
+                let src = (k * np + p) * d;
+                x[k * d..(k + 1) * d].copy_from_slice(&gr.rows[src..src + d]);
+            }
+            node.partial_fit(View::from_slice(&x, kv, d)?, first_image)
+        })
+    }
+
+    /// Ends a pass over the data: solves the node stage trained in it.
+    /// Returns true when the layer is fully trained.
+    pub fn end_pass(&mut self, net: &mut Network) -> Result<bool> {
+        if self.images_seen == 0 {
+            return Err(SfaError::TooFewSamples { what: "training images in this pass", needed: 1, got: 0 });
+        }
+        let n_passes = self.n_passes(net);
+        let last = self.pass + 1 == n_passes;
+        let layer = self.layer;
+        let nodes = net.nodes_mut(layer);
+        let r: Result<()> = nodes.par_iter_mut().try_for_each(|node| {
+            if last {
+                node.ensure_solved()
+            } else {
+                node.finish_stage()
+            }
+        });
+        r.map_err(|e| match e {
+            SfaError::RankDeficient { rank, requested, dim, tol } => SfaError::InvalidArgument(format!(
+                "layer {}: {}",
+                layer + 1,
+                SfaError::RankDeficient { rank, requested, dim, tol }
+            )),
+            e => e,
+        })?;
+        self.pass += 1;
+        self.tail = None;
+        self.images_seen = 0;
+        if last {
+            net.set_trained(layer + 1);
+        }
+        Ok(last)
+    }
+}
+
+/// Top-layer outputs of each image under every simulated rotation:
+/// `n x n_views x n_outputs`. Fast (periodic fields) with weight sharing;
+/// naive otherwise.
+pub fn transform_rotations(net: &Network, rot: Rotation, images: &[f64], n: usize) -> Result<Vec<f64>> {
+    rot.check(net)?;
+    if !net.is_trained() {
+        return Err(SfaError::NotFitted("the network is not trained".into()));
+    }
+    let (h, v, c) = net.input_shape();
+    let size = h * rot.period * c;
+    if images.len() != n * size {
+        return Err(SfaError::ShapeMismatch {
+            what: "image data length (n x height x width x channels)",
+            expected: n * size,
+            got: images.len(),
+        });
+    }
+    if images.iter().any(|x| !x.is_finite()) {
+        return Err(SfaError::InvalidArgument("images contain NaN or infinity".into()));
+    }
+    let kv = rot.n_views();
+    let m = net.n_outputs();
+    let top = net.n_layers() - 1;
+    let per: Vec<Result<Vec<f64>>> = images
+        .par_chunks(size)
+        .map(|img| {
+            if net.spec().weight_sharing {
+                let fields = periodic_fields(net, &rot, img, top + 1)?;
+                let f = fields.last().expect("top field");
+                Ok((0..kv)
+                    .flat_map(|k| {
+                        let i = f.idx[(k * rot.step) % rot.period];
+                        f.data[i * m..(i + 1) * m].to_vec()
+                    })
+                    .collect())
+            } else {
+                let mut out = Vec::with_capacity(kv * m);
+                for k in 0..kv {
+                    out.extend(net.field_below(&view(img, h, rot.period, c, v, k * rot.step), top + 1)?);
+                }
+                Ok(out)
+            }
+        })
+        .collect();
+    let mut y = Vec::with_capacity(n * kv * m);
+    for p in per {
+        y.extend(p?);
+    }
+    Ok(y)
+}
+
+/// Convenience: trains every untrained layer on an in-memory batch.
+pub fn train(net: &mut Network, rot: Rotation, images: &[f64], n: usize, path: Path) -> Result<()> {
+    for layer in net.n_trained()..net.n_layers() {
+        let mut tr = LayerTrainer::new(net, layer, rot, path)?;
+        loop {
+            tr.feed(net, images, n)?;
+            if tr.end_pass(net)? {
+                break;
+            }
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,127 @@
+mod common;
+use common::Rng;
+use sfa_core::rotation::{train, transform_rotations};
+use sfa_core::{LayerSpec, Network, NetworkSpec, Path, Rotation};
+
+/// `n` periodic random images `h x w x c` with smooth structure.
+fn images(n: usize, h: usize, w: usize, c: usize, seed: u64) -> Vec<f64> {
+    let mut r = Rng::new(seed);
+    let mut out = Vec::with_capacity(n * h * w * c);
+    for _ in 0..n {
+        let phases: Vec<f64> = (0..6).map(|_| r.next() * 3.0).collect();
+        for y in 0..h {
+            for x in 0..w {
+                for ch in 0..c {
+                    let a = 2.0 * std::f64::consts::PI * x as f64 / w as f64;
+                    let v = (a + phases[0] + y as f64 * 0.3).sin()
+                        + 0.5 * (2.0 * a + phases[1] * (1.0 + ch as f64)).cos()
+                        + 0.3 * (3.0 * a + phases[2] * y as f64).sin()
+                        + 0.2 * r.next();
+                    out.push(v);
+                }
+            }
+        }
+    }
+    out
+}
+
+fn spec(v: usize, c: usize, stride: usize, sharing: bool) -> NetworkSpec {
+    let n_w1 = (v - 4) / stride + 1;
+    NetworkSpec {
+        height: 6,
+        width: v,
+        channels: c,
+        layers: vec![
+            LayerSpec { rf: (4, 3), stride: (stride, 3), n_out: 4, reduce_to: Some(5), degree: 2 },
+            LayerSpec { rf: (n_w1, 2), stride: (1, 1), n_out: 3, reduce_to: Some(6), degree: 2 },
+        ],
+        weight_sharing: sharing,
+        tol: 1e-10,
+    }
+}
+
+fn max_rel(a: &[f64], b: &[f64]) -> f64 {
+    let scale = a.iter().map(|v| v.abs()).fold(0.0, f64::max).max(1e-300);
+    a.iter().zip(b).map(|(x, y)| (x - y).abs()).fold(0.0, f64::max) / scale
+}
+
+fn compare(v: usize, stride: usize, step: usize, c: usize) {
+    let w = 24;
+    let n = 40;
+    let imgs = images(n, 6, w, c, 7 + step as u64);
+    let rot = Rotation { step, period: w };
+    let mut naive = Network::new(spec(v, c, stride, true)).unwrap();
+    let mut fast = naive.clone();
+    train(&mut naive, rot, &imgs, n, Path::Naive).unwrap();
+    train(&mut fast, rot, &imgs, n, Path::Fast).unwrap();
+    for l in 0..2 {
+        let (a, b) = (naive.nodes(l)[0].state(true), fast.nodes(l)[0].state(true));
+        for (sa, sb) in a.stages.iter().zip(&b.stages) {
+            let (pa, pb) = (sa.solution.as_ref().unwrap(), sb.solution.as_ref().unwrap());
+            let e = max_rel(&pa.projection, &pb.projection);
+            assert!(e < 1e-9, "v={v} stride={stride} step={step} layer {l}: projection differs by {e}");
+            assert!(max_rel(&pa.delta, &pb.delta) < 1e-9);
+        }
+    }
+    // Inference under rotation agrees with rolling and transforming.
+    let m = 3;
+    let yr = transform_rotations(&fast, rot, &imgs[..2 * 6 * w * c], 2).unwrap();
+    let kv = rot.n_views();
+    for i in 0..2 {
+        for k in 0..kv {
+            let img = &imgs[i * 6 * w * c..(i + 1) * 6 * w * c];
+            let mut vw = Vec::new();
+            for y in 0..6 {
+                for x in 0..v {
+                    let col = (k * step + x) % w;
+                    vw.extend_from_slice(&img[(y * w + col) * c..(y * w + col + 1) * c]);
+                }
+            }
+            let y = fast.transform(&vw, 1).unwrap();
+            let got = &yr[(i * kv + k) * m..(i * kv + k + 1) * m];
+            assert!(max_rel(&y, got) < 1e-9);
+        }
+    }
+}
+
+#[test]
+fn fast_equals_naive_full_window() {
+    compare(24, 2, 2, 1);
+}
+
+#[test]
+fn fast_equals_naive_step_not_dividing_stride() {
+    compare(24, 2, 3, 1);
+}
+
+#[test]
+fn fast_equals_naive_narrow_window_rgb() {
+    compare(16, 2, 5, 3);
+}
+
+#[test]
+fn individual_nodes_train() {
+    let (w, n) = (24, 30);
+    let imgs = images(n, 6, w, 1, 3);
+    let mut net = Network::new(spec(24, 1, 4, false)).unwrap();
+    assert_eq!(net.nodes(0).len(), 6 * 2);
+    train(&mut net, Rotation { step: 2, period: w }, &imgs, n, Path::Fast).unwrap();
+    let y = net.transform(&imgs[..6 * w], 1).unwrap();
+    assert_eq!(y.len(), 3);
+    assert!(y.iter().all(|v| v.is_finite()));
+}
+
+#[test]
+fn bad_specs_name_the_layer() {
+    let mut s = spec(24, 1, 2, true);
+    s.layers[0].stride = (3, 3);
+    let e = Network::new(s).unwrap_err().to_string();
+    assert!(e.contains("layer 1") && e.contains("do not tile"), "{e}");
+    let mut s = spec(24, 1, 2, true);
+    s.layers[1].rf = (5, 2);
+    let e = Network::new(s).unwrap_err().to_string();
+    assert!(e.contains("layer 2"), "{e}");
+    let mut s = spec(24, 1, 2, true);
+    s.layers[0].n_out = 100;
+    assert!(Network::new(s).unwrap_err().to_string().contains("exceeds the expanded dim"));
+}
