@@ -7,10 +7,13 @@ NumPy / scikit-learn-style front.
 
 from ._core import __version__, get_num_threads, set_num_threads
 from .modelfile import load
+from .network import Network, Rotation
 from .sfa import SFA, NotFittedError, Statistics, beta_values, expand, expanded_dim
 
 __all__ = [
     "SFA",
+    "Network",
+    "Rotation",
     "Statistics",
     "NotFittedError",
     "beta_values",

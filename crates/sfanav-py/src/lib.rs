@@ -9,8 +9,8 @@ use pyo3::exceptions::{PyRuntimeError, PyTypeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
 use sfa_core::{
-    Accumulator, AccumulatorState, NodeConfig, NodeState, SfaError, SfaNode, SolutionState,
-    StageState, View,
+    Accumulator, AccumulatorState, LayerSpec, LayerTrainer, Network, NetworkSpec, NodeConfig,
+    NodeState, Path, Rotation, SfaError, SfaNode, SolutionState, StageState, View,
 };
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::sync::{Arc, Mutex};
@@ -533,6 +533,234 @@ impl PySfaNode {
     }
 }
 
+
+// ---------------------------------------------------------------- Network
+
+/// Image batches as contiguous f64 (N, H, W, C) data: converts float32,
+/// float64 or uint8 arrays of 3 (gray) or 4 dimensions.
+fn images_f64(obj: &Bound<'_, PyAny>) -> PyResult<(Vec<f64>, [usize; 4])> {
+    fn shape4(sh: &[usize]) -> PyResult<[usize; 4]> {
+        match sh.len() {
+            3 => Ok([sh[0], sh[1], sh[2], 1]),
+            4 => Ok([sh[0], sh[1], sh[2], sh[3]]),
+            _ => Err(PyValueError::new_err(format!(
+                "images must have shape (N, H, W) or (N, H, W, C), got {} dimensions",
+                sh.len()
+            ))),
+        }
+    }
+    macro_rules! conv {
+        ($t:ty) => {
+            if let Ok(a) = obj.cast::<numpy::PyArrayDyn<$t>>() {
+                let r = a.try_readonly().map_err(|e| PyValueError::new_err(format!("images: {e}")))?;
+                let v = r.as_array();
+                let sh = shape4(v.shape())?;
+                return Ok((v.iter().map(|&x| x as f64).collect(), sh));
+            }
+        };
+    }
+    conv!(f64);
+    conv!(f32);
+    conv!(u8);
+    Err(PyTypeError::new_err("images must be a NumPy array of float32, float64 or uint8"))
+}
+
+fn spec_from_dict(d: &Bound<'_, PyDict>) -> PyResult<NetworkSpec> {
+    let list = d
+        .get_item("layers")?
+        .ok_or_else(|| PyValueError::new_err("network spec: missing 'layers'"))?
+        .cast_into::<PyList>()
+        .map_err(|_| PyValueError::new_err("network spec: 'layers' must be a list"))?;
+    let mut layers = Vec::new();
+    for item in list.iter() {
+        let l = item
+            .cast_into::<PyDict>()
+            .map_err(|_| PyValueError::new_err("network spec: each layer must be a dict"))?;
+        layers.push(LayerSpec {
+            rf: get(&l, "rf")?,
+            stride: get(&l, "stride")?,
+            n_out: get(&l, "n_out")?,
+            reduce_to: get(&l, "reduce_to")?,
+            degree: get(&l, "degree")?,
+        });
+    }
+    Ok(NetworkSpec {
+        height: get(d, "height")?,
+        width: get(d, "width")?,
+        channels: get(d, "channels")?,
+        layers,
+        weight_sharing: get(d, "weight_sharing")?,
+        tol: get(d, "tol")?,
+    })
+}
+
+/// The receptive-field SFA network (see sfa_core::network); wrapped by
+/// sfanav.Network.
+#[pyclass(name = "Network", module = "sfanav._core")]
+#[derive(Clone)]
+struct PyNetwork {
+    inner: Network,
+}
+
+#[pymethods]
+impl PyNetwork {
+    #[new]
+    fn new(spec: &Bound<'_, PyDict>) -> PyResult<Self> {
+        Ok(PyNetwork { inner: Network::new(spec_from_dict(spec)?).map_err(to_py)? })
+    }
+
+    fn geometry<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyList>> {
+        let out = PyList::empty(py);
+        for (l, g) in self.inner.geometry().iter().enumerate() {
+            let d = PyDict::new(py);
+            d.set_item("input", (g.in_w, g.in_h, g.in_c))?;
+            d.set_item("rf", (g.rf_w, g.rf_h))?;
+            d.set_item("stride", (g.stride_w, g.stride_h))?;
+            d.set_item("grid", (g.n_w, g.n_h))?;
+            d.set_item("in_dim", g.in_dim)?;
+            d.set_item("reduce_to", g.reduce_to)?;
+            d.set_item("degree", g.degree)?;
+            d.set_item("n_out", g.n_out)?;
+            d.set_item("n_nodes", self.inner.nodes(l).len())?;
+            let nodes = self.inner.nodes(l);
+            let rd: Vec<Vec<usize>> = nodes.iter().map(|n| n.rank_deficits()).collect();
+            d.set_item("rank_deficits", rd)?;
+            d.set_item("reduced_to", nodes.iter().map(|n| n.stage_outputs().first().copied().unwrap_or(0)).collect::<Vec<_>>())?;
+            out.append(d)?;
+        }
+        Ok(out)
+    }
+
+    #[getter]
+    fn n_layers(&self) -> usize { self.inner.n_layers() }
+    #[getter]
+    fn n_trained(&self) -> usize { self.inner.n_trained() }
+    #[getter]
+    fn n_outputs(&self) -> usize { self.inner.n_outputs() }
+    #[getter]
+    fn input_shape(&self) -> (usize, usize, usize) { self.inner.input_shape() }
+
+    #[getter]
+    fn delta_values<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        let top = self.inner.n_layers() - 1;
+        Ok(vec1(py, self.inner.nodes(top)[0].delta_values().map_err(to_py)?.to_vec()))
+    }
+
+    /// transform(images) -> (N, n_outputs): images (N, H, W[, C]) of the
+    /// network's input size.
+    fn transform<'py>(&self, py: Python<'py>, images: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyAny>> {
+        let (data, [n, h, w, c]) = images_f64(images)?;
+        let (eh, ew, ec) = self.inner.input_shape();
+        if (h, w, c) != (eh, ew, ec) {
+            return Err(PyValueError::new_err(format!(
+                "images are {w}x{h} with {c} channel(s), the network takes {ew}x{eh} with {ec}"
+            )));
+        }
+        let net = &self.inner;
+        let y = run(py, || net.transform(&data, n))?;
+        out2(py, y, n, net.n_outputs())
+    }
+
+    /// transform_rotations(images, step) -> (N, K, n_outputs)
+    fn transform_rotations<'py>(&self, py: Python<'py>, images: &Bound<'py, PyAny>, step: usize) -> PyResult<Bound<'py, PyAny>> {
+        let (data, [n, h, w, c]) = images_f64(images)?;
+        let (eh, _, ec) = self.inner.input_shape();
+        if (h, c) != (eh, ec) {
+            return Err(PyValueError::new_err(format!(
+                "images are {h} px high with {c} channel(s), the network takes {eh} with {ec}"
+            )));
+        }
+        let rot = Rotation { step, period: w };
+        let net = &self.inner;
+        let y = run(py, || sfa_core::rotation::transform_rotations(net, rot, &data, n))?;
+        let (k, m) = (rot.n_views(), net.n_outputs());
+        let a = numpy::ndarray::Array3::from_shape_vec((n, k, m), y)
+            .map_err(|e| PyRuntimeError::new_err(format!("internal shape error: {e}")))?;
+        Ok(a.into_pyarray(py).into_any())
+    }
+
+    #[pyo3(signature = (with_statistics=false))]
+    fn node_states<'py>(&self, py: Python<'py>, with_statistics: bool) -> PyResult<Bound<'py, PyList>> {
+        let out = PyList::empty(py);
+        for layer in self.inner.node_states(with_statistics) {
+            let l = PyList::empty(py);
+            for st in &layer {
+                l.append(node_state_to_dict(py, st)?)?;
+            }
+            out.append(l)?;
+        }
+        Ok(out)
+    }
+
+    #[staticmethod]
+    fn from_states(spec: &Bound<'_, PyDict>, states: &Bound<'_, PyList>, trained: usize) -> PyResult<Self> {
+        let spec = spec_from_dict(spec)?;
+        let mut all = Vec::new();
+        for layer in states.iter() {
+            let layer = layer
+                .cast_into::<PyList>()
+                .map_err(|_| PyValueError::new_err("invalid model state: node states must be lists"))?;
+            let mut v = Vec::new();
+            for st in layer.iter() {
+                let st = st
+                    .cast_into::<PyDict>()
+                    .map_err(|_| PyValueError::new_err("invalid model state: a node state must be a dict"))?;
+                v.push(node_state_from_dict(&st)?);
+            }
+            all.push(v);
+        }
+        Ok(PyNetwork { inner: Network::from_states(spec, &all, trained).map_err(to_py)? })
+    }
+
+    fn copy(&self) -> Self {
+        self.clone()
+    }
+}
+
+/// Trains one layer pass by pass (see sfa_core::rotation::LayerTrainer).
+#[pyclass(name = "LayerTrainer", module = "sfanav._core")]
+struct PyLayerTrainer {
+    inner: LayerTrainer,
+}
+
+#[pymethods]
+impl PyLayerTrainer {
+    #[new]
+    #[pyo3(signature = (network, layer, step, period, fast=true))]
+    fn new(network: &PyNetwork, layer: usize, step: usize, period: usize, fast: bool) -> PyResult<Self> {
+        let path = if fast { Path::Fast } else { Path::Naive };
+        let inner = LayerTrainer::new(&network.inner, layer, Rotation { step, period }, path).map_err(to_py)?;
+        Ok(PyLayerTrainer { inner })
+    }
+
+    fn n_passes(&self, network: &PyNetwork) -> usize {
+        self.inner.n_passes(&network.inner)
+    }
+
+    #[getter]
+    fn fast(&self) -> bool {
+        self.inner.path() == Path::Fast
+    }
+
+    fn feed(&mut self, py: Python<'_>, network: &mut PyNetwork, images: &Bound<'_, PyAny>) -> PyResult<()> {
+        let (data, [n, h, w, c]) = images_f64(images)?;
+        let (eh, _, ec) = network.inner.input_shape();
+        if (h, c) != (eh, ec) {
+            return Err(PyValueError::new_err(format!(
+                "training images are {h} px high with {c} channel(s), the network takes {eh} with {ec}"
+            )));
+        }
+        let _ = w;
+        let (tr, net) = (&mut self.inner, &mut network.inner);
+        run(py, || tr.feed(net, &data, n))
+    }
+
+    fn end_pass(&mut self, py: Python<'_>, network: &mut PyNetwork) -> PyResult<bool> {
+        let (tr, net) = (&mut self.inner, &mut network.inner);
+        run(py, || tr.end_pass(net))
+    }
+}
+
 // ---------------------------------------------------------------- module
 
 #[pymodule]
@@ -546,5 +774,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(get_num_threads, m)?)?;
     m.add_class::<PyStatistics>()?;
     m.add_class::<PySfaNode>()?;
+    m.add_class::<PyNetwork>()?;
+    m.add_class::<PyLayerTrainer>()?;
     Ok(())
 }

@@ -1,0 +1,511 @@
+"""The hierarchical receptive-field SFA network (thesis sections 3.3-3.4, 5.1).
+
+Layers of SFA nodes on regular grids turn a panoramic image into a few slow
+features that encode the robot's position and not its orientation, learned
+from one exploration run with simulated rotation. The numerics run in Rust
+(``sfanav._core.Network``); this module handles configs, presets, image
+streaming, progress and persistence.
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+import os
+import sys
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import dataclass
+from importlib import resources
+from math import comb
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from . import _core
+from .modelfile import register_loader, save_model
+from .sfa import NotFittedError
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover
+    import tomli as tomllib
+
+PRESETS = ("thesis-5.1", "thesis-5.2", "thesis-5.3")
+
+
+@dataclass(frozen=True)
+class Rotation:
+    """Simulated rotation (thesis 3.4.1): every training panorama is shown as
+    its lateral circular shifts by ``step`` pixels, seen through a window of
+    ``window`` x the panorama width (1.0: the whole image, rolled)."""
+
+    step: int = 5
+    window: float = 1.0
+
+    def __post_init__(self) -> None:
+        if isinstance(self.step, bool) or not isinstance(self.step, (int, np.integer)) or self.step < 1:
+            raise ValueError(f"Rotation.step must be a positive integer (pixels), got {self.step!r}")
+        if not (isinstance(self.window, (int, float)) and 0.0 < self.window <= 1.0):
+            raise ValueError(f"Rotation.window must be in (0, 1], got {self.window!r}")
+
+
+# --------------------------------------------------------------------- config
+
+
+def _read_config_file(path: str | os.PathLike) -> dict[str, Any]:
+    path = Path(path)
+    if not path.exists():
+        raise FileNotFoundError(f"no network config at {path}")
+    text = path.read_text()
+    try:
+        if path.suffix.lower() == ".json":
+            return json.loads(text)
+        return tomllib.loads(text)
+    except (json.JSONDecodeError, tomllib.TOMLDecodeError) as exc:
+        raise ValueError(f"cannot parse network config {path}: {exc}") from None
+
+
+def _preset_config(name: str) -> dict[str, Any]:
+    if name not in PRESETS:
+        raise ValueError(f"unknown preset {name!r}; available: {', '.join(PRESETS)}")
+    text = resources.files("sfanav").joinpath("presets", f"{name}.toml").read_text()
+    return tomllib.loads(text)
+
+
+def _pair(v: Any, what: str) -> tuple[int, int]:
+    if (
+        isinstance(v, (list, tuple))
+        and len(v) == 2
+        and all(isinstance(x, int) and not isinstance(x, bool) for x in v)
+    ):
+        return int(v[0]), int(v[1])
+    raise ValueError(f"{what} must be [width, height] (two integers), got {v!r}")
+
+
+def _default_reduce(in_dim: int, degree: int, max_expanded: int) -> int:
+    k = 1
+    while k < in_dim and comb(k + 1 + degree, degree) - 1 <= max_expanded:
+        k += 1
+    return k
+
+
+def resolve_config(config: dict[str, Any]) -> dict[str, Any]:
+    """Checks a network config (as in the preset TOML files) and resolves it
+    into the spec the Rust core takes: ``"full"`` RFs become the size of the
+    map below, and a missing ``reduce_to`` becomes the largest k whose
+    expansion stays within ``max_expanded``. Raises ValueError naming the
+    layer and the problem."""
+    if not isinstance(config, dict):
+        raise TypeError(f"a network config must be a dict, got {type(config).__name__}")
+    try:
+        inp = config["input"]
+        w, h, c = int(inp["width"]), int(inp["height"]), int(inp.get("channels", 1))
+    except (KeyError, TypeError, ValueError) as exc:
+        raise ValueError(f"network config: [input] needs width, height (and channels): {exc}") from None
+    net = dict(config.get("network", {}))
+    unknown = set(net) - {"weight_sharing", "max_expanded", "tol"}
+    if unknown:
+        raise ValueError(f"network config: unknown [network] keys {sorted(unknown)}")
+    max_expanded = int(net.get("max_expanded", 300))
+    layers = config.get("layers")
+    if not isinstance(layers, list) or not layers:
+        raise ValueError("network config: needs at least one [[layers]] entry")
+    spec_layers = []
+    mw, mh, mc = w, h, c
+    for i, layer in enumerate(layers, 1):
+        name = f"layer {i}"
+        if not isinstance(layer, dict):
+            raise ValueError(f"{name}: must be a table")
+        unknown = set(layer) - {"rf", "stride", "out", "degree", "reduce_to"}
+        if unknown:
+            raise ValueError(f"{name}: unknown keys {sorted(unknown)}")
+        rf = (mw, mh) if layer.get("rf") == "full" else _pair(layer.get("rf"), f"{name}: rf")
+        stride = _pair(layer.get("stride", [1, 1]), f"{name}: stride")
+        degree = int(layer.get("degree", 2))
+        if "out" not in layer:
+            raise ValueError(f"{name}: missing 'out' (the node's output dim)")
+        out = int(layer["out"])
+        in_dim = rf[0] * rf[1] * mc
+        reduce_to = layer.get("reduce_to")
+        if reduce_to is None:
+            reduce_to = _default_reduce(in_dim, degree, max_expanded)
+        spec_layers.append(
+            {"rf": rf, "stride": stride, "n_out": out, "reduce_to": int(reduce_to), "degree": degree}
+        )
+        if rf[0] > mw or rf[1] > mh or min(stride) < 1:
+            break  # the core names the problem
+        mw, mh, mc = (mw - rf[0]) // stride[0] + 1, (mh - rf[1]) // stride[1] + 1, out
+    return {
+        "height": h,
+        "width": w,
+        "channels": c,
+        "layers": spec_layers,
+        "weight_sharing": bool(net.get("weight_sharing", True)),
+        "tol": float(net.get("tol", _core.DEFAULT_TOL)),
+    }
+
+
+# --------------------------------------------------------------------- images
+
+
+def _batches_of(images: Any, batch_size: int) -> Callable[[], Iterable[np.ndarray]]:
+    """A function that returns a fresh iterator of image batches (N, H, W[, C])
+    each time it is called (training needs several passes)."""
+    if isinstance(images, (str, os.PathLike)):
+        path = Path(images)
+        if not path.exists():
+            raise FileNotFoundError(f"no image data at {path}")
+        if path.suffix != ".npy":
+            raise ValueError(f"{path}: give an .npy array of images (N, H, W[, C]) or an array")
+        images = np.load(path, mmap_mode="r", allow_pickle=False)
+    if isinstance(images, np.ndarray):
+        if images.ndim not in (3, 4):
+            raise ValueError(f"images must have shape (N, H, W) or (N, H, W, C), got {images.shape}")
+        arr = images
+        return lambda: (arr[i : i + batch_size] for i in range(0, len(arr), batch_size))
+    if callable(images):
+        factory = images
+
+        def from_factory() -> Iterable[np.ndarray]:
+            return _rebatch(factory(), batch_size)
+
+        return from_factory
+    if isinstance(images, Sequence):
+        seq = images
+        return lambda: _rebatch(iter(seq), batch_size)
+    if isinstance(images, Iterable):
+        raise TypeError(
+            "training reads the images several times (two passes per layer): pass an array, "
+            "a list, an .npy path, or a function that returns a fresh iterable, not a one-shot "
+            "iterator or generator"
+        )
+    raise TypeError(f"cannot read images from {type(images).__name__}")
+
+
+def _rebatch(it: Iterable[Any], batch_size: int) -> Iterable[np.ndarray]:
+    buf: list[np.ndarray] = []
+    for item in it:
+        a = np.asarray(item)
+        if a.ndim in (2, 3) and (a.ndim == 2 or a.shape[-1] in (1, 3)):
+            buf.append(a)  # one image
+        elif a.ndim in (3, 4):
+            if buf:
+                yield np.stack(buf)
+                buf = []
+            yield a  # already a batch
+            continue
+        else:
+            raise ValueError(f"an image must be (H, W) or (H, W, C), got shape {a.shape}")
+        if len(buf) == batch_size:
+            yield np.stack(buf)
+            buf = []
+    if buf:
+        yield np.stack(buf)
+
+
+def _as_batch(batch: Any) -> np.ndarray:
+    a = np.asarray(batch)
+    if a.dtype not in (np.float32, np.float64, np.uint8):
+        if a.dtype.kind in "biuf":
+            a = a.astype(np.float64)
+        else:
+            raise TypeError(f"images must be numeric, got dtype {a.dtype}")
+    if a.ndim not in (3, 4):
+        raise ValueError(f"images must have shape (N, H, W) or (N, H, W, C), got {a.shape}")
+    return np.ascontiguousarray(a)
+
+
+def _progress(enabled: bool, total: int | None, desc: str):
+    if not enabled:
+        return None
+    try:
+        from tqdm.auto import tqdm
+    except ImportError:  # pragma: no cover
+        return None
+    return tqdm(total=total, desc=desc, unit="img", leave=False)
+
+
+# --------------------------------------------------------------------- Network
+
+
+class Network:
+    """Hierarchical SFA network over panoramic images.
+
+    Parameters
+    ----------
+    config : dict, or path to a TOML/JSON file
+        Layer grids and node settings, in the format of the preset files
+        (``sfanav/presets/*.toml``; see :meth:`from_preset`).
+
+    Attributes
+    ----------
+    config_ : dict
+        The resolved spec (explicit RF sizes and reductions).
+    delta_values_ : ndarray of shape (n_outputs,)
+        Delta values of the top node after :meth:`fit`.
+
+    Examples
+    --------
+    >>> net = sfanav.Network.from_preset("thesis-5.1")
+    >>> net.fit(train_images, rotation=sfanav.Rotation(step=5))   # doctest: +SKIP
+    >>> codes = net.transform(test_images)  # (N, 8)               # doctest: +SKIP
+    """
+
+    def __init__(self, config: dict[str, Any] | str | os.PathLike) -> None:
+        if isinstance(config, (str, os.PathLike)):
+            config = _read_config_file(config)
+        self.config = copy.deepcopy(config)
+        self.config_ = resolve_config(self.config)
+        self._net = _core.Network(self.config_)
+
+    @classmethod
+    def from_preset(cls, name: str, **overrides: Any) -> "Network":
+        """A network of the thesis's tables: ``"thesis-5.1"`` (350x40 RGB),
+        ``"thesis-5.2"`` (600x60 RGB), ``"thesis-5.3"`` (409x40 gray).
+
+        Overrides: ``weight_sharing``, ``max_expanded``, ``tol`` (network
+        settings), ``degree`` and ``reduce_to`` (applied to every layer), and
+        ``out`` (the top node's number of outputs)."""
+        config = _preset_config(name)
+        for key, value in overrides.items():
+            if key in ("weight_sharing", "max_expanded", "tol"):
+                config.setdefault("network", {})[key] = value
+            elif key in ("degree", "reduce_to"):
+                for layer in config["layers"]:
+                    layer[key] = value
+            elif key == "out":
+                config["layers"][-1]["out"] = value
+            else:
+                raise ValueError(
+                    f"unknown override {key!r}; use weight_sharing, max_expanded, tol, degree, "
+                    "reduce_to or out, or edit a copy of the preset file"
+                )
+        return cls(config)
+
+    @staticmethod
+    def presets() -> tuple[str, ...]:
+        """Names of the built-in presets."""
+        return PRESETS
+
+    @staticmethod
+    def preset_path(name: str) -> Path:
+        """Path of a preset's TOML file (copy it to start your own)."""
+        _preset_config(name)
+        return Path(str(resources.files("sfanav").joinpath("presets", f"{name}.toml")))
+
+    # ------------------------------------------------------------ info
+    @property
+    def input_shape(self) -> tuple[int, int, int]:
+        """(height, width, channels) the network takes."""
+        return tuple(self._net.input_shape)  # type: ignore[return-value]
+
+    @property
+    def n_outputs_(self) -> int:
+        return self._net.n_outputs
+
+    @property
+    def delta_values_(self) -> np.ndarray:
+        self._check_trained()
+        return self._net.delta_values
+
+    @property
+    def beta_values_(self) -> np.ndarray:
+        from .sfa import beta_values
+
+        return beta_values(self.delta_values_)
+
+    @property
+    def is_fitted_(self) -> bool:
+        return self._net.n_trained == self._net.n_layers
+
+    def _check_trained(self) -> None:
+        if not self.is_fitted_:
+            raise NotFittedError(
+                f"this network is not fitted ({self._net.n_trained} of {self._net.n_layers} layers "
+                "trained); call fit first"
+            )
+
+    def describe(self) -> str:
+        """A table of each layer's grid, dims and rank deficits."""
+        h, w, c = self.input_shape
+        lines = [
+            f"Network: input {w}x{h}x{c}, {'shared' if self.config_['weight_sharing'] else 'individual'} "
+            f"nodes, {self._net.n_trained}/{self._net.n_layers} layers trained",
+            f"{'layer':>5} {'input':>11} {'RFs':>7} {'RF size':>7} {'stride':>6} {'in dim':>6} "
+            f"{'k':>4} {'exp dim':>7} {'out':>4} {'rank deficit':>12}",
+        ]
+        for i, g in enumerate(self._net.geometry(), 1):
+            iw, ih, ic = g["input"]
+            exp_dim = comb(g["reduce_to"] + g["degree"], g["degree"]) - 1
+            rd = g["rank_deficits"]
+            deficit = "-" if not any(rd) and i > self._net.n_trained else (
+                "/".join(str(x) for x in rd[0]) if len(rd) == 1 else f"max {max(max(r) if r else 0 for r in rd)}"
+            )
+            lines.append(
+                f"{i:>5} {f'{iw}x{ih}x{ic}':>11} {'{}x{}'.format(*g['grid']):>7} "
+                f"{'{}x{}'.format(*g['rf']):>7} {'{}x{}'.format(*g['stride']):>6} {g['in_dim']:>6} "
+                f"{g['reduce_to']:>4} {exp_dim:>7} {g['n_out']:>4} {deficit:>12}"
+            )
+        return "\n".join(lines)
+
+    def __repr__(self) -> str:
+        h, w, c = self.input_shape
+        return f"<sfanav.Network {w}x{h}x{c}, {self._net.n_layers} layers, {self.n_outputs_} outputs>"
+
+    # ------------------------------------------------------------ training
+    def fit(
+        self,
+        images: Any,
+        rotation: Rotation | None = None,
+        *,
+        fast: bool = True,
+        batch_size: int = 16,
+        progress: bool = True,
+    ) -> "Network":
+        """Trains the network layer by layer, in the order the images come.
+
+        Parameters
+        ----------
+        images : array (N, H, W[, C]), list of images, path to an ``.npy``
+            file (memory-mapped), or a function returning a fresh iterable of
+            images or batches. Read in batches, several times (two passes per
+            layer); never all expanded at once. ``W`` is the panorama width
+            (the rotation period); the network's input width is the window.
+        rotation : Rotation, default ``Rotation(step=5, window=1.0)``
+        fast : bool, default True
+            Exact fast training (periodic fields with multiplicities); False
+            runs the naive per-view path (same result, slower). Without
+            weight sharing the naive path is always used.
+        batch_size : int
+            Images converted and processed per Rust call.
+        progress : bool
+            A progress bar per layer and pass (tqdm).
+        """
+        rotation = rotation or Rotation()
+        if not isinstance(rotation, Rotation):
+            raise TypeError("rotation must be a sfanav.Rotation")
+        batches = _batches_of(images, batch_size)
+        h, v, c = self.input_shape
+        first = next(iter(batches()), None)
+        if first is None:
+            raise ValueError("no training images")
+        first = _as_batch(first)
+        period = first.shape[2]
+        self._check_images(first, period, training=True)
+        expect_v = round(rotation.window * period)
+        if expect_v != v:
+            raise ValueError(
+                f"the network's input is {v} px wide, but a {rotation.window:.0%} window of "
+                f"{period}-px panoramas is {expect_v} px: build the network for that width"
+            )
+        total = len(images) if hasattr(images, "__len__") and not callable(images) else None
+        net = _core.Network(self.config_)
+        for layer in range(net.n_layers):
+            trainer = _core.LayerTrainer(net, layer, rotation.step, period, fast)
+            n_passes = trainer.n_passes(net)
+            for p in range(n_passes):
+                bar = _progress(progress, total, f"layer {layer + 1}/{net.n_layers} pass {p + 1}/{n_passes}")
+                try:
+                    for batch in batches():
+                        batch = _as_batch(batch)
+                        self._check_images(batch, period, training=True)
+                        trainer.feed(net, batch)
+                        if bar is not None:
+                            bar.update(len(batch))
+                finally:
+                    if bar is not None:
+                        bar.close()
+                trainer.end_pass(net)
+        self._net = net
+        self._period = period
+        self._step = rotation.step
+        return self
+
+    def _check_images(self, a: np.ndarray, period: int | None, training: bool = False) -> None:
+        h, v, c = self.input_shape
+        ac = 1 if a.ndim == 3 else a.shape[3]
+        if a.shape[1] != h or ac != c:
+            raise ValueError(
+                f"images are {a.shape[2]}x{a.shape[1]} with {ac} channel(s); this network takes "
+                f"{h} px high images with {c} channel(s)"
+            )
+        if period is not None and a.shape[2] != period:
+            raise ValueError(f"all images must be {period} px wide, got {a.shape[2]}")
+        if training and a.shape[2] < v:
+            raise ValueError(f"panoramas of {a.shape[2]} px are narrower than the network input ({v} px)")
+
+    # ------------------------------------------------------------ inference
+    def transform(self, images: Any, *, rotations: bool = False, step: int | None = None) -> np.ndarray:
+        """Slow features of images (N, H, W[, C]) or one image (H, W[, C]).
+
+        Returns (N, n_outputs); with ``rotations=True``, (N, K, n_outputs)
+        under every simulated rotation by ``step`` px (default: the training
+        step), K = ceil(W / step). Images wider than the network's input are
+        seen through the window at rotation 0 (their first columns).
+        """
+        self._check_trained()
+        a = np.asarray(images)
+        single = a.ndim == 2 or (a.ndim == 3 and self.input_shape[2] == 3 and a.shape[-1] == 3 and a.shape[0] == self.input_shape[0])
+        if single:
+            a = a[None]
+        a = _as_batch(a)
+        self._check_images(a, None)
+        if rotations:
+            s = step or getattr(self, "_step", 5)
+            out = self._net.transform_rotations(a, int(s))
+        else:
+            v = self.input_shape[1]
+            if a.shape[2] < v:
+                raise ValueError(f"images of {a.shape[2]} px are narrower than the network input ({v} px)")
+            if a.shape[2] > v:
+                a = np.ascontiguousarray(a[:, :, :v])
+            out = self._net.transform(a)
+        return out[0] if single else out
+
+    # ------------------------------------------------------------ persistence
+    def save(self, path: str | os.PathLike, *, include_statistics: bool = False) -> None:
+        """Saves the network (config and trained nodes; pickle-free)."""
+        state = {
+            "config": self.config,
+            "spec": _spec_to_json(self.config_),
+            "trained": self._net.n_trained,
+            "step": getattr(self, "_step", None),
+            "period": getattr(self, "_period", None),
+            "nodes": self._net.node_states(include_statistics),
+        }
+        save_model(path, "Network", state)
+
+    @classmethod
+    def _from_state(cls, state: dict[str, Any]) -> "Network":
+        try:
+            obj = cls(state["config"])
+            net = _core.Network.from_states(_spec_from_json(state["spec"]), state["nodes"], int(state["trained"]))
+        except (KeyError, TypeError) as exc:
+            raise ValueError(f"invalid Network model state: {exc}") from None
+        if _spec_to_json(obj.config_) != state["spec"]:
+            raise ValueError("invalid Network model state: config and spec disagree")
+        obj._net = net
+        if state.get("step") is not None:
+            obj._step = int(state["step"])
+            obj._period = int(state["period"])
+        return obj
+
+
+def _spec_to_json(spec: dict[str, Any]) -> dict[str, Any]:
+    s = copy.deepcopy(spec)
+    for layer in s["layers"]:
+        layer["rf"] = list(layer["rf"])
+        layer["stride"] = list(layer["stride"])
+    return s
+
+
+def _spec_from_json(spec: dict[str, Any]) -> dict[str, Any]:
+    s = copy.deepcopy(spec)
+    for layer in s["layers"]:
+        layer["rf"] = tuple(layer["rf"])
+        layer["stride"] = tuple(layer["stride"])
+    return s
+
+
+register_loader("Network", Network._from_state)

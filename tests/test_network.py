@@ -1,0 +1,245 @@
+"""The receptive-field network: presets, configs, fast vs naive training,
+invariance end to end, persistence and bad input."""
+
+import numpy as np
+import pytest
+
+import sfanav
+
+TABLES = {
+    # preset: [(grid w, grid h), (rf w, rf h), (stride), in_dim, out] per layer
+    "thesis-5.1": [((69, 7), (10, 10), (5, 5), 300, 14), ((22, 3), (6, 3), (3, 2), 252, 16),
+                   ((10, 1), (4, 3), (2, 1), 192, 16), ((1, 1), (10, 1), (1, 1), 160, 8)],
+    "thesis-5.2": [((99, 9), (12, 12), (6, 6), 432, 12), ((48, 3), (5, 5), (2, 2), 300, 14),
+                   ((15, 1), (6, 3), (3, 1), 252, 16), ((1, 1), (15, 1), (1, 1), 240, 8)],
+    "thesis-5.3": [((101, 7), (9, 10), (4, 5), 90, 12), ((49, 2), (5, 5), (2, 2), 300, 12),
+                   ((23, 1), (5, 2), (2, 1), 120, 12), ((1, 1), (23, 1), (1, 1), 276, 8)],
+}
+
+
+@pytest.mark.parametrize("name", sorted(TABLES))
+def test_presets_build_the_thesis_tables(name):
+    net = sfanav.Network.from_preset(name)
+    geo = net._net.geometry()
+    assert len(geo) == 4
+    for g, (grid, rf, stride, in_dim, out) in zip(geo, TABLES[name]):
+        assert tuple(g["grid"]) == grid
+        assert tuple(g["rf"]) == rf
+        assert tuple(g["stride"]) == stride
+        assert g["in_dim"] == in_dim
+        assert g["n_out"] == out
+        assert g["reduce_to"] == 23  # largest k with C(k+2, 2) - 1 <= 300
+    assert "69x7" in sfanav.Network.from_preset("thesis-5.1").describe()
+    assert sfanav.Network.preset_path(name).exists()
+
+
+def test_preset_overrides_and_unknown_preset():
+    net = sfanav.Network.from_preset("thesis-5.1", weight_sharing=False, reduce_to=10, out=6)
+    geo = net._net.geometry()
+    assert geo[0]["n_nodes"] == 69 * 7 and geo[0]["reduce_to"] == 10 and geo[-1]["n_out"] == 6
+    with pytest.raises(ValueError, match="unknown preset"):
+        sfanav.Network.from_preset("thesis-9.9")
+    with pytest.raises(ValueError, match="unknown override"):
+        sfanav.Network.from_preset("thesis-5.1", colour=True)
+
+
+def tiny_config(width=48, height=8, channels=1, sharing=True, top_out=4):
+    return {
+        "input": {"width": width, "height": height, "channels": channels},
+        "network": {"weight_sharing": sharing},
+        "layers": [
+            {"rf": [6, 4], "stride": [3, 2], "out": 8},
+            {"rf": "full", "out": top_out},
+        ],
+    }
+
+
+def test_bad_configs_name_the_layer(tmp_path):
+    cfg = tiny_config()
+    cfg["layers"][0]["stride"] = [4, 2]  # (48 - 6) is not a multiple of 4
+    with pytest.raises(ValueError, match="layer 1.*do not tile"):
+        sfanav.Network(cfg)
+    cfg = tiny_config()
+    cfg["layers"][1]["rf"] = [3, 3]
+    with pytest.raises(ValueError, match="layer 2"):
+        sfanav.Network(cfg)
+    cfg = tiny_config()
+    cfg["layers"][0]["out"] = 1000
+    with pytest.raises(ValueError, match="layer 1.*exceeds the expanded dim"):
+        sfanav.Network(cfg)
+    cfg = tiny_config()
+    cfg["layers"][0]["bogus"] = 1
+    with pytest.raises(ValueError, match="layer 1: unknown keys"):
+        sfanav.Network(cfg)
+    with pytest.raises(FileNotFoundError):
+        sfanav.Network(tmp_path / "missing.toml")
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[input\nwidth=")
+    with pytest.raises(ValueError, match="cannot parse"):
+        sfanav.Network(bad)
+
+
+def test_config_file_round_trip(tmp_path):
+    p = tmp_path / "net.toml"
+    p.write_text(sfanav.Network.preset_path("thesis-5.3").read_text())
+    assert sfanav.Network(p).config_ == sfanav.Network.from_preset("thesis-5.3").config_
+
+
+# ----------------------------------------------------------------- a tiny world
+
+LANDMARKS = np.array([[-1.0, -0.6], [1.6, -0.4], [0.4, 1.8], [-0.8, 1.5], [2.0, 1.2], [0.5, -1.4]])
+HEIGHTS = np.array([0.9, 0.5, 1.2, 0.7, 1.0, 0.6])
+
+
+def render(xy, heading, width=48, height=8):
+    """A toy panorama at position xy (unit square) facing `heading` (rad):
+    landmarks as bumps whose angular size and height shrink with distance."""
+    az = 2 * np.pi * np.arange(width) / width + heading
+    rows = (np.arange(height)[::-1] + 0.5) / height
+    img = np.zeros((height, width))
+    for (lx, ly), hgt in zip(LANDMARKS, HEIGHTS):
+        d = np.hypot(lx - xy[0], ly - xy[1])
+        ang = np.arctan2(ly - xy[1], lx - xy[0])
+        diff = np.angle(np.exp(1j * (az - ang)))
+        width_ang = 0.25 / d
+        top = np.clip(hgt / d, 0, 1.5)
+        vertical = 1.0 / (1.0 + np.exp((rows[:, None] - top) / 0.15))
+        img += np.exp(-(diff / width_ang) ** 2)[None, :] * vertical * (1.0 / d)
+    return img + 0.2 * rows[:, None]
+
+
+def walk(n, seed):
+    rng = np.random.default_rng(seed)
+    xy = np.empty((n, 2))
+    p, v = np.array([0.5, 0.5]), rng.standard_normal(2) * 0.02
+    for i in range(n):
+        v = 0.9 * v + 0.01 * rng.standard_normal(2)
+        p = p + v
+        for k in range(2):
+            if not 0 <= p[k] <= 1:
+                v[k] = -v[k]
+                p[k] = np.clip(p[k], 0, 1)
+        xy[i] = p
+    heading = np.cumsum(rng.standard_normal(n) * 0.2)
+    return xy, heading
+
+
+def grid_run(n_lines=12, per_line=50, seed=0):
+    """Boustrophedon exploration over the unit square (as the thesis's grid runs)."""
+    rng = np.random.default_rng(seed)
+    pts = []
+    for i, y in enumerate(np.linspace(0.02, 0.98, n_lines)):
+        xs = np.linspace(0.02, 0.98, per_line)
+        pts += [(x, y) for x in (xs if i % 2 == 0 else xs[::-1])]
+    xy = np.array(pts)
+    heading = np.cumsum(rng.standard_normal(len(xy)) * 0.2)
+    return xy, heading
+
+
+@pytest.fixture(scope="module")
+def world():
+    xy, heading = grid_run()
+    imgs = np.stack([render(p, h) for p, h in zip(xy, heading)])
+    txy, th = walk(150, seed=2)
+    timgs = np.stack([render(p, h) for p, h in zip(txy, th)])
+    net = sfanav.Network(tiny_config()).fit(imgs, sfanav.Rotation(step=3), progress=False)
+    return net, imgs, xy, timgs, txy
+
+
+def test_fast_equals_naive():
+    xy, heading = walk(60, seed=3)
+    # Pixel noise keeps every node's problem well conditioned, so the two
+    # paths' different summation orders stay at rounding level (on the bare
+    # toy renderer the quadratic layer-1 expansion is rank deficient and
+    # eigenvalues at the tolerance amplify rounding to ~1e-7).
+    noise = np.random.default_rng(5).standard_normal((60, 8, 48)) * 0.05
+    imgs = np.stack([render(p, h) for p, h in zip(xy, heading)]) + noise
+    rot = sfanav.Rotation(step=5)
+    fast = sfanav.Network(tiny_config(top_out=3)).fit(imgs, rot, progress=False)
+    naive = sfanav.Network(tiny_config(top_out=3)).fit(imgs, rot, fast=False, progress=False)
+    np.testing.assert_allclose(fast.delta_values_, naive.delta_values_, rtol=1e-9)
+    np.testing.assert_allclose(fast.transform(imgs[:5]), naive.transform(imgs[:5]), rtol=1e-7, atol=1e-9)
+
+
+def test_outputs_are_orientation_invariant_and_encode_position(world):
+    net, imgs, xy, timgs, txy = world
+    y = net.transform(timgs)
+    yr = net.transform(timgs, rotations=True)  # (N, K, n)
+    assert yr.shape == (150, 16, 4)
+    # eta_phi: variance over rotations at one place / variance over everything.
+    eta_phi = yr.var(axis=1).mean(axis=0) / yr.reshape(-1, 4).var(axis=0)
+    assert np.all(eta_phi[:2] < 0.1), eta_phi
+    # A quadratic regression of the slowest outputs recovers the position.
+    tr = net.transform(imgs)
+    feats = lambda z: sfanav.expand(z, 2)
+    A = np.c_[feats(tr), np.ones(len(tr))]
+    W, *_ = np.linalg.lstsq(A, xy, rcond=None)
+    pred = np.c_[feats(y), np.ones(len(y))] @ W
+    err = np.abs(pred - txy).mean(axis=0)
+    assert np.all(err < 0.15), err  # the area is 1 x 1 (chance level: about 0.33)
+
+
+def test_rotations_match_rolled_images(world):
+    net, imgs, *_ = world
+    yr = net.transform(imgs[:3], rotations=True, step=3)
+    for k in (0, 5, 11):
+        np.testing.assert_allclose(yr[:, k], net.transform(np.roll(imgs[:3], -3 * k, axis=2)), atol=1e-9)
+
+
+def test_individual_nodes_train(world):
+    _, imgs, *_ = world
+    net = sfanav.Network(tiny_config(sharing=False, top_out=3)).fit(imgs[:80], sfanav.Rotation(step=6), progress=False)
+    assert net._net.geometry()[0]["n_nodes"] == 15 * 3
+    assert net.transform(imgs[:4]).shape == (4, 3)
+
+
+def test_save_load_round_trip(world, tmp_path):
+    net, imgs, *_ = world
+    net.save(tmp_path / "net.sfa")
+    back = sfanav.load(tmp_path / "net.sfa")
+    assert isinstance(back, sfanav.Network)
+    np.testing.assert_array_equal(back.transform(imgs[:10]), net.transform(imgs[:10]))
+    np.testing.assert_array_equal(back.delta_values_, net.delta_values_)
+
+
+def test_streaming_sources_agree(world, tmp_path):
+    _, imgs, *_ = world
+    sub = imgs[:60]
+    rot = sfanav.Rotation(step=6)
+    ref = sfanav.Network(tiny_config(top_out=3)).fit(sub, rot, progress=False)
+    np.save(tmp_path / "imgs.npy", sub)
+    for src in (list(sub), lambda: iter(sub), str(tmp_path / "imgs.npy")):
+        other = sfanav.Network(tiny_config(top_out=3)).fit(src, rot, batch_size=7, progress=False)
+        np.testing.assert_allclose(other.delta_values_, ref.delta_values_, rtol=1e-9)
+    with pytest.raises(TypeError, match="one-shot iterator"):
+        sfanav.Network(tiny_config()).fit((im for im in sub), rot, progress=False)
+
+
+def test_window_narrower_than_panorama():
+    xy, heading = walk(80, seed=4)
+    imgs = np.stack([render(p, h, width=60) for p, h in zip(xy, heading)])
+    net = sfanav.Network(tiny_config(width=30, top_out=3))  # (30 - 6) % 3 == 0
+    net.fit(imgs, sfanav.Rotation(step=5, window=0.5), progress=False)
+    assert net.transform(imgs[:2]).shape == (2, 3)
+    with pytest.raises(ValueError, match="50% window of 60-px panoramas is 30 px"):
+        sfanav.Network(tiny_config(width=48)).fit(imgs, sfanav.Rotation(window=0.5), progress=False)
+
+
+def test_bad_images(world):
+    net, imgs, *_ = world
+    with pytest.raises(ValueError, match="this network takes 8 px high"):
+        net.transform(np.zeros((2, 9, 48)))
+    with pytest.raises(ValueError, match="channel"):
+        net.transform(np.zeros((2, 8, 48, 3)))
+    bad = imgs[:20].copy()
+    bad[7, 2, 3] = np.nan
+    with pytest.raises(ValueError, match="image 7 contains NaN"):
+        sfanav.Network(tiny_config()).fit(bad, progress=False)
+    with pytest.raises(ValueError, match="NaN"):
+        net.transform(bad[5:9])
+    with pytest.raises(ValueError, match="no training images"):
+        sfanav.Network(tiny_config()).fit(np.zeros((0, 8, 48)), progress=False)
+    with pytest.raises(sfanav.NotFittedError):
+        sfanav.Network(tiny_config()).transform(imgs[:1])
+    with pytest.raises(ValueError, match="Rotation.step"):
+        sfanav.Rotation(step=0)
