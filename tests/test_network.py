@@ -179,6 +179,11 @@ def test_outputs_are_orientation_invariant_and_encode_position(world):
     assert np.all(err < 0.15), err  # the area is 1 x 1 (chance level: about 0.33)
 
 
+def test_single_image_in_single_row_out(world):
+    net, imgs, *_ = world
+    np.testing.assert_array_equal(net.transform(imgs[3]), net.transform(imgs[3:4])[0])
+
+
 def test_rotations_match_rolled_images(world):
     net, imgs, *_ = world
     yr = net.transform(imgs[:3], rotations=True, step=3)

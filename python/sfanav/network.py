@@ -446,7 +446,8 @@ class Network:
         """
         self._check_trained()
         a = np.asarray(images)
-        single = a.ndim == 2 or (a.ndim == 3 and self.input_shape[2] == 3 and a.shape[-1] == 3 and a.shape[0] == self.input_shape[0])
+        # One image is (H, W) for a gray network and (H, W, 3) for RGB.
+        single = a.ndim == (2 if self.input_shape[2] == 1 else 3)
         if single:
             a = a[None]
         a = _as_batch(a)
