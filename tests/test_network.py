@@ -248,3 +248,26 @@ def test_bad_images(world):
         sfanav.Network(tiny_config()).transform(imgs[:1])
     with pytest.raises(ValueError, match="Rotation.step"):
         sfanav.Rotation(step=0)
+
+
+def _position_error(net, imgs, xy, timgs, txy):
+    tr, y = net.transform(imgs), net.transform(timgs)
+    A = np.c_[sfanav.expand(tr, 2), np.ones(len(tr))]
+    W, *_ = np.linalg.lstsq(A, xy, rcond=None)
+    pred = np.c_[sfanav.expand(y, 2), np.ones(len(y))] @ W
+    return np.abs(pred - txy).mean(axis=0)
+
+
+def test_mixed_precision_network_is_as_good_as_double(world):
+    net, imgs, xy, timgs, txy = world
+    cfg = tiny_config()
+    cfg["network"]["precision"] = "mixed"
+    mixed = sfanav.Network(cfg).fit(imgs, sfanav.Rotation(step=3), progress=False)
+    assert mixed.config_["mixed_precision"] and not net.config_["mixed_precision"]
+    err_d = _position_error(net, imgs, xy, timgs, txy)
+    err_m = _position_error(mixed, imgs, xy, timgs, txy)
+    assert np.all(err_m < 0.15) and np.all(err_m < 1.5 * err_d), (err_m, err_d)
+    yr = mixed.transform(timgs, rotations=True)
+    eta_phi = yr.var(axis=1).mean(axis=0) / yr.reshape(-1, yr.shape[2]).var(axis=0)
+    assert eta_phi[:2].mean() < 0.15, eta_phi
+    assert sfanav.Network.from_preset("thesis-5.2").config_["mixed_precision"]

@@ -231,3 +231,13 @@ def test_thread_count_setting():
     finally:
         sfanav.set_num_threads(0)
     np.testing.assert_allclose(one, ref, rtol=1e-10)
+
+
+def test_mixed_precision_close_to_double():
+    X = correlated(20_000, 30, seed=20)
+    a = sfanav.SFA(5).fit(X)
+    b = sfanav.SFA(5, precision="mixed").fit(X)
+    np.testing.assert_allclose(b.delta_values_, a.delta_values_, rtol=1e-3)
+    assert not np.array_equal(b.delta_values_, a.delta_values_)
+    with pytest.raises(ValueError, match="precision"):
+        sfanav.SFA(5, precision="half").fit(X)

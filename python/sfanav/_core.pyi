@@ -50,7 +50,12 @@ class Statistics:
 
 class SfaNode:
     def __init__(
-        self, n_components: int, degree: int = 1, reduce_to: int | None = None, tol: float = ...
+        self,
+        n_components: int,
+        degree: int = 1,
+        reduce_to: int | None = None,
+        tol: float = ...,
+        mixed_precision: bool = False,
     ) -> None: ...
     def partial_fit(self, x: FloatArray, new_sequence: bool = False) -> None: ...
     def finish_stage(self) -> None: ...

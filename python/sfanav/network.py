@@ -104,10 +104,13 @@ def resolve_config(config: dict[str, Any]) -> dict[str, Any]:
     except (KeyError, TypeError, ValueError) as exc:
         raise ValueError(f"network config: [input] needs width, height (and channels): {exc}") from None
     net = dict(config.get("network", {}))
-    unknown = set(net) - {"weight_sharing", "max_expanded", "tol"}
+    unknown = set(net) - {"weight_sharing", "max_expanded", "tol", "precision"}
     if unknown:
         raise ValueError(f"network config: unknown [network] keys {sorted(unknown)}")
     max_expanded = int(net.get("max_expanded", 300))
+    precision = net.get("precision", "double")
+    if precision not in ("double", "mixed"):
+        raise ValueError(f"network config: precision must be 'double' or 'mixed', got {precision!r}")
     layers = config.get("layers")
     if not isinstance(layers, list) or not layers:
         raise ValueError("network config: needs at least one [[layers]] entry")
@@ -143,6 +146,7 @@ def resolve_config(config: dict[str, Any]) -> dict[str, Any]:
         "layers": spec_layers,
         "weight_sharing": bool(net.get("weight_sharing", True)),
         "tol": float(net.get("tol", _core.DEFAULT_TOL)),
+        "mixed_precision": precision == "mixed",
     }
 
 
@@ -264,12 +268,12 @@ class Network:
         """A network of the thesis's tables: ``"thesis-5.1"`` (350x40 RGB),
         ``"thesis-5.2"`` (600x60 RGB), ``"thesis-5.3"`` (409x40 gray).
 
-        Overrides: ``weight_sharing``, ``max_expanded``, ``tol`` (network
-        settings), ``degree`` and ``reduce_to`` (applied to every layer), and
+        Overrides: ``weight_sharing``, ``max_expanded``, ``tol``, ``precision``
+        (network settings), ``degree`` and ``reduce_to`` (applied to every layer), and
         ``out`` (the top node's number of outputs)."""
         config = _preset_config(name)
         for key, value in overrides.items():
-            if key in ("weight_sharing", "max_expanded", "tol"):
+            if key in ("weight_sharing", "max_expanded", "tol", "precision"):
                 config.setdefault("network", {})[key] = value
             elif key in ("degree", "reduce_to"):
                 for layer in config["layers"]:
@@ -278,7 +282,7 @@ class Network:
                 config["layers"][-1]["out"] = value
             else:
                 raise ValueError(
-                    f"unknown override {key!r}; use weight_sharing, max_expanded, tol, degree, "
+                    f"unknown override {key!r}; use weight_sharing, max_expanded, tol, precision, degree, "
                     "reduce_to or out, or edit a copy of the preset file"
                 )
         return cls(config)

@@ -62,6 +62,11 @@ class SFA:
         at most ``tol`` times the largest are dropped (and counted in
         ``rank_deficit_``) instead of being divided by. If fewer than
         ``n_components`` directions remain, fitting raises ValueError.
+    precision : {"double", "mixed"}, default "double"
+        "mixed" forms the outer products of each cache-sized block of rows
+        in float32 and sums them in float64: about 1.8x faster statistics,
+        relative error about 1e-6 instead of 1e-15, and ``tol`` is raised to
+        at least 1e-6. For image-derived data; keep "double" otherwise.
 
     Attributes
     ----------
@@ -107,11 +112,13 @@ class SFA:
         degree: int = 1,
         reduce_to: int | None = None,
         tol: float = _core.DEFAULT_TOL,
+        precision: str = "double",
     ) -> None:
         self.n_components = n_components
         self.degree = degree
         self.reduce_to = reduce_to
         self.tol = tol
+        self.precision = precision
         self._node: _core.SfaNode | None = None
 
     # ------------------------------------------------------------ params
@@ -121,6 +128,7 @@ class SFA:
             "degree": self.degree,
             "reduce_to": self.reduce_to,
             "tol": self.tol,
+            "precision": self.precision,
         }
 
     def set_params(self, **params: Any) -> "SFA":
@@ -135,7 +143,7 @@ class SFA:
         args = ", ".join(
             f"{k}={v!r}"
             for k, v in self.get_params().items()
-            if v != {"degree": 1, "reduce_to": None, "tol": _core.DEFAULT_TOL}.get(k, object())
+            if v != {"degree": 1, "reduce_to": None, "tol": _core.DEFAULT_TOL, "precision": "double"}.get(k, object())
         )
         return f"SFA({args})"
 
@@ -145,7 +153,9 @@ class SFA:
         k = check_positive_int(self.reduce_to, "reduce_to", allow_none=True)
         if isinstance(self.tol, (bool, np.bool_)) or not isinstance(self.tol, (int, float, np.floating)):
             raise TypeError(f"tol must be a float, got {type(self.tol).__name__}")
-        return _core.SfaNode(n, degree=d, reduce_to=k, tol=float(self.tol))
+        if self.precision not in ("double", "mixed"):
+            raise ValueError(f"precision must be 'double' or 'mixed', got {self.precision!r}")
+        return _core.SfaNode(n, degree=d, reduce_to=k, tol=float(self.tol), mixed_precision=self.precision == "mixed")
 
     # ------------------------------------------------------------ training
     def fit(self, X: np.ndarray | Sequence[np.ndarray], y: None = None) -> "SFA":

@@ -55,6 +55,8 @@ pub struct NetworkSpec {
     pub weight_sharing: bool,
     /// Relative eigenvalue tolerance of every node.
     pub tol: f64,
+    /// Mixed-precision statistics in every node (see [`NodeConfig`]).
+    pub mixed_precision: bool,
 }
 
 /// A layer's resolved geometry.
@@ -218,6 +220,7 @@ impl Network {
                             degree: g.degree,
                             reduce_to: Some(g.reduce_to),
                             tol: spec.tol,
+                            mixed_precision: spec.mixed_precision,
                         })
                     })
                     .collect::<Result<Vec<_>>>()

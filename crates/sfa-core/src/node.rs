@@ -37,7 +37,16 @@ pub struct NodeConfig {
     pub reduce_to: Option<usize>,
     /// Relative tolerance below which covariance directions are dropped.
     pub tol: f64,
+    /// Form outer products in f32 per cache-sized block, summed in f64
+    /// ([`Accumulator::set_mixed_precision`]); the tolerance is then at least
+    /// [`MIXED_TOL_FLOOR`].
+    pub mixed_precision: bool,
 }
+
+/// Smallest relative tolerance used with mixed-precision statistics: their
+/// moments carry a relative error of about 1e-6, so directions with less
+/// variance than that are not resolved.
+pub const MIXED_TOL_FLOOR: f64 = 1e-6;
 
 impl NodeConfig {
     /// Linear SFA with `n_components` outputs.
@@ -47,6 +56,7 @@ impl NodeConfig {
             degree: 1,
             reduce_to: None,
             tol: DEFAULT_TOL,
+            mixed_precision: false,
         }
     }
 
@@ -119,7 +129,7 @@ struct Stage {
 }
 
 impl Stage {
-    fn new(input_dim: usize, degree: usize, n_out: usize) -> Result<Self> {
+    fn new(input_dim: usize, degree: usize, n_out: usize, mixed: bool) -> Result<Self> {
         let expansion = if degree > 1 {
             Some(Expansion::new(input_dim, degree)?)
         } else {
@@ -131,7 +141,11 @@ impl Stage {
             n_out,
             input_dim,
             expansion,
-            acc: Some(Accumulator::new(ed)?),
+            acc: Some({
+                let mut a = Accumulator::new(ed)?;
+                a.set_mixed_precision(mixed);
+                a
+            }),
             solution: None,
         })
     }
@@ -174,6 +188,7 @@ impl Stage {
         })?;
         let c = acc.covariance()?;
         let cd = acc.derivative_covariance()?;
+        let tol = if acc.is_mixed_precision() { tol.max(MIXED_TOL_FLOOR) } else { tol };
         let ed = self.expanded_dim();
         if strict && self.n_out > ed {
             return Err(SfaError::InvalidArgument(format!(
@@ -273,7 +288,7 @@ impl SfaNode {
                         "reduce_to ({k}) exceeds the number of input features ({d})"
                     )));
                 }
-                Stage::new(d, 1, k)?
+                Stage::new(d, 1, k, c.mixed_precision)?
             }
             None => {
                 let ed = expanded_dim(d, c.degree)?;
@@ -284,7 +299,7 @@ impl SfaNode {
                         if c.degree > 1 { "expanded " } else { "" }
                     )));
                 }
-                Stage::new(d, c.degree, c.n_components)?
+                Stage::new(d, c.degree, c.n_components, c.mixed_precision)?
             }
         };
         self.n_features = Some(d);
@@ -457,7 +472,7 @@ impl SfaNode {
                     c.n_components
                 )));
             }
-            self.stages.push(Stage::new(k, c.degree, c.n_components)?);
+            self.stages.push(Stage::new(k, c.degree, c.n_components, c.mixed_precision)?);
             self.training_stage += 1;
         }
         Ok(())
@@ -599,7 +614,7 @@ impl SfaNode {
             if ss.degree != want_degree || ss.n_out != want_out || ss.input_dim != input_dim {
                 return bad(format!("stage {i} does not match the node's configuration"));
             }
-            let mut stage = Stage::new(input_dim, ss.degree, ss.n_out)?;
+            let mut stage = Stage::new(input_dim, ss.degree, ss.n_out, st.config.mixed_precision)?;
             let ed = stage.expanded_dim();
             stage.acc = match &ss.stats {
                 Some(a) => {

@@ -37,6 +37,7 @@ fn spec(v: usize, c: usize, stride: usize, sharing: bool) -> NetworkSpec {
         ],
         weight_sharing: sharing,
         tol: 1e-10,
+        mixed_precision: false,
     }
 }
 

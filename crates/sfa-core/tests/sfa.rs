@@ -38,7 +38,7 @@ fn fit(x: &[f64], n: usize, d: usize, cfg: NodeConfig) -> SfaNode {
 fn wiskott_sejnowski_toy_problem() {
     let n = 5000;
     let x = toy(n);
-    let node = fit(&x, n, 2, NodeConfig { n_components: 1, degree: 2, reduce_to: None, tol: 1e-10 });
+    let node = fit(&x, n, 2, NodeConfig { n_components: 1, degree: 2, reduce_to: None, tol: 1e-10, mixed_precision: false });
     let y = node.transform(View::from_slice(&x, n, 2).unwrap()).unwrap();
     let s: Vec<f64> = (0..n).map(|i| (i as f64 / (n - 1) as f64 * 2.0 * std::f64::consts::PI).sin()).collect();
     assert!(corr(&y, &s).abs() > 0.99, "corr {}", corr(&y, &s));
@@ -49,9 +49,9 @@ fn outputs_satisfy_the_constraints() {
     let (n, d, m) = (4000, 8, 5);
     let x = correlated(n, d, 11);
     for cfg in [
-        NodeConfig { n_components: m, degree: 1, reduce_to: None, tol: 1e-10 },
-        NodeConfig { n_components: m, degree: 2, reduce_to: None, tol: 1e-10 },
-        NodeConfig { n_components: m, degree: 2, reduce_to: Some(6), tol: 1e-10 },
+        NodeConfig { n_components: m, degree: 1, reduce_to: None, tol: 1e-10, mixed_precision: false },
+        NodeConfig { n_components: m, degree: 2, reduce_to: None, tol: 1e-10, mixed_precision: false },
+        NodeConfig { n_components: m, degree: 2, reduce_to: Some(6), tol: 1e-10, mixed_precision: false },
     ] {
         let node = fit(&x, n, d, cfg);
         let y = node.transform(View::from_slice(&x, n, d).unwrap()).unwrap();
@@ -127,7 +127,7 @@ fn rank_deficit_is_dropped_and_reported() {
 fn chunked_partial_fit_equals_fit() {
     let (n, d) = (3000, 6);
     let x = correlated(n, d, 13);
-    let cfg = NodeConfig { n_components: 4, degree: 2, reduce_to: Some(5), tol: 1e-10 };
+    let cfg = NodeConfig { n_components: 4, degree: 2, reduce_to: Some(5), tol: 1e-10, mixed_precision: false };
     let one = fit(&x, n, d, cfg.clone());
     let mut node = SfaNode::new(cfg).unwrap();
     for stage in 0..2 {
@@ -153,7 +153,7 @@ fn chunked_partial_fit_equals_fit() {
 fn state_round_trip_is_bit_exact() {
     let (n, d) = (800, 4);
     let x = correlated(n, d, 17);
-    let node = fit(&x, n, d, NodeConfig { n_components: 3, degree: 2, reduce_to: Some(3), tol: 1e-10 });
+    let node = fit(&x, n, d, NodeConfig { n_components: 3, degree: 2, reduce_to: Some(3), tol: 1e-10, mixed_precision: false });
     let back = SfaNode::from_state(&node.state(true)).unwrap();
     assert_eq!(node.state(true), back.state(true));
     let v = View::from_slice(&x, n, d).unwrap();
@@ -166,8 +166,8 @@ fn state_round_trip_is_bit_exact() {
 #[test]
 fn bad_input_is_an_error_not_a_panic() {
     assert!(SfaNode::new(NodeConfig::linear(0)).is_err());
-    assert!(SfaNode::new(NodeConfig { n_components: 1, degree: 0, reduce_to: None, tol: 1e-10 }).is_err());
-    assert!(SfaNode::new(NodeConfig { n_components: 1, degree: 1, reduce_to: None, tol: f64::NAN }).is_err());
+    assert!(SfaNode::new(NodeConfig { n_components: 1, degree: 0, reduce_to: None, tol: 1e-10, mixed_precision: false }).is_err());
+    assert!(SfaNode::new(NodeConfig { n_components: 1, degree: 1, reduce_to: None, tol: f64::NAN, mixed_precision: false }).is_err());
     let mut node = SfaNode::new(NodeConfig::linear(2)).unwrap();
     let x = [1.0, 2.0, 3.0];
     assert!(matches!(node.transform(View::from_slice(&x, 1, 3).unwrap()), Err(SfaError::NotFitted(_))));

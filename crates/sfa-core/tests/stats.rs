@@ -182,3 +182,21 @@ proptest! {
         assert_same(&whole, &c, 1e-10);
     }
 }
+
+#[test]
+fn mixed_precision_is_close_to_double() {
+    let (n, d) = (20000, 40);
+    let x = correlated(n, d, 31);
+    let a = acc_of(&x, n, d);
+    let mut b = Accumulator::new(d).unwrap();
+    b.set_mixed_precision(true);
+    b.update(View::from_slice(&x, n, d).unwrap(), false).unwrap();
+    let (ca, cb) = (a.covariance().unwrap(), b.covariance().unwrap());
+    let (da, db) = (a.derivative_covariance().unwrap(), b.derivative_covariance().unwrap());
+    let ec = max_abs_diff(&ca, &cb) / max_abs(&ca);
+    let ed = max_abs_diff(&da, &db) / max_abs(&da);
+    assert!(ec < 1e-5 && ed < 1e-5, "{ec} {ed}");
+    assert!(ec > 0.0, "mixed precision should not be bit-identical to double");
+    let back = Accumulator::from_state(&b.state()).unwrap();
+    assert!(back.is_mixed_precision());
+}

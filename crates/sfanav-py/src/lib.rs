@@ -303,6 +303,15 @@ where
     }
 }
 
+fn get_bool_or(d: &Bound<'_, PyDict>, key: &str, default: bool) -> PyResult<bool> {
+    match d.get_item(key)? {
+        Some(v) => v
+            .extract::<bool>()
+            .map_err(|_| PyValueError::new_err(format!("invalid model state: field '{key}' must be a bool"))),
+        None => Ok(default),
+    }
+}
+
 fn get_vec(d: &Bound<'_, PyDict>, key: &str) -> PyResult<Vec<f64>> {
     match d.get_item(key)? {
         Some(v) => {
@@ -329,6 +338,7 @@ fn acc_state_to_dict<'py>(py: Python<'py>, s: &AccumulatorState) -> PyResult<Bou
     d.set_item("sdd", vec1(py, s.sdd.clone()))?;
     d.set_item("first", vec1(py, s.first.clone()))?;
     d.set_item("last", vec1(py, s.last.clone()))?;
+    d.set_item("mixed", s.mixed)?;
     Ok(d)
 }
 
@@ -346,6 +356,7 @@ fn acc_state_from_dict(d: &Bound<'_, PyDict>) -> PyResult<AccumulatorState> {
         sdd: get_vec(d, "sdd")?,
         first: get_vec(d, "first")?,
         last: get_vec(d, "last")?,
+        mixed: get_bool_or(d, "mixed", false)?,
     })
 }
 
@@ -355,6 +366,7 @@ fn node_state_to_dict<'py>(py: Python<'py>, s: &NodeState) -> PyResult<Bound<'py
     d.set_item("degree", s.config.degree)?;
     d.set_item("reduce_to", s.config.reduce_to)?;
     d.set_item("tol", s.config.tol)?;
+    d.set_item("mixed_precision", s.config.mixed_precision)?;
     d.set_item("n_features", s.n_features)?;
     d.set_item("training_stage", s.training_stage)?;
     let stages = PyList::empty(py);
@@ -402,6 +414,7 @@ fn node_state_from_dict(d: &Bound<'_, PyDict>) -> PyResult<NodeState> {
         degree: get(d, "degree")?,
         reduce_to: get(d, "reduce_to")?,
         tol: get(d, "tol")?,
+        mixed_precision: get_bool_or(d, "mixed_precision", false)?,
     };
     let list = d
         .get_item("stages")?
@@ -457,9 +470,9 @@ struct PySfaNode {
 #[pymethods]
 impl PySfaNode {
     #[new]
-    #[pyo3(signature = (n_components, degree=1, reduce_to=None, tol=sfa_core::DEFAULT_TOL))]
-    fn new(n_components: usize, degree: usize, reduce_to: Option<usize>, tol: f64) -> PyResult<Self> {
-        let inner = SfaNode::new(NodeConfig { n_components, degree, reduce_to, tol }).map_err(to_py)?;
+    #[pyo3(signature = (n_components, degree=1, reduce_to=None, tol=sfa_core::DEFAULT_TOL, mixed_precision=false))]
+    fn new(n_components: usize, degree: usize, reduce_to: Option<usize>, tol: f64, mixed_precision: bool) -> PyResult<Self> {
+        let inner = SfaNode::new(NodeConfig { n_components, degree, reduce_to, tol, mixed_precision }).map_err(to_py)?;
         Ok(PySfaNode { inner })
     }
 
@@ -591,6 +604,7 @@ fn spec_from_dict(d: &Bound<'_, PyDict>) -> PyResult<NetworkSpec> {
         layers,
         weight_sharing: get(d, "weight_sharing")?,
         tol: get(d, "tol")?,
+        mixed_precision: get_bool_or(d, "mixed_precision", false)?,
     })
 }
 
