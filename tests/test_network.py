@@ -157,7 +157,9 @@ def test_fast_equals_naive():
     rot = sfanav.Rotation(step=5)
     fast = sfanav.Network(tiny_config(top_out=3)).fit(imgs, rot, progress=False)
     naive = sfanav.Network(tiny_config(top_out=3)).fit(imgs, rot, fast=False, progress=False)
+    uncached = sfanav.Network(tiny_config(top_out=3)).fit(imgs, rot, cache=False, progress=False)
     np.testing.assert_allclose(fast.delta_values_, naive.delta_values_, rtol=1e-9)
+    np.testing.assert_allclose(uncached.delta_values_, naive.delta_values_, rtol=1e-9)
     np.testing.assert_allclose(fast.transform(imgs[:5]), naive.transform(imgs[:5]), rtol=1e-7, atol=1e-9)
 
 

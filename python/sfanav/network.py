@@ -364,6 +364,7 @@ class Network:
         rotation: Rotation | None = None,
         *,
         fast: bool = True,
+        cache: bool = True,
         batch_size: int = 16,
         progress: bool = True,
     ) -> "Network":
@@ -381,6 +382,12 @@ class Network:
             Exact fast training (periodic fields with multiplicities); False
             runs the naive per-view path (same result, slower). Without
             weight sharing the naive path is always used.
+        cache : bool, default True
+            Keep each image's periodic field of the layer below in memory
+            (float32 for mixed-precision networks) so later passes and layers
+            need neither the images nor recomputation: for Table 5.2 about
+            260 KB per image at the peak (layer 1's field). False streams
+            the images in every pass and recomputes lower layers.
         batch_size : int
             Images converted and processed per Rust call.
         progress : bool
@@ -405,21 +412,31 @@ class Network:
             )
         total = len(images) if hasattr(images, "__len__") and not callable(images) else None
         net = _core.Network(self.config_)
+        trainer = _core.LayerTrainer(net, 0, rotation.step, period, fast, cache)
         for layer in range(net.n_layers):
-            trainer = _core.LayerTrainer(net, layer, rotation.step, period, fast)
+            if layer > 0:
+                trainer = trainer.next_layer(net)
             n_passes = trainer.n_passes(net)
             for p in range(n_passes):
-                bar = _progress(progress, total, f"layer {layer + 1}/{net.n_layers} pass {p + 1}/{n_passes}")
-                try:
-                    for batch in batches():
-                        batch = _as_batch(batch)
-                        self._check_images(batch, period, training=True)
-                        trainer.feed(net, batch)
-                        if bar is not None:
-                            bar.update(len(batch))
-                finally:
+                desc = f"layer {layer + 1}/{net.n_layers} pass {p + 1}/{n_passes}"
+                if trainer.has_cache:
+                    bar = _progress(progress, trainer.cached_images, desc + " (cached)")
+                    trainer.feed_cached(net)
                     if bar is not None:
+                        bar.update(trainer.cached_images)
                         bar.close()
+                else:
+                    bar = _progress(progress, total, desc)
+                    try:
+                        for batch in batches():
+                            batch = _as_batch(batch)
+                            self._check_images(batch, period, training=True)
+                            trainer.feed(net, batch)
+                            if bar is not None:
+                                bar.update(len(batch))
+                    finally:
+                        if bar is not None:
+                            bar.close()
                 trainer.end_pass(net)
         self._net = net
         self._period = period

@@ -117,10 +117,49 @@ fn cum_strides(geom: &[LayerGeometry]) -> Vec<usize> {
 
 /// A layer's periodic output field of one image: `n_h x |offsets| x n_out`.
 struct Field {
-    data: Vec<f64>,
+    data: FieldData,
     idx: Vec<usize>,
     n_off: usize,
     depth: usize,
+}
+
+/// Field values: f64, or f32 when cached for a mixed-precision network.
+enum FieldData {
+    F64(Vec<f64>),
+    F32(Vec<f32>),
+}
+
+impl Field {
+    /// The `depth` values at (row, offset index), written into `out`.
+    #[inline]
+    fn read(&self, row: usize, i: usize, out: &mut [f64]) {
+        let at = (row * self.n_off + i) * self.depth;
+        match &self.data {
+            FieldData::F64(v) => out.copy_from_slice(&v[at..at + self.depth]),
+            FieldData::F32(v) => {
+                for (o, x) in out.iter_mut().zip(&v[at..at + self.depth]) {
+                    *o = *x as f64;
+                }
+            }
+        }
+    }
+
+    fn compact(self, f32_storage: bool) -> Field {
+        match (self.data, f32_storage) {
+            (FieldData::F64(v), true) => Field {
+                data: FieldData::F32(v.into_iter().map(|x| x as f32).collect()),
+                ..self
+            },
+            (data, _) => Field { data, ..self },
+        }
+    }
+
+    fn bytes(&self) -> usize {
+        match &self.data {
+            FieldData::F64(v) => v.len() * 8,
+            FieldData::F32(v) => v.len() * 4,
+        }
+    }
 }
 
 /// Gathers layer `l`'s periodic patches (rows `0..n_h`, offsets `offs`) of one
@@ -143,15 +182,16 @@ fn periodic_patches(
                 let src_row = r * g.stride_h + dr;
                 for m in 0..g.rf_w {
                     let col = (o + m * dilation) % period;
-                    let src = match below {
-                        None => &image[(src_row * period + col) * c..(src_row * period + col + 1) * c],
+                    match below {
+                        None => p[w..w + c].copy_from_slice(
+                            &image[(src_row * period + col) * c..(src_row * period + col + 1) * c],
+                        ),
                         Some(f) => {
                             let i = f.idx[col];
                             debug_assert!(i != usize::MAX, "offset {col} missing below");
-                            &f.data[(src_row * f.n_off + i) * f.depth..(src_row * f.n_off + i + 1) * f.depth]
+                            f.read(src_row, i, &mut p[w..w + c]);
                         }
-                    };
-                    p[w..w + c].copy_from_slice(src);
+                    }
                     w += c;
                 }
             }
@@ -160,31 +200,50 @@ fn periodic_patches(
     out
 }
 
-/// Periodic fields of layers `0..upto` of one image (weight sharing only).
-fn periodic_fields(net: &Network, rot: &Rotation, image: &[f64], upto: usize) -> Result<Vec<Field>> {
+/// Layer `l`'s periodic field of one image, from the image (l = 0) or the
+/// field of layer `l - 1`.
+fn layer_field(net: &Network, rot: &Rotation, l: usize, image: &[f64], below: Option<&Field>) -> Result<Field> {
     let geom = net.geometry();
     let t = cum_strides(geom);
+    let g = &geom[l];
+    let (offs, idx) = offset_set(rot, t[l], g.n_w);
+    let dilation = if l == 0 { 1 } else { t[l - 1] };
+    let patches = periodic_patches(g, dilation, rot.period, image, below, &offs);
+    let n = g.n_h * offs.len();
+    let data = net.apply_nodes(l, &patches, n, |_| 0)?;
+    Ok(Field { data: FieldData::F64(data), idx, n_off: offs.len(), depth: g.n_out })
+}
+
+/// Periodic fields of layers `0..upto` of one image (weight sharing only).
+fn periodic_fields(net: &Network, rot: &Rotation, image: &[f64], upto: usize) -> Result<Vec<Field>> {
     let mut fields: Vec<Field> = Vec::with_capacity(upto);
     for l in 0..upto {
-        let g = &geom[l];
-        let (offs, idx) = offset_set(rot, t[l], g.n_w);
-        let dilation = if l == 0 { 1 } else { t[l - 1] };
-        let patches = periodic_patches(g, dilation, rot.period, image, fields.last(), &offs);
-        let n = g.n_h * offs.len();
-        let data = net.apply_nodes(l, &patches, n, |_| 0)?;
-        fields.push(Field { data, idx, n_off: offs.len(), depth: g.n_out });
+        let f = layer_field(net, rot, l, image, fields.last())?;
+        fields.push(f);
     }
     Ok(fields)
 }
 
-fn fast_graph(net: &Network, rot: &Rotation, image: &[f64], layer: usize) -> Result<ImageGraph> {
+/// The fast graph of one image for `layer`; `below` is the field of layer
+/// `layer - 1` (computed from the image when None). Also returns that field.
+fn fast_graph(
+    net: &Network,
+    rot: &Rotation,
+    image: &[f64],
+    layer: usize,
+    below: Option<&Field>,
+) -> Result<(ImageGraph, Option<Field>)> {
     let geom = net.geometry();
     let g = &geom[layer];
     let t = cum_strides(geom);
-    let fields = periodic_fields(net, rot, image, layer)?;
+    let computed = match (below, layer) {
+        (None, l) if l > 0 => periodic_fields(net, rot, image, layer)?.pop(),
+        _ => None,
+    };
+    let below = below.or(computed.as_ref());
     let (offs, idx) = offset_set(rot, t[layer], g.n_w);
     let dilation = if layer == 0 { 1 } else { t[layer - 1] };
-    let rows = periodic_patches(g, dilation, rot.period, image, fields.last(), &offs);
+    let rows = periodic_patches(g, dilation, rot.period, image, below, &offs);
     let (w, k_views, s) = (rot.period, rot.n_views(), rot.step);
     let no = offs.len();
     let mut mult = vec![0.0; no];
@@ -217,7 +276,7 @@ fn fast_graph(net: &Network, rot: &Rotation, image: &[f64], layer: usize) -> Res
             last.push(r * no + idx[((k_views - 1) * s + j * t[layer]) % w]);
         }
     }
-    Ok(ImageGraph { rows, n, weights, edges, edge_weights, first, last })
+    Ok((ImageGraph { rows, n, weights, edges, edge_weights, first, last }, computed))
 }
 
 /// View `k` of a `h x period x c` image through a window of `v` columns.
@@ -278,6 +337,12 @@ pub struct LayerTrainer {
     /// between consecutive images.
     tail: Option<Vec<f64>>,
     images_seen: usize,
+    /// Fields of layer `layer - 1` per image, in feeding order (fast path):
+    /// filled in the first pass, reused in the next, and advanced by one
+    /// layer for the next trainer.
+    cache: Option<Vec<Field>>,
+    building: Vec<Field>,
+    caching: bool,
 }
 
 impl LayerTrainer {
@@ -295,7 +360,93 @@ impl LayerTrainer {
             )));
         }
         let path = if net.spec().weight_sharing { path } else { Path::Naive };
-        Ok(LayerTrainer { layer, rot, path, pass: 0, tail: None, images_seen: 0 })
+        Ok(LayerTrainer {
+            layer,
+            rot,
+            path,
+            pass: 0,
+            tail: None,
+            images_seen: 0,
+            cache: None,
+            building: Vec::new(),
+            caching: false,
+        })
+    }
+
+    /// Keeps the lower layers' periodic fields of every image in memory
+    /// (f32 for mixed-precision networks) so that later passes and layers
+    /// do not recompute them. Fast path only; the images must then be fed
+    /// in the same order in every pass.
+    pub fn set_caching(&mut self, on: bool) {
+        self.caching = on && self.path == Path::Fast;
+    }
+
+    /// True when the next pass reads the cache instead of images
+    /// ([`feed_cached`](Self::feed_cached)).
+    pub fn has_cache(&self) -> bool {
+        self.cache.is_some()
+    }
+
+    /// Number of images in the cache.
+    pub fn cached_images(&self) -> usize {
+        self.cache.as_ref().map_or(0, |c| c.len())
+    }
+
+    /// Bytes held by the cache.
+    pub fn cache_bytes(&self) -> usize {
+        self.cache.iter().flatten().chain(&self.building).map(Field::bytes).sum()
+    }
+
+    /// After the last pass: the trainer of the next layer, inheriting the
+    /// cache advanced by one layer (computed from the cached fields, in
+    /// parallel, without the images).
+    pub fn next_layer(self, net: &Network) -> Result<LayerTrainer> {
+        if net.n_trained() <= self.layer {
+            return Err(SfaError::NotFitted(format!("layer {} is not trained yet", self.layer + 1)));
+        }
+        let mut next = LayerTrainer::new(net, self.layer + 1, self.rot, self.path)?;
+        next.caching = self.caching;
+        let mixed = net.spec().mixed_precision;
+        if let (true, Some(cache)) = (self.caching, self.cache) {
+            let (layer, rot) = (self.layer, self.rot);
+            let advanced: Vec<Result<Field>> = cache
+                .into_par_iter()
+                .map(|f| Ok(layer_field(net, &rot, layer, &[], Some(&f))?.compact(mixed)))
+                .collect();
+            next.cache = Some(advanced.into_iter().collect::<Result<Vec<_>>>()?);
+        }
+        Ok(next)
+    }
+
+    /// Feeds the next pass from the cache (every cached image, in order).
+    pub fn feed_cached(&mut self, net: &mut Network) -> Result<()> {
+        let cache = self
+            .cache
+            .take()
+            .ok_or_else(|| SfaError::InvalidArgument("this trainer has no cached fields".into()))?;
+        let (layer, rot) = (self.layer, self.rot);
+        let chunk = 16;
+        let mut result = Ok(());
+        for part in cache.chunks(chunk) {
+            let graphs: Vec<Result<(ImageGraph, Option<Field>)>> = {
+                let net_ref: &Network = net;
+                part.par_iter().map(|f| fast_graph(net_ref, &rot, &[], layer, Some(f))).collect()
+            };
+            for g in graphs {
+                match g.and_then(|(gr, _)| self.feed_shared(net, gr, net.geometry()[layer].in_dim)) {
+                    Ok(()) => self.images_seen += 1,
+                    Err(e) => {
+                        result = Err(e);
+                        break;
+                    }
+                }
+            }
+            if result.is_err() {
+                break;
+            }
+        }
+        self.cache = Some(cache);
+        result
     }
 
     /// Passes over the data this layer needs (2: reduction, then expansion).
@@ -326,20 +477,31 @@ impl LayerTrainer {
                 self.images_seen + i / size
             )));
         }
+        if self.cache.is_some() {
+            return Err(SfaError::InvalidArgument(
+                "this pass reads the cached fields: call feed_cached instead of feed".into(),
+            ));
+        }
         let (layer, rot, path) = (self.layer, self.rot, self.path);
-        let graphs: Vec<Result<ImageGraph>> = {
+        let graphs: Vec<Result<(ImageGraph, Option<Field>)>> = {
             let net_ref: &Network = net;
             images
                 .par_chunks(size)
                 .map(|img| match path {
-                    Path::Fast => fast_graph(net_ref, &rot, img, layer),
-                    Path::Naive => naive_graph(net_ref, &rot, img, layer),
+                    Path::Fast => fast_graph(net_ref, &rot, img, layer, None),
+                    Path::Naive => Ok((naive_graph(net_ref, &rot, img, layer)?, None)),
                 })
                 .collect()
         };
         let d = net.geometry()[layer].in_dim;
+        let mixed = net.spec().mixed_precision;
         for gr in graphs {
-            let gr = gr?;
+            let (gr, field) = gr?;
+            if self.caching {
+                if let Some(f) = field {
+                    self.building.push(f.compact(mixed));
+                }
+            }
             if net.spec().weight_sharing {
                 self.feed_shared(net, gr, d)?;
             } else {
@@ -426,6 +588,18 @@ impl LayerTrainer {
         })?;
         self.pass += 1;
         self.tail = None;
+        if let Some(c) = &self.cache {
+            if c.len() != self.images_seen {
+                return Err(SfaError::InvalidArgument(format!(
+                    "{} images were fed in this pass but {} in the first",
+                    self.images_seen,
+                    c.len()
+                )));
+            }
+        }
+        if !self.building.is_empty() {
+            self.cache = Some(std::mem::take(&mut self.building));
+        }
         self.images_seen = 0;
         if last {
             net.set_trained(layer + 1);
@@ -465,8 +639,9 @@ pub fn transform_rotations(net: &Network, rot: Rotation, images: &[f64], n: usiz
                 let f = fields.last().expect("top field");
                 Ok((0..kv)
                     .flat_map(|k| {
-                        let i = f.idx[(k * rot.step) % rot.period];
-                        f.data[i * m..(i + 1) * m].to_vec()
+                        let mut v = vec![0.0; m];
+                        f.read(0, f.idx[(k * rot.step) % rot.period], &mut v);
+                        v
                     })
                     .collect())
             } else {
@@ -486,15 +661,23 @@ pub fn transform_rotations(net: &Network, rot: Rotation, images: &[f64], n: usiz
 }
 
 /// Convenience: trains every untrained layer on an in-memory batch.
-pub fn train(net: &mut Network, rot: Rotation, images: &[f64], n: usize, path: Path) -> Result<()> {
-    for layer in net.n_trained()..net.n_layers() {
-        let mut tr = LayerTrainer::new(net, layer, rot, path)?;
+pub fn train(net: &mut Network, rot: Rotation, images: &[f64], n: usize, path: Path, cache: bool) -> Result<()> {
+    let mut tr = LayerTrainer::new(net, net.n_trained(), rot, path)?;
+    tr.set_caching(cache);
+    loop {
         loop {
-            tr.feed(net, images, n)?;
+            if tr.has_cache() {
+                tr.feed_cached(net)?;
+            } else {
+                tr.feed(net, images, n)?;
+            }
             if tr.end_pass(net)? {
                 break;
             }
         }
+        if net.is_trained() {
+            return Ok(());
+        }
+        tr = tr.next_layer(net)?;
     }
-    Ok(())
 }

@@ -46,15 +46,15 @@ fn max_rel(a: &[f64], b: &[f64]) -> f64 {
     a.iter().zip(b).map(|(x, y)| (x - y).abs()).fold(0.0, f64::max) / scale
 }
 
-fn compare(v: usize, stride: usize, step: usize, c: usize) {
+fn compare(v: usize, stride: usize, step: usize, c: usize, cache: bool) {
     let w = 24;
     let n = 40;
     let imgs = images(n, 6, w, c, 7 + step as u64);
     let rot = Rotation { step, period: w };
     let mut naive = Network::new(spec(v, c, stride, true)).unwrap();
     let mut fast = naive.clone();
-    train(&mut naive, rot, &imgs, n, Path::Naive).unwrap();
-    train(&mut fast, rot, &imgs, n, Path::Fast).unwrap();
+    train(&mut naive, rot, &imgs, n, Path::Naive, false).unwrap();
+    train(&mut fast, rot, &imgs, n, Path::Fast, cache).unwrap();
     for l in 0..2 {
         let (a, b) = (naive.nodes(l)[0].state(true), fast.nodes(l)[0].state(true));
         for (sa, sb) in a.stages.iter().zip(&b.stages) {
@@ -87,17 +87,47 @@ fn compare(v: usize, stride: usize, step: usize, c: usize) {
 
 #[test]
 fn fast_equals_naive_full_window() {
-    compare(24, 2, 2, 1);
+    compare(24, 2, 2, 1, false);
+    compare(24, 2, 2, 1, true);
 }
 
 #[test]
 fn fast_equals_naive_step_not_dividing_stride() {
-    compare(24, 2, 3, 1);
+    compare(24, 2, 3, 1, true);
 }
 
 #[test]
 fn fast_equals_naive_narrow_window_rgb() {
-    compare(16, 2, 5, 3);
+    compare(16, 2, 5, 3, true);
+}
+
+#[test]
+fn cached_fields_advance_through_three_layers() {
+    let (w, n) = (24, 40);
+    let imgs = images(n, 6, w, 1, 11);
+    let spec = NetworkSpec {
+        height: 6,
+        width: 24,
+        channels: 1,
+        layers: vec![
+            LayerSpec { rf: (4, 3), stride: (2, 3), n_out: 4, reduce_to: Some(5), degree: 2 },
+            LayerSpec { rf: (3, 2), stride: (2, 1), n_out: 3, reduce_to: Some(6), degree: 2 },
+            LayerSpec { rf: (5, 1), stride: (1, 1), n_out: 2, reduce_to: Some(5), degree: 2 },
+        ],
+        weight_sharing: true,
+        tol: 1e-10,
+        mixed_precision: false,
+    };
+    let rot = Rotation { step: 3, period: w };
+    let mut naive = Network::new(spec).unwrap();
+    let mut cached = naive.clone();
+    train(&mut naive, rot, &imgs, n, Path::Naive, false).unwrap();
+    train(&mut cached, rot, &imgs, n, Path::Fast, true).unwrap();
+    for l in 0..3 {
+        let (a, b) = (naive.nodes(l)[0].state(false), cached.nodes(l)[0].state(false));
+        let (pa, pb) = (a.stages[1].solution.as_ref().unwrap(), b.stages[1].solution.as_ref().unwrap());
+        assert!(max_rel(&pa.delta, &pb.delta) < 1e-9, "layer {l}");
+    }
 }
 
 #[test]
@@ -106,7 +136,7 @@ fn individual_nodes_train() {
     let imgs = images(n, 6, w, 1, 3);
     let mut net = Network::new(spec(24, 1, 4, false)).unwrap();
     assert_eq!(net.nodes(0).len(), 6 * 2);
-    train(&mut net, Rotation { step: 2, period: w }, &imgs, n, Path::Fast).unwrap();
+    train(&mut net, Rotation { step: 2, period: w }, &imgs, n, Path::Fast, true).unwrap();
     let y = net.transform(&imgs[..6 * w], 1).unwrap();
     assert_eq!(y.len(), 3);
     assert!(y.iter().all(|v| v.is_finite()));

@@ -734,44 +734,87 @@ impl PyNetwork {
 /// Trains one layer pass by pass (see sfa_core::rotation::LayerTrainer).
 #[pyclass(name = "LayerTrainer", module = "sfanav._core")]
 struct PyLayerTrainer {
-    inner: LayerTrainer,
+    inner: Option<LayerTrainer>,
+}
+
+impl PyLayerTrainer {
+    fn get(&mut self) -> PyResult<&mut LayerTrainer> {
+        self.inner
+            .as_mut()
+            .ok_or_else(|| PyValueError::new_err("this trainer was handed on with next_layer()"))
+    }
 }
 
 #[pymethods]
 impl PyLayerTrainer {
     #[new]
-    #[pyo3(signature = (network, layer, step, period, fast=true))]
-    fn new(network: &PyNetwork, layer: usize, step: usize, period: usize, fast: bool) -> PyResult<Self> {
+    #[pyo3(signature = (network, layer, step, period, fast=true, cache=false))]
+    fn new(network: &PyNetwork, layer: usize, step: usize, period: usize, fast: bool, cache: bool) -> PyResult<Self> {
         let path = if fast { Path::Fast } else { Path::Naive };
-        let inner = LayerTrainer::new(&network.inner, layer, Rotation { step, period }, path).map_err(to_py)?;
-        Ok(PyLayerTrainer { inner })
+        let mut inner = LayerTrainer::new(&network.inner, layer, Rotation { step, period }, path).map_err(to_py)?;
+        inner.set_caching(cache);
+        Ok(PyLayerTrainer { inner: Some(inner) })
     }
 
-    fn n_passes(&self, network: &PyNetwork) -> usize {
-        self.inner.n_passes(&network.inner)
+    fn n_passes(&mut self, network: &PyNetwork) -> PyResult<usize> {
+        Ok(self.get()?.n_passes(&network.inner))
     }
 
     #[getter]
-    fn fast(&self) -> bool {
-        self.inner.path() == Path::Fast
+    fn fast(&mut self) -> PyResult<bool> {
+        Ok(self.get()?.path() == Path::Fast)
+    }
+
+    #[getter]
+    fn has_cache(&mut self) -> PyResult<bool> {
+        Ok(self.get()?.has_cache())
+    }
+
+    #[getter]
+    fn cache_bytes(&mut self) -> PyResult<usize> {
+        Ok(self.get()?.cache_bytes())
+    }
+
+    #[getter]
+    fn cached_images(&mut self) -> PyResult<usize> {
+        Ok(self.get()?.cached_images())
     }
 
     fn feed(&mut self, py: Python<'_>, network: &mut PyNetwork, images: &Bound<'_, PyAny>) -> PyResult<()> {
-        let (data, [n, h, w, c]) = images_f64(images)?;
+        let (data, [n, h, _w, c]) = images_f64(images)?;
         let (eh, _, ec) = network.inner.input_shape();
         if (h, c) != (eh, ec) {
             return Err(PyValueError::new_err(format!(
                 "training images are {h} px high with {c} channel(s), the network takes {eh} with {ec}"
             )));
         }
-        let _ = w;
-        let (tr, net) = (&mut self.inner, &mut network.inner);
+        let tr = self.get()?;
+        let net = &mut network.inner;
         run(py, || tr.feed(net, &data, n))
     }
 
+    fn feed_cached(&mut self, py: Python<'_>, network: &mut PyNetwork) -> PyResult<()> {
+        let tr = self.get()?;
+        let net = &mut network.inner;
+        run(py, || tr.feed_cached(net))
+    }
+
     fn end_pass(&mut self, py: Python<'_>, network: &mut PyNetwork) -> PyResult<bool> {
-        let (tr, net) = (&mut self.inner, &mut network.inner);
+        let tr = self.get()?;
+        let net = &mut network.inner;
         run(py, || tr.end_pass(net))
+    }
+
+    /// The trainer of the next layer, inheriting (and advancing) the cache;
+    /// this trainer is consumed.
+    fn next_layer(&mut self, py: Python<'_>, network: &PyNetwork) -> PyResult<PyLayerTrainer> {
+        let tr = self
+            .inner
+            .take()
+            .ok_or_else(|| PyValueError::new_err("this trainer was already handed on"))?;
+        let net = &network.inner;
+        let next = run(py, || tr.next_layer(net));
+        Ok(PyLayerTrainer { inner: Some(next?) })
     }
 }
 
