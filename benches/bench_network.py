@@ -198,6 +198,13 @@ def blas_summary(info: list[dict]) -> str:
 # --------------------------------------------------------------------------
 
 
+def new_network(sfanav, preset: str, precision: str):
+    """The preset's network; ``precision`` "preset" keeps the preset file's setting."""
+    if precision == "preset":
+        return sfanav.Network.from_preset(preset)
+    return sfanav.Network.from_preset(preset, precision=precision)
+
+
 def worker_train(args: argparse.Namespace) -> dict:
     import sfanav  # noqa: PLC0415
 
@@ -205,10 +212,10 @@ def worker_train(args: argparse.Namespace) -> dict:
     h, w, c = preset_shape(args.preset)
     images = make_images(0, args.n, h, w, c, args.seed)
     rss_data = rss_now_gb()
-    net = sfanav.Network.from_preset(args.preset)
+    net = new_network(sfanav, args.preset, args.precision)
     gc.collect()
     t0 = time.perf_counter()
-    net.fit(images, sfanav.Rotation(step=args.step, window=1.0), fast=True,
+    net.fit(images, sfanav.Rotation(step=args.step, window=1.0), fast=True, cache=not args.no_cache,
             batch_size=args.batch_size, progress=False)
     t_fit = time.perf_counter() - t0
     peak = maxrss_gb()
@@ -218,6 +225,7 @@ def worker_train(args: argparse.Namespace) -> dict:
         "preset": args.preset,
         "n": args.n,
         "threads": sfanav.get_num_threads(),
+        "precision": net.config_.get("mixed_precision"),
         "t_fit": t_fit,
         "rss_start_gb": rss_start,
         "rss_after_data_gb": rss_data,
@@ -324,7 +332,7 @@ def worker_mdp(args: argparse.Namespace) -> dict:
     flow = None
     for method in methods:
         flow = TimedFlow(build_mdp_flow(mdp, geometry, method).flow)
-        att = {"rank_deficit_method": method, "node_times": []}
+        att = {"rank_deficit_method": method, "node_times": [], "wall_start": time.time()}
         state["attempts"].append(att)
         progress_path.write_text(json.dumps(state))
         t0 = time.perf_counter()
@@ -361,6 +369,8 @@ def run_worker(kind: str, python: str, args: argparse.Namespace, extra: list[str
         out = Path(tmp) / "result.json"
         cmd = [python, os.path.abspath(__file__), "--_worker", kind, "--_out", str(out),
                "--seed", str(args.seed), "--step", str(args.step), *extra]
+        if kind == "train":
+            cmd += ["--precision", args.precision] + (["--no-cache"] if args.no_cache else [])
         err = None
         try:
             proc = subprocess.run(cmd, env=env, timeout=timeout)
@@ -368,10 +378,15 @@ def run_worker(kind: str, python: str, args: argparse.Namespace, extra: list[str
                 err = f"{kind} worker failed (exit {proc.returncode})"
         except subprocess.TimeoutExpired:
             err = f"timeout after {timeout:.0f} s"  # subprocess.run killed the worker
+            Path(tmp, "killed_at").write_text(repr(time.time()))
         if err is None:
             return json.loads(out.read_text()), None
         prog = Path(str(out) + ".progress")
-        return (json.loads(prog.read_text()) if prog.exists() else None), err
+        partial = json.loads(prog.read_text()) if prog.exists() else None
+        killed = Path(tmp, "killed_at")
+        if partial is not None and killed.exists():
+            partial["killed_at"] = float(killed.read_text())
+        return partial, err
 
 
 def ensure_mdp_venv(venv: Path, base_python: str) -> Path | None:
@@ -410,14 +425,15 @@ def ensure_mdp_venv(venv: Path, base_python: str) -> Path | None:
 # --------------------------------------------------------------------------
 
 
-def time_fit(sfanav, preset: str, images: np.ndarray, step: int, fast: bool, batch_size: int,
+def time_fit(sfanav, preset: str, images: np.ndarray, args: argparse.Namespace, fast: bool,
              repeats: int) -> tuple[float, list[float], object]:
     times, net = [], None
     for _ in range(repeats):
-        net = sfanav.Network.from_preset(preset)
+        net = new_network(sfanav, preset, args.precision)
         gc.collect()
         t0 = time.perf_counter()
-        net.fit(images, sfanav.Rotation(step=step, window=1.0), fast=fast, batch_size=batch_size, progress=False)
+        net.fit(images, sfanav.Rotation(step=args.step, window=1.0), fast=fast, cache=not args.no_cache,
+                batch_size=args.batch_size, progress=False)
         times.append(time.perf_counter() - t0)
     return min(times), times, net
 
@@ -436,7 +452,8 @@ def main_bench(args: argparse.Namespace) -> int:
             "seed": args.seed, "step": args.step, "n51": args.n51, "n52": args.n52,
             "subset": args.subset, "subset_preset": args.subset_preset, "batch_size": args.batch_size,
             "repeats": args.repeats, "quick": args.quick, "mdp_timeout": args.mdp_timeout,
-            "mdp_dtype": args.mdp_dtype, "mdp_chunk": args.mdp_chunk,
+            "mdp_dtype": args.mdp_dtype, "mdp_chunk": args.mdp_chunk, "precision": args.precision,
+            "cache": not args.no_cache,
             "python": sys.version.split()[0], "machine": platform.machine(), "cpu_count": os.cpu_count(),
             "sfanav_version": sfanav.__version__, "sfanav_threads": sfanav.get_num_threads(),
             "numpy_version": np.__version__,
@@ -464,7 +481,7 @@ def main_bench(args: argparse.Namespace) -> int:
     if args.n51 > 0:
         h, w, c = preset_shape("thesis-5.1")
         imgs = make_images(0, args.n51, h, w, c, args.seed)
-        t51, times51, _ = time_fit(sfanav, "thesis-5.1", imgs, step, True, args.batch_size, args.repeats)
+        t51, times51, _ = time_fit(sfanav, "thesis-5.1", imgs, args, True, args.repeats)
         res["train_51"] = {"n": args.n51, "t": t51, "times": times51, "ms_per_image": 1e3 * t51 / args.n51,
                            "views": n_views(w, step)}
         print(f"[5.1] fit {args.n51} images ({n_views(w, step)} views each): {t51:.2f} s, "
@@ -490,28 +507,50 @@ def main_bench(args: argparse.Namespace) -> int:
             r52["ms_per_image"] = 1e3 * r52["t_fit"] / n
             r52["extrapolated_minutes_at_5900"] = r52["t_fit"] / n * TARGET_IMAGES / 60.0
             r52["training_working_set_gb"] = working
-            # at 5900 images: same process baseline and working set, images held as float32 (or uint8)
-            r52["extrapolated_peak_gb_at_5900_f32"] = r52["peak_rss_gb"] - r52["images_gb"] + per_img_gb * TARGET_IMAGES
-            r52["extrapolated_peak_gb_at_5900_u8"] = (r52["peak_rss_gb"] - r52["images_gb"]
-                                                      + per_img_gb / 4 * TARGET_IMAGES)
             res["train_52"] = r52
             print(f"[5.2] fit {n} images: {r52['t_fit']:.2f} s, {r52['ms_per_image']:.1f} ms/image "
-                  f"({r52['threads']} threads); peak RSS {r52['peak_rss_gb']:.2f} GB "
+                  f"({r52['threads']} threads, {'mixed' if r52['precision'] else 'double'} precision, "
+                  f"cache {'off' if args.no_cache else 'on'}); peak RSS {r52['peak_rss_gb']:.2f} GB "
                   f"(images {r52['images_gb']:.2f} GB float32, training working set {working:.2f} GB)", flush=True)
+            # The working set grows with N (the field cache keeps every image's field of the
+            # layer below): a second fresh process with fewer images gives the slope.
+            ws_slope = None  # without a second point the memory is not extrapolated
+            n_small = args.mem_small if args.mem_small is not None else max(16, n // 8)
+            if 0 < n_small < n:
+                rs, err_s = run_worker("train", sys.executable, args,
+                                       ["--preset", "thesis-5.2", "--n", str(n_small),
+                                        "--batch-size", str(args.batch_size)], dict(os.environ))
+                if err_s is None:
+                    ws_small = rs["peak_rss_gb"] - rs["rss_after_data_gb"]
+                    ws_slope = max(0.0, (working - ws_small) / (n - n_small))
+                    r52["mem_small"] = {"n": n_small, "training_working_set_gb": ws_small,
+                                        "peak_rss_gb": rs["peak_rss_gb"], "t_fit": rs["t_fit"]}
+                    t_slope = (r52["t_fit"] - rs["t_fit"]) / (n - n_small)
+                    r52["extrapolated_minutes_at_5900_two_point"] = (
+                        r52["t_fit"] + t_slope * (TARGET_IMAGES - n)) / 60.0
+                    print(f"[5.2] fit {n_small} images (second point): working set {ws_small:.2f} GB -> "
+                          f"{1e6 * ws_slope:.0f} KB per image; time {rs['t_fit']:.1f} s -> two-point extrapolation "
+                          f"{r52['extrapolated_minutes_at_5900_two_point']:.1f} min at {TARGET_IMAGES}", flush=True)
+            r52["working_set_gb_per_image"] = ws_slope
+            if ws_slope is not None:
+                # at 5900 images: same baseline, working set grown by the slope, images as float32 (or uint8)
+                base = r52["peak_rss_gb"] - r52["images_gb"] + ws_slope * (TARGET_IMAGES - n)
+                r52["extrapolated_peak_gb_at_5900_f32"] = base + per_img_gb * TARGET_IMAGES
+                r52["extrapolated_peak_gb_at_5900_u8"] = base + per_img_gb / 4 * TARGET_IMAGES
 
     # ---- 2: fast vs naive on a subset --------------------------------------
     sp = args.subset_preset
     h, w, c = preset_shape(sp)
     sub = make_images(0, args.subset, h, w, c, args.seed)
     fp_sub = fingerprint(sub)
-    t_fast, times_fast, net_fast = time_fit(sfanav, sp, sub, step, True, args.batch_size, max(3, args.repeats))
+    t_fast, times_fast, net_fast = time_fit(sfanav, sp, sub, args, True, max(3, args.repeats))
     res["subset_fast"] = {"preset": sp, "n": args.subset, "t": t_fast, "times": times_fast,
                           "ms_per_image": 1e3 * t_fast / args.subset, "fingerprint": fp_sub,
                           "delta": [float(v) for v in net_fast.delta_values_]}
     print(f"[subset] {sp} x {args.subset} images, fast: {t_fast:.2f} s "
           f"({1e3 * t_fast / args.subset:.1f} ms/image, best of {len(times_fast)})", flush=True)
     if not args.no_naive:
-        t_naive, _, net_naive = time_fit(sfanav, sp, sub, step, False, args.batch_size, 1)
+        t_naive, _, net_naive = time_fit(sfanav, sp, sub, args, False, 1)
         d_f = np.asarray(net_fast.delta_values_)
         d_n = np.asarray(net_naive.delta_values_)
         res["subset_naive"] = {"t": t_naive, "ms_per_image": 1e3 * t_naive / args.subset,
@@ -563,9 +602,14 @@ def main_bench(args: argparse.Namespace) -> int:
             if err is not None:
                 res["mdp_error"] = err
                 print(f"[mdp] {err}", flush=True)
-                # lower bound: MDP ran at least the timeout on these images
-                if err.startswith("timeout"):
-                    res["mdp_over_fast_lower_bound"] = args.mdp_timeout / t_fast
+                # lower bound: the time MDP spent in Flow.train (all attempts) before it was killed
+                if err.startswith("timeout") and mdp_res is not None and mdp_res.get("attempts"):
+                    spent = sum(a["t"] for a in mdp_res["attempts"][:-1] if "t" in a)
+                    spent += mdp_res.get("killed_at", time.time()) - mdp_res["attempts"][-1]["wall_start"]
+                    res["mdp_train_seconds_before_timeout"] = spent
+                    res["mdp_over_fast_lower_bound"] = spent / t_fast
+                    print(f"[mdp] {spent:.1f} s in Flow.train before the timeout -> MDP/sfanav-fast >= "
+                          f"{spent / t_fast:.1f}x (raise --mdp-timeout or lower --subset for the full ratio)", flush=True)
             elif mdp_res is not None and mdp_res.get("ok"):
                 res["mdp_over_fast"] = mdp_res["t_train"] / t_fast
                 res["mdp_ms_per_image"] = 1e3 * mdp_res["t_train"] / args.subset
@@ -639,13 +683,19 @@ def main_bench(args: argparse.Namespace) -> int:
         rows.append((f"thesis-5.2 fit, {r['n']} img x {n_views(600, step)} views", f"{r['t_fit']:.1f} s",
                      f"{r['ms_per_image']:.1f} ms/img", ""))
         e = r["extrapolated_minutes_at_5900"]
-        rows.append((f"  -> {TARGET_IMAGES} images (linear; target < {TARGET_TRAIN_MIN:g} min)", f"{e:.1f} min", "",
-                     status(e, TARGET_TRAIN_MIN, False)))
+        e2 = r.get("extrapolated_minutes_at_5900_two_point")
+        rows.append((f"  -> {TARGET_IMAGES} images (t/N; target < {TARGET_TRAIN_MIN:g} min)", f"{e:.1f} min",
+                     "" if e2 is None else f"2-point: {e2:.1f} min", status(e, TARGET_TRAIN_MIN, False)))
+        slope = r["working_set_gb_per_image"]
         rows.append((f"peak RSS, 5.2 fit of {r['n']} img (fresh process)", f"{r['peak_rss_gb']:.2f} GB",
-                     f"ws {r['training_working_set_gb']:.2f} GB", ""))
-        p = r["extrapolated_peak_gb_at_5900_f32"]
-        rows.append((f"  -> {TARGET_IMAGES} img float32 in RAM (target < {TARGET_PEAK_GB:g} GB)", f"{p:.2f} GB",
-                     f"uint8: {r['extrapolated_peak_gb_at_5900_u8']:.2f} GB", status(p, TARGET_PEAK_GB, False)))
+                     f"ws {r['training_working_set_gb']:.2f} GB"
+                     + ("" if slope is None else f" +{1e6 * slope:.0f} KB/img"), ""))
+        if slope is not None:
+            p = r["extrapolated_peak_gb_at_5900_f32"]
+            rows.append((f"  -> {TARGET_IMAGES} img float32 in RAM (target < {TARGET_PEAK_GB:g} GB)", f"{p:.2f} GB",
+                         f"uint8: {r['extrapolated_peak_gb_at_5900_u8']:.2f} GB", status(p, TARGET_PEAK_GB, False)))
+        else:
+            rows.append((f"  -> {TARGET_IMAGES} img (needs the --mem-small point)", "n/a", "", ""))
     sf = res["subset_fast"]
     rows.append((f"subset {sp} x {args.subset}: sfanav fast", f"{sf['t']:.2f} s", f"{sf['ms_per_image']:.0f} ms/img", ""))
     if "subset_naive" in res:
@@ -658,7 +708,8 @@ def main_bench(args: argparse.Namespace) -> int:
                      f"{res['mdp_ms_per_image']:.0f} ms/img", ""))
         rows.append((f"  RATIO MDP / sfanav fast (target >= {TARGET_MDP_RATIO:g})", f"{res['mdp_over_fast']:.1f}x", "",
                      status(res["mdp_over_fast"], TARGET_MDP_RATIO)))
-        rows.append(("  top-node Delta max rel diff MDP vs sfanav", f"{res['mdp_delta_max_reldiff']:.1e}", "", ""))
+        rows.append(("  top-node Delta max rel diff MDP vs sfanav", f"{res['mdp_delta_max_reldiff']:.1e}",
+                     "(same network?)", ""))
     elif "mdp_over_fast_lower_bound" in res:
         rows.append((f"  RATIO MDP / sfanav fast (timeout; target >= {TARGET_MDP_RATIO:g})",
                      f">= {res['mdp_over_fast_lower_bound']:.1f}x", "",
@@ -675,9 +726,11 @@ def main_bench(args: argparse.Namespace) -> int:
 
     wn = max(len(r[0]) for r in rows)
     print()
-    print(f"== sfanav network bench (step {step}, seed {args.seed}) ==")
+    print(f"== sfanav network bench (step {step}, seed {args.seed}, precision {args.precision}, "
+          f"cache {'off' if args.no_cache else 'on'}) ==")
+    we = max(len(r[2]) for r in rows)
     for name, val, extra, st in rows:
-        print(f"  {name:<{wn}}  {val:>10}  {extra:<18} {st}")
+        print(f"  {name:<{wn}}  {val:>10}  {extra:<{we}}  {st}")
     print(f"  (load average 1 min: {res['config']['loadavg_1min_start']:.2f} at start, "
           f"{res['config']['loadavg_1min_end']:.2f} at end)")
     if "mdp_skipped" in res:
@@ -722,6 +775,13 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--latency-calls", type=int, default=DEFAULT_LATENCY_CALLS,
                    help="single-image transform calls for the median (default: %(default)s)")
     p.add_argument("--batch", type=int, default=DEFAULT_BATCH, help="images per transform call for throughput (default: %(default)s)")
+    p.add_argument("--precision", choices=["preset", "double", "mixed"], default="preset",
+                   help="network precision override; 'preset' keeps the preset file's setting (default: %(default)s)")
+    p.add_argument("--no-cache", action="store_true", help="fit(cache=False): stream the images in every pass")
+    p.add_argument("--mem-small", type=int, default=None,
+                   help="images of a second, smaller thesis-5.2 fit in a fresh process, for the per-image slope of "
+                        "the training working set (default max(16, n52 // 8); 0 = skip, and then the memory is "
+                        "not extrapolated to 5900 images)")
     p.add_argument("--no-naive", action="store_true", help="skip the naive path")
     p.add_argument("--no-mdp", action="store_true", help="skip the MDP comparison")
     p.add_argument("--mdp-timeout", type=float, default=DEFAULT_MDP_TIMEOUT,
