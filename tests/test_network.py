@@ -272,4 +272,5 @@ def test_mixed_precision_network_is_as_good_as_double(world):
     yr = mixed.transform(timgs, rotations=True)
     eta_phi = yr.var(axis=1).mean(axis=0) / yr.reshape(-1, yr.shape[2]).var(axis=0)
     assert eta_phi[:2].mean() < 0.15, eta_phi
-    assert sfanav.Network.from_preset("thesis-5.2").config_["mixed_precision"]
+    assert not sfanav.Network.from_preset("thesis-5.2").config_["mixed_precision"]
+    assert sfanav.Network.from_preset("thesis-5.2", precision="mixed").config_["mixed_precision"]
