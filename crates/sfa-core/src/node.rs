@@ -321,19 +321,25 @@ impl SfaNode {
         Ok(())
     }
 
-    /// Feeds a chunk of a time series to the stage in training (see
-    /// [`Accumulator::update`] for the sequence semantics).
-    pub fn partial_fit<T: Sample>(&mut self, x: View<'_, T>, new_sequence: bool) -> Result<()> {
+    /// Sets the node up on the first data and returns the stage in training.
+    fn begin_training<T: Sample>(&mut self, x: &View<'_, T>) -> Result<usize> {
         if self.n_features.is_none() {
             self.init(x.ncols())?;
         }
-        self.check_width(&x)?;
+        self.check_width(x)?;
         let s = self.training_stage;
         if self.stages[s].acc.is_none() {
             return Err(SfaError::NotFitted(
                 "the model was saved without training statistics; it cannot be trained further".into(),
             ));
         }
+        Ok(s)
+    }
+
+    /// Feeds a chunk of a time series to the stage in training (see
+    /// [`Accumulator::update`] for the sequence semantics).
+    pub fn partial_fit<T: Sample>(&mut self, x: View<'_, T>, new_sequence: bool) -> Result<()> {
+        let s = self.begin_training(&x)?;
         // Invalidate the stage being trained.
         self.stages[s].solution = None;
         if s == 0 && self.stages[0].expansion.is_none() {
@@ -384,16 +390,7 @@ impl SfaNode {
         edges: &[[usize; 2]],
         edge_weights: Option<&[f64]>,
     ) -> Result<()> {
-        if self.n_features.is_none() {
-            self.init(x.ncols())?;
-        }
-        self.check_width(&x)?;
-        let s = self.training_stage;
-        if self.stages[s].acc.is_none() {
-            return Err(SfaError::NotFitted(
-                "the model was saved without training statistics; it cannot be trained further".into(),
-            ));
-        }
+        let s = self.begin_training(&x)?;
         let n = x.nrows();
         if n == 0 {
             return Ok(());

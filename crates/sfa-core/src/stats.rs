@@ -502,14 +502,26 @@ impl Accumulator {
         if n == 0 {
             return Ok(());
         }
+        self.add_pair_rows(n, weights, |i, row, _tmp| {
+            b.row_into(i, None, row);
+            for (j, o) in row.iter_mut().enumerate() {
+                *o -= a.get(i, j).to_f64();
+            }
+        })
+    }
+
+    /// Accumulates `n` weighted derivative rows; `diff(i, row, scratch)`
+    /// writes pair `i`'s difference into `row`.
+    fn add_pair_rows<F>(&mut self, n: usize, weights: Option<&[f64]>, diff: F) -> Result<()>
+    where
+        F: Fn(usize, &mut [f64], &mut [f64]) + Sync,
+    {
         let d = self.dim;
         let m = parallel_moments(n, d, self.mixed, "pairs", |s, e, _cb, db, _sum, sum_d| {
+            let mut tmp = vec![0.0; d];
             for (k, i) in (s..e).enumerate() {
                 let row = &mut db[k * d..(k + 1) * d];
-                b.row_into(i, None, row);
-                for (j, o) in row.iter_mut().enumerate() {
-                    *o -= a.get(i, j).to_f64();
-                }
+                diff(i, row, &mut tmp);
                 if let Some(j) = first_non_finite(row) {
                     return Err((i, j));
                 }
@@ -552,30 +564,12 @@ impl Accumulator {
         if n == 0 {
             return Ok(());
         }
-        let d = self.dim;
-        let m = parallel_moments(n, d, self.mixed, "pairs", |s, e, _cb, db, _sum, sum_d| {
-            let mut tmp = vec![0.0; d];
-            for (k, i) in (s..e).enumerate() {
-                let row = &mut db[k * d..(k + 1) * d];
-                let [ia, ib] = edges[i];
-                x.row_into(ib, None, row);
-                x.row_into(ia, None, &mut tmp);
-                row.iter_mut().zip(&tmp).for_each(|(r, t)| *r -= t);
-                if let Some(j) = first_non_finite(row) {
-                    return Err((i, j));
-                }
-                let w = weights.map_or(1.0, |w| w[i]);
-                let sw = w.sqrt();
-                for (acc, v) in sum_d.iter_mut().zip(row.iter_mut()) {
-                    *acc += w * *v;
-                    *v *= sw;
-                }
-            }
-            Ok((0, e - s))
-        })?;
-        self.absorb(&m);
-        self.pair_weight_sum += weights.map_or(n as f64, |w| w.iter().sum());
-        Ok(())
+        self.add_pair_rows(n, weights, |i, row, tmp| {
+            let [ia, ib] = edges[i];
+            x.row_into(ib, None, row);
+            x.row_into(ia, None, tmp);
+            row.iter_mut().zip(tmp.iter()).for_each(|(r, t)| *r -= t);
+        })
     }
 
     /// Adds everything `other` accumulated (exact up to rounding). No
