@@ -397,22 +397,28 @@ impl SfaNode {
         }
         x.check_finite("input")?;
         self.stages[s].solution = None;
-        let input = self.forward_block(x, s)?;
-        let stage = &self.stages[s];
-        let ed = stage.expanded_dim();
-        let data = match &stage.expansion {
-            Some(ex) => {
-                let mut out = vec![0.0; n * ed];
-                ex.expand_block(&input, &mut out);
-                out
-            }
-            None => input,
-        };
-        let v = View::from_slice(&data, n, ed)?;
-        // Validate everything before touching the statistics.
+        // Accumulate into a copy, so a failure leaves the statistics as they were.
         let mut acc = self.stages[s].acc.clone().expect("acc");
-        acc.add_samples(v, sample_weights)?;
-        acc.add_pairs_indexed(v, edges, edge_weights)?;
+        if s == 0 && self.stages[0].expansion.is_none() {
+            // Zero-copy: the first stage reads the caller's rows.
+            acc.add_samples(x, sample_weights)?;
+            acc.add_pairs_indexed(x, edges, edge_weights)?;
+        } else {
+            let input = self.forward_block(x, s)?;
+            let stage = &self.stages[s];
+            let ed = stage.expanded_dim();
+            let data = match &stage.expansion {
+                Some(ex) => {
+                    let mut out = vec![0.0; n * ed];
+                    ex.expand_block(&input, &mut out);
+                    out
+                }
+                None => input,
+            };
+            let v = View::from_slice(&data, n, ed)?;
+            acc.add_samples(v, sample_weights)?;
+            acc.add_pairs_indexed(v, edges, edge_weights)?;
+        }
         self.stages[s].acc = Some(acc);
         Ok(())
     }
