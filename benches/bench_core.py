@@ -40,6 +40,15 @@ from pathlib import Path
 
 import numpy as np
 
+from _benchlib import (  # noqa: E402  (shared with the other bench script)
+    OPENBLAS_OVERRIDES,
+    blas_info,
+    blas_summary,
+    default_mdp_venv,
+    delta_mdp_to_sfanav_factor,
+    ensure_mdp_venv,
+)
+
 # --------------------------------------------------------------------------
 # configuration
 # --------------------------------------------------------------------------
@@ -59,18 +68,11 @@ TARGET_DELTA_RELDIFF = 1e-6  # max |Delta_sfanav - Delta_mdp| / |Delta_mdp|
 # Pinned so the venv is reproducible: numpy 1.23.5 is the last NumPy that MDP 3.6
 # imports under (no np.typeDict/np.longfloat removals yet) and has cp311 wheels;
 # scipy 1.11.4 is the newest SciPy that supports NumPy 1.23 on Python 3.11.
-MDP_REQUIREMENTS = ["numpy==1.23.5", "mdp==3.6", "scipy==1.11.4", "threadpoolctl"]
 
 # Environment variables that slow a current OpenBLAS down on some machines (see
 # shared/stack-notes.md): unset together, only in the NumPy-reference subprocess.
-OPENBLAS_OVERRIDES = ("OPENBLAS_CORETYPE", "OPENBLAS_L2_SIZE")
 
 CHUNK = 1 << 16  # rows per generation chunk; fixed, so the RNG stream is fixed
-
-
-def default_mdp_venv() -> Path:
-    cache = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-    return Path(cache) / "sfanav-bench" / "mdp-venv"
 
 
 # --------------------------------------------------------------------------
@@ -134,29 +136,6 @@ def best_of(fn, repeats: int) -> tuple[float, list[float], object]:
         result = fn()
         times.append(time.perf_counter() - t0)
     return min(times), times, result
-
-
-def blas_info() -> list[dict]:
-    try:
-        from threadpoolctl import threadpool_info
-    except ImportError:
-        return [{"error": "threadpoolctl not installed"}]
-    keep = ("user_api", "internal_api", "version", "architecture", "num_threads", "threading_layer", "filepath")
-    return [{k: info.get(k) for k in keep} for info in threadpool_info()]
-
-
-def blas_summary(info: list[dict]) -> str:
-    parts = []
-    for i in info:
-        if i.get("user_api") == "blas" or "error" in i:
-            if "error" in i:
-                parts.append(i["error"])
-            else:
-                parts.append(
-                    f"{i.get('internal_api')} {i.get('version')} {i.get('architecture')} "
-                    f"x{i.get('num_threads')} threads"
-                )
-    return "; ".join(dict.fromkeys(parts)) or "no BLAS found"
 
 
 # --------------------------------------------------------------------------
@@ -245,62 +224,9 @@ def run_worker(kind: str, python: str, args: argparse.Namespace, env: dict) -> d
 # --------------------------------------------------------------------------
 
 
-def ensure_mdp_venv(venv: Path, base_python: str) -> Path | None:
-    """Create (once) a venv with MDP 3.6 + NumPy 1.23; return its python or None."""
-    py = venv / "bin" / "python"
-    stamp = venv / ".sfanav-bench-ok"
-    wanted = " ".join(MDP_REQUIREMENTS)
-    if py.exists() and stamp.exists() and stamp.read_text().strip() == wanted:
-        return py
-    venv.parent.mkdir(parents=True, exist_ok=True)
-    log = venv.parent / (venv.name + "-install.log")
-    print(f"[mdp] creating venv {venv} with {wanted} (one-off; log: {log}) ...", flush=True)
-    with open(log, "w") as fh:
-        steps = []
-        if not py.exists():
-            steps.append([base_python, "-m", "venv", str(venv)])
-        steps.append([str(py), "-m", "pip", "install", *MDP_REQUIREMENTS])
-        steps.append([str(py), "-c", "import mdp, numpy; print('mdp', mdp.__version__, 'numpy', numpy.__version__)"])
-        for cmd in steps:
-            fh.write("$ " + " ".join(cmd) + "\n")
-            fh.flush()
-            try:
-                r = subprocess.run(cmd, stdout=fh, stderr=subprocess.STDOUT)
-            except OSError as e:
-                fh.write(f"{e}\n")
-                r = None
-            if r is None or r.returncode != 0:
-                print(f"[mdp] venv setup failed at: {' '.join(cmd)} (see {log})", flush=True)
-                return None
-    stamp.write_text(wanted + "\n")
-    return py
-
-
 # --------------------------------------------------------------------------
 # main
 # --------------------------------------------------------------------------
-
-
-def delta_mdp_to_sfanav_factor(t: int) -> float:
-    """Factor f with Delta_sfanav = f * Delta_mdp, for one sequence of t samples.
-
-    sfanav: covariance B_s = C / T (population; C = centered scatter matrix),
-            derivative covariance A_s = S_dd / P (mean squared derivative,
-            uncentered), P = T - 1 derivative pairs.
-    MDP 3.6 (SFANode with include_last_sample=True, CovarianceMatrix(bias=False)):
-      mdp/utils/covariance.py, CovarianceMatrix.fix: line 119 ``cov_mtx /= tlen - 1``
-            and line 126 ``avg_mtx /= tlen*(tlen - 1)`` (subtracted when center=True),
-            i.e. B_m = C / (T - 1);
-      mdp/nodes/sfa_nodes.py, SFANode._stop_training, lines 270-271: the derivative
-            matrix is fixed with ``center=False``, so the same line 119 gives
-            A_m = S_dd / (P - 1) with tlen = P = T - 1 (time_derivative, line 213:
-            ``x[1:, :]-x[:-1, :]``, no 1/dt).
-    Generalized eigenvalues scale as A/B:
-      Delta_m = Delta_s * (P / (P - 1)) * ((T - 1) / T)
-      => Delta_s = Delta_m * (P - 1) * T / (P * (T - 1)) = Delta_m * T (T - 2) / (T - 1)^2.
-    """
-    p = t - 1
-    return (p - 1) * t / (p * (t - 1))
 
 
 def fmt_t(v: float | None) -> str:

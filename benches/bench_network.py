@@ -36,7 +36,6 @@ from __future__ import annotations
 import argparse
 import gc
 import json
-import math
 import os
 import platform
 import resource
@@ -48,6 +47,15 @@ import time
 from pathlib import Path
 
 import numpy as np
+
+from _benchlib import (  # noqa: E402  (shared with the other bench script)
+    OPENBLAS_OVERRIDES,
+    blas_info,
+    blas_summary,
+    default_mdp_venv,
+    delta_mdp_to_sfanav_factor,
+    ensure_mdp_venv,
+)
 
 # --------------------------------------------------------------------------
 # configuration
@@ -79,14 +87,6 @@ PRESET_SHAPES = {  # (height, width, channels) of the panoramas (window = 100 %)
     "thesis-5.2": (60, 600, 3),
     "thesis-5.3": (40, 409, 1),
 }
-
-MDP_REQUIREMENTS = ["numpy==1.23.5", "mdp==3.6", "scipy==1.11.4", "threadpoolctl"]
-OPENBLAS_OVERRIDES = ("OPENBLAS_CORETYPE", "OPENBLAS_L2_SIZE")
-
-
-def default_mdp_venv() -> Path:
-    cache = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-    return Path(cache) / "sfanav-bench" / "mdp-venv"
 
 
 # --------------------------------------------------------------------------
@@ -172,25 +172,6 @@ def rss_now_gb() -> float:
 
 def maxrss_gb() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6  # kB on Linux
-
-
-def blas_info() -> list[dict]:
-    try:
-        from threadpoolctl import threadpool_info
-    except ImportError:
-        return [{"error": "threadpoolctl not installed"}]
-    keep = ("user_api", "internal_api", "version", "architecture", "num_threads")
-    return [{k: info.get(k) for k in keep} for info in threadpool_info()]
-
-
-def blas_summary(info: list[dict]) -> str:
-    parts = []
-    for i in info:
-        if "error" in i:
-            parts.append(i["error"])
-        elif i.get("user_api") == "blas":
-            parts.append(f"{i.get('internal_api')} {i.get('version')} {i.get('architecture')} x{i.get('num_threads')} threads")
-    return "; ".join(dict.fromkeys(parts)) or "no BLAS found"
 
 
 # --------------------------------------------------------------------------
@@ -392,37 +373,6 @@ def run_worker(kind: str, python: str, args: argparse.Namespace, extra: list[str
         return partial, err
 
 
-def ensure_mdp_venv(venv: Path, base_python: str) -> Path | None:
-    """Create (once) a venv with MDP 3.6 + NumPy 1.23 (same as bench_core.py)."""
-    py = venv / "bin" / "python"
-    stamp = venv / ".sfanav-bench-ok"
-    wanted = " ".join(MDP_REQUIREMENTS)
-    if py.exists() and stamp.exists() and stamp.read_text().strip() == wanted:
-        return py
-    venv.parent.mkdir(parents=True, exist_ok=True)
-    log = venv.parent / (venv.name + "-install.log")
-    print(f"[mdp] creating venv {venv} with {wanted} (one-off; log: {log}) ...", flush=True)
-    with open(log, "w") as fh:
-        steps = []
-        if not py.exists():
-            steps.append([base_python, "-m", "venv", str(venv)])
-        steps.append([str(py), "-m", "pip", "install", *MDP_REQUIREMENTS])
-        steps.append([str(py), "-c", "import mdp, numpy; print('mdp', mdp.__version__, 'numpy', numpy.__version__)"])
-        for cmd in steps:
-            fh.write("$ " + " ".join(cmd) + "\n")
-            fh.flush()
-            try:
-                r = subprocess.run(cmd, stdout=fh, stderr=subprocess.STDOUT)
-            except OSError as e:
-                fh.write(f"{e}\n")
-                r = None
-            if r is None or r.returncode != 0:
-                print(f"[mdp] venv setup failed at: {' '.join(cmd)} (see {log})", flush=True)
-                return None
-    stamp.write_text(wanted + "\n")
-    return py
-
-
 # --------------------------------------------------------------------------
 # main
 # --------------------------------------------------------------------------
@@ -439,12 +389,6 @@ def time_fit(sfanav, preset: str, images: np.ndarray, args: argparse.Namespace, 
                 batch_size=args.batch_size, progress=False)
         times.append(time.perf_counter() - t0)
     return min(times), times, net
-
-
-def delta_mdp_to_sfanav_factor(t: int) -> float:
-    """Delta_sfanav = f * Delta_mdp for one series of t samples (see bench_core.py):
-    MDP divides the covariance by T - 1 and the derivative moment by T - 2."""
-    return t * (t - 2) / (t - 1) ** 2
 
 
 def main_bench(args: argparse.Namespace) -> int:
