@@ -98,6 +98,25 @@ impl LayerGeometry {
     }
 }
 
+/// Checks a batch of `n` images of `size` values each: the length, and that
+/// every value is finite (the error names the image, numbered from `first`).
+pub(crate) fn check_images(images: &[f64], n: usize, size: usize, first: usize) -> Result<()> {
+    if images.len() != n * size {
+        return Err(SfaError::ShapeMismatch {
+            what: "image data length (n x height x width x channels)",
+            expected: n * size,
+            got: images.len(),
+        });
+    }
+    if let Some(i) = images.iter().position(|v| !v.is_finite()) {
+        return Err(SfaError::InvalidArgument(format!(
+            "image {} contains NaN or infinity",
+            first + i / size.max(1)
+        )));
+    }
+    Ok(())
+}
+
 fn default_reduce(in_dim: usize, degree: usize) -> Result<usize> {
     let mut k = 1;
     while k < in_dim && expanded_dim(k + 1, degree)? <= DEFAULT_MAX_EXPANDED {
@@ -326,19 +345,7 @@ impl Network {
         }
         let (h, w, c) = self.input_shape();
         let size = h * w * c;
-        if images.len() != n * size {
-            return Err(SfaError::ShapeMismatch {
-                what: "image data length (n x height x width x channels)",
-                expected: n * size,
-                got: images.len(),
-            });
-        }
-        if let Some(i) = images.iter().position(|v| !v.is_finite()) {
-            return Err(SfaError::InvalidArgument(format!(
-                "image {} contains NaN or infinity",
-                i / size
-            )));
-        }
+        check_images(images, n, size, 0)?;
         let m = self.n_outputs();
         let outs: Vec<Result<Vec<f64>>> = images
             .par_chunks(size)

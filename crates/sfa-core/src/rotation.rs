@@ -23,7 +23,7 @@
 //!   to rounding.
 
 use crate::error::{Result, SfaError};
-use crate::network::{LayerGeometry, Network};
+use crate::network::{check_images, LayerGeometry, Network};
 use crate::view::View;
 use rayon::prelude::*;
 
@@ -464,19 +464,7 @@ impl LayerTrainer {
     pub fn feed(&mut self, net: &mut Network, images: &[f64], n: usize) -> Result<()> {
         let (h, _, c) = net.input_shape();
         let size = h * self.rot.period * c;
-        if images.len() != n * size {
-            return Err(SfaError::ShapeMismatch {
-                what: "image data length (n x height x width x channels)",
-                expected: n * size,
-                got: images.len(),
-            });
-        }
-        if let Some(i) = images.iter().position(|v| !v.is_finite()) {
-            return Err(SfaError::InvalidArgument(format!(
-                "training image {} contains NaN or infinity",
-                self.images_seen + i / size
-            )));
-        }
+        check_images(images, n, size, self.images_seen)?;
         if self.cache.is_some() {
             return Err(SfaError::InvalidArgument(
                 "this pass reads the cached fields: call feed_cached instead of feed".into(),
@@ -618,16 +606,7 @@ pub fn transform_rotations(net: &Network, rot: Rotation, images: &[f64], n: usiz
     }
     let (h, v, c) = net.input_shape();
     let size = h * rot.period * c;
-    if images.len() != n * size {
-        return Err(SfaError::ShapeMismatch {
-            what: "image data length (n x height x width x channels)",
-            expected: n * size,
-            got: images.len(),
-        });
-    }
-    if images.iter().any(|x| !x.is_finite()) {
-        return Err(SfaError::InvalidArgument("images contain NaN or infinity".into()));
-    }
+    check_images(images, n, size, 0)?;
     let kv = rot.n_views();
     let m = net.n_outputs();
     let top = net.n_layers() - 1;
