@@ -502,12 +502,11 @@ class Network:
     def _from_state(cls, state: dict[str, Any]) -> "Network":
         try:
             obj = cls(state["config"])
-            net = _core.Network.from_states(_spec_from_json(state["spec"]), state["nodes"], int(state["trained"]))
+            if _spec_to_json(obj.config_) != state["spec"]:
+                raise ValueError("invalid Network model state: config and spec disagree")
+            obj._net = _core.Network.from_states(obj.config_, state["nodes"], int(state["trained"]))
         except (KeyError, TypeError) as exc:
             raise ValueError(f"invalid Network model state: {exc}") from None
-        if _spec_to_json(obj.config_) != state["spec"]:
-            raise ValueError("invalid Network model state: config and spec disagree")
-        obj._net = net
         if state.get("step") is not None:
             obj._step = int(state["step"])
             obj._period = int(state["period"])
@@ -515,18 +514,12 @@ class Network:
 
 
 def _spec_to_json(spec: dict[str, Any]) -> dict[str, Any]:
+    """The resolved spec as stored in model files (pairs as JSON lists); on
+    load the spec is recomputed from the config and compared with it."""
     s = copy.deepcopy(spec)
     for layer in s["layers"]:
         layer["rf"] = list(layer["rf"])
         layer["stride"] = list(layer["stride"])
-    return s
-
-
-def _spec_from_json(spec: dict[str, Any]) -> dict[str, Any]:
-    s = copy.deepcopy(spec)
-    for layer in s["layers"]:
-        layer["rf"] = tuple(layer["rf"])
-        layer["stride"] = tuple(layer["stride"])
     return s
 
 

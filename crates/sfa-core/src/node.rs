@@ -23,7 +23,7 @@ use crate::solve::{self, DEFAULT_TOL};
 use crate::stats::{Accumulator, AccumulatorState};
 use crate::view::{Sample, View};
 use faer::linalg::matmul::matmul;
-use faer::{Accum, Mat, MatRef, Par};
+use faer::{Accum, MatRef, Par};
 use rayon::prelude::*;
 
 /// Hyper-parameters of a node.
@@ -665,9 +665,8 @@ pub fn beta_values(delta: &[f64]) -> Vec<f64> {
         .collect()
 }
 
-#[allow(unused)]
-fn _assert_send() {
-    fn s<T: Send + Sync>() {}
-    s::<SfaNode>();
-    let _ = Mat::<f64>::zeros(0, 0);
-}
+/// A node is moved into worker threads (GIL-free calls, parallel layers).
+const _: () = {
+    const fn assert_send_sync<T: Send + Sync>() {}
+    assert_send_sync::<SfaNode>();
+};

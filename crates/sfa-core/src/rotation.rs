@@ -502,7 +502,7 @@ impl LayerTrainer {
 
     fn feed_shared(&mut self, net: &mut Network, gr: ImageGraph, d: usize) -> Result<()> {
         let ns = gr.first.len();
-        let (rows, n, mut weights, mut edges, mut ew) = match self.tail.take() {
+        let (rows, n, weights, edges, ew) = match self.tail.take() {
             None => (gr.rows, gr.n, gr.weights, gr.edges, gr.edge_weights),
             Some(tail) => {
                 // Prepend the previous image's last views as weight-0 rows.
@@ -523,9 +523,6 @@ impl LayerTrainer {
             let src = (offset + r) * d;
             tail[i * d..(i + 1) * d].copy_from_slice(&rows[src..src + d]);
         }
-        weights.shrink_to_fit();
-        edges.shrink_to_fit();
-        ew.shrink_to_fit();
         let node = &mut net.nodes_mut(self.layer)[0];
         node.partial_fit_graph(View::from_slice(&rows, n, d)?, Some(&weights), &edges, Some(&ew))?;
         self.tail = Some(tail);
