@@ -1,12 +1,12 @@
-//! f32 vs f64 sequential SYRK on small blocks: `cargo run --release --example perf_f32 -- D`.
+//! f32 vs f64 sequential SYRK on small blocks: `cargo run --release --example perf_f32 -- D [ROWS]`.
 use faer::linalg::matmul::triangular::{matmul as tri, BlockStructure};
 use faer::{Accum, Mat, MatRef, Par};
 use std::time::Instant;
 
 fn main() {
     let d: usize = std::env::args().nth(1).map_or(432, |a| a.parse().unwrap());
-    let rows = (1usize << 16) / d;
-    let n_blocks = 400;
+    let rows: usize = std::env::args().nth(2).map_or((1usize << 16) / d, |a| a.parse().unwrap());
+    let n_blocks = 60_000 / rows;
     let x64: Vec<f64> = (0..rows * d).map(|i| ((i * 2654435761usize) % 1000) as f64 / 1000.0).collect();
     let x32: Vec<f32> = x64.iter().map(|&v| v as f32).collect();
     for _ in 0..3 {
@@ -26,6 +26,7 @@ fn main() {
             for j in 0..d { for i in j..d { acc2[(i, j)] += tmp[(i, j)] as f64; } }
         }
         let t32 = t.elapsed().as_secs_f64();
-        println!("d={d} rows/block={rows}: f64 {t64:.3}s  f32+add {t32:.3}s  ratio {:.2}", t64 / t32);
+        let gf = (n_blocks * rows * d * d) as f64 * 1e-9;
+        println!("d={d} rows/block={rows}: f64 {:.1} GFLOP/s  f32+add {:.1} GFLOP/s  ratio {:.2}", gf / t64, gf / t32, t64 / t32);
     }
 }

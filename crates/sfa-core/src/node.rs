@@ -397,30 +397,26 @@ impl SfaNode {
         }
         x.check_finite("input")?;
         self.stages[s].solution = None;
-        // Accumulate into a copy, so a failure leaves the statistics as they were.
-        let mut acc = self.stages[s].acc.clone().expect("acc");
+        // `add_graph` checks and gathers everything before adding, so a
+        // failure leaves the statistics as they were.
         if s == 0 && self.stages[0].expansion.is_none() {
             // Zero-copy: the first stage reads the caller's rows.
-            acc.add_samples(x, sample_weights)?;
-            acc.add_pairs_indexed(x, edges, edge_weights)?;
-        } else {
-            let input = self.forward_block(x, s)?;
-            let stage = &self.stages[s];
-            let ed = stage.expanded_dim();
-            let data = match &stage.expansion {
-                Some(ex) => {
-                    let mut out = vec![0.0; n * ed];
-                    ex.expand_block(&input, &mut out);
-                    out
-                }
-                None => input,
-            };
-            let v = View::from_slice(&data, n, ed)?;
-            acc.add_samples(v, sample_weights)?;
-            acc.add_pairs_indexed(v, edges, edge_weights)?;
+            let acc = self.stages[0].acc.as_mut().expect("acc");
+            return acc.add_graph(x, sample_weights, edges, edge_weights);
         }
-        self.stages[s].acc = Some(acc);
-        Ok(())
+        let input = self.forward_block(x, s)?;
+        let stage = &mut self.stages[s];
+        let ed = stage.expanded_dim();
+        let data = match &stage.expansion {
+            Some(ex) => {
+                let mut out = vec![0.0; n * ed];
+                ex.expand_block(&input, &mut out);
+                out
+            }
+            None => input,
+        };
+        let v = View::from_slice(&data, n, ed)?;
+        stage.acc.as_mut().expect("acc").add_graph(v, sample_weights, edges, edge_weights)
     }
 
     /// Raw rows of `x` pushed through stages `0..upto` (all solved), in

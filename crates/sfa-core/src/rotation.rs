@@ -73,9 +73,14 @@ pub enum Path {
 
 /// One image's training graph for a layer: patch rows, their sample weights,
 /// weighted pairs inside the image, and which rows start and end the image's
-/// per-position series (for the pairs between consecutive images).
+/// per-position series (for the pairs between consecutive images). Row
+/// indices count from the image's first own row.
 struct ImageGraph {
+    /// `lead + n` rows: the first `lead` are reserved for the previous
+    /// image's last views (filled by the trainer, so the image's rows are
+    /// never copied to prepend them); the image's own rows follow.
     rows: Vec<f64>,
+    lead: usize,
     n: usize,
     weights: Vec<f64>,
     edges: Vec<[usize; 2]>,
@@ -171,8 +176,10 @@ fn periodic_patches(
     image: &[f64],
     below: Option<&Field>,
     offs: &[usize],
+    lead: usize,
 ) -> Vec<f64> {
-    let mut out = vec![0.0; g.n_h * offs.len() * g.in_dim];
+    let mut all = vec![0.0; (lead + g.n_h * offs.len()) * g.in_dim];
+    let out = &mut all[lead * g.in_dim..];
     let c = g.in_c;
     for r in 0..g.n_h {
         for (oi, &o) in offs.iter().enumerate() {
@@ -197,7 +204,7 @@ fn periodic_patches(
             }
         }
     }
-    out
+    all
 }
 
 /// Layer `l`'s periodic field of one image, from the image (l = 0) or the
@@ -208,7 +215,7 @@ fn layer_field(net: &Network, rot: &Rotation, l: usize, image: &[f64], below: Op
     let g = &geom[l];
     let (offs, idx) = offset_set(rot, t[l], g.n_w);
     let dilation = if l == 0 { 1 } else { t[l - 1] };
-    let patches = periodic_patches(g, dilation, rot.period, image, below, &offs);
+    let patches = periodic_patches(g, dilation, rot.period, image, below, &offs, 0);
     let n = g.n_h * offs.len();
     let data = net.apply_nodes(l, &patches, n, |_| 0)?;
     Ok(Field { data: FieldData::F64(data), idx, n_off: offs.len(), depth: g.n_out })
@@ -243,7 +250,8 @@ fn fast_graph(
     let below = below.or(computed.as_ref());
     let (offs, idx) = offset_set(rot, t[layer], g.n_w);
     let dilation = if layer == 0 { 1 } else { t[layer - 1] };
-    let rows = periodic_patches(g, dilation, rot.period, image, below, &offs);
+    let lead = g.n_positions();
+    let rows = periodic_patches(g, dilation, rot.period, image, below, &offs, lead);
     let (w, k_views, s) = (rot.period, rot.n_views(), rot.step);
     let no = offs.len();
     let mut mult = vec![0.0; no];
@@ -276,7 +284,7 @@ fn fast_graph(
             last.push(r * no + idx[((k_views - 1) * s + j * t[layer]) % w]);
         }
     }
-    Ok((ImageGraph { rows, n, weights, edges, edge_weights, first, last }, computed))
+    Ok((ImageGraph { rows, lead, n, weights, edges, edge_weights, first, last }, computed))
 }
 
 /// View `k` of a `h x period x c` image through a window of `v` columns.
@@ -296,13 +304,14 @@ fn naive_graph(net: &Network, rot: &Rotation, image: &[f64], layer: usize) -> Re
     let (h, v, c) = net.input_shape();
     let np = g.n_positions();
     let kv = rot.n_views();
-    let mut rows = vec![0.0; kv * np * g.in_dim];
+    let lead = np;
+    let mut rows = vec![0.0; (lead + kv * np) * g.in_dim];
     for k in 0..kv {
         let vw = view(image, h, rot.period, c, v, k * rot.step);
         let f = net.field_below(&vw, layer)?;
         for r in 0..g.n_h {
             for j in 0..g.n_w {
-                let i = k * np + r * g.n_w + j;
+                let i = lead + k * np + r * g.n_w + j;
                 g.gather(&f, r, j, &mut rows[i * g.in_dim..(i + 1) * g.in_dim]);
             }
         }
@@ -316,6 +325,7 @@ fn naive_graph(net: &Network, rot: &Rotation, image: &[f64], layer: usize) -> Re
     let ne = edges.len();
     Ok(ImageGraph {
         rows,
+        lead,
         n: kv * np,
         weights: vec![1.0; kv * np],
         edges,
@@ -502,29 +512,32 @@ impl LayerTrainer {
 
     fn feed_shared(&mut self, net: &mut Network, gr: ImageGraph, d: usize) -> Result<()> {
         let ns = gr.first.len();
-        let (rows, n, weights, edges, ew) = match self.tail.take() {
-            None => (gr.rows, gr.n, gr.weights, gr.edges, gr.edge_weights),
+        let mut rows = gr.rows;
+        let (start, n, weights, edges, ew) = match self.tail.take() {
+            None => (gr.lead, gr.n, gr.weights, gr.edges, gr.edge_weights),
             Some(tail) => {
-                // Prepend the previous image's last views as weight-0 rows.
-                let mut rows = tail;
-                rows.extend_from_slice(&gr.rows);
+                // The previous image's last views go into the reserved
+                // leading rows, as weight-0 samples that end one pair each.
+                debug_assert_eq!(gr.lead, ns);
+                rows[..ns * d].copy_from_slice(&tail);
                 let mut w = vec![0.0; ns];
                 w.extend_from_slice(&gr.weights);
                 let mut e: Vec<[usize; 2]> = (0..ns).map(|i| [i, ns + gr.first[i]]).collect();
                 e.extend(gr.edges.iter().map(|[a, b]| [a + ns, b + ns]));
                 let mut ew = vec![1.0; ns];
                 ew.extend_from_slice(&gr.edge_weights);
-                (rows, ns + gr.n, w, e, ew)
+                (0, ns + gr.n, w, e, ew)
             }
         };
-        let offset = n - gr.n;
+        let own = gr.lead * d;
         let mut tail = vec![0.0; ns * d];
         for (i, &r) in gr.last.iter().enumerate() {
-            let src = (offset + r) * d;
+            let src = own + r * d;
             tail[i * d..(i + 1) * d].copy_from_slice(&rows[src..src + d]);
         }
         let node = &mut net.nodes_mut(self.layer)[0];
-        node.partial_fit_graph(View::from_slice(&rows, n, d)?, Some(&weights), &edges, Some(&ew))?;
+        let x = View::from_slice(&rows[start * d..], n, d)?;
+        node.partial_fit_graph(x, Some(&weights), &edges, Some(&ew))?;
         self.tail = Some(tail);
         Ok(())
     }
@@ -539,7 +552,7 @@ impl LayerTrainer {
         nodes.par_iter_mut().enumerate().try_for_each(|(p, node)| {
             let mut x = vec![0.0; kv * d];
             for k in 0..kv {
-                let src = (k * np + p) * d;
+                let src = (gr.lead + k * np + p) * d;
                 x[k * d..(k + 1) * d].copy_from_slice(&gr.rows[src..src + d]);
             }
             node.partial_fit(View::from_slice(&x, kv, d)?, first_image)

@@ -95,8 +95,14 @@ fn block_rows(dim: usize) -> usize {
     }
 }
 
-/// Fewest rows worth a parallel part of their own.
-const MIN_ROWS_PER_PART: usize = 2048;
+/// Fewest rows worth a parallel part of their own: about 2^25 multiply-adds
+/// of SYRK work (372 rows at d = 300, 2048 at d = 128), so that one image's
+/// patches of a 300-dim layer (1800 rows in Table 5.2 layer 2) still use
+/// every thread, while tiny dimensions do not pay for a second d x d
+/// matrix per thread.
+fn min_rows_per_part(d: usize) -> usize {
+    ((1usize << 25) / (d * d).max(1)).clamp(64, 1 << 16)
+}
 
 /// `dst += rows^T rows` on the lower triangle; `rows` is row-major `n x d`.
 /// Sequential: parallelism is over row ranges (see [`parallel_moments`]).
@@ -139,13 +145,33 @@ fn syrk_add_mixed(dst: &mut Mat<f64>, rows: &[f64], n: usize, d: usize, buf: &mu
         Par::Seq,
     );
     for j in 0..d {
-        for i in j..d {
-            dst[(i, j)] += tmp[(i, j)] as f64;
-        }
+        let dc = dst.col_mut(j).try_as_col_major_mut().expect("contiguous");
+        let tc = tmp.col(j).try_as_col_major().expect("contiguous");
+        dc.as_slice_mut()[j..].iter_mut().zip(&tc.as_slice()[j..]).for_each(|(a, b)| *a += *b as f64);
     }
 }
 
-/// Moments gathered from a range of rows (lower triangles only).
+/// Which moment sets a [`parallel_moments`] call gathers.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Kind {
+    Samples,
+    Pairs,
+    Both,
+}
+
+impl Kind {
+    fn samples(self) -> bool {
+        self != Kind::Pairs
+    }
+    fn pairs(self) -> bool {
+        self != Kind::Samples
+    }
+}
+
+/// Moments gathered from a range of rows (lower triangles only). A moment
+/// set a call does not gather stays a 0 x 0 matrix: no allocation, nothing
+/// to add (a d x d f64 matrix is 1.5 MB at d = 432, and these are made per
+/// call and per thread).
 struct Moments {
     sxx: Mat<f64>,
     sdd: Mat<f64>,
@@ -155,10 +181,12 @@ struct Moments {
 }
 
 impl Moments {
-    fn zeros(d: usize) -> Self {
+    fn zeros(d: usize, kind: Kind) -> Self {
+        let ds = if kind.samples() { d } else { 0 };
+        let dp = if kind.pairs() { d } else { 0 };
         Moments {
-            sxx: Mat::zeros(d, d),
-            sdd: Mat::zeros(d, d),
+            sxx: Mat::zeros(ds, ds),
+            sdd: Mat::zeros(dp, dp),
             sum: vec![0.0; d],
             sum_d: vec![0.0; d],
             n_pairs: 0,
@@ -166,16 +194,24 @@ impl Moments {
     }
 
     fn add(&mut self, o: &Moments) {
-        let d = self.sum.len();
-        for j in 0..d {
-            for i in j..d {
-                self.sxx[(i, j)] += o.sxx[(i, j)];
-                self.sdd[(i, j)] += o.sdd[(i, j)];
-            }
-        }
+        add_lower(&mut self.sxx, &o.sxx);
+        add_lower(&mut self.sdd, &o.sdd);
         self.sum.iter_mut().zip(&o.sum).for_each(|(a, b)| *a += b);
         self.sum_d.iter_mut().zip(&o.sum_d).for_each(|(a, b)| *a += b);
         self.n_pairs += o.n_pairs;
+    }
+}
+
+/// `dst += src` on the lower triangle; a 0 x 0 `src` adds nothing.
+fn add_lower(dst: &mut Mat<f64>, src: &Mat<f64>) {
+    let d = src.nrows();
+    if d == 0 {
+        return;
+    }
+    debug_assert_eq!(dst.nrows(), d);
+    for j in 0..d {
+        let (dc, sc) = (dst.col_mut(j).try_as_col_major_mut().expect("contiguous"), src.col(j).try_as_col_major().expect("contiguous"));
+        dc.as_slice_mut()[j..].iter_mut().zip(&sc.as_slice()[j..]).for_each(|(a, b)| *a += b);
     }
 }
 
@@ -192,22 +228,22 @@ type Filled = std::result::Result<(usize, usize), (usize, usize)>;
 /// result is deterministic for a given thread count. (Splitting the long
 /// row dimension beats splitting the small `d x d` output: measured 1.2x on
 /// 200000 x 300, `cargo run --release --example perf_stats`.)
-fn parallel_moments<F>(n: usize, d: usize, mixed: bool, what: &'static str, fill: F) -> Result<Moments>
+fn parallel_moments<F>(n: usize, d: usize, kind: Kind, mixed: bool, what: &'static str, fill: F) -> Result<Moments>
 where
     F: Fn(usize, usize, &mut [f64], &mut [f64], &mut [f64], &mut [f64]) -> Filled + Sync,
 {
     let threads = rayon::current_num_threads().max(1);
-    let parts = threads.min(n.div_ceil(MIN_ROWS_PER_PART)).max(1);
+    let parts = threads.min(n.div_ceil(min_rows_per_part(d))).max(1);
     let per = n.div_ceil(parts);
     let br = block_rows(d);
     let results: Vec<std::result::Result<Moments, (usize, usize)>> = (0..parts)
         .into_par_iter()
         .map(|p| {
             let (lo, hi) = (p * per, ((p + 1) * per).min(n));
-            let mut m = Moments::zeros(d);
+            let mut m = Moments::zeros(d, kind);
             let rows = br.min(hi.saturating_sub(lo)).max(1);
-            let mut cbuf = vec![0.0; rows * d];
-            let mut dbuf = vec![0.0; rows * d];
+            let mut cbuf = vec![0.0; if kind.samples() { rows * d } else { 0 }];
+            let mut dbuf = vec![0.0; if kind.pairs() { rows * d } else { 0 }];
             let (mut buf32, mut tmp32) = if mixed {
                 (Vec::with_capacity(rows * d), Mat::<f32>::zeros(d, d))
             } else {
@@ -240,7 +276,7 @@ where
             Err((row, col)) => return Err(SfaError::NonFinite { what, row, col }),
         }
     }
-    Ok(total.unwrap_or_else(|| Moments::zeros(d)))
+    Ok(total.unwrap_or_else(|| Moments::zeros(d, kind)))
 }
 
 #[inline]
@@ -385,7 +421,7 @@ impl Accumulator {
             .last
             .as_ref()
             .map(|l| l.iter().zip(shift).map(|(a, b)| a - b).collect());
-        let m = parallel_moments(n, d, self.mixed, "input", |s, e, cb, db, sum, sum_d| {
+        let m = parallel_moments(n, d, Kind::Both, self.mixed, "input", |s, e, cb, db, sum, sum_d| {
             let nr = e - s;
             for (k, i) in (s..e).enumerate() {
                 let row = &mut cb[k * d..(k + 1) * d];
@@ -434,13 +470,8 @@ impl Accumulator {
 
     /// Adds gathered moments (lower triangles) into the running sums.
     fn absorb(&mut self, m: &Moments) {
-        let d = self.dim;
-        for j in 0..d {
-            for i in j..d {
-                self.sxx[(i, j)] += m.sxx[(i, j)];
-                self.sdd[(i, j)] += m.sdd[(i, j)];
-            }
-        }
+        add_lower(&mut self.sxx, &m.sxx);
+        add_lower(&mut self.sdd, &m.sdd);
         self.sum.iter_mut().zip(&m.sum).for_each(|(a, b)| *a += b);
         self.sum_d.iter_mut().zip(&m.sum_d).for_each(|(a, b)| *a += b);
         self.n_pairs += m.n_pairs;
@@ -451,33 +482,52 @@ impl Accumulator {
     pub fn add_samples<T: Sample>(&mut self, x: View<'_, T>, weights: Option<&[f64]>) -> Result<()> {
         self.check_width(&x)?;
         check_weights(weights, x.nrows(), "sample weights")?;
-        let n = x.nrows();
-        if n == 0 {
+        if x.nrows() == 0 {
             return Ok(());
         }
         self.ensure_shift(&x, "samples")?;
+        let m = self.sample_moments(&x, weights)?;
+        self.absorb_samples(&m, x.nrows(), weights);
+        Ok(())
+    }
+
+    /// Weighted sample moments of `x` (checked, shift set), not yet added.
+    fn sample_moments<T: Sample>(&self, x: &View<'_, T>, weights: Option<&[f64]>) -> Result<Moments> {
         let d = self.dim;
         let shift = self.shift.as_deref().expect("shift set");
-        let m = parallel_moments(n, d, self.mixed, "samples", |s, e, cb, _db, sum, _sum_d| {
-            for (k, i) in (s..e).enumerate() {
+        parallel_moments(x.nrows(), d, Kind::Samples, self.mixed, "samples", |s, e, cb, _db, sum, _sum_d| {
+            let mut k = 0;
+            for i in s..e {
                 let row = &mut cb[k * d..(k + 1) * d];
                 x.row_into(i, Some(shift), row);
                 if let Some(j) = first_non_finite(row) {
                     return Err((i, j));
                 }
                 let w = weights.map_or(1.0, |w| w[i]);
+                if w == 0.0 {
+                    // Contributes nothing (a pair end only): no product work.
+                    continue;
+                }
                 let sw = w.sqrt();
                 for (a, v) in sum.iter_mut().zip(row.iter_mut()) {
                     *a += w * *v;
                     *v *= sw;
                 }
+                k += 1;
             }
-            Ok((e - s, 0))
-        })?;
-        self.absorb(&m);
+            Ok((k, 0))
+        })
+    }
+
+    fn absorb_samples(&mut self, m: &Moments, n: usize, weights: Option<&[f64]>) {
+        self.absorb(m);
         self.n_samples += n as u64;
         self.weight_sum += weights.map_or(n as f64, |w| w.iter().sum());
-        Ok(())
+    }
+
+    fn absorb_pairs(&mut self, m: &Moments, n: usize, weights: Option<&[f64]>) {
+        self.absorb(m);
+        self.pair_weight_sum += weights.map_or(n as f64, |w| w.iter().sum());
     }
 
     /// Adds derivative pairs `d_i = b_i - a_i` with optional non-negative
@@ -503,22 +553,24 @@ impl Accumulator {
         if n == 0 {
             return Ok(());
         }
-        self.add_pair_rows(n, weights, |i, row, _tmp| {
+        let m = self.pair_moments(n, weights, |i, row, _tmp| {
             b.row_into(i, None, row);
             for (j, o) in row.iter_mut().enumerate() {
                 *o -= a.get(i, j).to_f64();
             }
-        })
+        })?;
+        self.absorb_pairs(&m, n, weights);
+        Ok(())
     }
 
-    /// Accumulates `n` weighted derivative rows; `diff(i, row, scratch)`
-    /// writes pair `i`'s difference into `row`.
-    fn add_pair_rows<F>(&mut self, n: usize, weights: Option<&[f64]>, diff: F) -> Result<()>
+    /// Moments of `n` weighted derivative rows, not yet added;
+    /// `diff(i, row, scratch)` writes pair `i`'s difference into `row`.
+    fn pair_moments<F>(&self, n: usize, weights: Option<&[f64]>, diff: F) -> Result<Moments>
     where
         F: Fn(usize, &mut [f64], &mut [f64]) + Sync,
     {
         let d = self.dim;
-        let m = parallel_moments(n, d, self.mixed, "pairs", |s, e, _cb, db, _sum, sum_d| {
+        parallel_moments(n, d, Kind::Pairs, self.mixed, "pairs", |s, e, _cb, db, _sum, sum_d| {
             let mut tmp = vec![0.0; d];
             for (k, i) in (s..e).enumerate() {
                 let row = &mut db[k * d..(k + 1) * d];
@@ -534,10 +586,30 @@ impl Accumulator {
                 }
             }
             Ok((0, e - s))
-        })?;
-        self.absorb(&m);
-        self.pair_weight_sum += weights.map_or(n as f64, |w| w.iter().sum());
+        })
+    }
+
+    fn check_edges<T: Sample>(x: &View<'_, T>, edges: &[[usize; 2]], weights: Option<&[f64]>) -> Result<()> {
+        check_weights(weights, edges.len(), "pair weights")?;
+        if let Some(e) = edges.iter().find(|e| e[0] >= x.nrows() || e[1] >= x.nrows()) {
+            return Err(SfaError::InvalidArgument(format!(
+                "pair ({}, {}) refers to a sample outside 0..{}",
+                e[0],
+                e[1],
+                x.nrows()
+            )));
+        }
         Ok(())
+    }
+
+    /// Moments of the indexed pairs `x[b] - x[a]` (checked), not yet added.
+    fn indexed_pair_moments<T: Sample>(&self, x: &View<'_, T>, edges: &[[usize; 2]], weights: Option<&[f64]>) -> Result<Moments> {
+        self.pair_moments(edges.len(), weights, |i, row, tmp| {
+            let [ia, ib] = edges[i];
+            x.row_into(ib, None, row);
+            x.row_into(ia, None, tmp);
+            row.iter_mut().zip(tmp.iter()).for_each(|(r, t)| *r -= t);
+        })
     }
 
     /// Adds derivative pairs given as row indices into `x`: pair `i` is
@@ -552,25 +624,54 @@ impl Accumulator {
         weights: Option<&[f64]>,
     ) -> Result<()> {
         self.check_width(&x)?;
-        let n = edges.len();
-        check_weights(weights, n, "pair weights")?;
-        if let Some(e) = edges.iter().find(|e| e[0] >= x.nrows() || e[1] >= x.nrows()) {
-            return Err(SfaError::InvalidArgument(format!(
-                "pair ({}, {}) refers to a sample outside 0..{}",
-                e[0],
-                e[1],
-                x.nrows()
-            )));
-        }
-        if n == 0 {
+        Self::check_edges(&x, edges, weights)?;
+        if edges.is_empty() {
             return Ok(());
         }
-        self.add_pair_rows(n, weights, |i, row, tmp| {
-            let [ia, ib] = edges[i];
-            x.row_into(ib, None, row);
-            x.row_into(ia, None, tmp);
-            row.iter_mut().zip(tmp.iter()).for_each(|(r, t)| *r -= t);
-        })
+        let m = self.indexed_pair_moments(&x, edges, weights)?;
+        self.absorb_pairs(&m, edges.len(), weights);
+        Ok(())
+    }
+
+    /// A weighted sample graph at once: every row of `x` is a sample
+    /// (`add_samples`) and every edge a derivative pair (`add_pairs_indexed`).
+    /// Everything is checked and gathered before anything is added, so on
+    /// error the statistics are unchanged (no copy of them is needed).
+    pub fn add_graph<T: Sample>(
+        &mut self,
+        x: View<'_, T>,
+        sample_weights: Option<&[f64]>,
+        edges: &[[usize; 2]],
+        edge_weights: Option<&[f64]>,
+    ) -> Result<()> {
+        self.check_width(&x)?;
+        check_weights(sample_weights, x.nrows(), "sample weights")?;
+        Self::check_edges(&x, edges, edge_weights)?;
+        if x.nrows() == 0 {
+            return Ok(());
+        }
+        let had_shift = self.shift.is_some();
+        self.ensure_shift(&x, "samples")?;
+        let gathered = self.sample_moments(&x, sample_weights).and_then(|ms| {
+            let mp = if edges.is_empty() { None } else { Some(self.indexed_pair_moments(&x, edges, edge_weights)?) };
+            Ok((ms, mp))
+        });
+        match gathered {
+            Ok((ms, mp)) => {
+                self.absorb_samples(&ms, x.nrows(), sample_weights);
+                if let Some(mp) = mp {
+                    self.absorb_pairs(&mp, edges.len(), edge_weights);
+                }
+                Ok(())
+            }
+            Err(e) => {
+                if !had_shift {
+                    self.shift = None;
+                    self.first = None;
+                }
+                Err(e)
+            }
+        }
     }
 
     /// Adds everything `other` accumulated (exact up to rounding). No

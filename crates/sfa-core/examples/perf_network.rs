@@ -1,0 +1,117 @@
+//! Per-layer, per-pass training time of the Table 5.2 network (600x60 RGB,
+//! step 5, whole panorama, field cache on) on synthetic smooth panoramas:
+//! `cargo run --release --example perf_network -p sfa-core -- [N] [mixed|double]`.
+//! Prints ms per image for every pass, the basis of the profile in
+//! docs/benchmarks.md.
+use sfa_core::network::{LayerSpec, Network, NetworkSpec};
+use sfa_core::rotation::{LayerTrainer, Path, Rotation};
+use std::time::Instant;
+
+fn images(n: usize, h: usize, w: usize, c: usize) -> Vec<f64> {
+    let mut out = Vec::with_capacity(n * h * w * c);
+    for i in 0..n {
+        let t = i as f64 * 0.03;
+        for y in 0..h {
+            for x in 0..w {
+                let a = 2.0 * std::f64::consts::PI * x as f64 / w as f64;
+                for ch in 0..c {
+                    let mut v = 0.5;
+                    for f in 1..7 {
+                        let ff = f as f64;
+                        v += (1.0 / ff)
+                            * (1.0 + 0.5 * (0.1 * y as f64 * ff + ch as f64).sin())
+                            * (ff * a + t * (0.3 + 0.1 * ff) + ch as f64 * 1.7).sin();
+                    }
+                    // a little deterministic noise
+                    let k = (i * 7919 + y * 104729 + x * 131 + ch * 17) as u64;
+                    v += ((k.wrapping_mul(2654435761) % 1000) as f64 / 1000.0 - 0.5) * 0.04;
+                    out.push(v);
+                }
+            }
+        }
+    }
+    out
+}
+
+/// Process CPU seconds (user + system) from /proc/self/stat (Linux; 0 elsewhere):
+/// on a shared machine CPU time is steadier than wall time.
+fn cpu_seconds() -> f64 {
+    let stat = std::fs::read_to_string("/proc/self/stat").unwrap_or_default();
+    let fields: Vec<&str> = stat.rsplit(')').next().unwrap_or("").split_whitespace().collect();
+    let tick = |i: usize| fields.get(i).and_then(|v| v.parse::<f64>().ok()).unwrap_or(0.0);
+    (tick(11) + tick(12)) / 100.0
+}
+
+fn main() {
+    let n: usize = std::env::args().nth(1).map_or(32, |a| a.parse().unwrap());
+    let mixed = std::env::args().nth(2).map_or(true, |a| a == "mixed");
+    let layer = |rf, stride, n_out| LayerSpec { rf, stride, n_out, reduce_to: None, degree: 2 };
+    let spec = NetworkSpec {
+        height: 60,
+        width: 600,
+        channels: 3,
+        layers: vec![layer((12, 12), (6, 6), 12), layer((5, 5), (2, 2), 14), layer((6, 3), (3, 1), 16), layer((15, 1), (1, 1), 8)],
+        weight_sharing: true,
+        tol: 1e-10,
+        mixed_precision: mixed,
+    };
+    let mut net = Network::new(spec).unwrap();
+    let imgs = images(n, 60, 600, 3);
+    let rot = Rotation { step: 5, period: 600 };
+    let batch = 16;
+    let mut tr = LayerTrainer::new(&net, 0, rot, Path::Fast).unwrap();
+    tr.set_caching(true);
+    // PERF_PASSES=k stops after k passes (for profiling one pass).
+    let max_passes: usize = std::env::var("PERF_PASSES").ok().and_then(|v| v.parse().ok()).unwrap_or(usize::MAX);
+    let mut passes_done = 0;
+    let total = Instant::now();
+    let total_cpu = cpu_seconds();
+    loop {
+        let mut pass = 0;
+        loop {
+            let t = Instant::now();
+            let c = cpu_seconds();
+            if tr.has_cache() {
+                tr.feed_cached(&mut net).unwrap();
+            } else {
+                for chunk in imgs.chunks(batch * 60 * 600 * 3) {
+                    tr.feed(&mut net, chunk, chunk.len() / (60 * 600 * 3)).unwrap();
+                }
+            }
+            let feed = t.elapsed().as_secs_f64();
+            let feed_cpu = cpu_seconds() - c;
+            let t = Instant::now();
+            let done = tr.end_pass(&mut net).unwrap();
+            println!(
+                "layer {} pass {}: {:.1} ms/image, cpu {:.1} ms/image (+ solve {:.0} ms)",
+                net.n_trained() + usize::from(!done),
+                pass + 1,
+                1e3 * feed / n as f64,
+                1e3 * feed_cpu / n as f64,
+                1e3 * t.elapsed().as_secs_f64()
+            );
+            pass += 1;
+            passes_done += 1;
+            if passes_done == max_passes {
+                return;
+            }
+            if done {
+                break;
+            }
+        }
+        if net.is_trained() {
+            break;
+        }
+        let t = Instant::now();
+        tr = tr.next_layer(&net).unwrap();
+        println!("  advance cache: {:.1} ms/image", 1e3 * t.elapsed().as_secs_f64() / n as f64);
+    }
+    println!(
+        "total {:.1} ms/image, cpu {:.1} ms/image ({} images, {}, {} threads)",
+        1e3 * total.elapsed().as_secs_f64() / n as f64,
+        1e3 * (cpu_seconds() - total_cpu) / n as f64,
+        n,
+        if mixed { "mixed" } else { "double" },
+        rayon::current_num_threads()
+    );
+}
