@@ -16,6 +16,7 @@ pub mod error;
 pub mod expansion;
 pub mod network;
 pub mod node;
+mod periodic;
 pub mod rotation;
 pub mod solve;
 pub mod stats;

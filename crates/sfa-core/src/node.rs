@@ -376,6 +376,46 @@ impl SfaNode {
         Ok(())
     }
 
+    /// True when the stage in training reads the raw input linearly (no
+    /// expansion): its statistics are then those of the input itself, and
+    /// may be formed by the caller ([`merge_statistics`](Self::merge_statistics)).
+    pub fn trains_on_raw_input(&self) -> bool {
+        match self.stages.get(self.training_stage) {
+            Some(st) => self.training_stage == 0 && st.expansion.is_none(),
+            // Not initialised yet: stage 0 is linear iff it is a reduction
+            // or a degree-1 node.
+            None => self.config.reduce_to.is_some() || self.config.degree == 1,
+        }
+    }
+
+    /// Adds statistics of raw `dim`-wide input gathered elsewhere (e.g. by
+    /// a structured algorithm) to the stage in training, which must read the
+    /// raw input linearly ([`trains_on_raw_input`](Self::trains_on_raw_input)).
+    pub fn merge_statistics(&mut self, stats: &Accumulator) -> Result<()> {
+        if self.n_features.is_none() {
+            self.init(stats.dim())?;
+        }
+        if !self.trains_on_raw_input() {
+            return Err(SfaError::InvalidArgument(
+                "the stage in training expands its input; it cannot take raw-input statistics".into(),
+            ));
+        }
+        if Some(stats.dim()) != self.n_features {
+            return Err(SfaError::ShapeMismatch {
+                what: "dimension of the merged statistics",
+                expected: self.n_features.unwrap_or(0),
+                got: stats.dim(),
+            });
+        }
+        let stage = &mut self.stages[0];
+        let acc = stage.acc.as_mut().ok_or_else(|| {
+            SfaError::NotFitted("the model was saved without training statistics; it cannot be trained further".into())
+        })?;
+        acc.merge(stats)?;
+        stage.solution = None;
+        Ok(())
+    }
+
     /// Feeds a *graph* of samples to the stage in training: every row of `x`
     /// is a sample with weight `sample_weights[i]` (default 1; 0 makes a row
     /// usable as a pair end only), and every edge `[a, b]` is a derivative

@@ -24,6 +24,8 @@
 
 use crate::error::{Result, SfaError};
 use crate::network::{check_images, LayerGeometry, Network};
+use crate::periodic;
+use crate::stats::Accumulator;
 use crate::view::View;
 use rayon::prelude::*;
 
@@ -89,6 +91,10 @@ struct ImageGraph {
     first: Vec<usize>,
     /// Per series: row of the last view.
     last: Vec<usize>,
+    /// Statistics formed without rows (first layer, lag products; see
+    /// [`crate::periodic`]); the rows are then only the first and last
+    /// views, as weight-0 pair ends.
+    moments: Option<Accumulator>,
 }
 
 /// Distinct offsets `(k * step + j * t) mod period` for `k < views`,
@@ -233,12 +239,15 @@ fn periodic_fields(net: &Network, rot: &Rotation, image: &[f64], upto: usize) ->
 
 /// The fast graph of one image for `layer`; `below` is the field of layer
 /// `layer - 1` (computed from the image when None). Also returns that field.
+/// `reference`: per-channel reference point for the first layer's
+/// lag-product statistics (None: always one row per patch).
 fn fast_graph(
     net: &Network,
     rot: &Rotation,
     image: &[f64],
     layer: usize,
     below: Option<&Field>,
+    reference: Option<&[f64]>,
 ) -> Result<(ImageGraph, Option<Field>)> {
     let geom = net.geometry();
     let g = &geom[layer];
@@ -250,8 +259,6 @@ fn fast_graph(
     let below = below.or(computed.as_ref());
     let (offs, idx) = offset_set(rot, t[layer], g.n_w);
     let dilation = if layer == 0 { 1 } else { t[layer - 1] };
-    let lead = g.n_positions();
-    let rows = periodic_patches(g, dilation, rot.period, image, below, &offs, lead);
     let (w, k_views, s) = (rot.period, rot.n_views(), rot.step);
     let no = offs.len();
     let mut mult = vec![0.0; no];
@@ -265,6 +272,44 @@ fn fast_graph(
             }
         }
     }
+    let lead = g.n_positions();
+    let first_offset = |j: usize| (j * t[layer]) % w;
+    let last_offset = |j: usize| ((k_views - 1) * s + j * t[layer]) % w;
+    if let (0, Some(reference)) = (layer, reference) {
+        let per_column = |m: &[f64]| {
+            let mut v = vec![0.0; w];
+            offs.iter().zip(m).for_each(|(&o, &x)| v[o] = x);
+            v
+        };
+        if let Some(plan) = periodic::plan(g, &per_column(&mult), &per_column(&pmult)) {
+            let moments = periodic::lattice_moments(g, &plan, image, w, s, reference, net.spec().mixed_precision)?;
+            // Rows: per RF row, the first views then the last views.
+            let ends: Vec<usize> = (0..g.n_w).map(first_offset).chain((0..g.n_w).map(last_offset)).collect();
+            let rows = periodic_patches(g, 1, w, image, None, &ends, lead);
+            let n = g.n_h * ends.len();
+            let series = |r: usize, j: usize, end: usize| r * 2 * g.n_w + end * g.n_w + j;
+            let (mut first, mut last) = (Vec::new(), Vec::new());
+            for r in 0..g.n_h {
+                for j in 0..g.n_w {
+                    first.push(series(r, j, 0));
+                    last.push(series(r, j, 1));
+                }
+            }
+            let graph = ImageGraph {
+                rows,
+                lead,
+                n,
+                weights: vec![0.0; n],
+                edges: Vec::new(),
+                edge_weights: Vec::new(),
+                first,
+                last,
+                moments: Some(moments),
+            };
+            return Ok((graph, computed));
+        }
+    }
+    let rows = periodic_patches(g, dilation, rot.period, image, below, &offs, lead);
     let n = g.n_h * no;
     let mut weights = Vec::with_capacity(n);
     let (mut edges, mut edge_weights) = (Vec::new(), Vec::new());
@@ -280,11 +325,11 @@ fn fast_graph(
     let (mut first, mut last) = (Vec::new(), Vec::new());
     for r in 0..g.n_h {
         for j in 0..g.n_w {
-            first.push(r * no + idx[(j * t[layer]) % w]);
-            last.push(r * no + idx[((k_views - 1) * s + j * t[layer]) % w]);
+            first.push(r * no + idx[first_offset(j)]);
+            last.push(r * no + idx[last_offset(j)]);
         }
     }
-    Ok((ImageGraph { rows, lead, n, weights, edges, edge_weights, first, last }, computed))
+    Ok((ImageGraph { rows, lead, n, weights, edges, edge_weights, first, last, moments: None }, computed))
 }
 
 /// View `k` of a `h x period x c` image through a window of `v` columns.
@@ -332,6 +377,7 @@ fn naive_graph(net: &Network, rot: &Rotation, image: &[f64], layer: usize) -> Re
         edge_weights: vec![1.0; ne],
         first: (0..np).collect(),
         last: (0..np).map(|p| (kv - 1) * np + p).collect(),
+        moments: None,
     })
 }
 
@@ -353,6 +399,13 @@ pub struct LayerTrainer {
     cache: Option<Vec<Field>>,
     building: Vec<Field>,
     caching: bool,
+    /// Reference point of the first layer's lag-product statistics in this
+    /// pass (set from the pass's first image).
+    reference: Option<Vec<f64>>,
+    /// Whether the first layer may use lag products ([`crate::periodic`]).
+    lag_products: bool,
+    /// Images whose statistics came from lag products.
+    lag_images: usize,
 }
 
 impl LayerTrainer {
@@ -380,6 +433,9 @@ impl LayerTrainer {
             cache: None,
             building: Vec::new(),
             caching: false,
+            reference: None,
+            lag_products: true,
+            lag_images: 0,
         })
     }
 
@@ -389,6 +445,18 @@ impl LayerTrainer {
     /// in the same order in every pass.
     pub fn set_caching(&mut self, on: bool) {
         self.caching = on && self.path == Path::Fast;
+    }
+
+    /// Lets the first layer form its linear statistics from lag products
+    /// ([`crate::periodic`]; on by default, used where it pays). Off: one
+    /// outer product per patch. Results agree up to rounding.
+    pub fn set_lag_products(&mut self, on: bool) {
+        self.lag_products = on;
+    }
+
+    /// Images whose statistics this trainer formed from lag products.
+    pub fn lag_product_images(&self) -> usize {
+        self.lag_images
     }
 
     /// True when the next pass reads the cache instead of images
@@ -440,7 +508,7 @@ impl LayerTrainer {
         for part in cache.chunks(chunk) {
             let graphs: Vec<Result<(ImageGraph, Option<Field>)>> = {
                 let net_ref: &Network = net;
-                part.par_iter().map(|f| fast_graph(net_ref, &rot, &[], layer, Some(f))).collect()
+                part.par_iter().map(|f| fast_graph(net_ref, &rot, &[], layer, Some(f), None)).collect()
             };
             for g in graphs {
                 match g.and_then(|(gr, _)| self.feed_shared(net, gr, net.geometry()[layer].in_dim)) {
@@ -481,12 +549,27 @@ impl LayerTrainer {
             ));
         }
         let (layer, rot, path) = (self.layer, self.rot, self.path);
+        if layer == 0
+            && path == Path::Fast
+            && self.reference.is_none()
+            && n > 0
+            && self.lag_products
+            && net.nodes(0)[0].trains_on_raw_input()
+        {
+            // Per-channel means of the first image: the lag products'
+            // reference point for the whole pass.
+            let mut mean = vec![0.0; c];
+            images[..size].chunks_exact(c).for_each(|px| mean.iter_mut().zip(px).for_each(|(m, v)| *m += v));
+            mean.iter_mut().for_each(|m| *m /= (size / c) as f64);
+            self.reference = Some(mean);
+        }
         let graphs: Vec<Result<(ImageGraph, Option<Field>)>> = {
             let net_ref: &Network = net;
+            let reference = self.reference.as_deref();
             images
                 .par_chunks(size)
                 .map(|img| match path {
-                    Path::Fast => fast_graph(net_ref, &rot, img, layer, None),
+                    Path::Fast => fast_graph(net_ref, &rot, img, layer, None, reference),
                     Path::Naive => Ok((naive_graph(net_ref, &rot, img, layer)?, None)),
                 })
                 .collect()
@@ -536,6 +619,10 @@ impl LayerTrainer {
             tail[i * d..(i + 1) * d].copy_from_slice(&rows[src..src + d]);
         }
         let node = &mut net.nodes_mut(self.layer)[0];
+        if let Some(m) = &gr.moments {
+            node.merge_statistics(m)?;
+            self.lag_images += 1;
+        }
         let x = View::from_slice(&rows[start * d..], n, d)?;
         node.partial_fit_graph(x, Some(&weights), &edges, Some(&ew))?;
         self.tail = Some(tail);
@@ -586,6 +673,7 @@ impl LayerTrainer {
         })?;
         self.pass += 1;
         self.tail = None;
+        self.reference = None;
         if let Some(c) = &self.cache {
             if c.len() != self.images_seen {
                 return Err(SfaError::InvalidArgument(format!(

@@ -332,6 +332,59 @@ impl Accumulator {
         })
     }
 
+    /// An empty accumulator whose sums are taken relative to `reference`
+    /// (instead of the first sample): pick a point near the data, e.g. an
+    /// expected mean. Fails on an empty or non-finite reference.
+    pub fn with_reference(reference: Vec<f64>) -> Result<Self> {
+        let mut a = Accumulator::new(reference.len())?;
+        if let Some(col) = reference.iter().position(|v| !v.is_finite()) {
+            return Err(SfaError::NonFinite { what: "reference point", row: 0, col });
+        }
+        a.shift = Some(reference);
+        Ok(a)
+    }
+
+    /// `scale x (lattice sums) - self`, for [`crate::periodic`]: `self` holds
+    /// correction rows relative to a zero reference in coordinates already
+    /// centred at `shift`; `sxx` / `sdd` (lower triangles used) and the sums
+    /// are the scaled lattice moments in the same coordinates. Reuses the
+    /// given matrices (no d x d copies).
+    #[allow(clippy::too_many_arguments)]
+    pub(crate) fn lattice_minus(
+        &self,
+        shift: Vec<f64>,
+        (n_samples, weight_sum, mut sum, mut sxx): (u64, f64, Vec<f64>, Mat<f64>),
+        (n_pairs, pair_weight_sum, mut sum_d, mut sdd): (u64, f64, Vec<f64>, Mat<f64>),
+    ) -> Accumulator {
+        let sub = |dst: &mut Mat<f64>, src: &Mat<f64>| {
+            let d = src.nrows();
+            for j in 0..d {
+                let dc = dst.col_mut(j).try_as_col_major_mut().expect("contiguous");
+                let sc = src.col(j).try_as_col_major().expect("contiguous");
+                dc.as_slice_mut()[j..].iter_mut().zip(&sc.as_slice()[j..]).for_each(|(a, b)| *a -= b);
+            }
+        };
+        sub(&mut sxx, &self.sxx);
+        sub(&mut sdd, &self.sdd);
+        sum.iter_mut().zip(&self.sum).for_each(|(a, b)| *a -= b);
+        sum_d.iter_mut().zip(&self.sum_d).for_each(|(a, b)| *a -= b);
+        Accumulator {
+            dim: self.dim,
+            shift: Some(shift),
+            n_samples,
+            weight_sum: weight_sum - self.weight_sum,
+            sum,
+            sxx,
+            n_pairs,
+            pair_weight_sum: pair_weight_sum - self.pair_weight_sum,
+            sum_d,
+            sdd,
+            first: None,
+            last: None,
+            mixed: self.mixed,
+        }
+    }
+
     /// Mixed precision: outer products of each cache-sized block of rows are
     /// formed in f32 and summed into the f64 totals (about 1.8x faster,
     /// `cargo run --release --example perf_f32 -p sfa-core -- 432`;
@@ -559,6 +612,20 @@ impl Accumulator {
                 *o -= a.get(i, j).to_f64();
             }
         })?;
+        self.absorb_pairs(&m, n, weights);
+        Ok(())
+    }
+
+    /// Adds derivative rows `d_i` directly (when the caller already holds
+    /// the differences), with optional non-negative weights (default 1).
+    pub fn add_differences<T: Sample>(&mut self, dx: View<'_, T>, weights: Option<&[f64]>) -> Result<()> {
+        self.check_width(&dx)?;
+        let n = dx.nrows();
+        check_weights(weights, n, "difference weights")?;
+        if n == 0 {
+            return Ok(());
+        }
+        let m = self.pair_moments(n, weights, |i, row, _tmp| dx.row_into(i, None, row))?;
         self.absorb_pairs(&m, n, weights);
         Ok(())
     }
@@ -886,7 +953,8 @@ impl Accumulator {
         {
             return bad("non-finite or negative values".into());
         }
-        if (s.n_samples > 0) == s.shift.is_empty() {
+        if s.n_samples > 0 && s.shift.is_empty() {
+            // (A reference point without samples is fine: `with_reference`.)
             return bad("sample count and reference point disagree".into());
         }
         let mat = |v: &Vec<f64>| Mat::from_fn(d, d, |i, j| v[i * d + j]);

@@ -1,6 +1,7 @@
 mod common;
 use common::Rng;
 use sfa_core::rotation::{train, transform_rotations};
+use sfa_core::LayerTrainer;
 use sfa_core::{LayerSpec, Network, NetworkSpec, Path, Rotation};
 
 /// `n` periodic random images `h x w x c` with smooth structure.
@@ -155,4 +156,99 @@ fn bad_specs_name_the_layer() {
     let mut s = spec(24, 1, 2, true);
     s.layers[0].n_out = 100;
     assert!(Network::new(s).unwrap_err().to_string().contains("exceeds the expanded dim"));
+}
+
+/// A first layer with wide RFs, where the lag-product statistics
+/// (`periodic.rs`) pay and are used.
+fn wide_spec(v: usize, c: usize, stride: usize, mixed: bool) -> NetworkSpec {
+    let n_w1 = (v - 12) / stride + 1;
+    NetworkSpec {
+        height: 6,
+        width: v,
+        channels: c,
+        layers: vec![
+            LayerSpec { rf: (12, 2), stride: (stride, 2), n_out: 4, reduce_to: Some(6), degree: 2 },
+            LayerSpec { rf: (n_w1, 3), stride: (1, 1), n_out: 3, reduce_to: Some(6), degree: 2 },
+        ],
+        weight_sharing: true,
+        tol: 1e-10,
+        mixed_precision: mixed,
+    }
+}
+
+/// Trains every layer on the fast path with the field cache; returns how
+/// many images the first layer took through lag products.
+fn train_fast(net: &mut Network, rot: Rotation, imgs: &[f64], n: usize, lag: bool) -> usize {
+    let mut tr = LayerTrainer::new(net, 0, rot, Path::Fast).unwrap();
+    tr.set_caching(true);
+    tr.set_lag_products(lag);
+    let mut lag_images = 0;
+    loop {
+        loop {
+            if tr.has_cache() {
+                tr.feed_cached(net).unwrap();
+            } else {
+                tr.feed(net, imgs, n).unwrap();
+            }
+            if tr.end_pass(net).unwrap() {
+                break;
+            }
+        }
+        lag_images += tr.lag_product_images();
+        if net.is_trained() {
+            return lag_images;
+        }
+        tr = tr.next_layer(net).unwrap();
+    }
+}
+
+fn projections(net: &Network) -> Vec<(Vec<f64>, Vec<f64>)> {
+    (0..net.n_layers())
+        .flat_map(|l| net.nodes(l)[0].state(false).stages)
+        .map(|st| {
+            let s = st.solution.unwrap();
+            (s.projection, s.delta)
+        })
+        .collect()
+}
+
+/// Lag products (on by default) give the naive path's node weights, for
+/// full and narrow windows, steps that do and do not divide the stride,
+/// gray and RGB; and the structured path really ran.
+#[test]
+fn lag_product_statistics_equal_naive() {
+    // (period, window, stride, step, channels). Offsets on the lattice 2Z
+    // (g = 2) for the first and last; g = 1 with steps that do not divide
+    // the stride, full and narrow windows, gray and RGB, for the others.
+    for (w, v, stride, step, c) in [(24, 24, 2, 2, 1), (48, 40, 2, 3, 3), (48, 48, 2, 5, 1), (36, 36, 2, 2, 1)] {
+        let n = 30;
+        let imgs = images(n, 6, w, c, 11 + step as u64);
+        let rot = Rotation { step, period: w };
+        let mut naive = Network::new(wide_spec(v, c, stride, false)).unwrap();
+        let mut fast = naive.clone();
+        train(&mut naive, rot, &imgs, n, Path::Naive, false).unwrap();
+        let used = train_fast(&mut fast, rot, &imgs, n, true);
+        assert_eq!(used, n, "lag products not used for v={v} stride={stride} step={step}");
+        for (i, ((pa, da), (pb, db))) in projections(&naive).iter().zip(&projections(&fast)).enumerate() {
+            let e = max_rel(pa, pb);
+            assert!(e < 1e-9, "v={v} stride={stride} step={step} c={c} stage {i}: projection differs by {e}");
+            assert!(max_rel(da, db) < 1e-9);
+        }
+    }
+}
+
+/// Mixed precision: lag products in f32 agree with one f32 outer product
+/// per patch to the mixed tolerance.
+#[test]
+fn lag_products_mixed_precision_close_to_plain() {
+    let (w, c, n) = (48, 3, 30);
+    let imgs = images(n, 6, w, c, 5);
+    let rot = Rotation { step: 3, period: w };
+    let mut plain = Network::new(wide_spec(40, c, 2, true)).unwrap();
+    let mut lag = plain.clone();
+    assert_eq!(train_fast(&mut plain, rot, &imgs, n, false), 0);
+    assert_eq!(train_fast(&mut lag, rot, &imgs, n, true), n);
+    let (a, b) = (&projections(&plain)[0].1, &projections(&lag)[0].1);
+    let e = max_rel(a, b);
+    assert!(e < 1e-4, "first-stage Delta values differ by {e}");
 }
