@@ -200,6 +200,9 @@ def plot_firing_maps(
     fig = _figure(2.4 * len(cols) + 0.8, 2.2 * len(which) + (0.4 if title else 0))
     axes = fig.subplots(len(which), len(cols), squeeze=False, sharex=True, sharey=True)
     x0, x1, y0, y1 = P[:, 0].min(), P[:, 0].max(), P[:, 1].min(), P[:, 1].max()
+    pad = 0.02 * max(x1 - x0, y1 - y0)
+    x0, x1, y0, y1 = x0 - pad, x1 + pad, y0 - pad, y1 + pad
+    marker = float(np.clip((150.0 / np.sqrt(len(P))) ** 2, 2.0, 200.0))  # points^2: tiles a ~2 inch panel
     for r, j in enumerate(which):
         vals = a[:, cols, j]
         vmin, vmax = float(vals.min()), float(vals.max())
@@ -214,7 +217,7 @@ def plot_firing_maps(
                     grid = np.where(cnt > 0, sums / np.maximum(cnt, 1), np.nan)
                 im = ax.pcolormesh(xe, ye, grid.T, cmap=cmap, vmin=vmin, vmax=vmax)
             else:
-                im = ax.scatter(P[:, 0], P[:, 1], c=v, s=10, marker="s", cmap=cmap, vmin=vmin, vmax=vmax, linewidths=0)
+                im = ax.scatter(P[:, 0], P[:, 1], c=v, s=marker, marker="s", cmap=cmap, vmin=vmin, vmax=vmax, linewidths=0)
             ax.set_aspect("equal")
             if x1 > x0:
                 ax.set_xlim(x0, x1)
