@@ -362,8 +362,8 @@ def estimate_mirror(images: Any, *, max_images: int = 50) -> Mirror:
     2. Mirror disc: Otsu thresholds of the mean image and of the activity
        (either), cleaned by a morphological opening; the outer rim is a
        least-squares circle through the largest blob's outer contour (points
-       on the image border left out, so a clipped disc works): center and
-       outer radius.
+       on the image border left out, so a clipped disc works; refitted
+       without outlying points): center and outer radius.
     3. Inner radius: the smallest radius at which at least half of the circle
        around that center is active (0 if the center is active).
 
@@ -394,7 +394,7 @@ def estimate_mirror(images: Any, *, max_images: int = 50) -> Mirror:
     log_act = np.log(act + 1e-3 * hi)
     act_mask = cv2.erode(_otsu(log_act - log_act.min()), np.ones((3, 3), np.uint8))
     disc = np.maximum(_otsu(mean), act_mask)
-    disc = cv2.morphologyEx(disc, cv2.MORPH_OPEN, np.ones((3, 3), np.uint8))
+    disc = cv2.morphologyEx(disc, cv2.MORPH_OPEN, np.ones((5, 5), np.uint8))
     contours, _ = cv2.findContours(disc, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
     if not contours:
         raise ValueError("estimate_mirror: found no mirror disc (the images look uniform)")
@@ -404,6 +404,13 @@ def estimate_mirror(images: Any, *, max_images: int = 50) -> Mirror:
     if len(pts) < 10:
         raise ValueError("estimate_mirror: the mirror's rim is not visible inside the image")
     cx, cy, r_out = _fit_circle(pts[:, 0], pts[:, 1])
+    for _ in range(3):  # refit without outliers (noise blobs stuck to the rim)
+        res = np.abs(np.hypot(pts[:, 0] - cx, pts[:, 1] - cy) - r_out)
+        keep = res <= max(1.5, 3.0 * float(np.median(res)))
+        if keep.all() or keep.sum() < 10:
+            break
+        pts = pts[keep]
+        cx, cy, r_out = _fit_circle(pts[:, 0], pts[:, 1])
     r_out += 0.5  # contour points are the centers of the disc's boundary pixels
     # Inner radius: radial profile of the active fraction.
     yy, xx = np.mgrid[0:H, 0:W]
