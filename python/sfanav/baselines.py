@@ -72,7 +72,8 @@ class _Memory:
 
     def predict(self, images: Any) -> np.ndarray:
         """Positions (N, 2) in metres: those of the best-matching stored views."""
-        return self.xy_[self.match(images)[0]]
+        idx = self.match(images)[0]  # checks fitted first
+        return self.xy_[idx]
 
     def score(self, images: Any, xy: Any) -> float:
         """Mean Euclidean distance (MED, metres); lower is better."""
@@ -152,7 +153,6 @@ class PerfectMemory(_Memory):
         chunk = max(1, int(self.chunk_bytes) // per_query)
         idx = np.empty(len(q), dtype=np.int64)
         shift = np.empty(len(q), dtype=np.int64)
-        rms = np.empty(len(q))
         for start in range(0, len(q), chunk):
             sl = slice(start, start + chunk)
             Qc = np.ascontiguousarray(Q[sl].transpose(2, 0, 1))  # (F, m, R)
@@ -161,7 +161,12 @@ class PerfectMemory(_Memory):
             flat = d2.transpose(1, 2, 0).reshape(d2.shape[1], -1)  # (m, n * W)
             best = np.argmin(flat, axis=1)
             idx[sl], shift[sl] = np.divmod(best, W)
-            rms[sl] = np.sqrt(np.clip(flat[np.arange(len(best)), best], 0, None) / self._n_values)
+        # The float32 spectra rank the candidates; the winners' RMS is recomputed
+        # directly (the norm expansion loses digits to cancellation near 0).
+        views = np.fft.irfft(self._spectra[idx], n=W, axis=2)  # (m, R, W)
+        cols = (np.arange(W)[None, :] - shift[:, None]) % W  # roll(view, d)[w] = view[w - d]
+        rolled = np.take_along_axis(views, cols[:, None, :], axis=2)
+        rms = np.sqrt(((q.astype(np.float64) - rolled) ** 2).mean(axis=(1, 2)))
         return idx, shift, rms
 
     def ridf(self, image: Any, index: int) -> np.ndarray:
