@@ -110,7 +110,8 @@ class PerfectMemory(_Memory):
         the input dtype, e.g. 1 byte per pixel for uint8) plus its position.
     cache_bytes_ : int
         Extra memory of the precomputed spectra (a speed-up, not part of the
-        method).
+        method): H x C x (W // 2 + 1) x 8 bytes per place, about 4x a uint8
+        view (e.g. 2.5 GB for 5900 RGB 600x60 views).
     """
 
     def __init__(self, normalize: bool = False, chunk_bytes: int = 2**28) -> None:
