@@ -24,3 +24,12 @@ __all__ = [
     "get_num_threads",
     "__version__",
 ]
+
+# Localization building blocks (issue 6): unwarping, regression, metrics, analysis, baselines.
+from . import analysis, baselines, metrics, regression, unwarp  # noqa: E402
+from .localizer import Localizer  # noqa: E402
+from .regression import QuadraticRegression  # noqa: E402
+from .unwarp import Unwarper, estimate_mirror  # noqa: E402
+
+__all__ += ["Localizer", "QuadraticRegression", "Unwarper", "estimate_mirror"]
+__all__ += ["analysis", "baselines", "metrics", "regression", "unwarp"]

@@ -1,0 +1,93 @@
+"""Input checks for the localization modules (metrics, regression, analysis,
+localizer, baselines, unwarping): clear ValueError/TypeError messages that
+name the argument and the problem before any arithmetic runs."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+
+def as_real_array(a: Any, name: str) -> np.ndarray:
+    """``a`` as a NumPy array of real numbers (bool and complex refused)."""
+    try:
+        arr = np.asarray(a)
+    except Exception as exc:  # ragged lists and the like
+        raise TypeError(f"{name} must be array-like of numbers: {exc}") from None
+    if arr.dtype.kind not in "iuf":
+        raise TypeError(f"{name} must hold real numbers, got dtype {arr.dtype}")
+    return arr
+
+
+def check_finite(arr: np.ndarray, name: str) -> None:
+    """ValueError naming the first non-finite entry of ``arr``."""
+    if arr.dtype.kind == "f" and not np.isfinite(arr).all():
+        bad = tuple(int(i) for i in np.argwhere(~np.isfinite(arr))[0])
+        where = bad[0] if len(bad) == 1 else bad
+        raise ValueError(f"{name} contains NaN or infinity (at index {where})")
+
+
+def as_matrix(
+    a: Any,
+    name: str,
+    *,
+    n_cols: int | None = None,
+    min_rows: int = 1,
+    allow_3d: bool = False,
+) -> np.ndarray:
+    """A finite float64 array of shape (N, d) (or (N, K, d) with ``allow_3d``)."""
+    arr = as_real_array(a, name).astype(np.float64, copy=False)
+    ndims = (2, 3) if allow_3d else (2,)
+    if arr.ndim not in ndims:
+        want = "(N, d) or (N, K, d)" if allow_3d else "(N, d)"
+        raise ValueError(f"{name} must have shape {want}, got shape {arr.shape}")
+    if n_cols is not None and arr.shape[-1] != n_cols:
+        raise ValueError(f"{name} must have {n_cols} columns, got shape {arr.shape}")
+    if arr.shape[-1] == 0:
+        raise ValueError(f"{name} has no columns (shape {arr.shape})")
+    if arr.shape[0] < min_rows:
+        raise ValueError(f"{name} needs at least {min_rows} rows, got {arr.shape[0]}")
+    check_finite(arr, name)
+    return arr
+
+
+def check_same_length(a: np.ndarray, b: np.ndarray, name_a: str, name_b: str) -> None:
+    if len(a) != len(b):
+        raise ValueError(f"{name_a} has {len(a)} rows but {name_b} has {len(b)}; they must match")
+
+
+def as_images(a: Any, name: str = "images") -> np.ndarray:
+    """A finite batch of images (N, H, W) or (N, H, W, C) of a real dtype
+    (uint8 and float kept; other integers become float64)."""
+    arr = as_real_array(a, name)
+    if arr.ndim not in (3, 4):
+        raise ValueError(f"{name} must have shape (N, H, W) or (N, H, W, C), got shape {arr.shape}")
+    if arr.shape[0] == 0:
+        raise ValueError(f"{name} is empty (shape {arr.shape})")
+    if min(arr.shape[1:3]) == 0 or (arr.ndim == 4 and arr.shape[3] == 0):
+        raise ValueError(f"{name} has an empty image dimension (shape {arr.shape})")
+    if arr.dtype != np.uint8 and arr.dtype.kind != "f":
+        arr = arr.astype(np.float64)
+    if arr.dtype.kind == "f":
+        bad = ~np.isfinite(arr.reshape(len(arr), -1)).all(axis=1)
+        if bad.any():
+            raise ValueError(f"{name}: image {int(np.argmax(bad))} contains NaN or infinity")
+    return arr
+
+
+def check_nonneg_float(value: Any, name: str) -> float:
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise TypeError(f"{name} must be a number, got {type(value).__name__}")
+    value = float(value)
+    if not np.isfinite(value) or value < 0:
+        raise ValueError(f"{name} must be a finite number >= 0, got {value}")
+    return value
+
+
+def check_int(value: Any, name: str, *, minimum: int = 1) -> int:
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
+        raise TypeError(f"{name} must be an integer, got {type(value).__name__}")
+    if value < minimum:
+        raise ValueError(f"{name} must be at least {minimum}, got {value}")
+    return int(value)

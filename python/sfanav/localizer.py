@@ -1,0 +1,220 @@
+"""``sfanav.Localizer``: a trained network plus the regression from its slow
+features to metric positions (thesis 3.5, 5.1-5.2), saved and loaded as one
+model file."""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ._checks import as_matrix, as_real_array, check_finite, check_int, check_nonneg_float, check_same_length
+from .metrics import euclidean_errors, localization_metrics
+from .modelfile import read_model, register_loader, save_model
+from .network import Network
+from .regression import QuadraticRegression
+from .sfa import NotFittedError
+
+__all__ = ["Localizer"]
+
+
+class Localizer:
+    """Absolute position from one panoramic image: slow features of a trained
+    :class:`sfanav.Network`, then a quadratic regression of the ``n_outputs``
+    slowest ones to metric (x, y).
+
+    Parameters
+    ----------
+    network : Network or None
+        A fitted network. None for a features-only localizer (use
+        :meth:`fit_features` / :meth:`predict_features`, e.g. with features
+        stacked from several networks).
+    n_outputs : int, default 8
+        Number of slowest outputs regressed (the thesis's best n; choose with
+        :func:`sfanav.regression.error_vs_n`).
+    ridge : float, default 0.0
+        L2 penalty of the regression (0: ordinary least squares).
+    degree : int, default 2
+        Degree of the feature expansion (2: the thesis's quadratic).
+
+    Attributes
+    ----------
+    regression_ : QuadraticRegression
+        The fitted regression.
+    n_features_in_ : int
+        Feature columns seen in fit.
+    train_metrics_ : dict
+        :func:`sfanav.metrics.localization_metrics` on the training data
+        (optimistic; evaluate on a separate test run).
+
+    Examples
+    --------
+    >>> loc = sfanav.Localizer(net, n_outputs=8).fit(train_images, train_xy)  # doctest: +SKIP
+    >>> xy = loc.predict(test_images)           # (N, 2) metres              # doctest: +SKIP
+    >>> loc.evaluate(test_images, test_xy)["med"]                            # doctest: +SKIP
+    >>> loc.save("garden.sfa"); loc = sfanav.load("garden.sfa")             # doctest: +SKIP
+    """
+
+    def __init__(self, network: Network | None, n_outputs: int = 8, ridge: float = 0.0, degree: int = 2) -> None:
+        if network is not None and not isinstance(network, Network):
+            raise TypeError(f"network must be a sfanav.Network or None, got {type(network).__name__}")
+        self.network = network
+        self.n_outputs = n_outputs
+        self.ridge = ridge
+        self.degree = degree
+
+    def get_params(self, deep: bool = True) -> dict[str, Any]:
+        return {"network": self.network, "n_outputs": self.n_outputs, "ridge": self.ridge, "degree": self.degree}
+
+    def __repr__(self) -> str:
+        net = "None" if self.network is None else repr(self.network)
+        state = "fitted" if self.is_fitted_ else "not fitted"
+        return f"<sfanav.Localizer n_outputs={self.n_outputs}, ridge={self.ridge}, {state}, network={net}>"
+
+    @property
+    def is_fitted_(self) -> bool:
+        return hasattr(self, "regression_")
+
+    # ------------------------------------------------------------ features
+    def _network(self) -> Network:
+        if self.network is None:
+            raise ValueError(
+                "this Localizer has no network: use fit_features/predict_features with precomputed features"
+            )
+        if not self.network.is_fitted_:
+            raise NotFittedError("the Localizer's network is not fitted; fit the network first")
+        return self.network
+
+    def features(self, images: Any, *, rotations: bool = False) -> np.ndarray:
+        """The network's slow features of images (N, H, W[, C]): (N, n) or,
+        with ``rotations=True``, (N, K, n) under the simulated rotations."""
+        return self._network().transform(images, rotations=rotations)
+
+    def _check_params(self) -> tuple[int, float, int]:
+        n = check_int(self.n_outputs, "n_outputs")
+        ridge = check_nonneg_float(self.ridge, "ridge")
+        degree = check_int(self.degree, "degree")
+        if self.network is not None and self.network.is_fitted_ and n > self.network.n_outputs_:
+            raise ValueError(f"n_outputs={n}, but the network has only {self.network.n_outputs_} outputs")
+        return n, ridge, degree
+
+    # ------------------------------------------------------------ training
+    def fit(self, images: Any, xy: Any) -> "Localizer":
+        """Fits the regression on images (N, H, W[, C]) of a training run and
+        their positions (N, 2) in metres (the network is not retrained).
+        Returns ``self``."""
+        Y = as_matrix(xy, "xy", n_cols=2)
+        F = self.features(images)
+        if F.ndim == 1:
+            F = F[None]
+        return self.fit_features(F, Y)
+
+    def fit_features(self, features: Any, xy: Any) -> "Localizer":
+        """Fits on precomputed slow features (N, m >= n_outputs), slowest
+        first, and positions (N, 2) in metres. Returns ``self``."""
+        n, ridge, degree = self._check_params()
+        F = as_matrix(features, "features")
+        Y = as_matrix(xy, "xy", n_cols=2)
+        check_same_length(F, Y, "features", "xy")
+        reg = QuadraticRegression(n, ridge, degree).fit(F, Y)
+        self.regression_ = reg
+        self.n_features_in_ = F.shape[1]
+        self.train_metrics_ = localization_metrics(reg.predict(F), Y)
+        return self
+
+    # ------------------------------------------------------------ inference
+    def _check_fitted(self) -> QuadraticRegression:
+        if not self.is_fitted_:
+            raise NotFittedError("this Localizer is not fitted yet; call fit or fit_features first")
+        return self.regression_
+
+    def predict(self, images: Any, *, rotations: bool = False) -> np.ndarray:
+        """Positions (N, 2) in metres of images (N, H, W[, C]).
+
+        With ``rotations=True`` the estimate is the mean over the simulated
+        rotations of each image (as the thesis's Fig. 5.2b, 5.5b): K times
+        the work, smoother estimates."""
+        self._check_fitted()
+        a = np.asarray(images)
+        single = a.ndim == (2 if self._network().input_shape[2] == 1 else 3)  # one (H, W[, C]) image
+        out = self.predict_features(self.features(a[None] if single else a, rotations=rotations))
+        return out[0] if single else out
+
+    def predict_features(self, features: Any) -> np.ndarray:
+        """Positions (N, 2) in metres from precomputed features: (N, m), or
+        (N, K, m) under K rotations, whose K estimates are averaged."""
+        reg = self._check_fitted()
+        a = as_real_array(features, "features")
+        if a.ndim == 3:
+            check_finite(a.astype(np.float64, copy=False), "features")
+            N, K, m = a.shape
+            if m != self.n_features_in_:
+                raise ValueError(f"features have {m} columns, but this Localizer was fitted with {self.n_features_in_}")
+            return reg.predict(a.reshape(N * K, m)).reshape(N, K, -1).mean(axis=1)
+        F = as_matrix(a, "features")
+        if F.shape[1] != self.n_features_in_:
+            raise ValueError(
+                f"features have {F.shape[1]} columns, but this Localizer was fitted with {self.n_features_in_}"
+            )
+        return reg.predict(F)
+
+    def score(self, images: Any, xy: Any, *, rotations: bool = False) -> float:
+        """Mean Euclidean distance (MED, metres) of the estimates for images
+        from the true positions ``xy`` (N, 2): the thesis's accuracy figure.
+        Lower is better (unlike scikit-learn's higher-is-better ``score``); see
+        :meth:`evaluate` for all metrics."""
+        return float(euclidean_errors(self.predict(images, rotations=rotations), xy).mean())
+
+    def evaluate(self, images: Any, xy: Any, *, rotations: bool = False, coordinate_range: Any = None) -> dict[str, float]:
+        """All metrics (:func:`sfanav.metrics.localization_metrics`) of the
+        estimates for images against ``xy`` (N, 2): MED, MAE per axis in
+        metres and in % of the coordinate range, percentiles."""
+        return localization_metrics(self.predict(images, rotations=rotations), xy, coordinate_range=coordinate_range)
+
+    def evaluate_features(self, features: Any, xy: Any, *, coordinate_range: Any = None) -> dict[str, float]:
+        """As :meth:`evaluate`, from precomputed features."""
+        return localization_metrics(self.predict_features(features), xy, coordinate_range=coordinate_range)
+
+    # ------------------------------------------------------------ persistence
+    def save(self, path: str | os.PathLike) -> Path:
+        """Saves the localizer with its network as one model file (pickle-free;
+        kind ``"Localizer"``); read back with :func:`sfanav.load`."""
+        reg = self._check_fitted()
+        net_state = None
+        if self.network is not None:
+            # The network's own save() defines its state: write it and read it back.
+            with tempfile.TemporaryDirectory(prefix="sfanav-") as tmp:
+                tmp_path = Path(tmp) / "network.sfa"
+                self.network.save(tmp_path)
+                kind, net_state, _ = read_model(tmp_path)
+        state = {
+            "params": {"n_outputs": int(self.n_outputs), "ridge": float(self.ridge), "degree": int(self.degree)},
+            "network": net_state,
+            "regression": reg._get_state(),
+            "n_features_in": int(self.n_features_in_),
+            "train_metrics": dict(self.train_metrics_),
+        }
+        return save_model(path, "Localizer", state)
+
+    @classmethod
+    def _from_state(cls, state: dict[str, Any]) -> "Localizer":
+        try:
+            net = None if state["network"] is None else Network._from_state(state["network"])
+            loc = cls(net, **state["params"])
+            loc.regression_ = QuadraticRegression._from_state(state["regression"])
+            loc.n_features_in_ = int(state["n_features_in"])
+            loc.train_metrics_ = dict(state.get("train_metrics") or {})
+        except (KeyError, TypeError) as exc:
+            raise ValueError(f"invalid Localizer model state: {exc}") from None
+        if net is not None and net.is_fitted_ and loc.n_features_in_ != net.n_outputs_:
+            raise ValueError(
+                f"invalid Localizer model state: the regression expects {loc.n_features_in_} features, "
+                f"the network has {net.n_outputs_} outputs"
+            )
+        return loc
+
+
+register_loader("Localizer", Localizer._from_state)
