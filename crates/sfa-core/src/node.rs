@@ -354,7 +354,7 @@ impl SfaNode {
         let mut start = 0;
         while start < n {
             let end = (start + TRAIN_BLOCK).min(n);
-            let input = self.forward_block(x.rows(start, end), s)?;
+            let input = self.forward_block(x.rows(start, end), 0, s)?;
             let stage = &self.stages[s];
             let nb = end - start;
             let ed = stage.expanded_dim();
@@ -444,27 +444,117 @@ impl SfaNode {
             let acc = self.stages[0].acc.as_mut().expect("acc");
             return acc.add_graph(x, sample_weights, edges, edge_weights);
         }
-        let input = self.forward_block(x, s)?;
+        let input = self.forward_block(x, 0, s)?;
+        self.fit_stage_input(s, &input, n, sample_weights, edges, edge_weights)
+    }
+
+    /// [`partial_fit_graph`](Self::partial_fit_graph) for rows that already
+    /// went through the solved stages `0..from` (`from >= 1`; the rows are
+    /// stage `from`'s input, e.g. a first stage evaluated by the caller in
+    /// a structured way).
+    pub fn partial_fit_graph_from<T: Sample>(
+        &mut self,
+        from: usize,
+        y: View<'_, T>,
+        sample_weights: Option<&[f64]>,
+        edges: &[[usize; 2]],
+        edge_weights: Option<&[f64]>,
+    ) -> Result<()> {
+        if self.n_features.is_none() {
+            return Err(SfaError::NotFitted("the node has not seen raw input yet".into()));
+        }
+        let s = self.training_stage;
+        if from == 0 || from > s {
+            return Err(SfaError::InvalidArgument(format!(
+                "rows after stage {from} cannot train stage {s} (need 1 <= from <= stage in training)"
+            )));
+        }
+        let width = self.stage_input_width(from)?;
+        if y.ncols() != width {
+            return Err(SfaError::ShapeMismatch { what: "width of the stage input", expected: width, got: y.ncols() });
+        }
+        let n = y.nrows();
+        if n == 0 {
+            return Ok(());
+        }
+        y.check_finite("stage input")?;
+        self.stages[s].solution = None;
+        let input = self.forward_block(y, from, s)?;
+        self.fit_stage_input(s, &input, n, sample_weights, edges, edge_weights)
+    }
+
+    /// Expands stage `s`'s input rows and adds them as a weighted graph.
+    fn fit_stage_input(
+        &mut self,
+        s: usize,
+        input: &[f64],
+        n: usize,
+        sample_weights: Option<&[f64]>,
+        edges: &[[usize; 2]],
+        edge_weights: Option<&[f64]>,
+    ) -> Result<()> {
         let stage = &mut self.stages[s];
         let ed = stage.expanded_dim();
-        let data = match &stage.expansion {
+        let expanded;
+        let data: &[f64] = match &stage.expansion {
             Some(ex) => {
                 let mut out = vec![0.0; n * ed];
-                ex.expand_block(&input, &mut out);
-                out
+                ex.expand_block(input, &mut out);
+                expanded = out;
+                &expanded
             }
             None => input,
         };
-        let v = View::from_slice(&data, n, ed)?;
+        let v = View::from_slice(data, n, ed)?;
         stage.acc.as_mut().expect("acc").add_graph(v, sample_weights, edges, edge_weights)
     }
 
-    /// Raw rows of `x` pushed through stages `0..upto` (all solved), in
-    /// parallel; row-major output of the width stage `upto` takes as input.
-    fn forward_block<T: Sample>(&self, x: View<'_, T>, upto: usize) -> Result<Vec<f64>> {
+    /// Width of stage `from`'s input: the raw width for 0, else the outputs
+    /// of the solved stage `from - 1`.
+    fn stage_input_width(&self, from: usize) -> Result<usize> {
+        if from == 0 {
+            return self.n_features.ok_or_else(|| SfaError::NotFitted("the node has not seen data".into()));
+        }
+        Ok(self
+            .stages
+            .get(from - 1)
+            .and_then(|st| st.solution.as_ref())
+            .ok_or_else(|| SfaError::NotFitted("an earlier stage is not solved".into()))?
+            .n_out)
+    }
+
+    /// The solved linear first stage as `(mean, projection, k)`: outputs
+    /// `(x - mean) P` with `P` row-major `n_features x k`. None when stage 0
+    /// expands its input or is not solved, or is the node's only stage.
+    pub fn linear_first_stage(&self) -> Option<(&[f64], &[f64], usize)> {
+        let st = self.stages.first()?;
+        if st.expansion.is_some() || self.stages.len() < 2 {
+            return None;
+        }
+        st.solution.as_ref().map(|sol| (&sol.mean[..], &sol.projection[..], sol.n_out))
+    }
+
+    /// [`transform`](Self::transform) of rows that already went through the
+    /// solved stages `0..from`.
+    pub fn transform_from<T: Sample>(&self, from: usize, y: View<'_, T>) -> Result<Vec<T>> {
+        let sol = self.final_solution()?;
+        let width = self.stage_input_width(from)?;
+        if y.ncols() != width {
+            return Err(SfaError::ShapeMismatch { what: "width of the stage input", expected: width, got: y.ncols() });
+        }
+        y.check_finite("stage input")?;
+        let out = self.forward_block(y, from, self.stages.len())?;
+        debug_assert_eq!(out.len(), y.nrows() * sol.n_out);
+        Ok(out.into_iter().map(T::from_f64).collect())
+    }
+
+    /// Rows of `x` (stage `from`'s input) pushed through stages
+    /// `from..upto` (all solved), in parallel; row-major output of the
+    /// width stage `upto` takes as input.
+    fn forward_block<T: Sample>(&self, x: View<'_, T>, from: usize, upto: usize) -> Result<Vec<f64>> {
         let n = x.nrows();
         let d = x.ncols();
-        let width = if upto == 0 {
+        let width = if upto == from {
             d
         } else {
             self.stages[upto - 1]
@@ -483,7 +573,7 @@ impl SfaNode {
                 for (k, row) in cur.chunks_mut(d).enumerate() {
                     x.row_into(r0 + k, None, row);
                 }
-                for st in &self.stages[..upto] {
+                for st in &self.stages[from..upto] {
                     cur = st.apply(&cur, nr);
                 }
                 o.copy_from_slice(&cur);
@@ -567,7 +657,7 @@ impl SfaNode {
         }
         x.check_finite("input")?;
         let m = sol.n_out;
-        let y = self.forward_block(x, self.stages.len())?;
+        let y = self.forward_block(x, 0, self.stages.len())?;
         debug_assert_eq!(y.len(), x.nrows() * m);
         Ok(y.into_iter().map(T::from_f64).collect())
     }

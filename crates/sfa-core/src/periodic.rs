@@ -292,3 +292,45 @@ pub(crate) fn lattice_moments(
     let pairs = ((geom.n_h * plan.n_pairs) as u64, plan.p_max * n_h * lattice, sum_d, sdd);
     Ok(short.lattice_minus(shift, samples, pairs))
 }
+
+/// Outputs of a solved linear first stage, `(x - mean) P`, for the periodic
+/// patches of one `in_h x period x in_c` image at column offsets `offs`:
+/// `n_h x |offs| x k`, row-major (row `r * |offs| + i`). Every patch of an
+/// RF row is a window of one wrapped column array, so the patches are the
+/// rows of an overlapping strided matrix (row stride = one column) and one
+/// matrix product per RF row evaluates them all, without gathering them.
+pub(crate) fn first_stage_outputs(
+    geom: &LayerGeometry,
+    image: &[f64],
+    period: usize,
+    offs: &[usize],
+    (mean, projection, k): (&[f64], &[f64], usize),
+) -> Vec<f64> {
+    let (w, c, d) = (period, geom.in_c, geom.in_dim);
+    let q = geom.rf_h * c;
+    let wq = geom.rf_w * q;
+    debug_assert_eq!(image.len(), geom.in_h * w * c);
+    // Projection rows in the wrapped arrays' (m, dr, ch) order.
+    let patch_index = |a: usize| {
+        let (m, rest) = (a / q, a % q);
+        let (dr, ch) = (rest / c, rest % c);
+        (dr * geom.rf_w + m) * c + ch
+    };
+    let p = Mat::<f64>::from_fn(wq, k, |a, j| projection[patch_index(a) * k + j]);
+    let bias: Vec<f64> = (0..k).map(|j| (0..d).map(|i| mean[i] * projection[i * k + j]).sum()).collect();
+    let no = offs.len();
+    let mut out = vec![0.0; geom.n_h * no * k];
+    out.par_chunks_mut(no * k).enumerate().for_each(|(r, o)| {
+        let r0 = r * geom.stride_h;
+        let cols: Vec<f64> = columns(geom, w, |col, dr, ch| image[((r0 + dr) * w + col) * c + ch]);
+        let patches = MatRef::from_row_major_slice_with_stride(&cols, w, wq, q);
+        let mut y = Mat::<f64>::zeros(w, k);
+        matmul(y.as_mut(), Accum::Replace, patches, p.as_ref(), 1.0, Par::Seq);
+        for (i, &off) in offs.iter().enumerate() {
+            for j in 0..k {
+                o[i * k + j] = y[(off, j)] - bias[j];
+            }
+        }
+    });
+    out
+}

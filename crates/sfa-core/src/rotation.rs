@@ -84,6 +84,11 @@ struct ImageGraph {
     rows: Vec<f64>,
     lead: usize,
     n: usize,
+    /// Row width, and the node stage the rows enter at (0: raw patches; 1:
+    /// outputs of the node's linear first stage, formed by
+    /// [`periodic::first_stage_outputs`]).
+    width: usize,
+    from_stage: usize,
     weights: Vec<f64>,
     edges: Vec<[usize; 2]>,
     edge_weights: Vec<f64>,
@@ -221,9 +226,18 @@ fn layer_field(net: &Network, rot: &Rotation, l: usize, image: &[f64], below: Op
     let g = &geom[l];
     let (offs, idx) = offset_set(rot, t[l], g.n_w);
     let dilation = if l == 0 { 1 } else { t[l - 1] };
-    let patches = periodic_patches(g, dilation, rot.period, image, below, &offs, 0);
     let n = g.n_h * offs.len();
-    let data = net.apply_nodes(l, &patches, n, |_| 0)?;
+    let node = &net.nodes(l)[0];
+    let data = match (l, node.linear_first_stage()) {
+        (0, Some(first)) => {
+            let y = periodic::first_stage_outputs(g, image, rot.period, &offs, first);
+            node.transform_from(1, View::from_slice(&y, n, first.2)?)?
+        }
+        _ => {
+            let patches = periodic_patches(g, dilation, rot.period, image, below, &offs, 0);
+            net.apply_nodes(l, &patches, n, |_| 0)?
+        }
+    };
     Ok(Field { data: FieldData::F64(data), idx, n_off: offs.len(), depth: g.n_out })
 }
 
@@ -299,6 +313,8 @@ fn fast_graph(
                 rows,
                 lead,
                 n,
+                width: g.in_dim,
+                from_stage: 0,
                 weights: vec![0.0; n],
                 edges: Vec::new(),
                 edge_weights: Vec::new(),
@@ -309,7 +325,17 @@ fn fast_graph(
             return Ok((graph, computed));
         }
     }
-    let rows = periodic_patches(g, dilation, rot.period, image, below, &offs, lead);
+    // The first layer's second pass: rows enter after the node's solved
+    // linear first stage, evaluated without gathering patches.
+    let first = if layer == 0 { net.nodes(0)[0].linear_first_stage() } else { None };
+    let (rows, width, from_stage) = match first {
+        Some(first) => {
+            let mut rows = vec![0.0; lead * first.2];
+            rows.extend(periodic::first_stage_outputs(g, image, w, &offs, first));
+            (rows, first.2, 1)
+        }
+        None => (periodic_patches(g, dilation, rot.period, image, below, &offs, lead), g.in_dim, 0),
+    };
     let n = g.n_h * no;
     let mut weights = Vec::with_capacity(n);
     let (mut edges, mut edge_weights) = (Vec::new(), Vec::new());
@@ -329,7 +355,7 @@ fn fast_graph(
             last.push(r * no + idx[last_offset(j)]);
         }
     }
-    Ok((ImageGraph { rows, lead, n, weights, edges, edge_weights, first, last, moments: None }, computed))
+    Ok((ImageGraph { rows, lead, n, width, from_stage, weights, edges, edge_weights, first, last, moments: None }, computed))
 }
 
 /// View `k` of a `h x period x c` image through a window of `v` columns.
@@ -372,6 +398,8 @@ fn naive_graph(net: &Network, rot: &Rotation, image: &[f64], layer: usize) -> Re
         rows,
         lead,
         n: kv * np,
+        width: g.in_dim,
+        from_stage: 0,
         weights: vec![1.0; kv * np],
         edges,
         edge_weights: vec![1.0; ne],
@@ -511,7 +539,7 @@ impl LayerTrainer {
                 part.par_iter().map(|f| fast_graph(net_ref, &rot, &[], layer, Some(f), None)).collect()
             };
             for g in graphs {
-                match g.and_then(|(gr, _)| self.feed_shared(net, gr, net.geometry()[layer].in_dim)) {
+                match g.and_then(|(gr, _)| self.feed_shared(net, gr)) {
                     Ok(()) => self.images_seen += 1,
                     Err(e) => {
                         result = Err(e);
@@ -584,7 +612,7 @@ impl LayerTrainer {
                 }
             }
             if net.spec().weight_sharing {
-                self.feed_shared(net, gr, d)?;
+                self.feed_shared(net, gr)?;
             } else {
                 self.feed_individual(net, gr, d)?;
             }
@@ -593,8 +621,9 @@ impl LayerTrainer {
         Ok(())
     }
 
-    fn feed_shared(&mut self, net: &mut Network, gr: ImageGraph, d: usize) -> Result<()> {
+    fn feed_shared(&mut self, net: &mut Network, gr: ImageGraph) -> Result<()> {
         let ns = gr.first.len();
+        let d = gr.width;
         let mut rows = gr.rows;
         let (start, n, weights, edges, ew) = match self.tail.take() {
             None => (gr.lead, gr.n, gr.weights, gr.edges, gr.edge_weights),
@@ -624,7 +653,11 @@ impl LayerTrainer {
             self.lag_images += 1;
         }
         let x = View::from_slice(&rows[start * d..], n, d)?;
-        node.partial_fit_graph(x, Some(&weights), &edges, Some(&ew))?;
+        if gr.from_stage == 0 {
+            node.partial_fit_graph(x, Some(&weights), &edges, Some(&ew))?;
+        } else {
+            node.partial_fit_graph_from(gr.from_stage, x, Some(&weights), &edges, Some(&ew))?;
+        }
         self.tail = Some(tail);
         Ok(())
     }
