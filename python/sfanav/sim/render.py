@@ -380,19 +380,94 @@ def camera_from_dict(d: dict[str, Any]) -> Camera:
 # ------------------------------------------------------------------ renderer
 
 
-class _Prims:
-    """Static primitive parameters as arrays, for per-frame vector work."""
+SHAPE_CODE = {"ellipsoid": 0, "box": 1, "cylinder": 2}
 
-    def __init__(self, prims: list[Primitive], pyramids: dict[str, Pyramid]):
-        self.list = prims
-        n = len(prims)
-        self.x = np.array([p.x for p in prims], float).reshape(n)
-        self.y = np.array([p.y for p in prims], float).reshape(n)
-        self.z0 = np.array([p.z0 for p in prims], float).reshape(n)
-        self.z1 = np.array([p.z1 for p in prims], float).reshape(n)
-        self.rb = np.array([p.bound_radius for p in prims], float).reshape(n)
-        self.tex = [pyramids[p.texture] for p in prims]
-        self.front = [pyramids[p.front] if p.front else None for p in prims]
+
+class _Atlas:
+    """Every texture's mip levels in one flat RGBA array (T, 4), with per
+    (texture, level) entries: offset, height, width and texels per metre."""
+
+    def __init__(self, pyramids: dict[str, Pyramid]):
+        self.index: dict[str, int] = {}
+        chunks, off, hs, ws, su, sv = [], [], [], [], [], []
+        base, nlev, texel, alpha = [], [], [], []
+        pos = 0
+        for tid, (name, pyr) in enumerate(pyramids.items()):
+            self.index[name] = tid
+            base.append(len(off))
+            nlev.append(len(pyr.levels))
+            texel.append(pyr.texel)
+            alpha.append(pyr.has_alpha)
+            for lv, (h, w) in zip(pyr.levels, pyr.shapes):
+                if lv.shape[1] == 3:
+                    lv = np.concatenate([lv, np.ones((len(lv), 1), np.float32)], axis=1)
+                chunks.append(lv[:, :4])
+                off.append(pos)
+                pos += h * w
+                hs.append(h)
+                ws.append(w)
+                su.append(w / pyr.tile[0])
+                sv.append(h / pyr.tile[1])
+        self.flat = np.concatenate(chunks).astype(np.float32) if chunks else np.zeros((1, 4), np.float32)
+        self.off = np.array(off, np.int64)
+        self.h = np.array(hs, np.int64)
+        self.w = np.array(ws, np.int64)
+        self.su = np.array(su, np.float64)
+        self.sv = np.array(sv, np.float64)
+        self.base = np.array(base, np.int64)
+        self.nlev = np.array(nlev, np.int64)
+        self.texel = np.array(texel, np.float64)
+        self.alpha = np.array(alpha, bool)
+
+    def sample(self, entry: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """Wrapped nearest-texel lookup at surface coordinates in metres
+        (u along, v up). Returns (n, 4)."""
+        w, h = self.w[entry], self.h[entry]
+        iu = np.floor(u * self.su[entry]).astype(np.int64) % w
+        iv = (-1 - np.floor(v * self.sv[entry]).astype(np.int64)) % h
+        return self.flat[self.off[entry] + iv * w + iu]
+
+    def sample_stretched(self, entry: np.ndarray, fu: np.ndarray, fv: np.ndarray) -> np.ndarray:
+        """Lookup at tile fractions fu, fv in [0, 1] (v up), clamped."""
+        w, h = self.w[entry], self.h[entry]
+        iu = np.clip((fu * w).astype(np.int64), 0, w - 1)
+        iv = np.clip(((1.0 - fv) * h).astype(np.int64), 0, h - 1)
+        return self.flat[self.off[entry] + iv * w + iu]
+
+
+class _Prims:
+    """Primitive parameters as arrays, grouped by shape (ellipsoids, boxes,
+    cylinders), for the per-frame vector work."""
+
+    FIELDS = ("code", "x", "y", "z0", "z1", "r", "L2", "W2", "cos", "sin", "tex", "front", "rb")
+
+    def __init__(self, prims: list[Primitive], atlas: _Atlas):
+        order = sorted(range(len(prims)), key=lambda i: SHAPE_CODE[prims[i].shape])
+        self.list = [prims[i] for i in order]
+        L = self.list
+        self.code = np.array([SHAPE_CODE[p.shape] for p in L], np.int64)
+        self.x = np.array([p.x for p in L], float)
+        self.y = np.array([p.y for p in L], float)
+        self.z0 = np.array([p.z0 for p in L], float)
+        self.z1 = np.array([p.z1 for p in L], float)
+        self.r = np.array([p.radius for p in L], float)
+        self.L2 = np.array([p.length / 2 for p in L], float)
+        self.W2 = np.array([p.width / 2 for p in L], float)
+        self.cos = np.array([np.cos(p.yaw) for p in L], float)
+        self.sin = np.array([np.sin(p.yaw) for p in L], float)
+        self.tex = np.array([atlas.index[p.texture] for p in L], np.int64)
+        self.front = np.array([atlas.index[p.front] if p.front else -1 for p in L], np.int64)
+        self.rb = np.array([p.bound_radius for p in L], float)
+
+    def plus(self, extra: "_Prims") -> "_Prims":
+        """These primitives followed by ``extra`` (cylinders only, so the
+        shape groups stay contiguous)."""
+        assert not len(extra.code) or (extra.code == SHAPE_CODE["cylinder"]).all()
+        out = object.__new__(_Prims)
+        out.list = self.list + extra.list
+        for f in self.FIELDS:
+            setattr(out, f, np.concatenate([getattr(self, f), getattr(extra, f)]))
+        return out
 
 
 class Renderer:
@@ -415,7 +490,8 @@ class Renderer:
         self.world = world
         self.lighting = lighting or Lighting()
         self.pyramids = {name: Pyramid(make_texture(spec), spec.tile) for name, spec in world.textures.items()}
-        self._static = _Prims(world.primitives(0.0)[: sum(len(o.parts) for o in world.objects)], self.pyramids)
+        self._atlas = _Atlas(self.pyramids)
+        self._static = _Prims([p for o in world.objects for p in o.parts], self._atlas)
         self._build_ground()
         self._build_sky()
         self._ground_cache: dict[tuple, np.ndarray] = {}
@@ -510,12 +586,13 @@ class Renderer:
         t = np.sqrt(np.sin(el))[:, None, None]
         base = (1 - t) * np.asarray(sk.horizon, np.float32) + t * np.asarray(sk.zenith, np.float32)
         base = np.broadcast_to(base, (n_el, n_az, 3)).astype(np.float32)
-        clouds = fractal_noise((n_el * 2, n_az), rng, beta=2.6, fmin=2.0)[:n_el]
+        clouds = fractal_noise((n_el * 2, n_az), rng, beta=3.4, fmin=3.0, aspect=2.0)[:n_el]
         thr = np.quantile(clouds, 1 - sk.cloud_cover) if sk.cloud_cover > 0 else np.inf
-        cover = np.clip((clouds - thr) / 0.8, 0, 1)
+        cover = np.clip((clouds - thr) / 0.6, 0, 1) ** 0.7
         cover *= np.clip(el / np.radians(3.0), 0, 1)[:, None]  # thin out at the horizon
-        shade = 0.8 + 0.2 * np.clip(fractal_noise((n_el * 2, n_az), rng, beta=2.0)[:n_el], -1, 1)
-        cloud_col = (0.96 * shade)[..., None] * np.ones(3, np.float32)
+        # brighter tops, grey bellies
+        shade = 0.97 - 0.2 * np.clip(clouds - thr - 0.6, 0, 1.5) / 1.5
+        cloud_col = shade[..., None] * np.ones(3, np.float32)
         sky = base * (1 - cover[..., None]) + cloud_col * cover[..., None]
         # distant tree line / hills at infinity
         prof = fractal_noise((1, n_az), rng, beta=1.8, fmin=1.0)[0]
@@ -632,179 +709,212 @@ class Renderer:
             fog = gd["gnd_fog"]
             out[gr] = col + fog * (self._horizon_rgb - col)
         # objects
-        prims = self._static
-        lists = [prims]
+        P = self._static
         if self.world.dynamic:
-            dyn = [dd.primitive_at(time) for dd in self.world.dynamic]
-            lists.append(_Prims(dyn, self.pyramids))
-        for P in lists:
-            self._draw(P, gd, grid, x, y, heading, ux, uy, out, depth, light)
+            P = P.plus(_Prims([dd.primitive_at(time) for dd in self.world.dynamic], self._atlas))
+        self._draw(P, gd, grid, x, y, heading, ux, uy, out, depth, light)
         out *= light.rgb
         return out
 
     def _draw(self, P: _Prims, gd: dict[str, Any], grid: _Grid, cx: float, cy: float, heading: float,
               ux: np.ndarray, uy: np.ndarray, out: np.ndarray, depth: np.ndarray, light: Lighting) -> None:
+        """Draws every primitive at once: candidate pixels are the union of
+        the primitives' screen bounding blocks, intersected exactly in one
+        vector pass per shape; the nearest hit per pixel wins."""
+        n = len(P.code)
+        if n == 0:
+            return
         W, h = grid.W, grid.h
+        atlas = self._atlas
+        # --- per primitive: screen block
         qx, qy = P.x - cx, P.y - cy
-        rho = np.hypot(qx, qy)
-        ang = np.arctan2(qy, qx)
-        half = np.arcsin(np.clip(P.rb / np.maximum(rho, 1e-9), 0, 1))
-        inside = rho <= P.rb
-        jc = column_of_bearing(ang - heading, W) if W else ang
+        rho2 = qx * qx + qy * qy
+        rho = np.sqrt(rho2)
+        half = np.arcsin(np.clip(P.rb / np.maximum(rho, 1e-9), 0.0, 1.0))
+        jc = column_of_bearing(np.arctan2(qy, qx) - heading, W)
         hw = half * (W / (2 * np.pi))
         near = np.maximum(rho - P.rb, 0.05)
         far = rho + P.rb
         z0r, z1r = P.z0 - h, P.z1 - h
         e_hi = np.arctan2(z1r, np.where(z1r > 0, near, far))
         e_lo = np.arctan2(z0r, np.where(z0r < 0, near, far))
-        i_lo = np.searchsorted(gd["neg_elev"], -e_hi, "left")
-        i_hi = np.searchsorted(gd["neg_elev"], -e_lo, "right")
-        j_lo = np.floor(jc - hw).astype(int)
-        j_hi = np.ceil(jc + hw).astype(int) + 1
-        sun = light.sun
-        amb, dif = light.ambient, (1 - light.ambient) / np.sin(np.radians(50.0))
-        order = np.argsort(near)
-        for i in order:
-            r0, r1 = int(i_lo[i]), int(i_hi[i])
-            if r1 <= r0:
-                continue
-            if inside[i] or j_hi[i] - j_lo[i] >= W:
-                spans = [(0, W)]
-            else:
-                a, b = int(j_lo[i]), int(j_hi[i])
-                if a < 0:
-                    spans = [(a + W, W), (0, b)]
-                elif b > W:
-                    spans = [(a, W), (0, b - W)]
-                else:
-                    spans = [(a, b)]
-            p = P.list[i]
-            for c0, c1 in spans:
-                if c1 <= c0:
-                    continue
-                dblk = depth[r0:r1, c0:c1]
-                if near[i] > dblk.max():
-                    continue  # hidden behind nearer surfaces everywhere in its block
-                self._draw_block(p, P.tex[i], P.front[i], qx[i], qy[i], rho[i], cx, cy, h,
-                                 ux[c0:c1], uy[c0:c1], grid.tan[r0:r1], dblk, out[r0:r1, c0:c1],
-                                 grid.pixel_angle, sun, amb, dif)
-
-    def _draw_block(self, p: Primitive, tex: Pyramid, front: Pyramid | None, qx: float, qy: float, rho: float,
-                    cx: float, cy: float, h: float, ux: np.ndarray, uy: np.ndarray, t: np.ndarray,
-                    dblk: np.ndarray, oblk: np.ndarray, pixel_angle: float, sun: np.ndarray,
-                    amb: float, dif: float) -> None:
-        tcol = t[:, None]
-        z0r, z1r = p.z0 - h, p.z1 - h
-        face = None
+        r0 = np.searchsorted(gd["neg_elev"], -e_hi, "left")
+        r1 = np.searchsorted(gd["neg_elev"], -e_lo, "right")
+        c0 = np.floor(jc - hw).astype(np.int64)
+        c1 = np.ceil(jc + hw).astype(np.int64) + 1
+        full = (rho <= P.rb) | (c1 - c0 >= W)
+        c0 = np.where(full, 0, c0)
+        c1 = np.where(full, W, c1)
+        nc = c1 - c0
+        cnt = np.maximum(r1 - r0, 0) * nc
+        total = int(cnt.sum())
+        if total == 0:
+            return
+        # --- candidate pixels
+        pid = np.repeat(np.arange(n), cnt)
+        local = np.arange(total) - np.repeat(np.cumsum(cnt) - cnt, cnt)
+        ncp = nc[pid]
+        row = r0[pid] + local // ncp
+        col = (c0[pid] + local % ncp) % W
+        pix = row * W + col
+        base = depth.reshape(-1)
+        keep = near[pid] < base[pix]  # cannot beat a nearer ground hit
+        pid, row, col, pix = pid[keep], row[keep], col[keep], pix[keep]
+        t = grid.tan[row]
+        vx, vy = ux[col], uy[col]
+        d = np.full(len(pid), np.inf)
+        face = np.zeros(len(pid), np.int8)
+        bounds = np.searchsorted(pid, np.searchsorted(P.code, [0, 1, 2, 3]))
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-            if p.shape == "ellipsoid":
-                r, rz = p.radius, 0.5 * (p.z1 - p.z0)
-                zc = 0.5 * (p.z0 + p.z1) - h
-                a = qx * ux + qy * uy
-                A = 1.0 / (r * r) + tcol * tcol / (rz * rz)
-                B = -2.0 * a / (r * r) - 2.0 * tcol * zc / (rz * rz)
-                C = rho * rho / (r * r) - 1.0 + zc * zc / (rz * rz)
+            # ellipsoids
+            s, e = bounds[0], bounds[1]
+            if e > s:
+                p, tt = pid[s:e], t[s:e]
+                r2 = P.r * P.r
+                rz = 0.5 * (P.z1 - P.z0)
+                zc = 0.5 * (P.z0 + P.z1) - h
+                ir2, irz2 = (1.0 / np.where(r2 > 0, r2, 1.0))[p], (1.0 / (rz * rz))[p]
+                zcp = zc[p]
+                a = qx[p] * vx[s:e] + qy[p] * vy[s:e]
+                A = ir2 + tt * tt * irz2
+                B = -2.0 * (a * ir2 + tt * zcp * irz2)
+                C = (rho2 / np.where(r2 > 0, r2, 1.0) - 1.0 + zc * zc / (rz * rz))[p]
                 disc = B * B - 4.0 * A * C
-                d = (-B - np.sqrt(disc)) / (2.0 * A)
-                d = np.where((disc >= 0) & (d > 0), d, np.inf)
-            else:
-                if p.shape == "cylinder":
-                    a = qx * ux + qy * uy
-                    disc = p.radius**2 - (rho * rho - a * a)
-                    s = np.sqrt(disc)
-                    din, dout = a - s, a + s
+                dd = (-B - np.sqrt(disc)) / (2.0 * A)
+                d[s:e] = np.where((disc >= 0) & (dd > 0), dd, np.inf)
+            # boxes and cylinders: an interval [din, dout] in the horizontal plane, then heights
+            for code in (1, 2):
+                s, e = bounds[code], bounds[code + 1]
+                if e <= s:
+                    continue
+                p, tt = pid[s:e], t[s:e]
+                if code == 2:
+                    a = qx[p] * vx[s:e] + qy[p] * vy[s:e]
+                    disc = (P.r * P.r - rho2)[p] + a * a
+                    sq = np.sqrt(disc)
+                    din, dout = a - sq, a + sq
                     valid = disc > 0
-                else:  # box: slabs in the box frame
-                    c, sn = np.cos(p.yaw), np.sin(p.yaw)
-                    ox, oy = -(c * qx + sn * qy), -(-sn * qx + c * qy)
-                    vx, vy = c * ux + sn * uy, -sn * ux + c * uy
-                    L2, W2 = p.length / 2, p.width / 2
-                    tx1, tx2 = (-L2 - ox) / vx, (L2 - ox) / vx
-                    ty1, ty2 = (-W2 - oy) / vy, (W2 - oy) / vy
-                    txn, txf = np.minimum(tx1, tx2), np.maximum(tx1, tx2)
-                    tyn, tyf = np.minimum(ty1, ty2), np.maximum(ty1, ty2)
-                    din, dout = np.maximum(txn, tyn), np.minimum(txf, tyf)
+                    fc = np.zeros(e - s, np.int8)
+                else:
+                    cs, sn = P.cos, P.sin
+                    ox, oy = (-(cs * qx + sn * qy))[p], (-(-sn * qx + cs * qy))[p]
+                    wx = cs[p] * vx[s:e] + sn[p] * vy[s:e]
+                    wy = -sn[p] * vx[s:e] + cs[p] * vy[s:e]
+                    L2, W2 = P.L2[p], P.W2[p]
+                    tx1, tx2 = (-L2 - ox) / wx, (L2 - ox) / wx
+                    ty1, ty2 = (-W2 - oy) / wy, (W2 - oy) / wy
+                    txn, tyn = np.minimum(tx1, tx2), np.minimum(ty1, ty2)
+                    din = np.maximum(txn, tyn)
+                    dout = np.minimum(np.maximum(tx1, tx2), np.maximum(ty1, ty2))
                     valid = (din < dout) & (dout > 0)
-                    face = np.where(txn > tyn, np.where(vx < 0, 0, 1), np.where(vy < 0, 2, 3))
                     # faces: 0 = +x, 1 = -x, 2 = +y, 3 = -y (the "front")
+                    fc = np.where(txn > tyn, np.where(wx < 0, 0, 1), np.where(wy < 0, 2, 3)).astype(np.int8)
                 din = np.maximum(din, 0.0)
-                zin = din * tcol
-                side = valid & (zin >= z0r) & (zin <= z1r)
-                d = np.where(side, din, np.inf)
-                cap = None
-                if z1r < 0:  # top visible from above
-                    dc = z1r / tcol
-                    top = valid & (zin > z1r) & (tcol < 0) & (dc <= dout)
-                    d = np.where(top, dc, d)
-                    cap = top
-                if z0r > 0:  # bottom visible from below
-                    dc = z0r / tcol
-                    bot = valid & (zin < z0r) & (tcol > 0) & (dc <= dout)
-                    d = np.where(bot, dc, d)
-                    cap = bot if cap is None else cap | bot
-            win = d < dblk
-            if not win.any():
+                zin = din * tt
+                lo, hi = z0r[p], z1r[p]
+                side = valid & (zin >= lo) & (zin <= hi)
+                dc = np.where(tt < 0, hi, lo) / tt
+                cap = (valid & ~side & (dc >= din) & (dc <= dout)
+                       & (((tt < 0) & (zin > hi)) | ((tt > 0) & (zin < lo))))
+                d[s:e] = np.where(side, din, np.where(cap, dc, np.inf))
+                face[s:e] = np.where(cap, 4, fc)
+            foot = rho * grid.pixel_angle  # metres per pixel at the primitive
+            level = np.floor(np.log2(np.maximum(foot / atlas.texel[P.tex], 1.0))).astype(np.int64)
+            ftex = np.maximum(P.front, 0)
+            flevel = np.floor(np.log2(np.maximum(foot / atlas.texel[ftex], 1.0))).astype(np.int64)
+            level = np.stack([np.minimum(level, atlas.nlev[P.tex] - 1), np.minimum(flevel, atlas.nlev[ftex] - 1)])
+            # transparent texels (fence gaps) let the ray through
+            if atlas.alpha[P.tex].any():
+                m = np.nonzero(atlas.alpha[P.tex][pid] & np.isfinite(d))[0]
+                if len(m):
+                    rgba, _ = self._surface(P, m, pid, d, face, t, vx, vy, qx, qy, h, level, bounds)
+                    d[m[rgba[:, 3] < 0.5]] = np.inf
+            # depth test: nearest hit per pixel
+            cand = np.nonzero(d < base[pix])[0]
+            if not len(cand):
                 return
-            ri, ci = np.nonzero(win)
-            dw = d[ri, ci]
-            hx = dw * ux[ci] - qx  # hit point relative to the primitive's centre
-            hy = dw * uy[ci] - qy
-            hz = dw * t[ri]  # relative to the camera height
-            level = tex.level_for(rho * pixel_angle)
-            alpha = None
-            if p.shape == "ellipsoid":
-                zc = 0.5 * (p.z0 + p.z1) - h
-                rz = 0.5 * (p.z1 - p.z0)
-                nx, ny, nz = hx / p.radius**2, hy / p.radius**2, (hz - zc) / rz**2
-                u = np.arctan2(hy, hx) * p.radius
-                rgba = tex.sample(u, hz + h, level)
-            elif p.shape == "cylinder":
-                nx, ny, nz = hx, hy, np.zeros_like(hx)
-                u = np.arctan2(hy, hx) * p.radius
-                rgba = tex.sample(u, hz + h, level)
-                if cap is not None:
-                    cw = cap[ri, ci]
-                    if cw.any():
-                        nx, ny = np.where(cw, 0.0, nx), np.where(cw, 0.0, ny)
-                        nz = np.where(cw, np.sign(-t[ri]), nz)
-                        rgba[cw] = tex.sample(hx[cw] + p.x, hy[cw] + p.y, level)
-            else:
-                c, sn = np.cos(p.yaw), np.sin(p.yaw)
-                lx, ly = c * hx + sn * hy, -sn * hx + c * hy
-                f = face[ci]
-                nlx = np.where(f == 0, 1.0, np.where(f == 1, -1.0, 0.0))
-                nly = np.where(f == 2, 1.0, np.where(f == 3, -1.0, 0.0))
-                nx, ny = c * nlx - sn * nly, sn * nlx + c * nly
-                nz = np.zeros_like(hx)
-                u = np.where(f <= 1, ly, lx)
-                rgba = tex.sample(u, hz + h, level)
-                if front is not None:
-                    fw = f == 3
-                    if cap is not None:
-                        fw &= ~cap[ri, ci]
-                    if fw.any():
-                        fu = (lx[fw] + p.length / 2) / p.length
-                        fv = (hz[fw] + h - p.z0) / (p.z1 - p.z0)
-                        rgba[fw] = front.sample(fu, fv, front.level_for(rho * pixel_angle), stretch=True)
-                if cap is not None:
-                    cw = cap[ri, ci]
-                    if cw.any():
-                        nx, ny = np.where(cw, 0.0, nx), np.where(cw, 0.0, ny)
-                        nz = np.where(cw, np.sign(-t[ri]), nz)
-                        rgba[cw] = tex.sample(hx[cw] + p.x, hy[cw] + p.y, level)
-            if tex.has_alpha:
-                keep = rgba[:, 3] > 0.5
-                if not keep.all():
-                    ri, ci, dw, rgba = ri[keep], ci[keep], dw[keep], rgba[keep]
-                    nx, ny, nz = nx[keep], ny[keep], nz[keep]
-            norm = np.sqrt(nx * nx + ny * ny + nz * nz)
-            lam = np.maximum((nx * sun[0] + ny * sun[1] + nz * sun[2]) / np.maximum(norm, 1e-12), 0.0)
-            shade = (amb + dif * lam).astype(np.float32)
-            col = rgba[:, :3] * shade[:, None]
-            fog = np.float32(1.0 - np.exp(-rho / FOG_DISTANCE))
-            col = col + fog * (self._horizon_rgb - col)
-            oblk[ri, ci] = col
-            dblk[ri, ci] = dw
+            buf = base.copy()
+            np.minimum.at(buf, pix[cand], d[cand])
+            win = cand[d[cand] <= buf[pix[cand]]]
+            rgba, nrm = self._surface(P, win, pid, d, face, t, vx, vy, qx, qy, h, level, bounds)
+            sun = light.sun
+            norm = np.sqrt((nrm * nrm).sum(axis=1))
+            lam = np.maximum((nrm @ sun) / np.maximum(norm, 1e-12), 0.0)
+            shade = (light.ambient + (1 - light.ambient) / np.sin(np.radians(50.0)) * lam).astype(np.float32)
+            colr = rgba[:, :3] * shade[:, None]
+            fog = (1.0 - np.exp(-rho[pid[win]] / FOG_DISTANCE)).astype(np.float32)[:, None]
+            colr += fog * (self._horizon_rgb - colr)
+        out.reshape(-1, 3)[pix[win]] = colr
+        base[pix[win]] = d[win]
+
+    def _surface(self, P: _Prims, idx: np.ndarray, pid: np.ndarray, d: np.ndarray, face: np.ndarray,
+                 t: np.ndarray, vx: np.ndarray, vy: np.ndarray, qx: np.ndarray, qy: np.ndarray, h: float,
+                 level: np.ndarray, bounds: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Texture colour (n, 4) and surface normal (n, 3) at the hits of
+        candidates ``idx`` (sorted)."""
+        atlas = self._atlas
+        p = pid[idx]
+        dw = d[idx]
+        tt = t[idx]
+        hx = dw * vx[idx] - qx[p]  # hit point relative to the primitive's centre
+        hy = dw * vy[idx] - qy[p]
+        hz = dw * tt  # height above the camera
+        z = hz + h
+        nrm = np.zeros((len(idx), 3))
+        u = np.empty(len(idx))
+        v = z.copy()
+        fc = face[idx]
+        entry = atlas.base[P.tex[p]] + level[0, p]
+        g = np.searchsorted(idx, bounds)
+        # ellipsoids
+        s, e = g[0], g[1]
+        if e > s:
+            pp = p[s:e]
+            r = P.r[pp]
+            rz = 0.5 * (P.z1 - P.z0)[pp]
+            zc = 0.5 * (P.z0 + P.z1)[pp] - h
+            nrm[s:e, 0] = hx[s:e] / (r * r)
+            nrm[s:e, 1] = hy[s:e] / (r * r)
+            nrm[s:e, 2] = (hz[s:e] - zc) / (rz * rz)
+            u[s:e] = np.arctan2(hy[s:e], hx[s:e]) * r
+        # boxes
+        s, e = g[1], g[2]
+        if e > s:
+            pp = p[s:e]
+            cs, sn = P.cos[pp], P.sin[pp]
+            lx = cs * hx[s:e] + sn * hy[s:e]
+            ly = -sn * hx[s:e] + cs * hy[s:e]
+            f = fc[s:e]
+            nlx = np.where(f == 0, 1.0, np.where(f == 1, -1.0, 0.0))
+            nly = np.where(f == 2, 1.0, np.where(f == 3, -1.0, 0.0))
+            nrm[s:e, 0] = cs * nlx - sn * nly
+            nrm[s:e, 1] = sn * nlx + cs * nly
+            u[s:e] = np.where(f <= 1, ly, lx)
+        # cylinders
+        s, e = g[2], g[3]
+        if e > s:
+            pp = p[s:e]
+            nrm[s:e, 0] = hx[s:e]
+            nrm[s:e, 1] = hy[s:e]
+            u[s:e] = np.arctan2(hy[s:e], hx[s:e]) * P.r[pp]
+        # caps (tops and bottoms of boxes and cylinders): ground-plane texture coordinates
+        cap = fc == 4
+        if cap.any():
+            nrm[cap] = 0.0
+            nrm[cap, 2] = -np.sign(tt[cap])
+            u[cap] = hx[cap] + P.x[p[cap]]
+            v[cap] = hy[cap] + P.y[p[cap]]
+        rgba = atlas.sample(entry, u, v)
+        fr = (fc == 3) & (P.front[p] >= 0)
+        if fr.any():
+            pf = p[fr]
+            cs, sn = P.cos[pf], P.sin[pf]
+            lx = cs * hx[fr] + sn * hy[fr]
+            fu = (lx + P.L2[pf]) / (2 * P.L2[pf])
+            fv = (z[fr] - P.z0[pf]) / (P.z1[pf] - P.z0[pf])
+            fe = atlas.base[P.front[pf]] + level[1, pf]
+            rgba[fr] = atlas.sample_stretched(fe, fu, fv)
+        return rgba, nrm
 
 
 def _hit_distance(p: Primitive, ox: np.ndarray, oy: np.ndarray, dx: float, dy: float, rise: float) -> np.ndarray:

@@ -252,7 +252,7 @@ class World:
         n_objects: int = 30,
         *,
         margin: float = 1.0,
-        depth: float = 14.0,
+        depth: float = 10.0,
         weights: dict[str, float] | None = None,
         markers: Sequence[int] = (),
         marker_size: float = 0.8,
