@@ -409,6 +409,7 @@ class _Atlas:
                 su.append(w / pyr.tile[0])
                 sv.append(h / pyr.tile[1])
         self.flat = np.concatenate(chunks).astype(np.float32) if chunks else np.zeros((1, 4), np.float32)
+        self._vflat = self.flat.view("V16").ravel()  # one 16-byte texel per element: fast gathers
         self.off = np.array(off, np.int64)
         self.h = np.array(hs, np.int64)
         self.w = np.array(ws, np.int64)
@@ -418,21 +419,26 @@ class _Atlas:
         self.nlev = np.array(nlev, np.int64)
         self.texel = np.array(texel, np.float64)
         self.alpha = np.array(alpha, bool)
+        self.pow2 = bool(np.all((self.w & (self.w - 1)) == 0) and np.all((self.h & (self.h - 1)) == 0))
 
     def sample(self, entry: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
         """Wrapped nearest-texel lookup at surface coordinates in metres
         (u along, v up). Returns (n, 4)."""
         w, h = self.w[entry], self.h[entry]
-        iu = np.floor(u * self.su[entry]).astype(np.int64) % w
-        iv = (-1 - np.floor(v * self.sv[entry]).astype(np.int64)) % h
-        return self.flat[self.off[entry] + iv * w + iu]
+        if self.pow2:
+            iu = np.floor(u * self.su[entry]).astype(np.int64) & (w - 1)
+            iv = (-1 - np.floor(v * self.sv[entry]).astype(np.int64)) & (h - 1)
+        else:
+            iu = np.floor(u * self.su[entry]).astype(np.int64) % w
+            iv = (-1 - np.floor(v * self.sv[entry]).astype(np.int64)) % h
+        return self._vflat[self.off[entry] + iv * w + iu].view(np.float32).reshape(-1, 4)
 
     def sample_stretched(self, entry: np.ndarray, fu: np.ndarray, fv: np.ndarray) -> np.ndarray:
         """Lookup at tile fractions fu, fv in [0, 1] (v up), clamped."""
         w, h = self.w[entry], self.h[entry]
         iu = np.clip((fu * w).astype(np.int64), 0, w - 1)
         iv = np.clip(((1.0 - fv) * h).astype(np.int64), 0, h - 1)
-        return self.flat[self.off[entry] + iv * w + iu]
+        return self._vflat[self.off[entry] + iv * w + iu].view(np.float32).reshape(-1, 4)
 
 
 class _Prims:
@@ -569,7 +575,9 @@ class Renderer:
             s = light.sun
             direct = (1 - light.ambient) * max(s[2], 0.0) / np.sin(np.radians(50.0))
             shade = light.ambient + direct * (1.0 - self._shadow_map(light))
-            lit = (self._gmap * shade[..., None]).reshape(-1, 3).astype(np.float32)
+            lit = np.ones((self._gmap_n * self._gmap_n, 4), np.float32)
+            lit[:, :3] = (self._gmap * shade[..., None]).reshape(-1, 3)
+            lit = lit.view("V16").ravel()
             if len(self._ground_cache) > 32:
                 self._ground_cache.clear()
             self._ground_cache[key] = lit
@@ -605,6 +613,7 @@ class Renderer:
         self._sky = sky.astype(np.float32)
         self._sky_el = el
         self._horizon_rgb = np.asarray(sk.horizon, np.float32)
+        self._horizon_rgba = np.append(self._horizon_rgb, np.float32(1.0))
 
     # ------------------------------------------------------------ per-grid data
 
@@ -620,7 +629,9 @@ class Renderer:
         gd["gnd_rows"] = slice(int(gnd_rows[0]), int(gnd_rows[-1]) + 1) if len(gnd_rows) else slice(0, 0)
         if len(sky_rows):
             k = np.clip(np.searchsorted(self._sky_el, grid.elev[sky_rows]), 0, len(self._sky_el) - 1)
-            gd["sky_panel"] = np.ascontiguousarray(self._sky[k])  # (Hs, n_az, 3)
+            panel = np.ones((len(k), self._sky_n_az, 4), np.float32)
+            panel[..., :3] = self._sky[k]
+            gd["sky_panel"] = panel.view("V16")[..., 0]  # (Hs, n_az) of 16-byte RGBA texels
         if len(gnd_rows):
             t = grid.tan[gnd_rows]
             d = grid.h / -t  # horizontal distance of the ground hit, per row
@@ -673,25 +684,26 @@ class Renderer:
             raise TypeError(f"camera must be a PanoramicCamera or OmniCamera, got {type(camera).__name__}")
         x, y, heading = _pose3(pose)
         light = lighting or self.lighting
-        img = self.render_grid(camera._grid, x, y, heading, time, light)
+        img = self._render_grid(camera._grid, x, y, heading, time, light)
         if isinstance(camera, OmniCamera):
             img = camera._finish(img)
-        return _to_uint8(img, camera.rgb)
+        return _to_uint8(img, camera.rgb, light.rgb)
 
-    def render_grid(self, grid: _Grid, x: float, y: float, heading: float, time: float,
-                    light: Lighting) -> np.ndarray:
-        """Linear RGB float32 image (H, W, 3) of a ray grid (internal; see :meth:`render`)."""
+    def _render_grid(self, grid: _Grid, x: float, y: float, heading: float, time: float,
+                     light: Lighting) -> np.ndarray:
+        """Float32 image (H, W, 4) of a ray grid, before the light's intensity
+        and tint; channel 3 is padding (see :meth:`render`)."""
         gd = self._grid_data(grid)
         H, W, h = grid.H, grid.W, grid.h
         phi = heading + grid.bearings
         ux, uy = np.cos(phi), np.sin(phi)
-        out = np.empty((H, W, 3), np.float32)
+        out = np.empty((H, W, 4), np.float32)
         depth = gd["depth_init"].copy()
         # sky
         sr = gd["sky_rows"]
         if sr.stop > sr.start:
             k = (np.mod(phi, 2 * np.pi) * (self._sky_n_az / (2 * np.pi))).astype(np.int64) % self._sky_n_az
-            out[sr] = gd["sky_panel"][:, k]
+            out[sr] = np.take(gd["sky_panel"], k, axis=1).view(np.float32).reshape(sr.stop - sr.start, W, 4)
         # ground
         gr = gd["gnd_rows"]
         if gr.stop > gr.start:
@@ -705,15 +717,15 @@ class Renderer:
             n, res, o = self._gmap_n, self._gmap_res, self._gmap_origin
             gi = (np.floor((X - o) / res).astype(np.int64) & (n - 1)) + (
                 np.floor((Y - o) / res).astype(np.int64) & (n - 1)) * n
-            col = self._lit_ground(light)[gi] * det[..., None]
+            col = self._lit_ground(light)[gi].view(np.float32).reshape(gi.shape + (4,)) * det[..., None]
             fog = gd["gnd_fog"]
-            out[gr] = col + fog * (self._horizon_rgb - col)
+            col += fog * (self._horizon_rgba - col)
+            out[gr] = col
         # objects
         P = self._static
         if self.world.dynamic:
             P = P.plus(_Prims([dd.primitive_at(time) for dd in self.world.dynamic], self._atlas))
         self._draw(P, gd, grid, x, y, heading, ux, uy, out, depth, light)
-        out *= light.rgb
         return out
 
     def _draw(self, P: _Prims, gd: dict[str, Any], grid: _Grid, cx: float, cy: float, heading: float,
@@ -841,10 +853,10 @@ class Renderer:
             norm = np.sqrt((nrm * nrm).sum(axis=1))
             lam = np.maximum((nrm @ sun) / np.maximum(norm, 1e-12), 0.0)
             shade = (light.ambient + (1 - light.ambient) / np.sin(np.radians(50.0)) * lam).astype(np.float32)
-            colr = rgba[:, :3] * shade[:, None]
+            rgba *= shade[:, None]
             fog = (1.0 - np.exp(-rho[pid[win]] / FOG_DISTANCE)).astype(np.float32)[:, None]
-            colr += fog * (self._horizon_rgb - colr)
-        out.reshape(-1, 3)[pix[win]] = colr
+            rgba += fog * (self._horizon_rgba - rgba)
+        out.reshape(-1, 4)[pix[win]] = rgba
         base[pix[win]] = d[win]
 
     def _surface(self, P: _Prims, idx: np.ndarray, pid: np.ndarray, d: np.ndarray, face: np.ndarray,
@@ -966,7 +978,12 @@ def _pose3(pose: Sequence[float]) -> tuple[float, float, float]:
     return x, y, th
 
 
-def _to_uint8(img: np.ndarray, rgb: bool) -> np.ndarray:
-    if not rgb:
-        img = img @ _LUMA
-    return np.clip(img * 255.0 + 0.5, 0, 255).astype(np.uint8)
+def _to_uint8(img: np.ndarray, rgb: bool, light: np.ndarray) -> np.ndarray:
+    """(H, W, 4) float32 before the light -> uint8 (H, W, 3) or gray (H, W)."""
+    gain = (255.0 * light).astype(np.float32)
+    if rgb:
+        out = img[..., :3] * gain
+    else:
+        out = img[..., :3] @ (_LUMA * gain)
+    out += 0.5
+    return np.clip(out, 0, 255, out=out).astype(np.uint8)

@@ -264,6 +264,9 @@ def make_texture(spec: Texture) -> np.ndarray:
         return np.clip(np.concatenate([rgb, a], axis=2), 0, 1).astype(np.float32)
     if k == "marker":
         m = marker_image(int(spec.params.get("id", 0)), spec.params.get("dictionary", "DICT_ARUCO_ORIGINAL"))
+        # nearest resampling to 128 x 128 (a power of two, for fast mip levels); cells stay sharp
+        idx = (np.arange(128) * m.shape[0] / 128).astype(int)
+        m = m[idx][:, idx]
         rgb = np.repeat(m[..., None], 3, axis=2) * np.asarray(c, np.float32)
         a = np.ones(m.shape + (1,), np.float32)
         return np.concatenate([rgb, a], axis=2)

@@ -209,7 +209,8 @@ class World:
         Objects stay beyond this radius (m); at least the half diagonal of
         the area.
     outer_radius : float
-        Objects stay within this radius (m).
+        Objects stay within this radius (m): the free radius plus ``depth``,
+        grown where a crowded ring needed more room.
     objects : list of WorldObject
         Garden objects and obstacles.
     textures : dict of str to Texture
@@ -342,21 +343,32 @@ class World:
             placed.extend(b.obstacle(spec))
         world.objects = placed
         if dynamic is not None:
-            if isinstance(dynamic, dict):
-                d = dict(dynamic)
-                d.setdefault("orbit", r_free)
-                d.setdefault("period", 100.0)
-                dynamic = DynamicCylinder(**d)
-            if not isinstance(dynamic, DynamicCylinder):
-                raise TypeError("dynamic must be a DynamicCylinder or a dict of its fields")
-            if dynamic.texture not in world.textures:
-                world.textures[dynamic.texture] = Texture(
-                    "stripes", (0.85, 0.2, 0.15), 0.8, int(rng.integers(2**31)), (2 * np.pi * dynamic.radius, 1.0),
-                    {"n": 4, "color2": (0.95, 0.9, 0.3)},
-                )
-            world.dynamic = [dynamic]
+            world.add_dynamic(dynamic, seed=int(rng.integers(2**31)))
         world.__post_init__()
         return world
+
+    def add_dynamic(self, dynamic: DynamicCylinder | dict[str, Any], seed: int = 0) -> DynamicCylinder:
+        """Adds a moving textured cylinder (thesis 6.2.1). A dict is passed to
+        :class:`DynamicCylinder`; its ``orbit`` defaults to the free radius
+        (circling just outside the area) and ``period`` to 100 s. A missing
+        texture gets a striped one."""
+        if isinstance(dynamic, dict):
+            d = dict(dynamic)
+            d.setdefault("orbit", self.free_radius)
+            d.setdefault("period", 100.0)
+            try:
+                dynamic = DynamicCylinder(**d)
+            except TypeError as exc:
+                raise ValueError(f"bad dynamic object fields: {exc}") from None
+        if not isinstance(dynamic, DynamicCylinder):
+            raise TypeError("dynamic must be a DynamicCylinder or a dict of its fields")
+        if dynamic.texture not in self.textures:
+            self.textures[dynamic.texture] = Texture(
+                "stripes", (0.85, 0.2, 0.15), 0.8, int(seed), (2 * np.pi * dynamic.radius / 2, 1.0),
+                {"n": 4, "color2": (0.95, 0.9, 0.3)},
+            )
+        self.dynamic.append(dynamic)
+        return dynamic
 
     # ------------------------------------------------------------ queries
 
@@ -608,17 +620,15 @@ class _Builder:
         hi = min(r_out, lo + 3.0) if near else r_out
         if hi <= lo:
             hi = lo + radius
-        for _ in range(500):
+        for attempt in range(100000):
+            if attempt and attempt % 200 == 0:
+                hi += 1.0  # crowded: let the ring grow outwards
             r = float(np.sqrt(self.rng.uniform(lo**2, hi**2)))
             a = float(self.rng.uniform(0, 2 * np.pi))
             x, y = r * np.cos(a), r * np.sin(a)
             if all(np.hypot(x - o.x, y - o.y) >= radius + o.radius + 0.3 for o in placed if not o.obstacle):
                 break
-        else:
-            raise ValueError(
-                f"could not place a {kind} without overlap between radii {lo:.1f} and {hi:.1f} m; "
-                "use fewer objects or a larger depth"
-            )
+        self.w.outer_radius = max(self.w.outer_radius, r + radius)
         if tangential:
             # facing the centre: the local -y face (outward normal yaw - pi/2) looks at the origin
             yaw = a - np.pi / 2 + (self.rng.uniform(-0.35, 0.35) if kind in ("fence", "hedge") else 0.0)
