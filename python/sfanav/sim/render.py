@@ -575,8 +575,12 @@ class Renderer:
             s = light.sun
             direct = (1 - light.ambient) * max(s[2], 0.0) / np.sin(np.radians(50.0))
             shade = light.ambient + direct * (1.0 - self._shadow_map(light))
-            lit = np.ones((self._gmap_n * self._gmap_n, 4), np.float32)
-            lit[:, :3] = (self._gmap * shade[..., None]).reshape(-1, 3)
+            # two copies: with shadows, and without for ground so far away that the
+            # periodic map would repeat the shadows of the objects
+            nn = self._gmap_n * self._gmap_n
+            lit = np.ones((2 * nn, 4), np.float32)
+            lit[:nn, :3] = (self._gmap * shade[..., None]).reshape(-1, 3)
+            lit[nn:, :3] = (self._gmap * (light.ambient + direct)).reshape(-1, 3)
             lit = lit.view("V16").ravel()
             if len(self._ground_cache) > 32:
                 self._ground_cache.clear()
@@ -649,6 +653,9 @@ class Renderer:
             gd["det_off"] = self._det_off[lev][:, None]
             fog = 1.0 - np.exp(-d / FOG_DISTANCE)
             gd["gnd_fog"] = fog[:, None, None].astype(np.float32)
+            half_period = self._gmap_n * self._gmap_res / 2
+            far = d > half_period - self.world.outer_radius - 1.0
+            gd["gnd_map_off"] = np.where(far, self._gmap_n * self._gmap_n, 0)[:, None].astype(np.int64)
             gd["depth_init"] = np.concatenate(
                 [np.full(len(sky_rows), np.inf), d]
             )[:, None] * np.ones((1, grid.W))
@@ -716,7 +723,7 @@ class Renderer:
             det = self._det_flat[gd["det_off"] + iv * gd["det_n"] + iu]
             n, res, o = self._gmap_n, self._gmap_res, self._gmap_origin
             gi = (np.floor((X - o) / res).astype(np.int64) & (n - 1)) + (
-                np.floor((Y - o) / res).astype(np.int64) & (n - 1)) * n
+                np.floor((Y - o) / res).astype(np.int64) & (n - 1)) * n + gd["gnd_map_off"]
             col = self._lit_ground(light)[gi].view(np.float32).reshape(gi.shape + (4,)) * det[..., None]
             fog = gd["gnd_fog"]
             col += fog * (self._horizon_rgba - col)

@@ -116,7 +116,7 @@ class _Path:
     def straight(self, length: float, label: int = -1) -> None:
         if length <= 1e-9:
             return
-        n = max(1, int(round(length / self.step)))
+        n = max(1, int(np.ceil(length / self.step - 1e-9)))
         ds = length / n
         x, y, th = self.pose
         for i in range(1, n + 1):
@@ -137,7 +137,7 @@ class _Path:
     def arc(self, radius: float, angle: float, label: int = -1) -> None:
         """Arc of ``radius`` m turning by ``angle`` rad (positive: left)."""
         length = abs(angle) * radius
-        n = max(1, int(round(length / self.step)))
+        n = max(1, int(np.ceil(length / self.step - 1e-9)))
         x, y, th = self.pose
         sgn = np.sign(angle)
         cx, cy = x - sgn * radius * np.sin(th), y + sgn * radius * np.cos(th)
@@ -223,9 +223,13 @@ def grid(area: Sequence[float], spacing: float = 1.0, step: float = 0.2, *, marg
                     path.straight(abs(nxt - lev))
                     path.turn(sgn * np.pi / 2)
 
-    lanes(0, -hx, hx, -hy, hy)
+    # U-turn arcs bulge half a spacing beyond the lane ends: keep them inside the margin
+    ex = spacing / 2 if turn == "arc" else 0.0
+    if hx <= ex or hy <= ex:
+        raise ValueError(f"spacing {spacing} m is too large for arc turns in area {w} x {h} m")
+    lanes(0, -hx + ex, hx - ex, -hy, hy)
     if crossings:
-        lanes(1, -hy, hy, -hx, hx)
+        lanes(1, -hy + ex, hy - ex, -hx, hx)
     return path.result()
 
 
