@@ -579,15 +579,15 @@ class Dataset:
         if len(bad):
             i = int(bad[0])
             raise ValueError(
-                f"pose log {poses}: timestamps must increase strictly; row {i + 2} (t={pt[i + 1]!r}) "
-                f"does not come after row {i + 1} (t={pt[i]!r}); sort the log"
+                f"pose log {poses}: timestamps must increase strictly; row {i + 2} (t={float(pt[i + 1])!r}) "
+                f"does not come after row {i + 1} (t={float(pt[i])!r}); sort the log"
             )
         bad = np.nonzero(np.diff(img_t) < 0)[0]
         if len(bad):
             i = int(bad[0])
             raise ValueError(
-                f"image log {images}: timestamps must not decrease; image {img_paths[i + 1]} (t={img_t[i + 1]!r}) "
-                f"comes after {img_paths[i]} (t={img_t[i]!r})"
+                f"image log {images}: timestamps must not decrease; image {img_paths[i + 1]} "
+                f"(t={float(img_t[i + 1])!r}) comes after {img_paths[i]} (t={float(img_t[i])!r})"
             )
         inside = (img_t >= pt[0]) & (img_t <= pt[-1])
         if not inside.all():
@@ -595,8 +595,8 @@ class Dataset:
             if outside == "error":
                 j = int(np.nonzero(~inside)[0][0])
                 raise ValueError(
-                    f"{n_out} image(s) lie outside the pose log's time span [{pt[0]}, {pt[-1]}] s, "
-                    f"first {img_paths[j]} at t={img_t[j]}; pass outside='drop' to leave them out"
+                    f"{n_out} image(s) lie outside the pose log's time span [{float(pt[0])}, {float(pt[-1])}] s, "
+                    f"first {img_paths[j]} at t={float(img_t[j])}; pass outside='drop' to leave them out"
                 )
             img_t = img_t[inside]
             img_paths = [p for p, k in zip(img_paths, inside) if k]
@@ -677,7 +677,10 @@ def _read_image_log(path: Path) -> tuple[np.ndarray, list[Path], Path]:
 
 
 def _read_csv_columns(path: Path, *, required: Sequence[str], floats: Sequence[str], what: str,
-                      ints: Sequence[str] = ()) -> dict[str, np.ndarray]:
+                      ints: Sequence[str] = (), nonempty: Sequence[str] | None = None) -> dict[str, np.ndarray]:
+    """Columns of a CSV file; ``required`` columns must exist, ``nonempty``
+    ones (default: the required ones) must have a value in every row."""
+    nonempty = required if nonempty is None else nonempty
     if not path.exists():
         raise FileNotFoundError(f"no {what} at {path}")
     with open(path, newline="") as f:
@@ -703,7 +706,7 @@ def _read_csv_columns(path: Path, *, required: Sequence[str], floats: Sequence[s
                     raise ValueError(f"{what} {path} line {ln}: column {h!r} has {cell!r}, not a number") from None
                 if cell != "" and not math.isfinite(v):
                     raise ValueError(f"{what} {path} line {ln}: column {h!r} is not finite ({cell!r})")
-                if h in required and cell == "":
+                if h in nonempty and cell == "":
                     raise ValueError(f"{what} {path} line {ln}: column {h!r} is empty")
                 data[h].append(v)
             elif h in ints:
@@ -738,28 +741,44 @@ def _read_sfanav(root: Path) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
         raise ValueError(f"{mpath} is not sfanav dataset metadata (format {meta.get('format') if isinstance(meta, dict) else None!r})")
     if int(meta.get("version", 0)) > VERSION:
         raise ValueError(f"dataset version {meta['version']} is newer than this sfanav reads ({VERSION}); upgrade sfanav")
-    cols = _read_csv_columns(fpath, required=COLUMNS, floats=FLOAT_COLUMNS, ints=("frame",), what="frames table")
+    cols = _read_csv_columns(fpath, required=COLUMNS, floats=FLOAT_COLUMNS, ints=("frame",), what="frames table",
+                             nonempty=("timestamp", "x", "y", "heading"))
     for name in ("x", "y", "heading"):
         bad = np.nonzero(~np.isfinite(cols[name]))[0]
         if len(bad):
             raise ValueError(f"frames table {fpath} line {int(bad[0]) + 2}: ground truth {name!r} is missing")
-    # timestamps must not decrease within one run and camera
-    keys = np.char.add(cols["run"].astype(str), np.char.add("\x00", cols["camera"].astype(str)))
-    for k in np.unique(keys):
-        idx = np.nonzero(keys == k)[0]
-        t = cols["timestamp"][idx]
-        bad = np.nonzero(np.diff(t) < 0)[0]
+    # timestamps must not decrease within one run, camera and condition
+    groups: dict[tuple[str, str, str], list[int]] = {}
+    for i, key in enumerate(zip(cols["run"], cols["camera"], cols["condition"])):
+        groups.setdefault(key, []).append(i)
+    for (run, cam, cond), idx_list in groups.items():
+        idx = np.array(idx_list)
+        bad = np.nonzero(np.diff(cols["timestamp"][idx]) < 0)[0]
         if len(bad):
             i = int(idx[bad[0] + 1])
-            run, cam = k.split("\x00")
             raise ValueError(
-                f"frames table {fpath} line {i + 2}: timestamp {cols['timestamp'][i]!r} is earlier than the "
-                f"previous image of run {run!r}, camera {cam!r}; timestamps must be sorted"
+                f"frames table {fpath} line {i + 2}: timestamp {float(cols['timestamp'][i])!r} is earlier than the "
+                f"previous image of run {run!r}, camera {cam!r}, condition {cond!r}; timestamps must be sorted"
             )
     for i, rel in enumerate(cols["image"]):
         if not rel:
             raise ValueError(f"frames table {fpath} line {i + 2}: empty image path")
+    for k in cols:
+        if k not in COLUMNS:
+            cols[k] = _infer(cols[k])
     return cols, meta
+
+
+def _infer(values: np.ndarray) -> np.ndarray:
+    """An extra column as integers, else floats (empty = NaN), else strings."""
+    try:
+        return np.array([int(v) for v in values], np.int64)
+    except ValueError:
+        pass
+    try:
+        return np.array([float(v) if v != "" else math.nan for v in values], float)
+    except ValueError:
+        return values
 
 
 def _read_insect(root: Path) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
