@@ -201,6 +201,19 @@ def get(name: str) -> Preset:
     return PRESETS[name]
 
 
+def _streams(seed: int) -> list[np.random.Generator]:
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
+    return [np.random.default_rng(s) for s in np.random.SeedSequence(int(seed)).spawn(4)]
+
+
+def preset_world(preset: str, seed: int = 0) -> World:
+    """The world that ``simulate(preset, ..., seed)`` uses (without the
+    dynamic object, whose period depends on the run)."""
+    p = get(preset)
+    return World.generate(int(_streams(seed)[0].integers(2**31)), **p.world)
+
+
 def simulate(preset: str, out: str | os.PathLike, seed: int = 0, *, max_frames: int | None = None,
              camera: PanoramicCamera | OmniCamera | None = None, overwrite: bool = False,
              progress: bool = True) -> Any:
@@ -229,13 +242,10 @@ def simulate(preset: str, out: str | os.PathLike, seed: int = 0, *, max_frames: 
     from ..dataset import Dataset, DatasetWriter
 
     p = get(preset)
-    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
-        raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
     if max_frames is not None and (isinstance(max_frames, bool) or not isinstance(max_frames, (int, np.integer))
                                    or max_frames < 1):
         raise ValueError(f"max_frames must be a positive integer, got {max_frames!r}")
-    seq = np.random.SeedSequence(int(seed))
-    s_world, s_runs, s_traj, s_odo = (np.random.default_rng(s) for s in seq.spawn(4))
+    s_world, s_runs, s_traj, s_odo = _streams(seed)
     world = World.generate(int(s_world.integers(2**31)), **p.world)
     cam = camera or p.camera()
     robot = p.robot()

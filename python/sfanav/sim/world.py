@@ -277,7 +277,9 @@ class World:
         depth : float
             Width (m) of the ring beyond the free radius where objects stand.
         weights : dict, optional
-            Relative frequency of each object type (keys from ``OBJECT_TYPES``).
+            Relative frequency of each object type (keys from ``OBJECT_TYPES``);
+            each type gets ``floor(p * n_objects)`` objects and the remainder is
+            drawn at random with these weights.
         markers : sequence of int
             ArUco ids; each becomes a marker board facing the area centre,
             just outside the free area (thesis 5.4 used ids 136 and 144).
@@ -335,7 +337,14 @@ class World:
             probs = probs / probs.sum()
             # big objects first, so they find room
             order = {"house": 0, "shed": 1, "hedge": 2, "fence": 3}
-            drawn = sorted(rng.choice(kinds, size=int(n_objects), p=probs), key=lambda k: order.get(k, 9))
+            # quota sampling: each type gets floor(p n) objects, the rest are drawn by p,
+            # so a garden has about the expected mix (plain draws give 8 houses now and then)
+            quota = np.floor(probs * n_objects).astype(int)
+            rest = rng.choice(len(kinds), size=int(n_objects) - int(quota.sum()), p=probs)
+            counts = quota + np.bincount(rest, minlength=len(kinds))
+            drawn = [k for k, c in zip(kinds, counts) for _ in range(int(c))]
+            drawn = [drawn[i] for i in rng.permutation(len(drawn))]
+            drawn.sort(key=lambda k: order.get(k, 9))
             for kind in drawn:
                 getattr(b, kind)()
                 placed.append(b.place(placed))
