@@ -83,10 +83,10 @@ def _add(p: Preset) -> None:
 
 _add(Preset(
     "demo", "-",
-    "small 8x8 m garden: a grid exploration (~560 frames) and a 150-frame test walk, 600x60 panoramas; quick to make",
+    "small 8x8 m garden: a grid exploration (~480 frames) and a 150-frame test walk, 600x60 panoramas; quick to make",
     _garden((8.0, 8.0), 22, depth=8.0),
     lambda: PanoramicCamera(600, 60),
-    lambda rng: [RunSpec("train", lambda w, r: T.grid(w.area, spacing=1.0, step=0.2)),
+    lambda rng: [RunSpec("train", lambda w, r: T.grid(w.area, spacing=1.5, step=0.25)),
                  RunSpec("test", lambda w, r: T.random_walk(w.area, 150, rng=r, world=w))],
 ))
 _add(Preset(
@@ -102,7 +102,7 @@ _add(Preset(
 
 def _garden_runs(lines: bool) -> Callable[[np.random.Generator], list[RunSpec]]:
     def runs(rng: np.random.Generator) -> list[RunSpec]:
-        out = [RunSpec("train", lambda w, r: T.grid(w.area, spacing=1.6, step=0.24)),
+        out = [RunSpec("train", lambda w, r: T.grid(w.area, spacing=1.6, step=0.26)),
                RunSpec("test", lambda w, r: T.random_walk(w.area, 1090, rng=r, world=w))]
         if lines:
             out.append(RunSpec("lines", lambda w, r: T.line_segments(w.area, 10, 8.0, 0.2, rng=r, world=w)))
@@ -112,7 +112,7 @@ def _garden_runs(lines: bool) -> Callable[[np.random.Generator], list[RunSpec]]:
 
 _add(Preset(
     "thesis-5.3-garden", "5.3, 5.4",
-    "16x18 m garden with ArUco markers 136 and 144: grid exploration with crossings (~1770 frames), a 1090-frame "
+    "16x18 m garden with ArUco markers 136 and 144: grid exploration with crossings (~1780 frames), a 1090-frame "
     "test walk and 10 straight lines >= 8 m sampled every 0.2 m (metric learning), 600x60 RGB panoramas",
     _garden((16.0, 18.0), 30, markers=(136, 144)),
     lambda: PanoramicCamera(600, 60),
@@ -121,7 +121,7 @@ _add(Preset(
 _add(Preset(
     "thesis-6.2.1-static", "6.2.1",
     "the 16x18 m garden seen by a 500x500 omnidirectional camera (unwarp to 600x55): grid exploration "
-    "(~1770 frames), 1090-frame test walk",
+    "(~1780 frames), 1090-frame test walk",
     _garden((16.0, 18.0), 30, markers=(136, 144)),
     lambda: OmniCamera(500),
     _garden_runs(lines=False),
@@ -132,7 +132,7 @@ _add(Preset(
     "(condition 'light-ramp'); the test run is lit normally",
     _garden((16.0, 18.0), 30, markers=(136, 144)),
     lambda: OmniCamera(500),
-    lambda rng: [RunSpec("train", lambda w, r: T.grid(w.area, spacing=1.6, step=0.24),
+    lambda rng: [RunSpec("train", lambda w, r: T.grid(w.area, spacing=1.6, step=0.26),
                          {"light-ramp": _ramp(0.4, 1.4)}),
                  RunSpec("test", lambda w, r: T.random_walk(w.area, 1090, rng=r, world=w))],
 ))
