@@ -369,6 +369,12 @@ def test_closed_loop_simulator(garden):
     s.reset((1.5, 0.8, np.pi / 2))
     assert not s.step(1.0, 0.0, 1.0)  # would hit the box obstacle
     np.testing.assert_allclose(s.pose, [1.5, 0.8, np.pi / 2])
+    s.reset((1.5, 0.5, np.pi / 2))
+    assert garden.free(1.5, 2.5, 0.25)
+    assert not s.step(2.0, 0.0, 1.0)  # would end clear beyond the box, but passes through it
+    s.reset((1.5, 0.5, -np.pi / 2))
+    assert s.step(0.5, 0.0, 1.0)  # driving away is fine
+    np.testing.assert_allclose(s.pose, [1.5, 0.0, -np.pi / 2], atol=1e-12)
 
 
 # ------------------------------------------------------------------ trajectories

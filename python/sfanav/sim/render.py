@@ -263,7 +263,6 @@ class OmniCamera:
         n_rad = int(np.ceil(self.outer_radius - self.inner_radius)) + 2
         radii = self.outer_radius + 0.5 - np.arange(n_rad)  # descending; first row just outside the rim
         radii = np.clip(radii, self.inner_radius, self.outer_radius)
-        self._radii = self.outer_radius + 0.5 - np.arange(n_rad)
         n_az = int(np.ceil(2 * np.pi * self.outer_radius / 8) * 8)
         el = self.elevation_of_radius(radii)
         el = el - np.arange(n_rad) * 1e-9  # strictly decreasing after clipping

@@ -269,13 +269,17 @@ class Simulator:
 
     def step(self, v: float, omega: float, dt: float) -> bool:
         """Drives with speed ``v`` (m/s) and turn rate ``omega`` (rad/s) for
-        ``dt`` s. The move is refused (returns False, the robot stays) when
-        the robot would leave the area or touch an obstacle."""
+        ``dt`` s. The move is refused (returns False, the robot stays; time
+        passes) when the robot (a disc of diameter ``robot.size``) would leave
+        the area or touch an obstacle on the way."""
         if not dt > 0:
             raise ValueError(f"dt must be positive (s), got {dt}")
         new = unicycle_step(self.pose, v, omega, dt)
         self.time += dt
-        if not bool(self.world.free(new[0], new[1], self.robot.size / 2)):
+        # check the swept path every 5 cm, not just the end (thin walls)
+        n = max(1, int(np.ceil(abs(v) * dt / 0.05)))
+        path = np.array([unicycle_step(self.pose, v, omega, dt * k / n) for k in range(1, n + 1)])
+        if not bool(self.world.free(path[:, 0], path[:, 1], self.robot.size / 2).all()):
             return False
         odo = simulate_odometry(np.stack([self.pose, new]), self.robot.noise, self.rng)
         # apply the noisy increment to the odometry pose (relative motion in the robot frame)
