@@ -5,7 +5,9 @@ The numerics run in a Rust core (``sfanav._core``); this package is the
 NumPy / scikit-learn-style front.
 """
 
+from . import sim
 from ._core import __version__, get_num_threads, set_num_threads
+from .dataset import Dataset, DatasetWriter, write_dataset
 from .modelfile import load
 from .network import Network, Rotation
 from .sfa import SFA, NotFittedError, Statistics, beta_values, expand, expanded_dim
@@ -13,6 +15,10 @@ from .sfa import SFA, NotFittedError, Statistics, beta_values, expand, expanded_
 __all__ = [
     "SFA",
     "Network",
+    "Dataset",
+    "DatasetWriter",
+    "write_dataset",
+    "sim",
     "Rotation",
     "Statistics",
     "NotFittedError",

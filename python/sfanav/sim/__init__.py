@@ -1,0 +1,47 @@
+"""The built-in garden simulator: pure NumPy, nothing to download.
+
+* :class:`World` (``world.py``): seeded garden generation (thesis 4.1), JSON.
+* :class:`Renderer`, :class:`PanoramicCamera`, :class:`OmniCamera`,
+  :class:`Lighting` (``render.py``): the ray caster.
+* :class:`Robot`, :class:`OdometryNoise`, :func:`simulate_odometry`,
+  :class:`Simulator` (``robot.py``): kinematics, camera mounts, odometry,
+  closed-loop stepping.
+* ``trajectories``: grid exploration, random lines, border loop, line
+  segments, random walks, velocity regions.
+* ``presets``: the thesis's scenes; :func:`simulate` writes a dataset.
+"""
+
+from . import presets, trajectories
+from .presets import PRESETS, simulate
+from .render import Lighting, OmniCamera, PanoramicCamera, Renderer, bearings, camera_from_dict, column_of_bearing
+from .robot import OdometryNoise, Robot, Simulator, simulate_odometry, unicycle_step, wrap_angle
+from .textures import Texture
+from .trajectories import Trajectory, VelocityRegions
+from .world import DynamicCylinder, Primitive, World, WorldObject
+
+__all__ = [
+    "World",
+    "WorldObject",
+    "Primitive",
+    "DynamicCylinder",
+    "Texture",
+    "Lighting",
+    "PanoramicCamera",
+    "OmniCamera",
+    "Renderer",
+    "Robot",
+    "OdometryNoise",
+    "Simulator",
+    "simulate_odometry",
+    "unicycle_step",
+    "wrap_angle",
+    "Trajectory",
+    "VelocityRegions",
+    "trajectories",
+    "presets",
+    "PRESETS",
+    "simulate",
+    "bearings",
+    "column_of_bearing",
+    "camera_from_dict",
+]

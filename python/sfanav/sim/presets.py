@@ -1,0 +1,313 @@
+"""Scene presets: the thesis's simulator experiments as ready-made datasets.
+
+``simulate(name, out, seed)`` generates a preset's world, drives its runs
+and writes one sfanav dataset (see :mod:`sfanav.dataset`) with a ``run``
+column (``train``, ``test``, ...), the world as ``world.json`` and the whole
+recipe in ``metadata.json``. ``sfanav simulate --preset NAME --out DIR`` is
+the same from the command line.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+
+from . import trajectories as T
+from .render import Lighting, OmniCamera, PanoramicCamera, Renderer
+from .robot import Robot
+from .world import World
+
+LightFn = Callable[[float], Lighting]  # progress in [0, 1] -> lighting
+
+
+@dataclass
+class RunSpec:
+    """One run of a preset: a trajectory under one or more conditions.
+
+    ``trajectory(world, rng)`` builds the trajectory; ``conditions`` maps a
+    condition name to a Lighting, or to a function of the run's progress
+    (0 .. 1) for light that changes during the run. With several conditions
+    the same trajectory is driven once per condition."""
+
+    name: str
+    trajectory: Callable[[World, np.random.Generator], T.Trajectory]
+    conditions: dict[str, Lighting | LightFn] = field(default_factory=lambda: {"default": Lighting()})
+
+
+@dataclass
+class Preset:
+    name: str
+    section: str
+    description: str
+    world: dict[str, Any]
+    camera: Callable[[], PanoramicCamera | OmniCamera]
+    runs: Callable[[np.random.Generator], list[RunSpec]]
+    robot: Callable[[], Robot] = Robot
+    dynamic: bool = False  # a cylinder circling the area once during the first run
+
+
+def _garden(area: tuple[float, float], n_objects: int = 30, **kw: Any) -> dict[str, Any]:
+    return {"area": area, "n_objects": n_objects, **kw}
+
+
+def _ramp(lo: float, hi: float) -> LightFn:
+    return lambda s: Lighting(intensity=lo + (hi - lo) * s)
+
+
+def _random_conditions(rng: np.random.Generator, n: int) -> dict[str, Lighting]:
+    """Thesis 6.2.2: lamp energy in [3, 8], its y in [-10, 10], red channel in
+    [0.5, 1]; here intensity = energy / 5, the sun azimuth towards a lamp at
+    (10, y), red tint as drawn."""
+    out = {}
+    for i in range(n):
+        energy = rng.uniform(3, 8)
+        ly = rng.uniform(-10, 10)
+        red = rng.uniform(0.5, 1.0)
+        out[f"c{i}"] = Lighting(intensity=float(energy / 5), tint=(float(red), 1.0, 1.0),
+                                sun_azimuth_deg=float(np.degrees(np.arctan2(ly, 10.0))),
+                                sun_elevation_deg=float(rng.uniform(25, 60)))
+    return out
+
+
+PRESETS: dict[str, Preset] = {}
+
+
+def _add(p: Preset) -> None:
+    PRESETS[p.name] = p
+
+
+_add(Preset(
+    "demo", "-",
+    "small 8x8 m garden: a grid exploration (~480 frames) and a 150-frame test walk, 600x60 panoramas; quick to make",
+    _garden((8.0, 8.0), 22, depth=8.0),
+    lambda: PanoramicCamera(600, 60),
+    lambda rng: [RunSpec("train", lambda w, r: T.grid(w.area, spacing=1.5, step=0.25)),
+                 RunSpec("test", lambda w, r: T.random_walk(w.area, 150, rng=r, world=w))],
+))
+_add(Preset(
+    "thesis-5.1.1-grid", "5.1.1",
+    "30x30 m garden seen on regular grids walked as serpentines: 624 training (26x24) and 196 test (14x14) "
+    "350x40 RGB panoramas",
+    _garden((30.0, 30.0), 40, depth=12.0),
+    lambda: PanoramicCamera(350, 40),
+    lambda rng: [RunSpec("train", lambda w, r: T.grid_points(w.area, 26, 24, margin=0.5)),
+                 RunSpec("test", lambda w, r: T.grid_points(w.area, 14, 14, margin=2.0))],
+))
+
+
+def _garden_runs(lines: bool) -> Callable[[np.random.Generator], list[RunSpec]]:
+    def runs(rng: np.random.Generator) -> list[RunSpec]:
+        out = [RunSpec("train", lambda w, r: T.grid(w.area, spacing=1.6, step=0.26)),
+               RunSpec("test", lambda w, r: T.random_walk(w.area, 1090, rng=r, world=w))]
+        if lines:
+            out.append(RunSpec("lines", lambda w, r: T.line_segments(w.area, 10, 8.0, 0.2, rng=r, world=w)))
+        return out
+    return runs
+
+
+_add(Preset(
+    "thesis-5.3-garden", "5.3, 5.4",
+    "16x18 m garden with ArUco markers 136 and 144: grid exploration with crossings (~1780 frames), a 1090-frame "
+    "test walk and 10 straight lines >= 8 m sampled every 0.2 m (metric learning), 600x60 RGB panoramas",
+    _garden((16.0, 18.0), 30, markers=(136, 144)),
+    lambda: PanoramicCamera(600, 60),
+    _garden_runs(lines=True),
+))
+_add(Preset(
+    "thesis-6.2.1-static", "6.2.1",
+    "the 16x18 m garden seen by a 500x500 omnidirectional camera (unwarp to 600x55): grid exploration "
+    "(~1780 frames), 1090-frame test walk",
+    _garden((16.0, 18.0), 30, markers=(136, 144)),
+    lambda: OmniCamera(500),
+    _garden_runs(lines=False),
+))
+_add(Preset(
+    "thesis-6.2.1-light", "6.2.1",
+    "as thesis-6.2.1-static, but the light intensity rises from 0.4 to 1.4 through the training run "
+    "(condition 'light-ramp'); the test run is lit normally",
+    _garden((16.0, 18.0), 30, markers=(136, 144)),
+    lambda: OmniCamera(500),
+    lambda rng: [RunSpec("train", lambda w, r: T.grid(w.area, spacing=1.6, step=0.26),
+                         {"light-ramp": _ramp(0.4, 1.4)}),
+                 RunSpec("test", lambda w, r: T.random_walk(w.area, 1090, rng=r, world=w))],
+))
+_add(Preset(
+    "thesis-6.2.1-dynamic", "6.2.1",
+    "as thesis-6.2.1-static, plus a textured cylinder circling the area once during the training run",
+    _garden((16.0, 18.0), 30, markers=(136, 144)),
+    lambda: OmniCamera(500),
+    _garden_runs(lines=False),
+    dynamic=True,
+))
+_add(Preset(
+    "thesis-6.2.2-conditions", "6.2.2",
+    "15x15 m garden, a border-wire loop of 279 frames driven under 10 random lighting conditions "
+    "(intensity, sun direction, red tint), 600x60 RGB panoramas",
+    _garden((15.0, 15.0), 30),
+    lambda: PanoramicCamera(600, 60),
+    lambda rng: [RunSpec("loop", lambda w, r: T.border_loop(w.area, 279, rng=r), _random_conditions(rng, 10))],
+))
+_add(Preset(
+    "thesis-7.1-open", "7.1.2",
+    "18x22 m open field, two cameras on the robot's left and right (0.7 m apart), 5000 frames along random "
+    "straight lines at 0.2 m per step, 600x60 RGB panoramas per camera",
+    _garden((18.0, 22.0), 36),
+    lambda: PanoramicCamera(600, 60),
+    lambda rng: [RunSpec("train", lambda w, r: T.random_lines(w.area, 5000, 0.2, margin=0.35, world=w, rng=r))],
+    robot=lambda: Robot.two_cameras(0.7),
+))
+_add(Preset(
+    "thesis-7.1-obstacle", "7.1.2",
+    "as thesis-7.1-open with a v-shaped wall in the area; the random lines bounce off it",
+    _garden((18.0, 22.0), 36, obstacles=("v-wall",)),
+    lambda: PanoramicCamera(600, 60),
+    lambda rng: [RunSpec("train", lambda w, r: T.random_lines(w.area, 5000, 0.2, margin=0.35, world=w, rng=r))],
+    robot=lambda: Robot.two_cameras(0.7),
+))
+_add(Preset(
+    "thesis-7.2.2-halfplane", "7.2.2",
+    "18x22 m field, random lines (5000 frames) moving 3x farther per step in the right half (x > 0) than in the "
+    "left; column speed_factor; 600x60 panoramas",
+    _garden((18.0, 22.0), 36),
+    lambda: PanoramicCamera(600, 60),
+    lambda rng: [RunSpec("train", lambda w, r: T.random_lines(
+        w.area, 5000, 0.2, margin=0.35, world=w, rng=r, speed=T.VelocityRegions.half_plane(0.0, "left", 3.0)))],
+))
+_add(Preset(
+    "thesis-7.2.2-disc", "7.2.2",
+    "18x22 m field, random lines (5000 frames), 3x slower inside a central disc of radius 5 m; column "
+    "speed_factor; 600x60 panoramas",
+    _garden((18.0, 22.0), 36),
+    lambda: PanoramicCamera(600, 60),
+    lambda rng: [RunSpec("train", lambda w, r: T.random_lines(
+        w.area, 5000, 0.2, margin=0.35, world=w, rng=r, speed=T.VelocityRegions.disc(5.0, factor=3.0)))],
+))
+
+
+def describe() -> str:
+    """One line per preset: name, thesis section, description."""
+    width = max(len(n) for n in PRESETS)
+    return "\n".join(f"{n:<{width}}  [{p.section}] {p.description}" for n, p in PRESETS.items())
+
+
+def get(name: str) -> Preset:
+    if name not in PRESETS:
+        raise ValueError(f"unknown preset {name!r}; available: {', '.join(PRESETS)}")
+    return PRESETS[name]
+
+
+def _streams(seed: int) -> list[np.random.Generator]:
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
+    return [np.random.default_rng(s) for s in np.random.SeedSequence(int(seed)).spawn(4)]
+
+
+def preset_world(preset: str, seed: int = 0) -> World:
+    """The world that ``simulate(preset, ..., seed)`` uses (without the
+    dynamic object, whose period depends on the run)."""
+    p = get(preset)
+    return World.generate(int(_streams(seed)[0].integers(2**31)), **p.world)
+
+
+def simulate(preset: str, out: str | os.PathLike, seed: int = 0, *, max_frames: int | None = None,
+             camera: PanoramicCamera | OmniCamera | None = None, overwrite: bool = False,
+             progress: bool = True) -> Any:
+    """Generates a preset's dataset.
+
+    Parameters
+    ----------
+    preset : str
+        A name from ``PRESETS`` (``describe()`` lists them).
+    out : path
+        Directory of the dataset (must not exist or be empty, unless ``overwrite``).
+    seed : int
+        Seeds the world, the trajectories, the lighting conditions and the
+        odometry noise: same seed, same dataset.
+    max_frames : int, optional
+        Keep only the first frames of every run (quick looks, tests).
+    camera : PanoramicCamera or OmniCamera, optional
+        Replaces the preset's camera.
+    progress : bool
+        A progress bar (tqdm).
+
+    Returns
+    -------
+    sfanav.Dataset
+    """
+    from ..dataset import Dataset, DatasetWriter
+
+    p = get(preset)
+    if max_frames is not None and (isinstance(max_frames, bool) or not isinstance(max_frames, (int, np.integer))
+                                   or max_frames < 1):
+        raise ValueError(f"max_frames must be a positive integer, got {max_frames!r}")
+    s_world, s_runs, s_traj, s_odo = _streams(seed)
+    world = World.generate(int(s_world.integers(2**31)), **p.world)
+    cam = camera or p.camera()
+    robot = p.robot()
+    runs = p.runs(s_runs)
+    trajs = []
+    for r in runs:
+        tr = r.trajectory(world, s_traj)
+        if max_frames is not None:
+            tr = tr[: int(max_frames)]
+        trajs.append(tr)
+    if p.dynamic:
+        world.add_dynamic({"period": float(max(trajs[0].times[-1], 1e-3)), "radius": 0.6, "height": 2.5},
+                          seed=int(s_world.integers(2**31)))
+    renderer = Renderer(world)
+    total = sum(len(t) * len(r.conditions) * len(robot.cameras) for t, r in zip(trajs, runs))
+    extra_cols = sorted({k for t in trajs for k in t.extra})
+    meta = {
+        "source": "sfanav.sim",
+        "preset": p.name,
+        "thesis_section": p.section,
+        "description": p.description,
+        "seed": int(seed),
+        "max_frames": max_frames,
+        "camera": cam.to_dict(),
+        "robot": robot.to_dict(),
+        "world": "world.json",
+        "runs": {},
+    }
+    bar = None
+    if progress:
+        from tqdm.auto import tqdm
+
+        bar = tqdm(total=total, desc=f"simulate {p.name}", unit="img")
+    frame = 0
+    with DatasetWriter(out, meta, overwrite=overwrite, extra_columns=extra_cols) as w:
+        for r, tr in zip(runs, trajs):
+            info = {"frames": len(tr), "conditions": {}}
+            for cond, light in r.conditions.items():
+                info["conditions"][cond] = light.to_dict() if isinstance(light, Lighting) else {
+                    "changing": True, "start": light(0.0).to_dict(), "end": light(1.0).to_dict()}
+                frame = _record(w, renderer, robot, cam, tr, run=r.name, condition=cond, lighting=light,
+                                frame0=frame, rng=s_odo, bar=bar)
+            meta["runs"][r.name] = info
+        w.metadata.update(meta)
+        world.save(Path(out) / "world.json")
+    if bar is not None:
+        bar.close()
+    return Dataset(out)
+
+
+def _record(w: Any, renderer: Renderer, robot: Robot, cam: Any, tr: T.Trajectory, *, run: str, condition: str,
+            lighting: Lighting | LightFn, frame0: int, rng: np.random.Generator, bar: Any) -> int:
+    cam_poses = robot.camera_poses(tr.poses)
+    odo = robot.camera_poses(robot.odometry(tr.poses, rng))
+    n = len(tr)
+    for k in range(n):
+        light = lighting if isinstance(lighting, Lighting) else lighting(k / max(n - 1, 1))
+        extra = {c: v[k].item() for c, v in tr.extra.items()}
+        for name in robot.cameras:
+            img = renderer.render(cam, cam_poses[name][k], float(tr.times[k]), light)
+            w.add(img, frame=frame0 + k, timestamp=float(tr.times[k]), pose=cam_poses[name][k],
+                  odometry=odo[name][k], camera=name, condition=condition, run=run, **extra)
+            if bar is not None:
+                bar.update(1)
+    return frame0 + n

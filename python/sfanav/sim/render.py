@@ -1,0 +1,995 @@
+"""Ray casting of garden worlds: panoramic and omnidirectional cameras.
+
+One ray caster serves both cameras. It renders a separable ray grid, a
+vector of azimuths (one per column, relative to the camera's heading) times a
+vector of elevations (one per row), from a camera at ``mount_height`` metres
+above the ground:
+
+* sky and distant tree line above the horizon (at infinity: no parallax);
+* the ground below it, hit at horizontal distance ``h / tan(-elevation)``,
+  textured by a photographic lawn detail times a large-scale colour map,
+  mip-mapped by distance, with the shadows of the objects;
+* every object primitive (vertical cylinder, oriented box, ellipsoid),
+  intersected exactly within its screen bounding block; the nearest hit wins
+  (occlusion), so views change with position by true parallax.
+
+The :class:`PanoramicCamera` image *is* such a grid (360 degree cylindrical,
+equiangular rows). The :class:`OmniCamera` renders the grid on the polar
+samples of a curved mirror (one row per pixel of radius, one column per
+pixel of circumference) and resamples it into the donut image the mirror
+shows, with a blind central disc; :meth:`OmniCamera.unwarp` turns such an
+image back into a panorama.
+
+Angles: pose headings in radians (counter-clockwise from +x); camera fields
+of view and sun directions in degrees (their names say ``_deg``). Image
+convention: the middle column of a panorama looks straight ahead, the robot's
+left is left of the middle, and turning the robot left by ``2 pi k / W``
+radians rolls the panorama by ``k`` columns to the right (``np.roll(img, k,
+axis=1)``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Sequence
+
+import numpy as np
+
+from .textures import Pyramid, fractal_noise, make_texture, photo
+from .world import Primitive, World
+
+_LUMA = np.array([0.299, 0.587, 0.114], np.float32)
+FOG_DISTANCE = 250.0  # m; aerial perspective: far surfaces fade to the horizon colour
+
+
+@dataclass(frozen=True)
+class Lighting:
+    """A lighting condition.
+
+    Attributes
+    ----------
+    intensity : float
+        Overall light (1: a bright overcast-to-sunny day); scales every pixel.
+    tint : (R, G, B)
+        Colour of the light, multiplies the channels (e.g. red 0.5..1 as in
+        thesis 6.2.2).
+    sun_azimuth_deg, sun_elevation_deg : float
+        Sun direction in degrees (azimuth counter-clockwise from +x). Sides of
+        objects facing the sun are brighter; objects cast shadows on the ground.
+    ambient : float
+        Share of sky light that reaches every surface, in [0, 1].
+    shadows : bool
+        Ground shadows of the static objects.
+    """
+
+    intensity: float = 1.0
+    tint: tuple[float, float, float] = (1.0, 1.0, 1.0)
+    sun_azimuth_deg: float = 135.0
+    sun_elevation_deg: float = 40.0
+    ambient: float = 0.6
+    shadows: bool = True
+
+    def __post_init__(self) -> None:
+        if not (np.isfinite(self.intensity) and self.intensity >= 0):
+            raise ValueError(f"light intensity must be finite and >= 0, got {self.intensity}")
+        tint = tuple(float(t) for t in self.tint)
+        if len(tint) != 3 or min(tint) < 0:
+            raise ValueError(f"light tint must be three non-negative numbers, got {self.tint!r}")
+        object.__setattr__(self, "tint", tint)
+        if not 0 < self.sun_elevation_deg <= 90:
+            raise ValueError(f"sun_elevation_deg must be in (0, 90], got {self.sun_elevation_deg}")
+        if not 0 <= self.ambient <= 1:
+            raise ValueError(f"ambient must be in [0, 1], got {self.ambient}")
+
+    @property
+    def sun(self) -> np.ndarray:
+        """Unit vector towards the sun (x, y, z)."""
+        az, el = np.radians(self.sun_azimuth_deg), np.radians(self.sun_elevation_deg)
+        return np.array([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)])
+
+    @property
+    def rgb(self) -> np.ndarray:
+        return (self.intensity * np.asarray(self.tint)).astype(np.float32)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "intensity": self.intensity,
+            "tint": list(self.tint),
+            "sun_azimuth_deg": self.sun_azimuth_deg,
+            "sun_elevation_deg": self.sun_elevation_deg,
+            "ambient": self.ambient,
+            "shadows": self.shadows,
+        }
+
+
+# ------------------------------------------------------------------ cameras
+
+
+class _Grid:
+    """A separable ray grid: bearings (W,) relative to the heading (rad,
+    counter-clockwise), elevations (H,) strictly decreasing (rad)."""
+
+    def __init__(self, bearings: np.ndarray, elevations: np.ndarray, mount_height: float):
+        self.bearings = np.asarray(bearings, np.float64)
+        self.elev = np.asarray(elevations, np.float64)
+        if np.any(np.diff(self.elev) >= 0):
+            raise ValueError("ray grid elevations must decrease from the top row down")
+        self.h = float(mount_height)
+        self.tan = np.tan(self.elev)
+        self.W, self.H = len(self.bearings), len(self.elev)
+        self.pixel_angle = 2 * np.pi / self.W
+
+
+def _check_size(v: Any, name: str, lo: int = 2) -> int:
+    if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < lo:
+        raise ValueError(f"{name} must be an integer >= {lo}, got {v!r}")
+    return int(v)
+
+
+def _check_elevation(el: Sequence[float]) -> tuple[float, float]:
+    try:
+        lo, hi = (float(e) for e in el)
+    except (TypeError, ValueError):
+        raise ValueError(f"elevation_deg must be (lowest, highest) in degrees, got {el!r}") from None
+    if not -90 <= lo < hi <= 90:
+        raise ValueError(f"elevation_deg must satisfy -90 <= lowest < highest <= 90, got {el!r}")
+    return lo, hi
+
+
+class PanoramicCamera:
+    """A 360 degree cylindrical panorama camera.
+
+    Parameters
+    ----------
+    width, height : int
+        Image size in pixels; column ``j`` looks at bearing
+        ``-2 pi (j + 0.5 - width / 2) / width`` relative to the heading
+        (middle column ahead, left half = robot's left).
+    elevation_deg : (lowest, highest)
+        Vertical field of view in degrees; rows are equiangular, row 0 the
+        highest.
+    mount_height : float
+        Height of the camera above the ground (m).
+    rgb : bool
+        (H, W, 3) uint8 images if True, else (H, W) gray.
+    """
+
+    kind = "panorama"
+
+    def __init__(self, width: int = 600, height: int = 60, elevation_deg: Sequence[float] = (-30.0, 20.0),
+                 mount_height: float = 0.5, rgb: bool = True):
+        self.width = _check_size(width, "width", 8)
+        self.height = _check_size(height, "height", 1)
+        self.elevation_deg = _check_elevation(elevation_deg)
+        if not mount_height > 0:
+            raise ValueError(f"mount_height must be positive (m), got {mount_height}")
+        self.mount_height = float(mount_height)
+        self.rgb = bool(rgb)
+        lo, hi = np.radians(self.elevation_deg)
+        step = (hi - lo) / self.height
+        self.elevations = hi - (np.arange(self.height) + 0.5) * step
+        self.bearings = bearings(self.width)
+        self._grid = _Grid(self.bearings, self.elevations, self.mount_height)
+
+    @property
+    def shape(self) -> tuple[int, ...]:
+        return (self.height, self.width, 3) if self.rgb else (self.height, self.width)
+
+    def column_of_bearing(self, bearing: Any) -> np.ndarray:
+        """Fractional column of a bearing (rad, relative to the heading)."""
+        return column_of_bearing(bearing, self.width)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "type": self.kind,
+            "width": self.width,
+            "height": self.height,
+            "elevation_deg": list(self.elevation_deg),
+            "mount_height": self.mount_height,
+            "rgb": self.rgb,
+        }
+
+
+def bearings(width: int) -> np.ndarray:
+    """Bearing (rad, counter-clockwise from the heading) of each panorama column."""
+    return -2 * np.pi * (np.arange(width) + 0.5 - width / 2) / width
+
+
+def column_of_bearing(bearing: Any, width: int) -> np.ndarray:
+    """Fractional panorama column of a bearing (inverse of :func:`bearings`), in [-0.5, width - 0.5)."""
+    b = np.asarray(bearing, float)
+    return (width / 2 - 0.5 - np.angle(np.exp(1j * b)) * width / (2 * np.pi) + 0.5) % width - 0.5
+
+
+MIRRORS = ("spherical", "equiangular")
+
+
+class OmniCamera:
+    """A catadioptric camera: a camera looking up into a curved mirror.
+
+    The image is a donut of outer radius ``size / 2 - 1`` pixels: the
+    mirror's rim sees elevation ``elevation_deg[1]``, its inner edge sees
+    ``elevation_deg[0]``; inside is the blind disc where the mirror shows the
+    camera itself (black), outside the donut the image is black. The robot's
+    heading points up in the image and its left is left.
+
+    Mirror models (``rho`` = radius / outer radius):
+
+    * ``"spherical"``: a spherical mirror seen from far below; a ray hitting
+      it at incidence ``a`` leaves at elevation ``2 a - 90 deg``, and
+      ``rho = sin(a) / sin(a_max)`` with ``a_max`` set by the rim elevation.
+      Elevation resolution is densest near the rim (the horizon), as in real
+      mirrors.
+    * ``"equiangular"``: elevation linear in radius.
+
+    Parameters
+    ----------
+    size : int
+        Image width and height (pixels).
+    elevation_deg : (lowest, highest)
+        Elevations (degrees) at the inner and outer edge of the donut.
+    mirror : str
+        ``"spherical"`` or ``"equiangular"``.
+    mount_height : float
+        Height of the mirror's viewpoint above the ground (m).
+    rgb : bool
+        (size, size, 3) uint8 if True, else (size, size) gray.
+    """
+
+    kind = "omni"
+
+    def __init__(self, size: int = 500, elevation_deg: Sequence[float] = (-55.0, 20.0), mirror: str = "spherical",
+                 mount_height: float = 0.5, rgb: bool = True, inner_fraction: float = 0.25):
+        self.size = _check_size(size, "size", 16)
+        self.elevation_deg = _check_elevation(elevation_deg)
+        if mirror not in MIRRORS:
+            raise ValueError(f"unknown mirror {mirror!r}; available: {', '.join(MIRRORS)}")
+        self.mirror = mirror
+        if not mount_height > 0:
+            raise ValueError(f"mount_height must be positive (m), got {mount_height}")
+        self.mount_height = float(mount_height)
+        self.rgb = bool(rgb)
+        if not 0 <= inner_fraction < 1:
+            raise ValueError(f"inner_fraction must be in [0, 1), got {inner_fraction}")
+        self.outer_radius = self.size / 2 - 1.0
+        lo, hi = np.radians(self.elevation_deg)
+        if mirror == "spherical":
+            self._a_max = (hi + np.pi / 2) / 2
+            rho_in = np.sin((lo + np.pi / 2) / 2) / np.sin(self._a_max)
+        else:
+            rho_in = float(inner_fraction)
+        self.inner_radius = float(rho_in * self.outer_radius)
+        # polar ray grid: one row per pixel of radius (outer first), one column per pixel of circumference
+        n_rad = int(np.ceil(self.outer_radius - self.inner_radius)) + 2
+        radii = self.outer_radius + 0.5 - np.arange(n_rad)  # descending; first row just outside the rim
+        radii = np.clip(radii, self.inner_radius, self.outer_radius)
+        n_az = int(np.ceil(2 * np.pi * self.outer_radius / 8) * 8)
+        el = self.elevation_of_radius(radii)
+        el = el - np.arange(n_rad) * 1e-9  # strictly decreasing after clipping
+        self._grid = _Grid(bearings(n_az), el, self.mount_height)
+        self._maps = self._donut_maps()
+
+    @property
+    def shape(self) -> tuple[int, ...]:
+        return (self.size, self.size, 3) if self.rgb else (self.size, self.size)
+
+    def elevation_of_radius(self, r: Any) -> np.ndarray:
+        """Elevation (rad) seen at image radius ``r`` (pixels from the centre)."""
+        rho = np.asarray(r, float) / self.outer_radius
+        lo, hi = np.radians(self.elevation_deg)
+        if self.mirror == "spherical":
+            return 2 * np.arcsin(np.clip(rho * np.sin(self._a_max), -1, 1)) - np.pi / 2
+        rho_in = self.inner_radius / self.outer_radius
+        return lo + (rho - rho_in) / (1 - rho_in) * (hi - lo)
+
+    def radius_of_elevation(self, elevation: Any) -> np.ndarray:
+        """Image radius (pixels) that sees ``elevation`` (rad); inverse of
+        :meth:`elevation_of_radius`."""
+        e = np.asarray(elevation, float)
+        lo, hi = np.radians(self.elevation_deg)
+        if self.mirror == "spherical":
+            rho = np.sin((e + np.pi / 2) / 2) / np.sin(self._a_max)
+        else:
+            rho_in = self.inner_radius / self.outer_radius
+            rho = rho_in + (e - lo) / (hi - lo) * (1 - rho_in)
+        return rho * self.outer_radius
+
+    def _donut_maps(self) -> tuple[np.ndarray, np.ndarray]:
+        c = (self.size - 1) / 2
+        yy, xx = np.mgrid[0 : self.size, 0 : self.size].astype(np.float64)
+        dx, dy = xx - c, c - yy
+        r = np.hypot(dx, dy)
+        b = np.arctan2(-dx, dy)  # bearing: up = ahead, left = left
+        W = self._grid.W
+        col = column_of_bearing(b, W)
+        col = np.where(col < 0, col + W, col)  # [0, W): the grid is padded by one wrapped column
+        row = self.outer_radius + 0.5 - r
+        outside = (r > self.outer_radius + 0.5) | (r < self.inner_radius)
+        col[outside] = -10
+        row[outside] = -10
+        return col.astype(np.float32), row.astype(np.float32)
+
+    def _finish(self, grid_img: np.ndarray) -> np.ndarray:
+        import cv2
+
+        padded = np.concatenate([grid_img, grid_img[:, :1]], axis=1)
+        return cv2.remap(padded, self._maps[0], self._maps[1], cv2.INTER_LINEAR,
+                         borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+
+    def unwarp(self, image: np.ndarray, width: int = 600, height: int = 55,
+               elevation_deg: Sequence[float] | None = None) -> np.ndarray:
+        """Unwarps an omni image of this camera into a panorama.
+
+        Parameters
+        ----------
+        image : ndarray (size, size[, C])
+        width, height : int
+            Panorama size (thesis 6.2.1: 600 x 55).
+        elevation_deg : (lowest, highest), optional
+            Vertical field of the panorama in degrees; default the donut's.
+
+        Returns
+        -------
+        ndarray (height, width[, C]), same dtype: the same column and row
+        convention as :class:`PanoramicCamera`.
+        """
+        import cv2
+
+        img = np.asarray(image)
+        if img.shape[:2] != (self.size, self.size):
+            raise ValueError(f"omni image must be {self.size} x {self.size}, got shape {img.shape}")
+        pano = PanoramicCamera(_check_size(width, "width", 8), _check_size(height, "height", 1),
+                               elevation_deg or self.elevation_deg, self.mount_height, rgb=True)
+        r = self.radius_of_elevation(pano.elevations)[:, None]
+        b = pano.bearings[None, :]
+        c = (self.size - 1) / 2
+        mx = (c - r * np.sin(b)).astype(np.float32)
+        my = (c - r * np.cos(b)).astype(np.float32)
+        return cv2.remap(img, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "type": self.kind,
+            "size": self.size,
+            "elevation_deg": list(self.elevation_deg),
+            "mirror": self.mirror,
+            "mount_height": self.mount_height,
+            "rgb": self.rgb,
+            "inner_radius_px": self.inner_radius,
+            "outer_radius_px": self.outer_radius,
+        }
+
+
+Camera = PanoramicCamera | OmniCamera
+
+
+def camera_from_dict(d: dict[str, Any]) -> Camera:
+    """Rebuilds a camera from :meth:`to_dict` output."""
+    d = dict(d)
+    kind = d.pop("type", None)
+    d.pop("inner_radius_px", None)
+    d.pop("outer_radius_px", None)
+    if kind == "panorama":
+        return PanoramicCamera(**d)
+    if kind == "omni":
+        return OmniCamera(**d)
+    raise ValueError(f"unknown camera type {kind!r}; available: 'panorama', 'omni'")
+
+
+# ------------------------------------------------------------------ renderer
+
+
+SHAPE_CODE = {"ellipsoid": 0, "box": 1, "cylinder": 2}
+
+
+class _Atlas:
+    """Every texture's mip levels in one flat RGBA array (T, 4), with per
+    (texture, level) entries: offset, height, width and texels per metre."""
+
+    def __init__(self, pyramids: dict[str, Pyramid]):
+        self.index: dict[str, int] = {}
+        chunks, off, hs, ws, su, sv = [], [], [], [], [], []
+        base, nlev, texel, alpha = [], [], [], []
+        pos = 0
+        for tid, (name, pyr) in enumerate(pyramids.items()):
+            self.index[name] = tid
+            base.append(len(off))
+            nlev.append(len(pyr.levels))
+            texel.append(pyr.texel)
+            alpha.append(pyr.has_alpha)
+            for lv, (h, w) in zip(pyr.levels, pyr.shapes):
+                if lv.shape[1] == 3:
+                    lv = np.concatenate([lv, np.ones((len(lv), 1), np.float32)], axis=1)
+                chunks.append(lv[:, :4])
+                off.append(pos)
+                pos += h * w
+                hs.append(h)
+                ws.append(w)
+                su.append(w / pyr.tile[0])
+                sv.append(h / pyr.tile[1])
+        self.flat = np.concatenate(chunks).astype(np.float32) if chunks else np.zeros((1, 4), np.float32)
+        self._vflat = self.flat.view("V16").ravel()  # one 16-byte texel per element: fast gathers
+        self.off = np.array(off, np.int64)
+        self.h = np.array(hs, np.int64)
+        self.w = np.array(ws, np.int64)
+        self.su = np.array(su, np.float64)
+        self.sv = np.array(sv, np.float64)
+        self.base = np.array(base, np.int64)
+        self.nlev = np.array(nlev, np.int64)
+        self.texel = np.array(texel, np.float64)
+        self.alpha = np.array(alpha, bool)
+        self.pow2 = bool(np.all((self.w & (self.w - 1)) == 0) and np.all((self.h & (self.h - 1)) == 0))
+
+    def sample(self, entry: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """Wrapped nearest-texel lookup at surface coordinates in metres
+        (u along, v up). Returns (n, 4)."""
+        w, h = self.w[entry], self.h[entry]
+        if self.pow2:
+            iu = np.floor(u * self.su[entry]).astype(np.int64) & (w - 1)
+            iv = (-1 - np.floor(v * self.sv[entry]).astype(np.int64)) & (h - 1)
+        else:
+            iu = np.floor(u * self.su[entry]).astype(np.int64) % w
+            iv = (-1 - np.floor(v * self.sv[entry]).astype(np.int64)) % h
+        return self._vflat[self.off[entry] + iv * w + iu].view(np.float32).reshape(-1, 4)
+
+    def sample_stretched(self, entry: np.ndarray, fu: np.ndarray, fv: np.ndarray) -> np.ndarray:
+        """Lookup at tile fractions fu, fv in [0, 1] (v up), clamped."""
+        w, h = self.w[entry], self.h[entry]
+        iu = np.clip((fu * w).astype(np.int64), 0, w - 1)
+        iv = np.clip(((1.0 - fv) * h).astype(np.int64), 0, h - 1)
+        return self._vflat[self.off[entry] + iv * w + iu].view(np.float32).reshape(-1, 4)
+
+
+class _Prims:
+    """Primitive parameters as arrays, grouped by shape (ellipsoids, boxes,
+    cylinders), for the per-frame vector work."""
+
+    FIELDS = ("code", "x", "y", "z0", "z1", "r", "L2", "W2", "cos", "sin", "tex", "front", "rb")
+
+    def __init__(self, prims: list[Primitive], atlas: _Atlas):
+        order = sorted(range(len(prims)), key=lambda i: SHAPE_CODE[prims[i].shape])
+        self.list = [prims[i] for i in order]
+        L = self.list
+        self.code = np.array([SHAPE_CODE[p.shape] for p in L], np.int64)
+        self.x = np.array([p.x for p in L], float)
+        self.y = np.array([p.y for p in L], float)
+        self.z0 = np.array([p.z0 for p in L], float)
+        self.z1 = np.array([p.z1 for p in L], float)
+        self.r = np.array([p.radius for p in L], float)
+        self.L2 = np.array([p.length / 2 for p in L], float)
+        self.W2 = np.array([p.width / 2 for p in L], float)
+        self.cos = np.array([np.cos(p.yaw) for p in L], float)
+        self.sin = np.array([np.sin(p.yaw) for p in L], float)
+        self.tex = np.array([atlas.index[p.texture] for p in L], np.int64)
+        self.front = np.array([atlas.index[p.front] if p.front else -1 for p in L], np.int64)
+        self.rb = np.array([p.bound_radius for p in L], float)
+
+    def plus(self, extra: "_Prims") -> "_Prims":
+        """These primitives followed by ``extra`` (cylinders only, so the
+        shape groups stay contiguous)."""
+        assert not len(extra.code) or (extra.code == SHAPE_CODE["cylinder"]).all()
+        out = object.__new__(_Prims)
+        out.list = self.list + extra.list
+        for f in self.FIELDS:
+            setattr(out, f, np.concatenate([getattr(self, f), getattr(extra, f)]))
+        return out
+
+
+class Renderer:
+    """Renders a :class:`~sfanav.sim.world.World` for any camera.
+
+    Building a renderer synthesises the textures and the ground and sky maps
+    (about a second for a garden); each lighting condition's sun direction
+    adds a shadow map (cached). Rendering is then pure NumPy.
+
+    Parameters
+    ----------
+    world : World
+    lighting : Lighting
+        Default lighting of :meth:`render`.
+    """
+
+    def __init__(self, world: World, lighting: Lighting | None = None):
+        if not isinstance(world, World):
+            raise TypeError(f"Renderer needs a World, got {type(world).__name__}")
+        self.world = world
+        self.lighting = lighting or Lighting()
+        self.pyramids = {name: Pyramid(make_texture(spec), spec.tile) for name, spec in world.textures.items()}
+        self._atlas = _Atlas(self.pyramids)
+        self._static = _Prims([p for o in world.objects for p in o.parts], self._atlas)
+        self._build_ground()
+        self._build_sky()
+        self._ground_cache: dict[tuple, np.ndarray] = {}
+        self._grid_cache: dict[int, dict[str, Any]] = {}
+
+    # ------------------------------------------------------------ ground
+
+    def _build_ground(self) -> None:
+        g = self.world.ground
+        rng = np.random.default_rng(g.seed)
+        det = photo(g.detail) if g.detail in ("grass", "gravel", "brick") else None
+        if det is None:  # pragma: no cover - GroundSpec.detail is a photo name
+            raise ValueError(f"ground detail must be a photographic texture, got {g.detail!r}")
+        det = 1.0 + g.contrast * (det - 1.0)
+        self._detail = Pyramid(det[..., None], (g.detail_tile, g.detail_tile))
+        # flat concatenation of the detail pyramid for one gather per pixel
+        self._det_flat = np.concatenate([lv[:, 0] for lv in self._detail.levels]).astype(np.float32)
+        sizes = np.array([s[0] for s in self._detail.shapes])
+        self._det_off = np.concatenate([[0], np.cumsum(sizes**2)[:-1]]).astype(np.int64)
+        self._det_n = sizes.astype(np.int64)
+        # colour map: power-of-two cells covering the world, periodic beyond
+        extent = 2 * (self.world.outer_radius + 4.0)
+        n = int(2 ** np.ceil(np.log2(extent / g.resolution)))
+        self._gmap_n = n
+        self._gmap_res = g.resolution
+        self._gmap_origin = -n * g.resolution / 2
+        big = fractal_noise((n, n), rng, beta=3.0, fmin=2.0)
+        mid = fractal_noise((n, n), rng, beta=2.2, fmin=8.0)
+        mix = np.clip(0.5 + 0.35 * big + 0.15 * mid, 0, 1)[..., None]
+        col = mix * np.asarray(g.green, np.float32) + (1 - mix) * np.asarray(g.green2, np.float32)
+        patches = fractal_noise((n, n), rng, beta=3.0, fmin=3.0)
+        thr = np.quantile(patches, 1 - g.dry_fraction) if g.dry_fraction > 0 else np.inf
+        dry = np.clip((patches - thr) / 0.3, 0, 1)[..., None]
+        col = (1 - dry) * col + dry * np.asarray(g.dry, np.float32)
+        self._gmap = col.astype(np.float32)  # (n, n, 3), row = y index, col = x index
+
+    def _shadow_map(self, light: Lighting) -> np.ndarray:
+        """Fraction of direct sun blocked, (n, n) in [0, 1], on the ground map grid."""
+        import cv2
+
+        n, res, o = self._gmap_n, self._gmap_res, self._gmap_origin
+        shadow = np.zeros((n, n), np.float32)
+        if not light.shadows:
+            return shadow
+        s = light.sun
+        horiz = np.hypot(s[0], s[1])
+        cot = horiz / s[2]
+        sx, sy = (s[0] / horiz, s[1] / horiz) if horiz > 1e-9 else (1.0, 0.0)
+        P = self._static
+        for i, p in enumerate(P.list):
+            top = max(P.z1[i], 0.0)
+            reach = top * cot
+            # bounding box of the shadow: footprint swept away from the sun
+            xs = [p.x - P.rb[i], p.x + P.rb[i], p.x - P.rb[i] - sx * reach, p.x + P.rb[i] - sx * reach]
+            ys = [p.y - P.rb[i], p.y + P.rb[i], p.y - P.rb[i] - sy * reach, p.y + P.rb[i] - sy * reach]
+            i0, i1 = int((min(xs) - o) / res) - 1, int((max(xs) - o) / res) + 2
+            j0, j1 = int((min(ys) - o) / res) - 1, int((max(ys) - o) / res) + 2
+            i0, j0 = max(i0, 0), max(j0, 0)
+            i1, j1 = min(i1, n), min(j1, n)
+            if i1 <= i0 or j1 <= j0:
+                continue
+            gx = o + (np.arange(i0, i1) + 0.5) * res
+            gy = o + (np.arange(j0, j1) + 0.5) * res
+            X, Y = np.meshgrid(gx, gy)
+            # ray from the ground point towards the sun, horizontal direction (sx, sy), rise tan(el)
+            d = _hit_distance(p, X - p.x, Y - p.y, sx, sy, s[2] / horiz if horiz > 1e-9 else 1e9)
+            shadow[j0:j1, i0:i1] = np.maximum(shadow[j0:j1, i0:i1], np.isfinite(d).astype(np.float32))
+        k = max(3, int(0.25 / res) | 1)
+        return cv2.GaussianBlur(shadow, (k, k), 0)
+
+    def _lit_ground(self, light: Lighting) -> np.ndarray:
+        key = (light.sun_azimuth_deg, light.sun_elevation_deg, light.ambient, light.shadows)
+        lit = self._ground_cache.get(key)
+        if lit is None:
+            s = light.sun
+            direct = (1 - light.ambient) * max(s[2], 0.0) / np.sin(np.radians(50.0))
+            shade = light.ambient + direct * (1.0 - self._shadow_map(light))
+            # two copies: with shadows, and without for ground so far away that the
+            # periodic map would repeat the shadows of the objects
+            nn = self._gmap_n * self._gmap_n
+            lit = np.ones((2 * nn, 4), np.float32)
+            lit[:nn, :3] = (self._gmap * shade[..., None]).reshape(-1, 3)
+            lit[nn:, :3] = (self._gmap * (light.ambient + direct)).reshape(-1, 3)
+            lit = lit.view("V16").ravel()
+            if len(self._ground_cache) > 32:
+                self._ground_cache.clear()
+            self._ground_cache[key] = lit
+        return lit
+
+    # ------------------------------------------------------------ sky
+
+    def _build_sky(self) -> None:
+        sk = self.world.sky
+        rng = np.random.default_rng(sk.seed)
+        n_az, n_el = 2048, 180  # 0.5 degree rows from the horizon to the zenith
+        self._sky_n_az = n_az
+        el = (np.arange(n_el) + 0.5) / n_el * (np.pi / 2)
+        t = np.sqrt(np.sin(el))[:, None, None]
+        base = (1 - t) * np.asarray(sk.horizon, np.float32) + t * np.asarray(sk.zenith, np.float32)
+        base = np.broadcast_to(base, (n_el, n_az, 3)).astype(np.float32)
+        clouds = fractal_noise((n_el * 2, n_az), rng, beta=3.4, fmin=3.0, aspect=2.0)[:n_el]
+        thr = np.quantile(clouds, 1 - sk.cloud_cover) if sk.cloud_cover > 0 else np.inf
+        cover = np.clip((clouds - thr) / 0.6, 0, 1) ** 0.7
+        cover *= np.clip(el / np.radians(3.0), 0, 1)[:, None]  # thin out at the horizon
+        # brighter tops, grey bellies
+        shade = 0.97 - 0.2 * np.clip(clouds - thr - 0.6, 0, 1.5) / 1.5
+        cloud_col = shade[..., None] * np.ones(3, np.float32)
+        sky = base * (1 - cover[..., None]) + cloud_col * cover[..., None]
+        # distant tree line / hills at infinity
+        prof = fractal_noise((1, n_az), rng, beta=1.8, fmin=1.0)[0]
+        lo, hi = np.radians(sk.treeline_deg)
+        prof = lo + (hi - lo) * (prof - prof.min()) / max(prof.max() - prof.min(), 1e-9)
+        tex = 1.0 + 0.25 * fractal_noise((n_el, n_az), rng, beta=1.2)
+        tree = (np.asarray(sk.treeline, np.float32)[None, None, :] * tex[..., None]).astype(np.float32)
+        below = el[:, None] < prof[None, :]
+        sky = np.where(below[..., None], tree, sky)
+        self._sky = sky.astype(np.float32)
+        self._sky_el = el
+        self._horizon_rgb = np.asarray(sk.horizon, np.float32)
+        self._horizon_rgba = np.append(self._horizon_rgb, np.float32(1.0))
+
+    # ------------------------------------------------------------ per-grid data
+
+    def _grid_data(self, grid: _Grid) -> dict[str, Any]:
+        key = id(grid)
+        gd = self._grid_cache.get(key)
+        if gd is not None and gd["grid"] is grid:
+            return gd
+        gd = {"grid": grid}
+        sky_rows = np.nonzero(grid.elev >= 0)[0]
+        gnd_rows = np.nonzero(grid.elev < 0)[0]
+        gd["sky_rows"] = slice(int(sky_rows[0]), int(sky_rows[-1]) + 1) if len(sky_rows) else slice(0, 0)
+        gd["gnd_rows"] = slice(int(gnd_rows[0]), int(gnd_rows[-1]) + 1) if len(gnd_rows) else slice(0, 0)
+        if len(sky_rows):
+            k = np.clip(np.searchsorted(self._sky_el, grid.elev[sky_rows]), 0, len(self._sky_el) - 1)
+            panel = np.ones((len(k), self._sky_n_az, 4), np.float32)
+            panel[..., :3] = self._sky[k]
+            gd["sky_panel"] = panel.view("V16")[..., 0]  # (Hs, n_az) of 16-byte RGBA texels
+        if len(gnd_rows):
+            t = grid.tan[gnd_rows]
+            d = grid.h / -t  # horizontal distance of the ground hit, per row
+            # texel footprint: the larger of the radial and tangential pixel extents
+            de = np.abs(np.gradient(grid.elev))[gnd_rows] if grid.H > 1 else np.full(len(gnd_rows), 0.01)
+            foot = np.maximum(d * d / grid.h * de, d * grid.pixel_angle)
+            lev = np.clip(np.log2(np.maximum(foot / self._detail.texel, 1.0)).astype(int), 0,
+                          len(self._det_n) - 1)
+            n_l = self._det_n[lev]
+            gd["gnd_d"] = d
+            gd["gnd_d_col"] = d[:, None].astype(np.float64)
+            gd["det_inv"] = (n_l / self._detail.tile[0])[:, None].astype(np.float64)
+            gd["det_mask"] = (n_l - 1)[:, None]
+            gd["det_n"] = n_l[:, None]
+            gd["det_off"] = self._det_off[lev][:, None]
+            fog = 1.0 - np.exp(-d / FOG_DISTANCE)
+            gd["gnd_fog"] = fog[:, None, None].astype(np.float32)
+            half_period = self._gmap_n * self._gmap_res / 2
+            far = d > half_period - self.world.outer_radius - 1.0
+            gd["gnd_map_off"] = np.where(far, self._gmap_n * self._gmap_n, 0)[:, None].astype(np.int64)
+            gd["depth_init"] = np.concatenate(
+                [np.full(len(sky_rows), np.inf), d]
+            )[:, None] * np.ones((1, grid.W))
+        else:
+            gd["depth_init"] = np.full((grid.H, grid.W), np.inf)
+        gd["neg_elev"] = -grid.elev
+        if len(self._grid_cache) > 16:
+            self._grid_cache.clear()
+        self._grid_cache[key] = gd
+        return gd
+
+    # ------------------------------------------------------------ rendering
+
+    def render(self, camera: Camera, pose: Sequence[float], time: float = 0.0,
+               lighting: Lighting | None = None) -> np.ndarray:
+        """Renders one image.
+
+        Parameters
+        ----------
+        camera : PanoramicCamera or OmniCamera
+        pose : (x, y, heading)
+            Camera position (m) and heading (rad).
+        time : float
+            Seconds, for the dynamic objects.
+        lighting : Lighting, optional
+            Default: the renderer's.
+
+        Returns
+        -------
+        ndarray uint8, ``camera.shape``.
+        """
+        if not isinstance(camera, (PanoramicCamera, OmniCamera)):
+            raise TypeError(f"camera must be a PanoramicCamera or OmniCamera, got {type(camera).__name__}")
+        x, y, heading = _pose3(pose)
+        light = lighting or self.lighting
+        img = self._render_grid(camera._grid, x, y, heading, time, light)
+        if isinstance(camera, OmniCamera):
+            img = camera._finish(img)
+        return _to_uint8(img, camera.rgb, light.rgb)
+
+    def _render_grid(self, grid: _Grid, x: float, y: float, heading: float, time: float,
+                     light: Lighting) -> np.ndarray:
+        """Float32 image (H, W, 4) of a ray grid, before the light's intensity
+        and tint; channel 3 is padding (see :meth:`render`)."""
+        gd = self._grid_data(grid)
+        H, W, h = grid.H, grid.W, grid.h
+        phi = heading + grid.bearings
+        ux, uy = np.cos(phi), np.sin(phi)
+        out = np.empty((H, W, 4), np.float32)
+        depth = gd["depth_init"].copy()
+        # sky
+        sr = gd["sky_rows"]
+        if sr.stop > sr.start:
+            k = (np.mod(phi, 2 * np.pi) * (self._sky_n_az / (2 * np.pi))).astype(np.int64) % self._sky_n_az
+            out[sr] = np.take(gd["sky_panel"], k, axis=1).view(np.float32).reshape(sr.stop - sr.start, W, 4)
+        # ground
+        gr = gd["gnd_rows"]
+        if gr.stop > gr.start:
+            d = gd["gnd_d_col"]
+            X = x + d * ux
+            Y = y + d * uy
+            inv = gd["det_inv"]
+            iu = np.floor(X * inv).astype(np.int64) & gd["det_mask"]
+            iv = np.floor(Y * inv).astype(np.int64) & gd["det_mask"]
+            det = self._det_flat[gd["det_off"] + iv * gd["det_n"] + iu]
+            n, res, o = self._gmap_n, self._gmap_res, self._gmap_origin
+            gi = (np.floor((X - o) / res).astype(np.int64) & (n - 1)) + (
+                np.floor((Y - o) / res).astype(np.int64) & (n - 1)) * n + gd["gnd_map_off"]
+            col = self._lit_ground(light)[gi].view(np.float32).reshape(gi.shape + (4,)) * det[..., None]
+            fog = gd["gnd_fog"]
+            col += fog * (self._horizon_rgba - col)
+            out[gr] = col
+        # objects
+        P = self._static
+        if self.world.dynamic:
+            P = P.plus(_Prims([dd.primitive_at(time) for dd in self.world.dynamic], self._atlas))
+        self._draw(P, gd, grid, x, y, heading, ux, uy, out, depth, light)
+        return out
+
+    def _draw(self, P: _Prims, gd: dict[str, Any], grid: _Grid, cx: float, cy: float, heading: float,
+              ux: np.ndarray, uy: np.ndarray, out: np.ndarray, depth: np.ndarray, light: Lighting) -> None:
+        """Draws every primitive at once: candidate pixels are the union of
+        the primitives' screen bounding blocks, intersected exactly in one
+        vector pass per shape; the nearest hit per pixel wins."""
+        n = len(P.code)
+        if n == 0:
+            return
+        W, h = grid.W, grid.h
+        atlas = self._atlas
+        # --- per primitive: screen block
+        qx, qy = P.x - cx, P.y - cy
+        rho2 = qx * qx + qy * qy
+        rho = np.sqrt(rho2)
+        half = np.arcsin(np.clip(P.rb / np.maximum(rho, 1e-9), 0.0, 1.0))
+        jc = column_of_bearing(np.arctan2(qy, qx) - heading, W)
+        hw = half * (W / (2 * np.pi))
+        near = np.maximum(rho - P.rb, 0.05)
+        far = rho + P.rb
+        z0r, z1r = P.z0 - h, P.z1 - h
+        e_hi = np.arctan2(z1r, np.where(z1r > 0, near, far))
+        e_lo = np.arctan2(z0r, np.where(z0r < 0, near, far))
+        r0 = np.searchsorted(gd["neg_elev"], -e_hi, "left")
+        r1 = np.searchsorted(gd["neg_elev"], -e_lo, "right")
+        c0 = np.floor(jc - hw).astype(np.int64)
+        c1 = np.ceil(jc + hw).astype(np.int64) + 1
+        full = (rho <= P.rb) | (c1 - c0 >= W)
+        c0 = np.where(full, 0, c0)
+        c1 = np.where(full, W, c1)
+        nc = c1 - c0
+        cnt = np.maximum(r1 - r0, 0) * nc
+        total = int(cnt.sum())
+        if total == 0:
+            return
+        # --- candidate pixels
+        pid = np.repeat(np.arange(n), cnt)
+        local = np.arange(total) - np.repeat(np.cumsum(cnt) - cnt, cnt)
+        ncp = nc[pid]
+        row = r0[pid] + local // ncp
+        col = (c0[pid] + local % ncp) % W
+        pix = row * W + col
+        base = depth.reshape(-1)
+        keep = near[pid] < base[pix]  # cannot beat a nearer ground hit
+        pid, row, col, pix = pid[keep], row[keep], col[keep], pix[keep]
+        t = grid.tan[row]
+        vx, vy = ux[col], uy[col]
+        d = np.full(len(pid), np.inf)
+        face = np.zeros(len(pid), np.int8)
+        bounds = np.searchsorted(pid, np.searchsorted(P.code, [0, 1, 2, 3]))
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            # ellipsoids
+            s, e = bounds[0], bounds[1]
+            if e > s:
+                p, tt = pid[s:e], t[s:e]
+                r2 = P.r * P.r
+                rz = 0.5 * (P.z1 - P.z0)
+                zc = 0.5 * (P.z0 + P.z1) - h
+                ir2, irz2 = (1.0 / np.where(r2 > 0, r2, 1.0))[p], (1.0 / (rz * rz))[p]
+                zcp = zc[p]
+                a = qx[p] * vx[s:e] + qy[p] * vy[s:e]
+                A = ir2 + tt * tt * irz2
+                B = -2.0 * (a * ir2 + tt * zcp * irz2)
+                C = (rho2 / np.where(r2 > 0, r2, 1.0) - 1.0 + zc * zc / (rz * rz))[p]
+                disc = B * B - 4.0 * A * C
+                dd = (-B - np.sqrt(disc)) / (2.0 * A)
+                d[s:e] = np.where((disc >= 0) & (dd > 0), dd, np.inf)
+            # boxes and cylinders: an interval [din, dout] in the horizontal plane, then heights
+            for code in (1, 2):
+                s, e = bounds[code], bounds[code + 1]
+                if e <= s:
+                    continue
+                p, tt = pid[s:e], t[s:e]
+                if code == 2:
+                    a = qx[p] * vx[s:e] + qy[p] * vy[s:e]
+                    disc = (P.r * P.r - rho2)[p] + a * a
+                    sq = np.sqrt(disc)
+                    din, dout = a - sq, a + sq
+                    valid = disc > 0
+                    fc = np.zeros(e - s, np.int8)
+                else:
+                    cs, sn = P.cos, P.sin
+                    ox, oy = (-(cs * qx + sn * qy))[p], (-(-sn * qx + cs * qy))[p]
+                    wx = cs[p] * vx[s:e] + sn[p] * vy[s:e]
+                    wy = -sn[p] * vx[s:e] + cs[p] * vy[s:e]
+                    L2, W2 = P.L2[p], P.W2[p]
+                    tx1, tx2 = (-L2 - ox) / wx, (L2 - ox) / wx
+                    ty1, ty2 = (-W2 - oy) / wy, (W2 - oy) / wy
+                    txn, tyn = np.minimum(tx1, tx2), np.minimum(ty1, ty2)
+                    din = np.maximum(txn, tyn)
+                    dout = np.minimum(np.maximum(tx1, tx2), np.maximum(ty1, ty2))
+                    valid = (din < dout) & (dout > 0)
+                    # faces: 0 = +x, 1 = -x, 2 = +y, 3 = -y (the "front")
+                    fc = np.where(txn > tyn, np.where(wx < 0, 0, 1), np.where(wy < 0, 2, 3)).astype(np.int8)
+                din = np.maximum(din, 0.0)
+                zin = din * tt
+                lo, hi = z0r[p], z1r[p]
+                side = valid & (zin >= lo) & (zin <= hi)
+                dc = np.where(tt < 0, hi, lo) / tt
+                cap = (valid & ~side & (dc >= din) & (dc <= dout)
+                       & (((tt < 0) & (zin > hi)) | ((tt > 0) & (zin < lo))))
+                d[s:e] = np.where(side, din, np.where(cap, dc, np.inf))
+                face[s:e] = np.where(cap, 4, fc)
+            foot = rho * grid.pixel_angle  # metres per pixel at the primitive
+            level = np.floor(np.log2(np.maximum(foot / atlas.texel[P.tex], 1.0))).astype(np.int64)
+            ftex = np.maximum(P.front, 0)
+            flevel = np.floor(np.log2(np.maximum(foot / atlas.texel[ftex], 1.0))).astype(np.int64)
+            level = np.stack([np.minimum(level, atlas.nlev[P.tex] - 1), np.minimum(flevel, atlas.nlev[ftex] - 1)])
+            # transparent texels (fence gaps) let the ray through
+            if atlas.alpha[P.tex].any():
+                m = np.nonzero(atlas.alpha[P.tex][pid] & np.isfinite(d))[0]
+                if len(m):
+                    rgba, _ = self._surface(P, m, pid, d, face, t, vx, vy, qx, qy, h, level, bounds)
+                    d[m[rgba[:, 3] < 0.5]] = np.inf
+            # depth test: nearest hit per pixel
+            cand = np.nonzero(d < base[pix])[0]
+            if not len(cand):
+                return
+            buf = base.copy()
+            np.minimum.at(buf, pix[cand], d[cand])
+            win = cand[d[cand] <= buf[pix[cand]]]
+            rgba, nrm = self._surface(P, win, pid, d, face, t, vx, vy, qx, qy, h, level, bounds)
+            sun = light.sun
+            norm = np.sqrt((nrm * nrm).sum(axis=1))
+            lam = np.maximum((nrm @ sun) / np.maximum(norm, 1e-12), 0.0)
+            shade = (light.ambient + (1 - light.ambient) / np.sin(np.radians(50.0)) * lam).astype(np.float32)
+            rgba *= shade[:, None]
+            fog = (1.0 - np.exp(-rho[pid[win]] / FOG_DISTANCE)).astype(np.float32)[:, None]
+            rgba += fog * (self._horizon_rgba - rgba)
+        out.reshape(-1, 4)[pix[win]] = rgba
+        base[pix[win]] = d[win]
+
+    def _surface(self, P: _Prims, idx: np.ndarray, pid: np.ndarray, d: np.ndarray, face: np.ndarray,
+                 t: np.ndarray, vx: np.ndarray, vy: np.ndarray, qx: np.ndarray, qy: np.ndarray, h: float,
+                 level: np.ndarray, bounds: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Texture colour (n, 4) and surface normal (n, 3) at the hits of
+        candidates ``idx`` (sorted)."""
+        atlas = self._atlas
+        p = pid[idx]
+        dw = d[idx]
+        tt = t[idx]
+        hx = dw * vx[idx] - qx[p]  # hit point relative to the primitive's centre
+        hy = dw * vy[idx] - qy[p]
+        hz = dw * tt  # height above the camera
+        z = hz + h
+        nrm = np.zeros((len(idx), 3))
+        u = np.empty(len(idx))
+        v = z.copy()
+        fc = face[idx]
+        entry = atlas.base[P.tex[p]] + level[0, p]
+        g = np.searchsorted(idx, bounds)
+        # ellipsoids
+        s, e = g[0], g[1]
+        if e > s:
+            pp = p[s:e]
+            r = P.r[pp]
+            rz = 0.5 * (P.z1 - P.z0)[pp]
+            zc = 0.5 * (P.z0 + P.z1)[pp] - h
+            nrm[s:e, 0] = hx[s:e] / (r * r)
+            nrm[s:e, 1] = hy[s:e] / (r * r)
+            nrm[s:e, 2] = (hz[s:e] - zc) / (rz * rz)
+            u[s:e] = np.arctan2(hy[s:e], hx[s:e]) * r
+        # boxes
+        s, e = g[1], g[2]
+        if e > s:
+            pp = p[s:e]
+            cs, sn = P.cos[pp], P.sin[pp]
+            lx = cs * hx[s:e] + sn * hy[s:e]
+            ly = -sn * hx[s:e] + cs * hy[s:e]
+            f = fc[s:e]
+            nlx = np.where(f == 0, 1.0, np.where(f == 1, -1.0, 0.0))
+            nly = np.where(f == 2, 1.0, np.where(f == 3, -1.0, 0.0))
+            nrm[s:e, 0] = cs * nlx - sn * nly
+            nrm[s:e, 1] = sn * nlx + cs * nly
+            u[s:e] = np.where(f <= 1, ly, lx)
+        # cylinders
+        s, e = g[2], g[3]
+        if e > s:
+            pp = p[s:e]
+            nrm[s:e, 0] = hx[s:e]
+            nrm[s:e, 1] = hy[s:e]
+            u[s:e] = np.arctan2(hy[s:e], hx[s:e]) * P.r[pp]
+        # caps (tops and bottoms of boxes and cylinders): ground-plane texture coordinates
+        cap = fc == 4
+        if cap.any():
+            nrm[cap] = 0.0
+            nrm[cap, 2] = -np.sign(tt[cap])
+            u[cap] = hx[cap] + P.x[p[cap]]
+            v[cap] = hy[cap] + P.y[p[cap]]
+        rgba = atlas.sample(entry, u, v)
+        fr = (fc == 3) & (P.front[p] >= 0)
+        if fr.any():
+            pf = p[fr]
+            cs, sn = P.cos[pf], P.sin[pf]
+            lx = cs * hx[fr] + sn * hy[fr]
+            fu = (lx + P.L2[pf]) / (2 * P.L2[pf])
+            fv = (z[fr] - P.z0[pf]) / (P.z1[pf] - P.z0[pf])
+            fe = atlas.base[P.front[pf]] + level[1, pf]
+            rgba[fr] = atlas.sample_stretched(fe, fu, fv)
+        return rgba, nrm
+
+
+def _hit_distance(p: Primitive, ox: np.ndarray, oy: np.ndarray, dx: float, dy: float, rise: float) -> np.ndarray:
+    """Horizontal distance at which rays from ground points (ox, oy relative
+    to the primitive centre, z = 0) going in horizontal direction (dx, dy)
+    with slope ``rise`` (dz per horizontal metre) first meet the primitive;
+    inf where they miss. Used for shadow maps."""
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        if p.shape == "ellipsoid":
+            r, rz = p.radius, 0.5 * (p.z1 - p.z0)
+            zc = 0.5 * (p.z0 + p.z1)
+            # (ox + d dx)^2/r^2 + (oy + d dy)^2/r^2 + (d rise - zc)^2/rz^2 = 1
+            A = 1.0 / r**2 + rise**2 / rz**2
+            B = 2 * (ox * dx + oy * dy) / r**2 - 2 * rise * zc / rz**2
+            C = (ox**2 + oy**2) / r**2 + zc**2 / rz**2 - 1
+            disc = B * B - 4 * A * C
+            d = (-B - np.sqrt(disc)) / (2 * A)
+            d2 = (-B + np.sqrt(disc)) / (2 * A)
+            return np.where((disc >= 0) & (d2 > 0), np.maximum(d, 0), np.inf)
+        if p.shape == "cylinder":
+            a = -(ox * dx + oy * dy)
+            disc = p.radius**2 - (ox**2 + oy**2 - a * a)
+            s = np.sqrt(disc)
+            din, dout = a - s, a + s
+            valid = (disc > 0) & (dout > 0)
+        else:
+            c, sn = np.cos(p.yaw), np.sin(p.yaw)
+            lx, ly = c * ox + sn * oy, -sn * ox + c * oy
+            vx, vy = c * dx + sn * dy, -sn * dx + c * dy
+            L2, W2 = p.length / 2, p.width / 2
+            tx1, tx2 = (-L2 - lx) / vx, (L2 - lx) / vx
+            ty1, ty2 = (-W2 - ly) / vy, (W2 - ly) / vy
+            din = np.maximum(np.minimum(tx1, tx2), np.minimum(ty1, ty2))
+            dout = np.minimum(np.maximum(tx1, tx2), np.maximum(ty1, ty2))
+            valid = (din < dout) & (dout > 0)
+        din = np.maximum(din, 0)
+        # heights of the ray over [din, dout]: [din*rise, dout*rise]; hit if it overlaps [z0, z1]
+        hit = valid & (din * rise <= p.z1) & (dout * rise >= p.z0)
+        return np.where(hit, din, np.inf)
+
+
+def _pose3(pose: Sequence[float]) -> tuple[float, float, float]:
+    try:
+        x, y, th = (float(v) for v in pose)
+    except (TypeError, ValueError):
+        raise ValueError(f"pose must be (x, y, heading) in metres and radians, got {pose!r}") from None
+    if not all(np.isfinite([x, y, th])):
+        raise ValueError(f"pose must be finite, got {pose!r}")
+    return x, y, th
+
+
+def _to_uint8(img: np.ndarray, rgb: bool, light: np.ndarray) -> np.ndarray:
+    """(H, W, 4) float32 before the light -> uint8 (H, W, 3) or gray (H, W)."""
+    gain = (255.0 * light).astype(np.float32)
+    if rgb:
+        out = img[..., :3] * gain
+    else:
+        out = img[..., :3] @ (_LUMA * gain)
+    out += 0.5
+    return np.clip(out, 0, 255, out=out).astype(np.uint8)
