@@ -196,9 +196,12 @@ def worker_train(args: argparse.Namespace) -> dict:
     net = new_network(sfanav, args.preset, args.precision)
     gc.collect()
     t0 = time.perf_counter()
-    net.fit(images, sfanav.Rotation(step=args.step, window=1.0), fast=True, cache=not args.no_cache,
+    r0 = resource.getrusage(resource.RUSAGE_SELF)
+    net.fit(images, sfanav.Rotation(step=args.step, window=1.0), fast=True,
+            cache=False if args.no_cache else "auto", cache_limit=args.cache_limit,
             batch_size=args.batch_size, progress=False)
     t_fit = time.perf_counter() - t0
+    r1 = resource.getrusage(resource.RUSAGE_SELF)
     peak = maxrss_gb()
     if args._model:
         net.save(args._model)
@@ -208,6 +211,9 @@ def worker_train(args: argparse.Namespace) -> dict:
         "threads": sfanav.get_num_threads(),
         "precision": net.config_.get("mixed_precision"),
         "t_fit": t_fit,
+        # process CPU seconds of the fit: steadier than wall time on a shared machine
+        "cpu_fit": (r1.ru_utime + r1.ru_stime) - (r0.ru_utime + r0.ru_stime),
+        "cache_plan": [list(p) for p in getattr(net, "cache_plan_", [])],
         "rss_start_gb": rss_start,
         "rss_after_data_gb": rss_data,
         "images_gb": images.nbytes / 1e9,
@@ -354,7 +360,7 @@ def run_worker(kind: str, python: str, args: argparse.Namespace, extra: list[str
         cmd = [python, os.path.abspath(__file__), "--_worker", kind, "--_out", str(out),
                "--seed", str(args.seed), "--step", str(args.step), *extra]
         if kind == "train":
-            cmd += ["--precision", args.precision] + (["--no-cache"] if args.no_cache else [])
+            cmd += ["--precision", args.precision, "--cache-limit", repr(args.cache_limit)] + (["--no-cache"] if args.no_cache else [])
         err = None
         try:
             proc = subprocess.run(cmd, env=env, timeout=timeout)
@@ -385,7 +391,7 @@ def time_fit(sfanav, preset: str, images: np.ndarray, args: argparse.Namespace, 
         net = new_network(sfanav, preset, args.precision)
         gc.collect()
         t0 = time.perf_counter()
-        net.fit(images, sfanav.Rotation(step=args.step, window=1.0), fast=fast, cache=not args.no_cache,
+        net.fit(images, sfanav.Rotation(step=args.step, window=1.0), fast=fast, cache=False if args.no_cache else "auto", cache_limit=args.cache_limit,
                 batch_size=args.batch_size, progress=False)
         times.append(time.perf_counter() - t0)
     return min(times), times, net
@@ -455,6 +461,10 @@ def main_bench(args: argparse.Namespace) -> int:
             r52["extrapolated_minutes_at_5900"] = r52["t_fit"] / n * TARGET_IMAGES / 60.0
             r52["training_working_set_gb"] = working
             res["train_52"] = r52
+            plan = ", ".join(f"layer {l} {'cached' if keep else 'streamed'} ({b / 1e9:.2f} GB)"
+                             for l, keep, b in r52.get("cache_plan", []))
+            print(f"[5.2] field cache plan (cache=\"auto\", limit {args.cache_limit / 1e9:.2f} GB): {plan}; "
+                  f"fit CPU time {1e3 * r52['cpu_fit'] / n:.1f} ms/image", flush=True)
             print(f"[5.2] fit {n} images: {r52['t_fit']:.2f} s, {r52['ms_per_image']:.1f} ms/image "
                   f"({r52['threads']} threads, {'mixed' if r52['precision'] else 'double'} precision, "
                   f"cache {'off' if args.no_cache else 'on'}); peak RSS {r52['peak_rss_gb']:.2f} GB "
@@ -726,6 +736,8 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--precision", choices=["preset", "double", "mixed"], default="preset",
                    help="network precision override; 'preset' keeps the preset file's setting (default: %(default)s)")
     p.add_argument("--no-cache", action="store_true", help="fit(cache=False): stream the images in every pass")
+    p.add_argument("--cache-limit", type=float, default=1e9,
+                   help="Network.fit cache_limit in bytes under cache=\"auto\" (default: %(default)g)")
     p.add_argument("--mem-small", type=int, default=None,
                    help="images of a second, smaller thesis-5.2 fit in a fresh process, for the per-image slope of "
                         "the training working set (default n52 // 8 if n52 >= 256, else none; 0 = skip; without it "

@@ -163,6 +163,40 @@ def test_fast_equals_naive():
     np.testing.assert_allclose(fast.transform(imgs[:5]), naive.transform(imgs[:5]), rtol=1e-7, atol=1e-9)
 
 
+def three_layer_config():
+    return {
+        "input": {"width": 48, "height": 8, "channels": 1},
+        "layers": [
+            {"rf": [6, 4], "stride": [3, 2], "out": 6},
+            {"rf": [5, 2], "stride": [2, 1], "out": 5},
+            {"rf": "full", "out": 3},
+        ],
+    }
+
+
+def test_cache_policy_streams_what_does_not_fit_and_changes_nothing():
+    xy, heading = walk(40, seed=4)
+    noise = np.random.default_rng(6).standard_normal((40, 8, 48)) * 0.05
+    imgs = np.stack([render(p, h) for p, h in zip(xy, heading)]) + noise
+    rot = sfanav.Rotation(step=3)
+    cached = sfanav.Network(three_layer_config()).fit(imgs, rot, cache=True, progress=False)
+    assert [keep for _, keep, _ in cached.cache_plan_] == [True, True]
+    # A budget between the two fields' sizes: layer 2's input (the larger
+    # layer-1 field) is streamed, layer 3's input is cached.
+    sizes = [b for _, _, b in cached.cache_plan_]
+    assert sizes[0] > sizes[1] > 0
+    auto = sfanav.Network(three_layer_config()).fit(imgs, rot, cache="auto", cache_limit=(sizes[0] + sizes[1]) / 2, progress=False)
+    assert [keep for _, keep, _ in auto.cache_plan_] == [False, True]
+    none = sfanav.Network(three_layer_config()).fit(imgs, rot, cache="auto", cache_limit=0, progress=False)
+    assert [keep for _, keep, _ in none.cache_plan_] == [False, False]
+    for net in (auto, none):
+        np.testing.assert_allclose(net.delta_values_, cached.delta_values_, rtol=1e-9)
+    with pytest.raises(ValueError, match="cache must be"):
+        sfanav.Network(three_layer_config()).fit(imgs, rot, cache="sometimes", progress=False)
+    with pytest.raises(ValueError, match="cache_limit"):
+        sfanav.Network(three_layer_config()).fit(imgs, rot, cache_limit=-1, progress=False)
+
+
 def test_outputs_are_orientation_invariant_and_encode_position(world):
     net, imgs, xy, timgs, txy = world
     y = net.transform(timgs)

@@ -34,6 +34,26 @@ else:  # pragma: no cover
 PRESETS = ("thesis-5.1", "thesis-5.2", "thesis-5.3")
 
 
+DEFAULT_CACHE_LIMIT = 1e9  # bytes of cached lower-layer fields under cache="auto"
+
+
+def _field_bytes(spec: dict[str, Any], layer: int, step: int, period: int) -> int:
+    """Bytes of one image's periodic field of ``layer`` (0-based) on the
+    fast path (``spec`` as from :func:`resolve_config`): RF rows x distinct
+    column offsets x outputs x value size."""
+    mw, mh = spec["width"], spec["height"]
+    t = 1
+    for lspec in spec["layers"][: layer + 1]:
+        (rw, rh), (sw, sh) = lspec["rf"], lspec["stride"]
+        n_w, n_h = (mw - rw) // sw + 1, (mh - rh) // sh + 1
+        mw, mh = n_w, n_h
+        t *= sw
+    views = -(-period // step)
+    offsets = {(k * step + j * t) % period for k in range(views) for j in range(n_w)}
+    size = 4 if spec.get("mixed_precision", False) else 8
+    return n_h * len(offsets) * spec["layers"][layer]["n_out"] * size
+
+
 @dataclass(frozen=True)
 class Rotation:
     """Simulated rotation (thesis 3.4.1): every training panorama is shown as
@@ -364,7 +384,8 @@ class Network:
         rotation: Rotation | None = None,
         *,
         fast: bool = True,
-        cache: bool = True,
+        cache: bool | str = "auto",
+        cache_limit: float = DEFAULT_CACHE_LIMIT,
         batch_size: int = 16,
         progress: bool = True,
     ) -> "Network":
@@ -382,12 +403,18 @@ class Network:
             Exact fast training (periodic fields with multiplicities); False
             runs the naive per-view path (same result, slower). Without
             weight sharing the naive path is always used.
-        cache : bool, default True
+        cache : bool or "auto", default "auto"
             Keep each image's periodic field of the layer below in memory
-            (float32 for mixed-precision networks) so later passes and layers
-            need neither the images nor recomputation: for Table 5.2 about
-            260 KB per image at the peak (layer 1's field). False streams
-            the images in every pass and recomputes lower layers.
+            (float32 for mixed-precision networks, else float64) so later
+            passes and layers need neither recomputation of the lower layers
+            nor, above the first layer, the images. True caches every
+            layer's input field; False streams the images in every pass and
+            recomputes the lower layers; "auto" caches a layer's input field
+            when all images' fields fit in ``cache_limit`` bytes (for Table
+            5.2 the fields take, per image, 259 / 101 / 38 KB in mixed
+            precision for layers 2 / 3 / 4, twice that in double).
+        cache_limit : float, default 1e9
+            Byte budget of the field cache under ``cache="auto"``.
         batch_size : int
             Images converted and processed per Rust call.
         progress : bool
@@ -410,12 +437,27 @@ class Network:
                 f"the network's input is {v} px wide, but a {rotation.window:.0%} window of "
                 f"{period}-px panoramas is {expect_v} px: build the network for that width"
             )
+        if not (isinstance(cache, bool) or cache == "auto"):
+            raise ValueError(f'cache must be True, False or "auto", got {cache!r}')
+        if not (cache_limit >= 0):
+            raise ValueError(f"cache_limit must be a non-negative number of bytes, got {cache_limit!r}")
         total = len(images) if hasattr(images, "__len__") and not callable(images) else None
         net = _core.Network(self.config_)
-        trainer = _core.LayerTrainer(net, 0, rotation.step, period, fast, cache)
+        trainer = _core.LayerTrainer(net, 0, rotation.step, period, fast, False)
+        n_images = 0
+        self.cache_plan_ = []
         for layer in range(net.n_layers):
             if layer > 0:
-                trainer = trainer.next_layer(net)
+                # Whether the next trainer keeps the fields of this layer.
+                field = _field_bytes(self.config_, layer - 1, rotation.step, period)
+                keep = cache if isinstance(cache, bool) else field * n_images <= cache_limit
+                self.cache_plan_.append((layer + 1, bool(keep), field * n_images))
+                if layer == 1:
+                    trainer = trainer.next_layer(net)
+                    trainer.set_caching(keep)
+                else:
+                    trainer.set_caching(keep)
+                    trainer = trainer.next_layer(net)
             n_passes = trainer.n_passes(net)
             for p in range(n_passes):
                 desc = f"layer {layer + 1}/{net.n_layers} pass {p + 1}/{n_passes}"
@@ -428,15 +470,19 @@ class Network:
                 else:
                     bar = _progress(progress, total, desc)
                     try:
+                        seen = 0
                         for batch in batches():
                             batch = _as_batch(batch)
                             self._check_images(batch, period, training=True)
                             trainer.feed(net, batch)
+                            seen += len(batch)
                             if bar is not None:
                                 bar.update(len(batch))
                     finally:
                         if bar is not None:
                             bar.close()
+                    if layer == 0 and p == 0:
+                        n_images = seen
                 trainer.end_pass(net)
         self._net = net
         self._period = period

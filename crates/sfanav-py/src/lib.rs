@@ -765,6 +765,13 @@ impl PyLayerTrainer {
         Ok(self.get()?.path() == Path::Fast)
     }
 
+    /// Whether this trainer keeps the lower layer's fields (built in its
+    /// first pass) and hands them on with next_layer(); off drops them.
+    fn set_caching(&mut self, on: bool) -> PyResult<()> {
+        self.get()?.set_caching(on);
+        Ok(())
+    }
+
     #[getter]
     fn has_cache(&mut self) -> PyResult<bool> {
         Ok(self.get()?.has_cache())
