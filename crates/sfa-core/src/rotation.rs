@@ -21,6 +21,23 @@
 //!   offset's multiplicity as a sample weight and each `(o, o + step)` pair's
 //!   multiplicity as a pair weight. Both paths give the same node weights up
 //!   to rounding.
+//!
+//! # The first layer, without gathering patches
+//! The first layer's patches are windows of the periodic image itself, so
+//! two structured shortcuts apply (private module `periodic.rs`):
+//! * pass 1 (the linear reduction's statistics): the weighted second moments
+//!   of all periodic patches come from lag products of the image's columns
+//!   (and of its difference image for the derivatives), with a few
+//!   correction rows for offsets whose multiplicity falls short of the
+//!   maximum; used where a cost model says it pays;
+//! * pass 2 and every later use of the layer's field: the solved linear
+//!   stage is one matrix product per RF row over an overlapping strided
+//!   view of the columns.
+//!
+//! # Memory
+//! Per image, a layer's training rows are built, fed and dropped; the
+//! trainer can cache each image's field of the layer below (`set_caching`)
+//! so later passes and layers neither recompute it nor read the images.
 
 use crate::error::{Result, SfaError};
 use crate::network::{check_images, LayerGeometry, Network};
@@ -97,7 +114,7 @@ struct ImageGraph {
     /// Per series: row of the last view.
     last: Vec<usize>,
     /// Statistics formed without rows (first layer, lag products; see
-    /// [`crate::periodic`]); the rows are then only the first and last
+    /// `periodic.rs`); the rows are then only the first and last
     /// views, as weight-0 pair ends.
     moments: Option<Accumulator>,
 }
@@ -430,7 +447,7 @@ pub struct LayerTrainer {
     /// Reference point of the first layer's lag-product statistics in this
     /// pass (set from the pass's first image).
     reference: Option<Vec<f64>>,
-    /// Whether the first layer may use lag products ([`crate::periodic`]).
+    /// Whether the first layer may use lag products (`periodic.rs`).
     lag_products: bool,
     /// Images whose statistics came from lag products.
     lag_images: usize,
@@ -476,7 +493,7 @@ impl LayerTrainer {
     }
 
     /// Lets the first layer form its linear statistics from lag products
-    /// ([`crate::periodic`]; on by default, used where it pays). Off: one
+    /// (`periodic.rs`; on by default, used where it pays). Off: one
     /// outer product per patch. Results agree up to rounding.
     pub fn set_lag_products(&mut self, on: bool) {
         self.lag_products = on;

@@ -344,7 +344,7 @@ impl Accumulator {
         Ok(a)
     }
 
-    /// `scale x (lattice sums) - self`, for [`crate::periodic`]: `self` holds
+    /// `scale x (lattice sums) - self`, for `periodic.rs`: `self` holds
     /// correction rows relative to a zero reference in coordinates already
     /// centred at `shift`; `sxx` / `sdd` (lower triangles used) and the sums
     /// are the scaled lattice moments in the same coordinates. Reuses the
