@@ -472,7 +472,7 @@ def plot_fusion(
             ax.plot(E[ok, 0], E[ok, 1], ".", color="tab:red", ms=2.5, label=lab)
         else:
             ax.plot(E[ok, 0], E[ok, 1], "-", color="tab:red", lw=1.0, label=lab)
-        ax.set_aspect("equal", adjustable="datalim")
+        ax.set_aspect("equal", adjustable="box")
         ax.set_title(f"{lab}: MED {err:.3f} m")
         ax.set_xlabel("x [m]")
         ax.legend(loc="best", fontsize="small")

@@ -546,10 +546,11 @@ class MetricLearner:
 
         t0 = time.perf_counter()
         inits = self._inits(pb, lines, rng, n_init)
+        vp = _VarPro(pb) if self.solver == "varpro" else None  # one factorisation for all starts
         best = None
         costs, total = [], 0
         for a0, O0, W0 in inits:
-            res = self._solve(pb, a0, O0, W0, lr, mom, max_iter, tol, snaps_at, progress)
+            res = self._solve(pb, vp, a0, O0, W0, lr, mom, max_iter, tol, snaps_at, progress)
             costs.append(res["cost"])
             total += res["n_iter"]
             if best is None or res["cost"] < best["cost"]:
@@ -619,7 +620,7 @@ class MetricLearner:
             out.append((a0, O0, W0))
         return out
 
-    def _solve(self, pb, a0, O0, W0, lr, mom, max_iter, tol, snaps_at, progress):
+    def _solve(self, pb, vp, a0, O0, W0, lr, mom, max_iter, tol, snaps_at, progress):
         snaps: dict[int, dict[str, np.ndarray]] = {}
 
         def snap(it, a, O, W):
@@ -687,7 +688,6 @@ class MetricLearner:
 
                 x0 = base[free]
             else:
-                vp = _VarPro(pb)
                 freea = pb.free_a
                 abase = a0.copy()
 

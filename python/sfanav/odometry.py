@@ -262,9 +262,10 @@ def segment_lines(
         Metres per second. None: a quarter of the median speed of the steps
         that move at all (scale-free; stops and turns on the spot fall below).
     max_turn_rate : float or None
-        Radians per second. None: 0.2 rad per metre driven at the median
-        speed (``0.2 * median speed``), i.e. arcs tighter than a 5 m radius
-        are not straight.
+        Radians per second. None: the larger of 0.2 rad per metre driven at
+        the median speed (arcs tighter than a 5 m radius are not straight)
+        and 4 times the median turn rate of the steps at or above
+        ``min_speed`` (the heading noise of straight driving).
     min_points : int, default 10
         Fewest samples of a line.
     min_length : float, default 0.5
@@ -296,7 +297,12 @@ def segment_lines(
         raise ValueError("no line found: the odometry never moves")
     med = float(np.median(moving))
     v_min = 0.25 * med if min_speed is None else check_nonneg_float(min_speed, "min_speed")
-    w_max = 0.2 * med if max_turn_rate is None else check_nonneg_float(max_turn_rate, "max_turn_rate")
+    if max_turn_rate is None:
+        # 0.2 rad per metre at the median speed, or 4x the median turn rate of the moving steps
+        # (the heading noise of straight driving), whichever is larger
+        w_max = max(0.2 * med, 4.0 * float(np.median(rate[speed >= v_min])))
+    else:
+        w_max = check_nonneg_float(max_turn_rate, "max_turn_rate")
     min_points = check_int(min_points, "min_points", minimum=2)
     min_length = check_nonneg_float(min_length, "min_length")
     straight = (speed >= v_min) & (rate <= w_max)
