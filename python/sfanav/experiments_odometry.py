@@ -332,6 +332,9 @@ def experiment_5_3_2(
         s0 = np.asarray(start_pose, dtype=np.float64)
     else:
         raise ValueError(f"truth_test must have shape (T, 3) or (T, 2), got {T.shape}")
+    train_given = [a is not None for a in (sfa_train, odometry_train, truth_train)]
+    if any(train_given) and not all(train_given):
+        raise ValueError("give all of sfa_train, odometry_train and truth_train, or none")
     xy = T[:, :2]
     g = dict(grid or {})
     odo_xy = OdometryEKF.dead_reckoning(odo, s0)[:, :2]
@@ -341,7 +344,7 @@ def experiment_5_3_2(
     sfa_med, odo_med, ekf_med = med(Z, xy), med(odo_xy, xy), med(ekf_xy, xy)
     gated = OdometryEKF(**gs.best_params, gate_probability=gate_probability)
     gated_xy = gated.run(odo, Z, s0)[:, :2]
-    improvement = 100.0 * (sfa_med - ekf_med) / sfa_med
+    improvement = 100.0 * (sfa_med - ekf_med) / sfa_med if sfa_med > 0 else float("nan")
     bp = gs.best_params
     values: dict[str, Any] = {
         "SFA MED (m)": sfa_med,
@@ -354,9 +357,7 @@ def experiment_5_3_2(
     }
     details: dict[str, Any] = {"grid_search": gs, "grid_search_nll": gs_nll, "ekf_poses": gs.best_poses,
                                "odometry_xy": odo_xy, "gated": gated}
-    if sfa_train is not None or odometry_train is not None or truth_train is not None:
-        if sfa_train is None or odometry_train is None or truth_train is None:
-            raise ValueError("give all of sfa_train, odometry_train and truth_train, or none")
+    if all(train_given):
         Ttr = as_matrix(truth_train, "truth_train")
         if Ttr.shape[1] != 3:
             raise ValueError(f"truth_train must be poses of shape (N, 3), got {Ttr.shape}")
@@ -464,7 +465,8 @@ def make_line_problem(*, n_lines: int = 10, area: tuple[float, float] = (16.0, 1
                       min_length: float = 8.0, noise: float = 0.02, random_state: int | None = 0) -> dict[str, Any]:
     """Synthetic thesis 5.3.1-sim data: ``n_lines`` straight lines of random
     orientation, start and end inside the area, at least ``min_length``
-    metres, sampled every ``step`` metres.
+    metres (and at least 70 % of the way to the border), sampled every
+    ``step`` metres.
 
     Returns
     -------
@@ -487,7 +489,7 @@ def make_line_problem(*, n_lines: int = 10, area: tuple[float, float] = (16.0, 1
         tmax = min(t for t in ts if t > 0)
         if tmax < min_length:
             continue
-        d = np.arange(0.0, rng.uniform(min_length, tmax), step)
+        d = np.arange(0.0, rng.uniform(max(min_length, 0.7 * tmax), tmax), step)
         pts.append(p0 + d[:, None] * u)
         lab.append(np.full(len(d), len(heads)))
         dist.append(d)

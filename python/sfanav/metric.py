@@ -89,6 +89,7 @@ def metric_cost(
     *,
     angle_term: str | None = "cos",
     angle_weight: float = 1.0,
+    ridge: float = 0.0,
 ) -> tuple[float, tuple[np.ndarray, np.ndarray, np.ndarray]]:
     """Cost (thesis 5.1, or 5.5 with the angle term) and its gradient.
 
@@ -114,6 +115,8 @@ def metric_cost(
         difference of signed turns; None: cost (5.1).
     angle_weight : float
         Weight lambda of the angle term (thesis: 1).
+    ridge : float
+        Adds ``ridge / 2 * ||W[1:]||^2`` (not the bias row; beyond the thesis).
 
     Returns
     -------
@@ -133,6 +136,9 @@ def metric_cost(
     g_a = np.bincount(lab, weights=d * (-sa[lab] * R[:, 0] + ca[lab] * R[:, 1]), minlength=L)
     g_o = np.c_[np.bincount(lab, weights=R[:, 0], minlength=L), np.bincount(lab, weights=R[:, 1], minlength=L)]
     g_W = -Phi.T @ R
+    if ridge:
+        cost += 0.5 * ridge * float(np.einsum("ij,ij->", W[1:], W[1:]))
+        g_W[1:] += ridge * W[1:]
     if angle_term is not None and relative_angles is not None and L > 1:
         phi = np.asarray(relative_angles, dtype=np.float64)
         lam = float(angle_weight)
@@ -157,8 +163,8 @@ def metric_cost(
 class _Problem:
     """The data of one fit: design, labels, distances, angles, fixed parameters."""
 
-    def __init__(self, Phi, lab, d, phi, angle_term, lam, fix_alpha, fix_origin):
-        self.Phi, self.lab, self.d, self.phi = Phi, lab, d, phi
+    def __init__(self, Phi, lab, d, phi, angle_term, lam, fix_alpha, fix_origin, ridge=0.0):
+        self.Phi, self.lab, self.d, self.phi, self.ridge = Phi, lab, d, phi, ridge
         self.angle_term, self.lam = angle_term, lam
         self.L, self.K = int(lab.max()) + 1, Phi.shape[1]
         self.fix_alpha, self.fix_origin = fix_alpha, fix_origin
@@ -172,7 +178,7 @@ class _Problem:
 
     def cost(self, a, O, W):
         return metric_cost(a, O, W, self.Phi, self.lab, self.d, self.phi,
-                           angle_term=self.angle_term, angle_weight=self.lam)
+                           angle_term=self.angle_term, angle_weight=self.lam, ridge=self.ridge)
 
     def pack(self, a, O, W):
         return np.concatenate([a, O.ravel(), W.ravel()])
@@ -201,17 +207,27 @@ class _VarPro:
         E = np.zeros((M, L))
         E[np.arange(M), pb.lab] = 1.0
         self.A = np.hstack([E[:, pb.free_o], -pb.Phi])  # r_x = A theta_x + b_x
+        n_extra = 0
+        if pb.ridge:
+            # ridge on W[1:] as extra residual rows sqrt(ridge) * W[1:] (with b = 0 there)
+            nf, K = int(pb.free_o.sum()), pb.K
+            J = np.zeros((K - 1, nf + K))
+            J[:, nf + 1 :] = np.sqrt(pb.ridge) * np.eye(K - 1)
+            self.A = np.vstack([self.A, J])
+            n_extra = K - 1
+        M = M + n_extra
         U, S, Vt = np.linalg.svd(self.A, full_matrices=False)
         rank = int((S > S[0] * max(self.A.shape) * np.finfo(float).eps).sum())
         self.U, self.S, self.Vt, self.rank = U[:, :rank], S[:rank], Vt[:rank], rank
+        m0 = len(pb.lab)
         D = np.zeros((M, L))
-        D[np.arange(M), pb.lab] = pb.d
+        D[np.arange(m0), pb.lab] = pb.d
         self.D = D
         fx = np.zeros(M)
         fy = np.zeros(M)
         for n, (ox, oy) in pb.fix_origin.items():
-            fx[pb.lab == n] = ox
-            fy[pb.lab == n] = oy
+            fx[:m0][pb.lab == n] = ox
+            fy[:m0][pb.lab == n] = oy
         self.fx, self.fy = fx, fy
         Q = self.U
         PD = D - Q @ (Q.T @ D)
@@ -270,6 +286,20 @@ def _progress(enabled: bool, total: int, desc: str):
     return tqdm(total=total, desc=desc, unit="it", leave=False)
 
 
+def _one_blas_thread():
+    """One BLAS thread for the optimisation loops: their matrices are tiny, and
+    scipy's L-BFGS-B calls BLAS on vectors of a few hundred entries thousands
+    of times, where thread start-up dominates (measured 20x slower with two
+    threads on a busy two-core machine)."""
+    try:
+        from threadpoolctl import threadpool_limits
+    except ImportError:  # pragma: no cover
+        import contextlib
+
+        return contextlib.nullcontext()
+    return threadpool_limits(limits=1, user_api="blas")
+
+
 def _check_fixed(mapping: Any, name: str, width: int) -> dict[int, Any]:
     if mapping is None:
         return {}
@@ -310,6 +340,12 @@ class MetricLearner:
         ``"cos"`` if the lines carry measured relative angles, else None.
     angle_weight : float, default 1.0
         Weight of the angle term (thesis: 1).
+    ridge : float, default 0.0
+        L2 penalty ``ridge / 2 * ||W||^2`` on the weights of the expanded
+        features (not the bias); beyond the thesis. It shrinks the map
+        towards a constant, which the distances resist: on the synthetic
+        problems of ``docs/odometry.md`` it did not lower the error, so the
+        default is off.
     init : {"random", "odometry"} or mapping, default "random"
         ``"random"`` (thesis, simulator): alpha uniform in [0, 2 pi), origins
         uniform in +-``origin_range``, W uniform in +-``weight_range``.
@@ -391,6 +427,7 @@ class MetricLearner:
         solver: str = "varpro",
         angle_term: str | None = "auto",
         angle_weight: float = 1.0,
+        ridge: float = 0.0,
         init: str | Mapping[str, Any] = "random",
         learning_rate: float = 1e-5,
         momentum: float = 0.95,
@@ -410,6 +447,7 @@ class MetricLearner:
         self.solver = solver
         self.angle_term = angle_term
         self.angle_weight = angle_weight
+        self.ridge = ridge
         self.init = init
         self.learning_rate = learning_rate
         self.momentum = momentum
@@ -425,7 +463,7 @@ class MetricLearner:
         self.random_state = random_state
 
     _PARAMS = (
-        "n_outputs", "degree", "solver", "angle_term", "angle_weight", "init", "learning_rate", "momentum",
+        "n_outputs", "degree", "solver", "angle_term", "angle_weight", "ridge", "init", "learning_rate", "momentum",
         "max_iter", "tol", "n_init", "fix_alpha", "fix_origin", "origin_range", "weight_range",
         "snapshot_iterations", "segmentation", "random_state",
     )
@@ -540,21 +578,23 @@ class MetricLearner:
             bad = [k for k in fx if k >= L]
             if bad:
                 raise ValueError(f"{name} names line(s) {bad}, but only {L} lines were found (0..{L - 1})")
-        pb = _Problem(Phi, lab, d, lines.relative_angles, angle_term, lam, fix_a, fix_o)
+        ridge = check_nonneg_float(self.ridge, "ridge")
+        pb = _Problem(Phi, lab, d, lines.relative_angles, angle_term, lam, fix_a, fix_o, ridge)
         rng = np.random.default_rng(self.random_state)
         snaps_at = sorted({check_int(int(i), "snapshot_iterations", minimum=0) for i in self.snapshot_iterations})
 
         t0 = time.perf_counter()
         inits = self._inits(pb, lines, rng, n_init)
-        vp = _VarPro(pb) if self.solver == "varpro" else None  # one factorisation for all starts
         best = None
         costs, total = [], 0
-        for a0, O0, W0 in inits:
-            res = self._solve(pb, vp, a0, O0, W0, lr, mom, max_iter, tol, snaps_at, progress)
-            costs.append(res["cost"])
-            total += res["n_iter"]
-            if best is None or res["cost"] < best["cost"]:
-                best = res
+        with _one_blas_thread():
+            vp = _VarPro(pb) if self.solver == "varpro" else None  # one factorisation for all starts
+            for a0, O0, W0 in inits:
+                res = self._solve(pb, vp, a0, O0, W0, lr, mom, max_iter, tol, snaps_at, progress)
+                costs.append(res["cost"])
+                total += res["n_iter"]
+                if best is None or res["cost"] < best["cost"]:
+                    best = res
         self.fit_time_ = time.perf_counter() - t0
         assert best is not None
         self.alpha_ = best["alpha"]
