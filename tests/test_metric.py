@@ -32,7 +32,7 @@ def small():
 @pytest.mark.parametrize("angle_term", [None, "cos", "signed"])
 def test_gradients_match_finite_differences(small, angle_term):
     Phi, lab, d, phi, theta = small
-    c, grads = metric_cost(*theta, Phi, lab, d, phi, angle_term=angle_term, angle_weight=2.5)
+    c, grads = metric_cost(*theta, Phi, lab, d, phi, angle_term=angle_term, angle_weight=2.5, ridge=0.7)
     h = 1e-6
     for b, (param, g) in enumerate(zip(theta, grads)):
         num = np.zeros_like(param)
@@ -41,8 +41,8 @@ def test_gradients_match_finite_differences(small, angle_term):
             minus = [t.copy() for t in theta]
             plus[b][idx] += h
             minus[b][idx] -= h
-            cp = metric_cost(*plus, Phi, lab, d, phi, angle_term=angle_term, angle_weight=2.5)[0]
-            cm = metric_cost(*minus, Phi, lab, d, phi, angle_term=angle_term, angle_weight=2.5)[0]
+            cp = metric_cost(*plus, Phi, lab, d, phi, angle_term=angle_term, angle_weight=2.5, ridge=0.7)[0]
+            cm = metric_cost(*minus, Phi, lab, d, phi, angle_term=angle_term, angle_weight=2.5, ridge=0.7)[0]
             num[idx] = (cp - cm) / (2 * h)
         np.testing.assert_allclose(g, num, rtol=1e-6, atol=1e-6 * np.abs(num).max())
 
@@ -95,10 +95,13 @@ def test_solvers_reach_the_same_cost():
         F, lines, progress=False)
     gd = MetricLearner(angle_term=None, solver="gd", init=start, learning_rate=5e-5, max_iter=3000,
                        tol=1e-10).fit(F, lines, progress=False)
+    # preconditioned gradient descent from the same random start as varpro
+    pre = MetricLearner(angle_term=None, solver="gd", precondition=True, random_state=0).fit(F, lines, progress=False)
     assert lb.cost_ == pytest.approx(vp.cost_, rel=1e-4)
     assert gd.cost_ == pytest.approx(vp.cost_, rel=2e-2)
+    assert pre.cost_ == pytest.approx(vp.cost_, rel=1e-3) and pre.converged_ and pre.n_iter_ < 3000
     assert gd.cost_history_[0] > gd.cost_history_[-1] and len(gd.cost_history_) == gd.n_iter_ + 1
-    for m in (vp, lb, gd):
+    for m in (vp, lb, gd, pre):
         assert m.fit_time_ > 0 and m.n_iter_ > 0
         P = m.transform(F)
         assert med(align(P, xy, allow_reflection=True).apply(P), xy) < 0.5
@@ -108,7 +111,7 @@ def test_gd_defaults_snapshots_and_plot(problem, tmp_path):
     F, lines = problem["features"], problem["lines"]
     m = MetricLearner(solver="gd", angle_term=None, max_iter=120, snapshot_iterations=(0, 50, 100), random_state=1)
     m.fit(F, lines, progress=False)
-    assert m.learning_rate == 1e-5 and m.momentum == 0.95
+    assert m.learning_rate_ == 1e-5 and m.momentum == 0.95
     assert sorted(m.snapshots_) == [0, 50, 100, 120] and not m.converged_ and m.n_iter_ == 120
     assert m.cost_history_[-1] < 0.1 * m.cost_history_[0]
     png = plot_metric_lines(m, F, tmp_path / "lines.png", iterations=(0, 50, 120))

@@ -354,9 +354,18 @@ class MetricLearner:
         features to the odometry positions of the line samples. A mapping with
         ``"alpha"`` (L,), ``"origins"`` (L, 2), ``"weights"`` (K, 2) warm-starts
         (``"varpro"`` uses ``"alpha"`` only).
-    learning_rate, momentum : float, default 1e-5, 0.95
-        beta and gamma of (5.7, 5.8), solver ``"gd"`` only. The cost is a sum
-        over samples, so a good learning rate shrinks as they grow.
+    learning_rate : float or None, default None
+        beta of (5.7), solver ``"gd"`` only. None: the thesis's 1e-5, or 0.3
+        with ``precondition``. The cost is a sum over samples, so a good
+        (unpreconditioned) learning rate shrinks as they grow.
+    momentum : float, default 0.95
+        gamma of (5.7), solver ``"gd"`` only.
+    precondition : bool, default False
+        Solver ``"gd"`` only, beyond the thesis: scale the gradient by the
+        inverse of each block's curvature, ``(Phi^T Phi)^+`` for W,
+        ``1 / sum_m d_{n,m}^2`` for alpha_n and ``1 / M_n`` for o_n (block
+        Jacobi). The expanded features are strongly correlated, which makes
+        plain gradient descent crawl along W's flat directions.
     max_iter : int, default 5000
         Iteration limit (per start).
     tol : float, default 1e-7
@@ -415,6 +424,8 @@ class MetricLearner:
         at ``snapshot_iterations`` (those reached) and at the last iteration.
     angle_term_ : str or None
         The angle term used.
+    learning_rate_ : float
+        The learning rate used (solver ``"gd"``).
     n_features_in_ : int
         Feature columns seen in fit.
     """
@@ -429,8 +440,9 @@ class MetricLearner:
         angle_weight: float = 1.0,
         ridge: float = 0.0,
         init: str | Mapping[str, Any] = "random",
-        learning_rate: float = 1e-5,
+        learning_rate: float | None = None,
         momentum: float = 0.95,
+        precondition: bool = False,
         max_iter: int = 5000,
         tol: float = 1e-7,
         n_init: int = 1,
@@ -451,6 +463,7 @@ class MetricLearner:
         self.init = init
         self.learning_rate = learning_rate
         self.momentum = momentum
+        self.precondition = precondition
         self.max_iter = max_iter
         self.tol = tol
         self.n_init = n_init
@@ -463,7 +476,7 @@ class MetricLearner:
         self.random_state = random_state
 
     _PARAMS = (
-        "n_outputs", "degree", "solver", "angle_term", "angle_weight", "ridge", "init", "learning_rate", "momentum",
+        "n_outputs", "degree", "solver", "angle_term", "angle_weight", "ridge", "init", "learning_rate", "momentum", "precondition",
         "max_iter", "tol", "n_init", "fix_alpha", "fix_origin", "origin_range", "weight_range",
         "snapshot_iterations", "segmentation", "random_state",
     )
@@ -541,7 +554,8 @@ class MetricLearner:
         if self.angle_term not in ANGLE_TERMS:
             raise ValueError(f"angle_term must be one of {ANGLE_TERMS}, got {self.angle_term!r}")
         lam = check_nonneg_float(self.angle_weight, "angle_weight")
-        lr = check_nonneg_float(self.learning_rate, "learning_rate")
+        lr_default = 0.3 if self.precondition else 1e-5
+        lr = lr_default if self.learning_rate is None else check_nonneg_float(self.learning_rate, "learning_rate")
         mom = check_nonneg_float(self.momentum, "momentum")
         if mom > 1:
             raise ValueError(f"momentum must be in [0, 1], got {mom}")
@@ -609,6 +623,7 @@ class MetricLearner:
         self.start_costs_ = np.asarray(costs)
         self.lines_ = lines
         self.angle_term_ = angle_term
+        self.learning_rate_ = lr
         self.n_outputs_ = n
         self.degree_ = degree
         self.n_features_in_ = F.shape[1]
@@ -660,6 +675,21 @@ class MetricLearner:
             out.append((a0, O0, W0))
         return out
 
+    @staticmethod
+    def _preconditioner(pb: _Problem) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Block-Jacobi: inverse curvature of alpha_n, o_n and W (pseudo-inverse)."""
+        h_a = np.bincount(pb.lab, weights=pb.d**2, minlength=pb.L)
+        if pb.angle_term is not None and pb.phi is not None:
+            h_a = h_a + 2.0 * pb.lam
+        h_o = np.bincount(pb.lab, minlength=pb.L).astype(np.float64)
+        H = pb.Phi.T @ pb.Phi
+        if pb.ridge:
+            H[1:, 1:] += pb.ridge * np.eye(pb.K - 1)
+        ev, U = np.linalg.eigh(H)
+        keep = ev > ev[-1] * 1e-10
+        Hinv = (U[:, keep] / ev[keep]) @ U[:, keep].T
+        return 1.0 / np.maximum(h_a, 1e-12), (1.0 / h_o)[:, None], Hinv
+
     def _solve(self, pb, vp, a0, O0, W0, lr, mom, max_iter, tol, snaps_at, progress):
         snaps: dict[int, dict[str, np.ndarray]] = {}
 
@@ -669,6 +699,7 @@ class MetricLearner:
         if self.solver == "gd":
             theta = pb.pack(a0, O0, W0)
             free = pb.free
+            precond = self._preconditioner(pb) if self.precondition else None
             v = np.zeros_like(theta)
             c, g = pb.cost(*pb.unpack(theta))
             hist = [c]
@@ -678,6 +709,8 @@ class MetricLearner:
             converged, it = False, 0
             try:
                 for it in range(1, max_iter + 1):
+                    if precond is not None:
+                        g = (g[0] * precond[0], g[1] * precond[1], precond[2] @ g[2])
                     grad = np.concatenate([g[0], g[1].ravel(), g[2].ravel()])
                     v = mom * v + lr * np.where(free, grad, 0.0)  # (5.7)
                     theta = theta - v  # (5.8)
@@ -865,6 +898,7 @@ class MetricLearner:
             "converged": self.converged_,
             "start_costs": self.start_costs_,
             "angle_term": self.angle_term_,
+            "learning_rate": self.learning_rate_,
             "n_outputs": self.n_outputs_,
             "degree": self.degree_,
             "n_features_in": self.n_features_in_,
@@ -899,6 +933,7 @@ class MetricLearner:
             m.converged_ = bool(state["converged"])
             m.start_costs_ = np.asarray(state["start_costs"], dtype=np.float64)
             m.angle_term_ = state["angle_term"]
+            m.learning_rate_ = float(state["learning_rate"])
             m.n_outputs_ = int(state["n_outputs"])
             m.degree_ = int(state["degree"])
             m.n_features_in_ = int(state["n_features_in"])
