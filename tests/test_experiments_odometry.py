@@ -13,7 +13,7 @@ from sfanav.experiments_odometry import (
     make_odometry_run,
 )
 
-SMALL_GRID = dict(distance_noise=(0.003, 0.01), heading_noise=(0.01, 0.03), measurement_noise=(0.05, 0.1))
+SMALL_GRID = dict(distance_noise=(0.003, 0.01), heading_noise=(0.03,), measurement_noise=(0.05, 0.1))
 
 
 @pytest.fixture(scope="module")

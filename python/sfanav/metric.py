@@ -598,10 +598,10 @@ class MetricLearner:
         snaps_at = sorted({check_int(int(i), "snapshot_iterations", minimum=0) for i in self.snapshot_iterations})
 
         t0 = time.perf_counter()
-        inits = self._inits(pb, lines, rng, n_init)
         best = None
         costs, total = [], 0
         with _one_blas_thread():
+            inits = self._inits(pb, lines, rng, n_init)
             vp = _VarPro(pb) if self.solver == "varpro" else None  # one factorisation for all starts
             for a0, O0, W0 in inits:
                 res = self._solve(pb, vp, a0, O0, W0, lr, mom, max_iter, tol, snaps_at, progress)
