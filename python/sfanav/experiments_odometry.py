@@ -21,8 +21,8 @@ EKF's noise grid search; a ground-truth-free choice is reported beside it).
 
 from __future__ import annotations
 
-import time
-from collections.abc import Mapping, Sequence
+import functools
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -31,7 +31,7 @@ import numpy as np
 
 from ._checks import as_matrix, check_same_length
 from .ekf import OdometryEKF, grid_search, plot_fusion
-from .metric import MetricLearner, plot_metric_lines
+from .metric import MetricLearner, _one_blas_thread, plot_metric_lines
 from .metrics import align, med
 from .odometry import Lines, as_poses, dead_reckon, lines_from_labels, segment_lines
 from .regression import QuadraticRegression
@@ -131,6 +131,18 @@ def format_rows(rows: Sequence[Mapping[str, Any]], targets: Mapping[str, bool] |
     return "\n".join(lines)
 
 
+def _single_blas_thread(fn: Callable[..., Any]) -> Callable[..., Any]:
+    """Runs ``fn`` with one BLAS thread: its matrices are small, and BLAS
+    threads cost more than they give there (see ``sfanav.metric``)."""
+
+    @functools.wraps(fn)
+    def wrapper(*args: Any, **kwargs: Any) -> Any:
+        with _one_blas_thread():
+            return fn(*args, **kwargs)
+
+    return wrapper
+
+
 def _rows(name: str, values: Mapping[str, Any]) -> list[dict[str, Any]]:
     thesis = THESIS.get(name, {})
     return [{"metric": k, "thesis": thesis.get(k), "sfanav": v} for k, v in values.items()]
@@ -149,6 +161,7 @@ def _as_lines(odometry: Any, n: int, segmentation: Mapping[str, Any] | None) -> 
     return lines
 
 
+@_single_blas_thread
 def experiment_5_3_1(
     features_train: Any,
     odometry_train: Any,
@@ -273,6 +286,7 @@ def experiment_5_3_1(
 # --------------------------------------------------------------------- 5.3.2
 
 
+@_single_blas_thread
 def experiment_5_3_2(
     sfa_test: Any,
     odometry_test: Any,
