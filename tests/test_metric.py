@@ -184,3 +184,18 @@ def test_bad_inputs(problem):
     m = MetricLearner(angle_term=None, random_state=0).fit(F, lines, progress=False)
     with pytest.raises(ValueError, match="fitted with 8"):
         m.transform(F[:, :5])
+
+
+def test_fit_on_odometry_poses_segments_them():
+    from sfanav.experiments_odometry import make_odometry_run
+    from sfanav.odometry import segment_lines
+
+    run = make_odometry_run(n_legs=10, random_state=4)
+    seg = {"min_points": 12}
+    a = MetricLearner(init="odometry", segmentation=seg).fit(run["features"], run["odometry"], progress=False)
+    b = MetricLearner(init="odometry").fit(run["features"], segment_lines(run["odometry"], **seg), progress=False)
+    assert a.lines_.n_lines == b.lines_.n_lines and a.angle_term_ == "cos"
+    np.testing.assert_allclose(a.transform(run["features"]), b.transform(run["features"]))
+    # learned from odometry alone, the map is metric: after a rigid alignment it matches the truth
+    P = a.transform(run["features"])
+    assert med(align(P, run["xy"], allow_reflection=True).apply(P), run["xy"]) < 0.3

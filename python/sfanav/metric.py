@@ -35,7 +35,9 @@ Solvers (all minimise the same cost; compare ``cost_``):
 
 ``"gd"``
     The thesis's momentum gradient descent (5.7, 5.8) on all parameters,
-    learning rate 1e-5 and momentum 0.95 by default.
+    learning rate 1e-5 and momentum 0.95 by default; with
+    ``precondition=True`` (beyond the thesis) block-Jacobi scaled steps,
+    which converge in hundreds instead of tens of thousands of iterations.
 ``"lbfgs"``
     scipy's L-BFGS-B on all parameters, same cost and gradient.
 ``"varpro"`` (default)
