@@ -199,3 +199,15 @@ def test_fit_on_odometry_poses_segments_them():
     # learned from odometry alone, the map is metric: after a rigid alignment it matches the truth
     P = a.transform(run["features"])
     assert med(align(P, run["xy"], allow_reflection=True).apply(P), run["xy"]) < 0.3
+
+
+def test_varpro_is_a_minimum_of_the_full_cost_with_ridge_and_fixed_origin(problem):
+    """The eliminated origins and W are optimal: L-BFGS on all parameters, started
+    at the varpro solution, finds nothing lower (ridge and a fixed origin included)."""
+    F, lines = problem["features"], problem["lines"]
+    kw = dict(angle_term=None, ridge=0.5, fix_origin={2: (3.0, -1.0)})
+    vp = MetricLearner(n_init=2, random_state=0, **kw).fit(F, lines, progress=False)
+    lb = MetricLearner(solver="lbfgs", init={"alpha": vp.alpha_, "origins": vp.origins_, "weights": vp.weights_},
+                       tol=1e-14, max_iter=500, **kw).fit(F, lines, progress=False)
+    assert np.allclose(vp.origins_[2], (3.0, -1.0)) and vp.cost_ > 1.0  # the ridge costs something
+    assert lb.cost_ == pytest.approx(vp.cost_, rel=1e-7)
