@@ -39,3 +39,10 @@ from .unwarp import Unwarper, estimate_mirror  # noqa: E402
 
 __all__ += ["Localizer", "QuadraticRegression", "Unwarper", "estimate_mirror"]
 __all__ += ["analysis", "baselines", "metrics", "regression", "unwarp"]
+
+# Odometry integration (issue 8): line segmentation, unsupervised metric learning, EKF fusion.
+from . import ekf, experiments_odometry, metric, odometry  # noqa: E402
+from .ekf import OdometryEKF  # noqa: E402
+from .metric import MetricLearner  # noqa: E402
+
+__all__ += ["MetricLearner", "OdometryEKF", "ekf", "experiments_odometry", "metric", "odometry"]

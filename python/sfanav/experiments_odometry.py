@@ -1,0 +1,598 @@
+"""Experiment logic of thesis 5.3 (odometry integration), as reusable
+functions on arrays: given the features, odometry and ground truth of a
+training and a test run they compute the rows that ``sfanav experiment``
+prints beside the thesis's figures.
+
+* :func:`experiment_5_3_1`: unsupervised metric learning vs a supervised
+  regression (5.3.1, ``variant="sim"``: random lines, random initialisation,
+  cost 5.1; ``variant="real"``: lines from odometry, initialisation from
+  odometry, cost 5.5).
+* :func:`experiment_5_3_2`: EKF fusion of the SFA estimates with odometry.
+* :func:`compare_solvers`: the same problem with each solver (cost reached,
+  iterations, time).
+* :func:`make_line_problem`, :func:`make_odometry_run`: synthetic data
+  (an 8-dim smooth "slow feature" code of position) for tests and the
+  solver comparison in ``docs/odometry.md``.
+
+Every row is ``{"metric": str, "thesis": value or None, "sfanav": value}``.
+Ground truth is used for evaluation only (and, as in the thesis, for the
+EKF's noise grid search; a ground-truth-free choice is reported beside it).
+"""
+
+from __future__ import annotations
+
+import functools
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ._checks import as_matrix, check_same_length
+from .ekf import OdometryEKF, grid_search, plot_fusion
+from .metric import MetricLearner, _one_blas_thread, plot_metric_lines
+from .metrics import align, med
+from .odometry import Lines, as_poses, dead_reckon, lines_from_labels, segment_lines
+from .regression import QuadraticRegression
+
+__all__ = [
+    "ExperimentResult",
+    "THESIS",
+    "compare_solvers",
+    "experiment_5_3_1",
+    "experiment_5_3_2",
+    "format_rows",
+    "make_line_problem",
+    "make_odometry_run",
+    "print_solver_comparison",
+    "synthetic_features",
+]
+
+#: The thesis's figures (section 5.3, ``shared/thesis-figures.md``).
+THESIS: dict[str, dict[str, Any]] = {
+    "5.3.1-sim": {
+        "lines": 10, "points on lines": 862, "iterations": 1000,
+        "train MED supervised (m)": 0.13, "train MED unsupervised (m)": 0.17,
+        "test MED supervised (m)": 0.39, "test MED unsupervised (m)": 0.36,
+        "unsupervised/supervised test MED ratio": round(0.36 / 0.39, 3),
+    },
+    "5.3.1-real": {
+        "lines": 18, "points on lines": 1346, "iterations": 900,
+        "train MED supervised (m)": 0.12, "train MED unsupervised (m)": 0.17,
+        "test MED supervised (m)": 0.14, "test MED unsupervised (m)": 0.14,
+        "unsupervised/supervised test MED ratio": 1.0,
+    },
+    "5.3.2": {
+        "SFA MED (m)": 0.14, "odometry MED (m)": 0.31, "EKF MED (m)": 0.11,
+        "EKF improvement over SFA alone (%)": 21.0,
+    },
+}
+
+
+@dataclass
+class ExperimentResult:
+    """Rows, target checks, figures and the objects behind them.
+
+    Attributes
+    ----------
+    name : str
+        ``"5.3.1-sim"``, ``"5.3.1-real"`` or ``"5.3.2"``.
+    rows : list of dict
+        ``{"metric", "thesis", "sfanav"}``.
+    targets : dict str -> bool
+        The issue's targets and whether they are met.
+    figures : dict str -> Path
+        Caption -> PNG (when an output directory was given).
+    details : dict
+        Learner, alignment, estimates, grid search, ... for further use.
+    """
+
+    name: str
+    rows: list[dict[str, Any]]
+    targets: dict[str, bool] = field(default_factory=dict)
+    figures: dict[str, Path] = field(default_factory=dict)
+    details: dict[str, Any] = field(default_factory=dict)
+
+    def table(self) -> str:
+        """The rows as an aligned text table (metric | thesis | sfanav)."""
+        return format_rows(self.rows, self.targets)
+
+    def row(self, metric: str) -> Any:
+        """The sfanav value of one metric."""
+        for r in self.rows:
+            if r["metric"] == metric:
+                return r["sfanav"]
+        raise KeyError(f"no row {metric!r} in {self.name}")
+
+
+def _fmt(v: Any) -> str:
+    if v is None:
+        return "-"
+    if isinstance(v, (bool, np.bool_)):
+        return "yes" if v else "no"
+    if isinstance(v, (int, np.integer)):
+        return str(int(v))
+    if isinstance(v, (float, np.floating)):
+        v = float(v)
+        return f"{v:.3g}" if abs(v) < 0.01 and v != 0 else (f"{v:.3f}" if abs(v) < 100 else f"{v:.1f}")
+    return str(v)
+
+
+def format_rows(rows: Sequence[Mapping[str, Any]], targets: Mapping[str, bool] | None = None) -> str:
+    """Rows ``{"metric", "thesis", "sfanav"}`` as an aligned text table, then
+    the targets with ``met``/``NOT met``."""
+    cells = [("metric", "thesis", "sfanav")] + [(str(r["metric"]), _fmt(r["thesis"]), _fmt(r["sfanav"])) for r in rows]
+    w = [max(len(c[i]) for c in cells) for i in range(3)]
+    lines = [f"{a:<{w[0]}}  {b:>{w[1]}}  {c:>{w[2]}}" for a, b, c in cells]
+    lines.insert(1, "-" * (sum(w) + 4))
+    for name, ok in (targets or {}).items():
+        lines.append(f"target: {name}: {'met' if ok else 'NOT met'}")
+    return "\n".join(lines)
+
+
+def _single_blas_thread(fn: Callable[..., Any]) -> Callable[..., Any]:
+    """Runs ``fn`` with one BLAS thread: its matrices are small, and BLAS
+    threads cost more than they give there (see ``sfanav.metric``)."""
+
+    @functools.wraps(fn)
+    def wrapper(*args: Any, **kwargs: Any) -> Any:
+        with _one_blas_thread():
+            return fn(*args, **kwargs)
+
+    return wrapper
+
+
+def _rows(name: str, values: Mapping[str, Any]) -> list[dict[str, Any]]:
+    thesis = THESIS.get(name, {})
+    return [{"metric": k, "thesis": thesis.get(k), "sfanav": v} for k, v in values.items()]
+
+
+# --------------------------------------------------------------------- 5.3.1
+
+
+def _as_lines(odometry: Any, n: int, segmentation: Mapping[str, Any] | None) -> Lines:
+    if isinstance(odometry, Lines):
+        lines = odometry
+    else:
+        lines = segment_lines(as_poses(odometry, "odometry_train"), **dict(segmentation or {}))
+    if len(lines.labels) != n:
+        raise ValueError(f"features_train has {n} rows but the odometry/lines have {len(lines.labels)}; they must match")
+    return lines
+
+
+@_single_blas_thread
+def experiment_5_3_1(
+    features_train: Any,
+    odometry_train: Any,
+    xy_train: Any,
+    features_test: Any,
+    xy_test: Any,
+    *,
+    variant: str = "real",
+    learner: MetricLearner | None = None,
+    n_outputs: int = 8,
+    segmentation: Mapping[str, Any] | None = None,
+    out_dir: Any = None,
+    random_state: int | None = 0,
+    progress: bool = False,
+) -> ExperimentResult:
+    """Thesis 5.3.1: unsupervised metric learning against a supervised
+    quadratic regression on the same training samples.
+
+    Parameters
+    ----------
+    features_train : array (N, m)
+        Slow features of the training run (slowest first).
+    odometry_train : array (N, 3) or Lines
+        Odometry poses of the training run (x, y in metres, heading in
+        radians), split into lines with :func:`sfanav.odometry.segment_lines`;
+        or the lines themselves (simulator: lines driven on purpose).
+    xy_train : array (N, 2)
+        Ground truth of the training run, metres (evaluation and the
+        supervised reference only).
+    features_test, xy_test : arrays (T, m), (T, 2)
+        The separate test run.
+    variant : {"real", "sim"}
+        Defaults of the thesis's two runs for the learner: ``"sim"``: random
+        initialisation (best of 5 starts), cost 5.1; ``"real"``:
+        initialisation from odometry, cost 5.5.
+    learner : MetricLearner, optional
+        Overrides those defaults (fitted here).
+    n_outputs : int, default 8
+        Slowest outputs used by both models.
+    segmentation : mapping, optional
+        Keywords for :func:`sfanav.odometry.segment_lines`.
+    out_dir : path, optional
+        Writes fig. 5.19 (``metric_lines.png``) and the test trajectories
+        (``metric_test.png``) there.
+
+    Returns
+    -------
+    ExperimentResult
+        Rows ``lines``, ``points on lines``, ``iterations``, ``fit time (s)``,
+        ``train MED supervised (m)``, ``train MED unsupervised (m)``,
+        ``test MED supervised (m)``, ``test MED unsupervised (m)``,
+        ``unsupervised/supervised test MED ratio``; target "unsupervised within
+        1.3x of supervised test MED". ``details["test_estimates"]`` holds the
+        unsupervised test estimates aligned to ground truth (input for
+        :func:`experiment_5_3_2`).
+    """
+    if variant not in ("real", "sim"):
+        raise ValueError(f"variant must be 'real' or 'sim', got {variant!r}")
+    name = f"5.3.1-{variant}"
+    Ftr = as_matrix(features_train, "features_train")
+    Ytr = as_matrix(xy_train, "xy_train", n_cols=2)
+    check_same_length(Ftr, Ytr, "features_train", "xy_train")
+    Fte = as_matrix(features_test, "features_test")
+    Yte = as_matrix(xy_test, "xy_test", n_cols=2)
+    check_same_length(Fte, Yte, "features_test", "xy_test")
+    lines = _as_lines(odometry_train, len(Ftr), segmentation)
+    if learner is None:
+        if variant == "real":
+            learner = MetricLearner(n_outputs, init="odometry", angle_term="auto", snapshot_iterations=(0, 500, 1000),
+                                    random_state=random_state)
+        else:
+            learner = MetricLearner(n_outputs, init="random", angle_term=None, n_init=5,
+                                    snapshot_iterations=(0, 500, 1000), random_state=random_state)
+    learner.fit(Ftr, lines, progress=progress)
+    on = lines.mask
+    F_on, Y_on = Ftr[on], Ytr[on]
+    sup = QuadraticRegression(learner.n_outputs_, degree=learner.degree_).fit(F_on, Y_on)
+    P_on = learner.transform(F_on)
+    al = align(P_on, Y_on, allow_reflection=True)
+    test_est = al.apply(learner.transform(Fte))
+    train_sup, test_sup = sup.score(F_on, Y_on), sup.score(Fte, Yte)
+    train_uns, test_uns = med(al.apply(P_on), Y_on), med(test_est, Yte)
+    ratio = test_uns / test_sup if test_sup > 0 else float("inf")
+    values = {
+        "lines": lines.n_lines,
+        "points on lines": lines.n_points,
+        "solver": learner.solver,
+        "iterations": learner.n_iter_,
+        "fit time (s)": learner.fit_time_,
+        "final cost": learner.cost_,
+        "train MED supervised (m)": train_sup,
+        "train MED unsupervised (m)": train_uns,
+        "test MED supervised (m)": test_sup,
+        "test MED unsupervised (m)": test_uns,
+        "unsupervised/supervised test MED ratio": ratio,
+        "alignment mirrored": bool(np.linalg.det(al.rotation) < 0),
+    }
+    if lines.relative_angles is not None and learner.angle_term_ != "signed":
+        # beyond the thesis: the signed heading change between lines (also excludes the mirror image)
+        alt = MetricLearner(**{**learner.get_params(), "angle_term": "signed", "snapshot_iterations": ()})
+        alt.fit(Ftr, lines, progress=False)
+        P_alt = alt.transform(F_on)
+        al_alt = align(P_alt, Y_on, allow_reflection=True)
+        values["test MED unsupervised, signed angle term (m)"] = med(al_alt.apply(alt.transform(Fte)), Yte)
+    res = ExperimentResult(
+        name, _rows(name, values),
+        targets={"unsupervised test MED within 1.3x of supervised": bool(ratio <= 1.3)},
+        details={"learner": learner, "supervised": sup, "alignment": al, "lines": lines,
+                 "test_estimates": test_est, "test_estimates_supervised": sup.predict(Fte)},
+    )
+    if out_dir is not None:
+        from .analysis import plot_trajectory
+
+        out = Path(out_dir)
+        res.figures["unsupervised metric learning (fig. 5.19)"] = plot_metric_lines(
+            learner, Ftr, out / "metric_lines.png", title=f"{name}: line estimates (dotted) vs W^T s (solid)")
+        res.figures["unsupervised estimates on the test run, aligned"] = plot_trajectory(
+            Yte, test_est, out / "metric_test.png", title=f"{name}: test MED {test_uns:.3f} m")
+    return res
+
+
+# --------------------------------------------------------------------- 5.3.2
+
+
+@_single_blas_thread
+def experiment_5_3_2(
+    sfa_test: Any,
+    odometry_test: Any,
+    truth_test: Any,
+    *,
+    start_pose: Any = None,
+    sfa_train: Any = None,
+    odometry_train: Any = None,
+    truth_train: Any = None,
+    grid: Mapping[str, Sequence[float]] | None = None,
+    gate_probability: float = 0.999,
+    out_dir: Any = None,
+    progress: bool = False,
+) -> ExperimentResult:
+    """Thesis 5.3.2: EKF fusion of SFA estimates (measurements) and odometry
+    (CTRV prediction) from a known start pose.
+
+    Parameters
+    ----------
+    sfa_test : array (T, 2)
+        SFA position estimates of the test run in the ground truth's frame,
+        metres (e.g. ``experiment_5_3_1(...).details["test_estimates"]``:
+        unsupervised, aligned with the training run's alignment).
+    odometry_test : array (T, 3)
+        Odometry poses of the test run (own frame; only increments are used).
+    truth_test : array (T, 3) or (T, 2)
+        Ground-truth poses (x, y [m], heading [rad]) or positions. The start
+        pose is its first pose, or ``start_pose`` for positions only.
+    sfa_train, odometry_train, truth_train : arrays, optional
+        The same for the training run: the noise is then also tuned there
+        (row ``EKF MED, noise tuned on the training run (m)``).
+    grid : mapping, optional
+        Candidate ``distance_noise``, ``heading_noise``, ``measurement_noise``
+        for :func:`sfanav.ekf.grid_search`.
+    gate_probability : float, default 0.999
+        For the gated run (row ``EKF MED with Mahalanobis gating (m)``).
+    out_dir : path, optional
+        Writes fig. 5.24 (``fusion.png``) there.
+
+    Returns
+    -------
+    ExperimentResult
+        The headline EKF row uses the noise chosen by grid search against
+        the test run's ground truth (the thesis's protocol); the rows below
+        it show the ground-truth-free (innovation likelihood) choice and,
+        with training data, the noise tuned on the training run.
+    """
+    Z = as_matrix(sfa_test, "sfa_test", n_cols=2)
+    odo = as_poses(odometry_test, "odometry_test")
+    T = as_matrix(truth_test, "truth_test")
+    check_same_length(Z, odo, "sfa_test", "odometry_test")
+    check_same_length(Z, T, "sfa_test", "truth_test")
+    if T.shape[1] == 3:
+        s0 = T[0] if start_pose is None else np.asarray(start_pose, dtype=np.float64)
+    elif T.shape[1] == 2:
+        if start_pose is None:
+            raise ValueError("truth_test holds positions only: pass start_pose (x [m], y [m], heading [rad])")
+        s0 = np.asarray(start_pose, dtype=np.float64)
+    else:
+        raise ValueError(f"truth_test must have shape (T, 3) or (T, 2), got {T.shape}")
+    train_given = [a is not None for a in (sfa_train, odometry_train, truth_train)]
+    if any(train_given) and not all(train_given):
+        raise ValueError("give all of sfa_train, odometry_train and truth_train, or none")
+    xy = T[:, :2]
+    g = dict(grid or {})
+    odo_xy = OdometryEKF.dead_reckoning(odo, s0)[:, :2]
+    gs = grid_search(odo, Z, s0, xy, criterion="med", progress=progress, **g)
+    ekf_xy = gs.best_poses[:, :2]
+    gs_nll = grid_search(odo, Z, s0, None, criterion="nll", progress=progress, **g)
+    sfa_med, odo_med, ekf_med = med(Z, xy), med(odo_xy, xy), med(ekf_xy, xy)
+    gated = OdometryEKF(**gs.best_params, gate_probability=gate_probability)
+    gated_xy = gated.run(odo, Z, s0)[:, :2]
+    improvement = 100.0 * (sfa_med - ekf_med) / sfa_med if sfa_med > 0 else float("nan")
+    bp = gs.best_params
+    values: dict[str, Any] = {
+        "SFA MED (m)": sfa_med,
+        "odometry MED (m)": odo_med,
+        "EKF MED (m)": ekf_med,
+        "EKF improvement over SFA alone (%)": improvement,
+        "EKF noise (distance m, heading rad, measurement m)":
+            f"{bp['distance_noise']:g}, {bp['heading_noise']:g}, {bp['measurement_noise']:g}",
+        "EKF MED, noise by innovation likelihood, no ground truth (m)": med(gs_nll.best_poses[:, :2], xy),
+    }
+    details: dict[str, Any] = {"grid_search": gs, "grid_search_nll": gs_nll, "ekf_poses": gs.best_poses,
+                               "odometry_xy": odo_xy, "gated": gated}
+    if all(train_given):
+        Ttr = as_matrix(truth_train, "truth_train")
+        if Ttr.shape[1] != 3:
+            raise ValueError(f"truth_train must be poses of shape (N, 3), got {Ttr.shape}")
+        gs_tr = grid_search(odometry_train, sfa_train, Ttr[0], Ttr[:, :2], criterion="med", progress=progress, **g)
+        tuned = OdometryEKF(**gs_tr.best_params).run(odo, Z, s0)
+        values["EKF MED, noise tuned on the training run (m)"] = med(tuned[:, :2], xy)
+        details["grid_search_train"] = gs_tr
+    values["EKF MED with Mahalanobis gating (m)"] = med(gated_xy, xy)
+    values["gated SFA measurements"] = gated.n_gated_
+    res = ExperimentResult(
+        "5.3.2", _rows("5.3.2", values),
+        targets={
+            "EKF at least 20 % better than SFA alone": bool(improvement >= 20.0),
+            "EKF better than odometry alone": bool(ekf_med < odo_med),
+        },
+        details=details,
+    )
+    if out_dir is not None:
+        res.figures["SFA vs odometry vs EKF (fig. 5.24)"] = plot_fusion(
+            xy, Z, odo_xy, ekf_xy, Path(out_dir) / "fusion.png", title="5.3.2: fusion of SFA estimates and odometry")
+    return res
+
+
+# --------------------------------------------------------------------- solvers
+
+
+def compare_solvers(
+    features: Any,
+    lines: Lines,
+    xy: Any = None,
+    *,
+    solvers: Sequence[str] = ("varpro", "lbfgs", "gd"),
+    learner_params: Mapping[str, Any] | None = None,
+    solver_params: Mapping[str, Mapping[str, Any]] | None = None,
+    warmup: bool = True,
+) -> list[dict[str, Any]]:
+    """Fits the same problem with each solver from the same seed.
+
+    Parameters
+    ----------
+    features : array (N, m)
+    lines : Lines
+    xy : array (N, 2), optional
+        Ground truth: adds the aligned MED on the line samples.
+    learner_params : mapping, optional
+        Common :class:`MetricLearner` parameters (default ``random_state=0``).
+    solver_params : mapping solver -> mapping, optional
+        Per-solver parameters (e.g. ``{"gd": {"max_iter": 20000}}``).
+    warmup : bool, default True
+        One untimed fit first (imports, BLAS start-up).
+
+    Returns
+    -------
+    list of dict
+        ``solver``, ``cost``, ``n_iter``, ``time_s``, ``converged`` and, with
+        ground truth, ``med`` (metres).
+    """
+    base = {"random_state": 0, **dict(learner_params or {})}
+    per = dict(solver_params or {})
+    if warmup:
+        MetricLearner(**{**base, "solver": "varpro", "max_iter": 5}).fit(features, lines, progress=False)
+    Y = None if xy is None else as_matrix(xy, "xy", n_cols=2)
+    out = []
+    for s in solvers:
+        m = MetricLearner(**{**base, **dict(per.get(s, {})), "solver": s}).fit(features, lines, progress=False)
+        row = {"solver": s, "cost": m.cost_, "n_iter": m.n_iter_, "time_s": m.fit_time_, "converged": m.converged_}
+        if Y is not None:
+            on = lines.mask
+            P = m.transform(np.asarray(features)[on])
+            row["med"] = med(align(P, Y[on], allow_reflection=True).apply(P), Y[on])
+        out.append(row)
+    return out
+
+
+# --------------------------------------------------------------------- synthetic data
+
+
+def synthetic_features(xy: Any, *, area: tuple[float, float] = (16.0, 18.0), n_outputs: int = 8,
+                       noise: float = 0.0, random_state: int | np.random.Generator | None = 0) -> np.ndarray:
+    """A smooth 8-dim "slow feature" code of position (N, 2) metres inside
+    ``[0, area_x] x [0, area_y]``: x, y, cosines of one and two periods and
+    two products, each scaled to unit variance over the area, mixed by a
+    fixed random rotation (seed 12345), plus Gaussian noise of std
+    ``noise``. Their quadratic expansion contains x and y linearly, so a
+    metric map exists (exactly, without noise)."""
+    P = as_matrix(xy, "xy", n_cols=2)
+    if not 1 <= n_outputs <= 8:
+        raise ValueError(f"n_outputs must be in 1..8, got {n_outputs}")
+    x = 2 * P[:, 0] / area[0] - 1
+    y = 2 * P[:, 1] / area[1] - 1
+    pi = np.pi
+    g = np.c_[
+        x * np.sqrt(3), y * np.sqrt(3), np.cos(pi * x) * np.sqrt(2), np.cos(pi * y) * np.sqrt(2),
+        2 * np.cos(pi * x) * np.cos(pi * y), np.sin(pi * x) * np.cos(pi * y / 2) * 1.6,
+        np.cos(2 * pi * x) * np.sqrt(2), 2 * np.sin(pi * x) * np.sin(pi * y),
+    ][:, :n_outputs]
+    M = np.linalg.qr(np.random.default_rng(12345).normal(size=(8, 8)))[0][:n_outputs, :n_outputs]
+    out = g @ M
+    if noise:
+        out = out + noise * np.random.default_rng(random_state).normal(size=out.shape)
+    return out
+
+
+def make_line_problem(*, n_lines: int = 10, area: tuple[float, float] = (16.0, 18.0), step: float = 0.2,
+                      min_length: float = 8.0, noise: float = 0.02, random_state: int | None = 0) -> dict[str, Any]:
+    """Synthetic thesis 5.3.1-sim data: ``n_lines`` straight lines of random
+    orientation, start and end inside the area, at least ``min_length``
+    metres (and at least 70 % of the way to the border), sampled every
+    ``step`` metres.
+
+    Returns
+    -------
+    dict
+        ``features`` (N, 8), ``xy`` (N, 2) metres, ``lines`` (Lines with
+        the true heading differences as relative angles), ``alpha`` (L,)
+        true orientations in radians.
+    """
+    rng = np.random.default_rng(random_state)
+    pts, lab, dist, heads = [], [], [], []
+    tries = 0
+    while len(heads) < n_lines:
+        tries += 1
+        if tries > 10000:
+            raise ValueError(f"cannot fit lines of {min_length} m into an area of {area} m")
+        p0 = rng.uniform([0.0, 0.0], area)
+        a = rng.uniform(0, 2 * np.pi)
+        u = np.array([np.cos(a), np.sin(a)])
+        ts = [t for i in range(2) if abs(u[i]) > 1e-9 for t in ((0 - p0[i]) / u[i], (area[i] - p0[i]) / u[i])]
+        tmax = min(t for t in ts if t > 0)
+        if tmax < min_length:
+            continue
+        d = np.arange(0.0, rng.uniform(max(min_length, 0.7 * tmax), tmax), step)
+        pts.append(p0 + d[:, None] * u)
+        lab.append(np.full(len(d), len(heads)))
+        dist.append(d)
+        heads.append(a)
+    xy = np.vstack(pts)
+    alpha = np.array(heads)
+    lines = lines_from_labels(np.concatenate(lab), np.concatenate(dist), np.angle(np.exp(1j * np.diff(alpha))))
+    feats = synthetic_features(xy, area=area, noise=noise, random_state=rng)
+    return {"features": feats, "xy": xy, "lines": lines, "alpha": alpha}
+
+
+def make_odometry_run(*, n_legs: int = 12, area: tuple[float, float] = (5.0, 5.0), speed: float = 0.04,
+                      turn_steps: int = 8, feature_noise: float = 0.02, distance_noise: float = 0.02,
+                      heading_noise: float = 0.01, heading_bias: float = 0.002,
+                      random_state: int | None = 0) -> dict[str, Any]:
+    """Synthetic thesis 5.3.1-real / 5.3.2 run: a robot drives straight legs
+    of random length and turns on the spot by about +-90 or 180 degrees
+    (a grid-like pattern), starting in the centre facing +x.
+
+    ``distance_noise`` is the relative error of each step's distance,
+    ``heading_noise`` the std of each step's heading change (radians) and
+    ``heading_bias`` a constant heading error per moving step (radians):
+    the odometry drifts.
+
+    Returns
+    -------
+    dict
+        ``poses`` (N, 3) true poses, ``odometry`` (N, 3) noisy odometry poses
+        from (0, 0, 0), ``features`` (N, 8), ``xy`` (N, 2).
+    """
+    rng = np.random.default_rng(random_state)
+    start = np.array([area[0] / 2, area[1] / 2, 0.0])
+    steps: list[tuple[float, float]] = []
+    pose = start.copy()
+    margin = 0.3
+    for _ in range(n_legs):
+        turn = float(rng.choice([-np.pi / 2, np.pi / 2, np.pi]) + rng.normal(0, 0.05))
+        steps += [(0.0, turn / turn_steps)] * turn_steps
+        th = pose[2] + turn
+        u = np.array([np.cos(th), np.sin(th)])
+        ts = [t for i in range(2) if abs(u[i]) > 1e-9
+              for t in ((margin - pose[i]) / u[i], (area[i] - margin - pose[i]) / u[i])]
+        tmax = min([t for t in ts if t > 0], default=0.0)
+        length = rng.uniform(0.5, 1.0) * tmax
+        n = max(int(length / speed), 2)
+        steps += [(length / n, 0.0)] * n
+        pose = dead_reckon(np.array(steps), start)[-1]
+    U = np.array(steps)
+    poses = dead_reckon(U, start)
+    Un = U.copy()
+    Un[:, 0] *= 1 + distance_noise * rng.normal(size=len(U))
+    Un[:, 1] += heading_noise * rng.normal(size=len(U)) + heading_bias * (np.abs(U[:, 0]) > 0)
+    odometry = dead_reckon(Un, (0.0, 0.0, 0.0))
+    feats = synthetic_features(poses[:, :2], area=area, noise=feature_noise, random_state=rng)
+    return {"poses": poses, "odometry": odometry, "features": feats, "xy": poses[:, :2].copy()}
+
+
+def print_solver_comparison(max_iter: int = 20000) -> list[dict[str, Any]]:
+    """The solver comparison of ``docs/odometry.md`` on two synthetic problems
+    (seed 0): the 5.3.1-sim setting (random lines, random initialisation,
+    cost 5.1) and the 5.3.1-real setting (lines from drifting odometry,
+    initialisation from odometry, cost 5.5). Prints and returns the rows
+    (with a ``problem`` key)::
+
+        python -c "from sfanav.experiments_odometry import print_solver_comparison as p; p()"
+    """
+    solvers = ("varpro", "lbfgs", "gd", "gd-precond")
+    per = {"gd": {"max_iter": max_iter}, "lbfgs": {"max_iter": max_iter},
+           "gd-precond": {"max_iter": max_iter, "precondition": True}}
+    out = []
+    sim = make_line_problem(random_state=0)
+    real = make_odometry_run(n_legs=18, random_state=0)
+    problems = [
+        ("5.3.1-sim (random init, cost 5.1)", sim["features"], sim["lines"], sim["xy"],
+         {"angle_term": None, "init": "random"}),
+        ("5.3.1-real (odometry init, cost 5.5)", real["features"], segment_lines(real["odometry"]), real["xy"],
+         {"angle_term": "cos", "init": "odometry"}),
+    ]
+    for name, F, lines, xy, common in problems:
+        print(f"{name}: {lines.n_lines} lines, {lines.n_points} points, 8 outputs -> 45 dims")
+        for s in solvers:
+            params = dict(per.get(s, {}))
+            (row,) = compare_solvers(F, lines, xy, solvers=("gd" if s.startswith("gd") else s,),
+                                     learner_params={"random_state": 0, **common},
+                                     solver_params={"gd" if s.startswith("gd") else s: params}, warmup=not out)
+            row["solver"] = s
+            row["problem"] = name
+            out.append(row)
+            print(f"  {s:>10}: cost {row['cost']:.4f}, {row['n_iter']} iterations, {row['time_s']:.3f} s, "
+                  f"converged {row['converged']}, aligned MED {row['med']:.3f} m")
+    return out

@@ -1,0 +1,1018 @@
+"""Unsupervised metric learning (thesis 5.3.1): the map from slow features to
+metric (x, y) learned from odometry distances along straight lines, without
+ground truth.
+
+The robot drives straight lines (found by :func:`sfanav.odometry.segment_lines`,
+or known in advance). Sample m of line n has slow features ``s_{n,m}``
+(quadratically expanded, with a bias: 8 outputs give 1 + 44 = 45 dims) and the
+odometry distance ``d_{n,m}`` from the line's first sample. Two estimates of
+its position must agree: from the line, ``o_n + d_{n,m} u(alpha_n)`` with
+``u(a) = (cos a, sin a)``, and from the features, ``W^T s_{n,m}``. The cost
+(thesis 5.1) is
+
+    C = 1/2 sum_n sum_m || o_n + d_{n,m} u(alpha_n) - W^T s_{n,m} ||^2
+
+and, with the measured heading change ``phi_n`` between lines n and n+1
+(thesis 5.5, ``angle_term="cos"``),
+
+    C += lambda/2 sum_n ( cos(alpha_n - alpha_{n+1}) - cos(phi_n) )^2
+
+or (``angle_term="signed"``, beyond the thesis: also fixes the mirror image)
+
+    C += lambda sum_n ( 1 - cos(alpha_{n+1} - alpha_n - phi_n) ).
+
+Gradients (derived in ``docs/odometry.md``; :func:`metric_cost` returns them),
+with residuals ``r_{n,m} = o_n + d_{n,m} u(alpha_n) - W^T s_{n,m}``:
+
+    dC/d alpha_n = sum_m d_{n,m} u'(alpha_n) . r_{n,m},   u'(a) = (-sin a, cos a)
+    dC/d o_n     = sum_m r_{n,m}
+    dC/d W       = - sum_{n,m} s_{n,m} r_{n,m}^T
+    angle term "cos": with delta_n = alpha_n - alpha_{n+1}, e_n = cos delta_n - cos phi_n,
+      dC/d alpha_n += -lambda e_n sin delta_n      (n < L, i.e. n has a successor)
+      dC/d alpha_n += +lambda e_{n-1} sin delta_{n-1}  (n > 1, i.e. n has a predecessor)
+
+Solvers (all minimise the same cost; compare ``cost_``):
+
+``"gd"``
+    The thesis's momentum gradient descent (5.7, 5.8) on all parameters,
+    learning rate 1e-5 and momentum 0.95 by default; with
+    ``precondition=True`` (beyond the thesis) block-Jacobi scaled steps,
+    which converge in hundreds instead of tens of thousands of iterations.
+``"lbfgs"``
+    scipy's L-BFGS-B on all parameters, same cost and gradient.
+``"varpro"`` (default)
+    Variable projection: for fixed orientations the cost is linear least
+    squares in the origins and W, which are eliminated in closed form; what
+    remains is a cost of the L line orientations only (a quadratic form in
+    ``cos alpha``, ``sin alpha`` plus the angle term), minimised with
+    L-BFGS-B. Tens of variables instead of hundreds, so restarts
+    (``n_init``) are cheap.
+
+The solution is only defined up to a rotation and translation (and, without
+a signed angle term, a mirror image) of the plane: align it to ground truth
+for evaluation only (:func:`sfanav.metrics.align` with
+``allow_reflection=True``), or fix the first line's parameters
+(``fix_alpha={0: 0.0}, fix_origin={0: (0.0, 0.0)}``) to put it in that line's
+frame.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ._checks import as_matrix, check_int, check_nonneg_float, check_same_length
+from .modelfile import register_loader, save_model
+from .odometry import Lines, segment_lines
+from .sfa import NotFittedError, expand, expanded_dim
+
+__all__ = ["MetricLearner", "metric_cost", "plot_metric_lines"]
+
+SOLVERS = ("gd", "lbfgs", "varpro")
+ANGLE_TERMS = ("auto", "cos", "signed", None)
+
+
+# --------------------------------------------------------------------- cost
+
+
+def metric_cost(
+    alpha: Any,
+    origins: Any,
+    weights: Any,
+    design: Any,
+    labels: Any,
+    distances: Any,
+    relative_angles: Any = None,
+    *,
+    angle_term: str | None = "cos",
+    angle_weight: float = 1.0,
+    ridge: float = 0.0,
+) -> tuple[float, tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """Cost (thesis 5.1, or 5.5 with the angle term) and its gradient.
+
+    Parameters
+    ----------
+    alpha : array (L,)
+        Line orientations, radians.
+    origins : array (L, 2)
+        Line origins, metres.
+    weights : array (K, 2)
+        W: expanded features (with the bias column) to metres.
+    design : array (M, K)
+        Expanded features of the M samples on lines (bias column included).
+    labels : int array (M,)
+        Line of each sample, 0..L-1.
+    distances : array (M,)
+        Distance along the line from its origin, metres.
+    relative_angles : array (L - 1,), optional
+        Measured heading change from line n to n+1, radians. Needed by the
+        angle term; ignored without it.
+    angle_term : {"cos", "signed", None}
+        ``"cos"``: the thesis's (5.5); ``"signed"``: ``1 - cos`` of the
+        difference of signed turns; None: cost (5.1).
+    angle_weight : float
+        Weight lambda of the angle term (thesis: 1).
+    ridge : float
+        Adds ``ridge / 2 * ||W[1:]||^2`` (not the bias row; beyond the thesis).
+
+    Returns
+    -------
+    cost : float
+    (grad_alpha, grad_origins, grad_weights) : arrays of shapes (L,), (L, 2), (K, 2)
+    """
+    a = np.asarray(alpha, dtype=np.float64)
+    O = np.asarray(origins, dtype=np.float64)
+    W = np.asarray(weights, dtype=np.float64)
+    Phi = np.asarray(design, dtype=np.float64)
+    lab = np.asarray(labels)
+    d = np.asarray(distances, dtype=np.float64)
+    ca, sa = np.cos(a), np.sin(a)
+    R = O[lab] + d[:, None] * np.c_[ca, sa][lab] - Phi @ W
+    cost = 0.5 * float(np.einsum("ij,ij->", R, R))
+    L = len(a)
+    g_a = np.bincount(lab, weights=d * (-sa[lab] * R[:, 0] + ca[lab] * R[:, 1]), minlength=L)
+    g_o = np.c_[np.bincount(lab, weights=R[:, 0], minlength=L), np.bincount(lab, weights=R[:, 1], minlength=L)]
+    g_W = -Phi.T @ R
+    if ridge:
+        cost += 0.5 * ridge * float(np.einsum("ij,ij->", W[1:], W[1:]))
+        g_W[1:] += ridge * W[1:]
+    if angle_term is not None and relative_angles is not None and L > 1:
+        phi = np.asarray(relative_angles, dtype=np.float64)
+        lam = float(angle_weight)
+        if angle_term == "cos":
+            delta = a[:-1] - a[1:]
+            e = np.cos(delta) - np.cos(phi)
+            cost += 0.5 * lam * float(e @ e)
+            g = lam * e * np.sin(delta)
+            g_a[:-1] -= g
+            g_a[1:] += g
+        elif angle_term == "signed":
+            delta = a[1:] - a[:-1] - phi
+            cost += lam * float(np.sum(1.0 - np.cos(delta)))
+            g = lam * np.sin(delta)
+            g_a[1:] += g
+            g_a[:-1] -= g
+        else:
+            raise ValueError(f"angle_term must be 'cos', 'signed' or None, got {angle_term!r}")
+    return cost, (g_a, g_o, g_W)
+
+
+class _Problem:
+    """The data of one fit: design, labels, distances, angles, fixed parameters."""
+
+    def __init__(self, Phi, lab, d, phi, angle_term, lam, fix_alpha, fix_origin, ridge=0.0):
+        self.Phi, self.lab, self.d, self.phi, self.ridge = Phi, lab, d, phi, ridge
+        self.angle_term, self.lam = angle_term, lam
+        self.L, self.K = int(lab.max()) + 1, Phi.shape[1]
+        self.fix_alpha, self.fix_origin = fix_alpha, fix_origin
+        free_a = np.ones(self.L, bool)
+        free_a[list(fix_alpha)] = False
+        free_o = np.ones(self.L, bool)
+        free_o[list(fix_origin)] = False
+        self.free_a, self.free_o = free_a, free_o
+        # free-parameter mask over the packed vector [alpha (L), origins (L*2), W (K*2)]
+        self.free = np.concatenate([free_a, np.repeat(free_o, 2), np.ones(2 * self.K, bool)])
+
+    def cost(self, a, O, W):
+        return metric_cost(a, O, W, self.Phi, self.lab, self.d, self.phi,
+                           angle_term=self.angle_term, angle_weight=self.lam, ridge=self.ridge)
+
+    def pack(self, a, O, W):
+        return np.concatenate([a, O.ravel(), W.ravel()])
+
+    def unpack(self, theta):
+        L, K = self.L, self.K
+        return theta[:L], theta[L : 3 * L].reshape(L, 2), theta[3 * L :].reshape(K, 2)
+
+    def apply_fixed(self, a, O):
+        a, O = a.copy(), O.copy()
+        for n, v in self.fix_alpha.items():
+            a[n] = v
+        for n, v in self.fix_origin.items():
+            O[n] = v
+        return a, O
+
+
+class _VarPro:
+    """The cost as a function of the line orientations alone: for fixed
+    alpha, origins and W solve a linear least-squares problem (see the
+    module docstring and docs/odometry.md)."""
+
+    def __init__(self, pb: _Problem):
+        self.pb = pb
+        L, M = pb.L, len(pb.lab)
+        E = np.zeros((M, L))
+        E[np.arange(M), pb.lab] = 1.0
+        self.A = np.hstack([E[:, pb.free_o], -pb.Phi])  # r_x = A theta_x + b_x
+        n_extra = 0
+        if pb.ridge:
+            # ridge on W[1:] as extra residual rows sqrt(ridge) * W[1:] (with b = 0 there)
+            nf, K = int(pb.free_o.sum()), pb.K
+            J = np.zeros((K - 1, nf + K))
+            J[:, nf + 1 :] = np.sqrt(pb.ridge) * np.eye(K - 1)
+            self.A = np.vstack([self.A, J])
+            n_extra = K - 1
+        M = M + n_extra
+        U, S, Vt = np.linalg.svd(self.A, full_matrices=False)
+        rank = int((S > S[0] * max(self.A.shape) * np.finfo(float).eps).sum())
+        self.U, self.S, self.Vt, self.rank = U[:, :rank], S[:rank], Vt[:rank], rank
+        m0 = len(pb.lab)
+        D = np.zeros((M, L))
+        D[np.arange(m0), pb.lab] = pb.d
+        self.D = D
+        fx = np.zeros(M)
+        fy = np.zeros(M)
+        for n, (ox, oy) in pb.fix_origin.items():
+            fx[:m0][pb.lab == n] = ox
+            fy[:m0][pb.lab == n] = oy
+        self.fx, self.fy = fx, fy
+        Q = self.U
+        PD = D - Q @ (Q.T @ D)
+        Pfx, Pfy = fx - Q @ (Q.T @ fx), fy - Q @ (Q.T @ fy)
+        self.G = PD.T @ PD
+        self.hx, self.hy = PD.T @ Pfx, PD.T @ Pfy
+        self.kappa = 0.5 * float(Pfx @ Pfx + Pfy @ Pfy)
+
+    def cost(self, a):
+        pb = self.pb
+        c, s = np.cos(a), np.sin(a)
+        gc, gs = self.G @ c + self.hx, self.G @ s + self.hy
+        cost = 0.5 * float(c @ (gc + self.hx) + s @ (gs + self.hy)) + self.kappa
+        grad = -s * gc + c * gs
+        if pb.angle_term is not None and pb.phi is not None and pb.L > 1:
+            if pb.angle_term == "cos":
+                delta = a[:-1] - a[1:]
+                e = np.cos(delta) - np.cos(pb.phi)
+                cost += 0.5 * pb.lam * float(e @ e)
+                g = pb.lam * e * np.sin(delta)
+                grad[:-1] -= g
+                grad[1:] += g
+            else:
+                delta = a[1:] - a[:-1] - pb.phi
+                cost += pb.lam * float(np.sum(1.0 - np.cos(delta)))
+                g = pb.lam * np.sin(delta)
+                grad[1:] += g
+                grad[:-1] -= g
+        return cost, grad
+
+    def linear(self, a):
+        """Origins (L, 2) and W (K, 2) minimising the cost for orientations ``a``."""
+        pb = self.pb
+        bx = self.D @ np.cos(a) + self.fx
+        by = self.D @ np.sin(a) + self.fy
+        B = np.c_[bx, by]
+        theta = -(self.Vt.T @ ((self.U.T @ B) / self.S[:, None]))  # minimum-norm least squares
+        nf = int(pb.free_o.sum())
+        O = np.zeros((pb.L, 2))
+        O[pb.free_o] = theta[:nf]
+        for n, v in pb.fix_origin.items():
+            O[n] = v
+        return O, theta[nf:]
+
+
+# --------------------------------------------------------------------- learner
+
+
+def _progress(enabled: bool, total: int, desc: str):
+    if not enabled:
+        return None
+    try:
+        from tqdm.auto import tqdm
+    except ImportError:  # pragma: no cover
+        return None
+    return tqdm(total=total, desc=desc, unit="it", leave=False)
+
+
+def _one_blas_thread():
+    """One BLAS thread for the optimisation loops: their matrices are tiny, and
+    scipy's L-BFGS-B calls BLAS on vectors of a few hundred entries thousands
+    of times, where thread start-up dominates (measured 20x slower with two
+    threads on a busy two-core machine)."""
+    try:
+        from threadpoolctl import threadpool_limits
+    except ImportError:  # pragma: no cover
+        import contextlib
+
+        return contextlib.nullcontext()
+    return threadpool_limits(limits=1, user_api="blas")
+
+
+def _check_fixed(mapping: Any, name: str, width: int) -> dict[int, Any]:
+    if mapping is None:
+        return {}
+    if not isinstance(mapping, Mapping):
+        raise TypeError(f"{name} must be a mapping from line index to value, got {type(mapping).__name__}")
+    out: dict[int, Any] = {}
+    for k, v in mapping.items():
+        n = check_int(k, f"{name} key", minimum=0)
+        arr = np.asarray(v, dtype=np.float64)
+        if arr.shape != (() if width == 1 else (width,)) or not np.all(np.isfinite(arr)):
+            want = "a finite number (radians)" if width == 1 else "a finite (x, y) pair (metres)"
+            raise ValueError(f"{name}[{n}] must be {want}, got {v!r}")
+        out[n] = float(arr) if width == 1 else arr.copy()
+    return out
+
+
+class MetricLearner:
+    """Unsupervised metric learning (thesis 5.3.1): learns ``W`` mapping the
+    quadratically expanded slowest SFA outputs (with a bias) to metric
+    (x, y), from odometry distances along straight lines. No ground truth.
+
+    Parameters
+    ----------
+    n_outputs : int, default 8
+        Number of slowest outputs used (thesis: 8).
+    degree : int, default 2
+        Degree of the expansion (:func:`sfanav.expand`); 8 outputs at degree 2
+        give 44 monomials + 1 bias = 45 dims.
+    solver : {"varpro", "gd", "lbfgs"}, default "varpro"
+        ``"gd"``: the thesis's momentum gradient descent; ``"lbfgs"``: L-BFGS-B
+        on all parameters; ``"varpro"``: L-BFGS-B on the line orientations with
+        origins and W eliminated (fastest). See the module docstring.
+    angle_term : {"auto", "cos", "signed", None}, default "auto"
+        None: cost (5.1). ``"cos"``: cost (5.5), the thesis's term on the
+        cosine of the measured heading change between consecutive lines
+        (against shear on grid-like trajectories). ``"signed"``: a term on the
+        signed heading change (also excludes the mirror image). ``"auto"``:
+        ``"cos"`` if the lines carry measured relative angles, else None.
+    angle_weight : float, default 1.0
+        Weight of the angle term (thesis: 1).
+    ridge : float, default 0.0
+        L2 penalty ``ridge / 2 * ||W||^2`` on the weights of the expanded
+        features (not the bias); beyond the thesis. It shrinks the map
+        towards a constant, which the distances resist: on the synthetic
+        problems of ``docs/odometry.md`` it did not lower the error, so the
+        default is off.
+    init : {"random", "odometry"} or mapping, default "random"
+        ``"random"`` (thesis, simulator): alpha uniform in [0, 2 pi), origins
+        uniform in +-``origin_range``, W uniform in +-``weight_range``.
+        ``"odometry"`` (thesis, real robot): alpha and origins from the
+        odometry headings and line starts, W by least squares from the
+        features to the odometry positions of the line samples. A mapping with
+        ``"alpha"`` (L,), ``"origins"`` (L, 2), ``"weights"`` (K, 2) warm-starts
+        (``"varpro"`` uses ``"alpha"`` only).
+    learning_rate : float or None, default None
+        beta of (5.7), solver ``"gd"`` only. None: the thesis's 1e-5, or 0.3
+        with ``precondition``. The cost is a sum over samples, so a good
+        (unpreconditioned) learning rate shrinks as they grow.
+    momentum : float, default 0.95
+        gamma of (5.7), solver ``"gd"`` only.
+    precondition : bool, default False
+        Solver ``"gd"`` only, beyond the thesis: scale the gradient by the
+        inverse of each block's curvature, ``(Phi^T Phi)^+`` for W,
+        ``1 / sum_m d_{n,m}^2`` for alpha_n and ``1 / M_n`` for o_n (block
+        Jacobi). The expanded features are strongly correlated, which makes
+        plain gradient descent crawl along W's flat directions.
+    max_iter : int, default 5000
+        Iteration limit (per start).
+    tol : float, default 1e-7
+        Stop when the relative decrease of the cost over an iteration,
+        ``(C_{t-1} - C_t) / C_{t-1}``, falls below ``tol`` (for ``"gd"``: in
+        absolute value; for the L-BFGS solvers this is scipy's ``ftol``).
+    n_init : int, default 1
+        Starts from independent random initialisations (``init="random"``);
+        the lowest final cost wins.
+    fix_alpha : mapping int -> float, optional
+        Line orientations (radians) held fixed, e.g. ``{0: 0.0}``.
+    fix_origin : mapping int -> (x, y), optional
+        Line origins (metres) held fixed, e.g. ``{0: (0.0, 0.0)}``.
+    origin_range : float or (float, float), optional
+        Half-width in metres of the random origins per axis; default half the
+        longest line (thesis: 8 and 9 m on a 16 x 18 m area).
+    weight_range : float, default 1.0
+        Half-width of the random weights (thesis: 1).
+    snapshot_iterations : sequence of int, default ()
+        Iterations at which the parameters are recorded in ``snapshots_``
+        (e.g. (0, 500, 1000) for :func:`plot_metric_lines`, fig. 5.19).
+    segmentation : mapping, optional
+        Keyword arguments for :func:`sfanav.odometry.segment_lines` when
+        :meth:`fit` is given odometry poses.
+    random_state : int, Generator or None
+        Seed of the random initialisation.
+
+    Attributes
+    ----------
+    weights_ : ndarray (K, 2)
+        W; row 0 multiplies the bias 1, rows 1.. the expanded features.
+    coef_, intercept_ : ndarray (K - 1, 2), (2,)
+        The same split into the expanded features' weights and the bias.
+    alpha_ : ndarray (L,)
+        Line orientations, radians.
+    origins_ : ndarray (L, 2)
+        Line origins, metres.
+    lines_ : Lines
+        The lines fitted on.
+    cost_ : float
+        Final cost (5.1 or 5.5), evaluated on all parameters.
+    cost_history_ : ndarray
+        Cost at iteration 0 (initialisation), 1, 2, ... of the winning start.
+    n_iter_ : int
+        Iterations of the winning start.
+    n_iter_total_ : int
+        Iterations over all starts.
+    fit_time_ : float
+        Wall time of :meth:`fit` in seconds.
+    converged_ : bool
+        True if the winning start stopped on ``tol`` rather than ``max_iter``.
+    start_costs_ : ndarray (n_init,)
+        Final cost of each start.
+    snapshots_ : dict int -> dict
+        ``{iteration: {"alpha", "origins", "weights"}}`` of the winning start,
+        at ``snapshot_iterations`` (those reached) and at the last iteration.
+    angle_term_ : str or None
+        The angle term used.
+    learning_rate_ : float
+        The learning rate used (solver ``"gd"``).
+    n_features_in_ : int
+        Feature columns seen in fit.
+    """
+
+    def __init__(
+        self,
+        n_outputs: int = 8,
+        degree: int = 2,
+        *,
+        solver: str = "varpro",
+        angle_term: str | None = "auto",
+        angle_weight: float = 1.0,
+        ridge: float = 0.0,
+        init: str | Mapping[str, Any] = "random",
+        learning_rate: float | None = None,
+        momentum: float = 0.95,
+        precondition: bool = False,
+        max_iter: int = 5000,
+        tol: float = 1e-7,
+        n_init: int = 1,
+        fix_alpha: Mapping[int, float] | None = None,
+        fix_origin: Mapping[int, Any] | None = None,
+        origin_range: float | tuple[float, float] | None = None,
+        weight_range: float = 1.0,
+        snapshot_iterations: Sequence[int] = (),
+        segmentation: Mapping[str, Any] | None = None,
+        random_state: int | np.random.Generator | None = None,
+    ) -> None:
+        self.n_outputs = n_outputs
+        self.degree = degree
+        self.solver = solver
+        self.angle_term = angle_term
+        self.angle_weight = angle_weight
+        self.ridge = ridge
+        self.init = init
+        self.learning_rate = learning_rate
+        self.momentum = momentum
+        self.precondition = precondition
+        self.max_iter = max_iter
+        self.tol = tol
+        self.n_init = n_init
+        self.fix_alpha = fix_alpha
+        self.fix_origin = fix_origin
+        self.origin_range = origin_range
+        self.weight_range = weight_range
+        self.snapshot_iterations = snapshot_iterations
+        self.segmentation = segmentation
+        self.random_state = random_state
+
+    _PARAMS = (
+        "n_outputs", "degree", "solver", "angle_term", "angle_weight", "ridge", "init", "learning_rate", "momentum", "precondition",
+        "max_iter", "tol", "n_init", "fix_alpha", "fix_origin", "origin_range", "weight_range",
+        "snapshot_iterations", "segmentation", "random_state",
+    )
+
+    def get_params(self, deep: bool = True) -> dict[str, Any]:
+        return {k: getattr(self, k) for k in self._PARAMS}
+
+    def set_params(self, **params: Any) -> "MetricLearner":
+        for k, v in params.items():
+            if k not in self._PARAMS:
+                raise ValueError(f"unknown parameter {k!r} for MetricLearner")
+            setattr(self, k, v)
+        return self
+
+    def __repr__(self) -> str:
+        state = "fitted" if hasattr(self, "weights_") else "not fitted"
+        return (
+            f"MetricLearner(n_outputs={self.n_outputs!r}, degree={self.degree!r}, solver={self.solver!r}, "
+            f"angle_term={self.angle_term!r}, init={self.init if isinstance(self.init, str) else 'given'!r}) "
+            f"<{state}>"
+        )
+
+    # ------------------------------------------------------------ design
+    def _design(self, features: Any, n: int, degree: int, name: str = "features") -> np.ndarray:
+        F = as_matrix(features, name)
+        if F.shape[1] < n:
+            raise ValueError(f"{name} has {F.shape[1]} columns, but the learner uses the first {n}")
+        E = expand(np.ascontiguousarray(F[:, :n]), degree)
+        return np.hstack([np.ones((len(E), 1)), E])
+
+    def _lines(self, odometry: Any, n_samples: int) -> Lines:
+        if isinstance(odometry, Lines):
+            lines = odometry
+        else:
+            P = np.asarray(odometry) if not isinstance(odometry, np.ndarray) else odometry
+            if P.ndim == 2 and P.shape[1] == 3:
+                lines = segment_lines(P, **dict(self.segmentation or {}))
+            else:
+                raise ValueError(
+                    "odometry must be poses of shape (N, 3) (x [m], y [m], heading [rad]) or a "
+                    f"sfanav.odometry.Lines, got shape {getattr(P, 'shape', None)}"
+                )
+        if len(lines.labels) != n_samples:
+            raise ValueError(
+                f"features have {n_samples} rows but the odometry/lines have {len(lines.labels)}; they must match"
+            )
+        if lines.n_lines == 0:
+            raise ValueError("no line found: every sample is labelled -1")
+        return lines
+
+    # ------------------------------------------------------------ fit
+    def fit(self, features: Any, odometry: Any, *, progress: bool = True) -> "MetricLearner":
+        """Learns the metric map.
+
+        Parameters
+        ----------
+        features : array (N, m >= n_outputs)
+            Slow features of the run, slowest first.
+        odometry : array (N, 3) or Lines
+            Odometry poses ``(x [m], y [m], heading [rad])`` of the same
+            samples, split into lines with :func:`sfanav.odometry.segment_lines`
+            (``segmentation`` keywords), or lines given directly
+            (:func:`sfanav.odometry.lines_from_labels`).
+        progress : bool, default True
+            A tqdm progress bar over the iterations.
+
+        Returns
+        -------
+        self
+        """
+        n = check_int(self.n_outputs, "n_outputs")
+        degree = check_int(self.degree, "degree")
+        if self.solver not in SOLVERS:
+            raise ValueError(f"solver must be one of {SOLVERS}, got {self.solver!r}")
+        if self.angle_term not in ANGLE_TERMS:
+            raise ValueError(f"angle_term must be one of {ANGLE_TERMS}, got {self.angle_term!r}")
+        lam = check_nonneg_float(self.angle_weight, "angle_weight")
+        lr_default = 0.3 if self.precondition else 1e-5
+        lr = lr_default if self.learning_rate is None else check_nonneg_float(self.learning_rate, "learning_rate")
+        mom = check_nonneg_float(self.momentum, "momentum")
+        if mom > 1:
+            raise ValueError(f"momentum must be in [0, 1], got {mom}")
+        max_iter = check_int(self.max_iter, "max_iter")
+        tol = check_nonneg_float(self.tol, "tol")
+        n_init = check_int(self.n_init, "n_init")
+        F = as_matrix(features, "features")
+        if F.shape[1] < n:
+            raise ValueError(f"n_outputs={n}, but features have only {F.shape[1]} columns")
+        lines = self._lines(odometry, len(F))
+        on = lines.mask
+        L = lines.n_lines
+        Phi = self._design(F[on], n, degree)
+        lab, d = lines.labels[on], lines.distances[on]
+        K = Phi.shape[1]
+        n_params = 3 * L + 2 * K
+        if len(lab) < 2 or 2 * len(lab) < n_params - 3:
+            raise ValueError(
+                f"too few points on lines: {len(lab)} samples on {L} lines give {2 * len(lab)} equations for "
+                f"{n_params} parameters ({L} orientations, {2 * L} origin coordinates, {2 * K} weights); "
+                "drive more or longer lines, or use fewer outputs"
+            )
+        angle_term = self.angle_term
+        if angle_term == "auto":
+            angle_term = "cos" if lines.relative_angles is not None and L > 1 else None
+        if angle_term is not None and lines.relative_angles is None:
+            raise ValueError(
+                f"angle_term={angle_term!r} needs the measured relative angles between lines, but the lines have "
+                "none: pass relative_angles to lines_from_labels, or use angle_term=None (cost 5.1)"
+            )
+        fix_a = _check_fixed(self.fix_alpha, "fix_alpha", 1)
+        fix_o = _check_fixed(self.fix_origin, "fix_origin", 2)
+        for name, fx in (("fix_alpha", fix_a), ("fix_origin", fix_o)):
+            bad = [k for k in fx if k >= L]
+            if bad:
+                raise ValueError(f"{name} names line(s) {bad}, but only {L} lines were found (0..{L - 1})")
+        ridge = check_nonneg_float(self.ridge, "ridge")
+        pb = _Problem(Phi, lab, d, lines.relative_angles, angle_term, lam, fix_a, fix_o, ridge)
+        rng = np.random.default_rng(self.random_state)
+        snaps_at = sorted({check_int(int(i), "snapshot_iterations", minimum=0) for i in self.snapshot_iterations})
+
+        t0 = time.perf_counter()
+        best = None
+        costs, total = [], 0
+        with _one_blas_thread():
+            inits = self._inits(pb, lines, rng, n_init)
+            vp = _VarPro(pb) if self.solver == "varpro" else None  # one factorisation for all starts
+            for a0, O0, W0 in inits:
+                res = self._solve(pb, vp, a0, O0, W0, lr, mom, max_iter, tol, snaps_at, progress)
+                costs.append(res["cost"])
+                total += res["n_iter"]
+                if best is None or res["cost"] < best["cost"]:
+                    best = res
+        self.fit_time_ = time.perf_counter() - t0
+        assert best is not None
+        self.alpha_ = best["alpha"]
+        self.origins_ = best["origins"]
+        self.weights_ = best["weights"]
+        self.cost_ = float(best["cost"])
+        self.cost_history_ = np.asarray(best["history"], dtype=np.float64)
+        self.n_iter_ = int(best["n_iter"])
+        self.n_iter_total_ = int(total)
+        self.converged_ = bool(best["converged"])
+        self.snapshots_ = best["snapshots"]
+        self.start_costs_ = np.asarray(costs)
+        self.lines_ = lines
+        self.angle_term_ = angle_term
+        self.learning_rate_ = lr
+        self.n_outputs_ = n
+        self.degree_ = degree
+        self.n_features_in_ = F.shape[1]
+        return self
+
+    def _inits(self, pb: _Problem, lines: Lines, rng: np.random.Generator, n_init: int):
+        L, K = pb.L, pb.K
+        init = self.init
+        if isinstance(init, Mapping):
+            a0 = np.asarray(init.get("alpha"), dtype=np.float64)
+            if a0.shape != (L,):
+                raise ValueError(f"init['alpha'] must have shape ({L},) for {L} lines, got {a0.shape}")
+            O0 = np.asarray(init.get("origins", np.zeros((L, 2))), dtype=np.float64)
+            W0 = np.asarray(init.get("weights", np.zeros((K, 2))), dtype=np.float64)
+            if O0.shape != (L, 2) or W0.shape != (K, 2):
+                raise ValueError(
+                    f"init['origins'] and init['weights'] must have shapes ({L}, 2) and ({K}, 2), "
+                    f"got {O0.shape} and {W0.shape}"
+                )
+            a0, O0 = pb.apply_fixed(a0, O0)
+            return [(a0, O0, W0)]
+        if init == "odometry":
+            if lines.headings is None or lines.origins is None:
+                raise ValueError(
+                    "init='odometry' needs the odometry headings and line origins: fit on odometry poses, or "
+                    "pass headings and origins to lines_from_labels"
+                )
+            a0, O0 = pb.apply_fixed(lines.headings.copy(), lines.origins.copy())
+            target = O0[pb.lab] + pb.d[:, None] * np.c_[np.cos(a0), np.sin(a0)][pb.lab]
+            W0 = np.linalg.lstsq(pb.Phi, target, rcond=None)[0]
+            return [(a0, O0, W0)]
+        if init != "random":
+            raise ValueError(f"init must be 'random', 'odometry' or a mapping of arrays, got {init!r}")
+        if self.origin_range is None:
+            half = 0.5 * float(lines.lengths().max())
+            ox = oy = max(half, 1e-6)
+        else:
+            rr = np.broadcast_to(np.asarray(self.origin_range, dtype=np.float64), (2,))
+            if not np.all(np.isfinite(rr)) or np.any(rr < 0):
+                raise ValueError(f"origin_range must be finite and >= 0, got {self.origin_range!r}")
+            ox, oy = float(rr[0]), float(rr[1])
+        wr = check_nonneg_float(self.weight_range, "weight_range")
+        out = []
+        for _ in range(n_init):
+            a0 = rng.uniform(0, 2 * np.pi, L)
+            O0 = np.c_[rng.uniform(-ox, ox, L), rng.uniform(-oy, oy, L)]
+            W0 = rng.uniform(-wr, wr, (K, 2))
+            a0, O0 = pb.apply_fixed(a0, O0)
+            out.append((a0, O0, W0))
+        return out
+
+    @staticmethod
+    def _preconditioner(pb: _Problem) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Block-Jacobi: inverse curvature of alpha_n, o_n and W (pseudo-inverse)."""
+        h_a = np.bincount(pb.lab, weights=pb.d**2, minlength=pb.L)
+        if pb.angle_term is not None and pb.phi is not None:
+            h_a = h_a + 2.0 * pb.lam
+        h_o = np.bincount(pb.lab, minlength=pb.L).astype(np.float64)
+        H = pb.Phi.T @ pb.Phi
+        if pb.ridge:
+            H[1:, 1:] += pb.ridge * np.eye(pb.K - 1)
+        ev, U = np.linalg.eigh(H)
+        keep = ev > ev[-1] * 1e-10
+        Hinv = (U[:, keep] / ev[keep]) @ U[:, keep].T
+        return 1.0 / np.maximum(h_a, 1e-12), (1.0 / h_o)[:, None], Hinv
+
+    def _solve(self, pb, vp, a0, O0, W0, lr, mom, max_iter, tol, snaps_at, progress):
+        snaps: dict[int, dict[str, np.ndarray]] = {}
+
+        def snap(it, a, O, W):
+            snaps[it] = {"alpha": a.copy(), "origins": O.copy(), "weights": W.copy()}
+
+        if self.solver == "gd":
+            theta = pb.pack(a0, O0, W0)
+            free = pb.free
+            precond = self._preconditioner(pb) if self.precondition else None
+            v = np.zeros_like(theta)
+            c, g = pb.cost(*pb.unpack(theta))
+            hist = [c]
+            if 0 in snaps_at:
+                snap(0, *pb.unpack(theta))
+            bar = _progress(progress, max_iter, "metric learning (gd)")
+            converged, it = False, 0
+            try:
+                for it in range(1, max_iter + 1):
+                    if precond is not None:
+                        g = (g[0] * precond[0], g[1] * precond[1], precond[2] @ g[2])
+                    grad = np.concatenate([g[0], g[1].ravel(), g[2].ravel()])
+                    v = mom * v + lr * np.where(free, grad, 0.0)  # (5.7)
+                    theta = theta - v  # (5.8)
+                    c_new, g = pb.cost(*pb.unpack(theta))
+                    hist.append(c_new)
+                    if it in snaps_at:
+                        snap(it, *pb.unpack(theta))
+                    if bar is not None:
+                        bar.update(1)
+                        if it % 50 == 0:
+                            bar.set_postfix(cost=f"{c_new:.4g}")
+                    if not np.isfinite(c_new):
+                        raise FloatingPointError(
+                            f"gradient descent diverged at iteration {it} (cost {c_new}); "
+                            f"lower learning_rate (now {lr:g})"
+                        )
+                    if abs(c - c_new) <= tol * abs(c):
+                        converged = True
+                        break
+                    c = c_new
+            finally:
+                if bar is not None:
+                    bar.close()
+            a, O, W = pb.unpack(theta)
+            a, O, W = a.copy(), O.copy(), W.copy()
+            n_iter = it
+        else:
+            from scipy.optimize import minimize
+
+            hist: list[float] = []
+            bar = _progress(progress, max_iter, f"metric learning ({self.solver})")
+            if self.solver == "lbfgs":
+                free = pb.free
+                base = pb.pack(a0, O0, W0)
+
+                def full(x):
+                    th = base.copy()
+                    th[free] = x
+                    return th
+
+                def fun(x):
+                    c, g = pb.cost(*pb.unpack(full(x)))
+                    return c, np.concatenate([g[0], g[1].ravel(), g[2].ravel()])[free]
+
+                def params(x):
+                    a, O, W = pb.unpack(full(x))
+                    return a.copy(), O.copy(), W.copy()
+
+                x0 = base[free]
+            else:
+                freea = pb.free_a
+                abase = a0.copy()
+
+                def full_a(x):
+                    a = abase.copy()
+                    a[freea] = x
+                    return a
+
+                def fun(x):
+                    c, g = vp.cost(full_a(x))
+                    return c, g[freea]
+
+                def params(x):
+                    a = full_a(x)
+                    O, W = vp.linear(a)
+                    return a, O, W
+
+                x0 = a0[freea]
+            hist.append(float(pb.cost(*params(x0))[0]))
+            if 0 in snaps_at:
+                snap(0, *params(x0))
+            counter = [0]
+
+            def callback(intermediate_result):
+                counter[0] += 1
+                x = intermediate_result.x
+                if counter[0] in snaps_at:
+                    snap(counter[0], *params(x))
+                hist.append(float(intermediate_result.fun) if self.solver == "lbfgs" else float(pb.cost(*params(x))[0]))
+                if bar is not None:
+                    bar.update(1)
+
+            try:
+                if len(x0):
+                    res = minimize(fun, x0, jac=True, method="L-BFGS-B", callback=callback,
+                                   options={"maxiter": max_iter, "ftol": tol, "gtol": 1e-12, "maxcor": 20})
+                    x_opt, n_iter = res.x, int(res.nit)
+                    converged = bool(res.success) and n_iter < max_iter
+                else:
+                    x_opt, n_iter, converged = x0, 0, True
+            finally:
+                if bar is not None:
+                    bar.close()
+            a, O, W = params(x_opt)
+        cost = float(pb.cost(a, O, W)[0])
+        snap(n_iter, a, O, W)
+        return {"alpha": a, "origins": O, "weights": W, "cost": cost, "history": hist,
+                "n_iter": n_iter, "converged": converged, "snapshots": snaps}
+
+    # ------------------------------------------------------------ inference
+    def _check_fitted(self) -> None:
+        if not hasattr(self, "weights_"):
+            raise NotFittedError("this MetricLearner is not fitted yet; call fit first")
+
+    @property
+    def coef_(self) -> np.ndarray:
+        self._check_fitted()
+        return self.weights_[1:]
+
+    @property
+    def intercept_(self) -> np.ndarray:
+        self._check_fitted()
+        return self.weights_[0]
+
+    def transform(self, features: Any) -> np.ndarray:
+        """Metric positions (N, 2) in metres (in the learned frame, see the
+        module docstring) of features (N, m >= n_outputs_)."""
+        self._check_fitted()
+        F = as_matrix(features, "features")
+        if F.shape[1] != self.n_features_in_:
+            raise ValueError(
+                f"features have {F.shape[1]} columns, but this MetricLearner was fitted with {self.n_features_in_}"
+            )
+        return self._design(F, self.n_outputs_, self.degree_) @ self.weights_
+
+    predict = transform
+
+    def fit_transform(self, features: Any, odometry: Any, **kw: Any) -> np.ndarray:
+        """:meth:`fit`, then :meth:`transform` of the same features."""
+        return self.fit(features, odometry, **kw).transform(features)
+
+    def line_points(self, snapshot: int | None = None) -> np.ndarray:
+        """Line-model positions ``o_n + d u(alpha_n)`` (N, 2) in metres of the
+        training samples (NaN rows off the lines), with the final parameters
+        or those of ``snapshots_[snapshot]``."""
+        self._check_fitted()
+        a, O, _ = self._snapshot(snapshot)
+        lab, d = self.lines_.labels, self.lines_.distances
+        out = np.full((len(lab), 2), np.nan)
+        on = lab >= 0
+        out[on] = O[lab[on]] + d[on, None] * np.c_[np.cos(a), np.sin(a)][lab[on]]
+        return out
+
+    def _snapshot(self, snapshot: int | None):
+        if snapshot is None:
+            return self.alpha_, self.origins_, self.weights_
+        if snapshot not in self.snapshots_:
+            raise ValueError(f"no snapshot at iteration {snapshot}; recorded: {sorted(self.snapshots_)}")
+        s = self.snapshots_[snapshot]
+        return s["alpha"], s["origins"], s["weights"]
+
+    def transform_snapshot(self, features: Any, snapshot: int) -> np.ndarray:
+        """As :meth:`transform`, with W of ``snapshots_[snapshot]``."""
+        self._check_fitted()
+        _, _, W = self._snapshot(snapshot)
+        F = as_matrix(features, "features")
+        return self._design(F, self.n_outputs_, self.degree_) @ W
+
+    # ------------------------------------------------------------ persistence
+    def save(self, path: str | os.PathLike) -> Path:
+        """Saves the fitted learner as a model file (kind ``"MetricLearner"``,
+        pickle-free); read back with :func:`sfanav.load`. ``init`` given as
+        arrays and ``random_state`` generators are not stored."""
+        self._check_fitted()
+        lines = self.lines_
+        params = {k: getattr(self, k) for k in self._PARAMS}
+        params["init"] = self.init if isinstance(self.init, str) else "random"
+        params["random_state"] = self.random_state if isinstance(self.random_state, (int, np.integer)) else None
+        params["fix_alpha"] = [[int(k), float(v)] for k, v in (self.fix_alpha or {}).items()]
+        params["fix_origin"] = [[int(k), [float(x) for x in v]] for k, v in (self.fix_origin or {}).items()]
+        params["snapshot_iterations"] = [int(i) for i in self.snapshot_iterations]
+        params["segmentation"] = dict(self.segmentation or {})
+        if params["origin_range"] is not None:
+            params["origin_range"] = np.broadcast_to(np.asarray(params["origin_range"], float), (2,)).tolist()
+        state = {
+            "params": params,
+            "weights": self.weights_,
+            "alpha": self.alpha_,
+            "origins": self.origins_,
+            "cost": self.cost_,
+            "cost_history": self.cost_history_,
+            "n_iter": self.n_iter_,
+            "n_iter_total": self.n_iter_total_,
+            "fit_time": self.fit_time_,
+            "converged": self.converged_,
+            "start_costs": self.start_costs_,
+            "angle_term": self.angle_term_,
+            "learning_rate": self.learning_rate_,
+            "n_outputs": self.n_outputs_,
+            "degree": self.degree_,
+            "n_features_in": self.n_features_in_,
+            "lines": {
+                "labels": lines.labels,
+                "distances": np.nan_to_num(lines.distances, nan=0.0),
+                "relative_angles": lines.relative_angles,
+                "headings": lines.headings,
+                "origins": lines.origins,
+            },
+        }
+        return save_model(path, "MetricLearner", state)
+
+    @classmethod
+    def _from_state(cls, state: dict[str, Any]) -> "MetricLearner":
+        try:
+            p = dict(state["params"])
+            p["fix_alpha"] = {int(k): float(v) for k, v in p["fix_alpha"]} or None
+            p["fix_origin"] = {int(k): tuple(v) for k, v in p["fix_origin"]} or None
+            p["snapshot_iterations"] = tuple(p["snapshot_iterations"])
+            if p["origin_range"] is not None:
+                p["origin_range"] = tuple(p["origin_range"])
+            m = cls(**p)
+            m.weights_ = np.asarray(state["weights"], dtype=np.float64)
+            m.alpha_ = np.asarray(state["alpha"], dtype=np.float64)
+            m.origins_ = np.asarray(state["origins"], dtype=np.float64)
+            m.cost_ = float(state["cost"])
+            m.cost_history_ = np.asarray(state["cost_history"], dtype=np.float64)
+            m.n_iter_ = int(state["n_iter"])
+            m.n_iter_total_ = int(state["n_iter_total"])
+            m.fit_time_ = float(state["fit_time"])
+            m.converged_ = bool(state["converged"])
+            m.start_costs_ = np.asarray(state["start_costs"], dtype=np.float64)
+            m.angle_term_ = state["angle_term"]
+            m.learning_rate_ = float(state["learning_rate"])
+            m.n_outputs_ = int(state["n_outputs"])
+            m.degree_ = int(state["degree"])
+            m.n_features_in_ = int(state["n_features_in"])
+            ls = state["lines"]
+            lab = np.asarray(ls["labels"])
+            dist = np.where(lab >= 0, np.asarray(ls["distances"], dtype=np.float64), np.nan)
+            m.lines_ = Lines(lab, dist, ls["relative_angles"], ls["headings"], ls["origins"])
+        except (KeyError, TypeError) as exc:
+            raise ValueError(f"invalid MetricLearner state: {exc}") from None
+        want = expanded_dim(m.n_outputs_, m.degree_) + 1
+        if m.weights_.shape != (want, 2) or m.alpha_.shape != (m.lines_.n_lines,):
+            raise ValueError(
+                f"invalid MetricLearner state: weights of shape {m.weights_.shape} (want ({want}, 2)) or "
+                f"{m.alpha_.shape[0]} orientations for {m.lines_.n_lines} lines"
+            )
+        m.snapshots_ = {m.n_iter_: {"alpha": m.alpha_, "origins": m.origins_, "weights": m.weights_}}
+        return m
+
+
+register_loader("MetricLearner", MetricLearner._from_state)
+
+
+# --------------------------------------------------------------------- plot
+
+
+def plot_metric_lines(
+    learner: MetricLearner,
+    features: Any,
+    path: Any,
+    *,
+    iterations: Sequence[int] | None = None,
+    title: str | None = None,
+    dpi: int = 120,
+) -> Path:
+    """The optimisation as in thesis fig. 5.19: one panel per recorded
+    iteration; per line, in its own colour, the line-model estimates
+    ``o_n + d u(alpha_n)`` dotted and the feature estimates ``W^T s`` solid.
+
+    Parameters
+    ----------
+    learner : MetricLearner
+        Fitted, with ``snapshot_iterations`` e.g. (0, 500, 1000).
+    features : array (N, m)
+        The features it was fitted on.
+    path : str or Path
+        Output PNG.
+    iterations : sequence of int, optional
+        Snapshots to show; default all recorded (the last is the result).
+    """
+    from .analysis import _figure, _save
+
+    learner._check_fitted()
+    F = as_matrix(features, "features")
+    check_same_length(F, learner.lines_.labels, "features", "the fitted lines")
+    its = sorted(learner.snapshots_) if iterations is None else [int(i) for i in iterations]
+    missing = [i for i in its if i not in learner.snapshots_]
+    if missing:
+        raise ValueError(f"no snapshot at iteration(s) {missing}; recorded: {sorted(learner.snapshots_)}")
+    lab = learner.lines_.labels
+    L = learner.lines_.n_lines
+    fig = _figure(4.0 * len(its), 4.2 + (0.3 if title else 0))
+    axes = fig.subplots(1, len(its), squeeze=False)[0]
+    from matplotlib import colormaps
+
+    cmap = colormaps["tab20" if L > 10 else "tab10"]
+    for ax, it in zip(axes, its):
+        lp = learner.line_points(it)
+        fp = learner.transform_snapshot(F, it)
+        for n in range(L):
+            sel = lab == n
+            col = cmap(n % cmap.N)
+            ax.plot(lp[sel, 0], lp[sel, 1], ":", color=col, lw=1.5)
+            ax.plot(fp[sel, 0], fp[sel, 1], "-", color=col, lw=0.8)
+        ax.set_aspect("equal", adjustable="datalim")
+        ax.set_title(f"iteration {it}")
+        ax.set_xlabel("x [m]")
+    axes[0].set_ylabel("y [m]")
+    if title:
+        fig.suptitle(title)
+    return _save(fig, path, dpi)

@@ -1,0 +1,335 @@
+"""Odometry helpers for the odometry integration (thesis 5.3): motion
+increments, dead reckoning, and the split of a trajectory into straight line
+segments for unsupervised metric learning (thesis 5.3.1).
+
+Conventions
+-----------
+* An odometry *pose* is ``(x, y, theta)``: position in metres, heading in
+  radians (counter-clockwise from the x axis), in the odometry's own frame.
+  Odometry is given as an array of poses of shape (N, 3), one per frame, as
+  a robot's dead-reckoned ``/odom`` would report it.
+* An *increment* between frames k and k+1 is ``(d, dtheta)``: the signed
+  distance driven in metres (negative when reversing) and the heading change
+  in radians, wrapped to (-pi, pi]. Increments have shape (N - 1, 2).
+* Motion between frames follows a circular arc (constant turn rate and
+  velocity over the step, the CTRV model of :mod:`sfanav.ekf`): the chord is
+  ``d * sinc(dtheta / 2)`` long and points along ``theta + dtheta / 2``.
+  :func:`increments` and :func:`dead_reckon` invert each other exactly for
+  such motion.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from ._checks import as_matrix, as_real_array, check_finite, check_int, check_nonneg_float
+
+__all__ = [
+    "Lines",
+    "arc_factor",
+    "dead_reckon",
+    "increments",
+    "lines_from_labels",
+    "segment_lines",
+    "wrap_angle",
+]
+
+
+def wrap_angle(a: Any) -> np.ndarray | float:
+    """Angles in radians wrapped to (-pi, pi]."""
+    w = np.pi - np.mod(np.pi - np.asarray(a, dtype=np.float64), 2 * np.pi)
+    return float(w) if np.ndim(w) == 0 else w
+
+
+def arc_factor(dtheta: Any) -> np.ndarray:
+    """``sinc(dtheta / 2) = sin(dtheta / 2) / (dtheta / 2)``: chord length of a
+    unit-length arc turning by ``dtheta`` radians (1 at dtheta = 0)."""
+    return np.sinc(np.asarray(dtheta, dtype=np.float64) / (2 * np.pi))
+
+
+def as_poses(odometry: Any, name: str = "odometry", *, min_rows: int = 2) -> np.ndarray:
+    """A finite float64 array of poses (N, 3): x, y in metres, heading in radians."""
+    P = as_matrix(odometry, name, min_rows=min_rows)
+    if P.shape[1] != 3:
+        raise ValueError(
+            f"{name} must be poses of shape (N, 3) (x [m], y [m], heading [rad]), got shape {P.shape}"
+        )
+    return P
+
+
+def increments(odometry: Any) -> np.ndarray:
+    """Motion increments between consecutive odometry poses.
+
+    Parameters
+    ----------
+    odometry : array of shape (N, 3)
+        Poses ``(x, y, theta)``: metres, metres, radians; N >= 2.
+
+    Returns
+    -------
+    ndarray of shape (N - 1, 2)
+        ``(d, dtheta)`` per step: signed arc length in metres (negative when
+        the displacement points against the mid-step heading, i.e. reversing)
+        and the heading change in radians, wrapped to (-pi, pi]. A lateral
+        component of the displacement (sliding sideways) is folded into the
+        length of the chord.
+    """
+    P = as_poses(odometry)
+    dxy = np.diff(P[:, :2], axis=0)
+    dth = wrap_angle(np.diff(P[:, 2]))
+    mid = P[:-1, 2] + 0.5 * dth
+    chord = np.hypot(dxy[:, 0], dxy[:, 1])
+    sign = np.where(dxy[:, 0] * np.cos(mid) + dxy[:, 1] * np.sin(mid) < 0, -1.0, 1.0)
+    return np.c_[sign * chord / arc_factor(dth), dth]
+
+
+def dead_reckon(steps: Any, start_pose: Any = (0.0, 0.0, 0.0)) -> np.ndarray:
+    """Integrates motion increments from a start pose (arc model).
+
+    Parameters
+    ----------
+    steps : array of shape (N - 1, 2)
+        ``(d, dtheta)`` per step, metres and radians (see :func:`increments`).
+    start_pose : array of shape (3,)
+        ``(x, y, theta)`` of the first frame, metres and radians.
+
+    Returns
+    -------
+    ndarray of shape (N, 3)
+        Poses ``(x, y, theta)``; headings are not wrapped (they accumulate).
+    """
+    U = as_matrix(steps, "steps", n_cols=2, min_rows=0)
+    s0 = as_real_array(start_pose, "start_pose").astype(np.float64).ravel()
+    if s0.shape != (3,):
+        raise ValueError(f"start_pose must be (x [m], y [m], heading [rad]), got shape {s0.shape}")
+    check_finite(s0, "start_pose")
+    theta = s0[2] + np.concatenate([[0.0], np.cumsum(U[:, 1])])
+    mid = theta[:-1] + 0.5 * U[:, 1]
+    chord = U[:, 0] * arc_factor(U[:, 1])
+    xy = np.cumsum(np.c_[chord * np.cos(mid), chord * np.sin(mid)], axis=0)
+    out = np.empty((len(U) + 1, 3))
+    out[0, :2] = s0[:2]
+    out[1:, :2] = s0[:2] + xy
+    out[:, 2] = theta
+    return out
+
+
+# --------------------------------------------------------------------- lines
+
+
+@dataclass
+class Lines:
+    """Straight line segments of a trajectory (thesis 5.3.1).
+
+    Attributes
+    ----------
+    labels : ndarray of int, shape (N,)
+        Line index of each sample, -1 for samples on no line (turns, stops,
+        segments too short).
+    distances : ndarray of float, shape (N,)
+        Signed distance in metres along its line from the line's first
+        sample (the thesis's ``d_{n,m}``; 0 at the first sample, growing in the
+        driving direction); NaN for samples on no line.
+    relative_angles : ndarray of float, shape (n_lines - 1,), or None
+        Measured heading change from line n to line n+1 in radians, wrapped
+        to (-pi, pi] (the thesis's angle between l_n and l_{n+1}); None if
+        unknown (e.g. lines driven independently in a simulator).
+    headings : ndarray of float, shape (n_lines,), or None
+        Odometry heading of each line in radians (circular mean over the
+        line): an initial guess for the line orientations.
+    origins : ndarray of float, shape (n_lines, 2), or None
+        Odometry position of each line's first sample in metres: an initial
+        guess for the line origins.
+    """
+
+    labels: np.ndarray
+    distances: np.ndarray
+    relative_angles: np.ndarray | None = None
+    headings: np.ndarray | None = None
+    origins: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        lab = np.asarray(self.labels)
+        if lab.ndim != 1 or lab.dtype.kind not in "iu":
+            raise TypeError(f"labels must be a 1-D integer array, got dtype {lab.dtype} and shape {lab.shape}")
+        self.labels = lab.astype(np.int64)
+        self.distances = np.asarray(self.distances, dtype=np.float64)
+        if self.distances.shape != self.labels.shape:
+            raise ValueError(
+                f"distances must have one value per sample ({len(self.labels)}), got shape {self.distances.shape}"
+            )
+        n = self.n_lines
+        on = self.labels >= 0
+        if np.any(self.labels < -1):
+            raise ValueError("labels must be line indices >= 0, or -1 for samples on no line")
+        if n and len(np.unique(self.labels[on])) != n:
+            missing = sorted(set(range(n)) - set(np.unique(self.labels[on]).tolist()))
+            raise ValueError(f"line labels must be 0..{n - 1} without gaps; line(s) {missing} have no samples")
+        if not np.isfinite(self.distances[on]).all():
+            raise ValueError("distances contain NaN or infinity on samples that belong to a line")
+        for name, shape in (("relative_angles", (max(n - 1, 0),)), ("headings", (n,)), ("origins", (n, 2))):
+            v = getattr(self, name)
+            if v is not None:
+                v = np.asarray(v, dtype=np.float64)
+                if v.shape != shape:
+                    raise ValueError(f"{name} must have shape {shape} for {n} lines, got {v.shape}")
+                check_finite(v, name)
+                setattr(self, name, v)
+
+    @property
+    def n_lines(self) -> int:
+        """Number of lines."""
+        return int(self.labels.max()) + 1 if len(self.labels) and self.labels.max() >= 0 else 0
+
+    @property
+    def mask(self) -> np.ndarray:
+        """Boolean (N,): samples that belong to a line."""
+        return self.labels >= 0
+
+    @property
+    def n_points(self) -> int:
+        """Number of samples on lines."""
+        return int(self.mask.sum())
+
+    def sizes(self) -> np.ndarray:
+        """Number of samples of each line, shape (n_lines,)."""
+        return np.bincount(self.labels[self.mask], minlength=self.n_lines)
+
+    def lengths(self) -> np.ndarray:
+        """Length of each line in metres (max - min distance), shape (n_lines,)."""
+        out = np.zeros(self.n_lines)
+        for n in range(self.n_lines):
+            d = self.distances[self.labels == n]
+            out[n] = d.max() - d.min()
+        return out
+
+    def __repr__(self) -> str:
+        ang = "measured" if self.relative_angles is not None else "none"
+        return (
+            f"<sfanav.odometry.Lines {self.n_lines} lines, {self.n_points} of {len(self.labels)} samples, "
+            f"relative angles: {ang}>"
+        )
+
+
+def lines_from_labels(labels: Any, distances: Any, relative_angles: Any = None, *, headings: Any = None,
+                      origins: Any = None) -> Lines:
+    """Lines known in advance (e.g. a simulator that drives given straight
+    lines, thesis 5.3.1): labels (N,) with line indices 0..L-1 (-1: no line)
+    and distances (N,) in metres along each line. Optional measured relative
+    angles (L - 1,) in radians, odometry headings (L,) and origins (L, 2)."""
+    lab = as_real_array(labels, "labels")
+    if lab.dtype.kind == "f":
+        if not np.all(np.isfinite(lab)) or not np.all(lab == np.round(lab)):
+            raise TypeError("labels must be integers")
+        lab = lab.astype(np.int64)
+    dist = as_real_array(distances, "distances").astype(np.float64)
+    return Lines(lab, dist, relative_angles, headings, origins)
+
+
+def _circular_mean(a: np.ndarray) -> float:
+    return float(np.arctan2(np.sin(a).mean(), np.cos(a).mean()))
+
+
+def segment_lines(
+    odometry: Any,
+    *,
+    dt: Any = 1.0,
+    min_speed: float | None = None,
+    max_turn_rate: float | None = None,
+    min_points: int = 10,
+    min_length: float = 0.5,
+) -> Lines:
+    """Splits a trajectory into straight line segments from odometry
+    (thesis 5.3.1, real-world experiment: "split into line segments based on
+    the translational and angular velocity measurements from odometry").
+
+    A step (frame k to k+1) is *straight* if its speed ``|d| / dt`` is at
+    least ``min_speed`` and its turn rate ``|dtheta| / dt`` at most
+    ``max_turn_rate``. A line is a maximal run of consecutive straight steps
+    (its samples are the frames they join); runs with fewer than
+    ``min_points`` samples or shorter than ``min_length`` are dropped.
+
+    Parameters
+    ----------
+    odometry : array of shape (N, 3)
+        Odometry poses ``(x, y, theta)``: metres, metres, radians.
+    dt : float or array of shape (N - 1,), default 1.0
+        Time of each step in seconds (default: speeds per frame).
+    min_speed : float or None
+        Metres per second. None: a quarter of the median speed of the steps
+        that move at all (scale-free; stops and turns on the spot fall below).
+    max_turn_rate : float or None
+        Radians per second. None: the larger of 0.2 rad per metre driven at
+        the median speed (arcs tighter than a 5 m radius are not straight)
+        and 4 times the median turn rate of the steps at or above
+        ``min_speed`` (the heading noise of straight driving).
+    min_points : int, default 10
+        Fewest samples of a line.
+    min_length : float, default 0.5
+        Shortest line in metres.
+
+    Returns
+    -------
+    Lines
+        With ``distances`` from the odometry's distance measurements (signed
+        cumulative arc length from the line's first sample), ``relative_angles``
+        from the odometry heading change between consecutive lines (circular
+        means over each line), ``headings`` and ``origins`` for initialisation.
+
+    Raises
+    ------
+    ValueError
+        If no line is found (with the thresholds used, so they can be
+        adjusted), or the inputs are malformed.
+    """
+    P = as_poses(odometry)
+    U = increments(P)
+    dts = np.broadcast_to(np.asarray(dt, dtype=np.float64), (len(U),))
+    if not np.all(np.isfinite(dts)) or np.any(dts <= 0):
+        raise ValueError("dt must be positive and finite (seconds per step)")
+    speed = np.abs(U[:, 0]) / dts
+    rate = np.abs(U[:, 1]) / dts
+    moving = speed[speed > 0]
+    if len(moving) == 0:
+        raise ValueError("no line found: the odometry never moves")
+    med = float(np.median(moving))
+    v_min = 0.25 * med if min_speed is None else check_nonneg_float(min_speed, "min_speed")
+    if max_turn_rate is None:
+        # 0.2 rad per metre at the median speed, or 4x the median turn rate of the moving steps
+        # (the heading noise of straight driving), whichever is larger
+        w_max = max(0.2 * med, 4.0 * float(np.median(rate[speed >= v_min])))
+    else:
+        w_max = check_nonneg_float(max_turn_rate, "max_turn_rate")
+    min_points = check_int(min_points, "min_points", minimum=2)
+    min_length = check_nonneg_float(min_length, "min_length")
+    straight = (speed >= v_min) & (rate <= w_max)
+    labels = np.full(len(P), -1, dtype=np.int64)
+    distances = np.full(len(P), np.nan)
+    headings, origins = [], []
+    # runs of straight steps [a, b) -> samples a..b
+    edges = np.diff(np.concatenate([[0], straight.astype(np.int8), [0]]))
+    starts, ends = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
+    n = 0
+    for a, b in zip(starts, ends):
+        d = np.concatenate([[0.0], np.cumsum(U[a:b, 0])])
+        if b - a + 1 < min_points or d.max() - d.min() < min_length:
+            continue
+        labels[a : b + 1] = n
+        distances[a : b + 1] = d
+        headings.append(_circular_mean(P[a : b + 1, 2]))
+        origins.append(P[a, :2])
+        n += 1
+    if n == 0:
+        raise ValueError(
+            f"no line found in {len(P)} odometry samples: no run of at least {min_points} samples and "
+            f"{min_length} m with speed >= {v_min:.4g} m/s and turn rate <= {w_max:.4g} rad/s "
+            f"(dt = {float(dts[0]):.4g} s); adjust min_speed, max_turn_rate, min_points or min_length"
+        )
+    # heading change between consecutive lines (odometry integrates it across the turn); wrapped,
+    # so only its value modulo 2 pi matters
+    hd = np.array(headings)
+    rel = wrap_angle(np.diff(hd)) if n > 1 else np.empty(0)
+    return Lines(labels, distances, rel, hd, np.array(origins))

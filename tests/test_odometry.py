@@ -1,0 +1,87 @@
+"""Odometry increments, dead reckoning and line segmentation (thesis 5.3.1)."""
+
+import numpy as np
+import pytest
+
+from sfanav.odometry import Lines, dead_reckon, increments, lines_from_labels, segment_lines, wrap_angle
+
+
+def square_walk(side_steps=20, turn_steps=5, step=0.2, laps=1):
+    """Drive a square: straight legs, turns of +90 degrees on the spot."""
+    steps = []
+    for _ in range(4 * laps):
+        steps += [(step, 0.0)] * side_steps + [(0.0, np.pi / 2 / turn_steps)] * turn_steps
+    return np.array(steps)
+
+
+def test_increments_and_dead_reckoning_invert_each_other():
+    rng = np.random.default_rng(0)
+    U = np.c_[rng.normal(0.1, 0.08, 300), rng.normal(0, 0.2, 300)]  # includes reversing steps
+    P = dead_reckon(U, (1.0, -2.0, 3.0))
+    assert P.shape == (301, 3) and np.allclose(P[0], (1.0, -2.0, 3.0))
+    np.testing.assert_allclose(increments(P), U, atol=1e-12)
+    # headings given wrapped give the same increments
+    Pw = P.copy()
+    Pw[:, 2] = wrap_angle(Pw[:, 2])
+    np.testing.assert_allclose(increments(Pw), U, atol=1e-12)
+    # an arc: quarter circle of radius 2 in 10 steps
+    Q = dead_reckon(np.tile([np.pi / 10, np.pi / 20], (10, 1)))
+    np.testing.assert_allclose(Q[-1], (2.0, 2.0, np.pi / 2), atol=1e-12)
+
+
+def test_segment_lines_on_a_square():
+    P = dead_reckon(square_walk(), (0.0, 0.0, 0.0))
+    lines = segment_lines(P)
+    assert lines.n_lines == 4 and lines.n_points == 84
+    np.testing.assert_allclose(lines.lengths(), 4.0)
+    np.testing.assert_allclose(lines.relative_angles, np.pi / 2)
+    np.testing.assert_allclose(lines.headings, wrap_angle(np.arange(4) * np.pi / 2), atol=1e-12)
+    np.testing.assert_allclose(lines.origins, [[0, 0], [4, 0], [4, 4], [0, 4]], atol=1e-12)
+    on = lines.mask
+    assert np.isnan(lines.distances[~on]).all() and (lines.labels[~on] == -1).all()
+    np.testing.assert_allclose(lines.distances[lines.labels == 1], np.arange(21) * 0.2, atol=1e-12)
+    assert "4 lines" in repr(lines)
+
+
+def test_segment_lines_thresholds_and_noise():
+    rng = np.random.default_rng(1)
+    U = square_walk(laps=2)
+    Un = U + np.c_[0.002 * rng.normal(size=len(U)), 0.005 * rng.normal(size=len(U))]
+    lines = segment_lines(dead_reckon(Un), dt=0.5)  # auto thresholds follow the noise and the time step
+    assert lines.n_lines == 8
+    np.testing.assert_allclose(lines.relative_angles, np.pi / 2, atol=0.1)
+    # a min_points above the leg length finds nothing, with the thresholds in the message
+    with pytest.raises(ValueError, match="no line found.*min_points"):
+        segment_lines(dead_reckon(Un), min_points=50)
+    with pytest.raises(ValueError, match="no line found"):
+        segment_lines(dead_reckon(Un), max_turn_rate=0.0)
+    with pytest.raises(ValueError, match="never moves"):
+        segment_lines(np.zeros((10, 3)))
+
+
+def test_bad_odometry_inputs():
+    with pytest.raises(ValueError, match=r"shape \(N, 3\)"):
+        increments(np.zeros((5, 2)))
+    with pytest.raises(ValueError, match="at least 2 rows"):
+        segment_lines(np.zeros((1, 3)))
+    with pytest.raises(ValueError, match="NaN"):
+        increments(np.array([[0, 0, 0], [np.nan, 0, 0.0]]))
+    with pytest.raises(ValueError, match="dt must be positive"):
+        segment_lines(dead_reckon(square_walk()), dt=0.0)
+    with pytest.raises(ValueError, match="start_pose"):
+        dead_reckon(np.zeros((3, 2)), (0.0, 0.0))
+
+
+def test_lines_from_labels_checks():
+    lines = lines_from_labels([0, 0, 0, -1, 1, 1, 1], [0, 1, 2, np.nan, 0, 1, 2], [0.5])
+    assert isinstance(lines, Lines) and lines.n_lines == 2 and list(lines.sizes()) == [3, 3]
+    with pytest.raises(ValueError, match="one value per sample"):
+        lines_from_labels([0, 0, 1], [0, 1])
+    with pytest.raises(ValueError, match="without gaps"):
+        lines_from_labels([0, 0, 2, 2], [0, 1, 0, 1])
+    with pytest.raises(ValueError, match="relative_angles must have shape"):
+        lines_from_labels([0, 0, 1, 1], [0, 1, 0, 1], [0.1, 0.2])
+    with pytest.raises(ValueError, match="NaN or infinity"):
+        lines_from_labels([0, 0, 1, 1], [0, np.nan, 0, 1])
+    with pytest.raises(TypeError, match="integers"):
+        lines_from_labels([0, 0.5], [0, 1])
