@@ -224,26 +224,32 @@ pub(crate) fn lattice_moments(
     struct RowPart {
         x: LatticeSums,
         dx: LatticeSums,
-        short_x: Vec<f64>,
-        short_d: Vec<f64>,
     }
-    let gather = |cols: &[f64], offs: &[(usize, f64)]| -> Vec<f64> {
+    let gather = |cols: &[f64], offs: &[(usize, f64)], out: &mut [f64]| {
         let q = geom.rf_h * c;
-        let mut out = Vec::with_capacity(offs.len() * d);
+        let mut at_out = 0;
         for &(o, _) in offs {
             let patch = &cols[o * q..(o + geom.rf_w) * q]; // (m, dr, ch) order
             for dr in 0..geom.rf_h {
                 for m in 0..geom.rf_w {
                     let at = (m * geom.rf_h + dr) * c;
-                    out.extend_from_slice(&patch[at..at + c]);
+                    out[at_out..at_out + c].copy_from_slice(&patch[at..at + c]);
+                    at_out += c;
                 }
             }
         }
-        out
     };
-    let parts: Vec<RowPart> = (0..geom.n_h)
-        .into_par_iter()
-        .map(|r| {
+    // Correction rows of every RF row, written in place (no concatenation).
+    let (ns, np) = (plan.short_samples.len(), plan.short_pairs.len());
+    // (At least one value per RF row, so that every row gets a chunk.)
+    let (cs, cp) = ((ns * d).max(1), (np * d).max(1));
+    let mut short_x = vec![0.0; geom.n_h * cs];
+    let mut short_d = vec![0.0; geom.n_h * cp];
+    let parts: Vec<RowPart> = short_x
+        .par_chunks_mut(cs)
+        .zip(short_d.par_chunks_mut(cp))
+        .enumerate()
+        .map(|(r, (sx, sd))| {
             let r0 = r * geom.stride_h;
             let centred = |col: usize, dr: usize, ch: usize| px(r0 + dr, col, ch) - reference[ch];
             let diff = |col: usize, dr: usize, ch: usize| px(r0 + dr, (col + step) % w, ch) - px(r0 + dr, col, ch);
@@ -260,29 +266,25 @@ pub(crate) fn lattice_moments(
                 lag_products(&xc, geom, w, g, &mut x.h, &mut x.s);
                 lag_products(&dc, geom, w, g, &mut dx.h, &mut dx.s);
             }
-            RowPart { x, dx, short_x: gather(&xc, &plan.short_samples), short_d: gather(&dc, &plan.short_pairs) }
+            gather(&xc, &plan.short_samples, &mut sx[..ns * d]);
+            gather(&dc, &plan.short_pairs, &mut sd[..np * d]);
+            RowPart { x, dx }
         })
         .collect();
     let mut x = LatticeSums::zeros(geom, g);
     let mut dx = LatticeSums::zeros(geom, g);
-    let mut short_x = Vec::new();
-    let mut short_d = Vec::new();
-    let mut wx = Vec::new();
-    let mut wd = Vec::new();
     for p in &parts {
         x.add(&p.x);
         dx.add(&p.dx);
-        short_x.extend_from_slice(&p.short_x);
-        short_d.extend_from_slice(&p.short_d);
-        wx.extend(plan.short_samples.iter().map(|&(_, v)| v));
-        wd.extend(plan.short_pairs.iter().map(|&(_, v)| v));
     }
+    let wx: Vec<f64> = (0..geom.n_h).flat_map(|_| plan.short_samples.iter().map(|&(_, v)| v)).collect();
+    let wd: Vec<f64> = (0..geom.n_h).flat_map(|_| plan.short_pairs.iter().map(|&(_, v)| v)).collect();
     // The shortfall, as ordinary weighted rows relative to the same (zero)
     // reference in the centred coordinates.
     let mut short = Accumulator::with_reference(vec![0.0; d])?;
     short.set_mixed_precision(mixed);
-    short.add_samples(View::from_slice(&short_x, wx.len(), d)?, Some(&wx))?;
-    short.add_differences(View::from_slice(&short_d, wd.len(), d)?, Some(&wd))?;
+    short.add_samples(View::from_slice(&short_x[..wx.len() * d], wx.len(), d)?, Some(&wx))?;
+    short.add_differences(View::from_slice(&short_d[..wd.len() * d], wd.len(), d)?, Some(&wd))?;
     let n_h = geom.n_h as f64;
     let lattice = (w / g) as f64;
     let shift: Vec<f64> = (0..d).map(|i| reference[i % c]).collect();

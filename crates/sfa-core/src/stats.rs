@@ -193,6 +193,11 @@ impl Moments {
         }
     }
 
+    /// No moments at all (nothing to add).
+    fn empty(d: usize) -> Self {
+        Moments { sxx: Mat::zeros(0, 0), sdd: Mat::zeros(0, 0), sum: vec![0.0; d], sum_d: vec![0.0; d], n_pairs: 0 }
+    }
+
     fn add(&mut self, o: &Moments) {
         add_lower(&mut self.sxx, &o.sxx);
         add_lower(&mut self.sdd, &o.sdd);
@@ -719,7 +724,14 @@ impl Accumulator {
         }
         let had_shift = self.shift.is_some();
         self.ensure_shift(&x, "samples")?;
-        let gathered = self.sample_moments(&x, sample_weights).and_then(|ms| {
+        let no_samples = sample_weights.is_some_and(|w| w.iter().all(|&v| v == 0.0));
+        let gathered = if no_samples {
+            // Pair ends only: no sample products (rows are still checked).
+            x.check_finite("samples").map(|_| Moments::empty(self.dim))
+        } else {
+            self.sample_moments(&x, sample_weights)
+        }
+        .and_then(|ms| {
             let mp = if edges.is_empty() { None } else { Some(self.indexed_pair_moments(&x, edges, edge_weights)?) };
             Ok((ms, mp))
         });
