@@ -126,7 +126,9 @@ class Localizer:
         reg = QuadraticRegression(n, ridge, degree).fit(F, Y)
         self.regression_ = reg
         self.n_features_in_ = F.shape[1]
-        self.train_metrics_ = localization_metrics(reg.predict(F), Y)
+        rng = np.ptp(Y, axis=0)  # a straight training run has no range across it: use the other axis's
+        rng = np.where(rng > 0, rng, max(float(rng.max()), 1.0))
+        self.train_metrics_ = localization_metrics(reg.predict(F), Y, coordinate_range=rng)
         return self
 
     # ------------------------------------------------------------ inference

@@ -473,6 +473,13 @@ class Evaluation:
     model_bytes: int | None = None
 
 
+def coordinate_range(xy: np.ndarray) -> np.ndarray:
+    """Range per axis (m) for MAE %: max - min, or, along an axis without
+    extent (a straight run), the other axis's range (1 m if both are 0)."""
+    rng = np.ptp(np.asarray(xy, dtype=float), axis=0)
+    return np.where(rng > 0, rng, max(float(rng.max()), 1.0))
+
+
 def _model_bytes(loc: Localizer) -> int | None:
     import tempfile
 
@@ -518,7 +525,8 @@ def evaluate(
     F_test = net.transform(test_images)
     sfa_ms = 1000.0 * (time.perf_counter() - t0) / len(test_images)
     pred = loc.predict_features(F_test)
-    m = localization_metrics(pred, test_xy)
+    crange = coordinate_range(test_xy)
+    m = localization_metrics(pred, test_xy, coordinate_range=crange)
     m["query_ms"] = sfa_ms
     ev = Evaluation(metrics=m, predictions=pred)
     ev.model_bytes = _model_bytes(loc)
@@ -561,7 +569,7 @@ def evaluate(
             if k is not None and k > train_images.shape[2] // 2 + 1:
                 model = baselines.FourierSignature(train_images.shape[2] // 2 + 1)
             model.fit(train_images, train_xy)
-            ev.baselines[name] = baselines.benchmark(model, test_images, test_xy)
+            ev.baselines[name] = baselines.benchmark(model, test_images, test_xy, coordinate_range=crange)
             b = ev.baselines[name]
             log(f"{name}: MED {b['med']:.3f} m, {b['query_ms']:.2f} ms per query, {b['bytes_per_place']} bytes per place")
     if out is not None:

@@ -9,7 +9,7 @@
   simulated garden.
 * ``5.1.3``: the window size of the simulated rotation, 10 % .. 100 %, plus a
   50 % window with cubic expansion and individual (unshared) nodes, at a
-  reduced resolution (175x20) as the thesis did.
+  reduced resolution (200x20) as the thesis did.
 * ``5.2``: indoor-style runs (4x4 m) with the Table 5.3 network (409x40 gray,
   normalised), large-radius turns (experiment I) and turns on the spot
   (experiment II).
@@ -92,20 +92,23 @@ def _tiny_config(width: int, height: int, channels: int, out: int = 12, degree: 
 def window_network(width: int, height: int, channels: int = 3, *, degree: int = 2, shared: bool = True,
                    out: int = 8, precision: str = "mixed") -> Network:
     """The network of the window-size experiment (5.1.3) for an input
-    ``width`` x ``height`` (the window): Table 5.1's first two layers (10x10
-    RFs every 5 px, then 6x3 RFs every 3x1 of those), clipped to the map they
-    see, and a top node over the whole map. ``degree`` 3 with ``shared=False``
-    is the thesis's modified network (cubic expansion, individual nodes)."""
-    if width < 10 or height < 10:
-        rf1 = [min(10, width), min(10, height)]
-        stride1 = [max(1, rf1[0] // 2), max(1, rf1[1] // 2)]
+    ``width`` x ``height`` (the window; both multiples of 5, at least 10):
+    Table 5.1's first two layers (10x10 RFs every 5 px; then RFs of 4..6 x 3
+    of those every 3 x 1, the width chosen so that they tile the map) and a
+    top node over the whole map. ``degree`` 3 with ``shared=False`` is the
+    thesis's modified network (cubic expansion, individual nodes)."""
+    if width < 10 or height < 10 or width % 5 or height % 5:
+        raise ValueError(f"window_network needs width and height >= 10 and multiples of 5, got {width}x{height}")
+    g1w, g1h = (width - 10) // 5 + 1, (height - 10) // 5 + 1
+    if g1w < 4:
+        rf2w = g1w
     else:
-        rf1, stride1 = [10, 10], [5, 5]
-    g1w = (width - rf1[0]) // stride1[0] + 1
-    g1h = (height - rf1[1]) // stride1[1] + 1
-    rf2 = [min(6, g1w), min(3, g1h)]
-    layers = [{"rf": rf1, "stride": stride1, "out": 14, "degree": degree},
-              {"rf": rf2, "stride": [3, max(1, rf2[1])], "out": 16, "degree": degree},
+        rf2w = next(r for r in (6, 5, 4) if (g1w - r) % 3 == 0)
+    rf2h = min(3, g1h)
+    if (g1h - rf2h) % max(1, rf2h):
+        rf2h = g1h
+    layers = [{"rf": [10, 10], "stride": [5, 5], "out": 14, "degree": degree},
+              {"rf": [rf2w, rf2h], "stride": [3, rf2h], "out": 16, "degree": degree},
               {"rf": "full", "out": out, "degree": degree}]
     return Network({"input": {"width": width, "height": height, "channels": channels},
                     "network": {"precision": precision, "weight_sharing": shared}, "layers": layers})
@@ -113,7 +116,8 @@ def window_network(width: int, height: int, channels: int = 3, *, degree: int = 
 
 def _run_localization(out: Path, ds: Dataset, net: Network, *, prefix: str, title: str, seed: int, progress: bool,
                       normalize: bool = False, step: int = 5, window: float = 1.0, thesis: dict[str, Any] | None = None,
-                      suffix: str = "", baselines: bool = True, data: tuple | None = None, text: tuple = ()):
+                      suffix: str = "", baselines: bool = True, data: tuple | None = None, text: tuple = (),
+                      plots: bool = True):
     """Train on the ``train`` run, evaluate on ``test``; returns (evaluation, rows, info, data)."""
     log = _log(progress)
     prep = Preprocessing.for_network(net, window=window, normalize=normalize)
@@ -127,7 +131,8 @@ def _run_localization(out: Path, ds: Dataset, net: Network, *, prefix: str, titl
                         progress=progress)
     fit_s = time.perf_counter() - t0
     log(f"{title}: trained on {len(X_tr)} images in {fit_s:.0f} s")
-    ev = evaluate(loc, X_te, xy_te, train_images=X_tr, train_xy=xy_tr, out=out, prefix=prefix, title=title,
+    ev = evaluate(loc, X_te, xy_te, train_images=X_tr, train_xy=xy_tr, out=out if plots else None, prefix=prefix,
+                  title=title,
                   run_baselines=baselines, seed=seed, log=log, text=text)
     rows = evaluation_rows(ev, suffix=suffix, thesis=thesis)
     info = {"n_train": len(X_tr), "n_test": len(X_te), "fit_s": fit_s, "prep": prep.describe()}
@@ -268,7 +273,7 @@ def exp_5_1_3(out: Path, *, quick: bool, seed: int, progress: bool) -> Experimen
         ds = simulated(out, preset, seed, quick=True, camera=sim.PanoramicCamera(W, H), max_frames=30,
                        progress=progress)
     else:
-        W, H = 175, 20
+        W, H = 200, 20
         ds = simulated(out, preset, seed, quick=False, camera=sim.PanoramicCamera(W, H), progress=progress)
     rows: list[dict[str, Any]] = []
     data = None
@@ -281,7 +286,7 @@ def exp_5_1_3(out: Path, *, quick: bool, seed: int, progress: bool) -> Experimen
         net = window_network(V, H, 3, out=8)
         ev, _, info, data = _run_localization(out, ds, net, prefix=f"5.1.3-window{w}-", title=f"5.1.3 window {w} %",
                                               seed=seed, progress=False, window=V / W, baselines=(w == 100),
-                                              data=data if data is not None else None)
+                                              data=data, plots=(w == 100))
         fits.append(info["fit_s"])
         log(f"window {w} %: max eta_phi {ev.eta_phi.max():.3f}, MED {ev.metrics['med']:.3f} m ({info['fit_s']:.0f} s)")
         etas.append(ev.eta_phi)
@@ -323,7 +328,7 @@ def exp_5_1_3(out: Path, *, quick: bool, seed: int, progress: bool) -> Experimen
     ]
     plots.insert(0, str(_plot_windows(list(WINDOWS), etas, meds, ev.eta_phi, mod_med, out / "5.1.3-windows.png")))
     notes = (
-        f"Scene: sim preset {preset} (seed {seed}) rendered at {W}x{H} RGB (the thesis trained these models at a "
+        f"Scene: sim preset {preset} (seed {seed}) rendered at {W}x{H} RGB (a width that makes every window a multiple of the 5 px stride) (the thesis trained these models at a "
         "reduced resolution too; its Fig. 5.8 gives curves, not numbers, so the thesis column holds its "
         "qualitative findings). Network per window width V = window x "
         f"{W} px: 10x10 RFs every 5 px, then 6x3 of those every 3x1 (clipped to the map), then a top node over "
