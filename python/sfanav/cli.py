@@ -196,6 +196,14 @@ def _fraction(text: str) -> float:
     return v
 
 
+def _wrap(text: str) -> str:
+    """A help description wrapped to 79 columns (the raw formatter keeps
+    the examples in the epilogs as written)."""
+    import textwrap
+
+    return textwrap.fill(" ".join(text.split()), 79)
+
+
 def _table(rows: "list[tuple[str, str]]") -> str:
     w = max(len(a) for a, _ in rows)
     return "\n".join(f"{a:<{w}}  {b}" for a, b in rows)
@@ -217,11 +225,11 @@ def _add_train(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p = sub.add_parser(
         "train",
         help="train a localizer (network + regression to metres) on a dataset",
-        description="Train an SFA network under simulated rotation on one run of a dataset (images in temporal "
+        description=_wrap("Train an SFA network under simulated rotation on one run of a dataset (images in temporal "
                     "order), then the quadratic regression from its slowest outputs to the ground-truth x, y "
                     "(metres). Writes one model file (network, regression and the image preprocessing) for "
                     "sfanav localize / evaluate. Images of another size are resized, omnidirectional images "
-                    "unwarped (with --mirror or an estimated mirror).",
+                    "unwarped (with --mirror or an estimated mirror)."),
         epilog="network presets (thesis tables): thesis-5.1 (350x40 RGB), thesis-5.2 (600x60 RGB), "
                "thesis-5.3 (409x40 gray). A config file is TOML or JSON in the presets' format "
                "(sfanav.Network.preset_path('thesis-5.1') shows one).\n\n"
@@ -315,12 +323,12 @@ def _add_localize(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p = sub.add_parser(
         "localize",
         help="estimate x, y for every image of a dataset, an image folder or a video",
-        description="Localize every image of INPUT with a trained model: a dataset directory, a folder of "
+        description=_wrap("Localize every image of INPUT with a trained model: a dataset directory, a folder of "
                     "images (png, jpg, ...; sorted by name) or a video file. Writes a CSV with columns "
                     "frame,x,y (frame: the dataset's frame id, else the image's index; x, y in metres). "
                     "Images are converted as the model was trained: panoramas of another size are resized, "
                     "omnidirectional (mirror) images unwarped with --mirror or an estimated mirror, and "
-                    "a message says which.",
+                    "a message says which."),
         epilog="example:\n  sfanav localize garden.sfa garden --run test --out test.csv",
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
@@ -388,13 +396,13 @@ def _add_evaluate(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p = sub.add_parser(
         "evaluate",
         help="metrics, baselines, plots and a report of a model on a dataset with ground truth",
-        description="Evaluate a trained model on a run of a dataset with ground truth: MAE per axis (m and % "
+        description=_wrap("Evaluate a trained model on a run of a dataset with ground truth: MAE per axis (m and % "
                     "of the coordinate range), MED, percentiles (regression fitted on the training run: the "
                     "honest protocol) and the thesis 5.1.1 protocol (random 50/50 splits of the evaluated "
                     "run, 100 repeats; optimistic on a continuous walk); eta_p / eta_phi of the outputs; "
                     "error vs number of outputs; the baselines perfect memory (RIDF) and Fourier signature "
                     "fitted on the training run (error, bytes per place, query time). Writes report.md, "
-                    "metrics.json and PNG plots (firing maps, trajectory, error vs n, eta) under --out.",
+                    "metrics.json and PNG plots (firing maps, trajectory, error vs n, eta) under --out."),
         epilog="example:\n  sfanav evaluate garden.sfa garden --out garden-report",
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
@@ -462,12 +470,12 @@ def _add_demo(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p = sub.add_parser(
         "demo",
         help="simulate a garden, train, localize a test run and report (a few minutes)",
-        description="The whole pipeline on the built-in simulator: generates the 'demo' garden (8x8 m, a "
+        description=_wrap("The whole pipeline on the built-in simulator: generates the 'demo' garden (8x8 m, a "
                     "grid exploration run and a test walk), trains the "
                     f"{DEMO_NETWORK} network under simulated rotation (mixed precision), localizes the test "
                     "walk, prints MAE, MED and eta beside the thesis's section 5.1.1 figures and the two "
                     "baselines, and writes the dataset, the model, the estimates (CSV), plots and a Markdown "
-                    "report under --out. Takes a few minutes on a 2-core machine.",
+                    "report under --out. Takes a few minutes on a 2-core machine."),
         epilog="outputs: DIR/dataset, DIR/model.sfa, DIR/test-estimates.csv, DIR/report.md, DIR/*.png, DIR/demo.json",
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
@@ -498,15 +506,18 @@ def _run_demo(args: argparse.Namespace) -> int:
 
 @command("experiment")
 def _add_experiment(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    from . import experiments
+
     p = sub.add_parser(
         "experiment",
         help="rerun one of the thesis's experiments on the simulator (--list lists them)",
-        description="Rerun one of the thesis's experiments on the built-in simulator: simulates the scene, "
+        description=_wrap("Rerun one of the thesis's experiments on the built-in simulator: simulates the scene, "
                     "trains, evaluates, prints a table of each metric with the thesis's value beside "
                     "sfanav's, and writes the same as JSON ({\"experiment\": NAME, \"rows\": [{\"metric\", "
                     "\"thesis\", \"sfanav\"}, ...]}) plus plots under --out. Localization experiments also "
-                    "run the perfect-memory and Fourier-signature baselines on the same images.",
-        epilog="example:\n  sfanav experiment --list\n  sfanav experiment 5.1.1 --out results",
+                    "run the perfect-memory and Fourier-signature baselines on the same images."),
+        epilog="experiments:\n" + "\n".join(f"  {n:<8} {experiments.get(n).title}" for n in experiments.names())
+               + "\n\nexample:\n  sfanav experiment --list\n  sfanav experiment 5.1.1 --out results",
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("name", nargs="?", metavar="NAME", help="experiment name (see --list)")
