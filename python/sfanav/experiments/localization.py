@@ -330,14 +330,16 @@ def exp_5_1_3(out: Path, *, quick: bool, seed: int, progress: bool) -> Experimen
     ]
     plots.insert(0, str(_plot_windows(list(WINDOWS), etas, meds, ev.eta_phi, mod_med, out / "5.1.3-windows.png")))
     notes = (
-        f"Scene: sim preset {preset} (seed {seed}) rendered at {W}x{H} RGB (a width that makes every window a multiple of the 5 px stride) (the thesis trained these models at a "
-        "reduced resolution too; its Fig. 5.8 gives curves, not numbers, so the thesis column holds its "
-        "qualitative findings). Network per window width V = window x "
-        f"{W} px: 10x10 RFs every 5 px, then 6x3 of those every 3x1 (clipped to the map), then a top node over "
-        "the whole map (8 outputs), quadratic, shared weights, mixed precision; the modified network: same "
-        "grid, cubic expansion, individual nodes (naive training path). Rotation 5 px. Errors: regression on "
-        "the training grid, MED on the test grid. Baselines use the full panoramas. Training times (s): "
-        + ", ".join(f"{w} %: {t:.0f}" for w, t in zip(WINDOWS, fits)) + f"; modified: {info['fit_s']:.0f}."
+        f"Scene: sim preset {preset} (seed {seed}) rendered at {W}x{H} RGB, a reduced resolution as the thesis "
+        "used for these models, with a width that makes every window a multiple of the 5 px stride. The "
+        "thesis's Fig. 5.8 gives curves, not numbers, so its column holds its qualitative findings. Network "
+        f"per window width V = window x {W} px (window_network): 10x10 RFs every 5 px, then RFs of 4..6 x 3 of "
+        "those every 3 x 1 (the width that tiles the map), then a top node over the whole map (8 outputs); "
+        "quadratic, shared weights, mixed precision. The modified network: the same grid with cubic expansion "
+        "and individual nodes (naive training path). Rotation 5 px. Errors: regression fitted on the training "
+        "grid, error on the test grid (test-run protocol only). Baselines on the full panoramas. Training "
+        "times (s): " + ", ".join(f"{w} %: {t:.0f}" for w, t in zip(WINDOWS, fits))
+        + f"; modified: {info['fit_s']:.0f}."
     )
     return ExperimentResult("5.1.3", rows, plots, notes)
 
