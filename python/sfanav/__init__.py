@@ -33,12 +33,13 @@ __all__ = [
 
 # Localization building blocks (issue 6): unwarping, regression, metrics, analysis, baselines.
 from . import analysis, baselines, metrics, regression, unwarp  # noqa: E402
+from . import workflow  # noqa: E402  (issue 6: the pipeline behind the sfanav command)
 from .localizer import Localizer  # noqa: E402
 from .regression import QuadraticRegression  # noqa: E402
 from .unwarp import Unwarper, estimate_mirror  # noqa: E402
 
 __all__ += ["Localizer", "QuadraticRegression", "Unwarper", "estimate_mirror"]
-__all__ += ["analysis", "baselines", "metrics", "regression", "unwarp"]
+__all__ += ["analysis", "baselines", "metrics", "regression", "unwarp", "workflow"]
 
 # Odometry integration (issue 8): line segmentation, unsupervised metric learning, EKF fusion.
 from . import ekf, experiments_odometry, metric, odometry  # noqa: E402

@@ -1,21 +1,34 @@
 """The ``sfanav`` command.
 
-Subcommands (more follow: ``train``, ``localize``, ``evaluate``, ``demo``,
-``experiment``):
+Subcommands:
 
 * ``sfanav simulate --preset NAME --out DIR [--seed N]``: a dataset from the
   built-in garden simulator.
+* ``sfanav train --dataset DIR --preset NAME|--config FILE --out MODEL``:
+  train a network under simulated rotation and the regression to metres.
+* ``sfanav localize MODEL INPUT --out CSV``: positions of a dataset, an image
+  folder or a video, one CSV row ``frame,x,y`` per image.
+* ``sfanav evaluate MODEL DATASET --out DIR``: metrics, baselines, plots and a
+  Markdown report.
+* ``sfanav demo``: simulate, train, localize and evaluate the demo garden.
+* ``sfanav experiment NAME`` / ``--list``: rerun a thesis experiment.
 
 Errors in the input (unknown preset, bad size, an existing output directory,
-...) end with a one-line message on stderr and exit status 2, never a
-traceback.
+a missing dataset, a bad network config, ...) end with a one-line message on
+stderr and exit status 2, never a traceback (set ``SFANAV_DEBUG=1`` to see
+the traceback). Results go to stdout, progress and notes to stderr.
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from collections.abc import Callable, Sequence
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from pathlib import Path
 
 EXIT_USAGE = 2
 
@@ -130,6 +143,426 @@ def _run_simulate(args: argparse.Namespace) -> int:
     return 0
 
 
+# ---------------------------------------------------------------- shared helpers
+
+
+def _log(message: str) -> None:
+    """Progress and notes go to stderr; results to stdout."""
+    print(message, file=sys.stderr, flush=True)
+
+
+def _existing_path(text: str, what: str) -> "Path":
+    from pathlib import Path
+
+    p = Path(text)
+    if not p.exists():
+        raise _UsageError(f"{what} {text} does not exist")
+    return p
+
+
+def _new_file(text: str, overwrite: bool, what: str = "output") -> "Path":
+    from pathlib import Path
+
+    p = Path(text)
+    if p.exists() and not overwrite:
+        raise _UsageError(f"{what} {p} exists; pass --overwrite to replace it")
+    if p.exists() and p.is_dir():
+        raise _UsageError(f"{what} {p} is a directory")
+    p.parent.mkdir(parents=True, exist_ok=True)
+    return p
+
+
+def _load_localizer(path: str) -> "Any":
+    from . import load
+    from .localizer import Localizer
+
+    model = load(_existing_path(path, "model file"))
+    if not isinstance(model, Localizer):
+        raise _UsageError(f"{path} holds a {type(model).__name__}, not a localizer (make one with sfanav train)")
+    if model.network is None:
+        raise _UsageError(f"{path} is a features-only localizer (no network): it cannot read images")
+    return model
+
+
+def _fraction(text: str) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if v > 1.0:
+        v /= 100.0  # "50" means 50 %
+    if not 0.0 < v <= 1.0:
+        raise argparse.ArgumentTypeError(f"expected a fraction in (0, 1] or a percentage, got {text!r}")
+    return v
+
+
+def _wrap(text: str) -> str:
+    """A help description wrapped to 79 columns (the raw formatter keeps
+    the examples in the epilogs as written)."""
+    import textwrap
+
+    return textwrap.fill(" ".join(text.split()), 79)
+
+
+def _table(rows: "list[tuple[str, str]]") -> str:
+    w = max(len(a) for a, _ in rows)
+    return "\n".join(f"{a:<{w}}  {b}" for a, b in rows)
+
+
+def _fmt(v: "Any") -> str:
+    if v is None:
+        return "-"
+    if isinstance(v, float):
+        return f"{v:.4g}"
+    return str(v)
+
+
+# ---------------------------------------------------------------- train
+
+
+@command("train")
+def _add_train(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    p = sub.add_parser(
+        "train",
+        help="train a localizer (network + regression to metres) on a dataset",
+        description=_wrap("Train an SFA network under simulated rotation on one run of a dataset (images in temporal "
+                    "order), then the quadratic regression from its slowest outputs to the ground-truth x, y "
+                    "(metres). Writes one model file (network, regression and the image preprocessing) for "
+                    "sfanav localize / evaluate. Images of another size are resized, omnidirectional images "
+                    "unwarped (with --mirror or an estimated mirror)."),
+        epilog="network presets (thesis tables): thesis-5.1 (350x40 RGB), thesis-5.2 (600x60 RGB), "
+               "thesis-5.3 (409x40 gray). A config file is TOML or JSON in the presets' format "
+               "(sfanav.Network.preset_path('thesis-5.1') shows one).\n\n"
+               "example:\n  sfanav simulate --preset demo --out garden\n"
+               "  sfanav train --dataset garden --preset thesis-5.2 --precision mixed --out garden.sfa",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    net = p.add_mutually_exclusive_group(required=True)
+    net.add_argument("--preset", metavar="NAME", help="network preset: thesis-5.1, thesis-5.2 or thesis-5.3")
+    net.add_argument("--config", metavar="FILE", help="network config file (TOML or JSON)")
+    p.add_argument("--dataset", required=True, metavar="DIR", help="dataset directory (sfanav format)")
+    p.add_argument("--out", required=True, metavar="MODEL", help="model file to write (e.g. garden.sfa)")
+    p.add_argument("--run", dest="run_name", default=None, metavar="RUN",
+                   help="run to train on (default: 'train' if the dataset has one, else all images)")
+    p.add_argument("--camera", default=None, metavar="NAME", help="camera to use if the dataset has several")
+    p.add_argument("--step", type=_pos_int, default=5, metavar="PX",
+                   help="simulated rotation step in pixels (default 5, the thesis's)")
+    p.add_argument("--window", type=_fraction, default=1.0, metavar="FRACTION",
+                   help="window of the simulated rotation, fraction of the panorama or percent (default 1.0); "
+                        "the network's input width must equal window x panorama width")
+    p.add_argument("--precision", choices=("double", "mixed"), default=None,
+                   help="statistics precision (default: the config's; mixed is ~1.4x faster)")
+    p.add_argument("--n-outputs", type=_pos_int, default=8, metavar="N",
+                   help="slowest outputs used by the regression (default 8, the thesis's)")
+    p.add_argument("--normalize", action="store_true",
+                   help="normalize every image to zero mean and unit variance (thesis 5.2)")
+    p.add_argument("--mirror", default=None, metavar="CX,CY,INNER,OUTER",
+                   help="mirror of omnidirectional images, pixels (default: estimated)")
+    p.add_argument("--overwrite", action="store_true", help="replace an existing model file")
+    p.add_argument("--no-progress", action="store_true", help="no progress bars")
+    p.set_defaults(run=_run_train)
+    return p
+
+
+def _network_from_args(args: argparse.Namespace) -> "Any":
+    from .network import Network, _read_config_file
+
+    if args.preset is not None:
+        over = {"precision": args.precision} if args.precision else {}
+        return Network.from_preset(args.preset, **over)
+    config = _read_config_file(_existing_path(args.config, "network config"))
+    if args.precision:
+        if not isinstance(config, dict):
+            raise _UsageError(f"{args.config}: not a network config")
+        config.setdefault("network", {})["precision"] = args.precision
+    return Network(config)
+
+
+def _run_train(args: argparse.Namespace) -> int:
+    import time
+
+    import numpy as np
+
+    from .dataset import Dataset
+    from .network import Rotation
+    from .workflow import Preprocessing, fit_localizer, load_run, select_run
+
+    t0 = time.perf_counter()
+    out = _new_file(args.out, args.overwrite, "model file")
+    ds = Dataset(_existing_path(args.dataset, "dataset"))
+    run = args.run_name
+    if run is None and "train" in set(ds.runs.tolist()):
+        run = "train"
+    train = select_run(ds, run, args.camera)
+    net = _network_from_args(args)
+    if args.n_outputs > net.n_outputs_:
+        raise _UsageError(f"--n-outputs {args.n_outputs}, but the network has only {net.n_outputs_} outputs")
+    prep = Preprocessing.for_network(net, window=args.window, normalize=args.normalize)
+    _log(f"training on {len(train)} images of {args.dataset}" + (f" (run {run})" if run else "")
+         + f" as {prep.describe()} panoramas; network: {net!r}")
+    images, xy = load_run(train, prep, mirror=args.mirror, log=_log, progress=not args.no_progress)
+    if not np.isfinite(xy).all():
+        raise _UsageError(f"{args.dataset} lacks ground-truth x, y for some images: the regression needs them")
+    loc = fit_localizer(net, images, xy, rotation=Rotation(step=args.step, window=args.window),
+                        n_outputs=args.n_outputs, prep=prep, progress=not args.no_progress,
+                        info={"dataset": str(args.dataset), "run": run,
+                              "network": args.preset or str(args.config)})
+    loc.save(out)
+    m = loc.train_metrics_
+    print(f"trained on {len(images)} images in {loc.info['fit_seconds']:.1f} s (total {time.perf_counter() - t0:.1f} s); "
+          f"training-run fit: MED {m['med']:.3f} m, MAE x {m['mae_x_pct']:.2f} %, y {m['mae_y_pct']:.2f} %")
+    print(f"wrote {out}")
+    return 0
+
+
+# ---------------------------------------------------------------- localize
+
+
+@command("localize")
+def _add_localize(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    p = sub.add_parser(
+        "localize",
+        help="estimate x, y for every image of a dataset, an image folder or a video",
+        description=_wrap("Localize every image of INPUT with a trained model: a dataset directory, a folder of "
+                    "images (png, jpg, ...; sorted by name) or a video file. Writes a CSV with columns "
+                    "frame,x,y (frame: the dataset's frame id, else the image's index; x, y in metres). "
+                    "Images are converted as the model was trained: panoramas of another size are resized, "
+                    "omnidirectional (mirror) images unwarped with --mirror or an estimated mirror, and "
+                    "a message says which."),
+        epilog="example:\n  sfanav localize garden.sfa garden --run test --out test.csv",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument("model", metavar="MODEL", help="model file from sfanav train")
+    p.add_argument("input", metavar="INPUT", help="dataset directory, image folder or video file")
+    p.add_argument("--out", required=True, metavar="CSV", help="CSV file to write (frame,x,y)")
+    p.add_argument("--run", dest="run_name", default=None, metavar="RUN", help="only this run of a dataset (default: all images)")
+    p.add_argument("--camera", default=None, metavar="NAME", help="camera of a multi-camera dataset")
+    p.add_argument("--mirror", default=None, metavar="CX,CY,INNER,OUTER",
+                   help="mirror center and radii of omnidirectional images, pixels (default: estimated)")
+    p.add_argument("--rotations", action="store_true",
+                   help="average the estimates over all simulated rotations of each image (slower, smoother)")
+    p.add_argument("--batch-size", type=_pos_int, default=64, metavar="N", help="images per batch (default 64)")
+    p.add_argument("--overwrite", action="store_true", help="replace an existing CSV")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.set_defaults(run=_run_localize)
+    return p
+
+
+def _run_localize(args: argparse.Namespace) -> int:
+    import csv
+
+    import numpy as np
+
+    from .metrics import med
+    from .workflow import Conformer, Preprocessing, _bar, open_images
+
+    loc = _load_localizer(args.model)
+    out = _new_file(args.out, args.overwrite, "CSV")
+    src = open_images(args.input, run=args.run_name, camera=args.camera)
+    prep = Preprocessing.of_model(loc)
+    conform = Conformer(prep, mirror=args.mirror, log=_log)
+    _log(f"localizing {src.description} with {args.model} ({prep.describe()} panoramas)")
+    bar = _bar(not args.no_progress, src.n, "localize")
+    preds = []
+    for batch in src.batches(args.batch_size):
+        preds.append(loc.predict(conform(batch), rotations=args.rotations))
+        if bar is not None:
+            bar.update(len(batch))
+    if bar is not None:
+        bar.close()
+    if not preds:
+        raise _UsageError(f"{args.input} has no images (an empty or unreadable video?)")
+    xy = np.concatenate(preds)
+    frames = src.frames if src.frames is not None else np.arange(len(xy))
+    tmp = out.with_name(out.name + ".part")
+    with open(tmp, "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(["frame", "x", "y"])
+        for fr, (x, y) in zip(frames, xy):
+            w.writerow([int(fr), f"{x:.4f}", f"{y:.4f}"])
+    tmp.replace(out)
+    msg = f"wrote {len(xy)} positions to {out}"
+    if src.xy is not None and np.isfinite(src.xy).all():
+        msg += f" (MED from the dataset's ground truth: {med(xy, src.xy):.3f} m)"
+    print(msg)
+    return 0
+
+
+# ---------------------------------------------------------------- evaluate
+
+
+@command("evaluate")
+def _add_evaluate(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    p = sub.add_parser(
+        "evaluate",
+        help="metrics, baselines, plots and a report of a model on a dataset with ground truth",
+        description=_wrap("Evaluate a trained model on a run of a dataset with ground truth: MAE per axis (m and % "
+                    "of the coordinate range), MED, percentiles (regression fitted on the training run: the "
+                    "honest protocol) and the thesis 5.1.1 protocol (random 50/50 splits of the evaluated "
+                    "run, 100 repeats; optimistic on a continuous walk); eta_p / eta_phi of the outputs; "
+                    "error vs number of outputs; the baselines perfect memory (RIDF) and Fourier signature "
+                    "fitted on the training run (error, bytes per place, query time). Writes report.md, "
+                    "metrics.json and PNG plots (firing maps, trajectory, error vs n, eta) under --out."),
+        epilog="example:\n  sfanav evaluate garden.sfa garden --out garden-report",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument("model", metavar="MODEL", help="model file from sfanav train")
+    p.add_argument("dataset", metavar="DATASET", help="dataset directory with ground-truth positions")
+    p.add_argument("--out", required=True, metavar="DIR", help="directory for report.md, metrics.json and plots")
+    p.add_argument("--run", dest="run_name", default=None, metavar="RUN",
+                   help="run to evaluate (default: 'test' if the dataset has one, else all images)")
+    p.add_argument("--train-run", default=None, metavar="RUN",
+                   help="training run for eta, the error curve and the baselines (default: 'train' if present)")
+    p.add_argument("--camera", default=None, metavar="NAME", help="camera of a multi-camera dataset")
+    p.add_argument("--mirror", default=None, metavar="CX,CY,INNER,OUTER",
+                   help="mirror of omnidirectional images, pixels (default: estimated)")
+    p.add_argument("--no-baselines", action="store_true", help="skip perfect memory and the Fourier signature")
+    p.add_argument("--no-progress", action="store_true", help="no progress bars")
+    p.set_defaults(run=_run_evaluate)
+    return p
+
+
+def _run_evaluate(args: argparse.Namespace) -> int:
+    import json
+    from pathlib import Path
+
+    import numpy as np
+
+    from .dataset import Dataset
+    from .workflow import Preprocessing, evaluate, evaluation_rows, load_run, metrics_json, select_run
+
+    loc = _load_localizer(args.model)
+    ds = Dataset(_existing_path(args.dataset, "dataset"))
+    runs = set(ds.runs.tolist())
+    run = args.run_name if args.run_name is not None else ("test" if "test" in runs else None)
+    train_run = args.train_run if args.train_run is not None else ("train" if "train" in runs and run != "train" else None)
+    prep = Preprocessing.of_model(loc)
+    test = select_run(ds, run, args.camera)
+    images, xy = load_run(test, prep, mirror=args.mirror, log=_log, progress=not args.no_progress)
+    if not np.isfinite(xy).all():
+        raise _UsageError(f"{args.dataset} lacks ground-truth x, y: evaluation needs them")
+    tr_images = tr_xy = None
+    if train_run is not None:
+        tr = select_run(ds, train_run, args.camera)
+        tr_images, tr_xy = load_run(tr, prep, mirror=args.mirror, log=_log, progress=not args.no_progress)
+    out = Path(args.out)
+    _log(f"evaluating {args.model} on {len(images)} images" + (f" (run {run})" if run else "")
+         + (f", training run {train_run}" if train_run else ""))
+    ev = evaluate(loc, images, xy, train_images=tr_images, train_xy=tr_xy, out=out,
+                  title=f"sfanav evaluation: {Path(args.model).name} on {args.dataset}",
+                  run_baselines=not args.no_baselines, log=_log,
+                  text=[f"Model `{args.model}`, dataset `{args.dataset}`, evaluated run: {run or 'all images'}, "
+                        f"training run: {train_run or 'none'}."])
+    (out / "metrics.json").write_text(json.dumps(metrics_json(ev), indent=2) + "\n")
+    rows = evaluation_rows(ev)
+    print(_table([("metric", "sfanav")] + [(r["metric"], _fmt(r["sfanav"])) for r in rows]))
+    print(f"wrote {ev.report}, {out / 'metrics.json'} and {len(ev.plots)} plots")
+    return 0
+
+
+# ---------------------------------------------------------------- demo
+
+
+@command("demo")
+def _add_demo(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    from .demo import DEMO_NETWORK
+
+    p = sub.add_parser(
+        "demo",
+        help="simulate a garden, train, localize a test run and report (a few minutes)",
+        description=_wrap("The whole pipeline on the built-in simulator: generates the 'demo' garden (8x8 m, a "
+                    "grid exploration run and a test walk), trains the "
+                    f"{DEMO_NETWORK} network under simulated rotation (mixed precision), localizes the test "
+                    "walk, prints MAE, MED and eta beside the thesis's section 5.1.1 figures and the two "
+                    "baselines, and writes the dataset, the model, the estimates (CSV), plots and a Markdown "
+                    "report under --out. Takes a few minutes on a 2-core machine."),
+        epilog="outputs: DIR/dataset, DIR/model.sfa, DIR/test-estimates.csv, DIR/report.md, DIR/*.png, DIR/demo.json",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument("--out", default="sfanav-demo", metavar="DIR", help="output directory (default sfanav-demo)")
+    p.add_argument("--seed", type=_nonneg_int, default=0, help="seed of the garden and the runs (default 0)")
+    p.add_argument("--overwrite", action="store_true", help="replace the outputs of an earlier demo in --out")
+    p.add_argument("--quick", action="store_true",
+                   help="a seconds-long smoke run (tiny images, few frames, a small network); not meaningful")
+    p.add_argument("--no-progress", action="store_true", help="no progress bars")
+    p.set_defaults(run=_run_demo)
+    return p
+
+
+def _run_demo(args: argparse.Namespace) -> int:
+    from .demo import run_demo
+
+    result = run_demo(args.out, seed=args.seed, overwrite=args.overwrite, quick=args.quick,
+                      progress=not args.no_progress, log=_log)
+    print(result.table())
+    if result.notes:
+        print()
+        print(result.notes)
+    return 0
+
+
+# ---------------------------------------------------------------- experiment
+
+
+@command("experiment")
+def _add_experiment(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    from . import experiments
+
+    p = sub.add_parser(
+        "experiment",
+        help="rerun one of the thesis's experiments on the simulator (--list lists them)",
+        description=_wrap("Rerun one of the thesis's experiments on the built-in simulator: simulates the scene, "
+                    "trains, evaluates, prints a table of each metric with the thesis's value beside "
+                    "sfanav's, and writes the same as JSON ({\"experiment\": NAME, \"rows\": [{\"metric\", "
+                    "\"thesis\", \"sfanav\"}, ...]}) plus plots under --out. Localization experiments also "
+                    "run the perfect-memory and Fourier-signature baselines on the same images."),
+        epilog="experiments:\n" + "\n".join(f"  {n:<8} {experiments.get(n).title}" for n in experiments.names())
+               + "\n\nexample:\n  sfanav experiment --list\n  sfanav experiment 5.1.1 --out results",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument("name", nargs="?", metavar="NAME", help="experiment name (see --list)")
+    p.add_argument("--list", action="store_true", help="list the experiments and exit")
+    p.add_argument("--out", default=None, metavar="DIR",
+                   help="output directory (default sfanav-results/NAME); writes NAME.json and plots")
+    p.add_argument("--quick", action="store_true",
+                   help="a seconds-long smoke run (tiny images and grids, few frames); numbers not meaningful")
+    p.add_argument("--seed", type=_nonneg_int, default=0, help="seed of scenes and runs (default 0)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bars")
+    p.set_defaults(run=_run_experiment)
+    return p
+
+
+def _run_experiment(args: argparse.Namespace) -> int:
+    import time
+    from pathlib import Path
+
+    from . import experiments
+
+    if args.list:
+        if args.name:
+            raise _UsageError("give either NAME or --list")
+        names = experiments.names()
+        width = max((len(n) for n in names), default=0)
+        for n in names:
+            print(f"{n:<{width}}  {experiments.get(n).title}")
+        return 0
+    if not args.name:
+        raise _UsageError("give an experiment NAME (sfanav experiment --list shows them)")
+    exp = experiments.get(args.name)  # ValueError with the known names
+    out = Path(args.out) if args.out else Path("sfanav-results") / args.name
+    if out.exists() and not out.is_dir():
+        raise _UsageError(f"--out {out} is a file")
+    _log(f"experiment {exp.name}: {exp.title}" + (" (quick smoke run)" if args.quick else ""))
+    t0 = time.perf_counter()
+    result = experiments.run(exp.name, out, quick=args.quick, seed=args.seed, progress=not args.no_progress)
+    print(result.table())
+    if result.notes:
+        print()
+        print(result.notes)
+    print(f"\nwrote {out / (exp.name + '.json')} and {len(result.plots)} plots in {time.perf_counter() - t0:.0f} s")
+    return 0
+
+
 # ---------------------------------------------------------------- main
 
 
@@ -161,11 +594,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     try:
         return int(args.run(args) or 0)
-    except _UsageError as exc:
-        parser.exit(EXIT_USAGE, f"sfanav {args.command}: error: {exc}\n")
-    except (ValueError, TypeError, FileNotFoundError, FileExistsError, NotADirectoryError,
-            PermissionError, ImportError) as exc:
-        parser.exit(EXIT_USAGE, f"sfanav {args.command}: error: {exc}\n")
+    except (_UsageError, ValueError, TypeError, OSError, ImportError, KeyError) as exc:
+        if os.environ.get("SFANAV_DEBUG") and not isinstance(exc, _UsageError):
+            raise  # the traceback, for bug reports
+        msg = str(exc.args[0]) if isinstance(exc, KeyError) and exc.args else str(exc)
+        msg = " ".join(msg.split()) or type(exc).__name__
+        parser.exit(EXIT_USAGE, f"sfanav {args.command}: error: {msg}\n")
     except KeyboardInterrupt:
         parser.exit(130, "interrupted\n")
     return 0  # pragma: no cover

@@ -49,6 +49,9 @@ class Localizer:
     train_metrics_ : dict
         :func:`sfanav.metrics.localization_metrics` on the training data
         (optimistic; evaluate on a separate test run).
+    info : dict
+        Free JSON metadata saved with the model (the ``sfanav`` command
+        stores the image preprocessing and training settings here).
 
     Examples
     --------
@@ -65,6 +68,7 @@ class Localizer:
         self.n_outputs = n_outputs
         self.ridge = ridge
         self.degree = degree
+        self.info: dict[str, Any] = {}
 
     def get_params(self, deep: bool = True) -> dict[str, Any]:
         return {"network": self.network, "n_outputs": self.n_outputs, "ridge": self.ridge, "degree": self.degree}
@@ -122,7 +126,9 @@ class Localizer:
         reg = QuadraticRegression(n, ridge, degree).fit(F, Y)
         self.regression_ = reg
         self.n_features_in_ = F.shape[1]
-        self.train_metrics_ = localization_metrics(reg.predict(F), Y)
+        rng = np.ptp(Y, axis=0)  # a straight training run has no range across it: use the other axis's
+        rng = np.where(rng > 0, rng, max(float(rng.max()), 1.0))
+        self.train_metrics_ = localization_metrics(reg.predict(F), Y, coordinate_range=rng)
         return self
 
     # ------------------------------------------------------------ inference
@@ -196,6 +202,7 @@ class Localizer:
             "regression": reg._get_state(),
             "n_features_in": int(self.n_features_in_),
             "train_metrics": dict(self.train_metrics_),
+            "info": dict(self.info or {}),
         }
         return save_model(path, "Localizer", state)
 
@@ -207,6 +214,7 @@ class Localizer:
             loc.regression_ = QuadraticRegression._from_state(state["regression"])
             loc.n_features_in_ = int(state["n_features_in"])
             loc.train_metrics_ = dict(state.get("train_metrics") or {})
+            loc.info = dict(state.get("info") or {})
         except (KeyError, TypeError) as exc:
             raise ValueError(f"invalid Localizer model state: {exc}") from None
         if net is not None and net.is_fitted_ and loc.n_features_in_ != net.n_outputs_:

@@ -99,6 +99,35 @@ _add(Preset(
                  RunSpec("test", lambda w, r: T.grid_points(w.area, 14, 14, margin=2.0))],
 ))
 
+_add(Preset(
+    "thesis-5.1.2-outdoor", "5.1.2",
+    "5x7 m area (the thesis's outdoor experiment) in a garden: a grid exploration with crossings and large-radius "
+    "turns, 2 cm per frame (~5900 frames), and a 2800-frame test walk, 600x60 RGB panoramas",
+    _garden((5.0, 7.0), 30, depth=8.0),
+    lambda: PanoramicCamera(600, 60),
+    lambda rng: [RunSpec("train", lambda w, r: T.grid(w.area, spacing=0.5, step=0.0204, turn="arc", margin=0.3)),
+                 RunSpec("test", lambda w, r: T.random_walk(w.area, 2800, 0.04, margin=0.3, rng=r, world=w))],
+))
+_INDOOR_WEIGHTS = {"house": 0.25, "shed": 0.2, "fence": 0.15, "hedge": 0.15, "bush": 0.1, "tree": 0.1, "rock": 0.05}
+_add(Preset(
+    "thesis-5.2-indoor-I", "5.2.2",
+    "indoor-style 4x4 m area closely walled by sheds, houses, fences and hedges: grid exploration with crossings "
+    "and large-radius turns, 3 cm per frame (~1700 frames), an 800-frame test walk; 409x40 gray panoramas",
+    _garden((4.0, 4.0), 24, margin=0.5, depth=4.0, weights=_INDOOR_WEIGHTS),
+    lambda: PanoramicCamera(409, 40, rgb=False),
+    lambda rng: [RunSpec("train", lambda w, r: T.grid(w.area, spacing=0.5, step=0.03, turn="arc", margin=0.3)),
+                 RunSpec("test", lambda w, r: T.random_walk(w.area, 800, 0.04, margin=0.3, rng=r, world=w))],
+))
+_add(Preset(
+    "thesis-5.2-indoor-II", "5.2.2",
+    "as thesis-5.2-indoor-I, but turns on the spot and denser lanes (more crossings, ~2600 frames); an 800-frame "
+    "test walk; 409x40 gray panoramas",
+    _garden((4.0, 4.0), 24, margin=0.5, depth=4.0, weights=_INDOOR_WEIGHTS),
+    lambda: PanoramicCamera(409, 40, rgb=False),
+    lambda rng: [RunSpec("train", lambda w, r: T.grid(w.area, spacing=0.4, step=0.03, turn="spot", margin=0.3)),
+                 RunSpec("test", lambda w, r: T.random_walk(w.area, 800, 0.04, margin=0.3, rng=r, world=w))],
+))
+
 
 def _garden_runs(lines: bool) -> Callable[[np.random.Generator], list[RunSpec]]:
     def runs(rng: np.random.Generator) -> list[RunSpec]:

@@ -1,0 +1,94 @@
+"""The localization experiments (5.1.1, 5.1.2, 5.1.3, 5.2) as quick smoke
+runs: each produces the required rows with finite values, its JSON and plots."""
+
+import json
+import math
+
+import pytest
+
+from sfanav import experiments
+from sfanav.experiments.localization import window_network
+
+BASE = ["MAE x (%)", "MAE y (%)", "MAE x (m)", "MAE y (m)", "MED (m)", "MAE x (%) (random splits)",
+        "MAE y (%) (random splits)", "MED (m) (random splits)", "max eta_phi (outputs 1-8)", "eta_phi s1",
+        "eta_phi s8", "min eta_p (outputs 1-8)", "best n", "best n (random splits)", "query ms", "model bytes"]
+BASELINES = [f"{m} {b}" for b in ("perfect memory", "Fourier signature")
+             for m in ("MED (m)", "MAE x (%)", "MAE y (%)", "bytes per place", "query ms")]
+
+
+def check(result, out, required):
+    assert result.experiment in {r["experiment"] for r in [json.loads((out / f"{result.experiment}.json").read_text())]}
+    names = [r["metric"] for r in result.rows]
+    assert len(names) == len(set(names)), "metric names must be unique"
+    missing = [n for n in required if n not in names]
+    assert not missing, missing
+    for r in result.rows:
+        assert set(r) >= {"metric", "thesis", "sfanav"}
+        if isinstance(r["sfanav"], (int, float)):
+            assert math.isfinite(r["sfanav"]), r
+        else:
+            assert isinstance(r["sfanav"], str), r
+    for p in result.plots:
+        assert (out / p).exists() or __import__("pathlib").Path(p).exists(), p
+    d = json.loads((out / f"{result.experiment}.json").read_text())
+    assert d["experiment"] == result.experiment and len(d["rows"]) == len(result.rows)
+    assert result.table().splitlines()[0].split() == ["metric", "thesis", "sfanav"]
+    return {r["metric"]: r for r in result.rows}
+
+
+def test_registered():
+    assert {"5.1.1", "5.1.2", "5.1.3", "5.2"} <= set(experiments.names())
+
+
+@pytest.mark.parametrize("name", ["5.1.1", "5.1.2"])
+def test_5_1_x_quick(name, tmp_path):
+    res = experiments.run(name, tmp_path, quick=True, progress=False)
+    rows = check(res, tmp_path, BASE + BASELINES)
+    if name == "5.1.1":
+        assert rows["MAE x (%) (random splits)"]["thesis"] == 1.83
+        assert rows["max eta_phi (outputs 1-8)"]["thesis"] == 0.17
+        assert rows["MAE x (%) (random splits)"]["protocol"] == "random-splits"
+    else:
+        assert rows["MAE x (m)"]["thesis"] == 0.23 and rows["MAE x (m)"]["protocol"] == "test-run"
+    assert rows["MED (m) perfect memory"]["baseline"] == "perfect memory"
+    assert res.notes and "quick" in res.notes
+
+
+def test_5_1_3_quick(tmp_path):
+    res = experiments.run("5.1.3", tmp_path, quick=True, progress=False)
+    required = [f"{m} window {w} %" for w in range(10, 101, 10)
+                for m in ("max eta_phi (outputs 1-8)", "MED (m)", "MAE x (%)", "MAE y (%)")]
+    required += [f"{m} window 50 % cubic individual" for m in ("max eta_phi (outputs 1-8)", "MED (m)")]
+    required += ["Spearman rho (window, max eta_phi)", "eta_phi grows as the window shrinks"] + BASELINES
+    rows = check(res, tmp_path, required)
+    assert rows["eta_phi grows as the window shrinks"]["thesis"] == "yes"
+    assert (tmp_path / "5.1.3-windows.png").exists()
+
+
+def test_5_2_quick(tmp_path):
+    res = experiments.run("5.2", tmp_path, quick=True, progress=False)
+    required = [f"{n} {run}" for run in ("indoor I", "indoor II") for n in BASE + BASELINES]
+    rows = check(res, tmp_path, required)
+    assert rows["MED (m) indoor I"]["thesis"] == 0.21 and rows["MED (m) indoor II"]["thesis"] == 0.13
+    # the dataset is simulated once and reused
+    from sfanav import sim
+    from sfanav.experiments.localization import simulated
+
+    ds = simulated(tmp_path, "thesis-5.2-indoor-I", 0, quick=True, camera=sim.PanoramicCamera(60, 8, rgb=False),
+                   max_frames=40, progress=False)
+    stamp = (ds.root / "frames.csv").stat().st_mtime_ns
+    ds = simulated(tmp_path, "thesis-5.2-indoor-I", 0, quick=True, camera=sim.PanoramicCamera(60, 8, rgb=False),
+                   max_frames=40, progress=False)
+    assert (ds.root / "frames.csv").stat().st_mtime_ns == stamp and len(ds) == 80
+
+
+def test_window_network_tiles_every_window():
+    for W, H in ((200, 20), (100, 10), (350, 40)):
+        for w in range(10, 101, 10):
+            V = W * w // 100
+            if V % 5:
+                continue
+            net = window_network(V, H)
+            assert net.input_shape == (H, V, 3)
+    with pytest.raises(ValueError, match="multiples of 5"):
+        window_network(17, 20)
