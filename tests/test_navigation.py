@@ -281,7 +281,12 @@ def test_coordinate_sfa_learns_position_codes():
     from sfanav.sim import trajectories as T
 
     tr = T.random_lines((10.0, 10.0), 3000, 0.2, margin=0.3, rng=0)
-    model = nav.fit_coordinate_sfa(tr.poses[:, :2], (10.0, 10.0), n_components=4, degree=5)
+    for kw in ({"expansion": "rbf", "spacing": 1.5}, {"expansion": "poly", "degree": 5}):
+        _check_coordinate_sfa(tr, kw)
+
+
+def _check_coordinate_sfa(tr, kw):
+    model = nav.fit_coordinate_sfa(tr.poses[:, :2], (10.0, 10.0), n_components=4, **kw)
     F = model(tr.poses[:, :2])
     assert F.shape == (3000, 4)
     # the slowest two are (mixtures of) half waves along x and y: together they encode position

@@ -39,3 +39,9 @@ from .unwarp import Unwarper, estimate_mirror  # noqa: E402
 
 __all__ += ["Localizer", "QuadraticRegression", "Unwarper", "estimate_mirror"]
 __all__ += ["analysis", "baselines", "metrics", "regression", "unwarp"]
+
+# Navigation along slow-feature gradients (issue 9): cost, plane-fit gradient, descents, closed loop, A*.
+from . import navigation  # noqa: E402
+from .navigation import Navigator, PlaneGradient, RobustDescent, SlowFeatureCost, ThesisDescent  # noqa: E402
+
+__all__ += ["navigation", "Navigator", "PlaneGradient", "RobustDescent", "SlowFeatureCost", "ThesisDescent"]

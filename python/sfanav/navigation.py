@@ -320,34 +320,51 @@ class ThesisDescent:
         return d.copy()
 
 
+def _rot(v: np.ndarray, a: float) -> np.ndarray:
+    c, s = np.cos(a), np.sin(a)
+    return np.array([c * v[0] - s * v[1], s * v[0] + c * v[1]])
+
+
+def _unit(v: np.ndarray) -> np.ndarray | None:
+    n = float(np.hypot(*v))
+    return v / n if n > 1e-12 else None
+
+
 class RobustDescent:
     """A descent for the thesis's open problem (flat regions, local minima).
 
-    * **Normalised step along the estimated direction**: the direction is
+    * **Normalised steps along the estimated direction**: the direction is
       the unit negative gradient, smoothed by a momentum on directions
-      (``momentum``); its length does not depend on the gradient's size, so
-      flat regions are crossed at full speed.
+      (``momentum``); the step's length does not depend on the gradient's
+      size, so flat regions are crossed at full speed.
     * **Step length from the cost's own distance estimate**: near a target a
       distance cost is a cone, ``C ~ |grad C| * distance``, so ``C / |g|``
       estimates the distance left; the step is ``clip(fraction * C / |g|,
-      min_step, max_step)`` (large in flat regions, short at the target).
+      min_step, max_step)`` (long in flat regions, short at the target).
     * **Step control by the measured cost**: when the cost rose since the
-      last stop the step is shortened (``shrink``), after decreases it may
-      grow back (``grow``) to the estimate.
-    * **Wall sliding**: after a blocked move the next step turns by
-      ``slide_angle`` away from the wall, on the side the gradient prefers.
+      last stop the step is shortened (``shrink``); after decreases it grows
+      back (``grow``) to the estimate.
     * **A look around at the start** (``probe_first``): the robot turns on
       the spot by 90 degrees before its first step, so the plane through the
       four camera positions (a cross) gives the full gradient instead of
       the difference quotient along one baseline. Turning costs no distance.
+    * **Wall following on bumps** (a bug algorithm with a bump sensor): when
+      a move is cut short by an obstacle or the border and the gradient
+      still points into it, the robot follows the wall on the side the
+      gradient prefers, turning ``follow_away`` degrees away after a bump
+      and ``follow_toward`` degrees back towards the wall after a free
+      step of ``follow_step`` m, until the cost is ``leave_drop`` below its
+      value where it hit the wall and the gradient no longer points into
+      the wall. After ``max_follow`` steps it turns round (twice as long).
     * **Plateau / local-minimum escape**: when the best cost has not
-      improved by ``rel_improvement`` for ``patience`` stops (or the
-      navigator reports being stuck), the robot drives ``escape_distance``
-      across its last direction (alternating sides, growing each time),
-      then resumes the descent.
+      improved by ``rel_improvement`` for ``patience`` stops in open space
+      (or the navigator reports being stuck), the robot drives
+      ``escape_distance`` across its last direction (alternating sides,
+      growing each time), then resumes the descent.
 
-    Parameters are in metres; the defaults suit a robot of 0.7 m with
-    cameras 0.7 m apart. Tuned on separate seeds from the reported trials.
+    Parameters are in metres and degrees; the defaults suit a robot of
+    0.7 m with cameras 0.7 m apart and were tuned on other trials (and
+    worlds) than the reported ones.
     """
 
     name = "robust descent"
@@ -361,7 +378,11 @@ class RobustDescent:
         momentum: float = 0.3,
         grow: float = 1.5,
         shrink: float = 0.5,
-        slide_angle: float = 60.0,
+        follow_step: float = 0.4,
+        follow_away: float = 45.0,
+        follow_toward: float = 30.0,
+        leave_drop: float = 0.05,
+        max_follow: int = 40,
         patience: int = 12,
         rel_improvement: float = 0.02,
         escape_distance: float = 2.0,
@@ -370,7 +391,7 @@ class RobustDescent:
         probe_first: bool = True,
     ) -> None:
         for name, v in (("fraction", fraction), ("min_step", min_step), ("max_step", max_step),
-                        ("escape_distance", escape_distance)):
+                        ("escape_distance", escape_distance), ("follow_step", follow_step)):
             if not v > 0:
                 raise ValueError(f"{name} must be positive, got {v}")
         if min_step > max_step:
@@ -381,24 +402,32 @@ class RobustDescent:
             raise ValueError("need grow >= 1 and 0 < shrink <= 1")
         self.fraction, self.min_step, self.max_step = float(fraction), float(min_step), float(max_step)
         self.momentum, self.grow, self.shrink = float(momentum), float(grow), float(shrink)
-        self.slide_angle = float(np.radians(slide_angle))
+        self.follow_step = float(follow_step)
+        self.follow_away, self.follow_toward = float(np.radians(follow_away)), float(np.radians(follow_toward))
+        self.leave_drop, self.max_follow = float(leave_drop), int(max_follow)
         self.patience, self.rel_improvement = int(patience), float(rel_improvement)
         self.escape_distance, self.escape_steps, self.max_escapes = float(escape_distance), int(escape_steps), int(max_escapes)
         self.probe_first = bool(probe_first)
         self.reset()
 
     def reset(self) -> None:
-        self._dir = np.zeros(2)
-        self._scale = 1.0  # multiplier from cost control (<= 1)
+        self._dir = np.zeros(2)       # smoothed descent direction
+        self._last = np.zeros(2)      # last displacement asked for
+        self._scale = 1.0             # multiplier from cost control (<= 1)
         self._prev_cost: float | None = None
         self._best = np.inf
         self._since_best = 0
         self._escape: list[np.ndarray] = []
         self._n_escapes = 0
+        self._follow: dict[str, Any] | None = None
+        self._n_follows = 0
         self.escapes = 0
+        self.follows = 0
 
+    # -- plateau escape
     def _start_escape(self) -> None:
-        base = self._dir if np.hypot(*self._dir) > 0 else np.array([1.0, 0.0])
+        base = _unit(self._dir)
+        base = base if base is not None else np.array([1.0, 0.0])
         side = 1.0 if self._n_escapes % 2 == 0 else -1.0
         perp = side * np.array([-base[1], base[0]])
         L = self.escape_distance * (1 + self._n_escapes // 2)
@@ -407,42 +436,80 @@ class RobustDescent:
         self.escapes += 1
         self._since_best = 0
 
+    # -- wall following
+    def _start_follow(self, bump: np.ndarray, u: np.ndarray, cost: float) -> None:
+        cross = bump[0] * u[1] - bump[1] * u[0]
+        if abs(cross) < 0.05:  # gradient straight into the wall: alternate sides
+            side = 1.0 if self._n_follows % 2 == 0 else -1.0
+        else:
+            side = 1.0 if cross > 0 else -1.0
+        self._follow = {"side": side, "heading": _rot(bump, side * np.pi / 2), "bump": bump, "hit": cost,
+                        "n": 0, "max": self.max_follow, "turned": False}
+        self._n_follows += 1
+        self.follows += 1
+
+    def _follow_step(self, u: np.ndarray, cost: float, info: StepInfo) -> np.ndarray | None:
+        F = self._follow
+        assert F is not None
+        if info.blocked:
+            F["bump"] = _unit(self._last) if _unit(self._last) is not None else F["bump"]
+        if (not info.blocked and cost < F["hit"] * (1 - self.leave_drop) and float(u @ F["bump"]) < 0.3):
+            self._follow = None  # leave the wall: descend again
+            self._since_best = 0
+            return None
+        F["n"] += 1
+        if F["n"] > F["max"]:
+            if F["turned"]:
+                self._follow = None
+                self._since_best = self.patience  # let the escape take over
+                return None
+            F["side"] = -F["side"]
+            F["heading"] = -F["heading"]
+            F["n"], F["max"], F["turned"] = 0, 2 * F["max"], True
+        elif info.blocked:
+            F["heading"] = _rot(F["heading"], F["side"] * self.follow_away)
+        else:
+            F["heading"] = _rot(F["heading"], -F["side"] * self.follow_toward)
+        return F["heading"] * self.follow_step
+
     def step(self, gradient: np.ndarray, cost: float, position: np.ndarray, info: StepInfo) -> np.ndarray:
         g = np.asarray(gradient, float)
         cost = float(cost)
+        gn = float(np.hypot(*g))
+        if gn > 1e-15:
+            u = -g / gn
+        else:
+            u = _unit(self._dir) if _unit(self._dir) is not None else np.array([1.0, 0.0])
+        if np.hypot(*self._dir) > 0:
+            v = _unit(self.momentum * self._dir + (1 - self.momentum) * u)
+            u = v if v is not None else u
         # plateau / local minimum bookkeeping
         if cost < self._best * (1 - self.rel_improvement):
             self._best = cost
             self._since_best = 0
         else:
             self._since_best += 1
-        if not self._escape and self._n_escapes < self.max_escapes and (
+        d = None
+        if self._escape:
+            d = self._escape.pop(0)
+            if info.blocked:
+                self._escape = []
+        if d is None and self._follow is None and info.blocked:
+            bump = _unit(self._last)
+            if bump is not None and float(u @ bump) > 0.0:
+                self._start_follow(bump, u, cost)
+        if d is None and self._follow is not None:
+            d = self._follow_step(u, cost, info)
+        if d is None and self._follow is None and self._n_escapes < self.max_escapes and (
             info.stuck or self._since_best >= self.patience
         ):
             self._start_escape()
-        if self._escape:
             d = self._escape.pop(0)
-            if info.blocked and self._escape:  # blocked while escaping: try the other way next
-                self._escape = []
+        if d is not None:
             self._prev_cost = cost
-            return d.copy()
-        gn = float(np.hypot(*g))
-        if gn <= 1e-15:
-            u = self._dir if np.hypot(*self._dir) > 0 else np.array([1.0, 0.0])
-        else:
-            u = -g / gn
-        if np.hypot(*self._dir) > 0:
-            v = self.momentum * self._dir + (1 - self.momentum) * u
-            nv = float(np.hypot(*v))
-            u = v / nv if nv > 1e-12 else u
-        if info.blocked:
-            # slide along the wall: the robot bumped while heading along _dir; turn away from it
-            h = self._dir if np.hypot(*self._dir) > 0 else u
-            side = 1.0 if (h[0] * u[1] - h[1] * u[0]) >= 0 else -1.0
-            a = side * self.slide_angle
-            c, s = np.cos(a), np.sin(a)
-            u = np.array([c * h[0] - s * h[1], s * h[0] + c * h[1]])
-        # cost control
+            self._last = np.asarray(d, float)
+            return self._last.copy()
+        # descent step
         if self._prev_cost is not None:
             if cost > self._prev_cost:
                 self._scale = max(self._scale * self.shrink, 1e-3)
@@ -454,7 +521,8 @@ class RobustDescent:
             est = self.min_step
         L = float(np.clip(est * self._scale, self.min_step, self.max_step))
         self._dir = u
-        return u * L
+        self._last = u * L
+        return self._last.copy()
 
 
 # --------------------------------------------------------------------- features
@@ -561,6 +629,10 @@ class NavigationResult:
         Images (or feature evaluations) processed.
     escapes : int
         Plateau escapes taken (robust descent).
+    blocked : int
+        Moves cut short by an obstacle or the border.
+    follows : int
+        Wall-following episodes (robust descent).
     """
 
     path: np.ndarray
@@ -574,6 +646,7 @@ class NavigationResult:
     images: int = 0
     escapes: int = 0
     blocked: int = 0
+    follows: int = 0
 
     @property
     def direct(self) -> float:
@@ -748,6 +821,7 @@ class Navigator:
             costs=np.array(costs), start=s, target=t,
             images=getattr(self.features, "images", 0) - images0,
             escapes=int(getattr(self.descent, "escapes", 0)), blocked=n_blocked,
+            follows=int(getattr(self.descent, "follows", 0)),
         )
 
 
@@ -1101,22 +1175,56 @@ def travel_time(path: Any, speed: Callable[[float, float], float], *, piece: flo
     return total
 
 
-def fit_coordinate_sfa(positions: Any, area: Sequence[float], *, n_components: int = 8, degree: int = 7) -> Callable[[np.ndarray], np.ndarray]:
-    """SFA learned on the coordinates of a trajectory (thesis 7.2.2): the
-    positions (N, 2) along the trajectory (in time order) are scaled to
-    [-1, 1] by ``area`` and expanded to all monomials up to ``degree``; the
-    returned callable maps positions (k, 2) to the ``n_components`` slow
-    features. Its attribute ``sfa`` is the fitted :class:`sfanav.SFA`
-    (``beta_values_`` for the 1/beta weights)."""
+def fit_coordinate_sfa(
+    positions: Any,
+    area: Sequence[float],
+    *,
+    n_components: int = 8,
+    expansion: str = "rbf",
+    spacing: float = 1.5,
+    degree: int = 7,
+) -> Callable[[np.ndarray], np.ndarray]:
+    """SFA learned on the coordinates of a trajectory (thesis 7.2.2).
+
+    The positions (N, 2) along the trajectory (in time order) are expanded
+    nonlinearly and linear SFA extracts the ``n_components`` slowest
+    features; the returned callable maps positions (k, 2) to them. Its
+    attribute ``sfa`` is the fitted :class:`sfanav.SFA` (``beta_values_``
+    for the 1/beta weights).
+
+    ``expansion="rbf"`` (default): Gaussian bumps of width ``spacing`` on a
+    grid of ``spacing`` m over the area, a function space flexible enough
+    for the local distortions that velocity regions cause (a 1.5 m grid
+    over 18 x 22 m: 195 functions). ``"poly"``: all monomials up to
+    ``degree`` of the coordinates scaled to [-1, 1] (smooth, global; it
+    cannot concentrate variance in a small region).
+    """
     from .sfa import SFA, expand
 
     P = np.asarray(positions, float).reshape(-1, 2)
-    scale = np.array([float(area[0]) / 2, float(area[1]) / 2])
-    sfa = SFA(int(n_components)).fit(expand(P / scale, int(degree)))
+    w, h = float(area[0]), float(area[1])
+    if expansion == "rbf":
+        sp = float(spacing)
+        if not sp > 0:
+            raise ValueError(f"spacing must be positive, got {spacing}")
+        cx = np.arange(-w / 2, w / 2 + 1e-9, sp)
+        cy = np.arange(-h / 2, h / 2 + 1e-9, sp)
+        C = np.array([(x, y) for x in cx for y in cy])
+
+        def feat(X: np.ndarray) -> np.ndarray:
+            d2 = ((X[:, None, :] - C[None, :, :]) ** 2).sum(-1)
+            return np.exp(-d2 / (2 * sp * sp))
+    elif expansion == "poly":
+        scale = np.array([w / 2, h / 2])
+
+        def feat(X: np.ndarray) -> np.ndarray:
+            return expand(X / scale, int(degree))
+    else:
+        raise ValueError(f"expansion must be 'rbf' or 'poly', got {expansion!r}")
+    sfa = SFA(int(n_components)).fit(feat(P))
 
     def model(X: np.ndarray) -> np.ndarray:
-        X = np.asarray(X, float).reshape(-1, 2)
-        return sfa.transform(expand(X / scale, int(degree)))
+        return sfa.transform(feat(np.asarray(X, float).reshape(-1, 2)))
 
     model.sfa = sfa  # type: ignore[attr-defined]
     return model
@@ -1126,7 +1234,7 @@ def fit_coordinate_sfa(positions: Any, area: Sequence[float], *, n_components: i
 
 
 def _draw_world(ax: Any, world: Any, area: Sequence[float] | None) -> None:
-    from matplotlib.patches import Polygon, Rectangle
+    from matplotlib.patches import Circle, Polygon, Rectangle
 
     if area is not None:
         w, h = area
@@ -1135,7 +1243,8 @@ def _draw_world(ax: Any, world: Any, area: Sequence[float] | None) -> None:
         return
     for o in getattr(world, "obstacles", []):
         for p in o.parts:
-            if p.kind != "box":
+            if p.shape != "box":
+                ax.add_patch(Circle((p.x, p.y), p.radius, fc="0.15", ec="0.15"))
                 continue
             c, s = np.cos(p.yaw), np.sin(p.yaw)
             hl, hw = p.length / 2, p.width / 2
@@ -1230,8 +1339,9 @@ def plot_trajectories(
 ) -> Path:
     """Navigation trajectories (thesis figs. 7.3, 7.6, 7.9c, 7.10c): one
     panel per run, start as a black cross, target as a white circle, the
-    driven path in red (success) or orange (failure), the optimal path in
-    white when ``optimal`` gives one per run, obstacles in black.
+    driven path in red (success) or orange (failure), the optimal path
+    (when ``optimal`` gives one per run) dashed blue, or white over a
+    ``background``; obstacles in black.
     ``background`` = (xs, ys, values) is drawn under the paths (e.g. a cost
     surface); ``regions(X, Y)`` shades slow-velocity regions."""
     from .analysis import _figure, _save
@@ -1265,8 +1375,10 @@ def plot_trajectories(
         _draw_world(ax, world, area)
         if optimal is not None and optimal[i] is not None and len(optimal[i]):
             op = np.asarray(optimal[i], float)
-            ax.plot(op[:, 0], op[:, 1], "-", color="white", lw=2.0, zorder=2)
-            ax.plot(op[:, 0], op[:, 1], "-", color="0.4", lw=0.6, zorder=2)
+            if background is not None:  # the thesis's white line on the colour map
+                ax.plot(op[:, 0], op[:, 1], "-", color="white", lw=1.6, zorder=2)
+            else:
+                ax.plot(op[:, 0], op[:, 1], "--", color="tab:blue", lw=1.2, zorder=2)
         P = r.path
         ax.plot(P[:, 0], P[:, 1], "-", color="tab:red" if r.success else "tab:orange", lw=1.3, zorder=3)
         ax.plot(P[:, 0], P[:, 1], ".", color="tab:red" if r.success else "tab:orange", ms=2, zorder=3)

@@ -402,7 +402,7 @@ def exp_722(out: Path, *, quick: bool = False, seed: int = 0, progress: bool = T
     for kind in ("halfplane", "disc"):
         world, traj, regions = _coordinate_scene(kind, seed, quick)
         area = world.area
-        model = nav.fit_coordinate_sfa(traj.poses[:, :2], area, n_components=8, degree=7)
+        model = nav.fit_coordinate_sfa(traj.poses[:, :2], area, n_components=8, expansion="rbf", spacing=1.5)
         beta = model.sfa.beta_values_
         w = nav.beta_weights(beta, relative=True)
         rng = _rng(seed, 722, 0 if kind == "halfplane" else 1)
@@ -458,7 +458,7 @@ def exp_722(out: Path, *, quick: bool = False, seed: int = 0, progress: bool = T
             plots.append(str(nav.plot_trajectories(
                 s.results[:k], out / f"7.2.2-{kind}-trajectories-{tag}.png", area=area, optimal=opt_paths[:k],
                 regions=lambda X, Y: np.vectorize(lambda x, y: 3.0 - regions(x, y))(X, Y) / 2,
-                title=f"7.2.2 {kind}: {d.name} (shaded: slow region; white: time-optimal)")))
+                title=f"7.2.2 {kind}: {d.name} (grey: slow region; dashed: time-optimal)")))
             notes.append(f"{kind} {d.name}: {_reasons(s)}")
         rows.append({"metric": f"{kind}: time efficiency of the direct path", "thesis": None,
                      "sfanav": float(np.mean(np.array(opt_times) / np.array(direct_times)))})
@@ -471,8 +471,8 @@ def exp_722(out: Path, *, quick: bool = False, seed: int = 0, progress: bool = T
                                                n_firing=4, target=targets[0],
                                                title=f"7.2.2 {kind}: s1-s4, cost (8 outputs) raw and 1/beta")))
     header = (
-        f"{'QUICK smoke version: ' if quick else ''}SFA (8 outputs, monomials up to degree 7 of the scaled "
-        f"coordinates) on the preset's random-lines trajectory ({'1500' if quick else '5000'} frames, 3x farther per "
+        f"{'QUICK smoke version: ' if quick else ''}Linear SFA (8 outputs) on Gaussian bumps (1.5 m grid and "
+        f"width) of the coordinates along the preset's random-lines trajectory ({'1500' if quick else '5000'} frames, 3x farther per "
         "step in the fast region); navigation with the 8 outputs weighted by beta_1/beta_i, a point robot with two "
         f"virtual sensors 0.7 m apart; {n_trials} trials per scene (half-plane: start x < -1, target x > 1, >= 8 m "
         "apart; disc: start and target 7-8.5 m from the centre on opposite sides). Optimal: Snell transition point "
