@@ -47,3 +47,9 @@ from .ekf import OdometryEKF  # noqa: E402
 from .metric import MetricLearner  # noqa: E402
 
 __all__ += ["MetricLearner", "OdometryEKF", "ekf", "experiments_odometry", "metric", "odometry"]
+
+# Navigation along slow-feature gradients (issue 9): cost, plane-fit gradient, descents, closed loop, A*.
+from . import navigation  # noqa: E402
+from .navigation import Navigator, PlaneGradient, RobustDescent, SlowFeatureCost, ThesisDescent  # noqa: E402
+
+__all__ += ["navigation", "Navigator", "PlaneGradient", "RobustDescent", "SlowFeatureCost", "ThesisDescent"]

@@ -1,0 +1,482 @@
+"""Navigation experiments of thesis chapter 7 on the built-in simulator.
+
+* ``7.1-open``: open field (7.1.2), n = 2 outputs, 50 trials with start and
+  target >= 15 m apart; success rate and efficiency (direct / travelled).
+* ``7.1-obstacle``: the v-shaped wall (7.1.2); target fixed inside the V,
+  starts in the lower half on the other side; efficiency against A* on a
+  0.1 m grid.
+* ``7.2.1``: n = 2..8 outputs, raw and weighted by 1/beta (open field).
+* ``7.2.2``: SFA on the coordinates of a random trajectory with a 3x speed
+  difference (half-plane split; slow central disc); paths against the
+  time-optimal ones.
+
+Each runs the thesis's descent rule (:class:`~sfanav.navigation.ThesisDescent`,
+eta 1.0, gamma 0.5) and sfanav's :class:`~sfanav.navigation.RobustDescent` on
+the same trials and reports one row per descent and metric. ``quick=True``
+shrinks everything to a smoke test (a 6 x 6 m garden, 120 x 16 gray
+panoramas, a two-layer network, a few trials).
+
+Networks are trained on the preset's training run (the robot's centre
+poses of the preset's random-lines trajectory, rendered as 600 x 60 RGB
+panoramas) with the thesis-5.2 network in mixed precision (for speed) and
+cached under ``out/cache`` (``7.2.1`` reuses ``7.1-open``'s network when run
+into the same directory).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .. import navigation as nav
+from . import ExperimentResult, register
+
+# The thesis's figures (chapter 7, thesis-figures.md).
+THESIS = {
+    "open": {"success": 0.98, "efficiency": 0.94},
+    "obstacle": {"success": 0.88, "efficiency": 0.76},
+    "7.2.1": {("raw", 2): (0.98, 0.94), ("raw", 8): (0.16, None), ("weighted", 3): (0.98, 0.92),
+              ("weighted", 8): (0.86, 0.86)},
+}
+ETA, GAMMA = 1.0, 0.5  # thesis 7.1.2
+SUCCESS_RADIUS, MAX_ITERATIONS = 0.5, 400
+QUICK_ITERATIONS = 40
+
+
+@dataclass
+class Scene:
+    """A navigation scene: world, camera, robot and the training trajectory."""
+
+    name: str
+    world: Any
+    camera: Any
+    robot: Any
+    trajectory: Any
+    quick: bool
+    _sim: Any = None
+
+    @property
+    def simulator(self) -> Any:
+        """The scene's closed-loop simulator (built once: its renderer takes
+        a few seconds); its ``renderer`` also renders training images."""
+        if self._sim is None:
+            from ..sim.robot import Simulator
+
+            self._sim = Simulator(self.world, self.camera, self.robot, seed=0)
+        return self._sim
+
+    @property
+    def area(self) -> tuple[float, float]:
+        return tuple(float(a) for a in self.world.area)  # type: ignore[return-value]
+
+
+def _rng(seed: int, *tags: int) -> np.random.Generator:
+    return np.random.default_rng(np.random.SeedSequence([int(seed), *tags]))
+
+
+def scene(kind: str, seed: int = 0, *, quick: bool = False) -> Scene:
+    """The scene of ``7.1-open`` (``kind="open"``) or ``7.1-obstacle``
+    (``"obstacle"``): the preset ``thesis-7.1-<kind>`` with its own
+    training trajectory, or with ``quick`` a 6 x 6 m garden with 120 x 16
+    gray panoramas and a 400-frame random-lines run."""
+    from ..sim import presets as P
+    from ..sim import trajectories as T
+    from ..sim.render import PanoramicCamera
+    from ..sim.robot import OdometryNoise, Robot
+    from ..sim.world import World
+
+    if kind not in ("open", "obstacle"):
+        raise ValueError(f"kind must be 'open' or 'obstacle', got {kind!r}")
+    if quick:
+        r = _rng(seed, 7, 1 if kind == "open" else 2)
+        world = World.generate(int(r.integers(2**31)), area=(6.0, 6.0), n_objects=14, depth=6.0,
+                               obstacles=("v-wall",) if kind == "obstacle" else ())
+        traj = T.random_lines(world.area, 400, 0.2, margin=0.35, world=world, rng=r)
+        cam = PanoramicCamera(120, 16, rgb=False)
+        robot = Robot.two_cameras(0.7, noise=OdometryNoise())
+        return Scene(f"quick-{kind}", world, cam, robot, traj, True)
+    name = f"thesis-7.1-{kind}"
+    p = P.get(name)
+    s_world, s_runs, s_traj, _ = P._streams(seed)
+    world = World.generate(int(s_world.integers(2**31)), **p.world)
+    traj = p.runs(s_runs)[0].trajectory(world, s_traj)
+    return Scene(name, world, p.camera(), p.robot(), traj, False)
+
+
+def network_config(quick: bool) -> dict[str, Any]:
+    """The network: thesis Table 5.2 (600 x 60 RGB) in mixed precision, or a
+    two-layer network for 120 x 16 gray panoramas (quick)."""
+    from ..network import _preset_config
+
+    if quick:
+        return {
+            "input": {"width": 120, "height": 16, "channels": 1},
+            "network": {"weight_sharing": True},
+            "layers": [{"rf": [10, 8], "stride": [5, 4], "out": 6}, {"rf": "full", "out": 8}],
+        }
+    cfg = _preset_config("thesis-5.2")
+    cfg.setdefault("network", {})["precision"] = "mixed"
+    return cfg
+
+
+def scene_network(sc: Scene, out: Path, seed: int, *, progress: bool = False) -> Any:
+    """Trains (or loads from ``out/cache``) the network of a scene on the
+    images of its training trajectory (robot centre poses, in time order),
+    with simulated rotation in steps of 5 px over the whole panorama."""
+    from ..modelfile import load
+    from ..network import Network, Rotation
+
+    cache = Path(out) / "cache" / f"{sc.name}-seed{seed}.sfanav"
+    if cache.exists():
+        return load(cache)
+    renderer = sc.simulator.renderer
+    poses = sc.trajectory.poses
+    it = poses
+    if progress:
+        from tqdm.auto import tqdm
+
+        it = tqdm(poses, desc=f"render {sc.name}", unit="img", leave=False)
+    imgs = np.stack([renderer.render(sc.camera, p) for p in it])
+    net = Network(network_config(sc.quick))
+    net.fit(imgs, rotation=Rotation(10 if sc.quick else 5), progress=progress)
+    cache.parent.mkdir(parents=True, exist_ok=True)
+    net.save(cache)
+    return net
+
+
+def _navigator(sc: Scene, net: Any, descent: Any, *, n: int = 2, weights: Any = None) -> nav.Navigator:
+    """A navigator in the scene's simulator."""
+    sim = sc.simulator
+    feats = nav.ImageFeatures(net, sim.renderer, sc.camera)
+    return nav.Navigator(sim, feats, descent, n_outputs=n, weights=weights, success_radius=SUCCESS_RADIUS,
+                         max_iterations=QUICK_ITERATIONS if sc.quick else MAX_ITERATIONS)
+
+
+def _free(sc: Scene, extra: float = 0.05):
+    r = sc.robot.size / 2 + extra
+    return lambda x, y: sc.world.free(x, y, r)
+
+
+def _descents() -> list[Any]:
+    return [nav.ThesisDescent(ETA, GAMMA), nav.RobustDescent()]
+
+
+def _grid_features(sc: Scene, net: Any, spacing: float, progress: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """SFA outputs on a grid over the area (NaN where the robot cannot stand)."""
+    w, h = sc.area
+    xs = np.arange(-w / 2 + spacing / 2, w / 2, spacing)
+    ys = np.arange(-h / 2 + spacing / 2, h / 2, spacing)
+    X, Y = np.meshgrid(xs, ys)
+    ok = np.asarray(sc.world.free(X, Y, 0.0))
+    renderer = sc.simulator.renderer
+    F = np.full(X.shape + (net.n_outputs_,), np.nan)
+    idx = np.argwhere(ok)
+    it = range(0, len(idx), 64)
+    if progress:
+        from tqdm.auto import tqdm
+
+        it = tqdm(it, desc="cost surface", unit="batch", leave=False)
+    for k in it:
+        chunk = idx[k : k + 64]
+        imgs = np.stack([renderer.render(sc.camera, (X[i, j], Y[i, j], 0.0)) for i, j in chunk])
+        F[chunk[:, 0], chunk[:, 1]] = net.transform(imgs)
+    return xs, ys, F
+
+
+def _summary_rows(label: str, s: nav.TrialSummary, thesis: dict[str, Any] | None, extra: str = "") -> list[dict[str, Any]]:
+    th = thesis or {}
+    rows = [
+        {"metric": f"success{extra} ({label})", "thesis": th.get("success"), "sfanav": s.success_rate},
+        {"metric": f"efficiency{extra} ({label})", "thesis": th.get("efficiency"), "sfanav": s.efficiency},
+    ]
+    return rows
+
+
+def _reasons(s: nav.TrialSummary) -> str:
+    return ", ".join(f"{k} {v}" for k, v in sorted(s.reasons.items()))
+
+
+def _pick(results: list[nav.NavigationResult], k: int) -> list[int]:
+    """Indices of up to k runs to plot: failures first, then successes."""
+    fail = [i for i, r in enumerate(results) if not r.success]
+    ok = [i for i, r in enumerate(results) if r.success]
+    sel = fail[: k // 2] + ok
+    return sorted(sel[:k])
+
+
+# --------------------------------------------------------------------- 7.1
+
+
+def _run_71(kind: str, out: Path, *, quick: bool, seed: int, progress: bool) -> ExperimentResult:
+    sc = scene(kind, seed, quick=quick)
+    net = scene_network(sc, out, seed, progress=progress)
+    n_trials = 3 if quick else 50
+    rng = _rng(seed, 71, 0 if kind == "open" else 1)
+    free = _free(sc)
+    w, h = sc.area
+    optimal = None
+    opt_paths: list[Any] = [None] * n_trials
+    if kind == "open":
+        min_d = 3.5 if quick else 15.0
+        starts, targets = nav.sample_trials(n_trials, sc.area, free=free, min_distance=min_d, margin=0.4, rng=rng)
+        geo = None
+    else:
+        apex_y = -0.15 * h
+        arm = 0.3 * min(w, h)
+        target = np.array([0.0, apex_y + 0.45 * arm])  # inside the V, on the side it opens to
+
+        def below(x: float, y: float) -> bool:  # lower half, outside the V's cup
+            return y < 0 and y < apex_y + abs(x) - 0.3
+
+        starts, targets = nav.sample_trials(n_trials, sc.area, free=free, min_distance=2.0 if quick else 4.0,
+                                            margin=0.4, target=target, start_region=below, rng=rng)
+        grid = nav.occupancy_grid(sc.area, lambda x, y: sc.world.free(x, y, sc.robot.size / 2), resolution=0.1,
+                                  margin=sc.robot.size / 2)
+        optimal, geo = [], []
+        for s_, t_ in zip(starts, targets):
+            P, L = nav.shortest_path(grid, s_, t_)
+            Ps, Ls = nav.shortest_path(grid, s_, t_, smooth=True)
+            optimal.append(L)
+            geo.append(Ls)
+            opt_paths[len(optimal) - 1] = Ps
+        optimal, geo = np.array(optimal), np.array(geo)
+    rows: list[dict[str, Any]] = []
+    plots: list[str] = []
+    notes_runs = []
+    summaries = {}
+    for d in _descents():
+        navi = _navigator(sc, net, d)
+        s = nav.evaluate_trials(navi, starts, targets, optimal_lengths=optimal, progress=progress, desc=d.name)
+        summaries[d.name] = s
+        rows += _summary_rows(d.name, s, THESIS[kind] if d.name == "thesis rule" else None)
+        if geo is not None:
+            ok = np.array([r.success for r in s.results])
+            eff_geo = np.array([geo[i] / r.travelled for i, r in enumerate(s.results) if r.success and r.travelled > 0])
+            rows.append({"metric": f"efficiency vs any-angle shortest path ({d.name})", "thesis": None,
+                         "sfanav": float(eff_geo.mean()) if ok.any() else float("nan")})
+        rows.append({"metric": f"mean stops ({d.name})", "thesis": None, "sfanav": s.mean_iterations})
+        notes_runs.append(f"{d.name}: {_reasons(s)}" + (f", escapes {sum(r.escapes for r in s.results)}"
+                                                        if d.name == "robust descent" else ""))
+        sel = _pick(s.results, 8)
+        tag = d.name.replace(" ", "-")
+        plots.append(str(nav.plot_trajectories(
+            [s.results[i] for i in sel], out / f"7.1-{kind}-trajectories-{tag}.png", world=sc.world,
+            optimal=[opt_paths[i] for i in sel],
+            titles=[("reached" if s.results[i].success else s.results[i].reason)
+                    + (f" e={s.efficiencies[i]:.2f}" if s.results[i].success else "") for i in sel],
+            title=f"7.1 {kind}: {d.name}")))
+    xs, ys, F = _grid_features(sc, net, 0.75 if quick else 0.5, progress)
+    tf = _navigator(sc, net, None).target_features(targets[0])
+    plots.append(str(nav.plot_cost_surface(xs, ys, F, tf, out / f"7.1-{kind}-cost-surface.png", ns=(2,), n_firing=4,
+                                           target=targets[0], world=sc.world,
+                                           title=f"7.1 {kind}: firing maps s1-s4, cost to the first trial's target")))
+    notes = (
+        f"{'QUICK smoke version: ' if quick else ''}scene {sc.name} (seed {seed}), {len(sc.trajectory)} training frames, "
+        f"network {'two-layer 120x16 gray' if quick else 'thesis-5.2 (600x60 RGB), precision mixed'}, rotation step {10 if quick else 5} px; "
+        f"{n_trials} trials, two cameras 0.7 m apart, n = 2 outputs, success radius {SUCCESS_RADIUS} m, "
+        f"at most {QUICK_ITERATIONS if quick else MAX_ITERATIONS} stops; thesis rule eta {ETA}, gamma {GAMMA}; robust descent "
+        "defaults (see docs/navigation.md). "
+        + ("Start-target >= %.1f m apart, efficiency = direct distance / travelled. " % (3.5 if quick else 15.0)
+           if kind == "open" else
+           f"Target fixed inside the V at ({targets[0][0]:.2f}, {targets[0][1]:.2f}); starts in the lower half outside "
+           "the V; efficiency = A* length (8-connected, 0.1 m grid, obstacles inflated by the robot radius) / "
+           "travelled; the any-angle row uses the line-of-sight-shortened A* path. ")
+        + "Outcomes: " + "; ".join(notes_runs) + "."
+    )
+    return ExperimentResult(f"7.1-{kind}", rows, plots, notes)
+
+
+@register("7.1-open", "Navigation in an open field (thesis 7.1.2): thesis rule vs robust descent")
+def exp_71_open(out: Path, *, quick: bool = False, seed: int = 0, progress: bool = True) -> ExperimentResult:
+    return _run_71("open", Path(out), quick=quick, seed=seed, progress=progress)
+
+
+@register("7.1-obstacle", "Navigation around the v-shaped obstacle (thesis 7.1.2): thesis rule vs robust descent")
+def exp_71_obstacle(out: Path, *, quick: bool = False, seed: int = 0, progress: bool = True) -> ExperimentResult:
+    return _run_71("obstacle", Path(out), quick=quick, seed=seed, progress=progress)
+
+
+# --------------------------------------------------------------------- 7.2.1
+
+
+@register("7.2.1", "More slow-feature outputs, raw vs weighted by 1/beta (thesis 7.2.1)")
+def exp_721(out: Path, *, quick: bool = False, seed: int = 0, progress: bool = True) -> ExperimentResult:
+    out = Path(out)
+    sc = scene("open", seed, quick=quick)
+    net = scene_network(sc, out, seed, progress=progress)
+    beta = np.asarray(net.beta_values_, float)
+    wrel = nav.beta_weights(beta, relative=True)
+    n_trials = 1 if quick else 50
+    ns = list(range(2, 9))
+    rng = _rng(seed, 721)
+    starts, targets = nav.sample_trials(n_trials, sc.area, free=_free(sc), min_distance=3.5 if quick else 15.0,
+                                        margin=0.4, rng=rng)
+    rows: list[dict[str, Any]] = []
+    outcome = []
+    for n in ns:
+        for mode, weights in (("raw", None), ("weighted", wrel)):
+            for d in _descents():
+                navi = _navigator(sc, net, d, n=n, weights=weights)
+                if quick:
+                    navi.max_iterations = 25
+                s = nav.evaluate_trials(navi, starts, targets, progress=progress, desc=f"n={n} {mode} {d.name}")
+                th = THESIS["7.2.1"].get((mode, n), (None, None)) if d.name == "thesis rule" else (None, None)
+                rows.append({"metric": f"n={n} {mode}: success ({d.name})", "thesis": th[0], "sfanav": s.success_rate})
+                rows.append({"metric": f"n={n} {mode}: efficiency ({d.name})", "thesis": th[1], "sfanav": s.efficiency})
+                outcome.append((n, mode, d.name, s.success_rate, s.efficiency))
+    plots = []
+    xs, ys, F = _grid_features(sc, net, 0.75 if quick else 0.5, progress)
+    tf = _navigator(sc, net, None).target_features(targets[0])
+    plots.append(str(nav.plot_cost_surface(xs, ys, F, tf, out / "7.2.1-cost-surfaces.png", ns=ns, weights=wrel,
+                                           n_firing=8, target=targets[0],
+                                           title="7.2.1: firing maps s1-s8; cost n = 2..8 raw and 1/beta-weighted")))
+    plots.append(str(_plot_721(outcome, out / "7.2.1-success-vs-n.png")))
+    notes = (
+        f"{'QUICK smoke version: ' if quick else ''}open-field scene {sc.name} (seed {seed}) and its network; "
+        f"{n_trials} trials (start-target >= {3.5 if quick else 15.0} m) per n, descent and weighting; beta of the "
+        f"network's outputs: {', '.join(f'{b:.3g}' for b in beta)}. Weighted outputs use weights beta_1 / beta_i "
+        f"(1/beta scaled so the slowest output keeps weight 1) with eta = {ETA}, which equals the thesis's 1/beta "
+        f"weights with eta = beta_1 = {beta[0]:.3g} (thesis: 0.0015); raw outputs eta = {ETA}; gamma {GAMMA}. "
+        "The thesis gives numbers only for raw n = 2 and 8 and weighted n = 3 and 8 (fig. 7.8)."
+    )
+    return ExperimentResult("7.2.1", rows, plots, notes)
+
+
+def _plot_721(outcome: list[tuple[int, str, str, float, float]], path: Path) -> Path:
+    from ..analysis import _figure, _save
+
+    fig = _figure(8.0, 3.2)
+    axes = fig.subplots(1, 2)
+    for (mode, dname), style in {("raw", "thesis rule"): "o-", ("weighted", "thesis rule"): "s-",
+                                 ("raw", "robust descent"): "o--", ("weighted", "robust descent"): "s--"}.items():
+        pts = [(n, sr, ef) for n, m, d, sr, ef in outcome if m == mode and d == dname]
+        if not pts:
+            continue
+        a = np.array(pts, float)
+        axes[0].plot(a[:, 0], a[:, 1], style, label=f"{mode}, {dname}")
+        axes[1].plot(a[:, 0], a[:, 2], style, label=f"{mode}, {dname}")
+    axes[0].plot([2, 8, 3, 8], [0.98, 0.16, 0.98, 0.86], "k*", ms=9, label="thesis")
+    axes[1].plot([2, 3, 8], [0.94, 0.92, 0.86], "k*", ms=9)
+    axes[0].set_ylabel("success rate")
+    axes[1].set_ylabel("efficiency")
+    for ax in axes:
+        ax.set_xlabel("number of SFA outputs n")
+        ax.set_ylim(0, 1.05)
+    axes[0].legend(fontsize="x-small")
+    return _save(fig, path, 110)
+
+
+# --------------------------------------------------------------------- 7.2.2
+
+
+def _coordinate_scene(kind: str, seed: int, quick: bool) -> tuple[Any, Any, Any]:
+    """(world, trajectory, velocity regions) of a 7.2.2 preset (quick: 1500 frames)."""
+    from ..sim import presets as P
+    from ..sim import trajectories as T
+    from ..sim.world import World
+
+    name = f"thesis-7.2.2-{kind}"
+    p = P.get(name)
+    s_world, s_runs, s_traj, _ = P._streams(seed)
+    world = World.generate(int(s_world.integers(2**31)), **p.world)
+    regions = T.VelocityRegions.half_plane(0.0, "left", 3.0) if kind == "halfplane" else T.VelocityRegions.disc(5.0, factor=3.0)
+    if quick:
+        traj = T.random_lines(world.area, 1500, 0.2, margin=0.35, world=world, rng=s_traj, speed=regions)
+    else:
+        traj = p.runs(s_runs)[0].trajectory(world, s_traj)
+    return world, traj, regions
+
+
+@register("7.2.2", "Velocity regions: SFA on coordinates, paths vs time-optimal ones (thesis 7.2.2)")
+def exp_722(out: Path, *, quick: bool = False, seed: int = 0, progress: bool = True) -> ExperimentResult:
+    from ..sim.robot import Robot
+
+    out = Path(out)
+    rows: list[dict[str, Any]] = []
+    plots: list[str] = []
+    notes = []
+    n_trials = 2 if quick else 20
+    for kind in ("halfplane", "disc"):
+        world, traj, regions = _coordinate_scene(kind, seed, quick)
+        area = world.area
+        model = nav.fit_coordinate_sfa(traj.poses[:, :2], area, n_components=8, expansion="rbf", spacing=1.5)
+        beta = model.sfa.beta_values_
+        w = nav.beta_weights(beta, relative=True)
+        rng = _rng(seed, 722, 0 if kind == "halfplane" else 1)
+        hw, hh = area[0] / 2 - 0.5, area[1] / 2 - 0.5
+        if kind == "halfplane":
+            starts, targets = nav.sample_trials(n_trials, area, min_distance=8.0, margin=0.5,
+                                                start_region=lambda x, y: x < -1.0, target_region=lambda x, y: x > 1.0,
+                                                rng=rng)
+        else:
+            th = rng.uniform(-np.pi, np.pi, n_trials)
+            r0, r1 = rng.uniform(7.0, 8.5, n_trials), rng.uniform(7.0, 8.5, n_trials)
+            th1 = th + np.pi + rng.uniform(-0.25, 0.25, n_trials)
+            starts = np.clip(np.column_stack([r0 * np.cos(th), r0 * np.sin(th)]), [-hw, -hh], [hw, hh])
+            targets = np.clip(np.column_stack([r1 * np.cos(th1), r1 * np.sin(th1)]), [-hw, -hh], [hw, hh])
+        # time-optimal references
+        opt_paths, opt_times = [], []
+        if kind == "disc":
+            grid = nav.occupancy_grid(area, None, resolution=0.1, margin=0.35)
+            GX, GY = grid.centres()
+            slow = (GX ** 2 + GY ** 2) < 25.0
+            wgrid = np.where(slow, 3.0, 1.0)
+        for s_, t_ in zip(starts, targets):
+            if kind == "halfplane":
+                P, T_ = nav.halfplane_optimal(s_, t_, x0=0.0, speed_left=1.0, speed_right=3.0)
+            else:
+                P, cost = nav.shortest_path(grid, s_, t_, weights=wgrid)
+                T_ = nav.travel_time(P, regions)
+            opt_paths.append(P)
+            opt_times.append(T_)
+        direct_times = [nav.travel_time(np.array([s_, t_]), regions) for s_, t_ in zip(starts, targets)]
+        for d in _descents():
+            sim = nav.PointSimulator(area, Robot.two_cameras(0.7))
+            navi = nav.Navigator(sim, nav.CoordinateFeatures(model), d, n_outputs=8, weights=w,
+                                 success_radius=SUCCESS_RADIUS, max_iterations=MAX_ITERATIONS)
+            s = nav.evaluate_trials(navi, starts, targets, progress=progress, desc=f"{kind} {d.name}")
+            teff = [opt_times[i] / nav.travel_time(r.path, regions) for i, r in enumerate(s.results) if r.success]
+            rows.append({"metric": f"{kind}: success ({d.name})", "thesis": None, "sfanav": s.success_rate})
+            rows.append({"metric": f"{kind}: time efficiency, optimal / path time ({d.name})", "thesis": None,
+                         "sfanav": float(np.mean(teff)) if teff else float("nan")})
+            if kind == "halfplane":
+                err = []
+                for i, r in enumerate(s.results):
+                    P = r.path
+                    k = np.nonzero(np.diff(np.sign(P[:, 0])) != 0)[0]
+                    if r.success and len(k):
+                        a, b = P[k[0]], P[k[0] + 1]
+                        y = a[1] + (b[1] - a[1]) * (0 - a[0]) / (b[0] - a[0])
+                        err.append(abs(y - opt_paths[i][1][1]))
+                rows.append({"metric": f"{kind}: transition point error m ({d.name})", "thesis": None,
+                             "sfanav": float(np.mean(err)) if err else float("nan")})
+            tag = d.name.replace(" ", "-")
+            k = min(4, len(s.results))
+            plots.append(str(nav.plot_trajectories(
+                s.results[:k], out / f"7.2.2-{kind}-trajectories-{tag}.png", area=area, optimal=opt_paths[:k],
+                regions=lambda X, Y: np.vectorize(lambda x, y: 3.0 - regions(x, y))(X, Y) / 2,
+                title=f"7.2.2 {kind}: {d.name} (grey: slow region; dashed: time-optimal)")))
+            notes.append(f"{kind} {d.name}: {_reasons(s)}")
+        rows.append({"metric": f"{kind}: time efficiency of the direct path", "thesis": None,
+                     "sfanav": float(np.mean(np.array(opt_times) / np.array(direct_times)))})
+        xs = np.linspace(-area[0] / 2 + 0.25, area[0] / 2 - 0.25, 72)
+        ys = np.linspace(-area[1] / 2 + 0.25, area[1] / 2 - 0.25, 88)
+        GX, GY = np.meshgrid(xs, ys)
+        F = model(np.column_stack([GX.ravel(), GY.ravel()])).reshape(GX.shape + (8,))
+        tf = model(targets[:1])[0]
+        plots.append(str(nav.plot_cost_surface(xs, ys, F, tf, out / f"7.2.2-{kind}-maps.png", ns=(8,), weights=w,
+                                               n_firing=4, target=targets[0],
+                                               title=f"7.2.2 {kind}: s1-s4, cost (8 outputs) raw and 1/beta")))
+    header = (
+        f"{'QUICK smoke version: ' if quick else ''}Linear SFA (8 outputs) on Gaussian bumps (1.5 m grid and "
+        f"width) of the coordinates along the preset's random-lines trajectory ({'1500' if quick else '5000'} frames, 3x farther per "
+        "step in the fast region); navigation with the 8 outputs weighted by beta_1/beta_i, a point robot with two "
+        f"virtual sensors 0.7 m apart; {n_trials} trials per scene (half-plane: start x < -1, target x > 1, >= 8 m "
+        "apart; disc: start and target 7-8.5 m from the centre on opposite sides). Optimal: Snell transition point "
+        "(half-plane), A* on a 0.1 m grid with cost 3 per metre in the slow disc (disc). The thesis reports no "
+        "numbers here, only that the paths are close to the time-optimal ones. "
+    )
+    return ExperimentResult("7.2.2", rows, plots, header + "Outcomes: " + "; ".join(notes) + ".")

@@ -1,0 +1,1397 @@
+"""Navigation along slow-feature gradients (thesis chapter 7).
+
+A robot that has learned a slow-feature representation of its garden can
+drive to a target by gradient descent on the distance, in slow-feature space,
+between what it sees and what it saw at the target:
+
+* **Cost** (7.1, 7.2.1): :class:`SlowFeatureCost`, the Euclidean distance
+  between the current and the target's first ``n`` SFA outputs, optionally
+  with the outputs weighted by ``1 / beta`` (:func:`beta_weights`).
+* **Gradient** (7.1.1): :class:`PlaneGradient`, from two cameras on the
+  robot's left and right: the first estimate from their difference quotient,
+  then a plane through the four cost values of the last two stops (the mean
+  of the normals of the four three-point planes).
+* **Descents** with one interface (``reset()``, ``step(gradient, cost,
+  position, info) -> displacement``): :class:`ThesisDescent` (step scale
+  ``eta``, momentum ``gamma``) and :class:`RobustDescent` (normalised steps
+  sized by the cost's own distance estimate, direction momentum, step
+  control by the measured cost, wall sliding and plateau escape).
+* **Closed loop**: :class:`Navigator` drives a simulator's two-camera robot
+  (:class:`sfanav.sim.Simulator`, obstacles are physical) with features from
+  :class:`ImageFeatures` (render + trained :class:`~sfanav.Network`) or any
+  function of the camera poses (:class:`CoordinateFeatures` for SFA on
+  coordinates, 7.2.2).
+* **Evaluation** (7.1.2): :func:`sample_trials`, :func:`evaluate_trials`
+  (success rate, efficiency = optimal / travelled length), :func:`astar` on
+  an occupancy grid (:func:`shortest_path` for worlds, weighted for velocity
+  regions).
+* **Velocity regions** (7.2.2): :func:`halfplane_optimal`,
+  :func:`travel_time`, :func:`fit_coordinate_sfa`.
+* **Plots**: :func:`plot_cost_surface` (fig. 7.7), :func:`plot_trajectories`
+  (figs. 7.3, 7.6, 7.9, 7.10); each writes a PNG and returns its path.
+"""
+
+from __future__ import annotations
+
+import heapq
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Protocol
+
+import numpy as np
+
+__all__ = [
+    "SlowFeatureCost",
+    "beta_weights",
+    "difference_quotient",
+    "plane_gradient",
+    "PlaneGradient",
+    "StepInfo",
+    "Descent",
+    "ThesisDescent",
+    "RobustDescent",
+    "ImageFeatures",
+    "CoordinateFeatures",
+    "PointSimulator",
+    "Navigator",
+    "NavigationResult",
+    "TrialSummary",
+    "sample_trials",
+    "evaluate_trials",
+    "astar",
+    "occupancy_grid",
+    "shortest_path",
+    "path_length",
+    "halfplane_optimal",
+    "travel_time",
+    "fit_coordinate_sfa",
+    "plot_cost_surface",
+    "plot_trajectories",
+]
+
+
+def _vec2(v: Any, name: str) -> np.ndarray:
+    a = np.asarray(v, dtype=float)
+    if a.shape != (2,) or not np.isfinite(a).all():
+        raise ValueError(f"{name} must be a finite (x, y) pair, got {v!r}")
+    return a
+
+
+# --------------------------------------------------------------------- cost
+
+
+def beta_weights(beta: Any, *, relative: bool = False) -> np.ndarray:
+    """Weights ``1 / beta`` of the slow-feature outputs (thesis 7.2.1): slower
+    outputs (smaller beta) count more. ``relative=True`` scales them so the
+    first weight is 1 (``beta_1 / beta_i``), which leaves the cost of the
+    slowest output in its own units; the thesis's 1/beta weights equal these
+    times ``1 / beta_1`` (its step scale 0.0015 for weighted outputs plays
+    the role of ``beta_1``)."""
+    b = np.asarray(beta, dtype=float)
+    if b.ndim != 1 or len(b) == 0 or not np.isfinite(b).all() or (b <= 0).any():
+        raise ValueError(f"beta must be a 1-D array of positive numbers, got {beta!r}")
+    w = 1.0 / b
+    return w / w[0] if relative else w
+
+
+class SlowFeatureCost:
+    """Cost of a place: the distance in slow-feature space from its outputs
+    to the target's (thesis 7.1: ``C(f(p)) = sqrt(sum_i (f(p)_i - f(t)_i)^2)``
+    over the first ``n`` outputs; 7.2.1: each output weighted by ``w_i``,
+    e.g. :func:`beta_weights`).
+
+    Parameters
+    ----------
+    target : array (m,)
+        SFA outputs at the target (from an image taken there); the first
+        ``n`` are used.
+    n : int, optional
+        Number of outputs (default all of ``target``).
+    weights : array (>= n,), optional
+        Per-output weights.
+
+    Calling the cost on features (..., m) returns costs (...).
+    """
+
+    def __init__(self, target: Any, n: int | None = None, weights: Any = None) -> None:
+        t = np.asarray(target, dtype=float).ravel()
+        if len(t) == 0 or not np.isfinite(t).all():
+            raise ValueError("target must be a non-empty finite vector of SFA outputs")
+        n = len(t) if n is None else int(n)
+        if not 1 <= n <= len(t):
+            raise ValueError(f"n must be in 1..{len(t)} (the target's outputs), got {n}")
+        self.n = n
+        self.target = t[:n].copy()
+        if weights is None:
+            self.weights = None
+        else:
+            w = np.asarray(weights, dtype=float).ravel()
+            if len(w) < n or not np.isfinite(w[:n]).all() or (w[:n] < 0).any():
+                raise ValueError(f"weights must hold at least {n} non-negative finite numbers")
+            self.weights = w[:n].copy()
+
+    def __call__(self, features: Any) -> np.ndarray:
+        f = np.asarray(features, dtype=float)
+        if f.shape[-1] < self.n:
+            raise ValueError(f"features have {f.shape[-1]} outputs, the cost uses {self.n}")
+        d = f[..., : self.n] - self.target
+        if self.weights is not None:
+            d = d * self.weights
+        return np.sqrt(np.sum(d * d, axis=-1))
+
+
+# --------------------------------------------------------------------- gradient
+
+
+def difference_quotient(p_left: Any, p_right: Any, c_left: float, c_right: float) -> np.ndarray:
+    """Gradient estimate from two cost values (thesis 7.1.1, first step): the
+    difference quotient along the baseline from the right to the left camera,
+    as a vector along that baseline. Its component across the baseline is
+    unknown and set to zero."""
+    a, b = _vec2(p_left, "p_left"), _vec2(p_right, "p_right")
+    d = a - b
+    L2 = float(d @ d)
+    if L2 <= 1e-18:
+        return np.zeros(2)
+    return (float(c_left) - float(c_right)) * d / L2
+
+
+def plane_gradient(points: Any, costs: Any, *, weighting: str = "area") -> np.ndarray | None:
+    """Slope of the plane through four cost values (thesis 7.1.1).
+
+    For each of the four three-point combinations of the points (x, y,
+    cost) the plane normal is the cross product of two edge vectors,
+    oriented upwards; the normals are averaged and the gradient is the
+    slope of the plane with the mean normal: ``-(n_x, n_y) / n_z``.
+
+    Parameters
+    ----------
+    points : array (k, 2), k >= 3
+        Measurement positions (m).
+    costs : array (k,)
+    weighting : ``"area"`` or ``"unit"``
+        ``"area"`` averages the raw cross products (each triangle weighted by
+        its area, so nearly collinear triples count little); ``"unit"``
+        averages unit normals.
+
+    Returns
+    -------
+    ndarray (2,), or None when all triples are (nearly) collinear.
+    Exact for costs that are a plane (any weighting).
+    """
+    P = np.asarray(points, dtype=float)
+    c = np.asarray(costs, dtype=float)
+    if P.ndim != 2 or P.shape[1] != 2 or len(P) < 3 or c.shape != (len(P),):
+        raise ValueError(f"need points (k>=3, 2) and costs (k,), got {P.shape} and {c.shape}")
+    if weighting not in ("area", "unit"):
+        raise ValueError(f"weighting must be 'area' or 'unit', got {weighting!r}")
+    Q = np.column_stack([P, c])
+    k = len(P)
+    scale = max(float(np.ptp(P, axis=0).max()), 1e-12)
+    normals = []
+    for i in range(k):
+        for j in range(i + 1, k):
+            for m in range(j + 1, k):
+                n = np.cross(Q[j] - Q[i], Q[m] - Q[i])
+                if abs(n[2]) <= 1e-9 * scale * scale:  # collinear in the plane
+                    continue
+                if n[2] < 0:
+                    n = -n
+                if weighting == "unit":
+                    n = n / np.linalg.norm(n)
+                normals.append(n)
+    if not normals:
+        return None
+    n = np.mean(normals, axis=0)
+    if n[2] <= 0:
+        return None
+    return -n[:2] / n[2]
+
+
+class PlaneGradient:
+    """The thesis's gradient estimator for a robot with two cameras (7.1.1).
+
+    Call :meth:`update` once per stop with the two camera positions and
+    their costs. The first call (and any call after which the last two
+    stops give only collinear points, e.g. when the robot could not move)
+    returns the difference quotient between the cameras; later calls return
+    the slope of the plane fitted to the four values of the last two stops
+    (:func:`plane_gradient`).
+    """
+
+    def __init__(self, *, weighting: str = "area") -> None:
+        if weighting not in ("area", "unit"):
+            raise ValueError(f"weighting must be 'area' or 'unit', got {weighting!r}")
+        self.weighting = weighting
+        self.reset()
+
+    def reset(self) -> None:
+        self._prev: tuple[np.ndarray, np.ndarray] | None = None
+        self.last_method = ""
+
+    def update(self, positions: Any, costs: Any) -> np.ndarray:
+        """``positions`` (2, 2): left and right camera (m); ``costs`` (2,).
+        Returns the gradient estimate (2,) (cost per metre)."""
+        P = np.asarray(positions, dtype=float)
+        c = np.asarray(costs, dtype=float)
+        if P.shape != (2, 2) or c.shape != (2,):
+            raise ValueError(f"need positions (2, 2) and costs (2,), got {P.shape} and {c.shape}")
+        g = None
+        if self._prev is not None:
+            pp, pc = self._prev
+            g = plane_gradient(np.vstack([pp, P]), np.concatenate([pc, c]), weighting=self.weighting)
+        if g is None:
+            g = difference_quotient(P[0], P[1], c[0], c[1])
+            self.last_method = "difference"
+        else:
+            self.last_method = "plane"
+        self._prev = (P.copy(), c.copy())
+        return g
+
+
+# --------------------------------------------------------------------- descents
+
+
+@dataclass
+class StepInfo:
+    """What the navigator tells a descent at each stop.
+
+    Attributes: ``iteration`` (0-based), ``blocked`` (the last move was cut
+    short by an obstacle or the border), ``last_move`` (metres actually
+    driven), ``stuck`` (the navigator's stuck detector fired at this stop),
+    ``heading`` (robot heading, odometry frame), ``method`` (how the
+    gradient was estimated: ``"difference"`` or ``"plane"``)."""
+
+    iteration: int = 0
+    blocked: bool = False
+    last_move: float = 0.0
+    stuck: bool = False
+    heading: float = 0.0
+    method: str = ""
+
+
+class Descent(Protocol):
+    """A descent rule: turns gradient estimates into displacements."""
+
+    name: str
+
+    def reset(self) -> None: ...
+
+    def step(self, gradient: np.ndarray, cost: float, position: np.ndarray, info: StepInfo) -> np.ndarray: ...
+
+
+class ThesisDescent:
+    """Gradient descent with momentum (thesis 7.1.1):
+    ``d_k = -eta * g_k + gamma * d_{k-1}``, the robot then drives ``d_k``.
+
+    Parameters
+    ----------
+    eta : float
+        Step scale (thesis: 1.0 for raw outputs, 0.0015 for 1/beta-weighted).
+    gamma : float
+        Momentum (thesis: 0.5).
+    max_step : float, optional
+        Cap on a step's length (m); the thesis has none.
+    """
+
+    name = "thesis rule"
+
+    def __init__(self, eta: float = 1.0, gamma: float = 0.5, max_step: float | None = None) -> None:
+        if not eta > 0:
+            raise ValueError(f"eta must be positive, got {eta}")
+        if not 0 <= gamma < 1:
+            raise ValueError(f"gamma must be in [0, 1), got {gamma}")
+        if max_step is not None and not max_step > 0:
+            raise ValueError(f"max_step must be positive, got {max_step}")
+        self.eta, self.gamma, self.max_step = float(eta), float(gamma), max_step
+        self.reset()
+
+    def reset(self) -> None:
+        self._d = np.zeros(2)
+
+    def step(self, gradient: np.ndarray, cost: float, position: np.ndarray, info: StepInfo) -> np.ndarray:
+        d = -self.eta * np.asarray(gradient, float) + self.gamma * self._d
+        if self.max_step is not None:
+            L = float(np.hypot(*d))
+            if L > self.max_step:
+                d = d * (self.max_step / L)
+        self._d = d
+        return d.copy()
+
+
+def _rot(v: np.ndarray, a: float) -> np.ndarray:
+    c, s = np.cos(a), np.sin(a)
+    return np.array([c * v[0] - s * v[1], s * v[0] + c * v[1]])
+
+
+def _unit(v: np.ndarray) -> np.ndarray | None:
+    n = float(np.hypot(*v))
+    return v / n if n > 1e-12 else None
+
+
+class RobustDescent:
+    """A descent for the thesis's open problem (flat regions, local minima).
+
+    * **Normalised steps along the estimated direction**: the direction is
+      the unit negative gradient, smoothed by a momentum on directions
+      (``momentum``); the step's length does not depend on the gradient's
+      size, so flat regions are crossed at full speed.
+    * **Step length from the cost's own distance estimate**: near a target a
+      distance cost is a cone, ``C ~ |grad C| * distance``, so ``C / |g|``
+      estimates the distance left; the step is ``clip(fraction * C / |g|,
+      min_step, max_step)`` (long in flat regions, short at the target).
+    * **Step control by the measured cost**: when the cost rose since the
+      last stop the step is shortened (``shrink``); after decreases it grows
+      back (``grow``) to the estimate.
+    * **A look around at the start** (``probe_first``): the robot turns on
+      the spot by 90 degrees before its first step, so the plane through the
+      four camera positions (a cross) gives the full gradient instead of
+      the difference quotient along one baseline. Turning costs no distance.
+    * **Wall following on bumps** (a bug algorithm with a bump sensor): when
+      a move is cut short by an obstacle or the border and the gradient
+      still points into it, the robot follows the wall on the side the
+      gradient prefers, turning ``follow_away`` degrees away after a bump
+      and ``follow_toward`` degrees back towards the wall after a free
+      step of ``follow_step`` m, until the cost is ``leave_drop`` below its
+      value where it hit the wall and the gradient no longer points into
+      the wall. After ``max_follow`` steps it turns round (twice as long).
+    * **Plateau / local-minimum escape**: when the best cost has not
+      improved by ``rel_improvement`` for ``patience`` stops in open space
+      (or the navigator reports being stuck), the robot drives
+      ``escape_distance`` across its last direction (alternating sides,
+      growing each time), then resumes the descent.
+
+    Parameters are in metres and degrees; the defaults suit a robot of
+    0.7 m with cameras 0.7 m apart and were tuned on other trials (and
+    worlds) than the reported ones.
+    """
+
+    name = "robust descent"
+
+    def __init__(
+        self,
+        *,
+        fraction: float = 0.7,
+        min_step: float = 0.15,
+        max_step: float = 1.0,
+        momentum: float = 0.3,
+        grow: float = 1.5,
+        shrink: float = 0.5,
+        follow_step: float = 0.4,
+        follow_away: float = 45.0,
+        follow_toward: float = 30.0,
+        leave_drop: float = 0.05,
+        max_follow: int = 40,
+        patience: int = 12,
+        rel_improvement: float = 0.02,
+        escape_distance: float = 2.0,
+        escape_steps: int = 3,
+        max_escapes: int = 6,
+        probe_first: bool = True,
+    ) -> None:
+        for name, v in (("fraction", fraction), ("min_step", min_step), ("max_step", max_step),
+                        ("escape_distance", escape_distance), ("follow_step", follow_step)):
+            if not v > 0:
+                raise ValueError(f"{name} must be positive, got {v}")
+        if min_step > max_step:
+            raise ValueError("min_step must not exceed max_step")
+        if not 0 <= momentum < 1:
+            raise ValueError(f"momentum must be in [0, 1), got {momentum}")
+        if not (grow >= 1 and 0 < shrink <= 1):
+            raise ValueError("need grow >= 1 and 0 < shrink <= 1")
+        self.fraction, self.min_step, self.max_step = float(fraction), float(min_step), float(max_step)
+        self.momentum, self.grow, self.shrink = float(momentum), float(grow), float(shrink)
+        self.follow_step = float(follow_step)
+        self.follow_away, self.follow_toward = float(np.radians(follow_away)), float(np.radians(follow_toward))
+        self.leave_drop, self.max_follow = float(leave_drop), int(max_follow)
+        self.patience, self.rel_improvement = int(patience), float(rel_improvement)
+        self.escape_distance, self.escape_steps, self.max_escapes = float(escape_distance), int(escape_steps), int(max_escapes)
+        self.probe_first = bool(probe_first)
+        self.reset()
+
+    def reset(self) -> None:
+        self._dir = np.zeros(2)       # smoothed descent direction
+        self._last = np.zeros(2)      # last displacement asked for
+        self._scale = 1.0             # multiplier from cost control (<= 1)
+        self._prev_cost: float | None = None
+        self._best = np.inf
+        self._since_best = 0
+        self._escape: list[np.ndarray] = []
+        self._n_escapes = 0
+        self._follow: dict[str, Any] | None = None
+        self._n_follows = 0
+        self.escapes = 0
+        self.follows = 0
+
+    # -- plateau escape
+    def _start_escape(self) -> None:
+        base = _unit(self._dir)
+        base = base if base is not None else np.array([1.0, 0.0])
+        side = 1.0 if self._n_escapes % 2 == 0 else -1.0
+        perp = side * np.array([-base[1], base[0]])
+        L = self.escape_distance * (1 + self._n_escapes // 2)
+        self._escape = [perp * (L / self.escape_steps)] * self.escape_steps
+        self._n_escapes += 1
+        self.escapes += 1
+        self._since_best = 0
+
+    # -- wall following
+    def _start_follow(self, bump: np.ndarray, u: np.ndarray, cost: float) -> None:
+        cross = bump[0] * u[1] - bump[1] * u[0]
+        if abs(cross) < 0.05:  # gradient straight into the wall: alternate sides
+            side = 1.0 if self._n_follows % 2 == 0 else -1.0
+        else:
+            side = 1.0 if cross > 0 else -1.0
+        self._follow = {"side": side, "heading": _rot(bump, side * np.pi / 2), "bump": bump, "hit": cost,
+                        "n": 0, "max": self.max_follow, "turned": False}
+        self._n_follows += 1
+        self.follows += 1
+
+    def _follow_step(self, u: np.ndarray, cost: float, info: StepInfo) -> np.ndarray | None:
+        F = self._follow
+        assert F is not None
+        if info.blocked:
+            F["bump"] = _unit(self._last) if _unit(self._last) is not None else F["bump"]
+        if (not info.blocked and cost < F["hit"] * (1 - self.leave_drop) and float(u @ F["bump"]) < 0.3):
+            self._follow = None  # leave the wall: descend again
+            self._since_best = 0
+            return None
+        F["n"] += 1
+        if F["n"] > F["max"]:
+            if F["turned"]:
+                self._follow = None
+                self._since_best = self.patience  # let the escape take over
+                return None
+            F["side"] = -F["side"]
+            F["heading"] = -F["heading"]
+            F["n"], F["max"], F["turned"] = 0, 2 * F["max"], True
+        elif info.blocked:
+            F["heading"] = _rot(F["heading"], F["side"] * self.follow_away)
+        else:
+            F["heading"] = _rot(F["heading"], -F["side"] * self.follow_toward)
+        return F["heading"] * self.follow_step
+
+    def step(self, gradient: np.ndarray, cost: float, position: np.ndarray, info: StepInfo) -> np.ndarray:
+        g = np.asarray(gradient, float)
+        cost = float(cost)
+        gn = float(np.hypot(*g))
+        if gn > 1e-15:
+            u = -g / gn
+        else:
+            u = _unit(self._dir) if _unit(self._dir) is not None else np.array([1.0, 0.0])
+        if np.hypot(*self._dir) > 0:
+            v = _unit(self.momentum * self._dir + (1 - self.momentum) * u)
+            u = v if v is not None else u
+        # plateau / local minimum bookkeeping
+        if cost < self._best * (1 - self.rel_improvement):
+            self._best = cost
+            self._since_best = 0
+        else:
+            self._since_best += 1
+        d = None
+        if self._escape:
+            d = self._escape.pop(0)
+            if info.blocked:
+                self._escape = []
+        if d is None and self._follow is None and info.blocked:
+            bump = _unit(self._last)
+            if bump is not None and float(u @ bump) > 0.0:
+                self._start_follow(bump, u, cost)
+        if d is None and self._follow is not None:
+            d = self._follow_step(u, cost, info)
+        if d is None and self._follow is None and self._n_escapes < self.max_escapes and (
+            info.stuck or self._since_best >= self.patience
+        ):
+            self._start_escape()
+            d = self._escape.pop(0)
+        if d is not None:
+            self._prev_cost = cost
+            self._last = np.asarray(d, float)
+            return self._last.copy()
+        # descent step
+        if self._prev_cost is not None:
+            if cost > self._prev_cost:
+                self._scale = max(self._scale * self.shrink, 1e-3)
+            else:
+                self._scale = min(self._scale * self.grow, 1.0)
+        self._prev_cost = cost
+        est = self.fraction * cost / gn if gn > 1e-15 else self.max_step
+        if info.method == "difference":  # only the component along the cameras' baseline is known
+            est = self.min_step
+        L = float(np.clip(est * self._scale, self.min_step, self.max_step))
+        self._dir = u
+        self._last = u * L
+        return self._last.copy()
+
+
+# --------------------------------------------------------------------- features
+
+
+class ImageFeatures:
+    """Slow features of camera poses: renders each pose with ``renderer``
+    and ``camera`` and transforms the images with a trained ``network``.
+
+    ``features(poses (k, 3)) -> (k, n_outputs)``; ``images`` counts the
+    images processed."""
+
+    def __init__(self, network: Any, renderer: Any, camera: Any, *, lighting: Any = None) -> None:
+        self.network, self.renderer, self.camera, self.lighting = network, renderer, camera, lighting
+        self.images = 0
+
+    def __call__(self, poses: Any) -> np.ndarray:
+        P = np.atleast_2d(np.asarray(poses, float))
+        imgs = np.stack([self.renderer.render(self.camera, p, 0.0, self.lighting) for p in P])
+        self.images += len(P)
+        return np.asarray(self.network.transform(imgs), float)
+
+
+class CoordinateFeatures:
+    """Slow features computed from positions (thesis 7.2.2: SFA learned on
+    the coordinates of a trajectory): ``features(poses) = model(x, y)``.
+
+    ``model`` is a callable on (k, 2) positions (see :func:`fit_coordinate_sfa`)."""
+
+    def __init__(self, model: Callable[[np.ndarray], np.ndarray]) -> None:
+        self.model = model
+        self.images = 0
+
+    def __call__(self, poses: Any) -> np.ndarray:
+        P = np.atleast_2d(np.asarray(poses, float))
+        self.images += len(P)
+        return np.asarray(self.model(P[:, :2]), float)
+
+
+class PointSimulator:
+    """A simulator without rendering, for features from coordinates: the
+    same interface as :class:`sfanav.sim.Simulator` (``pose``,
+    ``odometry_pose``, ``robot``, ``reset``, ``step``) with exact odometry
+    and moves refused outside the area or into ``world``'s obstacles."""
+
+    def __init__(self, area: Sequence[float] | None = None, robot: Any = None, *, world: Any = None,
+                 pose: Sequence[float] = (0.0, 0.0, 0.0)) -> None:
+        from .sim.robot import Robot
+
+        if world is None and area is None:
+            raise ValueError("give an area (width, height) or a world")
+        self.world = world
+        self.area = tuple(float(a) for a in (world.area if world is not None else area))
+        self.robot = robot or Robot.two_cameras(0.7)
+        self.reset(pose)
+
+    def reset(self, pose: Sequence[float] = (0.0, 0.0, 0.0)) -> None:
+        self.pose = np.asarray(pose, float).copy()
+        self.odometry_pose = self.pose.copy()
+        self.time = 0.0
+
+    def _free(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        r = self.robot.size / 2
+        if self.world is not None:
+            return self.world.free(x, y, r)
+        return (np.abs(x) <= self.area[0] / 2 - r) & (np.abs(y) <= self.area[1] / 2 - r)
+
+    def step(self, v: float, omega: float, dt: float) -> bool:
+        from .sim.robot import unicycle_step
+
+        new = unicycle_step(self.pose, v, omega, dt)
+        self.time += dt
+        n = max(1, int(np.ceil(abs(v) * dt / 0.05)))
+        path = np.array([unicycle_step(self.pose, v, omega, dt * k / n) for k in range(1, n + 1)])
+        if not bool(self._free(path[:, 0], path[:, 1]).all()):
+            return False
+        self.pose = new
+        self.odometry_pose = new.copy()
+        return True
+
+
+# --------------------------------------------------------------------- closed loop
+
+
+@dataclass
+class NavigationResult:
+    """One navigation run.
+
+    Attributes
+    ----------
+    path : ndarray (k, 2)
+        True robot positions at every stop (start first).
+    success : bool
+        Ended within the success radius of the target.
+    reason : str
+        ``"reached"``, ``"max_iterations"`` or ``"stuck"``.
+    iterations : int
+    travelled : float
+        True path length (m).
+    costs : ndarray (k,)
+        Cost at each stop (mean of the two cameras).
+    start, target : ndarray (2,)
+    images : int
+        Images (or feature evaluations) processed.
+    escapes : int
+        Plateau escapes taken (robust descent).
+    blocked : int
+        Moves cut short by an obstacle or the border.
+    follows : int
+        Wall-following episodes (robust descent).
+    """
+
+    path: np.ndarray
+    success: bool
+    reason: str
+    iterations: int
+    travelled: float
+    costs: np.ndarray
+    start: np.ndarray
+    target: np.ndarray
+    images: int = 0
+    escapes: int = 0
+    blocked: int = 0
+    follows: int = 0
+
+    @property
+    def direct(self) -> float:
+        return float(np.hypot(*(self.target - self.start)))
+
+
+class Navigator:
+    """Closed-loop navigation in a simulator (thesis 7.1).
+
+    At each stop the robot evaluates ``features`` at its two cameras' true
+    poses (rendering + SFA, or coordinates), computes their costs to the
+    target, estimates the gradient (:class:`PlaneGradient`, in the
+    odometry frame: the robot only knows its own motion), asks the descent
+    for a displacement, turns on the spot to face it and drives straight.
+    Obstacles are physical: the drive goes in pieces of ``drive_piece`` m
+    and ends at the first piece the simulator refuses (a bump).
+
+    Parameters
+    ----------
+    simulator : sfanav.sim.Simulator or PointSimulator
+        Its robot needs the cameras ``"left"`` and ``"right"``
+        (:meth:`sfanav.sim.Robot.two_cameras`).
+    features : callable
+        ``features(poses (k, 3)) -> (k, m)`` slow features at camera poses
+        (:class:`ImageFeatures`, :class:`CoordinateFeatures`).
+    descent : ThesisDescent, RobustDescent or any :class:`Descent`
+    n_outputs : int
+        Outputs used in the cost (thesis: 2).
+    weights : array, optional
+        Per-output cost weights (e.g. :func:`beta_weights`).
+    success_radius : float
+        Success when the robot's centre is this close to the target (thesis 0.5 m).
+    max_iterations : int
+        Stops per run (thesis 400).
+    stuck_window, stuck_distance : int, float
+        Stuck detector: the robot's (odometry) position moved less than
+        ``stuck_distance`` m over the last ``stuck_window`` stops. The
+        descent is told (``StepInfo.stuck``); with ``stop_when_stuck`` the
+        run ends as ``"stuck"``.
+    stop_when_stuck : bool
+        End a run when stuck (default False: run to ``max_iterations``,
+        as the thesis did).
+    """
+
+    def __init__(
+        self,
+        simulator: Any,
+        features: Callable[[np.ndarray], np.ndarray],
+        descent: Any = None,
+        *,
+        n_outputs: int = 2,
+        weights: Any = None,
+        success_radius: float = 0.5,
+        max_iterations: int = 400,
+        stuck_window: int = 40,
+        stuck_distance: float = 0.25,
+        stop_when_stuck: bool = False,
+        drive_piece: float = 0.1,
+        gradient: PlaneGradient | None = None,
+    ) -> None:
+        cams = getattr(getattr(simulator, "robot", None), "cameras", {})
+        if "left" not in cams or "right" not in cams:
+            raise ValueError("the simulator's robot needs cameras 'left' and 'right' (sim.Robot.two_cameras())")
+        self.simulator = simulator
+        self.features = features
+        self.descent = descent if descent is not None else ThesisDescent()
+        self.n_outputs = int(n_outputs)
+        self.weights = weights
+        if not success_radius > 0:
+            raise ValueError(f"success_radius must be positive, got {success_radius}")
+        if int(max_iterations) < 1:
+            raise ValueError(f"max_iterations must be >= 1, got {max_iterations}")
+        self.success_radius = float(success_radius)
+        self.max_iterations = int(max_iterations)
+        self.stuck_window, self.stuck_distance = int(stuck_window), float(stuck_distance)
+        self.stop_when_stuck = bool(stop_when_stuck)
+        self.drive_piece = float(drive_piece)
+        self.gradient = gradient or PlaneGradient()
+
+    def target_features(self, target: Any) -> np.ndarray:
+        """SFA outputs of an image taken at the target (a camera at the target position)."""
+        t = _vec2(target, "target")
+        return np.asarray(self.features(np.array([[t[0], t[1], 0.0]])), float)[0]
+
+    def _drive(self, d: np.ndarray) -> tuple[float, bool]:
+        """Turns to face displacement ``d`` (odometry frame) and drives its
+        length; returns (true metres driven, blocked)."""
+        sim = self.simulator
+        L = float(np.hypot(*d))
+        if L <= 1e-9:
+            return 0.0, False
+        turn = float((np.arctan2(d[1], d[0]) - sim.odometry_pose[2] + np.pi) % (2 * np.pi) - np.pi)
+        if abs(turn) > 1e-9:
+            sim.step(0.0, turn, 1.0)
+        n = max(1, int(np.ceil(L / self.drive_piece)))
+        piece = L / n
+        start = np.array(sim.pose[:2], float)
+        moved = 0.0
+        blocked = False
+        for _ in range(n):
+            before = np.array(sim.pose[:2], float)
+            if not sim.step(piece, 0.0, 1.0):
+                blocked = True
+                break
+            moved += float(np.hypot(*(np.array(sim.pose[:2]) - before)))
+        del start
+        return moved, blocked
+
+    def _measure(self, cost: SlowFeatureCost) -> tuple[np.ndarray, np.ndarray]:
+        """Costs at the two cameras (features at their true poses) and the
+        cameras' positions as the robot believes them (odometry)."""
+        sim = self.simulator
+        true_cams = sim.robot.camera_poses(np.asarray(sim.pose, float)[None, :])
+        odo_cams = sim.robot.camera_poses(np.asarray(sim.odometry_pose, float)[None, :])
+        F = self.features(np.vstack([true_cams["left"], true_cams["right"]]))
+        pos = np.vstack([odo_cams["left"][0, :2], odo_cams["right"][0, :2]])
+        return cost(F), pos
+
+    def run(self, start: Any, target: Any, *, heading: float = 0.0, target_features: Any = None) -> NavigationResult:
+        """Drives from ``start`` (x, y) towards ``target`` (x, y); the target's
+        representation comes from an image at the target unless
+        ``target_features`` is given."""
+        s, t = _vec2(start, "start"), _vec2(target, "target")
+        tf = self.target_features(t) if target_features is None else np.asarray(target_features, float)
+        cost = SlowFeatureCost(tf, self.n_outputs, self.weights)
+        sim = self.simulator
+        sim.reset((s[0], s[1], float(heading)))
+        self.descent.reset()
+        self.gradient.reset()
+        images0 = getattr(self.features, "images", 0)
+        path = [np.array(sim.pose[:2], float)]
+        odo_path = [np.array(sim.odometry_pose[:2], float)]
+        costs: list[float] = []
+        travelled = 0.0
+        info = StepInfo()
+        reason = "max_iterations"
+        n_blocked = 0
+        it = 0
+        for it in range(self.max_iterations + 1):
+            if np.hypot(*(np.array(sim.pose[:2]) - t)) <= self.success_radius:
+                reason = "reached"
+                break
+            if it == self.max_iterations:
+                break
+            c, pos = self._measure(cost)
+            costs.append(float(c.mean()))
+            g = self.gradient.update(pos, c)
+            if it == 0 and getattr(self.descent, "probe_first", False):
+                # turn on the spot by 90 degrees and look again: the four camera
+                # positions form a cross and the plane gives the full gradient
+                sim.step(0.0, np.pi / 2, 1.0)
+                c, pos = self._measure(cost)
+                g = self.gradient.update(pos, c)
+            info.iteration = it
+            w = self.stuck_window
+            info.stuck = len(odo_path) > w and float(np.hypot(*(odo_path[-1] - odo_path[-1 - w]))) < self.stuck_distance
+            if info.stuck and self.stop_when_stuck:
+                reason = "stuck"
+                break
+            info.heading = float(sim.odometry_pose[2])
+            info.method = self.gradient.last_method
+            d = self.descent.step(g, float(c.mean()), np.array(sim.odometry_pose[:2], float), info)
+            moved, blocked = self._drive(np.asarray(d, float))
+            n_blocked += int(blocked)
+            info.blocked, info.last_move = blocked, moved
+            travelled += moved
+            path.append(np.array(sim.pose[:2], float))
+            odo_path.append(np.array(sim.odometry_pose[:2], float))
+        success = reason == "reached"
+        return NavigationResult(
+            path=np.array(path), success=success, reason=reason, iterations=it, travelled=travelled,
+            costs=np.array(costs), start=s, target=t,
+            images=getattr(self.features, "images", 0) - images0,
+            escapes=int(getattr(self.descent, "escapes", 0)), blocked=n_blocked,
+            follows=int(getattr(self.descent, "follows", 0)),
+        )
+
+
+# --------------------------------------------------------------------- evaluation
+
+
+def sample_trials(
+    n: int,
+    area: Sequence[float],
+    *,
+    free: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None,
+    min_distance: float = 15.0,
+    margin: float = 0.35,
+    target: Any = None,
+    start_region: Callable[[float, float], bool] | None = None,
+    target_region: Callable[[float, float], bool] | None = None,
+    rng: Any = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Random start and target positions (thesis 7.1.2): uniform in the area
+    (``margin`` m from the border), where ``free(x, y)`` holds, at least
+    ``min_distance`` apart; ``target`` fixes the target; ``start_region`` /
+    ``target_region`` restrict the draws. Returns (starts (n, 2), targets (n, 2))."""
+    rng = np.random.default_rng(rng)
+    w, h = (float(a) for a in area)
+    hx, hy = w / 2 - margin, h / 2 - margin
+    if hx <= 0 or hy <= 0:
+        raise ValueError(f"margin {margin} leaves no room in area {area}")
+
+    def draw(region: Callable[[float, float], bool] | None) -> np.ndarray:
+        for _ in range(100000):
+            x, y = rng.uniform(-hx, hx), rng.uniform(-hy, hy)
+            if (free is None or bool(free(np.array(x), np.array(y)))) and (region is None or region(x, y)):
+                return np.array([x, y])
+        raise ValueError("found no free position in the region")
+
+    starts, targets = [], []
+    for _ in range(int(n)):
+        for _ in range(100000):
+            tg = _vec2(target, "target") if target is not None else draw(target_region)
+            st = draw(start_region)
+            if np.hypot(*(st - tg)) >= min_distance:
+                break
+        else:
+            raise ValueError(f"found no start and target {min_distance} m apart")
+        starts.append(st)
+        targets.append(tg)
+    return np.array(starts), np.array(targets)
+
+
+@dataclass
+class TrialSummary:
+    """Outcome of :func:`evaluate_trials`.
+
+    ``success_rate``: fraction of runs that reached the target;
+    ``efficiency``: mean over successful runs of optimal / travelled length
+    (the thesis's measure; NaN without successes); ``efficiencies``: per
+    run (NaN for failures); ``results``: the :class:`NavigationResult` s;
+    ``optimal``: the optimal lengths used."""
+
+    success_rate: float
+    efficiency: float
+    efficiencies: np.ndarray
+    results: list[NavigationResult]
+    optimal: np.ndarray
+    mean_iterations: float = 0.0
+    reasons: dict[str, int] = field(default_factory=dict)
+
+
+def evaluate_trials(
+    navigator: Navigator,
+    starts: Any,
+    targets: Any,
+    *,
+    optimal_lengths: Any = None,
+    headings: Any = None,
+    progress: bool = False,
+    desc: str = "trials",
+) -> TrialSummary:
+    """Runs ``navigator`` from each start to its target.
+
+    ``optimal_lengths`` (per trial) defaults to the direct distance; with
+    obstacles pass :func:`shortest_path` lengths (thesis: A* on a 0.1 grid).
+    ``headings`` default to random ones from a fixed seed."""
+    S = np.asarray(starts, float).reshape(-1, 2)
+    T = np.asarray(targets, float).reshape(-1, 2)
+    if S.shape != T.shape:
+        raise ValueError("starts and targets must have the same length")
+    n = len(S)
+    opt = np.hypot(*(T - S).T) if optimal_lengths is None else np.asarray(optimal_lengths, float).reshape(n)
+    if headings is None:
+        headings = np.random.default_rng(12345).uniform(-np.pi, np.pi, n)
+    headings = np.asarray(headings, float).reshape(n)
+    bar = None
+    if progress:
+        from tqdm.auto import tqdm
+
+        bar = tqdm(total=n, desc=desc, unit="run", leave=False)
+    results = []
+    cache: dict[tuple[float, float], np.ndarray] = {}
+    for i in range(n):
+        key = (float(T[i, 0]), float(T[i, 1]))
+        if key not in cache:
+            cache[key] = navigator.target_features(T[i])
+        results.append(navigator.run(S[i], T[i], heading=float(headings[i]), target_features=cache[key]))
+        if bar is not None:
+            bar.update(1)
+    if bar is not None:
+        bar.close()
+    ok = np.array([r.success for r in results])
+    eff = np.array([opt[i] / r.travelled if r.success and r.travelled > 0 else (1.0 if r.success else np.nan)
+                    for i, r in enumerate(results)])
+    reasons: dict[str, int] = {}
+    for r in results:
+        reasons[r.reason] = reasons.get(r.reason, 0) + 1
+    return TrialSummary(
+        success_rate=float(ok.mean()) if n else float("nan"),
+        efficiency=float(np.nanmean(eff[ok])) if ok.any() else float("nan"),
+        efficiencies=eff,
+        results=results,
+        optimal=opt,
+        mean_iterations=float(np.mean([r.iterations for r in results])) if n else 0.0,
+        reasons=reasons,
+    )
+
+
+# --------------------------------------------------------------------- A*
+
+_N8 = [(-1, -1), (-1, 0), (-1, 1), (0, -1), (0, 1), (1, -1), (1, 0), (1, 1)]
+
+
+def astar(grid: Any, start: Sequence[int], goal: Sequence[int], weights: Any = None,
+          *, connectivity: int = 8) -> tuple[list[tuple[int, int]], float]:
+    """Shortest path on an occupancy grid with A*.
+
+    Parameters
+    ----------
+    grid : bool array (rows, cols)
+        True where a cell is free.
+    start, goal : (row, col)
+    weights : float array (rows, cols), optional
+        Cost per unit length of each cell (>= 1 keeps the Euclidean
+        heuristic admissible when the smallest weight is 1; in general the
+        heuristic is scaled by the smallest weight). A move costs its length
+        (1 or sqrt 2 cells) times the mean weight of the two cells.
+    connectivity : 4 or 8
+
+    Returns
+    -------
+    (path, cost): the cells from start to goal and the path cost in cells
+    (times weights); ``([], inf)`` when the goal cannot be reached.
+    """
+    G = np.asarray(grid, bool)
+    if G.ndim != 2:
+        raise ValueError(f"grid must be 2-D, got shape {G.shape}")
+    if connectivity not in (4, 8):
+        raise ValueError(f"connectivity must be 4 or 8, got {connectivity}")
+    R, C = G.shape
+    W = None
+    if weights is not None:
+        W = np.asarray(weights, float)
+        if W.shape != G.shape or not np.isfinite(W).all() or (W <= 0).any():
+            raise ValueError("weights must be positive finite numbers with the grid's shape")
+    s, g = (int(start[0]), int(start[1])), (int(goal[0]), int(goal[1]))
+    for name, p in (("start", s), ("goal", g)):
+        if not (0 <= p[0] < R and 0 <= p[1] < C):
+            raise ValueError(f"{name} {p} is outside the grid {G.shape}")
+        if not G[p]:
+            return [], float("inf")
+    hscale = float(W[G].min()) if W is not None else 1.0
+    nbrs = _N8 if connectivity == 8 else [(-1, 0), (0, -1), (0, 1), (1, 0)]
+    steps = [(dr, dc, float(np.hypot(dr, dc))) for dr, dc in nbrs]
+
+    def h(p: tuple[int, int]) -> float:
+        return hscale * float(np.hypot(p[0] - g[0], p[1] - g[1]))
+
+    best = {s: 0.0}
+    parent: dict[tuple[int, int], tuple[int, int]] = {}
+    heap = [(h(s), 0.0, s)]
+    closed = set()
+    while heap:
+        f, cost, p = heapq.heappop(heap)
+        if p in closed:
+            continue
+        if p == g:
+            path = [p]
+            while p in parent:
+                p = parent[p]
+                path.append(p)
+            return path[::-1], cost
+        closed.add(p)
+        for dr, dc, L in steps:
+            q = (p[0] + dr, p[1] + dc)
+            if not (0 <= q[0] < R and 0 <= q[1] < C) or not G[q] or q in closed:
+                continue
+            if dr and dc and not (G[p[0] + dr, p[1]] and G[p[0], p[1] + dc]):
+                continue  # no corner cutting
+            step = L if W is None else L * 0.5 * (W[p] + W[q])
+            nc = cost + step
+            if nc < best.get(q, np.inf):
+                best[q] = nc
+                parent[q] = p
+                heapq.heappush(heap, (nc + h(q), nc, q))
+    return [], float("inf")
+
+
+@dataclass
+class GridMap:
+    """A grid over the area: cell (row, col) has its centre at
+    ``(x0 + col * res, y0 + row * res)``."""
+
+    free: np.ndarray
+    x0: float
+    y0: float
+    res: float
+
+    def cell(self, xy: Any) -> tuple[int, int]:
+        x, y = _vec2(xy, "position")
+        r = int(round((y - self.y0) / self.res))
+        c = int(round((x - self.x0) / self.res))
+        return min(max(r, 0), self.free.shape[0] - 1), min(max(c, 0), self.free.shape[1] - 1)
+
+    def xy(self, cells: Sequence[tuple[int, int]]) -> np.ndarray:
+        a = np.asarray(cells, float).reshape(-1, 2)
+        return np.column_stack([self.x0 + a[:, 1] * self.res, self.y0 + a[:, 0] * self.res])
+
+    def centres(self) -> tuple[np.ndarray, np.ndarray]:
+        R, C = self.free.shape
+        return np.meshgrid(self.x0 + np.arange(C) * self.res, self.y0 + np.arange(R) * self.res)
+
+
+def occupancy_grid(area: Sequence[float], free: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None,
+                   *, resolution: float = 0.1, margin: float = 0.35) -> GridMap:
+    """Occupancy grid of ``resolution`` m over the area (thesis: 0.1): a cell
+    is free when its centre is ``margin`` m inside the border and
+    ``free(x, y)`` holds there (pass ``lambda x, y: world.free(x, y, r)`` to
+    inflate obstacles by the robot radius ``r``)."""
+    w, h = (float(a) for a in area)
+    res = float(resolution)
+    if not res > 0:
+        raise ValueError(f"resolution must be positive, got {resolution}")
+    nx, ny = int(np.floor(w / res)) + 1, int(np.floor(h / res)) + 1
+    x0, y0 = -(nx - 1) * res / 2, -(ny - 1) * res / 2
+    m = GridMap(np.zeros((ny, nx), bool), x0, y0, res)
+    X, Y = m.centres()
+    ok = (np.abs(X) <= w / 2 - margin + 1e-9) & (np.abs(Y) <= h / 2 - margin + 1e-9)
+    if free is not None:
+        ok &= np.asarray(free(X, Y), bool)
+    m.free = ok
+    return m
+
+
+def path_length(path: Any) -> float:
+    """Length of a polyline (k, 2) (m)."""
+    P = np.asarray(path, float).reshape(-1, 2)
+    return float(np.hypot(*np.diff(P, axis=0).T).sum()) if len(P) > 1 else 0.0
+
+
+def _line_free(m: GridMap, a: np.ndarray, b: np.ndarray) -> bool:
+    L = float(np.hypot(*(b - a)))
+    k = max(2, int(np.ceil(L / (m.res * 0.5))) + 1)
+    for t in np.linspace(0.0, 1.0, k):
+        if not m.free[m.cell(a + t * (b - a))]:
+            return False
+    return True
+
+
+def shortest_path(
+    grid: GridMap,
+    start: Any,
+    goal: Any,
+    *,
+    weights: Any = None,
+    smooth: bool = False,
+    connectivity: int = 8,
+) -> tuple[np.ndarray, float]:
+    """A* between two positions on a :class:`GridMap` (:func:`occupancy_grid`).
+
+    Returns (path (k, 2) in m, length or weighted cost in m). With
+    ``smooth`` the grid path is shortened by line-of-sight (string pulling;
+    unweighted grids only), which removes the 8-neighbourhood's detours of
+    up to 8 % on oblique segments."""
+    s, g = _vec2(start, "start"), _vec2(goal, "goal")
+    cells, cost = astar(grid.free, grid.cell(s), grid.cell(g), weights, connectivity=connectivity)
+    if not cells:
+        return np.zeros((0, 2)), float("inf")
+    P = grid.xy(cells)
+    P[0], P[-1] = s, g
+    if smooth and weights is None:
+        out = [P[0]]
+        i = 0
+        while i < len(P) - 1:
+            j = len(P) - 1
+            while j > i + 1 and not _line_free(grid, P[i], P[j]):
+                j -= 1
+            out.append(P[j])
+            i = j
+        P = np.array(out)
+        return P, path_length(P)
+    # cost in cells -> metres; the ends are snapped to cell centres, add the offsets
+    return P, float(cost * grid.res)
+
+
+# --------------------------------------------------------------------- velocity regions
+
+
+def halfplane_optimal(start: Any, target: Any, *, x0: float = 0.0, speed_left: float = 1.0,
+                      speed_right: float = 3.0) -> tuple[np.ndarray, float]:
+    """The time-optimal path between two half-planes of different speed
+    (thesis 7.2.2, fig. 7.9): two straight pieces meeting at the transition
+    point ``(x0, y)`` that minimises the travel time (Snell's law); found by
+    a ternary search on the convex travel time. With start and target on the
+    same side the straight line is optimal. Returns (path (k, 2), time)."""
+    s, t = _vec2(start, "start"), _vec2(target, "target")
+    vl, vr = float(speed_left), float(speed_right)
+
+    def v(p: np.ndarray) -> float:
+        return vl if p[0] < x0 else vr
+
+    if (s[0] - x0) * (t[0] - x0) >= 0:
+        return np.array([s, t]), float(np.hypot(*(t - s))) / v(s if s[0] != x0 else t)
+
+    def T(y: float) -> float:
+        m = np.array([x0, y])
+        return float(np.hypot(*(m - s))) / v(s) + float(np.hypot(*(t - m))) / v(t)
+
+    lo, hi = min(s[1], t[1]), max(s[1], t[1])
+    for _ in range(200):
+        a, b = lo + (hi - lo) / 3, hi - (hi - lo) / 3
+        if T(a) < T(b):
+            hi = b
+        else:
+            lo = a
+    y = 0.5 * (lo + hi)
+    return np.array([s, [x0, y], t]), T(y)
+
+
+def travel_time(path: Any, speed: Callable[[float, float], float], *, piece: float = 0.02) -> float:
+    """Travel time along a polyline (k, 2) with the speed field
+    ``speed(x, y)`` (e.g. :class:`sfanav.sim.VelocityRegions`), integrated
+    in pieces of ``piece`` m (midpoint rule)."""
+    P = np.asarray(path, float).reshape(-1, 2)
+    total = 0.0
+    for a, b in zip(P[:-1], P[1:]):
+        L = float(np.hypot(*(b - a)))
+        if L <= 0:
+            continue
+        k = max(1, int(np.ceil(L / piece)))
+        for i in range(k):
+            m = a + (i + 0.5) / k * (b - a)
+            total += (L / k) / float(speed(float(m[0]), float(m[1])))
+    return total
+
+
+def fit_coordinate_sfa(
+    positions: Any,
+    area: Sequence[float],
+    *,
+    n_components: int = 8,
+    expansion: str = "rbf",
+    spacing: float = 1.5,
+    degree: int = 7,
+) -> Callable[[np.ndarray], np.ndarray]:
+    """SFA learned on the coordinates of a trajectory (thesis 7.2.2).
+
+    The positions (N, 2) along the trajectory (in time order) are expanded
+    nonlinearly and linear SFA extracts the ``n_components`` slowest
+    features; the returned callable maps positions (k, 2) to them. Its
+    attribute ``sfa`` is the fitted :class:`sfanav.SFA` (``beta_values_``
+    for the 1/beta weights).
+
+    ``expansion="rbf"`` (default): Gaussian bumps of width ``spacing`` on a
+    grid of ``spacing`` m over the area, a function space flexible enough
+    for the local distortions that velocity regions cause (a 1.5 m grid
+    over 18 x 22 m: 195 functions). ``"poly"``: all monomials up to
+    ``degree`` of the coordinates scaled to [-1, 1] (smooth, global; it
+    cannot concentrate variance in a small region).
+    """
+    from .sfa import SFA, expand
+
+    P = np.asarray(positions, float).reshape(-1, 2)
+    w, h = float(area[0]), float(area[1])
+    if expansion == "rbf":
+        sp = float(spacing)
+        if not sp > 0:
+            raise ValueError(f"spacing must be positive, got {spacing}")
+        cx = np.arange(-w / 2, w / 2 + 1e-9, sp)
+        cy = np.arange(-h / 2, h / 2 + 1e-9, sp)
+        C = np.array([(x, y) for x in cx for y in cy])
+
+        def feat(X: np.ndarray) -> np.ndarray:
+            d2 = ((X[:, None, :] - C[None, :, :]) ** 2).sum(-1)
+            return np.exp(-d2 / (2 * sp * sp))
+    elif expansion == "poly":
+        scale = np.array([w / 2, h / 2])
+
+        def feat(X: np.ndarray) -> np.ndarray:
+            return expand(X / scale, int(degree))
+    else:
+        raise ValueError(f"expansion must be 'rbf' or 'poly', got {expansion!r}")
+    sfa = SFA(int(n_components)).fit(feat(P))
+
+    def model(X: np.ndarray) -> np.ndarray:
+        return sfa.transform(feat(np.asarray(X, float).reshape(-1, 2)))
+
+    model.sfa = sfa  # type: ignore[attr-defined]
+    return model
+
+
+# --------------------------------------------------------------------- plots
+
+
+def _draw_world(ax: Any, world: Any, area: Sequence[float] | None) -> None:
+    from matplotlib.patches import Circle, Polygon, Rectangle
+
+    if area is not None:
+        w, h = area
+        ax.add_patch(Rectangle((-w / 2, -h / 2), w, h, fill=False, ec="0.3", lw=1.0))
+    if world is None:
+        return
+    for o in getattr(world, "obstacles", []):
+        for p in o.parts:
+            if p.shape != "box":
+                ax.add_patch(Circle((p.x, p.y), p.radius, fc="0.15", ec="0.15"))
+                continue
+            c, s = np.cos(p.yaw), np.sin(p.yaw)
+            hl, hw = p.length / 2, p.width / 2
+            corners = np.array([[hl, hw], [-hl, hw], [-hl, -hw], [hl, -hw]])
+            xy = np.column_stack([p.x + c * corners[:, 0] - s * corners[:, 1],
+                                  p.y + s * corners[:, 0] + c * corners[:, 1]])
+            ax.add_patch(Polygon(xy, closed=True, fc="0.15", ec="0.15"))
+
+
+def plot_cost_surface(
+    xs: Any,
+    ys: Any,
+    features: Any,
+    target_features: Any,
+    path: Any,
+    *,
+    ns: Sequence[int] = (2,),
+    weights: Any = None,
+    target: Any = None,
+    n_firing: int | None = None,
+    world: Any = None,
+    cmap: str = "viridis",
+    title: str | None = None,
+    dpi: int = 110,
+) -> Path:
+    """Spatial firing maps and cost surfaces (thesis fig. 7.7).
+
+    ``features`` (len(ys), len(xs), m): SFA outputs on a grid of positions
+    ``xs`` x ``ys`` (m); NaN rows mark places that cannot be visited. Rows:
+    the firing maps of outputs ``1..n_firing`` (default ``max(ns)``; 0 for
+    none), the cost to ``target_features`` for each ``n`` in ``ns``
+    with the raw outputs, and (when ``weights`` is given) with the weighted
+    outputs. ``target`` (x, y) is marked with a white cross."""
+    from .analysis import _figure, _save
+
+    X = np.asarray(xs, float)
+    Y = np.asarray(ys, float)
+    F = np.asarray(features, float)
+    if F.ndim != 3 or F.shape[:2] != (len(Y), len(X)):
+        raise ValueError(f"features must have shape (len(ys), len(xs), m) = ({len(Y)}, {len(X)}, m), got {F.shape}")
+    ns = [int(n) for n in ns]
+    m = F.shape[2]
+    if not ns or min(ns) < 1 or max(ns) > m:
+        raise ValueError(f"ns must be in 1..{m}, got {ns}")
+    nf = max(ns) if n_firing is None else int(n_firing)
+    if not 0 <= nf <= m:
+        raise ValueError(f"n_firing must be in 0..{m}, got {n_firing}")
+    rowsets: list[list[tuple[str, np.ndarray]]] = []
+    if nf:
+        rowsets.append([(f"s{j + 1}", F[:, :, j]) for j in range(nf)])
+    rowsets.append([(f"C, n={n}", SlowFeatureCost(target_features, n)(F)) for n in ns])
+    if weights is not None:
+        rowsets.append([(f"C 1/beta, n={n}", SlowFeatureCost(target_features, n, weights)(F)) for n in ns])
+    ncol = max(len(r) for r in rowsets)
+    aspect = (Y[-1] - Y[0]) / max(X[-1] - X[0], 1e-9) if len(X) > 1 and len(Y) > 1 else 1.0
+    fig = _figure(1.9 * ncol + 0.4, (1.9 * aspect + 0.35) * len(rowsets) + (0.4 if title else 0))
+    axes = fig.subplots(len(rowsets), ncol, squeeze=False)
+    for r, rs in enumerate(rowsets):
+        for c in range(ncol):
+            ax = axes[r, c]
+            if c >= len(rs):
+                ax.set_axis_off()
+                continue
+            name, V = rs[c]
+            ax.pcolormesh(X, Y, np.ma.masked_invalid(V), cmap=cmap, shading="nearest")
+            _draw_world(ax, world, None)
+            if target is not None and name.startswith("C"):
+                tx, ty = _vec2(target, "target")
+                ax.plot([tx], [ty], "x", color="white", ms=7, mew=2)
+            ax.set_title(name, fontsize="small")
+            ax.set_aspect("equal")
+            ax.set_xticks([])
+            ax.set_yticks([])
+    if title:
+        fig.suptitle(title)
+    return _save(fig, path, dpi)
+
+
+def plot_trajectories(
+    results: Sequence[NavigationResult],
+    path: Any,
+    *,
+    world: Any = None,
+    area: Sequence[float] | None = None,
+    background: tuple[Any, Any, Any] | None = None,
+    optimal: Sequence[Any] | None = None,
+    regions: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None,
+    titles: Sequence[str] | None = None,
+    title: str | None = None,
+    cols: int = 4,
+    dpi: int = 110,
+) -> Path:
+    """Navigation trajectories (thesis figs. 7.3, 7.6, 7.9c, 7.10c): one
+    panel per run, start as a black cross, target as a white circle, the
+    driven path in red (success) or orange (failure), the optimal path
+    (when ``optimal`` gives one per run) dashed blue, or white over a
+    ``background``; obstacles in black.
+    ``background`` = (xs, ys, values) is drawn under the paths (e.g. a cost
+    surface); ``regions(X, Y)`` shades slow-velocity regions."""
+    from .analysis import _figure, _save
+
+    n = len(results)
+    if n == 0:
+        raise ValueError("no results to plot")
+    cols = max(1, min(int(cols), n))
+    rows = (n + cols - 1) // cols
+    if area is None and world is not None:
+        area = world.area
+    aspect = area[1] / area[0] if area is not None else 1.0
+    fig = _figure(2.6 * cols + 0.2, 2.6 * aspect * rows + 0.3 + (0.4 if title else 0))
+    axes = fig.subplots(rows, cols, squeeze=False)
+    for i in range(rows * cols):
+        ax = axes[i // cols, i % cols]
+        if i >= n:
+            ax.set_axis_off()
+            continue
+        r = results[i]
+        if background is not None:
+            bx, by, bv = background
+            ax.pcolormesh(np.asarray(bx), np.asarray(by), np.ma.masked_invalid(np.asarray(bv, float)),
+                          cmap="viridis", shading="nearest")
+        elif regions is not None and area is not None:
+            gx = np.linspace(-area[0] / 2, area[0] / 2, 181)
+            gy = np.linspace(-area[1] / 2, area[1] / 2, 221)
+            GX, GY = np.meshgrid(gx, gy)
+            ax.pcolormesh(gx, gy, np.asarray(regions(GX, GY), float), cmap="Greys", vmin=0, vmax=3,
+                          shading="nearest")
+        _draw_world(ax, world, area)
+        if optimal is not None and optimal[i] is not None and len(optimal[i]):
+            op = np.asarray(optimal[i], float)
+            if background is not None:  # the thesis's white line on the colour map
+                ax.plot(op[:, 0], op[:, 1], "-", color="white", lw=1.6, zorder=2)
+            else:
+                ax.plot(op[:, 0], op[:, 1], "--", color="tab:blue", lw=1.2, zorder=2)
+        P = r.path
+        ax.plot(P[:, 0], P[:, 1], "-", color="tab:red" if r.success else "tab:orange", lw=1.3, zorder=3)
+        ax.plot(P[:, 0], P[:, 1], ".", color="tab:red" if r.success else "tab:orange", ms=2, zorder=3)
+        ax.plot([r.start[0]], [r.start[1]], "x", color="black", ms=8, mew=2, zorder=4)
+        ax.plot([r.target[0]], [r.target[1]], "o", mfc="white", mec="black", ms=7, zorder=4)
+        if area is not None:
+            ax.set_xlim(-area[0] / 2, area[0] / 2)
+            ax.set_ylim(-area[1] / 2, area[1] / 2)
+        ax.set_aspect("equal")
+        ax.set_xticks([])
+        ax.set_yticks([])
+        label = titles[i] if titles is not None else ("reached" if r.success else r.reason)
+        ax.set_title(label, fontsize="small")
+    if title:
+        fig.suptitle(title)
+    return _save(fig, path, dpi)

@@ -1,0 +1,364 @@
+"""Navigation along slow-feature gradients (thesis chapter 7): cost, the
+plane-fit gradient, the descents, A*, velocity-region helpers and a
+closed-loop smoke test in a tiny simulated world."""
+
+import numpy as np
+import pytest
+
+import sfanav
+from sfanav import navigation as nav
+from sfanav.sim import World
+from sfanav.sim.robot import OdometryNoise, Robot
+
+# --------------------------------------------------------------------- cost
+
+
+def test_cost_is_euclidean_over_n_outputs_and_weighted():
+    t = np.array([1.0, -2.0, 0.5])
+    c = nav.SlowFeatureCost(t, n=2)
+    f = np.array([[4.0, 2.0, 100.0], [1.0, -2.0, -7.0]])
+    np.testing.assert_allclose(c(f), [5.0, 0.0])
+    w = nav.beta_weights([0.01, 0.02, 0.04])
+    np.testing.assert_allclose(w, [100, 50, 25])
+    np.testing.assert_allclose(nav.beta_weights([0.01, 0.02, 0.04], relative=True), [1, 0.5, 0.25])
+    cw = nav.SlowFeatureCost(t, n=3, weights=[1.0, 0.5, 0.25])
+    np.testing.assert_allclose(cw(f[0]), np.sqrt(3**2 + (0.5 * 4) ** 2 + (0.25 * 99.5) ** 2))
+    with pytest.raises(ValueError, match="n must be"):
+        nav.SlowFeatureCost(t, n=4)
+    with pytest.raises(ValueError, match="weights"):
+        nav.SlowFeatureCost(t, n=3, weights=[1.0])
+    with pytest.raises(ValueError, match="beta"):
+        nav.beta_weights([0.1, 0.0])
+
+
+# --------------------------------------------------------------------- gradient
+
+
+def _two_stops(base, heading, step, sep=0.7):
+    """Camera positions of a robot at ``base`` facing ``heading`` before and
+    after driving ``step`` m forward (left camera first)."""
+    u = np.array([np.cos(heading), np.sin(heading)])
+    left = np.array([-u[1], u[0]])
+    p0 = np.array([base + sep / 2 * left, base - sep / 2 * left])
+    return p0, p0 + step * u
+
+
+@pytest.mark.parametrize("weighting", ["area", "unit"])
+def test_plane_gradient_is_exact_for_planes(weighting):
+    rng = np.random.default_rng(0)
+    for _ in range(50):
+        a = rng.normal(size=2) * rng.uniform(0.01, 5)
+        plane = lambda P: P @ a + 3.0  # noqa: E731
+        P = rng.uniform(-3, 3, (4, 2))
+        g = nav.plane_gradient(P, plane(P), weighting=weighting)
+        np.testing.assert_allclose(g, a, rtol=1e-9, atol=1e-12)
+    # the thesis's configuration: two stops of a two-camera robot
+    p0, p1 = _two_stops(np.array([2.0, -1.0]), 0.7, 0.3)
+    P = np.vstack([p0, p1])
+    np.testing.assert_allclose(nav.plane_gradient(P, plane(P), weighting=weighting), a, rtol=1e-9)
+
+
+def test_plane_gradient_degenerate_points():
+    P = np.array([[0.0, 0.0], [1.0, 1.0], [2.0, 2.0], [3.0, 3.0]])
+    assert nav.plane_gradient(P, np.arange(4.0)) is None
+    with pytest.raises(ValueError):
+        nav.plane_gradient(P[:2], np.arange(2.0))
+
+
+def _angle(g, true):
+    return np.degrees(np.arccos(np.clip(g @ true / np.linalg.norm(g) / np.linalg.norm(true), -1, 1)))
+
+
+def test_plane_gradient_direction_on_quadratics():
+    """On quadratic bowls the (area-weighted) plane of two stops has exactly
+    the gradient at the centroid of the four camera positions, and points
+    within a few degrees of the gradient at the robot's new position (steps
+    of 0.3 m, cameras 0.7 m apart, 2-8 m from the minimum)."""
+    rng = np.random.default_rng(1)
+    bowls = [np.diag([1.0, 2.0]), np.array([[1.5, 0.4], [0.4, 0.7]]), np.diag([0.3, 0.3])]
+    worst, worst_centroid = 0.0, 0.0
+    for A in bowls:
+        f = lambda P: 0.5 * np.einsum("ni,ij,nj->n", P, A, P)  # noqa: E731
+        for _ in range(40):
+            r = rng.uniform(2, 8)
+            base = r * np.array([np.cos(a := rng.uniform(0, 2 * np.pi)), np.sin(a)])
+            p0, p1 = _two_stops(base, rng.uniform(-np.pi, np.pi), 0.3)
+            P = np.vstack([p0, p1])
+            g = nav.plane_gradient(P, f(P))
+            worst = max(worst, _angle(g, A @ p1.mean(axis=0)))
+            worst_centroid = max(worst_centroid, _angle(g, A @ P.mean(axis=0)))
+    assert worst_centroid < 1e-3
+    assert worst < 7.0
+
+
+def test_plane_gradient_estimator_starts_with_the_difference_quotient():
+    a = np.array([0.3, -0.2])
+    plane = lambda P: P @ a  # noqa: E731
+    est = nav.PlaneGradient()
+    p0, p1 = _two_stops(np.zeros(2), 0.0, 0.4)  # heading +x: cameras at (0, +-0.35)
+    g0 = est.update(p0, plane(p0))
+    assert est.last_method == "difference"
+    np.testing.assert_allclose(g0, [0.0, -0.2])  # the component along the baseline only
+    np.testing.assert_allclose(nav.difference_quotient(p0[0], p0[1], *plane(p0)), g0)
+    g1 = est.update(p1, plane(p1))
+    assert est.last_method == "plane"
+    np.testing.assert_allclose(g1, a, atol=1e-12)
+    # not moving at all leaves only two distinct points: back to the difference quotient
+    est.update(p1, plane(p1))
+    assert est.last_method == "difference"
+    est.reset()
+    est.update(p1, plane(p1))
+    assert est.last_method == "difference"
+
+
+# --------------------------------------------------------------------- descents
+
+
+def _bowl_navigator(descent, scale=0.13, **kw):
+    """A point robot whose 'slow features' are smooth functions of position
+    (monotonic half waves with slopes up to 0.18 per metre, like unit-variance
+    SFA outputs over 20 m)."""
+    sim = nav.PointSimulator((18.0, 22.0), Robot.two_cameras(0.7))
+    feats = nav.CoordinateFeatures(lambda X: np.column_stack([np.sin(scale * X[:, 0]), np.sin(scale * X[:, 1])]) * 1.4)
+    return nav.Navigator(sim, feats, descent, **kw)
+
+
+@pytest.mark.parametrize("descent", [nav.ThesisDescent(1.0, 0.5), nav.RobustDescent()], ids=lambda d: d.name)
+def test_descents_reach_the_minimum_of_a_bowl(descent):
+    navi = _bowl_navigator(descent)
+    for start, target in [((-7.0, -9.0), (6.0, 8.0)), ((7.5, 2.0), (-7.0, -3.0)), ((0.0, 9.0), (1.0, -9.0))]:
+        r = navi.run(start, target, heading=0.3)
+        assert r.success and r.reason == "reached", (start, target, r.reason)
+        assert np.hypot(*(r.path[-1] - np.array(target))) <= 0.5
+        assert r.direct / r.travelled > 0.6
+        assert len(r.costs) == r.iterations and r.images >= 2 * r.iterations
+    # the robust descent takes near-straight paths
+    if isinstance(descent, nav.RobustDescent):
+        assert r.direct / r.travelled > 0.9
+
+
+def test_thesis_descent_is_momentum_gradient_descent():
+    d = nav.ThesisDescent(eta=2.0, gamma=0.5)
+    info = nav.StepInfo()
+    np.testing.assert_allclose(d.step(np.array([1.0, 0.0]), 1.0, np.zeros(2), info), [-2.0, 0.0])
+    np.testing.assert_allclose(d.step(np.array([0.0, 1.0]), 1.0, np.zeros(2), info), [-1.0, -2.0])
+    d.reset()
+    np.testing.assert_allclose(d.step(np.array([0.0, 1.0]), 1.0, np.zeros(2), info), [0.0, -2.0])
+    with pytest.raises(ValueError):
+        nav.ThesisDescent(gamma=1.0)
+
+
+def test_flat_region_stalls_the_thesis_rule_but_not_the_robust_descent():
+    """A cost with a tiny slope (a plateau) far from the target: the thesis
+    rule creeps, the normalised steps of the robust descent cross it."""
+    feats = lambda X: np.column_stack([np.tanh(0.15 * X[:, 0]) ** 3, np.tanh(0.15 * X[:, 1]) ** 3])  # noqa: E731
+    out = {}
+    for d in (nav.ThesisDescent(1.0, 0.5), nav.RobustDescent()):
+        sim = nav.PointSimulator((18.0, 22.0), Robot.two_cameras(0.7))
+        navi = nav.Navigator(sim, nav.CoordinateFeatures(feats), d, max_iterations=150)
+        out[d.name] = navi.run((-7.0, -9.0), (0.5, 0.5))
+    assert not out["thesis rule"].success
+    assert out["robust descent"].success
+
+
+def test_stuck_detector_ends_runs_when_asked():
+    sim = nav.PointSimulator((18.0, 22.0), Robot.two_cameras(0.7))
+    flat = nav.CoordinateFeatures(lambda X: np.zeros((len(X), 2)) + 1e-9 * X)
+    navi = nav.Navigator(sim, flat, nav.ThesisDescent(), stuck_window=10, stop_when_stuck=True)
+    r = navi.run((0.0, 0.0), (5.0, 5.0))
+    assert r.reason == "stuck" and not r.success and r.iterations <= 12
+
+
+def test_obstacles_are_physical_for_the_point_robot():
+    world = World.generate(3, area=(8.0, 8.0), n_objects=4, obstacles=({"kind": "box", "x": 0.0, "y": 0.0,
+                                                                        "length": 6.0, "width": 0.4},))
+    sim = nav.PointSimulator(robot=Robot.two_cameras(0.7), world=world)
+    # a cost pulling straight through the wall
+    navi = nav.Navigator(sim, nav.CoordinateFeatures(lambda X: 0.2 * X), nav.ThesisDescent(), max_iterations=40)
+    r = navi.run((0.0, -2.5), (0.0, 2.5))
+    assert world.free(r.path[:, 0], r.path[:, 1], 0.35 - 1e-9).all()
+    assert r.blocked > 0
+
+
+# --------------------------------------------------------------------- A*
+
+
+def _dijkstra(G, s, g, W=None):
+    import heapq
+
+    R, C = G.shape
+    dist = {s: 0.0}
+    heap = [(0.0, s)]
+    while heap:
+        d, p = heapq.heappop(heap)
+        if p == g:
+            return d
+        if d > dist[p]:
+            continue
+        for dr in (-1, 0, 1):
+            for dc in (-1, 0, 1):
+                q = (p[0] + dr, p[1] + dc)
+                if (dr, dc) == (0, 0) or not (0 <= q[0] < R and 0 <= q[1] < C) or not G[q]:
+                    continue
+                if dr and dc and not (G[p[0] + dr, p[1]] and G[p[0], p[1] + dc]):
+                    continue
+                L = np.hypot(dr, dc) * (1 if W is None else 0.5 * (W[p] + W[q]))
+                if d + L < dist.get(q, np.inf):
+                    dist[q] = d + L
+                    heapq.heappush(heap, (d + L, q))
+    return np.inf
+
+
+def test_astar_is_optimal_on_small_grids():
+    G = np.ones((5, 7), bool)
+    path, cost = nav.astar(G, (0, 0), (4, 6))
+    assert cost == pytest.approx(4 * np.sqrt(2) + 2)
+    assert path[0] == (0, 0) and path[-1] == (4, 6) and len(path) == 7
+    G[1:, 3] = False  # a wall with a gap at the top
+    path, cost = nav.astar(G, (4, 0), (4, 6))
+    assert all(G[p] for p in path)
+    assert cost == pytest.approx(_dijkstra(G, (4, 0), (4, 6)))
+    G[0, 3] = False
+    assert nav.astar(G, (4, 0), (4, 6)) == ([], float("inf"))
+    rng = np.random.default_rng(0)
+    for _ in range(30):
+        G = rng.random((9, 11)) > 0.3
+        W = rng.uniform(1, 3, G.shape)
+        s, g = (0, 0), (8, 10)
+        G[s] = G[g] = True
+        for weights in (None, W):
+            _, cost = nav.astar(G, s, g, weights)
+            assert cost == pytest.approx(_dijkstra(G, s, g, weights))
+    _, c4 = nav.astar(np.ones((3, 3), bool), (0, 0), (2, 2), connectivity=4)
+    assert c4 == 4
+
+
+def test_shortest_path_around_an_obstacle():
+    world = World.generate(3, area=(8.0, 8.0), n_objects=4, obstacles=({"kind": "box", "x": 0.0, "y": 0.0,
+                                                                        "length": 6.0, "width": 0.4},))
+    grid = nav.occupancy_grid(world.area, lambda x, y: world.free(x, y, 0.35), resolution=0.1, margin=0.35)
+    P, L = nav.shortest_path(grid, (0.0, -2.0), (0.0, 2.0))
+    Ps, Ls = nav.shortest_path(grid, (0.0, -2.0), (0.0, 2.0), smooth=True)
+    # around the end of the wall inflated by 0.35 m (corners at (3.35, +-0.55)): two legs and the end face
+    assert Ls == pytest.approx(2 * np.hypot(3.35, 1.45) + 1.1, rel=0.03)
+    assert Ls <= L <= Ls * 1.09
+    assert world.free(P[:, 0], P[:, 1], 0.3).all()
+    assert nav.path_length(Ps) == pytest.approx(Ls)
+
+
+# --------------------------------------------------------------------- velocity regions
+
+
+def test_halfplane_optimum_obeys_snells_law():
+    s, t = np.array([-6.0, -5.0]), np.array([7.0, 6.0])
+    P, T = nav.halfplane_optimal(s, t, x0=0.0, speed_left=1.0, speed_right=3.0)
+    m = P[1]
+    assert m[0] == 0.0
+    sin1 = abs(m[1] - s[1]) / np.hypot(*(m - s))
+    sin2 = abs(t[1] - m[1]) / np.hypot(*(t - m))
+    assert sin1 / 1.0 == pytest.approx(sin2 / 3.0, rel=1e-6)
+    regions = sfanav.sim.VelocityRegions.half_plane(0.0, "left", 3.0)
+    assert nav.travel_time(P, regions) == pytest.approx(T, rel=1e-3)
+    # better than the straight line and than crossing at the start's or target's height
+    assert T < nav.travel_time(np.array([s, t]), regions)
+    for y in (s[1], t[1], 0.0):
+        assert T <= nav.travel_time(np.array([s, [0.0, y], t]), regions) + 1e-9
+
+
+def test_travel_time_and_weighted_astar_avoid_a_slow_disc():
+    regions = sfanav.sim.VelocityRegions.disc(3.0, factor=3.0)
+    assert nav.travel_time(np.array([[-5.0, 0.0], [5.0, 0.0]]), regions) == pytest.approx(4 / 3 + 6.0, rel=1e-3)
+    grid = nav.occupancy_grid((12.0, 12.0), None, resolution=0.1, margin=0.0)
+    X, Y = grid.centres()
+    W = np.where(X**2 + Y**2 < 9.0, 3.0, 1.0)
+    P, cost = nav.shortest_path(grid, (-5.0, 0.0), (5.0, 0.0), weights=W)
+    t_opt = nav.travel_time(P, regions)
+    assert t_opt < nav.travel_time(np.array([[-5.0, 0.0], [5.0, 0.0]]), regions)
+    assert np.hypot(P[:, 0], P[:, 1]).min() > 2.0  # goes (almost) around the disc
+
+
+def test_coordinate_sfa_learns_position_codes():
+    from sfanav.sim import trajectories as T
+
+    tr = T.random_lines((10.0, 10.0), 3000, 0.2, margin=0.3, rng=0)
+    for kw in ({"expansion": "rbf", "spacing": 1.5}, {"expansion": "poly", "degree": 5}):
+        _check_coordinate_sfa(tr, kw)
+
+
+def _check_coordinate_sfa(tr, kw):
+    model = nav.fit_coordinate_sfa(tr.poses[:, :2], (10.0, 10.0), n_components=4, **kw)
+    F = model(tr.poses[:, :2])
+    assert F.shape == (3000, 4)
+    # the slowest two are (mixtures of) half waves along x and y: together they encode position
+    A = np.column_stack([F[:, :2], np.ones(len(F))])
+    coef, *_ = np.linalg.lstsq(A, tr.poses[:, :2], rcond=None)
+    assert np.sqrt(np.mean((A @ coef - tr.poses[:, :2]) ** 2)) < 1.0
+    assert np.all(np.diff(model.sfa.beta_values_) >= 0)
+
+
+# --------------------------------------------------------------------- trials, closed loop, plots
+
+
+def test_sample_trials_respects_distance_and_regions():
+    S, T = nav.sample_trials(20, (18.0, 22.0), min_distance=15.0, rng=0)
+    assert S.shape == T.shape == (20, 2)
+    assert (np.hypot(*(S - T).T) >= 15.0).all()
+    S, T = nav.sample_trials(5, (18.0, 22.0), target=(0.0, 1.0), start_region=lambda x, y: y < -3, min_distance=2.0,
+                             rng=1)
+    assert (T == [0.0, 1.0]).all() and (S[:, 1] < -3).all()
+
+
+@pytest.fixture(scope="module")
+def tiny_world():
+    """A 5 x 5 m garden with a short wall and a small network trained on 300
+    frames of 60 x 8 gray panoramas."""
+    from sfanav.sim import trajectories as T
+    from sfanav.sim.render import PanoramicCamera
+    from sfanav.sim.robot import Simulator
+
+    world = World.generate(5, area=(5.0, 5.0), n_objects=10, depth=5.0,
+                           obstacles=({"kind": "box", "x": 0.0, "y": 0.0, "length": 2.0, "width": 0.3},))
+    cam = PanoramicCamera(60, 8, rgb=False)
+    sim = Simulator(world, cam, Robot.two_cameras(0.7, noise=OdometryNoise.none()), seed=0)
+    tr = T.random_lines(world.area, 300, 0.2, margin=0.35, world=world, rng=0)
+    imgs = np.stack([sim.renderer.render(cam, p) for p in tr.poses])
+    net = sfanav.Network({"input": {"width": 60, "height": 8, "channels": 1},
+                          "layers": [{"rf": [10, 8], "stride": [5, 8], "out": 6}, {"rf": "full", "out": 4}]})
+    net.fit(imgs, rotation=sfanav.Rotation(10), progress=False)
+    return world, cam, sim, net
+
+
+@pytest.mark.parametrize("descent", [nav.ThesisDescent(), nav.RobustDescent()], ids=lambda d: d.name)
+def test_navigation_smoke_in_a_tiny_world(tiny_world, descent):
+    world, cam, sim, net = tiny_world
+    feats = nav.ImageFeatures(net, sim.renderer, cam)
+    navi = nav.Navigator(sim, feats, descent, max_iterations=15)
+    S, T = nav.sample_trials(2, world.area, free=lambda x, y: world.free(x, y, 0.4), min_distance=2.5, rng=3)
+    summary = nav.evaluate_trials(navi, S, T)
+    assert 0.0 <= summary.success_rate <= 1.0
+    assert len(summary.results) == 2 and sum(summary.reasons.values()) == 2
+    for r in summary.results:
+        assert world.free(r.path[:, 0], r.path[:, 1], 0.35 - 1e-9).all()  # never inside the wall
+        assert r.travelled == pytest.approx(nav.path_length(r.path), rel=1e-6, abs=1e-9)
+        assert np.isfinite(r.costs).all() and r.images >= 2 * r.iterations
+        assert r.success == (np.hypot(*(r.path[-1] - r.target)) <= 0.5)
+    ok = np.array([r.success for r in summary.results])
+    assert np.isnan(summary.efficiencies[~ok]).all()
+    assert np.isfinite(summary.efficiencies[ok]).all()
+
+
+def test_plots_write_pngs(tmp_path):
+    xs, ys = np.linspace(-2, 2, 9), np.linspace(-3, 3, 13)
+    X, Y = np.meshgrid(xs, ys)
+    F = np.stack([X, Y, X * Y, X**2], axis=-1)
+    F[0, 0] = np.nan
+    p = nav.plot_cost_surface(xs, ys, F, [0.0, 0.0, 0.0, 0.0], tmp_path / "c.png", ns=(2, 4),
+                              weights=[1, 1, 0.5, 0.25], target=(0, 0))
+    assert p.exists() and p.stat().st_size > 1000
+    navi = _bowl_navigator(nav.RobustDescent())
+    rs = [navi.run((-3.0, -3.0), (3.0, 4.0)), navi.run((3.0, -3.0), (-3.0, 4.0))]
+    q = nav.plot_trajectories(rs, tmp_path / "t.png", area=(18.0, 22.0), optimal=[np.array([r.start, r.target])
+                                                                                   for r in rs])
+    assert q.exists() and q.stat().st_size > 1000
+    with pytest.raises(ValueError, match="png"):
+        nav.plot_trajectories(rs, tmp_path / "t.jpg", area=(18.0, 22.0))
