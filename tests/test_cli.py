@@ -144,12 +144,27 @@ def test_localize_unwarps_omnidirectional_images(tiny, tmp_path, capsys):
     code, _, err = run(capsys, "localize", tiny["model"], folder, "--mirror", "23.5,23.5,4,23",
                        "--out", tmp_path / "omni.csv", "--no-progress")
     assert code == 0, err
-    assert "unwarping 48x48 omnidirectional images to 60x8 panoramas" in err and "--mirror" in err
+    assert "unwarping 48x48 omnidirectional images to 60x8 panoramas: given mirror" in err
     _, rows = read_csv(tmp_path / "omni.csv")
     assert len(rows) == 3
     code, _, err = run(capsys, "localize", tiny["model"], folder, "--mirror", "1,2,3",
                        "--out", tmp_path / "bad.csv", "--no-progress")
     assert_one_line_error(code, err, "mirror")
+
+
+def test_train_on_omni_images_keeps_the_mirror(tiny, tmp_path, capsys):
+    sim.simulate("demo", tmp_path / "omni", seed=1, max_frames=40, camera=sim.OmniCamera(64), progress=False)
+    code, _, err = run(capsys, "train", "--dataset", tmp_path / "omni", "--config", tiny["config"],
+                       "--out", tmp_path / "omni.sfa", "--no-progress")
+    assert code == 0, err
+    assert "unwarping 64x64 omnidirectional images to 60x8 panoramas: estimated mirror" in err
+    mirror = sfanav.load(tmp_path / "omni.sfa").info["mirror"]
+    assert len(mirror) == 4 and abs(mirror[0] - 31.5) < 3 and abs(mirror[1] - 31.5) < 3
+    code, _, err = run(capsys, "localize", tmp_path / "omni.sfa", tmp_path / "omni", "--run", "test",
+                       "--out", tmp_path / "omni.csv", "--no-progress")
+    assert code == 0, err
+    assert "using the mirror the model was trained with" in err and "given mirror" in err
+    assert len(read_csv(tmp_path / "omni.csv")[1]) == 40
 
 
 def test_evaluate_writes_report_metrics_and_plots(tiny, tmp_path, capsys):

@@ -184,6 +184,16 @@ def _load_localizer(path: str) -> "Any":
     return model
 
 
+def _mirror_of(args: argparse.Namespace, loc: "Any") -> "Any":
+    """--mirror, else the mirror the model was trained with (if it unwarped)."""
+    if args.mirror is not None:
+        return args.mirror
+    m = (loc.info or {}).get("mirror")
+    if m is not None:
+        _log("using the mirror the model was trained with (--mirror overrides it)")
+    return m
+
+
 def _fraction(text: str) -> float:
     try:
         v = float(text)
@@ -285,7 +295,7 @@ def _run_train(args: argparse.Namespace) -> int:
 
     from .dataset import Dataset
     from .network import Rotation
-    from .workflow import Preprocessing, fit_localizer, load_run, select_run
+    from .workflow import Conformer, Preprocessing, fit_localizer, load_run, select_run
 
     t0 = time.perf_counter()
     out = _new_file(args.out, args.overwrite, "model file")
@@ -300,13 +310,16 @@ def _run_train(args: argparse.Namespace) -> int:
     prep = Preprocessing.for_network(net, window=args.window, normalize=args.normalize)
     _log(f"training on {len(train)} images of {args.dataset}" + (f" (run {run})" if run else "")
          + f" as {prep.describe()} panoramas; network: {net!r}")
-    images, xy = load_run(train, prep, mirror=args.mirror, log=_log, progress=not args.no_progress)
+    conformer = Conformer(prep, mirror=args.mirror, log=_log)
+    images, xy = load_run(train, prep, conformer=conformer, progress=not args.no_progress)
     if not np.isfinite(xy).all():
         raise _UsageError(f"{args.dataset} lacks ground-truth x, y for some images: the regression needs them")
     loc = fit_localizer(net, images, xy, rotation=Rotation(step=args.step, window=args.window),
                         n_outputs=args.n_outputs, prep=prep, progress=not args.no_progress,
                         info={"dataset": str(args.dataset), "run": run,
                               "network": args.preset or str(args.config)})
+    if conformer.mirror_used is not None:
+        loc.info["mirror"] = list(conformer.mirror_used)  # localize and evaluate reuse it
     loc.save(out)
     m = loc.train_metrics_
     print(f"trained on {len(images)} images in {loc.info['fit_seconds']:.1f} s (total {time.perf_counter() - t0:.1f} s); "
@@ -360,7 +373,7 @@ def _run_localize(args: argparse.Namespace) -> int:
     out = _new_file(args.out, args.overwrite, "CSV")
     src = open_images(args.input, run=args.run_name, camera=args.camera)
     prep = Preprocessing.of_model(loc)
-    conform = Conformer(prep, mirror=args.mirror, log=_log)
+    conform = Conformer(prep, mirror=_mirror_of(args, loc), log=_log)
     _log(f"localizing {src.description} with {args.model} ({prep.describe()} panoramas)")
     bar = _bar(not args.no_progress, src.n, "localize")
     preds = []
@@ -438,13 +451,14 @@ def _run_evaluate(args: argparse.Namespace) -> int:
     train_run = args.train_run if args.train_run is not None else ("train" if "train" in runs and run != "train" else None)
     prep = Preprocessing.of_model(loc)
     test = select_run(ds, run, args.camera)
-    images, xy = load_run(test, prep, mirror=args.mirror, log=_log, progress=not args.no_progress)
+    mirror = _mirror_of(args, loc)
+    images, xy = load_run(test, prep, mirror=mirror, log=_log, progress=not args.no_progress)
     if not np.isfinite(xy).all():
         raise _UsageError(f"{args.dataset} lacks ground-truth x, y: evaluation needs them")
     tr_images = tr_xy = None
     if train_run is not None:
         tr = select_run(ds, train_run, args.camera)
-        tr_images, tr_xy = load_run(tr, prep, mirror=args.mirror, log=_log, progress=not args.no_progress)
+        tr_images, tr_xy = load_run(tr, prep, mirror=mirror, log=_log, progress=not args.no_progress)
     out = Path(args.out)
     _log(f"evaluating {args.model} on {len(images)} images" + (f" (run {run})" if run else "")
          + (f", training run {train_run}" if train_run else ""))

@@ -191,6 +191,7 @@ class Conformer:
         self.mode: str | None = None
         self._unwarper: Any = None
         self.message = ""
+        self.mirror_used: tuple[float, float, float, float] | None = None
 
     def _decide(self, batch: np.ndarray) -> None:
         h, w = batch.shape[1], batch.shape[2]
@@ -204,13 +205,15 @@ class Conformer:
             if self.mirror is not None:
                 cx, cy, r0, r1 = self.mirror
                 self._unwarper = Unwarper((cx, cy), r0, r1, (W, H))
-                how = f"mirror center ({cx:g}, {cy:g}) px, radii {r0:g}..{r1:g} px (--mirror)"
+                how = f"given mirror: center ({cx:.1f}, {cy:.1f}) px, radii {r0:.1f}..{r1:.1f} px"
             else:
                 m = estimate_mirror(batch)
                 self._unwarper = m.unwarper((W, H))
+                self.mirror = (float(m.center[0]), float(m.center[1]), float(m.inner_radius), float(m.outer_radius))
                 how = (f"estimated mirror center ({m.center[0]:.1f}, {m.center[1]:.1f}) px, radii "
                        f"{m.inner_radius:.1f}..{m.outer_radius:.1f} px; pass --mirror CX,CY,INNER,OUTER to set it")
             self.mode = "unwarp"
+            self.mirror_used = self.mirror
             self.message = f"unwarping {w}x{h} omnidirectional images to {W}x{H} panoramas: {how}"
         else:
             self.mode = "resize"
@@ -362,10 +365,12 @@ def open_images(path: str | os.PathLike, *, run: str | None = None, camera: str 
 
 
 def load_run(ds: Dataset, prep: Preprocessing, *, mirror: Any = None, log: Log = stderr_log,
-             progress: bool = False, batch_size: int = 64) -> tuple[np.ndarray, np.ndarray]:
+             progress: bool = False, batch_size: int = 64,
+             conformer: Conformer | None = None) -> tuple[np.ndarray, np.ndarray]:
     """All images of a (one-camera) dataset as the network's input array and
-    their positions (N, 2) in metres."""
-    conform = Conformer(prep, mirror=mirror, log=log)
+    their positions (N, 2) in metres (converted by ``conformer``, or a new
+    :class:`Conformer` with ``mirror``)."""
+    conform = conformer or Conformer(prep, mirror=mirror, log=log)
     out: np.ndarray | None = None
     bar = _bar(progress, len(ds), "reading images")
     i = 0

@@ -307,7 +307,8 @@ def exp_5_1_3(out: Path, *, quick: bool, seed: int, progress: bool) -> Experimen
     V = int(round(W * 0.5))
     net = window_network(V, H, 3, degree=3, shared=False, out=8)
     ev, _, info, _ = _run_localization(out, ds, net, prefix="5.1.3-modified-", title="5.1.3 window 50 % cubic individual",
-                                       seed=seed, progress=False, window=V / W, baselines=False, data=data)
+                                       seed=seed, progress=False, window=V / W, baselines=False, data=data,
+                                       plots=False)
     log(f"50 % cubic individual: max eta_phi {ev.eta_phi.max():.3f}, MED {ev.metrics['med']:.3f} m ({info['fit_s']:.0f} s)")
     mod_med = ev.metrics["med"]
     rows += [
