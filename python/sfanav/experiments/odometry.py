@@ -380,7 +380,7 @@ def exp_5_3_2(out: Path, *, quick: bool, seed: int, progress: bool) -> Experimen
         f"{grid['measurement_noise']} m) minimising the test MED (the thesis's protocol; chosen: "
         f"{bp['distance_noise']:g}, {bp['heading_noise']:g}, {bp['measurement_noise']:g}). Beside it: the noise "
         "chosen without ground truth (innovation likelihood) and the noise tuned on the training run. "
-        + ("Quick smoke run: tiny images and network, numbers not meaningful." if quick else
+        + ("A quick smoke run: tiny images and network, numbers not meaningful." if quick else
            f"Network: {info['network']}, trained in {info['fit_s']:.0f} s (reused from 5.3.1-real when cached).")
     )
     return ExperimentResult("5.3.2", rows, plots, notes)
