@@ -147,6 +147,23 @@ _add(Preset(
     lambda: PanoramicCamera(600, 60),
     _garden_runs(lines=True),
 ))
+# Thesis 5.3.1 simulator experiment: the 5.3 garden's world, training grid and
+# test walk, but the 10 lines are whole chords of the area through a random
+# point in a random direction (>= 8 m), which gives the thesis's point count
+# (862 on 10 lines; about 800 here) -- the `lines` run of thesis-5.3-garden
+# joins two random points (about 520 points on lines). Every frame has noisy
+# odometry; the experiment takes the distances along the lines from it.
+_add(Preset(
+    "thesis-5.3.1-sim", "5.3.1",
+    "the 16x18 m garden of thesis-5.3-garden: grid exploration (~1780 frames), a 1090-frame test walk, and 10 "
+    "straight lines >= 8 m running through the area (whole chords, ~800 points every 0.2 m, joined by "
+    "turn-drive-turn transits) for unsupervised metric learning, 600x60 RGB panoramas",
+    _garden((16.0, 18.0), 30, markers=(136, 144)),
+    lambda: PanoramicCamera(600, 60),
+    lambda rng: [RunSpec("train", lambda w, r: T.grid(w.area, spacing=1.6, step=0.26)),
+                 RunSpec("test", lambda w, r: T.random_walk(w.area, 1090, rng=r, world=w)),
+                 RunSpec("lines", lambda w, r: T.line_segments(w.area, 10, 8.0, 0.2, rng=r, world=w, through=True))],
+))
 _add(Preset(
     "thesis-6.2.1-static", "6.2.1",
     "the 16x18 m garden seen by a 500x500 omnidirectional camera (unwarp to 600x55): grid exploration "
