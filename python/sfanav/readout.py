@@ -242,6 +242,17 @@ def select_readout(features: Any, xy: Any, candidates: Sequence[dict[str, Any]] 
     if not cands:
         raise ValueError("no readout candidates")
     folds = block_folds(len(F), n_folds)
+    from threadpoolctl import threadpool_limits
+
+    with threadpool_limits(limits=1, user_api="blas"):  # many small solves: threads only thrash
+        scores = _cv_scores(cands, folds, F, Y)
+    best = int(np.argmin(scores))
+    spec = dict(cands[best])
+    return ReadoutSelection(spec, make_readout(spec).fit(F, Y), [dict(c) for c in cands], scores)
+
+
+def _cv_scores(cands: list[dict[str, Any]], folds: list[tuple[np.ndarray, np.ndarray]], F: np.ndarray,
+               Y: np.ndarray) -> np.ndarray:
     scores = np.empty(len(cands))
     for i, spec in enumerate(cands):
         errs = []
@@ -252,6 +263,4 @@ def select_readout(features: Any, xy: Any, candidates: Sequence[dict[str, Any]] 
             except (ValueError, np.linalg.LinAlgError):
                 errs.append(np.inf)
         scores[i] = float(np.mean(errs))
-    best = int(np.argmin(scores))
-    spec = dict(cands[best])
-    return ReadoutSelection(spec, make_readout(spec).fit(F, Y), [dict(c) for c in cands], scores)
+    return scores

@@ -144,7 +144,7 @@ def run_scene(out: Path, preset: str, seed: int, *, quick: bool, progress: bool,
         R = net.transform(A_tr, rotations=True)
         _, eta_phi = analysis.eta_values(R[:, :, :8])
         log(f"{tag} seed {seed} {rname or 'all rows'}: trained in {fit_s:.0f} s, max eta_phi {eta_phi.max():.3f}")
-        if firing_maps:
+        if firing_maps and (not quick or not rname):  # quick: the plain network's maps only
             angles = analysis.orientation_angles(R.shape[1], step=5, width=A_tr.shape[2])
             p = out / f"gardens-{tag}-seed{seed}-{(rname or 'all rows').replace('rows: ', '').replace(' + ', '+').replace(' ', '-')}-firing_maps.png"
             plots.append(str(analysis.plot_firing_maps(R, xy_tr, p, which=(0, 1, 2, 3), angles=angles,
@@ -162,7 +162,7 @@ def run_scene(out: Path, preset: str, seed: int, *, quick: bool, progress: bool,
                 spec, reader = sel.spec, sel.readout
             pred = reader.predict(F_te)
             m = localization_metrics(pred, xy_te, coordinate_range=crange)
-            rs = _random_splits(spec, F_te, xy_te, crange, n_repeats=n_repeats, seed=seed)
+            rs = _random_splits(spec, F_te, xy_te, crange, n_repeats=5 if quick else n_repeats, seed=seed)
             name = config_name(rname, oname, control)
             res[name] = {"MAE x (%)": m["mae_x_pct"], "MAE y (%)": m["mae_y_pct"], "MAE x (m)": m["mae_x"],
                          "MAE y (m)": m["mae_y"], "MED (m)": m["med"],

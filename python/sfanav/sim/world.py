@@ -731,14 +731,21 @@ class _Builder:
                 assert self.pending is not None
                 _, radius, parts, _, _ = self.pending
                 self.pending = None
-                for attempt in range(5000):
-                    gap = 1.6 if attempt < 3000 else 1.0  # room for the robot between objects
-                    lim_x, lim_y = w / 2 - radius - 1.0, h / 2 - radius - 1.0
+                low = max(p.bound_radius for p in parts if p.z0 < BLOCK_HEIGHT)
+                for attempt in range(10000):
+                    if attempt < 5000:
+                        # room for the robot between objects, crowns apart, 1 m from the border
+                        gap = 1.6 if attempt < 3000 else 1.0
+                        rad, border = radius, 1.0
+                    else:  # crowded (small areas): only the blocking parts keep the robot's room
+                        gap, rad, border = 1.0, low, 0.5
+                    lim_x, lim_y = w / 2 - rad - border, h / 2 - rad - border
                     if lim_x <= 0 or lim_y <= 0:
-                        raise ValueError(f"area {w} x {h} m is too small for inner objects")
+                        continue
                     x, y = self.u(-lim_x, lim_x), self.u(-lim_y, lim_y)
-                    if all(np.hypot(x - o.x, y - o.y) >= radius + o.radius + gap for o in out + [
-                            q for q in placed if q.obstacle]):
+                    if all(np.hypot(x - o.x, y - o.y) >= rad + (o.radius if attempt < 5000 else max(
+                            q.bound_radius for q in o.parts if q.z0 < BLOCK_HEIGHT)) + gap
+                           for o in out + [q for q in placed if q.obstacle]):
                         break
                 else:
                     raise ValueError(f"no room for {sum(counts.values())} inner objects in {w} x {h} m")
