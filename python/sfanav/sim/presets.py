@@ -235,6 +235,40 @@ _add(Preset(
 ))
 
 
+# --------------------------------------------------------------------- issue 7: realistic gardens
+
+GARDEN_INNER = {"tree": 3, "bush": 4, "pole": 4, "shed": 1}
+GARDEN_PATCHES = {"patio": 1, "path": 1, "bed": 3}
+
+
+def _realistic_runs(rng: np.random.Generator) -> list[RunSpec]:
+    # grid-like exploration with crossings and large-radius turns, led around the objects in the area;
+    # a random test walk that keeps clear of them
+    return [RunSpec("train", lambda w, r: T.detour(T.grid(w.area, spacing=1.0, step=0.25, turn="arc", margin=0.5), w)),
+            RunSpec("test", lambda w, r: T.random_walk(w.area, 400, 0.2, margin=0.45, rng=r, world=w))]
+
+
+_add(Preset(
+    "realistic-garden", "issue 7",
+    "12x12 m lawn with objects INSIDE the area (3 small trees, 4 bushes, 4 poles, a shed against the border) and "
+    "ground patches (a patio, a gravel path, 3 flower beds), 30 garden objects around; a grid exploration with "
+    "crossings and large-radius turns led around the objects (~1200 frames), a 400-frame random test walk; "
+    "350x40 RGB panoramas",
+    _garden((12.0, 12.0), 30, depth=10.0, inner=GARDEN_INNER, patches=GARDEN_PATCHES),
+    lambda: PanoramicCamera(350, 40),
+    _realistic_runs,
+))
+_add(Preset(
+    "realistic-garden-control", "issue 7",
+    "the thesis-like control of realistic-garden: the same 12x12 m garden and outer objects (same seed), but "
+    "nothing inside the area and a plain lawn; the same grid exploration (~1130 frames) and a 400-frame random "
+    "test walk; 350x40 RGB panoramas",
+    _garden((12.0, 12.0), 30, depth=10.0),
+    lambda: PanoramicCamera(350, 40),
+    _realistic_runs,
+))
+
+
 def describe() -> str:
     """One line per preset: name, thesis section, description."""
     width = max(len(n) for n in PRESETS)

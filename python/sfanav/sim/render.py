@@ -531,6 +531,8 @@ class Renderer:
         thr = np.quantile(patches, 1 - g.dry_fraction) if g.dry_fraction > 0 else np.inf
         dry = np.clip((patches - thr) / 0.3, 0, 1)[..., None]
         col = (1 - dry) * col + dry * np.asarray(g.dry, np.float32)
+        if g.patches:
+            _paint_patches(col, g.patches, self._gmap_origin, g.resolution)
         self._gmap = col.astype(np.float32)  # (n, n, 3), row = y index, col = x index
 
     def _shadow_map(self, light: Lighting) -> np.ndarray:
@@ -993,3 +995,74 @@ def _to_uint8(img: np.ndarray, rgb: bool, light: np.ndarray) -> np.ndarray:
         out = img[..., :3] @ (_LUMA * gain)
     out += 0.5
     return np.clip(out, 0, 255, out=out).astype(np.uint8)
+
+
+def _paint_patches(col: np.ndarray, patches: Sequence[dict[str, Any]], origin: float, res: float) -> None:
+    """Paints ground patches (patio, gravel path, flower bed; see
+    :class:`~sfanav.sim.world.GroundSpec`) into the lawn's colour map
+    ``col`` (n, n, 3; row = y, column = x) in place."""
+    n = col.shape[0]
+    for pt in patches:
+        kind = pt["kind"]
+        rng = np.random.default_rng(int(pt.get("seed", 0)))
+        if kind == "path":
+            P = np.asarray(pt["points"], float)
+            half = float(pt["width"]) / 2
+            lo, hi = P.min(axis=0) - half - 0.5, P.max(axis=0) + half + 0.5
+        elif kind == "patio":
+            r = 0.5 * float(np.hypot(pt["length"], pt["width"]))
+            lo, hi = np.array([pt["x"] - r, pt["y"] - r]), np.array([pt["x"] + r, pt["y"] + r])
+        elif kind == "bed":
+            r = max(float(pt["rx"]), float(pt["ry"])) + 0.2
+            lo, hi = np.array([pt["x"] - r, pt["y"] - r]), np.array([pt["x"] + r, pt["y"] + r])
+        else:
+            raise ValueError(f"unknown ground patch kind {kind!r}")
+        i0, j0 = (np.floor((lo - origin) / res).astype(int)).clip(0, n)
+        i1, j1 = (np.ceil((hi - origin) / res).astype(int) + 1).clip(0, n)
+        if i1 <= i0 or j1 <= j0:
+            continue
+        gx = origin + (np.arange(i0, i1) + 0.5) * res
+        gy = origin + (np.arange(j0, j1) + 0.5) * res
+        X, Y = np.meshgrid(gx, gy)
+        block = col[j0:j1, i0:i1]
+        shape = X.shape
+        if kind == "patio":
+            c, s_ = np.cos(pt["yaw"]), np.sin(pt["yaw"])
+            lx, ly = c * (X - pt["x"]) + s_ * (Y - pt["y"]), -s_ * (X - pt["x"]) + c * (Y - pt["y"])
+            inside = (np.abs(lx) <= pt["length"] / 2) & (np.abs(ly) <= pt["width"] / 2)
+            tile = float(pt["tile"])
+            tu, tv = np.floor((lx + pt["length"] / 2) / tile), np.floor((ly + pt["width"] / 2) / tile)
+            base = np.asarray(rng.choice([(0.62, 0.60, 0.56), (0.70, 0.64, 0.55), (0.55, 0.55, 0.57)]), np.float32)
+            # per-slab brightness, joints one map cell wide
+            shade = 0.85 + 0.3 * ((np.sin(tu * 12.9898 + tv * 78.233 + rng.uniform(0, 100)) * 43758.5453) % 1.0)
+            fu, fv = (lx + pt["length"] / 2) % tile, (ly + pt["width"] / 2) % tile
+            joint = (fu < res) | (fv < res)
+            paint = base[None, None, :] * shade[..., None] * np.where(joint, 0.45, 1.0)[..., None]
+            alpha = inside.astype(np.float32)
+        elif kind == "path":
+            # distance to the polyline
+            d = np.full(shape, np.inf)
+            for a, b in zip(P[:-1], P[1:]):
+                ab = b - a
+                t = np.clip(((X - a[0]) * ab[0] + (Y - a[1]) * ab[1]) / max(ab @ ab, 1e-12), 0, 1)
+                d = np.minimum(d, np.hypot(X - a[0] - t * ab[0], Y - a[1] - t * ab[1]))
+            half = float(pt["width"]) / 2
+            alpha = np.clip((half - d) / (1.5 * res) + 0.5, 0, 1).astype(np.float32)
+            base = np.asarray((0.66, 0.62, 0.54), np.float32)
+            grain = 0.8 + 0.4 * rng.random(shape)
+            paint = base[None, None, :] * grain[..., None]
+        else:  # bed
+            c, s_ = np.cos(pt["yaw"]), np.sin(pt["yaw"])
+            lx, ly = c * (X - pt["x"]) + s_ * (Y - pt["y"]), -s_ * (X - pt["x"]) + c * (Y - pt["y"])
+            q = (lx / pt["rx"]) ** 2 + (ly / pt["ry"]) ** 2
+            alpha = (q <= 1.0).astype(np.float32)
+            soil = np.asarray((0.28, 0.20, 0.13), np.float32)
+            paint = np.broadcast_to(soil, shape + (3,)) * (0.8 + 0.4 * rng.random(shape))[..., None]
+            u = rng.random(shape)
+            leaf = u < 0.35
+            paint = np.where(leaf[..., None], np.asarray((0.16, 0.34, 0.10), np.float32), paint)
+            palette = np.asarray([(0.85, 0.15, 0.15), (0.95, 0.85, 0.20), (0.60, 0.30, 0.75), (0.95, 0.95, 0.92),
+                                  (0.95, 0.50, 0.15)], np.float32)
+            flowers = palette[rng.integers(0, len(palette), shape)]
+            paint = np.where((u > 0.72)[..., None], flowers, paint)
+        block[:] = block * (1 - alpha[..., None]) + paint.astype(np.float32) * alpha[..., None]

@@ -18,6 +18,8 @@ a ``world`` also keep clear of its obstacles.
 * :func:`line_segments`: straight segments of random orientation and a
   minimum length, for unsupervised metric learning (5.3.1).
 * :func:`random_walk`: a smooth random test walk.
+* :func:`detour`: a trajectory (e.g. a grid) led around a world's obstacles
+  (issue 7's realistic gardens, with objects inside the area).
 """
 
 from __future__ import annotations
@@ -507,3 +509,86 @@ def random_walk(area: Sequence[float], n_frames: int, step: float = 0.2, *, turn
         poses[k] = (p[0], p[1], th)  # the heading it drives off with
         p = q
     return Trajectory(poses, np.arange(n) * _positive(dt, "dt"))
+
+
+def detour(traj: Trajectory, world: Any, *, margin: float = 0.45, speed: float = 0.4,
+           turn_rate: float = 0.8) -> Trajectory:
+    """Leads a trajectory around a world's obstacles.
+
+    Every stretch of consecutive poses within ``margin`` m of an obstacle is
+    replaced by a detour: straight out to a circle around that obstacle
+    (its parts' bounding circle plus ``margin``), along the circle on the
+    side that stays in the area and clear of other obstacles, and back in,
+    sampled at the trajectory's median step; headings follow the motion.
+    A stretch no detour clears is dropped (the trajectory jumps). Times are
+    recomputed from ``speed`` (m/s) and ``turn_rate`` (rad/s); extra
+    columns are dropped. A trajectory that touches no obstacle comes back
+    unchanged."""
+    from .world import BLOCK_HEIGHT
+
+    P = traj.poses
+    blocked = np.asarray(world.collides(P[:, 0], P[:, 1], margin), bool)
+    if not blocked.any():
+        return traj
+    steps = np.hypot(*np.diff(P[:, :2], axis=0).T)
+    step = float(np.median(steps[steps > 1e-9])) if np.any(steps > 1e-9) else 0.2
+    obstacles = world.obstacles
+    w, h = world.area
+
+    def clear(pts: np.ndarray) -> bool:
+        return bool(np.all(world.free(pts[:, 0], pts[:, 1], margin * 0.9)))
+
+    out: list[np.ndarray] = []
+    i, n = 0, len(P)
+    while i < n:
+        if not blocked[i]:
+            out.append(P[i, :2])
+            i += 1
+            continue
+        j = i
+        while j < n and blocked[j]:
+            j += 1
+        if i == 0 or j == n:
+            i = j
+            continue
+        a, b = P[i - 1, :2], P[j, :2]
+        mid = P[(i + j) // 2, :2]
+        o = min(obstacles, key=lambda ob: min(float(np.hypot(mid[0] - p.x, mid[1] - p.y)) - p.bound_radius
+                                              for p in ob.parts))
+        c = np.array([o.x, o.y])
+        R = max(float(np.hypot(p.x - o.x, p.y - o.y)) + p.bound_radius for p in o.parts
+                if p.z0 < BLOCK_HEIGHT) + margin + 0.05
+        a0 = np.arctan2(*(a - c)[::-1])
+        a1 = np.arctan2(*(b - c)[::-1])
+        best = None
+        for sgn in (1.0, -1.0):
+            span = float(wrap_angle(sgn * (a1 - a0))) % (2 * np.pi)
+            k = max(2, int(np.ceil(span * R / step)))
+            ang = a0 + sgn * span * np.linspace(0, 1, k + 1)
+            arc = c + R * np.stack([np.cos(ang), np.sin(ang)], axis=1)
+            pts = np.concatenate([_line(a, arc[0], step), arc, _line(arc[-1], b, step)])
+            if clear(pts) and (best is None or len(pts) < len(best)):
+                best = pts
+        if best is not None:
+            out.extend(best)
+        i = j
+    pts = np.asarray(out)
+    keep = np.ones(len(pts), bool)
+    keep[1:] = np.hypot(*np.diff(pts, axis=0).T) > 1e-9
+    # repeated positions (turns on the spot) are dropped: headings follow the motion
+    pts = pts[keep]
+    d = np.diff(pts, axis=0)
+    head = np.arctan2(d[:, 1], d[:, 0])
+    head = np.append(head, head[-1] if len(head) else 0.0)
+    poses = np.column_stack([pts, head])
+    dist = np.hypot(*np.diff(pts, axis=0).T)
+    dth = np.abs(wrap_angle(np.diff(head)))
+    times = np.concatenate([[0.0], np.cumsum(np.maximum(dist / speed, dth / turn_rate))])
+    return Trajectory(poses, times)
+
+
+def _line(a: np.ndarray, b: np.ndarray, step: float) -> np.ndarray:
+    k = int(np.ceil(float(np.hypot(*(b - a))) / step))
+    if k <= 1:
+        return np.empty((0, 2))
+    return a + (b - a) * np.linspace(0, 1, k + 1)[1:-1, None]

@@ -34,6 +34,11 @@ FORMAT = "sfanav-world"
 VERSION = 1
 
 OBJECT_TYPES = ("tree", "conifer", "bush", "house", "shed", "fence", "hedge", "rock")
+INNER_TYPES = ("tree", "bush", "pole", "shed")  # objects that can stand inside the area (issue 7)
+PATCH_KINDS = ("patio", "path", "bed")
+# parts whose bottom is at least this high (m) do not block the robot (a mower
+# drives under a tree's crown, not through its trunk)
+BLOCK_HEIGHT = 0.6
 DEFAULT_WEIGHTS = {
     "tree": 0.28,
     "conifer": 0.1,
@@ -158,7 +163,15 @@ class DynamicCylinder:
 class GroundSpec:
     """The lawn: a photographic detail texture (``detail``, tiling every
     ``detail_tile`` metres) times a large-scale colour map (two greens mixed
-    by fractal noise, with drier patches) sampled every ``resolution`` m."""
+    by fractal noise, with drier patches) sampled every ``resolution`` m.
+
+    ``patches``: dicts painted over the lawn's colour map (issue 7's
+    realistic gardens), each with a ``kind`` from ``PATCH_KINDS``:
+    ``{"kind": "patio", "x", "y", "length", "width", "yaw", "tile"}`` (grey
+    stone slabs of ``tile`` m with dark joints), ``{"kind": "path",
+    "points": [[x, y], ...], "width"}`` (a gravel path along a polyline),
+    ``{"kind": "bed", "x", "y", "rx", "ry", "yaw"}`` (an elliptic flower bed:
+    dark soil, leaves and coloured flowers). Metres, yaw in radians."""
 
     seed: int = 0
     detail: str = "grass"
@@ -169,6 +182,7 @@ class GroundSpec:
     dry: tuple[float, float, float] = (0.50, 0.47, 0.30)
     dry_fraction: float = 0.12
     resolution: float = 0.1
+    patches: tuple = ()  # ground patches painted over the lawn (see PATCH_KINDS)
 
 
 @dataclass
@@ -261,6 +275,8 @@ class World:
         obstacles: Sequence[str | dict[str, Any]] = (),
         dynamic: DynamicCylinder | dict[str, Any] | None = None,
         cloud_cover: float = 0.45,
+        inner: dict[str, int] | None = None,
+        patches: dict[str, int] | None = None,
     ) -> "World":
         """Generates a garden, deterministically from ``seed``.
 
@@ -296,6 +312,19 @@ class World:
             (``orbit`` defaults to the free radius).
         cloud_cover : float
             Fraction of the sky under clouds, in [0, 1].
+        inner : dict, optional
+            Objects standing *inside* the free area (issue 7's realistic
+            gardens), counts per type from ``INNER_TYPES``: ``tree`` (small
+            garden trees; the robot drives under the crown, around the
+            trunk), ``bush``, ``pole`` (thin painted posts: washing-line and
+            lamp posts), ``shed`` (against the area border). They are
+            obstacles (``world.free`` keeps clear of their parts lower than
+            ``BLOCK_HEIGHT``). Drawn from their own random stream, so a
+            world's outer objects do not depend on them.
+        patches : dict, optional
+            Ground patches inside the area, counts per kind from
+            ``PATCH_KINDS`` (``patio``, ``path``, ``bed``); see
+            :class:`GroundSpec`. Also their own random stream.
         """
         if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)):
             raise TypeError(f"seed must be an integer, got {type(seed).__name__}")
@@ -350,6 +379,14 @@ class World:
                 placed.append(b.place(placed))
         for spec in obstacles:
             placed.extend(b.obstacle(spec))
+        if inner or patches:
+            # own stream: the rest of the world is the same with and without them
+            rng2 = np.random.default_rng([int(seed), 7])
+            b2 = _Builder(world, rng2, prefix="in")
+            if patches:
+                world.ground.patches = tuple(b2.patches(patches))
+            if inner:
+                placed.extend(b2.inner(inner, placed))
         world.objects = placed
         if dynamic is not None:
             world.add_dynamic(dynamic, seed=int(rng.integers(2**31)))
@@ -402,12 +439,14 @@ class World:
         return (np.abs(x) <= self.area[0] / 2 - margin) & (np.abs(y) <= self.area[1] / 2 - margin)
 
     def collides(self, x: Any, y: Any, margin: float = 0.0) -> np.ndarray:
-        """Whether points are within ``margin`` (m) of an obstacle footprint."""
+        """Whether points are within ``margin`` (m) of an obstacle footprint
+        (of its parts lower than ``BLOCK_HEIGHT``)."""
         x, y = np.asarray(x, float), np.asarray(y, float)
         hit = np.zeros(np.broadcast(x, y).shape, bool)
         for o in self.obstacles:
             for p in o.parts:
-                hit |= _rect_distance(x, y, p) <= margin
+                if p.z0 < BLOCK_HEIGHT:
+                    hit |= _rect_distance(x, y, p) <= margin
         return hit
 
     def free(self, x: Any, y: Any, margin: float = 0.0) -> np.ndarray:
@@ -430,7 +469,7 @@ class World:
             "area": list(self.area),
             "free_radius": self.free_radius,
             "outer_radius": self.outer_radius,
-            "ground": asdict(self.ground),
+            "ground": _ground_dict(self.ground),
             "sky": asdict(self.sky),
             "textures": {k: t.to_dict() for k, t in self.textures.items()},
             "objects": [asdict(o) for o in self.objects],
@@ -480,6 +519,15 @@ class World:
         return cls.from_dict(d)
 
 
+def _ground_dict(g: GroundSpec) -> dict[str, Any]:
+    d = asdict(g)
+    if not d["patches"]:
+        del d["patches"]  # worlds without patches write what they always wrote
+    else:
+        d["patches"] = [dict(p) for p in g.patches]
+    return d
+
+
 def _tuples(d: dict[str, Any]) -> dict[str, Any]:
     return {k: tuple(v) if isinstance(v, list) else v for k, v in d.items()}
 
@@ -488,14 +536,15 @@ class _Builder:
     """Draws objects of each type; :meth:`place` puts the last one at a free
     polar position."""
 
-    def __init__(self, world: World, rng: np.random.Generator):
+    def __init__(self, world: World, rng: np.random.Generator, prefix: str = ""):
         self.w = world
         self.rng = rng
+        self.prefix = prefix
         self.pending: tuple[str, float, list[Primitive], int | None, bool] | None = None
         self._tex_count = 0
 
     def tex(self, kind: str, color: Sequence[float], contrast: float, tile: tuple[float, float], **params: Any) -> str:
-        name = f"{kind}{self._tex_count}"
+        name = f"{self.prefix}{kind}{self._tex_count}"
         self._tex_count += 1
         self.w.textures[name] = Texture(kind, tuple(color), contrast, int(self.rng.integers(2**31)), tile, params)
         return name
@@ -619,6 +668,127 @@ class _Builder:
         ]
         # local -y face carries the marker; place() turns it towards the centre
         self._set("marker", size / 2 + 0.1, parts, marker_id, tangential=True)
+
+    # ---------------------------------------------------- inside the area (issue 7)
+
+    def pole(self) -> None:
+        paint = self.rng.choice([(0.92, 0.92, 0.90), (0.35, 0.36, 0.38), (0.18, 0.32, 0.20), (0.55, 0.40, 0.25)])
+        tex = self.tex("noise", self.jitter(paint, 0.04), 0.3, (0.5, 0.5))
+        r = self.u(0.04, 0.08)
+        parts = [Primitive("cylinder", 0, 0, 0.0, self.u(1.6, 2.6), tex, radius=r)]
+        self._set("pole", r, parts)
+
+    def small_tree(self) -> None:
+        trunk_h = self.u(1.5, 2.2)
+        rz = self.u(0.7, 1.2)
+        r = self.u(0.8, 1.5)
+        bark = self.tex("bark", self.jitter((0.36, 0.27, 0.18)), 0.9, (1.0, 1.0))
+        leaves = self.tex("leaves", self.jitter((0.24, 0.42, 0.14), 0.12), 0.9, (1.2, 1.2))
+        zc = trunk_h + 0.7 * rz
+        parts = [
+            Primitive("cylinder", 0, 0, 0.0, trunk_h + 0.5 * rz, bark, radius=self.u(0.08, 0.16)),
+            Primitive("ellipsoid", 0, 0, zc - rz, zc + rz, leaves, radius=r),
+        ]
+        self._set("tree", r, parts)
+
+    def small_bush(self) -> None:
+        leaves = self.tex("leaves", self.jitter((0.20, 0.36, 0.12), 0.15), 1.0, (0.8, 0.8))
+        r = self.u(0.35, 0.75)
+        rz = self.u(0.3, 0.6)
+        zc = 0.55 * rz
+        self._set("bush", r, [Primitive("ellipsoid", 0, 0, zc - rz, zc + rz, leaves, radius=r)])
+
+    def inner(self, counts: dict[str, int], placed: list[WorldObject]) -> list[WorldObject]:
+        """Objects inside the free area, ``counts`` per type of ``INNER_TYPES``."""
+        bad = set(counts) - set(INNER_TYPES)
+        if bad:
+            raise ValueError(f"unknown inner object types {sorted(bad)}; available: {', '.join(INNER_TYPES)}")
+        w, h = self.w.area
+        out: list[WorldObject] = []
+        for _ in range(int(counts.get("shed", 0))):
+            length, width = self.u(2.0, 3.0), self.u(1.5, 2.2)
+            wood = self.tex("planks", self.jitter((0.45, 0.32, 0.20)), 0.8, (1.2, 2.0), boards=8, gap=0.0)
+            roof = self.tex("roof", self.jitter((0.20, 0.20, 0.22)), 0.6, (1.0, 1.0), rows=3)
+            hgt = self.u(1.9, 2.3)
+            side = int(self.rng.integers(4))  # 0: east, 1: north, 2: west, 3: south border
+            along = self.u(-0.3, 0.3) * (h if side in (0, 2) else w)
+            depth = 0.5 * width
+            if side == 0:
+                x, y, yaw = w / 2 - depth, along, np.pi / 2
+            elif side == 2:
+                x, y, yaw = -w / 2 + depth, along, np.pi / 2
+            elif side == 1:
+                x, y, yaw = along, h / 2 - depth, 0.0
+            else:
+                x, y, yaw = along, -h / 2 + depth, 0.0
+            parts = [Primitive("box", x, y, 0.0, hgt, wood, length=length, width=width, yaw=yaw),
+                     Primitive("box", x, y, hgt, hgt + 0.15, roof, length=length + 0.3, width=width + 0.3, yaw=yaw)]
+            out.append(WorldObject("shed", float(x), float(y), 0.5 * float(np.hypot(length, width)), parts, True))
+        makers = {"tree": self.small_tree, "bush": self.small_bush, "pole": self.pole}
+        for kind in ("tree", "bush", "pole"):
+            for _ in range(int(counts.get(kind, 0))):
+                makers[kind]()
+                assert self.pending is not None
+                _, radius, parts, _, _ = self.pending
+                self.pending = None
+                low = max(p.bound_radius for p in parts if p.z0 < BLOCK_HEIGHT)
+                for attempt in range(10000):
+                    if attempt < 5000:
+                        # room for the robot between objects, crowns apart, 1 m from the border
+                        gap = 1.6 if attempt < 3000 else 1.0
+                        rad, border = radius, 1.0
+                    else:  # crowded (small areas): only the blocking parts keep the robot's room
+                        gap, rad, border = 1.0, low, 0.5
+                    lim_x, lim_y = w / 2 - rad - border, h / 2 - rad - border
+                    if lim_x <= 0 or lim_y <= 0:
+                        continue
+                    x, y = self.u(-lim_x, lim_x), self.u(-lim_y, lim_y)
+                    if all(np.hypot(x - o.x, y - o.y) >= rad + (o.radius if attempt < 5000 else max(
+                            q.bound_radius for q in o.parts if q.z0 < BLOCK_HEIGHT)) + gap
+                           for o in out + [q for q in placed if q.obstacle]):
+                        break
+                else:
+                    raise ValueError(f"no room for {sum(counts.values())} inner objects in {w} x {h} m")
+                moved = [Primitive(**{**asdict(p), "x": x + p.x, "y": y + p.y}) for p in parts]
+                out.append(WorldObject(kind, float(x), float(y), float(radius), moved, True))
+        return out
+
+    def patches(self, counts: dict[str, int]) -> list[dict[str, Any]]:
+        """Ground patches inside the free area, ``counts`` per kind of ``PATCH_KINDS``."""
+        bad = set(counts) - set(PATCH_KINDS)
+        if bad:
+            raise ValueError(f"unknown ground patch kinds {sorted(bad)}; available: {', '.join(PATCH_KINDS)}")
+        w, h = self.w.area
+        out: list[dict[str, Any]] = []
+        for _ in range(int(counts.get("patio", 0))):
+            length, width = self.u(2.5, 4.0), self.u(2.0, 3.2)
+            # against a border, as a terrace in front of the house would be
+            side = int(self.rng.integers(4))
+            along = self.u(-0.3, 0.3)
+            if side in (0, 2):
+                x = (1 if side == 0 else -1) * (w / 2 - width / 2)
+                y, yaw = along * h, np.pi / 2
+            else:
+                y = (1 if side == 1 else -1) * (h / 2 - width / 2)
+                x, yaw = along * w, 0.0
+            out.append({"kind": "patio", "x": float(x), "y": float(y), "length": float(length), "width": float(width),
+                        "yaw": float(yaw), "tile": float(self.rng.choice([0.4, 0.5, 0.6])),
+                        "seed": int(self.rng.integers(2**31))})
+        for _ in range(int(counts.get("path", 0))):
+            # from one border across the area to another, with a bend
+            a0 = self.u(0, 2 * np.pi)
+            a1 = a0 + np.pi + self.u(-0.8, 0.8)
+            R = 0.5 * float(np.hypot(w, h)) + 1.0
+            p0 = np.array([R * np.cos(a0), R * np.sin(a0)])
+            p2 = np.array([R * np.cos(a1), R * np.sin(a1)])
+            mid = 0.5 * (p0 + p2) + np.array([self.u(-0.2, 0.2) * w, self.u(-0.2, 0.2) * h])
+            out.append({"kind": "path", "points": [[float(v) for v in q] for q in (p0, mid, p2)],
+                        "width": self.u(0.6, 1.0), "seed": int(self.rng.integers(2**31))})
+        for _ in range(int(counts.get("bed", 0))):
+            rx, ry = self.u(0.6, 1.5), self.u(0.4, 0.9)
+            out.append({"kind": "bed", "x": self.u(-w / 2 + rx, w / 2 - rx), "y": self.u(-h / 2 + rx, h / 2 - rx),
+                        "rx": rx, "ry": ry, "yaw": self.u(0, np.pi), "seed": int(self.rng.integers(2**31))})
+        return out
 
     def place(self, placed: list[WorldObject], near: bool = False) -> WorldObject:
         assert self.pending is not None

@@ -1,0 +1,266 @@
+"""Readouts: from slow features to metric positions, beyond the thesis's
+quadratic regression (issue 7).
+
+The thesis reads position out of the ``n`` slowest SFA outputs with a
+quadratic regression fitted by least squares (thesis 3.5;
+:class:`sfanav.regression.QuadraticRegression`). Where the slowest outputs
+are not smooth functions of position (gardens with objects inside the area:
+blobs and rings around nearby objects), a global polynomial cannot follow
+them, although the features still tell places apart. Local readouts can:
+
+* :class:`KNNReadout`: k nearest training samples in the (standardised)
+  feature space, their positions averaged with inverse-distance weights.
+* :class:`KernelRidgeReadout`: kernel ridge regression with a Gaussian (RBF)
+  kernel on the standardised features (Saunders, Gammerman and Vovk 1998;
+  Schoelkopf and Smola 2002, ch. 4), a smooth interpolant of the training
+  run's positions.
+* ``QuadraticRegression(ridge=...)``: the thesis's readout with an L2
+  penalty.
+
+:func:`select_readout` chooses among candidates by cross-validation **on the
+training run only**, in contiguous blocks of the run (neighbouring frames of
+a run are near copies; random folds would leak them into the held-out part,
+the same optimism as the thesis's random splits). The test run never
+influences the choice.
+
+All readouts have ``fit(features, xy)`` and ``predict(features)``, with
+features (N, m >= n_outputs) whose first ``n_outputs`` columns are used.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Sequence
+
+import numpy as np
+
+from ._checks import as_matrix, check_same_length
+from .regression import QuadraticRegression
+from .sfa import NotFittedError
+
+__all__ = [
+    "KNNReadout",
+    "KernelRidgeReadout",
+    "ReadoutSelection",
+    "block_folds",
+    "default_candidates",
+    "make_readout",
+    "select_readout",
+]
+
+
+def _cols(F: Any, n: int | None, name: str = "features") -> np.ndarray:
+    X = as_matrix(F, name)
+    if n is not None:
+        if X.shape[1] < n:
+            raise ValueError(f"{name} have {X.shape[1]} columns, fewer than n_outputs={n}")
+        X = X[:, :n]
+    return X
+
+
+class _Standardised:
+    n_outputs: int | None
+
+    def _fit_scale(self, X: np.ndarray) -> np.ndarray:
+        self.mean_ = X.mean(axis=0)
+        sd = X.std(axis=0)
+        self.scale_ = np.where(sd > 0, sd, 1.0)
+        return (X - self.mean_) / self.scale_
+
+    def _scaled(self, F: Any) -> np.ndarray:
+        if not hasattr(self, "mean_"):
+            raise NotFittedError(f"this {type(self).__name__} is not fitted; call fit first")
+        return (_cols(F, self.n_outputs) - self.mean_) / self.scale_
+
+
+class KNNReadout(_Standardised):
+    """k-nearest-neighbour readout: the mean position of the ``k`` training
+    samples nearest in the standardised feature space, weighted by inverse
+    distance (``weights="distance"``) or equally (``"uniform"``).
+
+    Memory grows with the training run (one feature vector and position per
+    sample: ``n_outputs + 2`` numbers), unlike the regressions."""
+
+    def __init__(self, n_outputs: int | None = 8, k: int = 5, weights: str = "distance") -> None:
+        if weights not in ("distance", "uniform"):
+            raise ValueError(f"weights must be 'distance' or 'uniform', got {weights!r}")
+        if int(k) < 1:
+            raise ValueError(f"k must be at least 1, got {k}")
+        self.n_outputs, self.k, self.weights = n_outputs, int(k), weights
+
+    def __repr__(self) -> str:
+        return f"KNNReadout(n_outputs={self.n_outputs}, k={self.k}, weights={self.weights!r})"
+
+    def fit(self, features: Any, xy: Any) -> "KNNReadout":
+        X = _cols(features, self.n_outputs)
+        Y = as_matrix(xy, "xy")
+        check_same_length(X, Y, "features", "xy")
+        self.X_ = self._fit_scale(X)
+        self.y_ = Y
+        return self
+
+    def predict(self, features: Any, chunk: int = 2048) -> np.ndarray:
+        Q = self._scaled(features)
+        k = min(self.k, len(self.X_))
+        out = np.empty((len(Q), self.y_.shape[1]))
+        sq = (self.X_**2).sum(axis=1)
+        for s in range(0, len(Q), chunk):
+            q = Q[s : s + chunk]
+            d2 = np.maximum((q**2).sum(axis=1)[:, None] + sq[None, :] - 2.0 * q @ self.X_.T, 0.0)
+            idx = np.argpartition(d2, k - 1, axis=1)[:, :k] if k < len(self.X_) else np.tile(np.arange(k), (len(q), 1))
+            dk = np.sqrt(np.take_along_axis(d2, idx, axis=1))
+            if self.weights == "distance":
+                w = 1.0 / np.maximum(dk, 1e-9)
+            else:
+                w = np.ones_like(dk)
+            w /= w.sum(axis=1, keepdims=True)
+            out[s : s + chunk] = np.einsum("qk,qkd->qd", w, self.y_[idx])
+        return out
+
+
+class KernelRidgeReadout(_Standardised):
+    """Kernel ridge regression with the Gaussian kernel ``exp(-gamma |a -
+    b|^2 / n)`` on the standardised features (``gamma`` relative to the
+    number of features ``n``), ridge ``alpha``; the intercept is the
+    training mean. Training runs longer than ``max_train`` samples are
+    subsampled evenly (the solve is cubic in the number of samples)."""
+
+    def __init__(self, n_outputs: int | None = 8, gamma: float = 1.0, alpha: float = 1e-2,
+                 max_train: int = 3000) -> None:
+        if not gamma > 0 or not alpha > 0:
+            raise ValueError(f"gamma and alpha must be positive, got {gamma}, {alpha}")
+        self.n_outputs, self.gamma, self.alpha, self.max_train = n_outputs, float(gamma), float(alpha), int(max_train)
+
+    def __repr__(self) -> str:
+        return f"KernelRidgeReadout(n_outputs={self.n_outputs}, gamma={self.gamma:g}, alpha={self.alpha:g})"
+
+    def _kernel(self, A: np.ndarray, B: np.ndarray) -> np.ndarray:
+        d2 = (A**2).sum(axis=1)[:, None] + (B**2).sum(axis=1)[None, :] - 2.0 * A @ B.T
+        return np.exp(-self.gamma / A.shape[1] * np.maximum(d2, 0.0))
+
+    def fit(self, features: Any, xy: Any) -> "KernelRidgeReadout":
+        X = _cols(features, self.n_outputs)
+        Y = as_matrix(xy, "xy")
+        check_same_length(X, Y, "features", "xy")
+        if len(X) > self.max_train:
+            keep = np.unique(np.linspace(0, len(X) - 1, self.max_train).round().astype(int))
+            X, Y = X[keep], Y[keep]
+        Xs = self._fit_scale(X)
+        self.X_ = Xs
+        self.y_mean_ = Y.mean(axis=0)
+        K = self._kernel(Xs, Xs)
+        K[np.diag_indices_from(K)] += self.alpha
+        self.dual_ = np.linalg.solve(K, Y - self.y_mean_)
+        return self
+
+    def predict(self, features: Any, chunk: int = 2048) -> np.ndarray:
+        Q = self._scaled(features)
+        out = np.empty((len(Q), self.dual_.shape[1]))
+        for s in range(0, len(Q), chunk):
+            out[s : s + chunk] = self._kernel(Q[s : s + chunk], self.X_) @ self.dual_ + self.y_mean_
+        return out
+
+
+def make_readout(spec: dict[str, Any]) -> Any:
+    """A readout from a spec: ``{"kind": "quadratic", "n_outputs", "ridge"}``,
+    ``{"kind": "knn", "n_outputs", "k", "weights"}`` or ``{"kind": "kernel",
+    "n_outputs", "gamma", "alpha"}``."""
+    s = dict(spec)
+    kind = s.pop("kind", None)
+    if kind == "quadratic":
+        return QuadraticRegression(n_outputs=s.pop("n_outputs", 8), ridge=s.pop("ridge", 0.0), degree=s.pop("degree", 2))
+    if kind == "knn":
+        return KNNReadout(**s)
+    if kind == "kernel":
+        return KernelRidgeReadout(**s)
+    raise ValueError(f"unknown readout kind {kind!r}; use 'quadratic', 'knn' or 'kernel'")
+
+
+def describe_spec(spec: dict[str, Any]) -> str:
+    s = dict(spec)
+    kind = s.pop("kind")
+    return kind + "(" + ", ".join(f"{k}={v:g}" if isinstance(v, float) else f"{k}={v}" for k, v in s.items()) + ")"
+
+
+def default_candidates(kinds: Sequence[str] = ("quadratic", "knn", "kernel"),
+                       n_outputs: Sequence[int] = (8, 12)) -> list[dict[str, Any]]:
+    """The grid :func:`select_readout` searches by default: ridge quadratic
+    regression (ridge 0 .. 1 on the centred expansion), kNN (k 1 .. 20,
+    inverse-distance weights) and Gaussian kernel ridge (gamma 0.5 .. 4,
+    alpha 1e-3 .. 1e-1), each on ``n_outputs`` slowest outputs."""
+    out: list[dict[str, Any]] = []
+    for n in n_outputs:
+        if "quadratic" in kinds:
+            out += [{"kind": "quadratic", "n_outputs": n, "ridge": r} for r in (0.0, 1e-2, 1e-1, 1.0, 10.0)]
+        if "knn" in kinds:
+            out += [{"kind": "knn", "n_outputs": n, "k": k, "weights": "distance"} for k in (1, 3, 5, 10, 20)]
+        if "kernel" in kinds:
+            out += [{"kind": "kernel", "n_outputs": n, "gamma": g, "alpha": a}
+                    for g in (0.5, 1.0, 2.0, 4.0) for a in (1e-3, 1e-2, 1e-1)]
+    return out
+
+
+def block_folds(n: int, n_folds: int = 5) -> list[tuple[np.ndarray, np.ndarray]]:
+    """(train, held-out) index pairs: ``n_folds`` contiguous blocks of a run."""
+    if n < 2 * n_folds:
+        raise ValueError(f"{n} samples are too few for {n_folds} folds")
+    edges = np.linspace(0, n, n_folds + 1).round().astype(int)
+    idx = np.arange(n)
+    return [(np.concatenate([idx[: edges[i]], idx[edges[i + 1] :]]), idx[edges[i] : edges[i + 1]])
+            for i in range(n_folds)]
+
+
+@dataclass
+class ReadoutSelection:
+    """What :func:`select_readout` found: the best ``spec``, its readout fitted
+    on the whole training run (``readout``), and each candidate's mean
+    held-out Euclidean error in metres (``scores``, same order as
+    ``candidates``)."""
+
+    spec: dict[str, Any]
+    readout: Any
+    candidates: list[dict[str, Any]] = field(default_factory=list)
+    scores: np.ndarray = field(default_factory=lambda: np.empty(0))
+
+    def describe(self) -> str:
+        return describe_spec(self.spec)
+
+
+def select_readout(features: Any, xy: Any, candidates: Sequence[dict[str, Any]] | None = None, *,
+                   n_folds: int = 5) -> ReadoutSelection:
+    """Chooses a readout by blocked cross-validation on one (training) run.
+
+    Each candidate is fitted on ``n_folds - 1`` contiguous blocks of the run
+    and scored by the mean Euclidean error on the held-out block; the one
+    with the lowest mean is refitted on the whole run. ``features`` (N, m)
+    and ``xy`` (N, 2) in the run's order."""
+    F = as_matrix(features, "features")
+    Y = as_matrix(xy, "xy")
+    check_same_length(F, Y, "features", "xy")
+    cands = list(candidates) if candidates is not None else default_candidates(n_outputs=tuple(
+        n for n in (8, 12) if n <= F.shape[1]) or (F.shape[1],))
+    if not cands:
+        raise ValueError("no readout candidates")
+    folds = block_folds(len(F), n_folds)
+    from threadpoolctl import threadpool_limits
+
+    with threadpool_limits(limits=1, user_api="blas"):  # many small solves: threads only thrash
+        scores = _cv_scores(cands, folds, F, Y)
+    best = int(np.argmin(scores))
+    spec = dict(cands[best])
+    return ReadoutSelection(spec, make_readout(spec).fit(F, Y), [dict(c) for c in cands], scores)
+
+
+def _cv_scores(cands: list[dict[str, Any]], folds: list[tuple[np.ndarray, np.ndarray]], F: np.ndarray,
+               Y: np.ndarray) -> np.ndarray:
+    scores = np.empty(len(cands))
+    for i, spec in enumerate(cands):
+        errs = []
+        for tr, te in folds:
+            try:
+                pred = make_readout(spec).fit(F[tr], Y[tr]).predict(F[te])
+                errs.append(float(np.hypot(*(pred - Y[te]).T).mean()))
+            except (ValueError, np.linalg.LinAlgError):
+                errs.append(np.inf)
+        scores[i] = float(np.mean(errs))
+    return scores
