@@ -362,3 +362,21 @@ def test_plots_write_pngs(tmp_path):
     assert q.exists() and q.stat().st_size > 1000
     with pytest.raises(ValueError, match="png"):
         nav.plot_trajectories(rs, tmp_path / "t.jpg", area=(18.0, 22.0))
+
+
+def test_robust_descent_follows_a_wall_out_of_a_local_minimum():
+    """Straight-line cost to a target behind a wall: the thesis rule presses
+    against the wall (a local minimum of the cost on the free space); the
+    robust descent follows the wall round its end and arrives."""
+    world = World.generate(3, area=(12.0, 12.0), n_objects=4, obstacles=({"kind": "box", "x": 0.0, "y": 0.0,
+                                                                         "length": 6.0, "width": 0.3},))
+    feats = nav.CoordinateFeatures(lambda X: 0.2 * X)
+    out = {}
+    for d in (nav.ThesisDescent(1.0, 0.5), nav.RobustDescent()):
+        sim = nav.PointSimulator(robot=Robot.two_cameras(0.7), world=world)
+        out[d.name] = nav.Navigator(sim, feats, d, max_iterations=150).run((0.5, -3.0), (-0.5, 3.0))
+    assert not out["thesis rule"].success
+    r = out["robust descent"]
+    assert r.success and r.follows >= 1
+    assert world.free(r.path[:, 0], r.path[:, 1], 0.35 - 1e-9).all()
+    assert r.direct / r.travelled > 0.4
