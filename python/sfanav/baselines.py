@@ -123,14 +123,36 @@ class PerfectMemory(_Memory):
 
     def fit(self, images: Any, xy: Any) -> "PerfectMemory":
         """Stores the views (N, H, W[, C]) and their positions (N, 2), metres."""
-        rows = self._fit_common(images, xy)
-        self.width_ = rows.shape[2]
-        self._spectra = np.fft.rfft(rows, axis=2).astype(np.complex64)  # (n, R, F)
-        self._sq_norms = (rows.astype(np.float64) ** 2).sum(axis=(1, 2))
-        self._n_values = rows.shape[1] * rows.shape[2]
+        imgs = as_images(images)
+        Y = as_matrix(xy, "xy", n_cols=2)
+        check_same_length(imgs, Y, "images", "xy")
+        self.xy_ = Y.copy()
+        self.image_shape_ = imgs.shape[1:]
+        self.n_places_ = n = len(imgs)
+        self._itemsize = imgs.dtype.itemsize
+        # Spectra in chunks of views, straight into the one stored copy, laid out
+        # conjugated as (F, R, n) for the per-frequency products of match():
+        # no float32 copy of all views, no complex128 or transposed temporaries
+        # (for 5900 RGB 600x60 views that kept the peak ~4x the cache).
+        first = _as_rows(imgs[:1], "images", self.normalize)
+        R, W = first.shape[1], first.shape[2]
+        F = W // 2 + 1
+        self.width_ = W
+        self._spectra_t = np.empty((F, R, n), np.complex64)
+        self._sq_norms = np.empty(n)
+        step = max(1, int(self.chunk_bytes) // max(1, R * W * 24))
+        for i in range(0, n, step):
+            rows = _as_rows(imgs[i : i + step], "images", self.normalize)
+            self._spectra_t[:, :, i : i + step] = np.conj(np.fft.rfft(rows, axis=2)).transpose(2, 1, 0)
+            self._sq_norms[i : i + step] = (rows.astype(np.float64) ** 2).sum(axis=(1, 2))
+        self._n_values = R * W
         self.bytes_per_place_ = int(np.prod(self.image_shape_)) * self._itemsize + 2 * 8
-        self.cache_bytes_ = int(self._spectra.nbytes + self._sq_norms.nbytes)
+        self.cache_bytes_ = int(self._spectra_t.nbytes + self._sq_norms.nbytes)
         return self
+
+    def _spectra_of(self, idx: Any) -> np.ndarray:
+        """Spectra (m, R, F) of the stored views ``idx`` (int array)."""
+        return np.conj(self._spectra_t[:, :, np.asarray(idx)]).transpose(2, 1, 0)
 
     def match(self, images: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Best stored view for each query image.
@@ -149,7 +171,7 @@ class PerfectMemory(_Memory):
         n, W = len(self.xy_), self.width_
         Q = np.fft.rfft(q, axis=2).astype(np.complex64)  # (m, R, F)
         q_norms = (q.astype(np.float64) ** 2).sum(axis=(1, 2))
-        S = np.ascontiguousarray(np.conj(self._spectra).transpose(2, 1, 0))  # (F, R, n)
+        S = self._spectra_t  # (F, R, n), conjugated
         per_query = W * n * 24 + S.shape[0] * n * 8  # correlations, distances, their copy, products
         chunk = max(1, int(self.chunk_bytes) // per_query)
         idx = np.empty(len(q), dtype=np.int64)
@@ -164,7 +186,7 @@ class PerfectMemory(_Memory):
             idx[sl], shift[sl] = np.divmod(best, W)
         # The float32 spectra rank the candidates; the winners' RMS is recomputed
         # directly (the norm expansion loses digits to cancellation near 0).
-        views = np.fft.irfft(self._spectra[idx], n=W, axis=2)  # (m, R, W)
+        views = np.fft.irfft(self._spectra_of(idx), n=W, axis=2)  # (m, R, W)
         cols = (np.arange(W)[None, :] - shift[:, None]) % W  # roll(view, d)[w] = view[w - d]
         rolled = np.take_along_axis(views, cols[:, None, :], axis=2)
         rms = np.sqrt(((q.astype(np.float64) - rolled) ** 2).mean(axis=(1, 2)))
@@ -174,7 +196,7 @@ class PerfectMemory(_Memory):
         """The RIDF (W,) of one query image (H, W[, C]) against stored view
         ``index``: RMS difference for every shift ``d`` (``np.roll(view, d, axis=1)``)."""
         q = self._check_query(np.asarray(image)[None])[0].astype(np.float64)
-        v = np.fft.irfft(self._spectra[index], n=self.width_, axis=1).astype(np.float64)
+        v = np.fft.irfft(self._spectra_of([index])[0], n=self.width_, axis=1).astype(np.float64)
         W = self.width_
         return np.array([np.sqrt(((q - np.roll(v, d, axis=1)) ** 2).mean()) for d in range(W)])
 
