@@ -255,3 +255,33 @@ def test_tiny_realistic_garden_local_readout_beats_the_thesis_readout():
     e_thesis = np.hypot(*(thesis - xy_te).T).mean()
     e_knn = np.hypot(*(sel.readout.predict(F_te) - xy_te).T).mean()
     assert e_knn < 0.8 * e_thesis, (e_knn, e_thesis)
+
+
+# --------------------------------------------------------------------- loop closures
+
+
+def test_loop_closures_found_aligned_and_interleaved():
+    from sfanav.loopclosure import find_loop_closures, interleave
+
+    rng = np.random.default_rng(0)
+    n, H, W = 20, 6, 64
+    base = rng.random((n, H, W)).astype(np.float32)
+    # smooth along the run so neighbouring frames look alike, as in a real run
+    places = np.stack([base[max(i - 1, 0)] + base[i] + base[min(i + 1, n - 1)] for i in range(n)])
+    shifts = rng.integers(0, W, n)
+    second = np.stack([np.roll(places[i], -int(shifts[i]), axis=1) + 0.01 * rng.standard_normal((H, W))
+                       for i in range(n)])
+    run = np.concatenate([places, second]).astype(np.float32)
+    odo = np.concatenate([np.c_[np.arange(n), np.zeros(n)]] * 2).astype(float)
+    lc = find_loop_closures(run, odo, min_gap=10, max_odometry_distance=0.5, neighbor_lag=1)
+    assert len(lc) >= n - 2 and np.all(lc.current >= n)
+    assert np.array_equal(lc.past, lc.current - n)
+    # rolling the past image by the shift aligns it to the current one
+    for c, p, s in zip(lc.current, lc.past, lc.shift):
+        assert np.abs(np.roll(run[p], s, axis=1) - run[c]).mean() < 0.05
+    seq = interleave(run, lc)
+    assert len(seq) == len(run) + len(lc)
+    k = int(np.nonzero([np.array_equal(x, run[lc.current[0]]) for x in seq])[0][0])
+    assert np.allclose(seq[k + 1], np.roll(run[lc.past[0]], lc.shift[0], axis=1))
+    # without odometry the gate is the temporal gap only; the first pass has no earlier partner
+    assert np.all(find_loop_closures(run, None, min_gap=10, neighbor_lag=1).current >= 10)

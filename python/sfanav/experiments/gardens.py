@@ -20,6 +20,10 @@ training run only) the localization error is measured:
 * the peer baselines (perfect memory with the rotational image difference,
   nearest neighbour on Fourier signatures) on the raw panoramas.
 
+A *training variant* ``loop closures`` (thesis 6.2.1 with image-based loop
+closures, :mod:`sfanav.loopclosure`) is trained on all rows beside the row
+variants.
+
 Every number is the mean over the seeds (``per_seed`` in the JSON holds
 each). Row names: ``"<metric> [<configuration>]"``, e.g. ``MAE x (%)
 [thesis config]``, ``MAE x (%) [readout: kNN]``, ``MAE x (%) [rows: band +
@@ -54,6 +58,9 @@ ROW_VARIANTS: dict[str, ImageRows] = {
     "rows: row-norm": ImageRows(normalize=True),
     "rows: band + row-norm": ImageRows(band=BAND, normalize=True),
 }
+# training variants: name -> options (None: the thesis's temporally ordered sequence)
+LOOP_CLOSURES = {"accept": 1.0, "min_gap": 40, "max_odometry_distance": 3.0}
+TRAIN_VARIANTS: dict[str, dict[str, Any] | None] = {"": None, "loop closures": LOOP_CLOSURES}
 READOUTS: dict[str, tuple[str, ...] | None] = {
     "": None,  # the thesis's quadratic regression, 8 outputs, least squares
     "readout: ridge quadratic": ("quadratic",),
@@ -68,8 +75,8 @@ METRICS = ("MAE x (%)", "MAE y (%)", "MAE x (m)", "MAE y (m)", "MED (m)", "MAE x
 TARGETS = {"realistic": 3.0, "control": 1.8}
 
 
-def config_name(rows: str, readout: str, control: bool = False) -> str:
-    name = " + ".join(p for p in (rows, readout) if p) or "thesis config"
+def config_name(rows: str, readout: str, control: bool = False, train: str = "") -> str:
+    name = " + ".join(p for p in (rows, train, readout) if p) or "thesis config"
     return ("control: " + name) if control else name
 
 
@@ -101,9 +108,12 @@ def _network(quick: bool, shape: tuple[int, int, int]) -> Network:
 
 def run_scene(out: Path, preset: str, seed: int, *, quick: bool, progress: bool, control: bool,
               row_variants: dict[str, ImageRows] = ROW_VARIANTS, readouts: dict[str, Any] = READOUTS,
+              train_variants: dict[str, dict[str, Any] | None] = TRAIN_VARIANTS, baselines_too: bool = True,
               firing_maps: bool = True, n_repeats: int = 20) -> tuple[dict[str, dict[str, Any]], list[str]]:
-    """Simulates one scene, trains one network per row variant, evaluates
-    every readout; returns ({configuration: {metric: value}}, plots)."""
+    """Simulates one scene, trains one network per row variant (all rows
+    and each training variant other than the plain one: the training
+    variants are measured on all rows), evaluates every readout; returns
+    ({configuration: {metric: value}}, plots)."""
     log = _log(progress)
     if quick:
         ds = simulated(out, preset, seed, quick=True, camera=sim.PanoramicCamera(60, 8), max_frames=60,
@@ -120,8 +130,8 @@ def run_scene(out: Path, preset: str, seed: int, *, quick: bool, progress: bool,
     plots: list[str] = []
     tag = "control" if control else "realistic"
     # peer baselines on the raw panoramas, stored training views, every test image
-    for name, model in (("perfect memory", baselines.PerfectMemory()),
-                        ("Fourier signature", baselines.FourierSignature())):
+    for name, model in ((("perfect memory", baselines.PerfectMemory()),
+                         ("Fourier signature", baselines.FourierSignature())) if baselines_too else ()):
         k = getattr(model, "n_coefficients", None)
         if k is not None and k > X_tr.shape[2] // 2 + 1:
             model = baselines.FourierSignature(X_tr.shape[2] // 2 + 1)
@@ -133,22 +143,38 @@ def run_scene(out: Path, preset: str, seed: int, *, quick: bool, progress: bool,
             "MAE y (m)": b["mae_y"], "MED (m)": b["med"], "numbers per image": None,
             "training (s)": None, "query ms": b["query_ms"]}
         log(f"{tag} seed {seed} {name}: MED {b['med']:.3f} m ({time.perf_counter() - t0:.0f} s)")
-    for rname, rows in row_variants.items():
+    odo_tr = ds.select(run="train").odometry[:, :2]
+    variants = [(rn, r, "", train_variants.get("")) for rn, r in row_variants.items()] if "" in train_variants else []
+    variants += [("", ImageRows(), tn, opts) for tn, opts in train_variants.items() if tn]
+    for rname, rows, tname, topts in variants:
         rows = ImageRows(rows.band, rows.normalize, elev)  # type: ignore[arg-type]
         A_tr, A_te = rows(X_tr), rows(X_te)
         net = _network(quick, A_tr.shape[1:] if A_tr.ndim == 4 else A_tr.shape[1:] + (1,))
         t0 = time.perf_counter()
-        net.fit(A_tr, Rotation(step=5, window=1.0), progress=False)
+        extra: dict[str, Any] = {}
+        seq = A_tr
+        if topts is not None:
+            from ..loopclosure import find_loop_closures, interleave
+
+            lc = find_loop_closures(X_tr, odo_tr, **topts)
+            seq = interleave(A_tr, lc)
+            true_d = np.hypot(*(xy_tr[lc.current] - xy_tr[lc.past]).T) if len(lc) else np.zeros(0)
+            extra = {"loop closures": len(lc),
+                     "loop closures within 0.5 m (%)": float(100 * np.mean(true_d < 0.5)) if len(lc) else None}
+            log(f"{tag} seed {seed} {tname}: {len(lc)} loop closures, "
+                f"{extra['loop closures within 0.5 m (%)'] or 0:.0f} % within 0.5 m (ground truth)")
+        net.fit(seq, Rotation(step=5, window=1.0), progress=False)
         fit_s = time.perf_counter() - t0
         F_tr, F_te = net.transform(A_tr), net.transform(A_te)
         R = net.transform(A_tr, rotations=True)
         _, eta_phi = analysis.eta_values(R[:, :, :8])
-        log(f"{tag} seed {seed} {rname or 'all rows'}: trained in {fit_s:.0f} s, max eta_phi {eta_phi.max():.3f}")
-        if firing_maps and (not quick or not rname):  # quick: the plain network's maps only
+        vname = rname or tname or "all rows"
+        log(f"{tag} seed {seed} {vname}: trained in {fit_s:.0f} s, max eta_phi {eta_phi.max():.3f}")
+        if firing_maps and (not quick or vname == "all rows"):  # quick: the plain network's maps only
             angles = analysis.orientation_angles(R.shape[1], step=5, width=A_tr.shape[2])
-            p = out / f"gardens-{tag}-seed{seed}-{(rname or 'all rows').replace('rows: ', '').replace(' + ', '+').replace(' ', '-')}-firing_maps.png"
+            p = out / f"gardens-{tag}-seed{seed}-{vname.replace('rows: ', '').replace(' + ', '+').replace(' ', '-')}-firing_maps.png"
             plots.append(str(analysis.plot_firing_maps(R, xy_tr, p, which=(0, 1, 2, 3), angles=angles,
-                                                       title=f"{preset} seed {seed}, {rows.describe()}")))
+                                                       title=f"{preset} seed {seed}, {tname or rows.describe()}")))
         sels: dict[str, Any] = {}  # one CV per readout kind; "best" takes the lowest CV error among them
         for oname, kinds in readouts.items():
             if kinds is None:
@@ -163,12 +189,12 @@ def run_scene(out: Path, preset: str, seed: int, *, quick: bool, progress: bool,
             pred = reader.predict(F_te)
             m = localization_metrics(pred, xy_te, coordinate_range=crange)
             rs = _random_splits(spec, F_te, xy_te, crange, n_repeats=5 if quick else n_repeats, seed=seed)
-            name = config_name(rname, oname, control)
+            name = config_name(rname, oname, control, tname)
             res[name] = {"MAE x (%)": m["mae_x_pct"], "MAE y (%)": m["mae_y_pct"], "MAE x (m)": m["mae_x"],
                          "MAE y (m)": m["mae_y"], "MED (m)": m["med"],
                          "MAE x (%) (random splits)": rs["mae_x_pct"], "MAE y (%) (random splits)": rs["mae_y_pct"],
                          ETA: float(eta_phi.max()), "training (s)": fit_s,
-                         "numbers per image": int(spec["n_outputs"]), "readout": describe_spec(spec)}
+                         "numbers per image": int(spec["n_outputs"]), "readout": describe_spec(spec), **extra}
             log(f"  {name}: MAE {m['mae_x_pct']:.2f} / {m['mae_y_pct']:.2f} %, MED {m['med']:.3f} m "
                 f"({describe_spec(spec)})")
     return res, plots
@@ -238,7 +264,7 @@ def _exp_gardens(out: Path, *, quick: bool, seed: int, progress: bool) -> Experi
     avg = {**_average(realistic), **_average(control)}
     rows: list[dict[str, Any]] = []
     for cfg, m in avg.items():
-        for k in METRICS + ("readout", "query ms"):
+        for k in METRICS + ("readout", "query ms", "loop closures", "loop closures within 0.5 m (%)"):
             if k not in m or m[k] is None:
                 continue
             row = {"metric": f"{k} [{cfg}]", "thesis": None, "sfanav": m[k], "configuration": cfg,
@@ -256,6 +282,10 @@ def _exp_gardens(out: Path, *, quick: bool, seed: int, progress: bool) -> Experi
            ": 350x40 RGB panoramas, ~1200 training frames on a grid with crossings (led around the objects), "
            "a 400-frame random test walk; Table 5.1 network (thesis-5.1 preset, mixed precision) with 12 outputs "
            "(the 8 slowest are Table 5.1's), rotation 5 px, 100 % window")
+        + ". Training variant 'loop closures' (thesis 6.2.1, image-based): each training image followed by its "
+        "earlier loop-closure partner (Fourier-signature nearest neighbour at least 40 frames earlier, within 3 m "
+        "by odometry, accepted if as alike as a frame 2 steps away), aligned by circular cross-correlation; "
+        "training time includes finding them"
         + f". Row variants: horizon band = rows of elevation {BAND[0]:g}..{BAND[1]:g} deg resampled to the full "
         "height; row-norm = each row to zero mean, unit variance. Readouts other than the thesis's are chosen "
         "among 8 or 12 outputs and their hyperparameters by 5-fold blocked cross-validation on the training run "
