@@ -186,6 +186,25 @@ def _grid_features(sc: Scene, net: Any, spacing: float, progress: bool) -> tuple
     return xs, ys, F
 
 
+def position_code_error(xs: np.ndarray, ys: np.ndarray, F: np.ndarray, n: int) -> float:
+    """RMS error (m) of x, y fitted as a quadratic function of the first
+    ``n`` outputs over a grid (a measure of how well they code position)."""
+    X, Y = np.meshgrid(xs, ys)
+    ok = np.isfinite(F[..., 0])
+    g = F[ok][:, :n]
+    P = np.column_stack([X[ok], Y[ok]])
+    A = np.column_stack([g] + [g[:, i : i + 1] * g[:, i:] for i in range(n)] + [np.ones(len(g))])
+    coef, *_ = np.linalg.lstsq(A, P, rcond=None)
+    return float(np.sqrt(np.mean(np.sum((A @ coef - P) ** 2, axis=1))))
+
+
+def coordinate_model(sc: Scene) -> Any:
+    """SFA on the coordinates of the scene's training trajectory (monomials
+    up to degree 7): the representation the image network ideally learns
+    (thesis 7.2.2, after [42]); a reference for the descents."""
+    return nav.fit_coordinate_sfa(sc.trajectory.poses[:, :2], sc.area, n_components=8, expansion="poly", degree=7)
+
+
 def _summary_rows(label: str, s: nav.TrialSummary, thesis: dict[str, Any] | None, extra: str = "") -> list[dict[str, Any]]:
     th = thesis or {}
     rows = [
@@ -268,7 +287,25 @@ def _run_71(kind: str, out: Path, *, quick: bool, seed: int, progress: bool) -> 
             titles=[("reached" if s.results[i].success else s.results[i].reason)
                     + (f" e={s.efficiencies[i]:.2f}" if s.results[i].success else "") for i in sel],
             title=f"7.1 {kind}: {d.name}")))
+    # the same trials with slow features of the coordinates (the ideal case of the image network)
+    model = coordinate_model(sc)
+    for d in _descents():
+        psim = nav.PointSimulator(robot=sc.robot, world=sc.world)
+        navi = nav.Navigator(psim, nav.CoordinateFeatures(model), d, n_outputs=2, success_radius=SUCCESS_RADIUS,
+                             max_iterations=QUICK_ITERATIONS if quick else MAX_ITERATIONS)
+        s = nav.evaluate_trials(navi, starts, targets, optimal_lengths=optimal, progress=progress,
+                                desc=f"{d.name}, coordinate SFA")
+        rows += _summary_rows(f"{d.name}, coordinate SFA", s, None)
+        notes_runs.append(f"{d.name} with coordinate SFA: {_reasons(s)}")
+        if d.name == "robust descent":
+            sel = _pick(s.results, 8)
+            plots.append(str(nav.plot_trajectories(
+                [s.results[i] for i in sel], out / f"7.1-{kind}-trajectories-coordinate-sfa.png", world=sc.world,
+                optimal=[opt_paths[i] for i in sel], title=f"7.1 {kind}: robust descent on coordinate SFA")))
     xs, ys, F = _grid_features(sc, net, 0.75 if quick else 0.5, progress)
+    for n in (2, 8):
+        rows.append({"metric": f"position code: RMS of x, y from s1-s{n} (m)", "thesis": None,
+                     "sfanav": position_code_error(xs, ys, F, n)})
     tf = _navigator(sc, net, None).target_features(targets[0])
     plots.append(str(nav.plot_cost_surface(xs, ys, F, tf, out / f"7.1-{kind}-cost-surface.png", ns=(2,), n_firing=4,
                                            target=targets[0], world=sc.world,
@@ -284,6 +321,10 @@ def _run_71(kind: str, out: Path, *, quick: bool, seed: int, progress: bool) -> 
            f"Target fixed inside the V at ({targets[0][0]:.2f}, {targets[0][1]:.2f}); starts in the lower half outside "
            "the V; efficiency = A* length (8-connected, 0.1 m grid, obstacles inflated by the robot radius) / "
            "travelled; the any-angle row uses the line-of-sight-shortened A* path. ")
+        + "Rows 'coordinate SFA': the same trials with slow features of the coordinates (degree-7 monomials of the "
+        "training trajectory's positions, the image network's ideal case), a point robot with exact odometry. "
+        "'position code' rows: RMS error of x, y fitted as a quadratic function of the image network's first 2 / 8 "
+        "outputs on a 0.5 m grid (how well the representation codes position). "
         + "Outcomes: " + "; ".join(notes_runs) + "."
     )
     return ExperimentResult(f"7.1-{kind}", rows, plots, notes)
