@@ -99,4 +99,4 @@ def test_722_rows(results):
         assert math.isfinite(rows[f"{kind}: time efficiency of the direct path"]["sfanav"])
     assert "halfplane: transition point error m (robust descent)" in rows
     _check_values(r)
-    assert len(r.plots) == 6
+    assert len(r.plots) == 8

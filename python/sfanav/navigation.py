@@ -374,7 +374,9 @@ class RobustDescent:
       and its length estimates the distance left. It straightens the
       curved paths of plain gradient descent where the outputs change at
       different rates. Used when it is a descent direction of the cost
-      (``lam = damping * trace(J^T J) / 2``); otherwise the gradient.
+      (``lam = damping * trace(J^T J) / 2``) within ``max_angle`` degrees
+      of the negative gradient (default 90: any descent direction);
+      otherwise the gradient.
     * **Step length from the cost's own distance estimate** (without a
       Gauss-Newton step): near a target a distance cost is a cone, ``C ~
       |grad C| * distance``, so ``C / |g|`` estimates the distance left; the
@@ -430,6 +432,7 @@ class RobustDescent:
         probe_first: bool = True,
         gauss_newton: bool = True,
         damping: float = 0.01,
+        max_angle: float = 90.0,
     ) -> None:
         for name, v in (("fraction", fraction), ("min_step", min_step), ("max_step", max_step),
                         ("escape_distance", escape_distance), ("follow_step", follow_step)):
@@ -450,6 +453,7 @@ class RobustDescent:
         self.escape_distance, self.escape_steps, self.max_escapes = float(escape_distance), int(escape_steps), int(max_escapes)
         self.probe_first = bool(probe_first)
         self.gauss_newton, self.damping = bool(gauss_newton), float(damping)
+        self.max_angle = float(np.radians(max_angle))
         if not self.damping >= 0:
             raise ValueError(f"damping must be >= 0, got {damping}")
         self.reset()
@@ -469,7 +473,10 @@ class RobustDescent:
             d = -np.linalg.solve(A + lam * np.eye(2), J.T @ r)
         except np.linalg.LinAlgError:
             return None
-        if not np.isfinite(d).all() or float(np.hypot(*d)) <= 1e-12 or float(d @ -g) <= 0:
+        nd, ng = float(np.hypot(*d)), float(np.hypot(*g))
+        if not np.isfinite(d).all() or nd <= 1e-12 or ng <= 1e-15:
+            return None
+        if float(d @ -g) / (nd * ng) <= (np.cos(self.max_angle) if self.max_angle < np.pi / 2 else 0.0):
             return None
         return d
 

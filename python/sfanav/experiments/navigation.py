@@ -474,7 +474,9 @@ def exp_722(out: Path, *, quick: bool = False, seed: int = 0, progress: bool = T
             opt_paths.append(P)
             opt_times.append(T_)
         direct_times = [nav.travel_time(np.array([s_, t_]), regions) for s_, t_ in zip(starts, targets)]
-        for d in _descents():
+        gd = nav.RobustDescent(gauss_newton=False)
+        gd.name = "robust descent, gradient steps"
+        for d in _descents() + [gd]:
             sim = nav.PointSimulator(area, Robot.two_cameras(0.7))
             navi = nav.Navigator(sim, nav.CoordinateFeatures(model), d, n_outputs=8, weights=w,
                                  success_radius=SUCCESS_RADIUS, max_iterations=MAX_ITERATIONS)
@@ -518,6 +520,7 @@ def exp_722(out: Path, *, quick: bool = False, seed: int = 0, progress: bool = T
         f"virtual sensors 0.7 m apart; {n_trials} trials per scene (half-plane: start x < -1, target x > 1, >= 8 m "
         "apart; disc: start and target 7-8.5 m from the centre on opposite sides). Optimal: Snell transition point "
         "(half-plane), A* on a 0.1 m grid with cost 3 per metre in the slow disc (disc). The thesis reports no "
-        "numbers here, only that the paths are close to the time-optimal ones. "
+        "numbers here, only that the paths are close to the time-optimal ones. 'robust descent, gradient steps': the robust "
+        "descent without its Gauss-Newton steps (it follows the cost's gradient like the thesis rule). "
     )
     return ExperimentResult("7.2.2", rows, plots, header + "Outcomes: " + "; ".join(notes) + ".")
