@@ -77,7 +77,7 @@ def test_721_rows_for_every_n_weighting_and_descent(results):
     rows = _rows(r)
     for n in range(2, 9):
         for mode in ("raw", "weighted"):
-            for d in ("thesis rule", "robust descent"):
+            for d in ("thesis rule", "robust descent", "thesis rule, coordinate SFA", "robust descent, coordinate SFA"):
                 assert f"n={n} {mode}: success ({d})" in rows
                 assert f"n={n} {mode}: efficiency ({d})" in rows
     assert rows["n=2 raw: success (thesis rule)"]["thesis"] == 0.98
@@ -85,7 +85,7 @@ def test_721_rows_for_every_n_weighting_and_descent(results):
     assert rows["n=3 weighted: efficiency (thesis rule)"]["thesis"] == 0.92
     assert rows["n=8 weighted: success (robust descent)"]["thesis"] is None
     _check_values(r)
-    assert "beta" in r.notes
+    assert "beta" in r.notes and len(r.plots) == 4
 
 
 def test_722_rows(results):

@@ -343,6 +343,9 @@ def exp_71_obstacle(out: Path, *, quick: bool = False, seed: int = 0, progress: 
 # --------------------------------------------------------------------- 7.2.1
 
 
+N_TRIALS_721_IMAGES = 20  # image-based runs per setting (28 settings; the thesis: 50)
+
+
 @register("7.2.1", "More slow-feature outputs, raw vs weighted by 1/beta (thesis 7.2.1)")
 def exp_721(out: Path, *, quick: bool = False, seed: int = 0, progress: bool = True) -> ExperimentResult:
     out = Path(out)
@@ -350,35 +353,62 @@ def exp_721(out: Path, *, quick: bool = False, seed: int = 0, progress: bool = T
     net = scene_network(sc, out, seed, progress=progress)
     beta = np.asarray(net.beta_values_, float)
     wrel = nav.beta_weights(beta, relative=True)
+    model = coordinate_model(sc)
+    cbeta = np.asarray(model.sfa.beta_values_, float)
+    cw = nav.beta_weights(cbeta, relative=True)
     n_trials = 1 if quick else 50
+    n_img = 1 if quick else N_TRIALS_721_IMAGES
     ns = list(range(2, 9))
     rng = _rng(seed, 721)
     starts, targets = nav.sample_trials(n_trials, sc.area, free=_free(sc), min_distance=3.5 if quick else 15.0,
                                         margin=0.4, rng=rng)
     rows: list[dict[str, Any]] = []
     outcome = []
-    for n in ns:
-        for mode, weights in (("raw", None), ("weighted", wrel)):
-            for d in _descents():
-                navi = _navigator(sc, net, d, n=n, weights=weights)
-                if quick:
-                    navi.max_iterations = 25
-                s = nav.evaluate_trials(navi, starts, targets, progress=progress, desc=f"n={n} {mode} {d.name}")
-                th = THESIS["7.2.1"].get((mode, n), (None, None)) if d.name == "thesis rule" else (None, None)
-                rows.append({"metric": f"n={n} {mode}: success ({d.name})", "thesis": th[0], "sfanav": s.success_rate})
-                rows.append({"metric": f"n={n} {mode}: efficiency ({d.name})", "thesis": th[1], "sfanav": s.efficiency})
-                outcome.append((n, mode, d.name, s.success_rate, s.efficiency))
+    for arm in ("images", "coordinate SFA"):
+        for n in ns:
+            for mode in ("raw", "weighted"):
+                for d in _descents():
+                    if arm == "images":
+                        navi = _navigator(sc, net, d, n=n, weights=wrel if mode == "weighted" else None)
+                        S, T = starts[:n_img], targets[:n_img]
+                        label = d.name
+                    else:
+                        psim = nav.PointSimulator(robot=sc.robot, world=sc.world)
+                        navi = nav.Navigator(psim, nav.CoordinateFeatures(model), d, n_outputs=n,
+                                             weights=cw if mode == "weighted" else None,
+                                             success_radius=SUCCESS_RADIUS, max_iterations=MAX_ITERATIONS)
+                        S, T = starts, targets
+                        label = f"{d.name}, coordinate SFA"
+                    if quick:
+                        navi.max_iterations = 25
+                    s = nav.evaluate_trials(navi, S, T, progress=progress, desc=f"n={n} {mode} {label}")
+                    th = THESIS["7.2.1"].get((mode, n), (None, None)) if label == "thesis rule" else (None, None)
+                    rows.append({"metric": f"n={n} {mode}: success ({label})", "thesis": th[0], "sfanav": s.success_rate})
+                    rows.append({"metric": f"n={n} {mode}: efficiency ({label})", "thesis": th[1],
+                                 "sfanav": s.efficiency})
+                    outcome.append((n, mode, label, s.success_rate, s.efficiency))
     plots = []
     xs, ys, F = _grid_features(sc, net, 0.75 if quick else 0.5, progress)
     tf = _navigator(sc, net, None).target_features(targets[0])
     plots.append(str(nav.plot_cost_surface(xs, ys, F, tf, out / "7.2.1-cost-surfaces.png", ns=ns, weights=wrel,
                                            n_firing=8, target=targets[0],
                                            title="7.2.1: firing maps s1-s8; cost n = 2..8 raw and 1/beta-weighted")))
-    plots.append(str(_plot_721(outcome, out / "7.2.1-success-vs-n.png")))
+    X, Y = np.meshgrid(xs, ys)
+    FC = model(np.column_stack([X.ravel(), Y.ravel()])).reshape(X.shape + (8,))
+    FC[~np.asarray(sc.world.free(X, Y, 0.0))] = np.nan
+    plots.append(str(nav.plot_cost_surface(xs, ys, FC, model(targets[:1])[0], out / "7.2.1-cost-surfaces-coordinate-sfa.png",
+                                           ns=ns, weights=cw, n_firing=8, target=targets[0],
+                                           title="7.2.1, coordinate SFA: s1-s8; cost n = 2..8 raw and 1/beta-weighted")))
+    plots.append(str(_plot_721([o for o in outcome if "coordinate" not in o[2]], out / "7.2.1-success-vs-n.png")))
+    plots.append(str(_plot_721([(n, m, d.replace(", coordinate SFA", ""), sr, ef) for n, m, d, sr, ef in outcome
+                                if "coordinate" in d], out / "7.2.1-success-vs-n-coordinate-sfa.png")))
     notes = (
         f"{'QUICK smoke version: ' if quick else ''}open-field scene {sc.name} (seed {seed}) and its network; "
-        f"{n_trials} trials (start-target >= {3.5 if quick else 15.0} m) per n, descent and weighting; beta of the "
-        f"network's outputs: {', '.join(f'{b:.3g}' for b in beta)}. Weighted outputs use weights beta_1 / beta_i "
+        f"{n_img} trials per n, descent and weighting with images (the thesis: 50; 28 settings of up to 400 stops "
+        f"of rendering and SFA each), {n_trials} with coordinate SFA (degree-7 monomials of the training "
+        f"trajectory's positions, the image network's ideal case); start-target >= {3.5 if quick else 15.0} m. "
+        f"beta of the network's outputs: {', '.join(f'{b:.3g}' for b in beta)}; of the coordinate SFA: "
+        f"{', '.join(f'{b:.3g}' for b in cbeta)}. Weighted outputs use weights beta_1 / beta_i "
         f"(1/beta scaled so the slowest output keeps weight 1) with eta = {ETA}, which equals the thesis's 1/beta "
         f"weights with eta = beta_1 = {beta[0]:.3g} (thesis: 0.0015); raw outputs eta = {ETA}; gamma {GAMMA}. "
         "The thesis gives numbers only for raw n = 2 and 8 and weighted n = 3 and 8 (fig. 7.8)."
