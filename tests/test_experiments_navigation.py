@@ -58,13 +58,14 @@ def test_71_rows_for_both_descents(results, name):
     thesis = {"7.1-open": (0.98, 0.94), "7.1-obstacle": (0.88, 0.76)}[name]
     assert rows["success (thesis rule)"]["thesis"] == thesis[0]
     assert rows["efficiency (thesis rule)"]["thesis"] == thesis[1]
-    for d in ("thesis rule", "robust descent"):
+    for d in ("thesis rule", "robust descent", "thesis rule, coordinate SFA", "robust descent, coordinate SFA"):
         assert f"success ({d})" in rows and f"efficiency ({d})" in rows
+    assert rows["position code: RMS of x, y from s1-s2 (m)"]["sfanav"] > 0
     if name == "7.1-obstacle":
         assert "efficiency vs any-angle shortest path (robust descent)" in rows
     _check_values(r)
     assert "QUICK" in r.notes and "trials" in r.notes
-    assert len(r.plots) == 3 and all((out / p).exists() or __import__("os").path.exists(p) for p in r.plots)
+    assert len(r.plots) == 4 and all((out / p).exists() or __import__("os").path.exists(p) for p in r.plots)
     saved = json.loads((out / f"{name}.json").read_text())
     assert saved["experiment"] == name and len(saved["rows"]) == len(r.rows)
     assert "thesis rule" in r.table() and "robust descent" in r.table()
@@ -76,7 +77,7 @@ def test_721_rows_for_every_n_weighting_and_descent(results):
     rows = _rows(r)
     for n in range(2, 9):
         for mode in ("raw", "weighted"):
-            for d in ("thesis rule", "robust descent"):
+            for d in ("thesis rule", "robust descent", "thesis rule, coordinate SFA", "robust descent, coordinate SFA"):
                 assert f"n={n} {mode}: success ({d})" in rows
                 assert f"n={n} {mode}: efficiency ({d})" in rows
     assert rows["n=2 raw: success (thesis rule)"]["thesis"] == 0.98
@@ -84,7 +85,7 @@ def test_721_rows_for_every_n_weighting_and_descent(results):
     assert rows["n=3 weighted: efficiency (thesis rule)"]["thesis"] == 0.92
     assert rows["n=8 weighted: success (robust descent)"]["thesis"] is None
     _check_values(r)
-    assert "beta" in r.notes
+    assert "beta" in r.notes and len(r.plots) == 4
 
 
 def test_722_rows(results):
@@ -98,4 +99,4 @@ def test_722_rows(results):
         assert math.isfinite(rows[f"{kind}: time efficiency of the direct path"]["sfanav"])
     assert "halfplane: transition point error m (robust descent)" in rows
     _check_values(r)
-    assert len(r.plots) == 6
+    assert len(r.plots) == 8

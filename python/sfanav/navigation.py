@@ -218,6 +218,13 @@ class PlaneGradient:
     returns the difference quotient between the cameras; later calls return
     the slope of the plane fitted to the four values of the last two stops
     (:func:`plane_gradient`).
+
+    With ``values`` (the two cameras' slow features, or their weighted
+    differences to the target) the same planes are fitted to every output
+    separately: ``jacobian`` (n, 2) then holds each output's gradient (the
+    local linear map from metres to slow features), used by
+    :class:`RobustDescent`'s Gauss-Newton step. ``last_method`` tells
+    ``"difference"`` or ``"plane"``.
     """
 
     def __init__(self, *, weighting: str = "area") -> None:
@@ -227,26 +234,40 @@ class PlaneGradient:
         self.reset()
 
     def reset(self) -> None:
-        self._prev: tuple[np.ndarray, np.ndarray] | None = None
+        self._prev: tuple[np.ndarray, np.ndarray, np.ndarray | None] | None = None
         self.last_method = ""
+        self.jacobian: np.ndarray | None = None
 
-    def update(self, positions: Any, costs: Any) -> np.ndarray:
-        """``positions`` (2, 2): left and right camera (m); ``costs`` (2,).
-        Returns the gradient estimate (2,) (cost per metre)."""
+    def update(self, positions: Any, costs: Any, values: Any = None) -> np.ndarray:
+        """``positions`` (2, 2): left and right camera (m); ``costs`` (2,);
+        ``values`` (2, n), optional. Returns the gradient estimate (2,)
+        (cost per metre); sets ``jacobian`` (n, 2) when ``values`` is given."""
         P = np.asarray(positions, dtype=float)
         c = np.asarray(costs, dtype=float)
         if P.shape != (2, 2) or c.shape != (2,):
             raise ValueError(f"need positions (2, 2) and costs (2,), got {P.shape} and {c.shape}")
+        V = None if values is None else np.asarray(values, dtype=float).reshape(2, -1)
         g = None
-        if self._prev is not None:
-            pp, pc = self._prev
+        prev = self._prev
+        if prev is not None:
+            pp, pc, _ = prev
             g = plane_gradient(np.vstack([pp, P]), np.concatenate([pc, c]), weighting=self.weighting)
         if g is None:
             g = difference_quotient(P[0], P[1], c[0], c[1])
             self.last_method = "difference"
         else:
             self.last_method = "plane"
-        self._prev = (P.copy(), c.copy())
+        self.jacobian = None
+        if V is not None:
+            rows = []
+            for i in range(V.shape[1]):
+                gi = None
+                if self.last_method == "plane" and prev is not None and prev[2] is not None and prev[2].shape == V.shape:
+                    gi = plane_gradient(np.vstack([prev[0], P]), np.concatenate([prev[2][:, i], V[:, i]]),
+                                        weighting=self.weighting)
+                rows.append(gi if gi is not None else difference_quotient(P[0], P[1], V[0, i], V[1, i]))
+            self.jacobian = np.array(rows)
+        self._prev = (P.copy(), c.copy(), None if V is None else V.copy())
         return g
 
 
@@ -261,7 +282,11 @@ class StepInfo:
     short by an obstacle or the border), ``last_move`` (metres actually
     driven), ``stuck`` (the navigator's stuck detector fired at this stop),
     ``heading`` (robot heading, odometry frame), ``method`` (how the
-    gradient was estimated: ``"difference"`` or ``"plane"``)."""
+    gradient was estimated: ``"difference"`` or ``"plane"``), ``jacobian``
+    (n, 2: each weighted output's gradient, from the same plane fits),
+    ``residual`` (n: weighted features minus the target's, mean of the two
+    cameras) and ``history`` (odometry camera positions (2k, 2) and their
+    residuals (2k, n) at all stops so far)."""
 
     iteration: int = 0
     blocked: bool = False
@@ -269,6 +294,9 @@ class StepInfo:
     stuck: bool = False
     heading: float = 0.0
     method: str = ""
+    jacobian: np.ndarray | None = None
+    residual: np.ndarray | None = None
+    history: tuple[np.ndarray, np.ndarray] | None = None
 
 
 class Descent(Protocol):
@@ -334,13 +362,26 @@ class RobustDescent:
     """A descent for the thesis's open problem (flat regions, local minima).
 
     * **Normalised steps along the estimated direction**: the direction is
-      the unit negative gradient, smoothed by a momentum on directions
-      (``momentum``); the step's length does not depend on the gradient's
-      size, so flat regions are crossed at full speed.
-    * **Step length from the cost's own distance estimate**: near a target a
-      distance cost is a cone, ``C ~ |grad C| * distance``, so ``C / |g|``
-      estimates the distance left; the step is ``clip(fraction * C / |g|,
-      min_step, max_step)`` (long in flat regions, short at the target).
+      the Gauss-Newton direction (below) or the unit negative gradient,
+      optionally smoothed by a momentum on directions (``momentum``, default
+      0); the step's length does not depend on the gradient's size, so flat
+      regions are crossed at full speed.
+    * **Gauss-Newton direction and length** (``gauss_newton``): the same
+      plane fits applied to every weighted output give the local Jacobian
+      ``J`` (n x 2) of the slow features; the damped Gauss-Newton step
+      ``-(J^T J + lam I)^-1 J^T r`` on the residual ``r`` to the target's
+      features points at where the linearised features match the target's,
+      and its length estimates the distance left. It straightens the
+      curved paths of plain gradient descent where the outputs change at
+      different rates. Used when it is a descent direction of the cost
+      (``lam = damping * trace(J^T J) / 2``) within ``max_angle`` degrees
+      of the negative gradient (default 90: any descent direction);
+      otherwise the gradient.
+    * **Step length from the cost's own distance estimate** (without a
+      Gauss-Newton step): near a target a distance cost is a cone, ``C ~
+      |grad C| * distance``, so ``C / |g|`` estimates the distance left; the
+      step is ``clip(fraction * C / |g|, min_step, max_step)`` (long in flat
+      regions, short at the target).
     * **Step control by the measured cost**: when the cost rose since the
       last stop the step is shortened (``shrink``); after decreases it grows
       back (``grow``) to the estimate.
@@ -375,7 +416,7 @@ class RobustDescent:
         fraction: float = 0.7,
         min_step: float = 0.15,
         max_step: float = 1.0,
-        momentum: float = 0.3,
+        momentum: float = 0.0,
         grow: float = 1.5,
         shrink: float = 0.5,
         follow_step: float = 0.4,
@@ -389,6 +430,9 @@ class RobustDescent:
         escape_steps: int = 3,
         max_escapes: int = 6,
         probe_first: bool = True,
+        gauss_newton: bool = True,
+        damping: float = 0.01,
+        max_angle: float = 90.0,
     ) -> None:
         for name, v in (("fraction", fraction), ("min_step", min_step), ("max_step", max_step),
                         ("escape_distance", escape_distance), ("follow_step", follow_step)):
@@ -408,7 +452,33 @@ class RobustDescent:
         self.patience, self.rel_improvement = int(patience), float(rel_improvement)
         self.escape_distance, self.escape_steps, self.max_escapes = float(escape_distance), int(escape_steps), int(max_escapes)
         self.probe_first = bool(probe_first)
+        self.gauss_newton, self.damping = bool(gauss_newton), float(damping)
+        self.max_angle = float(np.radians(max_angle))
+        if not self.damping >= 0:
+            raise ValueError(f"damping must be >= 0, got {damping}")
         self.reset()
+
+    def _gauss_newton(self, g: np.ndarray, info: StepInfo) -> np.ndarray | None:
+        """Damped Gauss-Newton displacement ``-(J^T J + lam I)^-1 J^T r`` on
+        the weighted feature residual, or None when unavailable or not a
+        descent direction of the cost."""
+        J, r = info.jacobian, info.residual
+        if not self.gauss_newton or J is None or r is None or info.method != "plane":
+            return None
+        J = np.asarray(J, float)
+        r = np.asarray(r, float)
+        A = J.T @ J
+        lam = self.damping * float(np.trace(A)) / 2 + 1e-12
+        try:
+            d = -np.linalg.solve(A + lam * np.eye(2), J.T @ r)
+        except np.linalg.LinAlgError:
+            return None
+        nd, ng = float(np.hypot(*d)), float(np.hypot(*g))
+        if not np.isfinite(d).all() or nd <= 1e-12 or ng <= 1e-15:
+            return None
+        if float(d @ -g) / (nd * ng) <= (np.cos(self.max_angle) if self.max_angle < np.pi / 2 else 0.0):
+            return None
+        return d
 
     def reset(self) -> None:
         self._dir = np.zeros(2)       # smoothed descent direction
@@ -476,7 +546,10 @@ class RobustDescent:
         g = np.asarray(gradient, float)
         cost = float(cost)
         gn = float(np.hypot(*g))
-        if gn > 1e-15:
+        d_gn = self._gauss_newton(g, info)
+        if d_gn is not None:
+            u = d_gn / float(np.hypot(*d_gn))
+        elif gn > 1e-15:
             u = -g / gn
         else:
             u = _unit(self._dir) if _unit(self._dir) is not None else np.array([1.0, 0.0])
@@ -517,6 +590,8 @@ class RobustDescent:
                 self._scale = min(self._scale * self.grow, 1.0)
         self._prev_cost = cost
         est = self.fraction * cost / gn if gn > 1e-15 else self.max_step
+        if d_gn is not None:  # the linearised distance to the target
+            est = float(np.hypot(*d_gn))
         if info.method == "difference":  # only the component along the cameras' baseline is known
             est = self.min_step
         L = float(np.clip(est * self._scale, self.min_step, self.max_step))
@@ -755,15 +830,19 @@ class Navigator:
         del start
         return moved, blocked
 
-    def _measure(self, cost: SlowFeatureCost) -> tuple[np.ndarray, np.ndarray]:
-        """Costs at the two cameras (features at their true poses) and the
-        cameras' positions as the robot believes them (odometry)."""
+    def _measure(self, cost: SlowFeatureCost) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Costs at the two cameras (features at their true poses), the
+        cameras' positions as the robot believes them (odometry) and the
+        weighted residuals (2, n) of their features to the target's."""
         sim = self.simulator
         true_cams = sim.robot.camera_poses(np.asarray(sim.pose, float)[None, :])
         odo_cams = sim.robot.camera_poses(np.asarray(sim.odometry_pose, float)[None, :])
-        F = self.features(np.vstack([true_cams["left"], true_cams["right"]]))
+        F = np.asarray(self.features(np.vstack([true_cams["left"], true_cams["right"]])), float)
         pos = np.vstack([odo_cams["left"][0, :2], odo_cams["right"][0, :2]])
-        return cost(F), pos
+        R = F[:, : cost.n] - cost.target
+        if cost.weights is not None:
+            R = R * cost.weights
+        return cost(F), pos, R
 
     def run(self, start: Any, target: Any, *, heading: float = 0.0, target_features: Any = None) -> NavigationResult:
         """Drives from ``start`` (x, y) towards ``target`` (x, y); the target's
@@ -784,6 +863,8 @@ class Navigator:
         info = StepInfo()
         reason = "max_iterations"
         n_blocked = 0
+        hist_P: list[np.ndarray] = []
+        hist_R: list[np.ndarray] = []
         it = 0
         for it in range(self.max_iterations + 1):
             if np.hypot(*(np.array(sim.pose[:2]) - t)) <= self.success_radius:
@@ -791,15 +872,15 @@ class Navigator:
                 break
             if it == self.max_iterations:
                 break
-            c, pos = self._measure(cost)
+            c, pos, R = self._measure(cost)
             costs.append(float(c.mean()))
-            g = self.gradient.update(pos, c)
+            g = self.gradient.update(pos, c, R)
             if it == 0 and getattr(self.descent, "probe_first", False):
                 # turn on the spot by 90 degrees and look again: the four camera
                 # positions form a cross and the plane gives the full gradient
                 sim.step(0.0, np.pi / 2, 1.0)
-                c, pos = self._measure(cost)
-                g = self.gradient.update(pos, c)
+                c, pos, R = self._measure(cost)
+                g = self.gradient.update(pos, c, R)
             info.iteration = it
             w = self.stuck_window
             info.stuck = len(odo_path) > w and float(np.hypot(*(odo_path[-1] - odo_path[-1 - w]))) < self.stuck_distance
@@ -808,6 +889,11 @@ class Navigator:
                 break
             info.heading = float(sim.odometry_pose[2])
             info.method = self.gradient.last_method
+            info.jacobian = self.gradient.jacobian
+            info.residual = R.mean(axis=0)
+            hist_P.append(pos)
+            hist_R.append(R)
+            info.history = (np.concatenate(hist_P), np.concatenate(hist_R))
             d = self.descent.step(g, float(c.mean()), np.array(sim.odometry_pose[:2], float), info)
             moved, blocked = self._drive(np.asarray(d, float))
             n_blocked += int(blocked)

@@ -186,6 +186,25 @@ def _grid_features(sc: Scene, net: Any, spacing: float, progress: bool) -> tuple
     return xs, ys, F
 
 
+def position_code_error(xs: np.ndarray, ys: np.ndarray, F: np.ndarray, n: int) -> float:
+    """RMS error (m) of x, y fitted as a quadratic function of the first
+    ``n`` outputs over a grid (a measure of how well they code position)."""
+    X, Y = np.meshgrid(xs, ys)
+    ok = np.isfinite(F[..., 0])
+    g = F[ok][:, :n]
+    P = np.column_stack([X[ok], Y[ok]])
+    A = np.column_stack([g] + [g[:, i : i + 1] * g[:, i:] for i in range(n)] + [np.ones(len(g))])
+    coef, *_ = np.linalg.lstsq(A, P, rcond=None)
+    return float(np.sqrt(np.mean(np.sum((A @ coef - P) ** 2, axis=1))))
+
+
+def coordinate_model(sc: Scene) -> Any:
+    """SFA on the coordinates of the scene's training trajectory (monomials
+    up to degree 7): the representation the image network ideally learns
+    (thesis 7.2.2, after [42]); a reference for the descents."""
+    return nav.fit_coordinate_sfa(sc.trajectory.poses[:, :2], sc.area, n_components=8, expansion="poly", degree=7)
+
+
 def _summary_rows(label: str, s: nav.TrialSummary, thesis: dict[str, Any] | None, extra: str = "") -> list[dict[str, Any]]:
     th = thesis or {}
     rows = [
@@ -268,7 +287,25 @@ def _run_71(kind: str, out: Path, *, quick: bool, seed: int, progress: bool) -> 
             titles=[("reached" if s.results[i].success else s.results[i].reason)
                     + (f" e={s.efficiencies[i]:.2f}" if s.results[i].success else "") for i in sel],
             title=f"7.1 {kind}: {d.name}")))
+    # the same trials with slow features of the coordinates (the ideal case of the image network)
+    model = coordinate_model(sc)
+    for d in _descents():
+        psim = nav.PointSimulator(robot=sc.robot, world=sc.world)
+        navi = nav.Navigator(psim, nav.CoordinateFeatures(model), d, n_outputs=2, success_radius=SUCCESS_RADIUS,
+                             max_iterations=QUICK_ITERATIONS if quick else MAX_ITERATIONS)
+        s = nav.evaluate_trials(navi, starts, targets, optimal_lengths=optimal, progress=progress,
+                                desc=f"{d.name}, coordinate SFA")
+        rows += _summary_rows(f"{d.name}, coordinate SFA", s, None)
+        notes_runs.append(f"{d.name} with coordinate SFA: {_reasons(s)}")
+        if d.name == "robust descent":
+            sel = _pick(s.results, 8)
+            plots.append(str(nav.plot_trajectories(
+                [s.results[i] for i in sel], out / f"7.1-{kind}-trajectories-coordinate-sfa.png", world=sc.world,
+                optimal=[opt_paths[i] for i in sel], title=f"7.1 {kind}: robust descent on coordinate SFA")))
     xs, ys, F = _grid_features(sc, net, 0.75 if quick else 0.5, progress)
+    for n in (2, 8):
+        rows.append({"metric": f"position code: RMS of x, y from s1-s{n} (m)", "thesis": None,
+                     "sfanav": position_code_error(xs, ys, F, n)})
     tf = _navigator(sc, net, None).target_features(targets[0])
     plots.append(str(nav.plot_cost_surface(xs, ys, F, tf, out / f"7.1-{kind}-cost-surface.png", ns=(2,), n_firing=4,
                                            target=targets[0], world=sc.world,
@@ -284,6 +321,10 @@ def _run_71(kind: str, out: Path, *, quick: bool, seed: int, progress: bool) -> 
            f"Target fixed inside the V at ({targets[0][0]:.2f}, {targets[0][1]:.2f}); starts in the lower half outside "
            "the V; efficiency = A* length (8-connected, 0.1 m grid, obstacles inflated by the robot radius) / "
            "travelled; the any-angle row uses the line-of-sight-shortened A* path. ")
+        + "Rows 'coordinate SFA': the same trials with slow features of the coordinates (degree-7 monomials of the "
+        "training trajectory's positions, the image network's ideal case), a point robot with exact odometry. "
+        "'position code' rows: RMS error of x, y fitted as a quadratic function of the image network's first 2 / 8 "
+        "outputs on a 0.5 m grid (how well the representation codes position). "
         + "Outcomes: " + "; ".join(notes_runs) + "."
     )
     return ExperimentResult(f"7.1-{kind}", rows, plots, notes)
@@ -302,6 +343,9 @@ def exp_71_obstacle(out: Path, *, quick: bool = False, seed: int = 0, progress: 
 # --------------------------------------------------------------------- 7.2.1
 
 
+N_TRIALS_721_IMAGES = 20  # image-based runs per setting (28 settings; the thesis: 50)
+
+
 @register("7.2.1", "More slow-feature outputs, raw vs weighted by 1/beta (thesis 7.2.1)")
 def exp_721(out: Path, *, quick: bool = False, seed: int = 0, progress: bool = True) -> ExperimentResult:
     out = Path(out)
@@ -309,35 +353,62 @@ def exp_721(out: Path, *, quick: bool = False, seed: int = 0, progress: bool = T
     net = scene_network(sc, out, seed, progress=progress)
     beta = np.asarray(net.beta_values_, float)
     wrel = nav.beta_weights(beta, relative=True)
+    model = coordinate_model(sc)
+    cbeta = np.asarray(model.sfa.beta_values_, float)
+    cw = nav.beta_weights(cbeta, relative=True)
     n_trials = 1 if quick else 50
+    n_img = 1 if quick else N_TRIALS_721_IMAGES
     ns = list(range(2, 9))
     rng = _rng(seed, 721)
     starts, targets = nav.sample_trials(n_trials, sc.area, free=_free(sc), min_distance=3.5 if quick else 15.0,
                                         margin=0.4, rng=rng)
     rows: list[dict[str, Any]] = []
     outcome = []
-    for n in ns:
-        for mode, weights in (("raw", None), ("weighted", wrel)):
-            for d in _descents():
-                navi = _navigator(sc, net, d, n=n, weights=weights)
-                if quick:
-                    navi.max_iterations = 25
-                s = nav.evaluate_trials(navi, starts, targets, progress=progress, desc=f"n={n} {mode} {d.name}")
-                th = THESIS["7.2.1"].get((mode, n), (None, None)) if d.name == "thesis rule" else (None, None)
-                rows.append({"metric": f"n={n} {mode}: success ({d.name})", "thesis": th[0], "sfanav": s.success_rate})
-                rows.append({"metric": f"n={n} {mode}: efficiency ({d.name})", "thesis": th[1], "sfanav": s.efficiency})
-                outcome.append((n, mode, d.name, s.success_rate, s.efficiency))
+    for arm in ("images", "coordinate SFA"):
+        for n in ns:
+            for mode in ("raw", "weighted"):
+                for d in _descents():
+                    if arm == "images":
+                        navi = _navigator(sc, net, d, n=n, weights=wrel if mode == "weighted" else None)
+                        S, T = starts[:n_img], targets[:n_img]
+                        label = d.name
+                    else:
+                        psim = nav.PointSimulator(robot=sc.robot, world=sc.world)
+                        navi = nav.Navigator(psim, nav.CoordinateFeatures(model), d, n_outputs=n,
+                                             weights=cw if mode == "weighted" else None,
+                                             success_radius=SUCCESS_RADIUS, max_iterations=MAX_ITERATIONS)
+                        S, T = starts, targets
+                        label = f"{d.name}, coordinate SFA"
+                    if quick:
+                        navi.max_iterations = 25
+                    s = nav.evaluate_trials(navi, S, T, progress=progress, desc=f"n={n} {mode} {label}")
+                    th = THESIS["7.2.1"].get((mode, n), (None, None)) if label == "thesis rule" else (None, None)
+                    rows.append({"metric": f"n={n} {mode}: success ({label})", "thesis": th[0], "sfanav": s.success_rate})
+                    rows.append({"metric": f"n={n} {mode}: efficiency ({label})", "thesis": th[1],
+                                 "sfanav": s.efficiency})
+                    outcome.append((n, mode, label, s.success_rate, s.efficiency))
     plots = []
     xs, ys, F = _grid_features(sc, net, 0.75 if quick else 0.5, progress)
     tf = _navigator(sc, net, None).target_features(targets[0])
     plots.append(str(nav.plot_cost_surface(xs, ys, F, tf, out / "7.2.1-cost-surfaces.png", ns=ns, weights=wrel,
                                            n_firing=8, target=targets[0],
                                            title="7.2.1: firing maps s1-s8; cost n = 2..8 raw and 1/beta-weighted")))
-    plots.append(str(_plot_721(outcome, out / "7.2.1-success-vs-n.png")))
+    X, Y = np.meshgrid(xs, ys)
+    FC = model(np.column_stack([X.ravel(), Y.ravel()])).reshape(X.shape + (8,))
+    FC[~np.asarray(sc.world.free(X, Y, 0.0))] = np.nan
+    plots.append(str(nav.plot_cost_surface(xs, ys, FC, model(targets[:1])[0], out / "7.2.1-cost-surfaces-coordinate-sfa.png",
+                                           ns=ns, weights=cw, n_firing=8, target=targets[0],
+                                           title="7.2.1, coordinate SFA: s1-s8; cost n = 2..8 raw and 1/beta-weighted")))
+    plots.append(str(_plot_721([o for o in outcome if "coordinate" not in o[2]], out / "7.2.1-success-vs-n.png")))
+    plots.append(str(_plot_721([(n, m, d.replace(", coordinate SFA", ""), sr, ef) for n, m, d, sr, ef in outcome
+                                if "coordinate" in d], out / "7.2.1-success-vs-n-coordinate-sfa.png")))
     notes = (
         f"{'QUICK smoke version: ' if quick else ''}open-field scene {sc.name} (seed {seed}) and its network; "
-        f"{n_trials} trials (start-target >= {3.5 if quick else 15.0} m) per n, descent and weighting; beta of the "
-        f"network's outputs: {', '.join(f'{b:.3g}' for b in beta)}. Weighted outputs use weights beta_1 / beta_i "
+        f"{n_img} trials per n, descent and weighting with images (the thesis: 50; 28 settings of up to 400 stops "
+        f"of rendering and SFA each), {n_trials} with coordinate SFA (degree-7 monomials of the training "
+        f"trajectory's positions, the image network's ideal case); start-target >= {3.5 if quick else 15.0} m. "
+        f"beta of the network's outputs: {', '.join(f'{b:.3g}' for b in beta)}; of the coordinate SFA: "
+        f"{', '.join(f'{b:.3g}' for b in cbeta)}. Weighted outputs use weights beta_1 / beta_i "
         f"(1/beta scaled so the slowest output keeps weight 1) with eta = {ETA}, which equals the thesis's 1/beta "
         f"weights with eta = beta_1 = {beta[0]:.3g} (thesis: 0.0015); raw outputs eta = {ETA}; gamma {GAMMA}. "
         "The thesis gives numbers only for raw n = 2 and 8 and weighted n = 3 and 8 (fig. 7.8)."
@@ -433,7 +504,9 @@ def exp_722(out: Path, *, quick: bool = False, seed: int = 0, progress: bool = T
             opt_paths.append(P)
             opt_times.append(T_)
         direct_times = [nav.travel_time(np.array([s_, t_]), regions) for s_, t_ in zip(starts, targets)]
-        for d in _descents():
+        gd = nav.RobustDescent(gauss_newton=False)
+        gd.name = "robust descent, gradient steps"
+        for d in _descents() + [gd]:
             sim = nav.PointSimulator(area, Robot.two_cameras(0.7))
             navi = nav.Navigator(sim, nav.CoordinateFeatures(model), d, n_outputs=8, weights=w,
                                  success_radius=SUCCESS_RADIUS, max_iterations=MAX_ITERATIONS)
@@ -477,6 +550,7 @@ def exp_722(out: Path, *, quick: bool = False, seed: int = 0, progress: bool = T
         f"virtual sensors 0.7 m apart; {n_trials} trials per scene (half-plane: start x < -1, target x > 1, >= 8 m "
         "apart; disc: start and target 7-8.5 m from the centre on opposite sides). Optimal: Snell transition point "
         "(half-plane), A* on a 0.1 m grid with cost 3 per metre in the slow disc (disc). The thesis reports no "
-        "numbers here, only that the paths are close to the time-optimal ones. "
+        "numbers here, only that the paths are close to the time-optimal ones. 'robust descent, gradient steps': the robust "
+        "descent without its Gauss-Newton steps (it follows the cost's gradient like the thesis rule). "
     )
     return ExperimentResult("7.2.2", rows, plots, header + "Outcomes: " + "; ".join(notes) + ".")
