@@ -62,8 +62,16 @@ ROW_VARIANTS: dict[str, ImageRows] = {
 LOOP_CLOSURES = {"accept": 1.0, "min_gap": 40, "max_odometry_distance": 3.0}
 # node capacity: wider lower layers (Table 5.1: 14 / 16 / 16 outputs)
 WIDER = {"network": {"outs": [20, 24, 24]}}
-TRAIN_VARIANTS: dict[str, dict[str, Any] | None] = {"": None, "loop closures": LOOP_CLOSURES,
-                                                    "capacity: wider layers": WIDER}
+WIDEST = {"network": {"outs": [28, 32, 32]}}
+# combinations: "rows" names a row variant applied with the training variant
+TRAIN_VARIANTS: dict[str, dict[str, Any] | None] = {
+    "": None,
+    "loop closures": LOOP_CLOSURES,
+    "capacity: wider layers": WIDER,
+    "capacity: widest layers": WIDEST,
+    "capacity: wider layers + rows: band": {**WIDER, "rows": "rows: band"},
+    "capacity: wider layers + loop closures": {**WIDER, **LOOP_CLOSURES},
+}
 READOUTS: dict[str, tuple[str, ...] | None] = {
     "": None,  # the thesis's quadratic regression, 8 outputs, least squares
     "readout: ridge quadratic": ("quadratic",),
@@ -161,7 +169,7 @@ def run_scene(out: Path, preset: str, seed: int, *, quick: bool, progress: bool,
         log(f"{tag} seed {seed} {name}: MED {b['med']:.3f} m ({time.perf_counter() - t0:.0f} s)")
     odo_tr = ds.select(run="train").odometry[:, :2]
     variants = [(rn, r, "", train_variants.get("")) for rn, r in row_variants.items()] if "" in train_variants else []
-    variants += [("", ImageRows(), tn, opts) for tn, opts in train_variants.items() if tn]
+    variants += [("", ROW_VARIANTS[(opts or {}).get("rows", "")], tn, opts) for tn, opts in train_variants.items() if tn]
     for rname, rows, tname, topts in variants:
         rows = ImageRows(rows.band, rows.normalize, elev)  # type: ignore[arg-type]
         A_tr, A_te = rows(X_tr), rows(X_te)
@@ -170,7 +178,7 @@ def run_scene(out: Path, preset: str, seed: int, *, quick: bool, progress: bool,
         t0 = time.perf_counter()
         extra: dict[str, Any] = {}
         seq = A_tr
-        lc_opts = {k: v for k, v in (topts or {}).items() if k != "network"}
+        lc_opts = {k: v for k, v in (topts or {}).items() if k not in ("network", "rows")}
         if lc_opts:
             from ..loopclosure import find_loop_closures, interleave
 
@@ -304,7 +312,7 @@ def _exp_gardens(out: Path, *, quick: bool, seed: int, progress: bool) -> Experi
         "earlier loop-closure partner (Fourier-signature nearest neighbour at least 40 frames earlier, within 3 m "
         "by odometry, accepted if as alike as a frame 2 steps away), aligned by circular cross-correlation; "
         "training time includes finding them. 'capacity: wider layers': Table 5.1 with 20 / 24 / 24 instead of "
-        "14 / 16 / 16 outputs in layers 1-3"
+        "14 / 16 / 16 outputs in layers 1-3; 'widest': 28 / 32 / 32; '+' combines"
         + f". Row variants: horizon band = rows of elevation {BAND[0]:g}..{BAND[1]:g} deg resampled to the full "
         "height; row-norm = each row to zero mean, unit variance. Readouts other than the thesis's are chosen "
         "among 8 or 12 outputs and their hyperparameters by 5-fold blocked cross-validation on the training run "
