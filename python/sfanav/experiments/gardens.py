@@ -60,7 +60,18 @@ ROW_VARIANTS: dict[str, ImageRows] = {
 }
 # training variants: name -> options (None: the thesis's temporally ordered sequence)
 LOOP_CLOSURES = {"accept": 1.0, "min_gap": 40, "max_odometry_distance": 3.0}
-TRAIN_VARIANTS: dict[str, dict[str, Any] | None] = {"": None, "loop closures": LOOP_CLOSURES}
+# node capacity: wider lower layers (Table 5.1: 14 / 16 / 16 outputs)
+WIDER = {"network": {"outs": [20, 24, 24]}}
+WIDEST = {"network": {"outs": [28, 32, 32]}}
+# combinations: "rows" names a row variant applied with the training variant
+TRAIN_VARIANTS: dict[str, dict[str, Any] | None] = {
+    "": None,
+    "loop closures": LOOP_CLOSURES,
+    "capacity: wider layers": WIDER,
+    "capacity: widest layers": WIDEST,
+    "capacity: wider layers + rows: band": {**WIDER, "rows": "rows: band"},
+    "capacity: wider layers + loop closures": {**WIDER, **LOOP_CLOSURES},
+}
 READOUTS: dict[str, tuple[str, ...] | None] = {
     "": None,  # the thesis's quadratic regression, 8 outputs, least squares
     "readout: ridge quadratic": ("quadratic",),
@@ -99,11 +110,24 @@ def _random_splits(spec: dict[str, Any], F: np.ndarray, xy: np.ndarray, crange: 
     return {k: float(np.mean([m[k] for m in ms])) for k in ("mae_x_pct", "mae_y_pct", "med")}
 
 
-def _network(quick: bool, shape: tuple[int, int, int]) -> Network:
+def _network(quick: bool, shape: tuple[int, int, int], outs: list[int] | None = None,
+             max_expanded: int | None = None) -> Network:
+    """Table 5.1 (12 top outputs, mixed precision), or with ``outs`` the
+    lower layers' output dims and ``max_expanded`` replaced (node capacity)."""
     h, w, c = shape
     if quick:
         return Network(_tiny_config(w, h, c, out=12))
-    return Network.from_preset("thesis-5.1", out=12, precision="mixed")
+    net = Network.from_preset("thesis-5.1", out=12, precision="mixed")
+    if outs is None and max_expanded is None:
+        return net
+    import copy
+
+    cfg = copy.deepcopy(net.config)
+    for layer, o in zip(cfg["layers"], outs or []):
+        layer["out"] = int(o)
+    if max_expanded is not None:
+        cfg["network"]["max_expanded"] = int(max_expanded)
+    return Network(cfg)
 
 
 def run_scene(out: Path, preset: str, seed: int, *, quick: bool, progress: bool, control: bool,
@@ -145,18 +169,20 @@ def run_scene(out: Path, preset: str, seed: int, *, quick: bool, progress: bool,
         log(f"{tag} seed {seed} {name}: MED {b['med']:.3f} m ({time.perf_counter() - t0:.0f} s)")
     odo_tr = ds.select(run="train").odometry[:, :2]
     variants = [(rn, r, "", train_variants.get("")) for rn, r in row_variants.items()] if "" in train_variants else []
-    variants += [("", ImageRows(), tn, opts) for tn, opts in train_variants.items() if tn]
+    variants += [("", ROW_VARIANTS[(opts or {}).get("rows", "")], tn, opts) for tn, opts in train_variants.items() if tn]
     for rname, rows, tname, topts in variants:
         rows = ImageRows(rows.band, rows.normalize, elev)  # type: ignore[arg-type]
         A_tr, A_te = rows(X_tr), rows(X_te)
-        net = _network(quick, A_tr.shape[1:] if A_tr.ndim == 4 else A_tr.shape[1:] + (1,))
+        nopts = dict((topts or {}).get("network", {}))
+        net = _network(quick, A_tr.shape[1:] if A_tr.ndim == 4 else A_tr.shape[1:] + (1,), **nopts)
         t0 = time.perf_counter()
         extra: dict[str, Any] = {}
         seq = A_tr
-        if topts is not None:
+        lc_opts = {k: v for k, v in (topts or {}).items() if k not in ("network", "rows")}
+        if lc_opts:
             from ..loopclosure import find_loop_closures, interleave
 
-            lc = find_loop_closures(X_tr, odo_tr, **topts)
+            lc = find_loop_closures(X_tr, odo_tr, **lc_opts)
             seq = interleave(A_tr, lc)
             true_d = np.hypot(*(xy_tr[lc.current] - xy_tr[lc.past]).T) if len(lc) else np.zeros(0)
             extra = {"loop closures": len(lc),
@@ -285,7 +311,8 @@ def _exp_gardens(out: Path, *, quick: bool, seed: int, progress: bool) -> Experi
         + ". Training variant 'loop closures' (thesis 6.2.1, image-based): each training image followed by its "
         "earlier loop-closure partner (Fourier-signature nearest neighbour at least 40 frames earlier, within 3 m "
         "by odometry, accepted if as alike as a frame 2 steps away), aligned by circular cross-correlation; "
-        "training time includes finding them"
+        "training time includes finding them. 'capacity: wider layers': Table 5.1 with 20 / 24 / 24 instead of "
+        "14 / 16 / 16 outputs in layers 1-3; 'widest': 28 / 32 / 32; '+' combines"
         + f". Row variants: horizon band = rows of elevation {BAND[0]:g}..{BAND[1]:g} deg resampled to the full "
         "height; row-norm = each row to zero mean, unit variance. Readouts other than the thesis's are chosen "
         "among 8 or 12 outputs and their hyperparameters by 5-fold blocked cross-validation on the training run "
