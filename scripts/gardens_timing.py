@@ -13,7 +13,7 @@ import time
 import numpy as np
 
 from sfanav.dataset import Dataset
-from sfanav.experiments.gardens import LOOP_CLOSURES, WIDER, _network
+from sfanav.experiments.gardens import LOOP_CLOSURES, WIDER, WIDEST, _network
 from sfanav.loopclosure import find_loop_closures, interleave
 from sfanav.network import Rotation
 from sfanav.workflow import Preprocessing, load_run
@@ -29,7 +29,8 @@ def main() -> None:
     X, _ = load_run(ds, Preprocessing(int(cam["width"]), int(cam["height"]), False, False), log=lambda m: None)
     odo = ds.odometry[:, :2]
     shape = X.shape[1:]
-    times: dict[str, list[float]] = {"thesis config": [], "capacity: wider layers": [], "loop closures": []}
+    times: dict[str, list[float]] = {"thesis config": [], "capacity: wider layers": [], "capacity: widest layers": [],
+                                     "loop closures": []}
     for _ in range(a.repeats):
         for name in times:
             t0 = time.perf_counter()
@@ -39,7 +40,8 @@ def main() -> None:
                 net = _network(False, shape)
             else:
                 seq = X
-                net = _network(False, shape, **(WIDER["network"] if name.startswith("capacity") else {}))
+                opts = {"capacity: wider layers": WIDER, "capacity: widest layers": WIDEST}.get(name, {})
+                net = _network(False, shape, **opts.get("network", {}))
             net.fit(seq, Rotation(5, 1.0), progress=False)
             times[name].append(time.perf_counter() - t0)
             print(f"{name}: {times[name][-1]:.1f} s", flush=True)
