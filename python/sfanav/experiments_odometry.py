@@ -273,7 +273,7 @@ def experiment_5_3_1(
         "points on lines": lines.n_points,
         "cost": cost_name,
         "solver": learner.solver,
-        "iterations": learner.n_iter_,
+        "iterations": learner.n_iter_total_,
         "fit time (s)": learner.fit_time_,
         "final cost": learner.cost_,
         "train MED supervised (m)": train_sup,
@@ -285,6 +285,7 @@ def experiment_5_3_1(
     }
     if learner.feature_noise_ is not None:
         values["map residual sigma_f, ML estimate (m)"] = learner.feature_noise_
+        values["fits of the sigma_f estimation"] = learner.noise_iterations_
         values["median angle / transit weight"] = (
             f"{float(np.median(learner.angle_weights_)):.3g} / {float(np.median(learner.transit_weights_)):.3g}")
     thesis_fit = None
