@@ -21,6 +21,19 @@ or (``angle_term="signed"``, beyond the thesis: also fixes the mirror image)
 
     C += lambda sum_n ( 1 - cos(alpha_{n+1} - alpha_n - phi_n) ).
 
+Beyond the thesis, the odometry between the lines (``transit_weight``): with
+``q_n`` the odometry displacement from the origin of line n to that of line
+n+1 in line n's frame (:meth:`sfanav.odometry.Lines.transits`),
+
+    C += 1/2 sum_n w_n || o_{n+1} - o_n - q_{n,x} u(alpha_n) - q_{n,y} u'(alpha_n) ||^2
+
+and, with ``angle_weight="noise"`` / ``transit_weight="noise"``, the
+maximum-likelihood weights ``sigma_f^2 / variance`` from an odometry noise
+model (:func:`odometry_variances`) and the residual variance ``sigma_f^2``
+of the map (estimated by maximum likelihood unless given). On grid-like runs
+of parallel lanes the thesis's costs have a bent map as their minimum; this
+one does not (``docs/odometry.md``).
+
 Gradients (derived in ``docs/odometry.md``; :func:`metric_cost` returns them),
 with residuals ``r_{n,m} = o_n + d_{n,m} u(alpha_n) - W^T s_{n,m}``:
 
