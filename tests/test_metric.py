@@ -379,3 +379,56 @@ def test_noise_weights_bad_inputs(problem, lanes):
     Fl, _, ll = lanes
     with pytest.raises(TypeError, match="odometry_noise must be a mapping"):
         MetricLearner(init="odometry", angle_weight="noise", odometry_noise=[0.01]).fit(Fl, ll, progress=False)
+
+
+def test_heading_drift_is_estimated_and_removed(odo_run):
+    """A systematic heading drift (0.002 rad per 4 cm step = 0.05 rad/m) biases every
+    measured heading change; heading_drift='estimate' recovers it and the map improves."""
+    from sfanav.experiments_odometry import make_odometry_run
+    from sfanav.metric import _Problem, _VarPro
+    from sfanav.odometry import segment_lines
+
+    run = make_odometry_run(n_legs=14, random_state=0)  # heading_bias 0.002 rad per moving step
+    lines = segment_lines(run["odometry"])
+    on = lines.mask
+    F, xy = run["features"], run["xy"]
+
+    def aligned_med(m):
+        P = m.transform(F[on])
+        return med(align(P, xy[on], allow_reflection=True).apply(P), xy[on])
+
+    kw = dict(init="odometry", angle_weight="noise", transit_weight="noise")
+    plain = MetricLearner(**kw).fit(F, lines, progress=False)
+    est = MetricLearner(**kw, heading_drift="estimate").fit(F, lines, progress=False)
+    known = MetricLearner(**kw, heading_drift=0.05).fit(F, lines, progress=False)
+    assert plain.heading_drift_ == 0.0 and known.heading_drift_ == 0.05
+    assert 0.04 < est.heading_drift_ < 0.06
+    assert aligned_med(est) < 0.6 * aligned_med(plain) and aligned_med(known) < 0.6 * aligned_med(plain)
+    # the estimate is a stationary point in the drift too: d cost / d drift = 0 there (finite differences)
+    S = lines.path_lengths()
+    p = S[:-1] / 2 + lines.transit_lengths + S[1:] / 2
+    Phi = est._design(F[on], 8, 2)
+
+    def cost(drift):
+        pb = _Problem(Phi, lines.labels[on], lines.distances[on], lines.relative_angles, "signed", est.angle_weights_,
+                      {}, {}, 0.0, lines.transits(), est.transit_weights_, p, drift)
+        vp = _VarPro(pb)
+        return vp.cost(est.alpha_)[0], vp.drift_gradient(est.alpha_), pb
+
+    c0, g0, pb = cost(est.heading_drift_)
+    assert c0 == pytest.approx(est.cost_, rel=1e-9) and c0 == pytest.approx(pb.cost(est.alpha_, est.origins_, est.weights_)[0])
+    h = 1e-6
+    g_num = (cost(0.03 + h)[0] - cost(0.03 - h)[0]) / (2 * h)
+    assert cost(0.03)[1] == pytest.approx(g_num, rel=1e-6)
+    assert abs(g0) < 1e-3 * abs(g_num)
+    with pytest.raises(ValueError, match="needs solver='varpro'"):
+        MetricLearner(**kw, heading_drift="estimate", solver="lbfgs").fit(F, lines, progress=False)
+    with pytest.raises(ValueError, match="needs angle_term='signed'"):
+        MetricLearner(**kw, heading_drift="estimate", angle_term="cos").fit(F, lines, progress=False)
+    with pytest.raises(ValueError, match="heading_drift must be a number"):
+        MetricLearner(**kw, heading_drift="auto").fit(F, lines, progress=False)
+    with pytest.raises(ValueError, match="heading_drift must be finite"):
+        MetricLearner(**kw, heading_drift=float("nan")).fit(F, lines, progress=False)
+    bare = lines_from_labels(lines.labels, lines.distances, lines.relative_angles)
+    with pytest.raises(ValueError, match="heading_drift needs the transits"):
+        MetricLearner(angle_term="signed", heading_drift=0.01).fit(F, bare, progress=False)

@@ -209,8 +209,11 @@ class _Problem:
     """The data of one fit: design, labels, distances, angles, transits, weights, fixed parameters."""
 
     def __init__(self, Phi, lab, d, phi, angle_term, lam, fix_alpha, fix_origin, ridge=0.0, transits=None,
-                 transit_weight=0.0):
-        self.Phi, self.lab, self.d, self.phi, self.ridge = Phi, lab, d, phi, ridge
+                 transit_weight=0.0, drift_path=None, drift=0.0):
+        self.Phi, self.lab, self.d, self.phi0, self.ridge = Phi, lab, d, phi, ridge
+        # heading drift (rad/m) times the odometry path between the lines' mean headings: the drift's
+        # share of the measured heading changes, removed from them
+        self.drift_path, self.drift = drift_path, float(drift)
         self.angle_term = angle_term
         self.L, self.K = int(lab.max()) + 1, Phi.shape[1]
         self.lam = np.broadcast_to(np.asarray(lam, dtype=np.float64), (max(self.L - 1, 0),)).copy()
@@ -225,6 +228,12 @@ class _Problem:
         self.free_a, self.free_o = free_a, free_o
         # free-parameter mask over the packed vector [alpha (L), origins (L*2), W (K*2)]
         self.free = np.concatenate([free_a, np.repeat(free_o, 2), np.ones(2 * self.K, bool)])
+
+    @property
+    def phi(self):
+        if self.phi0 is None or self.drift_path is None or not self.drift:
+            return self.phi0
+        return self.phi0 - self.drift * self.drift_path
 
     @property
     def has_angle(self) -> bool:
@@ -358,6 +367,12 @@ class _VarPro:
             cost += c_ang
             grad = grad + g_ang
         return cost, grad
+
+    def drift_gradient(self, a):
+        """d cost / d drift (signed angle term: phi_n = phi0_n - drift p_n)."""
+        pb = self.pb
+        delta = a[1:] - a[:-1] - pb.phi
+        return float(np.sum(pb.lam * np.sin(delta) * pb.drift_path))
 
     def linear(self, a):
         """Origins (L, 2) and W (K, 2) minimising the cost for orientations ``a``."""
@@ -548,6 +563,16 @@ class MetricLearner:
         n_parameters)`` from the residuals (starting from the residuals of the
         regression onto the odometry's line positions) until it changes by
         less than 0.1 %.
+    heading_drift : float, "estimate" or None, default None
+        Beyond the thesis: a systematic heading drift of the odometry in
+        rad/m (positive: the odometry believes the robot turned left), whose
+        share ``drift * p_n`` of each measured heading change is removed,
+        ``p_n`` the odometry path between the two lines' mean headings
+        (``S_n/2 + l_n + S_{n+1}/2``, needs the transits). ``"estimate"``:
+        the drift is a further unknown of the fit (maximum likelihood; solver
+        ``"varpro"`` and the signed angle term only). A random-walk noise
+        model does not cover drift, and the likelihood trusts the heading
+        changes (docs/odometry.md). None: no correction.
     ridge : float, default 0.0
         L2 penalty ``ridge / 2 * ||W||^2`` on the weights of the expanded
         features (not the bias); beyond the thesis. It shrinks the map
@@ -641,6 +666,9 @@ class MetricLearner:
         None without them.
     noise_iterations_ : int
         Fits of the ``sigma_f`` alternation (1 without it).
+    heading_drift_ : float
+        The heading drift (rad/m) removed from the heading changes (given,
+        estimated, or 0).
     learning_rate_ : float
         The learning rate used (solver ``"gd"``).
     n_features_in_ : int
@@ -658,6 +686,7 @@ class MetricLearner:
         transit_weight: float | str = 0.0,
         odometry_noise: Any = None,
         feature_noise: float | None = None,
+        heading_drift: float | str | None = None,
         ridge: float = 0.0,
         init: str | Mapping[str, Any] = "random",
         learning_rate: float | None = None,
@@ -682,6 +711,7 @@ class MetricLearner:
         self.transit_weight = transit_weight
         self.odometry_noise = odometry_noise
         self.feature_noise = feature_noise
+        self.heading_drift = heading_drift
         self.ridge = ridge
         self.init = init
         self.learning_rate = learning_rate
@@ -700,7 +730,7 @@ class MetricLearner:
 
     _PARAMS = (
         "n_outputs", "degree", "solver", "angle_term", "angle_weight", "transit_weight", "odometry_noise",
-        "feature_noise", "ridge", "init", "learning_rate", "momentum", "precondition",
+        "feature_noise", "heading_drift", "ridge", "init", "learning_rate", "momentum", "precondition",
         "max_iter", "tol", "n_init", "fix_alpha", "fix_origin", "origin_range", "weight_range",
         "snapshot_iterations", "segmentation", "random_state",
     )
@@ -789,6 +819,16 @@ class MetricLearner:
         if sigma_f is not None and sigma_f == 0:
             raise ValueError("feature_noise must be > 0 (metres), or None to estimate it")
         noise = _noise_dict(self.odometry_noise) if (lam_noise or wt_noise) else None
+        hd = self.heading_drift
+        if isinstance(hd, str):
+            if hd != "estimate":
+                raise ValueError(f"heading_drift must be a number (rad/m), 'estimate' or None, got {hd!r}")
+            if self.solver != "varpro":
+                raise ValueError(f"heading_drift='estimate' needs solver='varpro', got solver={self.solver!r}")
+        elif hd is not None:
+            hd = float(hd)
+            if not np.isfinite(hd):
+                raise ValueError(f"heading_drift must be finite (rad/m), got {self.heading_drift!r}")
         lr_default = 0.3 if self.precondition else 1e-5
         lr = lr_default if self.learning_rate is None else check_nonneg_float(self.learning_rate, "learning_rate")
         mom = check_nonneg_float(self.momentum, "momentum")
@@ -840,6 +880,16 @@ class MetricLearner:
                 )
             else:
                 transits = lines.transits()
+        drift_path, drift0 = None, 0.0
+        if hd is not None and angle_term is not None and L > 1:
+            if lines.transit_lengths is None:
+                raise ValueError("heading_drift needs the transits between lines (their path lengths): use "
+                                 "segment_lines or lines_from_odometry")
+            if hd == "estimate" and angle_term != "signed":
+                raise ValueError(f"heading_drift='estimate' needs angle_term='signed', got {angle_term!r}")
+            S = lines.path_lengths()
+            drift_path = S[:-1] / 2 + lines.transit_lengths + S[1:] / 2
+            drift0 = 0.0 if hd == "estimate" else hd
         var_a = var_t = None
         if (lam_noise and angle_term is not None) or wt_noise:
             var_a, var_t = odometry_variances(lines, noise)
@@ -847,10 +897,11 @@ class MetricLearner:
         rng = np.random.default_rng(self.random_state)
         snaps_at = sorted({check_int(int(i), "snapshot_iterations", minimum=0) for i in self.snapshot_iterations})
 
-        def problem(s2):
+        def problem(s2, drift):
             la = s2 / var_a if (lam_noise and var_a is not None) else lam
             w = s2 / var_t if (wt_noise and var_t is not None) else wt
-            return _Problem(Phi, lab, d, lines.relative_angles, angle_term, la, fix_a, fix_o, ridge, transits, w)
+            return _Problem(Phi, lab, d, lines.relative_angles, angle_term, la, fix_a, fix_o, ridge, transits, w,
+                            drift_path, drift)
 
         t0 = time.perf_counter()
         best = None
@@ -863,13 +914,14 @@ class MetricLearner:
                     s2 = sigma_f**2
                 else:
                     s2 = self._initial_residual_variance(Phi, lab, d, lines, n_params)
-            pb = problem(s2)
+            pb = problem(s2, drift0)
             inits = self._inits(pb, lines, rng, n_init)
             while True:
                 n_rounds += 1
                 vp = _VarPro(pb) if self.solver == "varpro" else None  # one factorisation for all starts
                 best, costs = None, []
                 for a0, O0, W0 in inits:
+                    pb.drift = drift0
                     res = self._solve(pb, vp, a0, O0, W0, lr, mom, max_iter, tol, snaps_at, progress)
                     costs.append(res["cost"])
                     total += res["n_iter"]
@@ -882,7 +934,8 @@ class MetricLearner:
                 if abs(s2_new - s2) <= 1e-3 * s2:
                     break
                 s2 = s2_new
-                pb = problem(s2)
+                drift0 = best["drift"]
+                pb = problem(s2, drift0)
                 inits = [(best["alpha"], best["origins"], best["weights"])]
         self.fit_time_ = time.perf_counter() - t0
         assert best is not None
@@ -890,6 +943,8 @@ class MetricLearner:
         self.transit_weights_ = pb.wt.copy()
         self.feature_noise_ = None if s2 is None else float(np.sqrt(s2))
         self.noise_iterations_ = n_rounds
+        pb.drift = best["drift"]
+        self.heading_drift_ = float(best["drift"]) if drift_path is not None else 0.0
         self.alpha_ = best["alpha"]
         self.origins_ = best["origins"]
         self.weights_ = best["weights"]
@@ -1070,16 +1125,26 @@ class MetricLearner:
                     a[freea] = x
                     return a
 
+                est = pb.drift_path is not None and self.heading_drift == "estimate" and pb.has_angle
+                n_a = int(freea.sum())
+
                 def fun(x):
-                    c, g = vp.cost(full_a(x))
+                    if est:
+                        pb.drift = float(x[n_a])
+                    a = full_a(x[:n_a])
+                    c, g = vp.cost(a)
+                    if est:
+                        return c, np.r_[g[freea], vp.drift_gradient(a)]
                     return c, g[freea]
 
                 def params(x):
-                    a = full_a(x)
+                    if est:
+                        pb.drift = float(x[n_a])
+                    a = full_a(x[:n_a])
                     O, W = vp.linear(a)
                     return a, O, W
 
-                x0 = a0[freea]
+                x0 = np.r_[a0[freea], pb.drift] if est else a0[freea]
             hist.append(float(pb.cost(*params(x0))[0]))
             if 0 in snaps_at:
                 snap(0, *params(x0))
@@ -1108,7 +1173,7 @@ class MetricLearner:
             a, O, W = params(x_opt)
         cost = float(pb.cost(a, O, W)[0])
         snap(n_iter, a, O, W)
-        return {"alpha": a, "origins": O, "weights": W, "cost": cost, "history": hist,
+        return {"alpha": a, "origins": O, "weights": W, "cost": cost, "history": hist, "drift": pb.drift,
                 "n_iter": n_iter, "converged": converged, "snapshots": snaps}
 
     # ------------------------------------------------------------ inference
@@ -1204,6 +1269,7 @@ class MetricLearner:
             "transit_weights": self.transit_weights_,
             "feature_noise": -1.0 if self.feature_noise_ is None else self.feature_noise_,
             "noise_iterations": self.noise_iterations_,
+            "heading_drift": self.heading_drift_,
             "learning_rate": self.learning_rate_,
             "n_outputs": self.n_outputs_,
             "degree": self.degree_,
@@ -1247,6 +1313,7 @@ class MetricLearner:
             fn = float(state.get("feature_noise", -1.0))
             m.feature_noise_ = None if fn < 0 else fn
             m.noise_iterations_ = int(state.get("noise_iterations", 1))
+            m.heading_drift_ = float(state.get("heading_drift", 0.0))
             m.learning_rate_ = float(state["learning_rate"])
             m.n_outputs_ = int(state["n_outputs"])
             m.degree_ = int(state["degree"])
