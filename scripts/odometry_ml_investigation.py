@@ -9,11 +9,13 @@
   5.5 and the ML cost with the default and a matched noise model, train /
   test MED;
 * ``sim``: the ML cost against the thesis's cost 5.1 on the 5.3.1-sim lines,
-  learner seeds 0-4.
+  learner seeds 0-4;
+* ``drift``: systematic heading drift on the synthetic ``make_odometry_run``
+  (no cached features needed) and the drift estimated on 5.3.1-real.
 
     PYTHONPATH=python python3 scripts/odometry_ml_investigation.py \\
         --real RESULTS/data/thesis-5.2-indoor-II-seed0-features.npz \\
-        --sim RESULTS/data/thesis-5.3.1-sim-seed0-features.npz [--parts real noise sim]
+        --sim RESULTS/data/thesis-5.3.1-sim-seed0-features.npz [--parts real noise sim drift]
 
 Seconds per part (one BLAS thread).
 """
@@ -104,18 +106,46 @@ def part_sim(path: str) -> None:
               f"{r.row('thesis cost 5.1 at its minimum: train MED unsupervised (m)'):.3f} m")
 
 
+def part_drift(path: str) -> None:
+    from sfanav.experiments_odometry import make_odometry_run
+
+    print("synthetic make_odometry_run, training-line MED (m) [heading_drift_ used]")
+    for bias in (0.002, 0.0002, 0.0):
+        for seed in (0, 1):
+            run = make_odometry_run(n_legs=14, random_state=seed, heading_bias=bias)
+            lines = segment_lines(run["odometry"])
+            F, xy, on = run["features"], run["xy"], lines.mask
+            variants = {"thesis 5.5": dict(angle_term="cos"), "ML": dict(angle_weight="noise", transit_weight="noise"),
+                        "ML drift estimated": dict(angle_weight="noise", transit_weight="noise", heading_drift="estimate"),
+                        "ML drift known": dict(angle_weight="noise", transit_weight="noise", heading_drift=bias / 0.04)}
+            cells = []
+            for name, kw in variants.items():
+                m = MetricLearner(init="odometry", **kw).fit(F, lines, progress=False)
+                cells.append(f"{name} {_aligned(m, F, xy, on):.3f} [{m.heading_drift_:.4f}]")
+            print(f"  drift {bias / 0.04:.3f} rad/m, seed {seed}: " + " | ".join(cells))
+    if path is not None:
+        z = np.load(path)
+        F, xy = z["train/features"], z["train/poses"][:, :2]
+        lines = segment_lines(z["train/odometry"])
+        m = MetricLearner(init="odometry", angle_weight="noise", transit_weight="noise",
+                          heading_drift="estimate").fit(F, lines, progress=False)
+        print(f"  5.3.1-real: estimated drift {m.heading_drift_:.4f} rad/m, train MED "
+              f"{_aligned(m, F, xy, lines.mask):.3f} m")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--real", help="cached features of 5.3.1-real (thesis-5.2-indoor-II-seed0-features.npz)")
     ap.add_argument("--sim", help="cached features of 5.3.1-sim (thesis-5.3.1-sim-seed0-features.npz)")
-    ap.add_argument("--parts", nargs="+", default=["real", "noise", "sim"], choices=["real", "noise", "sim"])
+    ap.add_argument("--parts", nargs="+", default=["real", "noise", "sim", "drift"],
+                    choices=["real", "noise", "sim", "drift"])
     args = ap.parse_args()
     with threadpool_limits(limits=1, user_api="blas"):
         for part in args.parts:
             path = args.sim if part == "sim" else args.real
-            if path is None:
+            if path is None and part != "drift":
                 ap.error(f"part {part!r} needs --{'sim' if part == 'sim' else 'real'}")
-            {"real": part_real, "noise": part_noise, "sim": part_sim}[part](path)
+            {"real": part_real, "noise": part_noise, "sim": part_sim, "drift": part_drift}[part](path)
 
 
 if __name__ == "__main__":
