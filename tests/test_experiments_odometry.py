@@ -30,11 +30,20 @@ def test_5_3_1_real_and_5_3_2(runs, tmp_path):
     for k, v in THESIS["5.3.1-real"].items():
         assert rows[k]["thesis"] == v
     assert r.row("lines") >= 10 and r.row("solver") == "varpro"
-    # the synthetic odometry drifts (0.002 rad per step), so the measured angles between lines are biased
-    assert r.row("test MED unsupervised (m)") < 0.4 and r.row("test MED supervised (m)") < 0.25
+    # the synthetic odometry drifts (0.002 rad per step, 0.05 rad/m: 25x the simulator's), so the measured
+    # angles between lines are biased; the default learner's random-walk noise model does not know the drift
+    # and trusts them more than the thesis's cos term (blind near 180 degrees) does (docs/odometry.md)
+    assert r.row("test MED unsupervised (m)") < 0.5 and r.row("test MED supervised (m)") < 0.25
+    assert r.row("thesis cost 5.5 at its minimum: test MED unsupervised (m)") < 0.4
     assert r.row("unsupervised/supervised test MED ratio") == pytest.approx(
         r.row("test MED unsupervised (m)") / r.row("test MED supervised (m)"))
-    assert "test MED unsupervised, signed angle term (m)" in rows
+    # default learner: the likelihood with the odometry between lines; the thesis's cost 5.5 beside it
+    assert r.details["learner"].transit_weights_.all() and r.details["learner"].angle_term_ == "signed"
+    assert r.row("cost").startswith("ML") and r.row("map residual sigma_f, ML estimate (m)") > 0
+    assert r.row("thesis cost 5.5 at its minimum: test MED unsupervised (m)") > 0
+    assert r.details["thesis_learner"].angle_term_ == "cos" and not r.details["thesis_learner"].transit_weights_.any()
+    assert set(r.targets) == {"unsupervised test MED within 1.3x of supervised",
+                              "unsupervised (thesis cost at its minimum) test MED within 1.3x of supervised"}
     assert all(p.exists() for p in r.figures.values()) and len(r.figures) == 2
     assert r.details["test_estimates"].shape == te["xy"].shape
 
@@ -58,6 +67,8 @@ def test_5_3_1_sim():
     assert r.name == "5.3.1-sim" and r.row("lines") == 10
     assert r.row("unsupervised/supervised test MED ratio") < 1.5
     assert r.details["learner"].n_init == 5 and r.details["learner"].angle_term_ is None
+    # lines without transits: the thesis's cost 5.1 (nothing to weight by the odometry)
+    assert r.row("cost") == "(5.1)" and r.details["thesis_learner"] is None
 
 
 def test_compare_solvers_and_format():

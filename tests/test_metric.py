@@ -211,3 +211,224 @@ def test_varpro_is_a_minimum_of_the_full_cost_with_ridge_and_fixed_origin(proble
                        tol=1e-14, max_iter=500, **kw).fit(F, lines, progress=False)
     assert np.allclose(vp.origins_[2], (3.0, -1.0)) and vp.cost_ > 1.0  # the ridge costs something
     assert lb.cost_ == pytest.approx(vp.cost_, rel=1e-7)
+
+
+# ----------------------------------------------------------------- odometry between lines (beyond the thesis)
+
+
+@pytest.mark.parametrize("angle_term", [None, "cos", "signed"])
+def test_transit_term_gradients_match_finite_differences(small, angle_term):
+    """The transit term t_n = o_{n+1} - o_n - q_x u(alpha_n) - q_y u'(alpha_n) with
+    per-pair weights, and per-pair angle weights."""
+    Phi, lab, d, phi, theta = small
+    rng = np.random.default_rng(7)
+    kw = dict(angle_term=angle_term, angle_weight=rng.uniform(0.5, 3, 4), ridge=0.3,
+              transits=rng.normal(size=(4, 2)), transit_weight=rng.uniform(0.5, 3, 4))
+    c, grads = metric_cost(*theta, Phi, lab, d, phi, **kw)
+    # the term itself, directly
+    a, O, _ = theta
+    q, w = kw["transits"], kw["transit_weight"]
+    t = O[1:] - O[:-1] - q[:, :1] * np.c_[np.cos(a), np.sin(a)][:-1] - q[:, 1:] * np.c_[-np.sin(a), np.cos(a)][:-1]
+    c0 = metric_cost(*theta, Phi, lab, d, phi, **{**kw, "transit_weight": 0.0})[0]
+    assert c - c0 == pytest.approx(0.5 * np.sum(w * (t**2).sum(1)))
+    h = 1e-6
+    for b, (param, g) in enumerate(zip(theta, grads)):
+        num = np.zeros_like(param)
+        for idx in np.ndindex(param.shape):
+            plus = [x.copy() for x in theta]
+            minus = [x.copy() for x in theta]
+            plus[b][idx] += h
+            minus[b][idx] -= h
+            num[idx] = (metric_cost(*plus, Phi, lab, d, phi, **kw)[0] - metric_cost(*minus, Phi, lab, d, phi, **kw)[0]) / (2 * h)
+        np.testing.assert_allclose(g, num, rtol=1e-6, atol=1e-6 * np.abs(num).max())
+
+
+@pytest.fixture(scope="module")
+def odo_run():
+    from sfanav.experiments_odometry import make_odometry_run
+
+    return make_odometry_run(n_legs=14, random_state=2)
+
+
+def test_varpro_with_transits_is_a_minimum_of_the_full_cost(odo_run):
+    """Variable projection with the transit term (which couples x and y through
+    the lateral displacement) and a fixed origin: L-BFGS on all parameters from
+    its solution finds nothing lower, and its solution does not depend on the gauge."""
+    from sfanav.odometry import segment_lines
+
+    lines = segment_lines(odo_run["odometry"])
+    F = odo_run["features"]
+    kw = dict(angle_term="signed", angle_weight=2.0, transit_weight=30.0, init="odometry")
+    vp = MetricLearner(**kw).fit(F, lines, progress=False)
+    assert vp.transit_weights_.shape == (lines.n_lines - 1,) and np.all(vp.transit_weights_ == 30.0)
+    lb = MetricLearner(**{**kw, "init": {"alpha": vp.alpha_, "origins": vp.origins_, "weights": vp.weights_}},
+                       solver="lbfgs", tol=1e-15, max_iter=2000).fit(F, lines, progress=False)
+    assert lb.cost_ == pytest.approx(vp.cost_, rel=1e-7)
+    # from a perturbed start, the full L-BFGS comes down to the same minimum
+    lb2 = MetricLearner(**{**kw, "init": {"alpha": vp.alpha_ + 0.02, "origins": vp.origins_ + 0.05,
+                                          "weights": vp.weights_}},
+                        solver="lbfgs", tol=1e-15, max_iter=5000).fit(F, lines, progress=False)
+    assert lb2.cost_ == pytest.approx(vp.cost_, rel=1e-5)
+    fixed = MetricLearner(**kw, fix_origin={3: (1.0, -2.0)}, fix_alpha={3: 0.5}).fit(F, lines, progress=False)
+    assert fixed.cost_ == pytest.approx(vp.cost_, rel=1e-7) and np.allclose(fixed.origins_[3], (1.0, -2.0))
+    P, Q = vp.transform(F), fixed.transform(F)
+    assert align(Q, P).rmse < 1e-4  # the same map up to a rigid motion (no mirror: signed angles, transits)
+
+
+def test_odometry_variances_follow_the_noise_model():
+    from sfanav.metric import DEFAULT_ODOMETRY_NOISE, odometry_variances
+    from sfanav.odometry import lines_from_odometry
+
+    # two lines along x (1 m each, 11 samples), a turn on the spot by pi between them, no drive
+    P = np.zeros((24, 3))
+    P[:11, 0] = np.arange(11) * 0.1
+    P[11, :] = (1.0, 0.0, np.pi / 2)
+    P[12:, 0] = 1.0 - np.arange(12) * 0.1 / 1.0
+    P[12:, 2] = np.pi
+    P[12:13, 0] = 1.0
+    lines = lines_from_odometry(np.r_[np.zeros(11, int), -1, np.ones(12, int)], P)
+    assert lines.n_lines == 2 and lines.transit_lengths[0] == pytest.approx(0.0)
+    assert lines.transit_turns[0] == pytest.approx(np.pi)
+    assert lines.relative_angles[0] == pytest.approx(np.pi)
+    np.testing.assert_allclose(lines.transits(), [[1.0, 0.0]], atol=1e-12)  # line 1 starts 1 m ahead of line 0
+    var_a, var_t = odometry_variances(lines, {"distance_sigma": 0.02, "heading_sigma": 0.0, "turn_sigma": 0.1})
+    S = lines.path_lengths()
+    np.testing.assert_allclose(S, [1.0, 1.1])
+    assert var_a[0] == pytest.approx(0.01 * np.pi)
+    # transit displacement from the end of line 0 (x = 1) to the start of line 1 (x = 1): zero, so only distance
+    assert var_t[0] == pytest.approx(0.5 * 0.02**2 * (1.0 / 3 + 1.1 / 3))
+    # defaults and the simulator's noise object
+    from sfanav.sim import OdometryNoise
+
+    np.testing.assert_allclose(odometry_variances(lines)[0], odometry_variances(lines, OdometryNoise())[0])
+    assert DEFAULT_ODOMETRY_NOISE["turn_sigma"] == OdometryNoise().turn_sigma
+    with pytest.raises(ValueError, match="needs the transits"):
+        odometry_variances(lines_from_labels(lines.labels, lines.distances))
+    with pytest.raises(ValueError, match="heading_sigma"):
+        odometry_variances(lines, {"heading_sigma": -1.0})
+    with pytest.raises(TypeError, match="odometry_noise must be a mapping"):
+        odometry_variances(lines, 0.1)
+
+
+@pytest.fixture(scope="module")
+def lanes():
+    """The 5.3.1-real situation on synthetic features: serpentine lanes 0.4 m apart with
+    turns on the spot (along x, then along y), the simulator's odometry noise, and
+    features of a smoothly warped position plus noise (no exact quadratic map)."""
+    from sfanav.sim import OdometryNoise, simulate_odometry
+    from sfanav.sim import trajectories as T
+    from sfanav.odometry import segment_lines
+
+    P = np.asarray(T.grid((4.0, 4.0), spacing=0.4, step=0.03, turn="spot", margin=0.3).poses)
+    xy = P[:, :2]
+    odo = simulate_odometry(P, OdometryNoise(), 0)
+    warped = xy + 0.1 * np.c_[np.sin(2.1 * xy[:, 1] + 0.3), np.sin(1.7 * xy[:, 0] + 1.0)]
+    F = synthetic_features(warped + 2.0, area=(4.0, 4.0), noise=0.05, random_state=1)
+    return F, xy, segment_lines(odo)
+
+
+def test_noise_weighted_cost_does_not_bend_where_the_thesis_cost_does(lanes):
+    from sfanav.regression import QuadraticRegression
+
+    F, xy, lines = lanes
+    on = lines.mask
+    assert lines.n_lines == 18 and lines.transit_lengths is not None
+
+    def aligned_med(m):
+        P = m.transform(F[on])
+        return med(align(P, xy[on], allow_reflection=True).apply(P), xy[on])
+
+    sup = QuadraticRegression(8).fit(F[on], xy[on]).score(F[on], xy[on])
+    thesis = MetricLearner(init="odometry", angle_term="cos").fit(F, lines, progress=False)
+    ml = MetricLearner(init="odometry", angle_weight="noise", transit_weight="noise").fit(F, lines, progress=False)
+    # the thesis's cost (5.5) at its minimum bends the lanes; the likelihood with the odometry between them does not
+    assert aligned_med(thesis) > 3 * sup
+    assert aligned_med(ml) < 1.2 * sup
+    assert ml.angle_term_ == "signed" and ml.noise_iterations_ > 1
+    # sigma_f is the ML estimate: the residual variance of the final fit (per coordinate, dof-corrected)
+    R = ml.line_points()[on] - ml.transform(F[on])
+    n_par = 3 * lines.n_lines + 2 * ml.weights_.shape[0]
+    assert ml.feature_noise_ == pytest.approx(np.sqrt((R**2).sum() / (2 * on.sum() - n_par)), rel=2e-3)
+    from sfanav.metric import odometry_variances
+
+    var_a, var_t = odometry_variances(lines)
+    np.testing.assert_allclose(ml.angle_weights_, ml.feature_noise_**2 / var_a, rtol=1e-12)
+    np.testing.assert_allclose(ml.transit_weights_, ml.feature_noise_**2 / var_t, rtol=1e-12)
+    # a given sigma_f: one fit, those weights
+    fixed = MetricLearner(init="odometry", angle_weight="noise", transit_weight="noise",
+                          feature_noise=0.05).fit(F, lines, progress=False)
+    assert fixed.noise_iterations_ == 1 and fixed.feature_noise_ == 0.05
+    np.testing.assert_allclose(fixed.transit_weights_, 0.05**2 / var_t)
+    # the weights are plain numbers in the model file
+    assert aligned_med(ml) == pytest.approx(aligned_med(sfanav.load(ml.save(
+        __import__("tempfile").mkdtemp() + "/m.sfa"))))
+
+
+def test_noise_weights_bad_inputs(problem, lanes):
+    F, lines = problem["features"], problem["lines"]
+    with pytest.raises(ValueError, match="angle_weight must be a number"):
+        MetricLearner(angle_weight="ml").fit(F, lines, progress=False)
+    with pytest.raises(ValueError, match="transit_weight must be a number"):
+        MetricLearner(transit_weight="likelihood").fit(F, lines, progress=False)
+    with pytest.raises(ValueError, match="transit_weight needs the odometry origins"):
+        MetricLearner(transit_weight=1.0).fit(F, lines, progress=False)
+    with pytest.raises(ValueError, match="needs the transits"):
+        MetricLearner(angle_weight="noise").fit(F, lines, progress=False)
+    with pytest.raises(ValueError, match="feature_noise must be > 0"):
+        MetricLearner(angle_weight="noise", feature_noise=0.0).fit(F, lines, progress=False)
+    Fl, _, ll = lanes
+    with pytest.raises(TypeError, match="odometry_noise must be a mapping"):
+        MetricLearner(init="odometry", angle_weight="noise", odometry_noise=[0.01]).fit(Fl, ll, progress=False)
+
+
+def test_heading_drift_is_estimated_and_removed(odo_run):
+    """A systematic heading drift (0.002 rad per 4 cm step = 0.05 rad/m) biases every
+    measured heading change; heading_drift='estimate' recovers it and the map improves."""
+    from sfanav.experiments_odometry import make_odometry_run
+    from sfanav.metric import _Problem, _VarPro
+    from sfanav.odometry import segment_lines
+
+    run = make_odometry_run(n_legs=14, random_state=0)  # heading_bias 0.002 rad per moving step
+    lines = segment_lines(run["odometry"])
+    on = lines.mask
+    F, xy = run["features"], run["xy"]
+
+    def aligned_med(m):
+        P = m.transform(F[on])
+        return med(align(P, xy[on], allow_reflection=True).apply(P), xy[on])
+
+    kw = dict(init="odometry", angle_weight="noise", transit_weight="noise")
+    plain = MetricLearner(**kw).fit(F, lines, progress=False)
+    est = MetricLearner(**kw, heading_drift="estimate").fit(F, lines, progress=False)
+    known = MetricLearner(**kw, heading_drift=0.05).fit(F, lines, progress=False)
+    assert plain.heading_drift_ == 0.0 and known.heading_drift_ == 0.05
+    assert 0.04 < est.heading_drift_ < 0.06
+    assert aligned_med(est) < 0.6 * aligned_med(plain) and aligned_med(known) < 0.6 * aligned_med(plain)
+    # the estimate is a stationary point in the drift too: d cost / d drift = 0 there (finite differences)
+    S = lines.path_lengths()
+    p = S[:-1] / 2 + lines.transit_lengths + S[1:] / 2
+    Phi = est._design(F[on], 8, 2)
+
+    def cost(drift):
+        pb = _Problem(Phi, lines.labels[on], lines.distances[on], lines.relative_angles, "signed", est.angle_weights_,
+                      {}, {}, 0.0, lines.transits(), est.transit_weights_, p, drift)
+        vp = _VarPro(pb)
+        return vp.cost(est.alpha_)[0], vp.drift_gradient(est.alpha_), pb
+
+    c0, g0, pb = cost(est.heading_drift_)
+    assert c0 == pytest.approx(est.cost_, rel=1e-9) and c0 == pytest.approx(pb.cost(est.alpha_, est.origins_, est.weights_)[0])
+    h = 1e-6
+    g_num = (cost(0.03 + h)[0] - cost(0.03 - h)[0]) / (2 * h)
+    assert cost(0.03)[1] == pytest.approx(g_num, rel=1e-6)
+    assert abs(g0) < 1e-3 * abs(g_num)
+    with pytest.raises(ValueError, match="needs solver='varpro'"):
+        MetricLearner(**kw, heading_drift="estimate", solver="lbfgs").fit(F, lines, progress=False)
+    with pytest.raises(ValueError, match="needs angle_term='signed'"):
+        MetricLearner(**kw, heading_drift="estimate", angle_term="cos").fit(F, lines, progress=False)
+    with pytest.raises(ValueError, match="heading_drift must be a number"):
+        MetricLearner(**kw, heading_drift="auto").fit(F, lines, progress=False)
+    with pytest.raises(ValueError, match="heading_drift must be finite"):
+        MetricLearner(**kw, heading_drift=float("nan")).fit(F, lines, progress=False)
+    bare = lines_from_labels(lines.labels, lines.distances, lines.relative_angles)
+    with pytest.raises(ValueError, match="heading_drift needs the transits"):
+        MetricLearner(angle_term="signed", heading_drift=0.01).fit(F, bare, progress=False)

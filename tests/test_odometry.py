@@ -3,7 +3,15 @@
 import numpy as np
 import pytest
 
-from sfanav.odometry import Lines, dead_reckon, increments, lines_from_labels, segment_lines, wrap_angle
+from sfanav.odometry import (
+    Lines,
+    dead_reckon,
+    increments,
+    lines_from_labels,
+    lines_from_odometry,
+    segment_lines,
+    wrap_angle,
+)
 
 
 def square_walk(side_steps=20, turn_steps=5, step=0.2, laps=1):
@@ -41,6 +49,33 @@ def test_segment_lines_on_a_square():
     assert np.isnan(lines.distances[~on]).all() and (lines.labels[~on] == -1).all()
     np.testing.assert_allclose(lines.distances[lines.labels == 1], np.arange(21) * 0.2, atol=1e-12)
     assert "4 lines" in repr(lines)
+    # transits: turns of 90 degrees on the spot; each next origin 4 m ahead in the line's frame
+    np.testing.assert_allclose(lines.transit_lengths, 0.0, atol=1e-12)
+    np.testing.assert_allclose(lines.transit_turns, np.pi / 2)
+    np.testing.assert_allclose(lines.transits(), [[4.0, 0.0]] * 3, atol=1e-12)
+    np.testing.assert_allclose(lines.path_lengths(), 4.0)
+
+
+def test_lines_from_odometry_matches_segmentation():
+    P = dead_reckon(square_walk(), (1.0, 2.0, 0.3))
+    seg = segment_lines(P)
+    known = lines_from_odometry(seg.labels, P)
+    for name in ("distances", "relative_angles", "headings", "origins", "transit_lengths", "transit_turns"):
+        np.testing.assert_allclose(np.nan_to_num(getattr(known, name)), np.nan_to_num(getattr(seg, name)), atol=1e-12)
+    lab = seg.labels.copy()
+    with pytest.raises(ValueError, match="must match"):
+        lines_from_odometry(lab[:-1], P)
+    bad = lab.copy()
+    bad[5] = 1  # line 1 interrupts line 0
+    with pytest.raises(ValueError, match="not contiguous"):
+        lines_from_odometry(bad, P)
+    swapped = np.where(lab == 0, 1, np.where(lab == 1, 0, lab))
+    with pytest.raises(ValueError, match="driving order"):
+        lines_from_odometry(swapped, P)
+    with pytest.raises(ValueError, match="no line"):
+        lines_from_odometry(np.full(len(P), -1), P)
+    with pytest.raises(ValueError, match="transit_turns must be >= 0"):
+        lines_from_labels(lab, seg.distances, transit_turns=-np.ones(3))
 
 
 def test_segment_lines_thresholds_and_noise():

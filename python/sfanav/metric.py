@@ -21,6 +21,19 @@ or (``angle_term="signed"``, beyond the thesis: also fixes the mirror image)
 
     C += lambda sum_n ( 1 - cos(alpha_{n+1} - alpha_n - phi_n) ).
 
+Beyond the thesis, the odometry between the lines (``transit_weight``): with
+``q_n`` the odometry displacement from the origin of line n to that of line
+n+1 in line n's frame (:meth:`sfanav.odometry.Lines.transits`),
+
+    C += 1/2 sum_n w_n || o_{n+1} - o_n - q_{n,x} u(alpha_n) - q_{n,y} u'(alpha_n) ||^2
+
+and, with ``angle_weight="noise"`` / ``transit_weight="noise"``, the
+maximum-likelihood weights ``sigma_f^2 / variance`` from an odometry noise
+model (:func:`odometry_variances`) and the residual variance ``sigma_f^2``
+of the map (estimated by maximum likelihood unless given). On grid-like runs
+of parallel lanes the thesis's costs have a bent map as their minimum; this
+one does not (``docs/odometry.md``).
+
 Gradients (derived in ``docs/odometry.md``; :func:`metric_cost` returns them),
 with residuals ``r_{n,m} = o_n + d_{n,m} u(alpha_n) - W^T s_{n,m}``:
 
@@ -71,7 +84,7 @@ from .modelfile import register_loader, save_model
 from .odometry import Lines, segment_lines
 from .sfa import NotFittedError, expand, expanded_dim
 
-__all__ = ["MetricLearner", "metric_cost", "plot_metric_lines"]
+__all__ = ["DEFAULT_ODOMETRY_NOISE", "MetricLearner", "metric_cost", "odometry_variances", "plot_metric_lines"]
 
 SOLVERS = ("gd", "lbfgs", "varpro")
 ANGLE_TERMS = ("auto", "cos", "signed", None)
@@ -90,8 +103,10 @@ def metric_cost(
     relative_angles: Any = None,
     *,
     angle_term: str | None = "cos",
-    angle_weight: float = 1.0,
+    angle_weight: Any = 1.0,
     ridge: float = 0.0,
+    transits: Any = None,
+    transit_weight: Any = 0.0,
 ) -> tuple[float, tuple[np.ndarray, np.ndarray, np.ndarray]]:
     """Cost (thesis 5.1, or 5.5 with the angle term) and its gradient.
 
@@ -115,10 +130,18 @@ def metric_cost(
     angle_term : {"cos", "signed", None}
         ``"cos"``: the thesis's (5.5); ``"signed"``: ``1 - cos`` of the
         difference of signed turns; None: cost (5.1).
-    angle_weight : float
-        Weight lambda of the angle term (thesis: 1).
+    angle_weight : float or array (L - 1,)
+        Weight lambda of the angle term (thesis: 1), or one per pair of
+        consecutive lines.
     ridge : float
         Adds ``ridge / 2 * ||W[1:]||^2`` (not the bias row; beyond the thesis).
+    transits : array (L - 1, 2), optional
+        Odometry displacement ``q_n`` from the origin of line n to that of
+        line n+1 in line n's frame (metres; :meth:`sfanav.odometry.Lines.transits`).
+        Beyond the thesis: adds, with ``t_n = o_{n+1} - o_n - q_{n,x} u(alpha_n)
+        - q_{n,y} u'(alpha_n)``, the term ``1/2 sum_n w_n ||t_n||^2``.
+    transit_weight : float or array (L - 1,)
+        Weight ``w_n`` of the transit term (0: off).
 
     Returns
     -------
@@ -142,33 +165,61 @@ def metric_cost(
         cost += 0.5 * ridge * float(np.einsum("ij,ij->", W[1:], W[1:]))
         g_W[1:] += ridge * W[1:]
     if angle_term is not None and relative_angles is not None and L > 1:
-        phi = np.asarray(relative_angles, dtype=np.float64)
-        lam = float(angle_weight)
-        if angle_term == "cos":
-            delta = a[:-1] - a[1:]
-            e = np.cos(delta) - np.cos(phi)
-            cost += 0.5 * lam * float(e @ e)
-            g = lam * e * np.sin(delta)
-            g_a[:-1] -= g
-            g_a[1:] += g
-        elif angle_term == "signed":
-            delta = a[1:] - a[:-1] - phi
-            cost += lam * float(np.sum(1.0 - np.cos(delta)))
-            g = lam * np.sin(delta)
-            g_a[1:] += g
-            g_a[:-1] -= g
-        else:
+        if angle_term not in ("cos", "signed"):
             raise ValueError(f"angle_term must be 'cos', 'signed' or None, got {angle_term!r}")
+        c_ang, g_ang = _angle_cost(a, np.asarray(relative_angles, dtype=np.float64), angle_term,
+                                   np.broadcast_to(np.asarray(angle_weight, dtype=np.float64), (L - 1,)))
+        cost += c_ang
+        g_a += g_ang
+    if transits is not None and L > 1:
+        w = np.broadcast_to(np.asarray(transit_weight, dtype=np.float64), (L - 1,))
+        if np.any(w):
+            q = np.asarray(transits, dtype=np.float64)
+            T = O[1:] - O[:-1] - q[:, :1] * np.c_[ca, sa][:-1] - q[:, 1:] * np.c_[-sa, ca][:-1]
+            cost += 0.5 * float(np.sum(w * np.einsum("ij,ij->i", T, T)))
+            wT = w[:, None] * T
+            g_o[1:] += wT
+            g_o[:-1] -= wT
+            # dt_n / d alpha_n = -q_x u'(alpha_n) + q_y u(alpha_n)
+            dT = -q[:, :1] * np.c_[-sa, ca][:-1] + q[:, 1:] * np.c_[ca, sa][:-1]
+            g_a[:-1] += np.einsum("ij,ij->i", wT, dT)
     return cost, (g_a, g_o, g_W)
 
 
-class _Problem:
-    """The data of one fit: design, labels, distances, angles, fixed parameters."""
+def _angle_cost(a: np.ndarray, phi: np.ndarray, angle_term: str, lam: np.ndarray) -> tuple[float, np.ndarray]:
+    """The angle term and its gradient in alpha, with one weight per pair."""
+    grad = np.zeros_like(a)
+    if angle_term == "cos":
+        delta = a[:-1] - a[1:]
+        e = np.cos(delta) - np.cos(phi)
+        cost = 0.5 * float(np.sum(lam * e * e))
+        g = lam * e * np.sin(delta)
+        grad[:-1] -= g
+        grad[1:] += g
+    else:
+        delta = a[1:] - a[:-1] - phi
+        cost = float(np.sum(lam * (1.0 - np.cos(delta))))
+        g = lam * np.sin(delta)
+        grad[1:] += g
+        grad[:-1] -= g
+    return cost, grad
 
-    def __init__(self, Phi, lab, d, phi, angle_term, lam, fix_alpha, fix_origin, ridge=0.0):
-        self.Phi, self.lab, self.d, self.phi, self.ridge = Phi, lab, d, phi, ridge
-        self.angle_term, self.lam = angle_term, lam
+
+class _Problem:
+    """The data of one fit: design, labels, distances, angles, transits, weights, fixed parameters."""
+
+    def __init__(self, Phi, lab, d, phi, angle_term, lam, fix_alpha, fix_origin, ridge=0.0, transits=None,
+                 transit_weight=0.0, drift_path=None, drift=0.0):
+        self.Phi, self.lab, self.d, self.phi0, self.ridge = Phi, lab, d, phi, ridge
+        # heading drift (rad/m) times the odometry path between the lines' mean headings: the drift's
+        # share of the measured heading changes, removed from them
+        self.drift_path, self.drift = drift_path, float(drift)
+        self.angle_term = angle_term
         self.L, self.K = int(lab.max()) + 1, Phi.shape[1]
+        self.lam = np.broadcast_to(np.asarray(lam, dtype=np.float64), (max(self.L - 1, 0),)).copy()
+        wt = np.broadcast_to(np.asarray(transit_weight, dtype=np.float64), (max(self.L - 1, 0),)).copy()
+        self.transits = transits if (transits is not None and np.any(wt)) else None
+        self.wt = wt if self.transits is not None else np.zeros(max(self.L - 1, 0))
         self.fix_alpha, self.fix_origin = fix_alpha, fix_origin
         free_a = np.ones(self.L, bool)
         free_a[list(fix_alpha)] = False
@@ -178,9 +229,24 @@ class _Problem:
         # free-parameter mask over the packed vector [alpha (L), origins (L*2), W (K*2)]
         self.free = np.concatenate([free_a, np.repeat(free_o, 2), np.ones(2 * self.K, bool)])
 
+    @property
+    def phi(self):
+        if self.phi0 is None or self.drift_path is None or not self.drift:
+            return self.phi0
+        return self.phi0 - self.drift * self.drift_path
+
+    @property
+    def has_angle(self) -> bool:
+        return self.angle_term is not None and self.phi is not None and self.L > 1
+
     def cost(self, a, O, W):
         return metric_cost(a, O, W, self.Phi, self.lab, self.d, self.phi,
-                           angle_term=self.angle_term, angle_weight=self.lam, ridge=self.ridge)
+                           angle_term=self.angle_term, angle_weight=self.lam, ridge=self.ridge,
+                           transits=self.transits, transit_weight=self.wt)
+
+    def residuals(self, a, O, W):
+        """Residuals (M, 2) of the line samples, metres."""
+        return O[self.lab] + self.d[:, None] * np.c_[np.cos(a), np.sin(a)][self.lab] - self.Phi @ W
 
     def pack(self, a, O, W):
         return np.concatenate([a, O.ravel(), W.ravel()])
@@ -201,78 +267,209 @@ class _Problem:
 class _VarPro:
     """The cost as a function of the line orientations alone: for fixed
     alpha, origins and W solve a linear least-squares problem (see the
-    module docstring and docs/odometry.md)."""
+    module docstring and docs/odometry.md).
+
+    All residuals are linear in the origins and W and in ``z = (cos alpha,
+    sin alpha)``: stacked per coordinate, ``r_x = A theta_x + M_x z + f_x``
+    and ``r_y = A theta_y + M_y z + f_y`` with the same A (sample rows
+    ``[E, -Phi]``, transit rows ``sqrt(w_n) (e_{n+1} - e_n)`` on the
+    origins, ridge rows on W). With ``P = I - A A^+`` the cost is
+    ``1/2 z^T G z + h^T z + kappa`` + angle term, ``G = sum (P M)^T (P M)``,
+    ``h = sum (P M)^T P f``."""
 
     def __init__(self, pb: _Problem):
         self.pb = pb
-        L, M = pb.L, len(pb.lab)
-        E = np.zeros((M, L))
-        E[np.arange(M), pb.lab] = 1.0
-        self.A = np.hstack([E[:, pb.free_o], -pb.Phi])  # r_x = A theta_x + b_x
-        n_extra = 0
+        L, m0, K = pb.L, len(pb.lab), pb.K
+        nf = int(pb.free_o.sum())
+        col = -np.ones(L, dtype=np.int64)
+        col[pb.free_o] = np.arange(nf)
+        blocks_A, blocks_Mx, blocks_My, blocks_fx, blocks_fy = [], [], [], [], []
+        # samples: o_n + d u(alpha_n) - W^T s
+        E = np.zeros((m0, nf + K))
+        fr = col[pb.lab] >= 0
+        E[np.flatnonzero(fr), col[pb.lab[fr]]] = 1.0
+        E[:, nf:] = -pb.Phi
+        blocks_A.append(E)
+        Dm = np.zeros((m0, L))
+        Dm[np.arange(m0), pb.lab] = pb.d
+        Z = np.zeros((m0, L))
+        blocks_Mx.append(np.hstack([Dm, Z]))
+        blocks_My.append(np.hstack([Z, Dm]))
+        fx, fy = np.zeros(m0), np.zeros(m0)
+        for n, (ox, oy) in pb.fix_origin.items():
+            fx[pb.lab == n] = ox
+            fy[pb.lab == n] = oy
+        blocks_fx.append(fx)
+        blocks_fy.append(fy)
+        if pb.transits is not None:
+            # sqrt(w) (o_{n+1} - o_n - q_x u(alpha_n) - q_y u'(alpha_n)), u' = (-sin, cos)
+            sw = np.sqrt(pb.wt)
+            q = pb.transits
+            T = np.zeros((L - 1, nf + K))
+            tfx, tfy = np.zeros(L - 1), np.zeros(L - 1)
+            for n in range(L - 1):
+                for m, sign in ((n + 1, 1.0), (n, -1.0)):
+                    if col[m] >= 0:
+                        T[n, col[m]] += sign * sw[n]
+                    else:
+                        tfx[n] += sign * sw[n] * pb.fix_origin[m][0]
+                        tfy[n] += sign * sw[n] * pb.fix_origin[m][1]
+            Cx, Sx = np.zeros((L - 1, L)), np.zeros((L - 1, L))
+            Cy, Sy = np.zeros((L - 1, L)), np.zeros((L - 1, L))
+            idx = np.arange(L - 1)
+            Cx[idx, idx] = -sw * q[:, 0]
+            Sx[idx, idx] = sw * q[:, 1]
+            Cy[idx, idx] = -sw * q[:, 1]
+            Sy[idx, idx] = -sw * q[:, 0]
+            blocks_A.append(T)
+            blocks_Mx.append(np.hstack([Cx, Sx]))
+            blocks_My.append(np.hstack([Cy, Sy]))
+            blocks_fx.append(tfx)
+            blocks_fy.append(tfy)
         if pb.ridge:
-            # ridge on W[1:] as extra residual rows sqrt(ridge) * W[1:] (with b = 0 there)
-            nf, K = int(pb.free_o.sum()), pb.K
+            # ridge on W[1:] as extra residual rows sqrt(ridge) * W[1:] (with M = f = 0 there)
             J = np.zeros((K - 1, nf + K))
             J[:, nf + 1 :] = np.sqrt(pb.ridge) * np.eye(K - 1)
-            self.A = np.vstack([self.A, J])
-            n_extra = K - 1
-        M = M + n_extra
+            blocks_A.append(J)
+            blocks_Mx.append(np.zeros((K - 1, 2 * L)))
+            blocks_My.append(np.zeros((K - 1, 2 * L)))
+            blocks_fx.append(np.zeros(K - 1))
+            blocks_fy.append(np.zeros(K - 1))
+        self.A = np.vstack(blocks_A)
+        self.Mx, self.My = np.vstack(blocks_Mx), np.vstack(blocks_My)
+        self.fx, self.fy = np.concatenate(blocks_fx), np.concatenate(blocks_fy)
+        self.nf = nf
         U, S, Vt = np.linalg.svd(self.A, full_matrices=False)
         rank = int((S > S[0] * max(self.A.shape) * np.finfo(float).eps).sum())
         self.U, self.S, self.Vt, self.rank = U[:, :rank], S[:rank], Vt[:rank], rank
-        m0 = len(pb.lab)
-        D = np.zeros((M, L))
-        D[np.arange(m0), pb.lab] = pb.d
-        self.D = D
-        fx = np.zeros(M)
-        fy = np.zeros(M)
-        for n, (ox, oy) in pb.fix_origin.items():
-            fx[:m0][pb.lab == n] = ox
-            fy[:m0][pb.lab == n] = oy
-        self.fx, self.fy = fx, fy
         Q = self.U
-        PD = D - Q @ (Q.T @ D)
-        Pfx, Pfy = fx - Q @ (Q.T @ fx), fy - Q @ (Q.T @ fy)
-        self.G = PD.T @ PD
-        self.hx, self.hy = PD.T @ Pfx, PD.T @ Pfy
-        self.kappa = 0.5 * float(Pfx @ Pfx + Pfy @ Pfy)
+        G = np.zeros((2 * L, 2 * L))
+        h = np.zeros(2 * L)
+        kappa = 0.0
+        for Mm, f in ((self.Mx, self.fx), (self.My, self.fy)):
+            PM = Mm - Q @ (Q.T @ Mm)
+            Pf = f - Q @ (Q.T @ f)
+            G += PM.T @ PM
+            h += PM.T @ Pf
+            kappa += 0.5 * float(Pf @ Pf)
+        self.G, self.h, self.kappa = G, h, kappa
 
     def cost(self, a):
         pb = self.pb
+        L = pb.L
         c, s = np.cos(a), np.sin(a)
-        gc, gs = self.G @ c + self.hx, self.G @ s + self.hy
-        cost = 0.5 * float(c @ (gc + self.hx) + s @ (gs + self.hy)) + self.kappa
-        grad = -s * gc + c * gs
-        if pb.angle_term is not None and pb.phi is not None and pb.L > 1:
-            if pb.angle_term == "cos":
-                delta = a[:-1] - a[1:]
-                e = np.cos(delta) - np.cos(pb.phi)
-                cost += 0.5 * pb.lam * float(e @ e)
-                g = pb.lam * e * np.sin(delta)
-                grad[:-1] -= g
-                grad[1:] += g
-            else:
-                delta = a[1:] - a[:-1] - pb.phi
-                cost += pb.lam * float(np.sum(1.0 - np.cos(delta)))
-                g = pb.lam * np.sin(delta)
-                grad[1:] += g
-                grad[:-1] -= g
+        z = np.concatenate([c, s])
+        gz = self.G @ z + self.h
+        cost = 0.5 * float(z @ (gz + self.h)) + self.kappa
+        grad = -s * gz[:L] + c * gz[L:]
+        if pb.has_angle:
+            c_ang, g_ang = _angle_cost(a, pb.phi, pb.angle_term, pb.lam)
+            cost += c_ang
+            grad = grad + g_ang
         return cost, grad
+
+    def drift_gradient(self, a):
+        """d cost / d drift (signed angle term: phi_n = phi0_n - drift p_n)."""
+        pb = self.pb
+        delta = a[1:] - a[:-1] - pb.phi
+        return float(np.sum(pb.lam * np.sin(delta) * pb.drift_path))
 
     def linear(self, a):
         """Origins (L, 2) and W (K, 2) minimising the cost for orientations ``a``."""
         pb = self.pb
-        bx = self.D @ np.cos(a) + self.fx
-        by = self.D @ np.sin(a) + self.fy
-        B = np.c_[bx, by]
+        z = np.concatenate([np.cos(a), np.sin(a)])
+        B = np.c_[self.Mx @ z + self.fx, self.My @ z + self.fy]
         theta = -(self.Vt.T @ ((self.U.T @ B) / self.S[:, None]))  # minimum-norm least squares
-        nf = int(pb.free_o.sum())
+        nf = self.nf
         O = np.zeros((pb.L, 2))
         O[pb.free_o] = theta[:nf]
         for n, v in pb.fix_origin.items():
             O[n] = v
         return O, theta[nf:]
+
+
+#: Random odometry noise assumed by ``angle_weight="noise"`` / ``transit_weight="noise"``
+#: when none is given: the defaults of :class:`sfanav.sim.OdometryNoise` (a small
+#: differential-drive robot; keys and units as there).
+DEFAULT_ODOMETRY_NOISE = {"distance_sigma": 0.01, "heading_sigma": 0.004, "turn_sigma": 0.01}
+
+
+def _noise_dict(noise: Any) -> dict[str, float]:
+    if noise is None:
+        return dict(DEFAULT_ODOMETRY_NOISE)
+    if hasattr(noise, "to_dict") and not isinstance(noise, Mapping):
+        noise = noise.to_dict()
+    if not isinstance(noise, Mapping):
+        raise TypeError(
+            "odometry_noise must be a mapping with distance_sigma (m/sqrt(m)), heading_sigma (rad/sqrt(m)) and "
+            f"turn_sigma (rad/sqrt(rad)), or a sfanav.sim.OdometryNoise, got {type(noise).__name__}"
+        )
+    out = dict(DEFAULT_ODOMETRY_NOISE)
+    for k in DEFAULT_ODOMETRY_NOISE:
+        if k in noise:
+            out[k] = check_nonneg_float(noise[k], f"odometry_noise[{k!r}]")
+    return out
+
+
+def odometry_variances(lines: Lines, noise: Any = None) -> tuple[np.ndarray, np.ndarray]:
+    """Variances of the odometry's relative pose of consecutive lines under a
+    random-walk noise model (beyond the thesis; the weights of
+    ``MetricLearner(angle_weight="noise", transit_weight="noise")``).
+
+    The odometry's heading error is a random walk with variance
+    ``heading_sigma^2`` per metre driven and ``turn_sigma^2`` per radian
+    turned, its distance error one with ``distance_sigma^2`` per metre (the
+    random terms of :class:`sfanav.sim.OdometryNoise`). A line's heading is
+    the mean over the line, and the mean of a random walk over a path of
+    length S varies by S/3 of its end variance. Hence, with ``S_n`` the path
+    length of line n, ``l_n`` and ``rho_n`` the path length and absolute turn
+    of the transit to line n+1, and ``g_n`` the transit's displacement from
+    the end of line n to the start of line n+1:
+
+        var(phi_n) = heading_sigma^2 (S_n/3 + l_n + S_{n+1}/3) + turn_sigma^2 rho_n
+        var(t_n)   = 1/2 [distance_sigma^2 (S_n/3 + l_n + S_{n+1}/3)
+                          + |g_n|^2 (heading_sigma^2 (S_n/3 + l_n) + turn_sigma^2 rho_n)]
+
+    ``var(t_n)`` is per coordinate: half the along-track plus cross-track
+    variance of the transit (an isotropic approximation, which keeps the
+    transit term linear in the origins).
+
+    Parameters
+    ----------
+    lines : Lines
+        With ``origins``, ``headings``, ``transit_lengths`` and ``transit_turns``
+        (:func:`sfanav.odometry.segment_lines`, :func:`sfanav.odometry.lines_from_odometry`).
+    noise : mapping or sfanav.sim.OdometryNoise, optional
+        ``distance_sigma`` (m/sqrt(m)), ``heading_sigma`` (rad/sqrt(m)),
+        ``turn_sigma`` (rad/sqrt(rad)); missing keys take
+        :data:`DEFAULT_ODOMETRY_NOISE`.
+
+    Returns
+    -------
+    var_angle : ndarray (L - 1,)
+        rad^2.
+    var_transit : ndarray (L - 1,)
+        m^2 per coordinate.
+    """
+    if not isinstance(lines, Lines):
+        raise TypeError(f"lines must be a sfanav.odometry.Lines, got {type(lines).__name__}")
+    if lines.transit_lengths is None or lines.transit_turns is None or lines.origins is None or lines.headings is None:
+        raise ValueError(
+            "the odometry noise model needs the transits between lines (path length and turn) and the lines' "
+            "odometry origins and headings: use segment_lines or lines_from_odometry"
+        )
+    nz = _noise_dict(noise)
+    sd2, sh2, st2 = nz["distance_sigma"] ** 2, nz["heading_sigma"] ** 2, nz["turn_sigma"] ** 2
+    S = lines.path_lengths()
+    ell, rho = lines.transit_lengths, lines.transit_turns
+    seg = S[:-1] / 3 + ell + S[1:] / 3
+    var_a = sh2 * seg + st2 * rho
+    L = lines.n_lines
+    last = np.array([lines.distances[np.flatnonzero(lines.labels == n)[-1]] for n in range(L - 1)])
+    g = lines.transits() - np.c_[last, np.zeros(L - 1)]
+    var_t = 0.5 * (sd2 * seg + np.einsum("ij,ij->i", g, g) * (sh2 * (S[:-1] / 3 + ell) + st2 * rho))
+    tiny = 1e-12
+    return np.maximum(var_a, tiny), np.maximum(var_t, tiny)
 
 
 # --------------------------------------------------------------------- learner
@@ -338,10 +535,44 @@ class MetricLearner:
         None: cost (5.1). ``"cos"``: cost (5.5), the thesis's term on the
         cosine of the measured heading change between consecutive lines
         (against shear on grid-like trajectories). ``"signed"``: a term on the
-        signed heading change (also excludes the mirror image). ``"auto"``:
-        ``"cos"`` if the lines carry measured relative angles, else None.
-    angle_weight : float, default 1.0
-        Weight of the angle term (thesis: 1).
+        signed heading change, ``lambda (1 - cos(alpha_{n+1} - alpha_n -
+        phi_n))`` (the von Mises likelihood; also excludes the mirror image).
+        ``"auto"``: if the lines carry measured relative angles ``"signed"``
+        with ``angle_weight="noise"`` and ``"cos"`` otherwise, else None.
+    angle_weight : float or "noise", default 1.0
+        Weight of the angle term (thesis: 1). ``"noise"`` (beyond the thesis):
+        the maximum-likelihood weight ``sigma_f^2 / var(phi_n)`` per pair of
+        lines, from the odometry noise model (:func:`odometry_variances`) and
+        the residual variance ``sigma_f^2`` of the map (``feature_noise``).
+    transit_weight : float or "noise", default 0.0
+        Beyond the thesis: weight of the transit term, which ties the origin of
+        line n+1 to the origin of line n plus the odometry's displacement
+        between them (``Lines.transits``), ``1/2 sum_n w_n ||o_{n+1} - o_n -
+        R(alpha_n) q_n||^2``. Without it every line's origin is free, and on
+        grid-like runs of parallel lanes the map can bend (docs/odometry.md).
+        ``"noise"``: ``w_n = sigma_f^2 / var(t_n)`` from the noise model. 0: off
+        (the thesis's costs).
+    odometry_noise : mapping or sfanav.sim.OdometryNoise, optional
+        The odometry's random noise for the ``"noise"`` weights:
+        ``distance_sigma`` (m/sqrt(m)), ``heading_sigma`` (rad/sqrt(m)),
+        ``turn_sigma`` (rad/sqrt(rad)); default :data:`DEFAULT_ODOMETRY_NOISE`.
+    feature_noise : float or None, default None
+        ``sigma_f``, the standard deviation (metres, per coordinate) of the
+        line residuals for the ``"noise"`` weights. None: estimated by maximum
+        likelihood, alternating fits and ``sigma_f^2 = sum ||r||^2 / (2 M -
+        n_parameters)`` from the residuals (starting from the residuals of the
+        regression onto the odometry's line positions) until it changes by
+        less than 0.1 %.
+    heading_drift : float, "estimate" or None, default None
+        Beyond the thesis: a systematic heading drift of the odometry in
+        rad/m (positive: the odometry believes the robot turned left), whose
+        share ``drift * p_n`` of each measured heading change is removed,
+        ``p_n`` the odometry path between the two lines' mean headings
+        (``S_n/2 + l_n + S_{n+1}/2``, needs the transits). ``"estimate"``:
+        the drift is a further unknown of the fit (maximum likelihood; solver
+        ``"varpro"`` and the signed angle term only). A random-walk noise
+        model does not cover drift, and the likelihood trusts the heading
+        changes (docs/odometry.md). None: no correction.
     ridge : float, default 0.0
         L2 penalty ``ridge / 2 * ||W||^2`` on the weights of the expanded
         features (not the bias); beyond the thesis. It shrinks the map
@@ -426,6 +657,18 @@ class MetricLearner:
         at ``snapshot_iterations`` (those reached) and at the last iteration.
     angle_term_ : str or None
         The angle term used.
+    angle_weights_ : ndarray (L - 1,)
+        Weight of the angle term per pair of lines (0 without an angle term).
+    transit_weights_ : ndarray (L - 1,)
+        Weight of the transit term per pair of lines (0: off).
+    feature_noise_ : float or None
+        ``sigma_f`` (metres) the ``"noise"`` weights used (estimated or given);
+        None without them.
+    noise_iterations_ : int
+        Fits of the ``sigma_f`` alternation (1 without it).
+    heading_drift_ : float
+        The heading drift (rad/m) removed from the heading changes (given,
+        estimated, or 0).
     learning_rate_ : float
         The learning rate used (solver ``"gd"``).
     n_features_in_ : int
@@ -439,7 +682,11 @@ class MetricLearner:
         *,
         solver: str = "varpro",
         angle_term: str | None = "auto",
-        angle_weight: float = 1.0,
+        angle_weight: float | str = 1.0,
+        transit_weight: float | str = 0.0,
+        odometry_noise: Any = None,
+        feature_noise: float | None = None,
+        heading_drift: float | str | None = None,
         ridge: float = 0.0,
         init: str | Mapping[str, Any] = "random",
         learning_rate: float | None = None,
@@ -461,6 +708,10 @@ class MetricLearner:
         self.solver = solver
         self.angle_term = angle_term
         self.angle_weight = angle_weight
+        self.transit_weight = transit_weight
+        self.odometry_noise = odometry_noise
+        self.feature_noise = feature_noise
+        self.heading_drift = heading_drift
         self.ridge = ridge
         self.init = init
         self.learning_rate = learning_rate
@@ -478,7 +729,8 @@ class MetricLearner:
         self.random_state = random_state
 
     _PARAMS = (
-        "n_outputs", "degree", "solver", "angle_term", "angle_weight", "ridge", "init", "learning_rate", "momentum", "precondition",
+        "n_outputs", "degree", "solver", "angle_term", "angle_weight", "transit_weight", "odometry_noise",
+        "feature_noise", "heading_drift", "ridge", "init", "learning_rate", "momentum", "precondition",
         "max_iter", "tol", "n_init", "fix_alpha", "fix_origin", "origin_range", "weight_range",
         "snapshot_iterations", "segmentation", "random_state",
     )
@@ -555,7 +807,28 @@ class MetricLearner:
             raise ValueError(f"solver must be one of {SOLVERS}, got {self.solver!r}")
         if self.angle_term not in ANGLE_TERMS:
             raise ValueError(f"angle_term must be one of {ANGLE_TERMS}, got {self.angle_term!r}")
-        lam = check_nonneg_float(self.angle_weight, "angle_weight")
+        lam_noise = isinstance(self.angle_weight, str)
+        if lam_noise and self.angle_weight != "noise":
+            raise ValueError(f"angle_weight must be a number >= 0 or 'noise', got {self.angle_weight!r}")
+        lam = 0.0 if lam_noise else check_nonneg_float(self.angle_weight, "angle_weight")
+        wt_noise = isinstance(self.transit_weight, str)
+        if wt_noise and self.transit_weight != "noise":
+            raise ValueError(f"transit_weight must be a number >= 0 or 'noise', got {self.transit_weight!r}")
+        wt = 0.0 if wt_noise else check_nonneg_float(self.transit_weight, "transit_weight")
+        sigma_f = None if self.feature_noise is None else check_nonneg_float(self.feature_noise, "feature_noise")
+        if sigma_f is not None and sigma_f == 0:
+            raise ValueError("feature_noise must be > 0 (metres), or None to estimate it")
+        noise = _noise_dict(self.odometry_noise) if (lam_noise or wt_noise) else None
+        hd = self.heading_drift
+        if isinstance(hd, str):
+            if hd != "estimate":
+                raise ValueError(f"heading_drift must be a number (rad/m), 'estimate' or None, got {hd!r}")
+            if self.solver != "varpro":
+                raise ValueError(f"heading_drift='estimate' needs solver='varpro', got solver={self.solver!r}")
+        elif hd is not None:
+            hd = float(hd)
+            if not np.isfinite(hd):
+                raise ValueError(f"heading_drift must be finite (rad/m), got {self.heading_drift!r}")
         lr_default = 0.3 if self.precondition else 1e-5
         lr = lr_default if self.learning_rate is None else check_nonneg_float(self.learning_rate, "learning_rate")
         mom = check_nonneg_float(self.momentum, "momentum")
@@ -582,7 +855,8 @@ class MetricLearner:
             )
         angle_term = self.angle_term
         if angle_term == "auto":
-            angle_term = "cos" if lines.relative_angles is not None and L > 1 else None
+            has = lines.relative_angles is not None and L > 1
+            angle_term = ("signed" if lam_noise else "cos") if has else None
         if angle_term is not None and lines.relative_angles is None:
             raise ValueError(
                 f"angle_term={angle_term!r} needs the measured relative angles between lines, but the lines have "
@@ -595,24 +869,82 @@ class MetricLearner:
             if bad:
                 raise ValueError(f"{name} names line(s) {bad}, but only {L} lines were found (0..{L - 1})")
         ridge = check_nonneg_float(self.ridge, "ridge")
-        pb = _Problem(Phi, lab, d, lines.relative_angles, angle_term, lam, fix_a, fix_o, ridge)
+        transits = None
+        if wt_noise or wt > 0:
+            if L < 2:
+                wt_noise, wt = False, 0.0
+            elif lines.origins is None or lines.headings is None:
+                raise ValueError(
+                    "transit_weight needs the odometry origins and headings of the lines (their transits): fit on "
+                    "odometry poses, or use segment_lines / lines_from_odometry"
+                )
+            else:
+                transits = lines.transits()
+        drift_path, drift0 = None, 0.0
+        if hd is not None and angle_term is not None and L > 1:
+            if lines.transit_lengths is None:
+                raise ValueError("heading_drift needs the transits between lines (their path lengths): use "
+                                 "segment_lines or lines_from_odometry")
+            if hd == "estimate" and angle_term != "signed":
+                raise ValueError(f"heading_drift='estimate' needs angle_term='signed', got {angle_term!r}")
+            S = lines.path_lengths()
+            drift_path = S[:-1] / 2 + lines.transit_lengths + S[1:] / 2
+            drift0 = 0.0 if hd == "estimate" else hd
+        var_a = var_t = None
+        if (lam_noise and angle_term is not None) or wt_noise:
+            var_a, var_t = odometry_variances(lines, noise)
+        use_noise = (lam_noise and angle_term is not None) or wt_noise
         rng = np.random.default_rng(self.random_state)
         snaps_at = sorted({check_int(int(i), "snapshot_iterations", minimum=0) for i in self.snapshot_iterations})
+
+        def problem(s2, drift):
+            la = s2 / var_a if (lam_noise and var_a is not None) else lam
+            w = s2 / var_t if (wt_noise and var_t is not None) else wt
+            return _Problem(Phi, lab, d, lines.relative_angles, angle_term, la, fix_a, fix_o, ridge, transits, w,
+                            drift_path, drift)
 
         t0 = time.perf_counter()
         best = None
         costs, total = [], 0
+        n_rounds = 0
+        s2 = None
         with _one_blas_thread():
+            if use_noise:
+                if sigma_f is not None:
+                    s2 = sigma_f**2
+                else:
+                    s2 = self._initial_residual_variance(Phi, lab, d, lines, n_params)
+            pb = problem(s2, drift0)
             inits = self._inits(pb, lines, rng, n_init)
-            vp = _VarPro(pb) if self.solver == "varpro" else None  # one factorisation for all starts
-            for a0, O0, W0 in inits:
-                res = self._solve(pb, vp, a0, O0, W0, lr, mom, max_iter, tol, snaps_at, progress)
-                costs.append(res["cost"])
-                total += res["n_iter"]
-                if best is None or res["cost"] < best["cost"]:
-                    best = res
+            while True:
+                n_rounds += 1
+                vp = _VarPro(pb) if self.solver == "varpro" else None  # one factorisation for all starts
+                best, costs = None, []
+                for a0, O0, W0 in inits:
+                    pb.drift = drift0
+                    res = self._solve(pb, vp, a0, O0, W0, lr, mom, max_iter, tol, snaps_at, progress)
+                    costs.append(res["cost"])
+                    total += res["n_iter"]
+                    if best is None or res["cost"] < best["cost"]:
+                        best = res
+                if not use_noise or sigma_f is not None or n_rounds >= self._MAX_NOISE_ROUNDS:
+                    break
+                R = pb.residuals(best["alpha"], best["origins"], best["weights"])
+                s2_new = max(float(np.einsum("ij,ij->", R, R)) / max(2 * len(lab) - n_params, 1), 1e-12)
+                if abs(s2_new - s2) <= 1e-3 * s2:
+                    break
+                s2 = s2_new
+                drift0 = best["drift"]
+                pb = problem(s2, drift0)
+                inits = [(best["alpha"], best["origins"], best["weights"])]
         self.fit_time_ = time.perf_counter() - t0
         assert best is not None
+        self.angle_weights_ = pb.lam.copy() if pb.has_angle else np.zeros(max(L - 1, 0))
+        self.transit_weights_ = pb.wt.copy()
+        self.feature_noise_ = None if s2 is None else float(np.sqrt(s2))
+        self.noise_iterations_ = n_rounds
+        pb.drift = best["drift"]
+        self.heading_drift_ = float(best["drift"]) if drift_path is not None else 0.0
         self.alpha_ = best["alpha"]
         self.origins_ = best["origins"]
         self.weights_ = best["weights"]
@@ -630,6 +962,21 @@ class MetricLearner:
         self.degree_ = degree
         self.n_features_in_ = F.shape[1]
         return self
+
+    _MAX_NOISE_ROUNDS = 30
+
+    @staticmethod
+    def _initial_residual_variance(Phi, lab, d, lines: Lines, n_params: int) -> float:
+        """Residual variance per coordinate (m^2) of the regression of the
+        features onto the odometry's line positions: the starting sigma_f^2."""
+        if lines.headings is None or lines.origins is None:
+            raise ValueError("estimating feature_noise needs the odometry origins and headings of the lines; "
+                             "give feature_noise")
+        a, O = lines.headings, lines.origins
+        target = O[lab] + d[:, None] * np.c_[np.cos(a), np.sin(a)][lab]
+        W = np.linalg.lstsq(Phi, target, rcond=None)[0]
+        R = target - Phi @ W
+        return max(float(np.einsum("ij,ij->", R, R)) / max(2 * len(lab) - n_params, 1), 1e-12)
 
     def _inits(self, pb: _Problem, lines: Lines, rng: np.random.Generator, n_init: int):
         L, K = pb.L, pb.K
@@ -681,9 +1028,16 @@ class MetricLearner:
     def _preconditioner(pb: _Problem) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Block-Jacobi: inverse curvature of alpha_n, o_n and W (pseudo-inverse)."""
         h_a = np.bincount(pb.lab, weights=pb.d**2, minlength=pb.L)
-        if pb.angle_term is not None and pb.phi is not None:
-            h_a = h_a + 2.0 * pb.lam
         h_o = np.bincount(pb.lab, minlength=pb.L).astype(np.float64)
+        if pb.has_angle:
+            adj = np.zeros(pb.L)
+            adj[:-1] = pb.lam
+            adj[1:] = np.maximum(adj[1:], pb.lam)
+            h_a = h_a + 2.0 * adj
+        if pb.transits is not None:
+            h_a[:-1] += pb.wt * np.einsum("ij,ij->i", pb.transits, pb.transits)
+            h_o[:-1] += pb.wt
+            h_o[1:] += pb.wt
         H = pb.Phi.T @ pb.Phi
         if pb.ridge:
             H[1:, 1:] += pb.ridge * np.eye(pb.K - 1)
@@ -771,16 +1125,26 @@ class MetricLearner:
                     a[freea] = x
                     return a
 
+                est = pb.drift_path is not None and self.heading_drift == "estimate" and pb.has_angle
+                n_a = int(freea.sum())
+
                 def fun(x):
-                    c, g = vp.cost(full_a(x))
+                    if est:
+                        pb.drift = float(x[n_a])
+                    a = full_a(x[:n_a])
+                    c, g = vp.cost(a)
+                    if est:
+                        return c, np.r_[g[freea], vp.drift_gradient(a)]
                     return c, g[freea]
 
                 def params(x):
-                    a = full_a(x)
+                    if est:
+                        pb.drift = float(x[n_a])
+                    a = full_a(x[:n_a])
                     O, W = vp.linear(a)
                     return a, O, W
 
-                x0 = a0[freea]
+                x0 = np.r_[a0[freea], pb.drift] if est else a0[freea]
             hist.append(float(pb.cost(*params(x0))[0]))
             if 0 in snaps_at:
                 snap(0, *params(x0))
@@ -809,7 +1173,7 @@ class MetricLearner:
             a, O, W = params(x_opt)
         cost = float(pb.cost(a, O, W)[0])
         snap(n_iter, a, O, W)
-        return {"alpha": a, "origins": O, "weights": W, "cost": cost, "history": hist,
+        return {"alpha": a, "origins": O, "weights": W, "cost": cost, "history": hist, "drift": pb.drift,
                 "n_iter": n_iter, "converged": converged, "snapshots": snaps}
 
     # ------------------------------------------------------------ inference
@@ -885,6 +1249,7 @@ class MetricLearner:
         params["fix_origin"] = [[int(k), [float(x) for x in v]] for k, v in (self.fix_origin or {}).items()]
         params["snapshot_iterations"] = [int(i) for i in self.snapshot_iterations]
         params["segmentation"] = dict(self.segmentation or {})
+        params["odometry_noise"] = None if self.odometry_noise is None else _noise_dict(self.odometry_noise)
         if params["origin_range"] is not None:
             params["origin_range"] = np.broadcast_to(np.asarray(params["origin_range"], float), (2,)).tolist()
         state = {
@@ -900,6 +1265,11 @@ class MetricLearner:
             "converged": self.converged_,
             "start_costs": self.start_costs_,
             "angle_term": self.angle_term_,
+            "angle_weights": self.angle_weights_,
+            "transit_weights": self.transit_weights_,
+            "feature_noise": -1.0 if self.feature_noise_ is None else self.feature_noise_,
+            "noise_iterations": self.noise_iterations_,
+            "heading_drift": self.heading_drift_,
             "learning_rate": self.learning_rate_,
             "n_outputs": self.n_outputs_,
             "degree": self.degree_,
@@ -910,6 +1280,8 @@ class MetricLearner:
                 "relative_angles": lines.relative_angles,
                 "headings": lines.headings,
                 "origins": lines.origins,
+                "transit_lengths": lines.transit_lengths,
+                "transit_turns": lines.transit_turns,
             },
         }
         return save_model(path, "MetricLearner", state)
@@ -935,6 +1307,13 @@ class MetricLearner:
             m.converged_ = bool(state["converged"])
             m.start_costs_ = np.asarray(state["start_costs"], dtype=np.float64)
             m.angle_term_ = state["angle_term"]
+            L1 = max(len(np.asarray(state["alpha"])) - 1, 0)
+            m.angle_weights_ = np.asarray(state.get("angle_weights", np.zeros(L1)), dtype=np.float64)
+            m.transit_weights_ = np.asarray(state.get("transit_weights", np.zeros(L1)), dtype=np.float64)
+            fn = float(state.get("feature_noise", -1.0))
+            m.feature_noise_ = None if fn < 0 else fn
+            m.noise_iterations_ = int(state.get("noise_iterations", 1))
+            m.heading_drift_ = float(state.get("heading_drift", 0.0))
             m.learning_rate_ = float(state["learning_rate"])
             m.n_outputs_ = int(state["n_outputs"])
             m.degree_ = int(state["degree"])
@@ -942,7 +1321,8 @@ class MetricLearner:
             ls = state["lines"]
             lab = np.asarray(ls["labels"])
             dist = np.where(lab >= 0, np.asarray(ls["distances"], dtype=np.float64), np.nan)
-            m.lines_ = Lines(lab, dist, ls["relative_angles"], ls["headings"], ls["origins"])
+            m.lines_ = Lines(lab, dist, ls["relative_angles"], ls["headings"], ls["origins"],
+                             ls.get("transit_lengths"), ls.get("transit_turns"))
         except (KeyError, TypeError) as exc:
             raise ValueError(f"invalid MetricLearner state: {exc}") from None
         want = expanded_dim(m.n_outputs_, m.degree_) + 1

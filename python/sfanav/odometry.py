@@ -33,6 +33,7 @@ __all__ = [
     "dead_reckon",
     "increments",
     "lines_from_labels",
+    "lines_from_odometry",
     "segment_lines",
     "wrap_angle",
 ]
@@ -143,6 +144,13 @@ class Lines:
     origins : ndarray of float, shape (n_lines, 2), or None
         Odometry position of each line's first sample in metres: an initial
         guess for the line origins.
+    transit_lengths : ndarray of float, shape (n_lines - 1,), or None
+        Odometry path length in metres driven between the last sample of
+        line n and the first sample of line n+1 (the transit; 0 for a turn on
+        the spot). With ``transit_turns`` it sets the odometry's noise on the
+        relative pose of consecutive lines (:func:`sfanav.metric.odometry_variances`).
+    transit_turns : ndarray of float, shape (n_lines - 1,), or None
+        Total absolute heading change in radians over the same transit.
     """
 
     labels: np.ndarray
@@ -150,6 +158,8 @@ class Lines:
     relative_angles: np.ndarray | None = None
     headings: np.ndarray | None = None
     origins: np.ndarray | None = None
+    transit_lengths: np.ndarray | None = None
+    transit_turns: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         lab = np.asarray(self.labels)
@@ -170,13 +180,16 @@ class Lines:
             raise ValueError(f"line labels must be 0..{n - 1} without gaps; line(s) {missing} have no samples")
         if not np.isfinite(self.distances[on]).all():
             raise ValueError("distances contain NaN or infinity on samples that belong to a line")
-        for name, shape in (("relative_angles", (max(n - 1, 0),)), ("headings", (n,)), ("origins", (n, 2))):
+        for name, shape in (("relative_angles", (max(n - 1, 0),)), ("headings", (n,)), ("origins", (n, 2)),
+                            ("transit_lengths", (max(n - 1, 0),)), ("transit_turns", (max(n - 1, 0),))):
             v = getattr(self, name)
             if v is not None:
                 v = np.asarray(v, dtype=np.float64)
                 if v.shape != shape:
                     raise ValueError(f"{name} must have shape {shape} for {n} lines, got {v.shape}")
                 check_finite(v, name)
+                if name.startswith("transit") and np.any(v < 0):
+                    raise ValueError(f"{name} must be >= 0 (path length in metres, absolute turn in radians)")
                 setattr(self, name, v)
 
     @property
@@ -198,6 +211,25 @@ class Lines:
         """Number of samples of each line, shape (n_lines,)."""
         return np.bincount(self.labels[self.mask], minlength=self.n_lines)
 
+    def path_lengths(self) -> np.ndarray:
+        """Odometry path length driven on each line in metres (sum of the
+        absolute steps of its distances), shape (n_lines,)."""
+        out = np.zeros(self.n_lines)
+        for n in range(self.n_lines):
+            out[n] = float(np.abs(np.diff(self.distances[self.labels == n])).sum())
+        return out
+
+    def transits(self) -> np.ndarray:
+        """Odometry displacement from the origin of line n to the origin of
+        line n+1, in the frame of line n's odometry heading (x along the
+        line, y to its left), metres, shape (n_lines - 1, 2). Needs
+        ``origins`` and ``headings``."""
+        if self.origins is None or self.headings is None:
+            raise ValueError("the transits between lines need the odometry origins and headings of the lines")
+        dxy = np.diff(self.origins, axis=0)
+        c, s = np.cos(self.headings[:-1]), np.sin(self.headings[:-1])
+        return np.c_[c * dxy[:, 0] + s * dxy[:, 1], -s * dxy[:, 0] + c * dxy[:, 1]]
+
     def lengths(self) -> np.ndarray:
         """Length of each line in metres (max - min distance), shape (n_lines,)."""
         out = np.zeros(self.n_lines)
@@ -215,18 +247,66 @@ class Lines:
 
 
 def lines_from_labels(labels: Any, distances: Any, relative_angles: Any = None, *, headings: Any = None,
-                      origins: Any = None) -> Lines:
+                      origins: Any = None, transit_lengths: Any = None, transit_turns: Any = None) -> Lines:
     """Lines known in advance (e.g. a simulator that drives given straight
     lines, thesis 5.3.1): labels (N,) with line indices 0..L-1 (-1: no line)
     and distances (N,) in metres along each line. Optional measured relative
-    angles (L - 1,) in radians, odometry headings (L,) and origins (L, 2)."""
+    angles (L - 1,) in radians, odometry headings (L,) and origins (L, 2),
+    transit path lengths (L - 1,) in metres and absolute turns (L - 1,) in
+    radians (see :class:`Lines`)."""
     lab = as_real_array(labels, "labels")
     if lab.dtype.kind == "f":
         if not np.all(np.isfinite(lab)) or not np.all(lab == np.round(lab)):
             raise TypeError("labels must be integers")
         lab = lab.astype(np.int64)
     dist = as_real_array(distances, "distances").astype(np.float64)
-    return Lines(lab, dist, relative_angles, headings, origins)
+    return Lines(lab, dist, relative_angles, headings, origins, transit_lengths, transit_turns)
+
+
+def _describe(P: np.ndarray, U: np.ndarray, spans: list[tuple[int, int]], labels: np.ndarray,
+              distances: np.ndarray) -> Lines:
+    """Lines of the sample spans [a, b] (inclusive, in time order) of odometry
+    poses P with increments U: headings, origins, relative angles, transits."""
+    headings = np.array([_circular_mean(P[a : b + 1, 2]) for a, b in spans])
+    origins = np.array([P[a, :2] for a, _ in spans]).reshape(len(spans), 2)
+    n = len(spans)
+    rel = wrap_angle(np.diff(headings)) if n > 1 else np.empty(0)
+    t_len = np.array([float(np.abs(U[b0:a1, 0]).sum()) for (_, b0), (a1, _) in zip(spans[:-1], spans[1:])])
+    t_turn = np.array([float(np.abs(U[b0:a1, 1]).sum()) for (_, b0), (a1, _) in zip(spans[:-1], spans[1:])])
+    return Lines(labels, distances, np.atleast_1d(rel), headings, origins, t_len, t_turn)
+
+
+def lines_from_odometry(labels: Any, odometry: Any) -> Lines:
+    """Lines known in advance (labels (N,), 0..L-1 in driving order, each
+    line's samples contiguous, -1 elsewhere) measured by odometry poses
+    (N, 3): distances along each line (signed cumulative odometry distance),
+    headings, origins, relative angles and transits, as
+    :func:`segment_lines` gives them."""
+    lab = as_real_array(labels, "labels")
+    if lab.dtype.kind == "f":
+        if not np.all(np.isfinite(lab)) or not np.all(lab == np.round(lab)):
+            raise TypeError("labels must be integers")
+    lab = lab.astype(np.int64).ravel()
+    P = as_poses(odometry)
+    if len(P) != len(lab):
+        raise ValueError(f"labels has {len(lab)} samples but odometry has {len(P)}; they must match")
+    U = increments(P)
+    dist = np.full(len(lab), np.nan)
+    spans = []
+    n_lines = int(lab.max()) + 1 if lab.size and lab.max() >= 0 else 0
+    for n in range(n_lines):
+        idx = np.flatnonzero(lab == n)
+        if len(idx) == 0:
+            raise ValueError(f"line labels must be 0..{n_lines - 1} without gaps; line {n} has no samples")
+        if np.any(np.diff(idx) != 1):
+            raise ValueError(f"line {n} is not contiguous in time")
+        if spans and idx[0] <= spans[-1][1]:
+            raise ValueError(f"line {n} starts before line {n - 1} ends: lines must be numbered in driving order")
+        dist[idx] = np.concatenate([[0.0], np.cumsum(U[idx[:-1], 0])])
+        spans.append((int(idx[0]), int(idx[-1])))
+    if not spans:
+        raise ValueError("no line: every sample is labelled -1")
+    return _describe(P, U, spans, lab, dist)
 
 
 def _circular_mean(a: np.ndarray) -> float:
@@ -308,19 +388,18 @@ def segment_lines(
     straight = (speed >= v_min) & (rate <= w_max)
     labels = np.full(len(P), -1, dtype=np.int64)
     distances = np.full(len(P), np.nan)
-    headings, origins = [], []
     # runs of straight steps [a, b) -> samples a..b
     edges = np.diff(np.concatenate([[0], straight.astype(np.int8), [0]]))
     starts, ends = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
     n = 0
+    spans = []
     for a, b in zip(starts, ends):
         d = np.concatenate([[0.0], np.cumsum(U[a:b, 0])])
         if b - a + 1 < min_points or d.max() - d.min() < min_length:
             continue
         labels[a : b + 1] = n
         distances[a : b + 1] = d
-        headings.append(_circular_mean(P[a : b + 1, 2]))
-        origins.append(P[a, :2])
+        spans.append((int(a), int(b)))
         n += 1
     if n == 0:
         raise ValueError(
@@ -329,7 +408,5 @@ def segment_lines(
             f"(dt = {float(dts[0]):.4g} s); adjust min_speed, max_turn_rate, min_points or min_length"
         )
     # heading change between consecutive lines (odometry integrates it across the turn); wrapped,
-    # so only its value modulo 2 pi matters
-    hd = np.array(headings)
-    rel = wrap_angle(np.diff(hd)) if n > 1 else np.empty(0)
-    return Lines(labels, distances, rel, hd, np.array(origins))
+    # so only its value modulo 2 pi matters; transits: path length and turn between the lines
+    return _describe(P, U, spans, labels, distances)
