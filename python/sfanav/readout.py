@@ -34,6 +34,11 @@ from typing import Any, Sequence
 
 import numpy as np
 
+try:  # loaded here, before any threadpool_limits: a BLAS library loaded inside one escapes the limit
+    from scipy.linalg import cho_factor, cho_solve
+except ImportError:  # pragma: no cover - scipy is a dependency
+    cho_factor = cho_solve = None
+
 from ._checks import as_matrix, check_same_length
 from .regression import QuadraticRegression
 from .sfa import NotFittedError
@@ -172,8 +177,8 @@ class KernelRidgeReadout(_Standardised):
         K = self._kernel(Xs, Xs)
         K[np.diag_indices_from(K)] += self.alpha
         try:  # K + alpha I is symmetric positive definite: Cholesky, ~2x faster than LU
-            from scipy.linalg import cho_factor, cho_solve
-
+            if cho_factor is None:
+                raise ImportError
             self.dual_ = cho_solve(cho_factor(K, overwrite_a=True, check_finite=False), Y - self.y_mean_,
                                    check_finite=False)
         except (ImportError, np.linalg.LinAlgError):
