@@ -14,7 +14,7 @@ import sfanav
 from sfanav import sim
 from sfanav.imagerows import ImageRows
 from sfanav.modelfile import read_model, save_model
-from sfanav.readout import (AUTO_FOLDS, KernelRidgeReadout, KNNReadout, auto_candidates, make_readout,
+from sfanav.readout import (AUTO_BLOCK, AUTO_FOLDS, KernelRidgeReadout, KNNReadout, auto_candidates, make_readout,
                             select_auto_readout, select_readout)
 from sfanav.regression import QuadraticRegression
 from sfanav.sim import trajectories as T
@@ -52,7 +52,7 @@ def test_auto_readout_prefers_kernel_ridge_within_the_tolerance_and_is_the_argmi
     assert sel.spec == (n_spec if n_err < 0.9 * k_err else k_spec)
     # tolerance 0 is the plain argmin over the same candidates and folds
     plain = select_auto_readout(F, xy, tolerance=0.0)
-    ref = select_readout(F, xy, auto_candidates((8, 12)), n_folds=AUTO_FOLDS)
+    ref = select_readout(F, xy, auto_candidates((8, 12)), n_folds=AUTO_FOLDS, block=AUTO_BLOCK)
     assert plain.spec == ref.spec
     np.testing.assert_allclose(plain.scores, ref.scores)
     # a tolerance near 1 keeps kernel ridge unless kNN is 100x better
@@ -91,12 +91,28 @@ def test_auto_readout_picks_knn_when_its_cv_error_is_much_lower():
     assert n_err < 0.9 * k_err and sel.spec["kind"] == "knn", (k_err, n_err)
 
 
+def test_block_folds_contiguous_and_interleaved():
+    from sfanav.readout import block_folds
+
+    for folds in (block_folds(47, 5), block_folds(47, 5, block=4)):
+        held = np.concatenate([te for _, te in folds])
+        assert sorted(held.tolist()) == list(range(47))  # every sample held out exactly once
+        for tr, te in folds:
+            assert not set(tr) & set(te) and len(tr) + len(te) == 47
+    f = block_folds(47, 5, block=4)
+    assert f[0][1].tolist() == [0, 1, 2, 3, 20, 21, 22, 23, 40, 41, 42, 43]  # blocks 0, 5, 10
+    assert block_folds(47, 5)[0][1].tolist() == list(range(9))  # one contiguous stretch
+    with pytest.raises(ValueError, match="too few for 5 folds"):
+        block_folds(12, 5, block=4)
+
+
 def test_auto_readout_errors_and_short_runs():
     rng = np.random.default_rng(0)
     xy = rng.uniform(0, 1, (12, 2))
     F = np.c_[xy, rng.standard_normal((12, 6))]
-    sel = select_auto_readout(F, xy)  # 12 samples: 6 folds of 2
-    assert sel.rule.startswith("6-fold")
+    sel = select_auto_readout(F, xy)  # 12 samples: 6 folds of one 2-image block each
+    assert sel.rule.startswith("6-fold blocked CV (blocks of 2 images)")
+    assert select_auto_readout(F, xy, block=None).rule.startswith("6-fold blocked CV (contiguous)")
     with pytest.raises(ValueError, match="too few"):
         select_auto_readout(F[:3], xy[:3])
     with pytest.raises(ValueError, match="tolerance"):

@@ -47,6 +47,7 @@ __all__ = [
     "KNNReadout",
     "KernelRidgeReadout",
     "ReadoutSelection",
+    "AUTO_BLOCK",
     "AUTO_FOLDS",
     "AUTO_TOLERANCE",
     "auto_candidates",
@@ -273,34 +274,49 @@ def default_candidates(kinds: Sequence[str] = ("quadratic", "knn", "kernel"),
     return out
 
 
-def block_folds(n: int, n_folds: int = 5) -> list[tuple[np.ndarray, np.ndarray]]:
-    """(train, held-out) index pairs: ``n_folds`` contiguous blocks of a run."""
+def block_folds(n: int, n_folds: int = 5, block: int | None = None) -> list[tuple[np.ndarray, np.ndarray]]:
+    """(train, held-out) index pairs of a run of ``n`` samples.
+
+    ``block=None``: ``n_folds`` contiguous blocks (each held-out part a
+    ``1/n_folds`` stretch of the run). ``block=b``: the run cut into blocks
+    of ``b`` consecutive samples, block ``i`` held out in fold ``i mod
+    n_folds`` (short held-out stretches spread over the run, as a test run
+    inside the explored area is; consecutive near-duplicate frames still
+    stay on one side)."""
     if n < 2 * n_folds:
         raise ValueError(f"{n} samples are too few for {n_folds} folds")
-    edges = np.linspace(0, n, n_folds + 1).round().astype(int)
     idx = np.arange(n)
-    return [(np.concatenate([idx[: edges[i]], idx[edges[i + 1] :]]), idx[edges[i] : edges[i + 1]])
-            for i in range(n_folds)]
+    if block is None:
+        edges = np.linspace(0, n, n_folds + 1).round().astype(int)
+        return [(np.concatenate([idx[: edges[i]], idx[edges[i + 1] :]]), idx[edges[i] : edges[i + 1]])
+                for i in range(n_folds)]
+    if int(block) < 1:
+        raise ValueError(f"block must be at least 1, got {block}")
+    fold = (idx // int(block)) % n_folds
+    if len(np.unique(fold)) < n_folds:
+        raise ValueError(f"{n} samples in blocks of {block} are too few for {n_folds} folds")
+    return [(idx[fold != k], idx[fold == k]) for k in range(n_folds)]
 
 
 # The sfanav default readout ("auto", issue 7): Gaussian kernel ridge or kNN,
-# chosen by blocked CV on the training run with AUTO_FOLDS folds; kNN only
-# when its CV error is lower than kernel ridge's by more than AUTO_TOLERANCE
-# (relative). Measured in docs/gardens.md ("Choosing the readout").
+# chosen by blocked CV on the training run (AUTO_FOLDS folds of interleaved
+# blocks of AUTO_BLOCK consecutive images); kNN only when its CV error is
+# lower than kernel ridge's by more than AUTO_TOLERANCE (relative). Measured
+# in docs/gardens.md ("Choosing the readout").
 AUTO_FOLDS = 10
+AUTO_BLOCK = 10  # consecutive training images per CV block
 AUTO_TOLERANCE = 0.1
 AUTO_MAX_CV_SAMPLES = 1500
 
 
 def auto_candidates(n_outputs: Sequence[int] = (8, 12)) -> list[dict[str, Any]]:
     """The grid of the default (``"auto"``) readout: Gaussian kernel ridge
-    (gamma 0.25 .. 1, alpha 1e-4 .. 1e-2; the gardens runs chose gamma 0.5,
-    alpha 1e-3 at the edge of the older grid) and kNN (k 1 .. 10,
-    inverse-distance weights), each on ``n_outputs`` slowest outputs."""
+    (gamma 0.25 .. 2, alpha 1e-3 .. 1e-2; docs/gardens.md) and kNN (k 1 ..
+    10, inverse-distance weights), each on ``n_outputs`` slowest outputs."""
     out: list[dict[str, Any]] = []
     for n in n_outputs:
         out += [{"kind": "kernel", "n_outputs": int(n), "gamma": g, "alpha": a}
-                for g in (0.25, 0.5, 1.0) for a in (1e-4, 1e-3, 1e-2)]
+                for g in (0.25, 0.5, 1.0, 2.0) for a in (1e-3, 1e-2)]
         out += [{"kind": "knn", "n_outputs": int(n), "k": k, "weights": "distance"} for k in (1, 3, 5, 10)]
     return out
 
@@ -331,14 +347,17 @@ class ReadoutSelection:
 
 
 def select_readout(features: Any, xy: Any, candidates: Sequence[dict[str, Any]] | None = None, *,
-                   n_folds: int = 5, max_cv_samples: int | None = None) -> ReadoutSelection:
+                   n_folds: int = 5, max_cv_samples: int | None = None,
+                   block: int | None = None) -> ReadoutSelection:
     """Chooses a readout by blocked cross-validation on one (training) run.
 
     Each candidate is fitted on ``n_folds - 1`` contiguous blocks of the run
     and scored by the mean Euclidean error on the held-out block; the one
     with the lowest mean is refitted on the whole run. ``features`` (N, m)
     and ``xy`` (N, 2) in the run's order. ``max_cv_samples``: runs longer
-    than that are subsampled evenly for the CV (not for the final fit)."""
+    than that are subsampled evenly for the CV (not for the final fit).
+    ``block``: folds of interleaved blocks of that many samples instead of
+    contiguous stretches (:func:`block_folds`)."""
     F = as_matrix(features, "features")
     Y = as_matrix(xy, "xy")
     check_same_length(F, Y, "features", "xy")
@@ -346,18 +365,18 @@ def select_readout(features: Any, xy: Any, candidates: Sequence[dict[str, Any]] 
         n for n in (8, 12) if n <= F.shape[1]) or (F.shape[1],))
     if not cands:
         raise ValueError("no readout candidates")
-    scores = _scores(cands, F, Y, n_folds, max_cv_samples)
+    scores = _scores(cands, F, Y, n_folds, max_cv_samples, block)
     best = int(np.argmin(scores))
     spec = dict(cands[best])
     return ReadoutSelection(spec, make_readout(spec).fit(F, Y), [dict(c) for c in cands], scores)
 
 
 def _scores(cands: list[dict[str, Any]], F: np.ndarray, Y: np.ndarray, n_folds: int,
-            max_cv_samples: int | None) -> np.ndarray:
+            max_cv_samples: int | None, block: int | None = None) -> np.ndarray:
     if max_cv_samples is not None and len(F) > max_cv_samples:
         keep = np.unique(np.linspace(0, len(F) - 1, int(max_cv_samples)).round().astype(int))
         F, Y = F[keep], Y[keep]
-    folds = block_folds(len(F), n_folds)
+    folds = block_folds(len(F), n_folds, block)
     from threadpoolctl import threadpool_limits
 
     with threadpool_limits(limits=1, user_api="blas"):  # many small solves: threads only thrash
@@ -365,19 +384,24 @@ def _scores(cands: list[dict[str, Any]], F: np.ndarray, Y: np.ndarray, n_folds: 
 
 
 def select_auto_readout(features: Any, xy: Any, *, n_outputs: int | Sequence[int] | None = None,
-                        n_folds: int = AUTO_FOLDS, tolerance: float = AUTO_TOLERANCE,
+                        n_folds: int = AUTO_FOLDS, block: int | None = AUTO_BLOCK,
+                        tolerance: float = AUTO_TOLERANCE,
                         max_cv_samples: int | None = AUTO_MAX_CV_SAMPLES) -> ReadoutSelection:
     """The sfanav default readout (``"auto"``): kernel ridge or kNN by
     blocked cross-validation on the training run only.
 
     Every candidate of :func:`auto_candidates` (on 8 and 12 outputs, or
-    ``n_outputs``; only those the features have) is scored by ``n_folds``-fold
-    blocked CV (mean held-out Euclidean error, m). The best kernel ridge
-    candidate is taken unless the best kNN candidate's error is lower by
-    more than ``tolerance`` (relative): on the gardens runs a plain argmin
-    over 5 folds picked kNN where kernel ridge was better on the test walk
-    (docs/gardens.md). Runs shorter than ``2 n_folds`` use fewer folds
-    (at least 2). Returns a :class:`ReadoutSelection` whose ``rule`` says
+    ``n_outputs``; only those the features have) is scored by blocked CV
+    (mean held-out Euclidean error, m): the run cut into blocks of
+    ``block`` consecutive images, block ``i`` held out in fold ``i mod
+    n_folds`` (``block=None``: ``n_folds`` contiguous stretches). The best
+    kernel ridge candidate is taken unless the best kNN candidate's error is
+    lower by more than ``tolerance`` (relative). On the gardens and 5.1.1
+    runs, 5 contiguous folds picked kNN where kernel ridge was better on the
+    test run, and contiguous folds (whole strips of the area held out)
+    chose too smooth kernels (docs/gardens.md). Runs too short for
+    ``n_folds`` folds of ``block`` images use fewer folds (at least 2) and
+    shorter blocks. Returns a :class:`ReadoutSelection` whose ``rule`` says
     why."""
     F = as_matrix(features, "features")
     Y = as_matrix(xy, "xy")
@@ -394,8 +418,10 @@ def select_auto_readout(features: Any, xy: Any, *, n_outputs: int | Sequence[int
     folds = min(int(n_folds), len(F) // 2)
     if folds < 2:
         raise ValueError(f"{len(F)} training samples are too few to choose a readout by cross-validation")
+    n_cv = min(len(F), max_cv_samples or len(F))
+    blk = None if block is None else max(1, min(int(block), n_cv // folds))
     cands = auto_candidates(ns)
-    scores = _scores(cands, F, Y, folds, max_cv_samples)
+    scores = _scores(cands, F, Y, folds, max_cv_samples, blk)
     sel = ReadoutSelection({}, None, [dict(c) for c in cands], scores)
     k_spec, k_err = sel.best_of("kernel")
     n_spec, n_err = sel.best_of("knn")
@@ -403,7 +429,8 @@ def select_auto_readout(features: Any, xy: Any, *, n_outputs: int | Sequence[int
         spec, why = n_spec, f"kNN: CV {n_err:.3f} m < (1 - {tolerance:g}) x kernel ridge's {k_err:.3f} m"
     else:
         spec, why = k_spec, f"kernel ridge: CV {k_err:.3f} m (kNN {n_err:.3f} m not {tolerance:.0%} lower)"
-    sel.spec, sel.rule = spec, f"{folds}-fold blocked CV; {why}"
+    how = f"{folds}-fold blocked CV" + (f" (blocks of {blk} images)" if blk is not None else " (contiguous)")
+    sel.spec, sel.rule = spec, f"{how}; {why}"
     sel.readout = make_readout(spec).fit(F, Y)
     return sel
 
