@@ -294,3 +294,15 @@ def test_cli_default_train_localize_round_trip(tmp_path, capsys):
     assert cli.main(["localize", str(model), str(ds.root), "--run", "test", "--out", str(tmp_path / "p.csv"),
                      "--no-progress"]) == 0
     assert len((tmp_path / "p.csv").read_text().splitlines()) == 31
+    # evaluate: the network sees the band, the baselines the panoramas as they are
+    assert cli.main(["evaluate", str(model), str(ds.root), "--out", str(tmp_path / "ev"), "--no-progress"]) == 0
+    m = json.loads((tmp_path / "ev" / "metrics.json").read_text())
+    assert "mae_x_pct" in m["random_splits"] and set(m["baselines"]) == {"perfect memory", "Fourier signature"}
+    np.testing.assert_allclose(m["test_run"]["med"], loc.evaluate(
+        *_test_run(ds, loc))["med"], rtol=1e-9)
+
+
+def _test_run(ds, loc):
+    from sfanav.workflow import Preprocessing, load_run
+
+    return load_run(ds.select(run="test"), Preprocessing.of_model(loc), log=lambda m: None)

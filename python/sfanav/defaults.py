@@ -12,7 +12,8 @@ ablation measured is the **sfanav default**:
 * image rows: the horizon band, elevation -10 .. +20 degrees, resampled to
   the full height (:func:`default_rows`; drops the near ground);
 * readout: ``"auto"``, Gaussian kernel ridge or kNN on the 8 or 12 slowest
-  outputs chosen by 10-fold blocked cross-validation on the training run,
+  outputs chosen by blocked cross-validation on the training run (10 folds
+  of interleaved blocks of 10 consecutive images),
   kNN only if its CV error is more than 10 % lower
   (:func:`sfanav.readout.select_auto_readout`);
 * simulated rotation: 5 px, 100 % window (as the thesis).

@@ -550,6 +550,7 @@ def evaluate(
     """
     net = loc._network()
     n_out = net.n_outputs_
+    raw_test, raw_train = test_images, train_images  # the baselines see the panoramas as they are
     if loc.rows is not None and not loc.rows.identity:  # the network sees the rows the localizer applies
         test_images = loc.rows(test_images)
         train_images = None if train_images is None else loc.rows(train_images)
@@ -605,13 +606,13 @@ def evaluate(
         if baseline_queries is not None and len(q) > baseline_queries:
             q = np.unique(np.linspace(0, len(q) - 1, int(baseline_queries)).round().astype(int))
         ev.baseline_queries = len(q)
-        Xq, Yq = test_images[q], test_xy[q]
+        Xq, Yq = raw_test[q], test_xy[q]
         for name, model in (("perfect memory", baselines.PerfectMemory()),
                             ("Fourier signature", baselines.FourierSignature())):
             k = getattr(model, "n_coefficients", None)
-            if k is not None and k > train_images.shape[2] // 2 + 1:
-                model = baselines.FourierSignature(train_images.shape[2] // 2 + 1)
-            model.fit(train_images, train_xy)
+            if k is not None and k > raw_train.shape[2] // 2 + 1:
+                model = baselines.FourierSignature(raw_train.shape[2] // 2 + 1)
+            model.fit(raw_train, train_xy)
             ev.baselines[name] = baselines.benchmark(model, Xq, Yq, coordinate_range=crange)
             b = ev.baselines[name]
             log(f"{name}: MED {b['med']:.3f} m on {len(q)} queries, {b['query_ms']:.2f} ms per query, "

@@ -202,7 +202,7 @@ def exp_5_1_1(out: Path, *, quick: bool, seed: int, progress: bool) -> Experimen
         "thesis's 1.83 % / 1.68 % are on that protocol. eta on the training views under all 70 rotations.\n"
         "Rows '[sfanav default]': the sfanav default on the same images (network sfanav-default: Table 5.1 with "
         "20 / 24 / 24 outputs in layers 1-3, 12 top outputs, mixed precision; horizon band of rows -10..+20 deg; "
-        f"readout chosen by 10-fold blocked CV on the training grid: {dinfo['readout']}, {dinfo['readout_rule']}); "
+        f"readout chosen by blocked CV on the training grid: {dinfo['readout']}, {dinfo['readout_rule']}); "
         f"training {dinfo['network_s']:.0f} s (thesis configuration {info['network_s']:.0f} s, double precision), "
         f"readout selection {dinfo['readout_s']:.0f} s. Its random-split rows use the same readout."
     )
