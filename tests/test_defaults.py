@@ -306,3 +306,18 @@ def _test_run(ds, loc):
     from sfanav.workflow import Preprocessing, load_run
 
     return load_run(ds.select(run="test"), Preprocessing.of_model(loc), log=lambda m: None)
+
+
+def test_gardens_experiment_has_the_default_row(tmp_path):
+    """`sfanav experiment gardens` measures the default as one row (quick: tiny images and network)."""
+    from sfanav.experiments.gardens import run_scene
+
+    res, plots = run_scene(tmp_path, "realistic-garden", 0, quick=True, progress=False, control=True,
+                           row_variants={}, train_variants={}, baselines_too=False, firing_maps=False)
+    assert list(res) == ["control: sfanav default"] and plots == []
+    row = res["control: sfanav default"]
+    assert row["readout"].startswith(("kernel(", "knn(")) and row["numbers per image"] in (8, 12)
+    assert "blocked CV (blocks of" in row["readout rule"] and row["MAE x (%)"] > 0
+    diag = row["cv diagnostics"]
+    assert set(diag) == {f"cv {s} {k}" for s in ("5 contiguous", "10 contiguous", "10 blocks of 10")
+                         for k in ("kernel", "knn")}

@@ -149,6 +149,8 @@ def _cv_diagnostics(F_tr: np.ndarray, xy_tr: np.ndarray, F_te: np.ndarray, xy_te
     n_outputs = sorted({c["n_outputs"] for c in sel.candidates})
     out: dict[str, Any] = {}
     for scheme, (folds, block) in CV_SCHEMES.items():
+        if block is not None:  # short (quick) runs: shorter blocks, as select_auto_readout does
+            block = max(1, min(block, len(F_tr) // folds))
         s = select_readout(F_tr, xy_tr, auto_candidates(n_outputs), n_folds=folds, block=block)
         for kind in ("kernel", "knn"):
             spec, err = s.best_of(kind)
