@@ -4,6 +4,7 @@ writes ``OUT/gardens-subset.json`` and ``OUT/gardens-subset.md`` (the
 ablation table of those configurations, mean over the seeds).
 
     PYTHONPATH=python python3 scripts/gardens_subset.py OUT --train "loop closures" [--rows ""] [--seeds 0 1 2]
+    PYTHONPATH=python python3 scripts/gardens_subset.py OUT --default          # the sfanav default only
 """
 
 from __future__ import annotations
@@ -24,6 +25,8 @@ def main() -> None:
     ap.add_argument("--rows", nargs="*", default=[], help="row variants (names of gardens.ROW_VARIANTS; '' = all rows)")
     ap.add_argument("--seeds", nargs="*", type=int, default=[0, 1, 2])
     ap.add_argument("--scenes", nargs="*", default=["realistic", "control"])
+    ap.add_argument("--default", action="store_true", help="also the sfanav default (row 'sfanav default')")
+    ap.add_argument("--baselines", action="store_true", help="also perfect memory and the Fourier signature")
     a = ap.parse_args()
     out = Path(a.out)
     rows = {k: G.ROW_VARIANTS[k] for k in a.rows}
@@ -36,8 +39,8 @@ def main() -> None:
             for scene in a.scenes:
                 preset = "realistic-garden" if scene == "realistic" else "realistic-garden-control"
                 r, _ = G.run_scene(out, preset, seed, quick=False, progress=True, control=(scene == "control"),
-                                   row_variants=rows, train_variants=train, baselines_too=False,
-                                   firing_maps=(seed == a.seeds[0]))
+                                   row_variants=rows, train_variants=train, baselines_too=a.baselines,
+                                   firing_maps=(seed == a.seeds[0]), default_too=a.default)
                 res[scene].append(r)
     avg = {}
     for scene in a.scenes:

@@ -48,6 +48,11 @@ def test_5_1_x_quick(name, tmp_path):
         assert rows["MAE x (%) (random splits)"]["thesis"] == 1.83
         assert rows["max eta_phi (outputs 1-8)"]["thesis"] == 0.17
         assert rows["MAE x (%) (random splits)"]["protocol"] == "random-splits"
+        # the sfanav default beside the thesis configuration (issue 7), the thesis rows' names unchanged
+        for m in ("MAE x (%)", "MAE y (%)", "MED (m)", "MAE x (%) (random splits)", "max eta_phi (outputs 1-8)"):
+            assert rows[f"{m} [sfanav default]"]["configuration"] == "sfanav default"
+            assert rows[f"{m} [sfanav default]"]["thesis"] is None
+        assert rows["readout [sfanav default]"]["sfanav"].startswith(("kernel(", "knn("))
     else:
         assert rows["MAE x (m)"]["thesis"] == 0.23 and rows["MAE x (m)"]["protocol"] == "test-run"
     assert rows["MED (m) perfect memory"]["baseline"] == "perfect memory"

@@ -41,6 +41,11 @@ from .unwarp import Unwarper, estimate_mirror  # noqa: E402
 __all__ += ["Localizer", "QuadraticRegression", "Unwarper", "estimate_mirror"]
 __all__ += ["analysis", "baselines", "metrics", "regression", "unwarp", "workflow"]
 
+# The sfanav default (issue 7): network preset, horizon band, auto readout; readouts beyond the thesis's.
+from . import defaults, readout  # noqa: E402
+
+__all__ += ["defaults", "readout"]
+
 # Odometry integration (issue 8): line segmentation, unsupervised metric learning, EKF fusion.
 from . import ekf, experiments_odometry, metric, odometry  # noqa: E402
 from .ekf import OdometryEKF  # noqa: E402

@@ -236,19 +236,26 @@ def _add_train(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
         "train",
         help="train a localizer (network + regression to metres) on a dataset",
         description=_wrap("Train an SFA network under simulated rotation on one run of a dataset (images in temporal "
-                    "order), then the quadratic regression from its slowest outputs to the ground-truth x, y "
-                    "(metres). Writes one model file (network, regression and the image preprocessing) for "
-                    "sfanav localize / evaluate. Images of another size are resized, omnidirectional images "
-                    "unwarped (with --mirror or an estimated mirror)."),
-        epilog="network presets (thesis tables): thesis-5.1 (350x40 RGB), thesis-5.2 (600x60 RGB), "
-               "thesis-5.3 (409x40 gray). A config file is TOML or JSON in the presets' format "
-               "(sfanav.Network.preset_path('thesis-5.1') shows one).\n\n"
+                    "order), then the readout from its slowest outputs to the ground-truth x, y (metres). "
+                    "Without --preset or --config: the sfanav default (network sfanav-default: Table 5.1 with "
+                    "wider layers and 12 outputs, 350x40 RGB; image rows of elevation -10..+20 deg; readout "
+                    "kernel ridge or kNN chosen by blocked cross-validation on the training run). With a thesis "
+                    "preset: the thesis's configuration (all rows, quadratic regression of 8 outputs). Writes "
+                    "one model file (network, readout and the image preprocessing) for sfanav localize / "
+                    "evaluate. Images of another size are resized, omnidirectional images unwarped (with "
+                    "--mirror or an estimated mirror)."),
+        epilog="network presets: thesis-5.1 (350x40 RGB), thesis-5.2 (600x60 RGB), thesis-5.3 (409x40 gray) "
+               "(thesis tables), sfanav-default (350x40 RGB). A config file is TOML or JSON in the presets' "
+               "format (sfanav.Network.preset_path('thesis-5.1') shows one).\n\n"
                "example:\n  sfanav simulate --preset demo --out garden\n"
-               "  sfanav train --dataset garden --preset thesis-5.2 --precision mixed --out garden.sfa",
+               "  sfanav train --dataset garden --out garden.sfa                       # the sfanav default\n"
+               "  sfanav train --dataset garden --preset thesis-5.2 --precision mixed --out thesis.sfa",
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    net = p.add_mutually_exclusive_group(required=True)
-    net.add_argument("--preset", metavar="NAME", help="network preset: thesis-5.1, thesis-5.2 or thesis-5.3")
+    net = p.add_mutually_exclusive_group(required=False)
+    net.add_argument("--preset", metavar="NAME",
+                     help="network preset: thesis-5.1, thesis-5.2 or thesis-5.3 (the thesis's configuration: all "
+                          "rows, quadratic regression of 8 outputs), or sfanav-default (the default)")
     net.add_argument("--config", metavar="FILE", help="network config file (TOML or JSON)")
     p.add_argument("--dataset", required=True, metavar="DIR", help="dataset directory (sfanav format)")
     p.add_argument("--out", required=True, metavar="MODEL", help="model file to write (e.g. garden.sfa)")
@@ -262,8 +269,15 @@ def _add_train(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                         "the network's input width must equal window x panorama width")
     p.add_argument("--precision", choices=("double", "mixed"), default=None,
                    help="statistics precision (default: the config's; mixed is ~1.4x faster)")
-    p.add_argument("--n-outputs", type=_pos_int, default=8, metavar="N",
-                   help="slowest outputs used by the regression (default 8, the thesis's)")
+    p.add_argument("--n-outputs", type=_pos_int, default=None, metavar="N",
+                   help="slowest outputs read out (default: 8 with the quadratic readout, the thesis's; "
+                        "8 or 12 by cross-validation with auto)")
+    p.add_argument("--readout", choices=("auto", "quadratic"), default=None,
+                   help="auto: kernel ridge or kNN chosen by blocked cross-validation on the training run "
+                        "(default); quadratic: the thesis's regression (default with thesis presets)")
+    p.add_argument("--rows", choices=("all", "band"), default=None,
+                   help="image rows: band = elevation -10..+20 deg only (default for the sfanav default "
+                        "network), all = every row (default with --preset thesis-* or --config)")
     p.add_argument("--normalize", action="store_true",
                    help="normalize every image to zero mean and unit variance (thesis 5.2)")
     p.add_argument("--mirror", default=None, metavar="CX,CY,INNER,OUTER",
@@ -277,9 +291,9 @@ def _add_train(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
 def _network_from_args(args: argparse.Namespace) -> "Any":
     from .network import Network, _read_config_file
 
-    if args.preset is not None:
+    if args.preset is not None or args.config is None:
         over = {"precision": args.precision} if args.precision else {}
-        return Network.from_preset(args.preset, **over)
+        return Network.from_preset(args.preset or "sfanav-default", **over)
     config = _read_config_file(_existing_path(args.config, "network config"))
     if args.precision:
         if not isinstance(config, dict):
@@ -305,24 +319,45 @@ def _run_train(args: argparse.Namespace) -> int:
         run = "train"
     train = select_run(ds, run, args.camera)
     net = _network_from_args(args)
-    if args.n_outputs > net.n_outputs_:
+    if args.n_outputs is not None and args.n_outputs > net.n_outputs_:
         raise _UsageError(f"--n-outputs {args.n_outputs}, but the network has only {net.n_outputs_} outputs")
+    thesis = args.preset is not None and args.preset.startswith("thesis-")
+    default = args.config is None and not thesis
+    readout = args.readout or ("quadratic" if thesis else "auto")
+    rows = None
+    if (args.rows or ("band" if default else "all")) == "band":
+        from .defaults import CAMERA_ELEVATION, default_rows
+
+        elev = (ds.metadata.get("camera") or {}).get("elevation_deg") if isinstance(ds.metadata, dict) else None
+        if elev is None:
+            elev = CAMERA_ELEVATION
+            _log(f"the dataset does not say its rows' elevations: assuming {elev[0]:g}..{elev[1]:g} deg "
+                 "(the simulator's) for the horizon band; --rows all uses every row")
+        try:
+            rows = default_rows(elev)
+        except ValueError as exc:
+            raise _UsageError(f"horizon band: {exc}") from None
     prep = Preprocessing.for_network(net, window=args.window, normalize=args.normalize)
     _log(f"training on {len(train)} images of {args.dataset}" + (f" (run {run})" if run else "")
-         + f" as {prep.describe()} panoramas; network: {net!r}")
+         + f" as {prep.describe()} panoramas; network: {net!r}; rows: {rows.describe() if rows else 'all'}; "
+         + f"readout: {readout}" + (" (the sfanav default)" if default else ""))
     conformer = Conformer(prep, mirror=args.mirror, log=_log)
     images, xy = load_run(train, prep, conformer=conformer, progress=not args.no_progress)
     if not np.isfinite(xy).all():
         raise _UsageError(f"{args.dataset} lacks ground-truth x, y for some images: the regression needs them")
     loc = fit_localizer(net, images, xy, rotation=Rotation(step=args.step, window=args.window),
-                        n_outputs=args.n_outputs, prep=prep, progress=not args.no_progress,
+                        n_outputs=args.n_outputs if args.n_outputs is not None or readout == "auto" else 8,
+                        readout=readout, rows=rows, prep=prep, progress=not args.no_progress,
                         info={"dataset": str(args.dataset), "run": run,
-                              "network": args.preset or str(args.config)})
+                              "network": args.preset or (str(args.config) if args.config else "sfanav-default"),
+                              **({"configuration": "sfanav default"}
+                                 if default and readout == "auto" and rows is not None else {})})
     if conformer.mirror_used is not None:
         loc.info["mirror"] = list(conformer.mirror_used)  # localize and evaluate reuse it
     loc.save(out)
     m = loc.train_metrics_
-    print(f"trained on {len(images)} images in {loc.info['fit_seconds']:.1f} s (total {time.perf_counter() - t0:.1f} s); "
+    print(f"trained on {len(images)} images in {loc.info['fit_seconds']:.1f} s, readout {loc.describe_readout()} "
+          f"in {loc.info['readout_seconds']:.1f} s (total {time.perf_counter() - t0:.1f} s); "
           f"training-run fit: MED {m['med']:.3f} m, MAE x {m['mae_x_pct']:.2f} %, y {m['mae_y_pct']:.2f} %")
     print(f"wrote {out}")
     return 0

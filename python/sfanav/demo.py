@@ -85,7 +85,8 @@ def run_demo(out: str | Path = "sfanav-demo", *, seed: int = 0, overwrite: bool 
     X_train, xy_train = load_run(train, prep, log=log)
     X_test, xy_test = load_run(test, prep, log=log)
     rotation = Rotation(step=5)
-    loc = fit_localizer(net, X_train, xy_train, rotation=rotation, n_outputs=8, prep=prep, progress=progress,
+    loc = fit_localizer(net, X_train, xy_train, rotation=rotation, n_outputs=8, readout="quadratic", prep=prep,
+                        progress=progress,
                         info={"dataset": str(out / "dataset"), "run": "train",
                               "network": "tiny" if quick else DEMO_NETWORK})
     loc.save(out / "model.sfa")

@@ -1,6 +1,11 @@
-"""``sfanav.Localizer``: a trained network plus the regression from its slow
-features to metric positions (thesis 3.5, 5.1-5.2), saved and loaded as one
-model file."""
+"""``sfanav.Localizer``: a trained network plus the readout from its slow
+features to metric positions, saved and loaded as one model file.
+
+The default readout is the sfanav default's (issue 7; docs/gardens.md):
+Gaussian kernel ridge or kNN on the 8 or 12 slowest outputs, chosen by
+blocked cross-validation on the training run (``readout="auto"``).
+``readout="quadratic"`` is the thesis's quadratic regression of the 8
+slowest outputs (thesis 3.5, 5.1-5.2)."""
 
 from __future__ import annotations
 
@@ -15,16 +20,21 @@ from ._checks import as_matrix, as_real_array, check_finite, check_int, check_no
 from .metrics import euclidean_errors, localization_metrics
 from .modelfile import read_model, register_loader, save_model
 from .network import Network
+from .imagerows import ImageRows
+from .readout import make_readout, readout_from_state, readout_state, select_auto_readout
 from .regression import QuadraticRegression
 from .sfa import NotFittedError
 
 __all__ = ["Localizer"]
 
 
+READOUTS = ("auto", "quadratic")
+
+
 class Localizer:
     """Absolute position from one panoramic image: slow features of a trained
-    :class:`sfanav.Network`, then a quadratic regression of the ``n_outputs``
-    slowest ones to metric (x, y).
+    :class:`sfanav.Network`, then a readout of the slowest ones to metric
+    (x, y).
 
     Parameters
     ----------
@@ -32,18 +42,38 @@ class Localizer:
         A fitted network. None for a features-only localizer (use
         :meth:`fit_features` / :meth:`predict_features`, e.g. with features
         stacked from several networks).
-    n_outputs : int, default 8
-        Number of slowest outputs regressed (the thesis's best n; choose with
-        :func:`sfanav.regression.error_vs_n`).
+    n_outputs : int or None, default None
+        Number of slowest outputs read out. None: with ``readout="auto"``
+        8 or 12 (whichever the cross-validation prefers; those the network
+        has), with ``"quadratic"`` 8 (the thesis's best n).
     ridge : float, default 0.0
-        L2 penalty of the regression (0: ordinary least squares).
+        L2 penalty of the quadratic regression (0: ordinary least squares).
     degree : int, default 2
-        Degree of the feature expansion (2: the thesis's quadratic).
+        Degree of the quadratic regression's expansion (2: the thesis's).
+    readout : {"auto", "quadratic"} or dict, default "auto"
+        ``"auto"``: the sfanav default, Gaussian kernel ridge or kNN chosen
+        with its hyperparameters by blocked cross-validation on the training
+        data (:func:`sfanav.readout.select_auto_readout`); ``"quadratic"``:
+        the thesis's quadratic regression (with ``ridge``, ``degree``); a
+        dict: one readout spec (:func:`sfanav.readout.make_readout`, e.g.
+        ``{"kind": "knn", "n_outputs": 8, "k": 3}``).
+    rows : ImageRows or None, default None
+        Row handling applied to images before the network
+        (:class:`sfanav.imagerows.ImageRows`, e.g. the sfanav default's
+        horizon band); it must be what the network was trained on
+        (:func:`sfanav.workflow.fit_localizer` takes care of that).
 
     Attributes
     ----------
-    regression_ : QuadraticRegression
-        The fitted regression.
+    regression_ : QuadraticRegression, KernelRidgeReadout or KNNReadout
+        The fitted readout (``predict(features)`` -> (N, 2) metres).
+    readout_spec_ : dict
+        Its spec (kind, n_outputs and hyperparameters).
+    n_outputs_ : int
+        Slowest outputs the fitted readout uses.
+    selection_ : ReadoutSelection or None
+        With ``readout="auto"``: the cross-validation (candidates, errors,
+        the rule that decided); not saved in the model file.
     n_features_in_ : int
         Feature columns seen in fit.
     train_metrics_ : dict
@@ -61,22 +91,36 @@ class Localizer:
     >>> loc.save("garden.sfa"); loc = sfanav.load("garden.sfa")             # doctest: +SKIP
     """
 
-    def __init__(self, network: Network | None, n_outputs: int = 8, ridge: float = 0.0, degree: int = 2) -> None:
+    def __init__(self, network: Network | None, n_outputs: int | None = None, ridge: float = 0.0, degree: int = 2,
+                 readout: str | dict[str, Any] = "auto", rows: ImageRows | None = None) -> None:
         if network is not None and not isinstance(network, Network):
             raise TypeError(f"network must be a sfanav.Network or None, got {type(network).__name__}")
+        if rows is not None and not isinstance(rows, ImageRows):
+            raise TypeError(f"rows must be a sfanav.imagerows.ImageRows or None, got {type(rows).__name__}")
         self.network = network
         self.n_outputs = n_outputs
         self.ridge = ridge
         self.degree = degree
+        self.readout = readout
+        self.rows = rows
         self.info: dict[str, Any] = {}
 
     def get_params(self, deep: bool = True) -> dict[str, Any]:
-        return {"network": self.network, "n_outputs": self.n_outputs, "ridge": self.ridge, "degree": self.degree}
+        return {"network": self.network, "n_outputs": self.n_outputs, "ridge": self.ridge, "degree": self.degree,
+                "readout": self.readout, "rows": self.rows}
 
     def __repr__(self) -> str:
         net = "None" if self.network is None else repr(self.network)
-        state = "fitted" if self.is_fitted_ else "not fitted"
-        return f"<sfanav.Localizer n_outputs={self.n_outputs}, ridge={self.ridge}, {state}, network={net}>"
+        state = f"fitted: {self.describe_readout()}" if self.is_fitted_ else "not fitted"
+        ro = self.readout if isinstance(self.readout, str) else "spec"
+        rows = "" if self.rows is None or self.rows.identity else f", rows={self.rows.describe()!r}"
+        return f"<sfanav.Localizer readout={ro!r}, n_outputs={self.n_outputs}{rows}, {state}, network={net}>"
+
+    def describe_readout(self) -> str:
+        """The fitted readout in words, e.g. ``kernel(n_outputs=12, gamma=0.5, alpha=0.001)``."""
+        from .readout import describe_spec
+
+        return describe_spec(self.readout_spec_) if self.is_fitted_ else "not fitted"
 
     @property
     def is_fitted_(self) -> bool:
@@ -93,16 +137,26 @@ class Localizer:
         return self.network
 
     def features(self, images: Any, *, rotations: bool = False) -> np.ndarray:
-        """The network's slow features of images (N, H, W[, C]): (N, n) or,
-        with ``rotations=True``, (N, K, n) under the simulated rotations."""
-        return self._network().transform(images, rotations=rotations)
+        """The network's slow features of images (N, H, W[, C]) (after
+        ``rows``): (N, n) or, with ``rotations=True``, (N, K, n) under the
+        simulated rotations."""
+        net = self._network()
+        if self.rows is not None and not self.rows.identity:
+            a = np.asarray(images)
+            one = a.ndim == (2 if net.input_shape[2] == 1 else 3)
+            images = self.rows(a[None] if one else a)
+            images = images[0] if one else images
+        return net.transform(images, rotations=rotations)
 
-    def _check_params(self) -> tuple[int, float, int]:
-        n = check_int(self.n_outputs, "n_outputs")
+    def _check_params(self) -> tuple[int | None, float, int]:
+        n = None if self.n_outputs is None else check_int(self.n_outputs, "n_outputs")
         ridge = check_nonneg_float(self.ridge, "ridge")
         degree = check_int(self.degree, "degree")
-        if self.network is not None and self.network.is_fitted_ and n > self.network.n_outputs_:
+        if n is not None and self.network is not None and self.network.is_fitted_ and n > self.network.n_outputs_:
             raise ValueError(f"n_outputs={n}, but the network has only {self.network.n_outputs_} outputs")
+        ro = self.readout
+        if not (isinstance(ro, dict) or ro in READOUTS):
+            raise ValueError(f"readout must be 'auto', 'quadratic' or a readout spec dict, got {ro!r}")
         return n, ridge, degree
 
     # ------------------------------------------------------------ training
@@ -123,8 +177,23 @@ class Localizer:
         F = as_matrix(features, "features")
         Y = as_matrix(xy, "xy", n_cols=2)
         check_same_length(F, Y, "features", "xy")
-        reg = QuadraticRegression(n, ridge, degree).fit(F, Y)
+        if n is not None and n > F.shape[1]:
+            raise ValueError(f"n_outputs={n}, but the features have only {F.shape[1]} columns")
+        self.selection_ = None
+        if isinstance(self.readout, dict):
+            spec = dict(self.readout)
+            if n is not None:
+                spec["n_outputs"] = n
+            reg = make_readout(spec).fit(F, Y)
+        elif self.readout == "quadratic":
+            spec = {"kind": "quadratic", "n_outputs": 8 if n is None else n, "ridge": float(ridge), "degree": degree}
+            reg = QuadraticRegression(spec["n_outputs"], ridge, degree).fit(F, Y)
+        else:
+            sel = select_auto_readout(F, Y, n_outputs=n)
+            spec, reg, self.selection_ = sel.spec, sel.readout, sel
         self.regression_ = reg
+        self.readout_spec_ = spec
+        self.n_outputs_ = int(spec.get("n_outputs") or F.shape[1])
         self.n_features_in_ = F.shape[1]
         rng = np.ptp(Y, axis=0)  # a straight training run has no range across it: use the other axis's
         rng = np.where(rng > 0, rng, max(float(rng.max()), 1.0))
@@ -132,7 +201,7 @@ class Localizer:
         return self
 
     # ------------------------------------------------------------ inference
-    def _check_fitted(self) -> QuadraticRegression:
+    def _check_fitted(self) -> Any:
         if not self.is_fitted_:
             raise NotFittedError("this Localizer is not fitted yet; call fit or fit_features first")
         return self.regression_
@@ -197,21 +266,38 @@ class Localizer:
                 self.network.save(tmp_path)
                 kind, net_state, _ = read_model(tmp_path)
         state = {
-            "params": {"n_outputs": int(self.n_outputs), "ridge": float(self.ridge), "degree": int(self.degree)},
+            "params": {"n_outputs": None if self.n_outputs is None else int(self.n_outputs),
+                       "ridge": float(self.ridge), "degree": int(self.degree)},
+            "readout_param": dict(self.readout) if isinstance(self.readout, dict) else str(self.readout),
+            "rows": None if self.rows is None else self.rows.to_dict(),
             "network": net_state,
-            "regression": reg._get_state(),
+            "readout": readout_state(self.readout_spec_, reg),
+            # the thesis's readout also as version 1 had it, so older sfanav reads such files
+            **({"regression": reg._get_state()} if self.readout_spec_["kind"] == "quadratic" else {}),
             "n_features_in": int(self.n_features_in_),
             "train_metrics": dict(self.train_metrics_),
             "info": dict(self.info or {}),
         }
-        return save_model(path, "Localizer", state)
+        # format version 2: a kernel ridge or kNN readout (older readers cannot rebuild it)
+        return save_model(path, "Localizer", state, version=1 if self.readout_spec_["kind"] == "quadratic" else 2)
 
     @classmethod
     def _from_state(cls, state: dict[str, Any]) -> "Localizer":
         try:
             net = None if state["network"] is None else Network._from_state(state["network"])
-            loc = cls(net, **state["params"])
-            loc.regression_ = QuadraticRegression._from_state(state["regression"])
+            rows = state.get("rows")
+            loc = cls(net, rows=None if rows is None else ImageRows.from_dict(rows), **state["params"])
+            loc.readout = state.get("readout_param", "quadratic")
+            if "readout" in state:  # since sfanav 0.2 (issue 7): any readout
+                loc.regression_ = readout_from_state(state["readout"])
+                loc.readout_spec_ = dict(state["readout"]["spec"])
+            else:  # files written before: the thesis's quadratic regression
+                loc.readout = "quadratic"
+                loc.regression_ = QuadraticRegression._from_state(state["regression"])
+                loc.readout_spec_ = {"kind": "quadratic", "n_outputs": loc.regression_.n_outputs_,
+                                     "ridge": float(loc.ridge), "degree": int(loc.degree)}
+            loc.n_outputs_ = int(loc.readout_spec_.get("n_outputs") or state["n_features_in"])
+            loc.selection_ = None
             loc.n_features_in_ = int(state["n_features_in"])
             loc.train_metrics_ = dict(state.get("train_metrics") or {})
             loc.info = dict(state.get("info") or {})

@@ -30,7 +30,7 @@ from typing import Any, Callable
 import numpy as np
 
 FORMAT = "sfanav-model"
-VERSION = 1
+VERSION = 2  # the newest version this sfanav reads and writes (see docs/model-format.md)
 
 _LOADERS: dict[str, Callable[[dict[str, Any]], Any]] = {}
 
@@ -80,9 +80,13 @@ def _canonical(obj: Any) -> bytes:
     return json.dumps(obj, sort_keys=True, separators=(",", ":"), allow_nan=False).encode()
 
 
-def save_model(path: str | os.PathLike, kind: str, state: dict[str, Any]) -> Path:
+def save_model(path: str | os.PathLike, kind: str, state: dict[str, Any], *, version: int = 1) -> Path:
     """Writes ``state`` (a tree of dicts, lists, scalars and arrays) as a
-    model file of ``kind``. The write is atomic (temporary file + rename)."""
+    model file of ``kind``. The write is atomic (temporary file + rename).
+    ``version``: the format version the state needs (1 unless it uses
+    something older readers cannot rebuild; at most :data:`VERSION`)."""
+    if not 1 <= int(version) <= VERSION:
+        raise ValueError(f"version must be 1 .. {VERSION}, got {version}")
     from . import __version__
 
     path = Path(path)
@@ -107,7 +111,7 @@ def save_model(path: str | os.PathLike, kind: str, state: dict[str, Any]) -> Pat
         }
     manifest = {
         "format": FORMAT,
-        "version": VERSION,
+        "version": int(version),
         "kind": kind,
         "sfanav_version": __version__,
         "state": tree,

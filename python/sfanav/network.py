@@ -31,7 +31,7 @@ if sys.version_info >= (3, 11):
 else:  # pragma: no cover
     import tomli as tomllib
 
-PRESETS = ("thesis-5.1", "thesis-5.2", "thesis-5.3")
+PRESETS = ("thesis-5.1", "thesis-5.2", "thesis-5.3", "sfanav-default")
 
 
 DEFAULT_CACHE_LIMIT = 1e9  # bytes of cached lower-layer fields under cache="auto"
@@ -286,7 +286,10 @@ class Network:
     @classmethod
     def from_preset(cls, name: str, **overrides: Any) -> "Network":
         """A network of the thesis's tables: ``"thesis-5.1"`` (350x40 RGB),
-        ``"thesis-5.2"`` (600x60 RGB), ``"thesis-5.3"`` (409x40 gray).
+        ``"thesis-5.2"`` (600x60 RGB), ``"thesis-5.3"`` (409x40 gray); or
+        ``"sfanav-default"``, the sfanav default (Table 5.1's geometry with
+        20 / 24 / 24 outputs in layers 1-3 and 12 top outputs, mixed
+        precision; issue 7, docs/gardens.md).
 
         Overrides: ``weight_sharing``, ``max_expanded``, ``tol``, ``precision``
         (network settings), ``degree`` and ``reduce_to`` (applied to every layer), and

@@ -34,6 +34,11 @@ from typing import Any, Sequence
 
 import numpy as np
 
+try:  # loaded here, before any threadpool_limits: a BLAS library loaded inside one escapes the limit
+    from scipy.linalg import cho_factor, cho_solve
+except ImportError:  # pragma: no cover - scipy is a dependency
+    cho_factor = cho_solve = None
+
 from ._checks import as_matrix, check_same_length
 from .regression import QuadraticRegression
 from .sfa import NotFittedError
@@ -42,9 +47,16 @@ __all__ = [
     "KNNReadout",
     "KernelRidgeReadout",
     "ReadoutSelection",
+    "AUTO_BLOCK",
+    "AUTO_FOLDS",
+    "AUTO_TOLERANCE",
+    "auto_candidates",
     "block_folds",
     "default_candidates",
     "make_readout",
+    "readout_from_state",
+    "readout_state",
+    "select_auto_readout",
     "select_readout",
 ]
 
@@ -117,6 +129,21 @@ class KNNReadout(_Standardised):
             out[s : s + chunk] = np.einsum("qk,qkd->qd", w, self.y_[idx])
         return out
 
+    def _get_state(self) -> dict[str, Any]:
+        if not hasattr(self, "X_"):
+            raise NotFittedError("this KNNReadout is not fitted; call fit first")
+        return {"params": {"n_outputs": self.n_outputs, "k": self.k, "weights": self.weights},
+                "mean": self.mean_, "scale": self.scale_, "X": self.X_, "y": self.y_}
+
+    @classmethod
+    def _from_state(cls, state: dict[str, Any]) -> "KNNReadout":
+        r = cls(**state["params"])
+        r.mean_, r.scale_ = np.asarray(state["mean"], float), np.asarray(state["scale"], float)
+        r.X_, r.y_ = np.asarray(state["X"], float), np.asarray(state["y"], float)
+        if r.X_.ndim != 2 or r.y_.ndim != 2 or len(r.X_) != len(r.y_) or r.mean_.shape != (r.X_.shape[1],):
+            raise ValueError("invalid KNNReadout state: inconsistent array shapes")
+        return r
+
 
 class KernelRidgeReadout(_Standardised):
     """Kernel ridge regression with the Gaussian kernel ``exp(-gamma |a -
@@ -150,7 +177,15 @@ class KernelRidgeReadout(_Standardised):
         self.y_mean_ = Y.mean(axis=0)
         K = self._kernel(Xs, Xs)
         K[np.diag_indices_from(K)] += self.alpha
-        self.dual_ = np.linalg.solve(K, Y - self.y_mean_)
+        try:  # K + alpha I is symmetric positive definite: Cholesky, ~2x faster than LU
+            if cho_factor is None:
+                raise ImportError
+            self.dual_ = cho_solve(cho_factor(K, overwrite_a=True, check_finite=False), Y - self.y_mean_,
+                                   check_finite=False)
+        except (ImportError, np.linalg.LinAlgError):
+            K = self._kernel(Xs, Xs)
+            K[np.diag_indices_from(K)] += self.alpha
+            self.dual_ = np.linalg.solve(K, Y - self.y_mean_)
         return self
 
     def predict(self, features: Any, chunk: int = 2048) -> np.ndarray:
@@ -159,6 +194,40 @@ class KernelRidgeReadout(_Standardised):
         for s in range(0, len(Q), chunk):
             out[s : s + chunk] = self._kernel(Q[s : s + chunk], self.X_) @ self.dual_ + self.y_mean_
         return out
+
+    def _get_state(self) -> dict[str, Any]:
+        if not hasattr(self, "dual_"):
+            raise NotFittedError("this KernelRidgeReadout is not fitted; call fit first")
+        return {"params": {"n_outputs": self.n_outputs, "gamma": self.gamma, "alpha": self.alpha,
+                           "max_train": self.max_train},
+                "mean": self.mean_, "scale": self.scale_, "X": self.X_, "dual": self.dual_, "y_mean": self.y_mean_}
+
+    @classmethod
+    def _from_state(cls, state: dict[str, Any]) -> "KernelRidgeReadout":
+        r = cls(**state["params"])
+        r.mean_, r.scale_ = np.asarray(state["mean"], float), np.asarray(state["scale"], float)
+        r.X_, r.dual_ = np.asarray(state["X"], float), np.asarray(state["dual"], float)
+        r.y_mean_ = np.asarray(state["y_mean"], float)
+        if (r.X_.ndim != 2 or r.dual_.ndim != 2 or len(r.X_) != len(r.dual_) or r.mean_.shape != (r.X_.shape[1],)
+                or r.y_mean_.shape != (r.dual_.shape[1],)):
+            raise ValueError("invalid KernelRidgeReadout state: inconsistent array shapes")
+        return r
+
+
+def readout_state(spec: dict[str, Any], readout: Any) -> dict[str, Any]:
+    """A fitted readout as a model-file state: ``{"spec": spec, "state": ...}``
+    (arrays inside; no pickle). Read back with :func:`readout_from_state`."""
+    return {"spec": dict(spec), "state": readout._get_state()}
+
+
+def readout_from_state(state: dict[str, Any]) -> Any:
+    """The fitted readout a :func:`readout_state` describes."""
+    try:
+        kind = state["spec"]["kind"]
+        cls = {"quadratic": QuadraticRegression, "knn": KNNReadout, "kernel": KernelRidgeReadout}[kind]
+        return cls._from_state(state["state"])
+    except (KeyError, TypeError) as exc:
+        raise ValueError(f"invalid readout state: {exc}") from None
 
 
 def make_readout(spec: dict[str, Any]) -> Any:
@@ -176,10 +245,15 @@ def make_readout(spec: dict[str, Any]) -> Any:
     raise ValueError(f"unknown readout kind {kind!r}; use 'quadratic', 'knn' or 'kernel'")
 
 
+_KEY_ORDER = ("n_outputs", "k", "weights", "gamma", "alpha", "ridge", "degree", "max_train")
+
+
 def describe_spec(spec: dict[str, Any]) -> str:
+    """A spec in words, e.g. ``kernel(n_outputs=12, gamma=0.5, alpha=0.001)``."""
     s = dict(spec)
     kind = s.pop("kind")
-    return kind + "(" + ", ".join(f"{k}={v:g}" if isinstance(v, float) else f"{k}={v}" for k, v in s.items()) + ")"
+    keys = sorted(s, key=lambda k: (_KEY_ORDER.index(k) if k in _KEY_ORDER else len(_KEY_ORDER), k))
+    return kind + "(" + ", ".join(f"{k}={s[k]:g}" if isinstance(s[k], float) else f"{k}={s[k]}" for k in keys) + ")"
 
 
 def default_candidates(kinds: Sequence[str] = ("quadratic", "knn", "kernel"),
@@ -200,14 +274,51 @@ def default_candidates(kinds: Sequence[str] = ("quadratic", "knn", "kernel"),
     return out
 
 
-def block_folds(n: int, n_folds: int = 5) -> list[tuple[np.ndarray, np.ndarray]]:
-    """(train, held-out) index pairs: ``n_folds`` contiguous blocks of a run."""
+def block_folds(n: int, n_folds: int = 5, block: int | None = None) -> list[tuple[np.ndarray, np.ndarray]]:
+    """(train, held-out) index pairs of a run of ``n`` samples.
+
+    ``block=None``: ``n_folds`` contiguous blocks (each held-out part a
+    ``1/n_folds`` stretch of the run). ``block=b``: the run cut into blocks
+    of ``b`` consecutive samples, block ``i`` held out in fold ``i mod
+    n_folds`` (short held-out stretches spread over the run, as a test run
+    inside the explored area is; consecutive near-duplicate frames still
+    stay on one side)."""
     if n < 2 * n_folds:
         raise ValueError(f"{n} samples are too few for {n_folds} folds")
-    edges = np.linspace(0, n, n_folds + 1).round().astype(int)
     idx = np.arange(n)
-    return [(np.concatenate([idx[: edges[i]], idx[edges[i + 1] :]]), idx[edges[i] : edges[i + 1]])
-            for i in range(n_folds)]
+    if block is None:
+        edges = np.linspace(0, n, n_folds + 1).round().astype(int)
+        return [(np.concatenate([idx[: edges[i]], idx[edges[i + 1] :]]), idx[edges[i] : edges[i + 1]])
+                for i in range(n_folds)]
+    if int(block) < 1:
+        raise ValueError(f"block must be at least 1, got {block}")
+    fold = (idx // int(block)) % n_folds
+    if len(np.unique(fold)) < n_folds:
+        raise ValueError(f"{n} samples in blocks of {block} are too few for {n_folds} folds")
+    return [(idx[fold != k], idx[fold == k]) for k in range(n_folds)]
+
+
+# The sfanav default readout ("auto", issue 7): Gaussian kernel ridge or kNN,
+# chosen by blocked CV on the training run (AUTO_FOLDS folds of interleaved
+# blocks of AUTO_BLOCK consecutive images); kNN only when its CV error is
+# lower than kernel ridge's by more than AUTO_TOLERANCE (relative). Measured
+# in docs/gardens.md ("Choosing the readout").
+AUTO_FOLDS = 10
+AUTO_BLOCK = 10  # consecutive training images per CV block
+AUTO_TOLERANCE = 0.1
+AUTO_MAX_CV_SAMPLES = 1500
+
+
+def auto_candidates(n_outputs: Sequence[int] = (8, 12)) -> list[dict[str, Any]]:
+    """The grid of the default (``"auto"``) readout: Gaussian kernel ridge
+    (gamma 0.25 .. 2, alpha 1e-3 .. 1e-2; docs/gardens.md) and kNN (k 1 ..
+    10, inverse-distance weights), each on ``n_outputs`` slowest outputs."""
+    out: list[dict[str, Any]] = []
+    for n in n_outputs:
+        out += [{"kind": "kernel", "n_outputs": int(n), "gamma": g, "alpha": a}
+                for g in (0.25, 0.5, 1.0, 2.0) for a in (1e-3, 1e-2)]
+        out += [{"kind": "knn", "n_outputs": int(n), "k": k, "weights": "distance"} for k in (1, 3, 5, 10)]
+    return out
 
 
 @dataclass
@@ -221,19 +332,32 @@ class ReadoutSelection:
     readout: Any
     candidates: list[dict[str, Any]] = field(default_factory=list)
     scores: np.ndarray = field(default_factory=lambda: np.empty(0))
+    rule: str = "lowest CV error"
 
     def describe(self) -> str:
         return describe_spec(self.spec)
 
+    def best_of(self, kind: str) -> tuple[dict[str, Any], float]:
+        """The candidate of one ``kind`` with the lowest CV error, and that error (m)."""
+        idx = [i for i, c in enumerate(self.candidates) if c["kind"] == kind]
+        if not idx:
+            raise ValueError(f"no {kind!r} candidates in this selection")
+        i = min(idx, key=lambda j: float(self.scores[j]))
+        return dict(self.candidates[i]), float(self.scores[i])
+
 
 def select_readout(features: Any, xy: Any, candidates: Sequence[dict[str, Any]] | None = None, *,
-                   n_folds: int = 5) -> ReadoutSelection:
+                   n_folds: int = 5, max_cv_samples: int | None = None,
+                   block: int | None = None) -> ReadoutSelection:
     """Chooses a readout by blocked cross-validation on one (training) run.
 
     Each candidate is fitted on ``n_folds - 1`` contiguous blocks of the run
     and scored by the mean Euclidean error on the held-out block; the one
     with the lowest mean is refitted on the whole run. ``features`` (N, m)
-    and ``xy`` (N, 2) in the run's order."""
+    and ``xy`` (N, 2) in the run's order. ``max_cv_samples``: runs longer
+    than that are subsampled evenly for the CV (not for the final fit).
+    ``block``: folds of interleaved blocks of that many samples instead of
+    contiguous stretches (:func:`block_folds`)."""
     F = as_matrix(features, "features")
     Y = as_matrix(xy, "xy")
     check_same_length(F, Y, "features", "xy")
@@ -241,14 +365,74 @@ def select_readout(features: Any, xy: Any, candidates: Sequence[dict[str, Any]] 
         n for n in (8, 12) if n <= F.shape[1]) or (F.shape[1],))
     if not cands:
         raise ValueError("no readout candidates")
-    folds = block_folds(len(F), n_folds)
-    from threadpoolctl import threadpool_limits
-
-    with threadpool_limits(limits=1, user_api="blas"):  # many small solves: threads only thrash
-        scores = _cv_scores(cands, folds, F, Y)
+    scores = _scores(cands, F, Y, n_folds, max_cv_samples, block)
     best = int(np.argmin(scores))
     spec = dict(cands[best])
     return ReadoutSelection(spec, make_readout(spec).fit(F, Y), [dict(c) for c in cands], scores)
+
+
+def _scores(cands: list[dict[str, Any]], F: np.ndarray, Y: np.ndarray, n_folds: int,
+            max_cv_samples: int | None, block: int | None = None) -> np.ndarray:
+    if max_cv_samples is not None and len(F) > max_cv_samples:
+        keep = np.unique(np.linspace(0, len(F) - 1, int(max_cv_samples)).round().astype(int))
+        F, Y = F[keep], Y[keep]
+    folds = block_folds(len(F), n_folds, block)
+    from threadpoolctl import threadpool_limits
+
+    with threadpool_limits(limits=1, user_api="blas"):  # many small solves: threads only thrash
+        return _cv_scores(cands, folds, F, Y)
+
+
+def select_auto_readout(features: Any, xy: Any, *, n_outputs: int | Sequence[int] | None = None,
+                        n_folds: int = AUTO_FOLDS, block: int | None = AUTO_BLOCK,
+                        tolerance: float = AUTO_TOLERANCE,
+                        max_cv_samples: int | None = AUTO_MAX_CV_SAMPLES) -> ReadoutSelection:
+    """The sfanav default readout (``"auto"``): kernel ridge or kNN by
+    blocked cross-validation on the training run only.
+
+    Every candidate of :func:`auto_candidates` (on 8 and 12 outputs, or
+    ``n_outputs``; only those the features have) is scored by blocked CV
+    (mean held-out Euclidean error, m): the run cut into blocks of
+    ``block`` consecutive images, block ``i`` held out in fold ``i mod
+    n_folds`` (``block=None``: ``n_folds`` contiguous stretches). The best
+    kernel ridge candidate is taken unless the best kNN candidate's error is
+    lower by more than ``tolerance`` (relative). On the gardens and 5.1.1
+    runs, 5 contiguous folds picked kNN where kernel ridge was better on the
+    test run, and contiguous folds (whole strips of the area held out)
+    chose too smooth kernels (docs/gardens.md). Runs too short for
+    ``n_folds`` folds of ``block`` images use fewer folds (at least 2) and
+    shorter blocks. Returns a :class:`ReadoutSelection` whose ``rule`` says
+    why."""
+    F = as_matrix(features, "features")
+    Y = as_matrix(xy, "xy")
+    check_same_length(F, Y, "features", "xy")
+    if not 0.0 <= float(tolerance) < 1.0:
+        raise ValueError(f"tolerance must be in [0, 1), got {tolerance}")
+    if n_outputs is None:
+        ns = tuple(n for n in (8, 12) if n <= F.shape[1]) or (F.shape[1],)
+    else:
+        ns = (int(n_outputs),) if np.isscalar(n_outputs) else tuple(int(n) for n in n_outputs)  # type: ignore[arg-type]
+        bad = [n for n in ns if not 1 <= n <= F.shape[1]]
+        if bad:
+            raise ValueError(f"n_outputs {bad} out of range: the features have {F.shape[1]} columns")
+    folds = min(int(n_folds), len(F) // 2)
+    if folds < 2:
+        raise ValueError(f"{len(F)} training samples are too few to choose a readout by cross-validation")
+    n_cv = min(len(F), max_cv_samples or len(F))
+    blk = None if block is None else max(1, min(int(block), n_cv // folds))
+    cands = auto_candidates(ns)
+    scores = _scores(cands, F, Y, folds, max_cv_samples, blk)
+    sel = ReadoutSelection({}, None, [dict(c) for c in cands], scores)
+    k_spec, k_err = sel.best_of("kernel")
+    n_spec, n_err = sel.best_of("knn")
+    if np.isfinite(n_err) and (not np.isfinite(k_err) or n_err < (1.0 - tolerance) * k_err):
+        spec, why = n_spec, f"kNN: CV {n_err:.3f} m < (1 - {tolerance:g}) x kernel ridge's {k_err:.3f} m"
+    else:
+        spec, why = k_spec, f"kernel ridge: CV {k_err:.3f} m (kNN {n_err:.3f} m not {tolerance:.0%} lower)"
+    how = f"{folds}-fold blocked CV" + (f" (blocks of {blk} images)" if blk is not None else " (contiguous)")
+    sel.spec, sel.rule = spec, f"{how}; {why}"
+    sel.readout = make_readout(spec).fit(F, Y)
+    return sel
 
 
 def _cv_scores(cands: list[dict[str, Any]], folds: list[tuple[np.ndarray, np.ndarray]], F: np.ndarray,

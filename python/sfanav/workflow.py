@@ -406,29 +406,46 @@ def fit_localizer(
     xy: np.ndarray,
     *,
     rotation: Rotation | None = None,
-    n_outputs: int = 8,
+    n_outputs: int | None = None,
+    readout: str | dict[str, Any] = "auto",
+    rows: Any = None,
     prep: Preprocessing | None = None,
     progress: bool = True,
     info: dict[str, Any] | None = None,
 ) -> Localizer:
     """Trains ``network`` on ``images`` (the training run, in temporal order)
-    under simulated rotation and fits the quadratic regression of its
-    ``n_outputs`` slowest outputs to ``xy`` (N, 2) metres. The returned
-    localizer's ``info`` records preprocessing, rotation and training time
-    (seconds)."""
+    under simulated rotation and fits the readout of its slowest outputs to
+    ``xy`` (N, 2) metres.
+
+    ``readout``, ``n_outputs``: as :class:`Localizer` (default ``"auto"``:
+    the sfanav default's kernel ridge / kNN chosen by blocked CV on this
+    run; ``readout="quadratic", n_outputs=8`` is the thesis's). ``rows``: an
+    :class:`sfanav.imagerows.ImageRows` applied to the images before the
+    network, in training and (stored in the localizer) at every query. The
+    returned localizer's ``info`` records preprocessing, rotation, training
+    time (seconds: network) and readout selection time."""
     rotation = rotation or Rotation()
+    if rows is not None and not rows.identity:
+        images = rows(images)
+    else:
+        rows = None
     t0 = time.perf_counter()
     network.fit(images, rotation, progress=progress)
     fit_s = time.perf_counter() - t0
-    if n_outputs > network.n_outputs_:
+    if n_outputs is not None and n_outputs > network.n_outputs_:
         raise ValueError(f"n_outputs={n_outputs}, but the network has only {network.n_outputs_} outputs")
-    loc = Localizer(network, n_outputs=n_outputs)
+    loc = Localizer(network, n_outputs=n_outputs, readout=readout, rows=rows)
+    t1 = time.perf_counter()
     loc.fit_features(network.transform(images), xy)
+    readout_s = time.perf_counter() - t1
     loc.info = dict(info or {})
     if prep is not None:
         loc.info["preprocessing"] = prep.to_dict()
     loc.info.update({"rotation": {"step": rotation.step, "window": rotation.window},
-                     "n_train_images": int(len(images)), "fit_seconds": round(fit_s, 2)})
+                     "n_train_images": int(len(images)), "fit_seconds": round(fit_s, 2),
+                     "readout_seconds": round(readout_s, 2), "readout": loc.describe_readout()})
+    if loc.selection_ is not None:
+        loc.info["readout_rule"] = loc.selection_.rule
     return loc
 
 
@@ -533,6 +550,10 @@ def evaluate(
     """
     net = loc._network()
     n_out = net.n_outputs_
+    raw_test, raw_train = test_images, train_images  # the baselines see the panoramas as they are
+    if loc.rows is not None and not loc.rows.identity:  # the network sees the rows the localizer applies
+        test_images = loc.rows(test_images)
+        train_images = None if train_images is None else loc.rows(train_images)
     t0 = time.perf_counter()
     F_test = net.transform(test_images)
     sfa_ms = 1000.0 * (time.perf_counter() - t0) / len(test_images)
@@ -542,12 +563,18 @@ def evaluate(
     m["query_ms"] = sfa_ms
     ev = Evaluation(metrics=m, predictions=pred)
     ev.model_bytes = _model_bytes(loc)
-    n_reg = loc.regression_.n_outputs_
-    log(f"test run: MED {m['med']:.3f} m, MAE x {m['mae_x_pct']:.2f} %, y {m['mae_y_pct']:.2f} %")
+    n_reg = loc.n_outputs_
+    spec = loc.readout_spec_
+    log(f"test run: MED {m['med']:.3f} m, MAE x {m['mae_x_pct']:.2f} %, y {m['mae_y_pct']:.2f} % "
+        f"(readout {loc.describe_readout()})")
     if len(test_xy) >= 8:
         try:
-            ev.splits = regression.evaluate_random_splits(F_test, test_xy, n_outputs=n_reg, n_repeats=n_repeats,
-                                                          random_state=seed)
+            if spec["kind"] == "quadratic":
+                ev.splits = regression.evaluate_random_splits(F_test, test_xy, n_outputs=n_reg,
+                                                              ridge=float(spec.get("ridge", 0.0)),
+                                                              n_repeats=n_repeats, random_state=seed)
+            else:
+                ev.splits = random_splits_readout(spec, F_test, test_xy, n_repeats=n_repeats, seed=seed)
         except ValueError as exc:  # too few samples for the expansion
             log(f"random splits skipped: {exc}")
     ns = range(2, n_out + 1)
@@ -579,13 +606,13 @@ def evaluate(
         if baseline_queries is not None and len(q) > baseline_queries:
             q = np.unique(np.linspace(0, len(q) - 1, int(baseline_queries)).round().astype(int))
         ev.baseline_queries = len(q)
-        Xq, Yq = test_images[q], test_xy[q]
+        Xq, Yq = raw_test[q], test_xy[q]
         for name, model in (("perfect memory", baselines.PerfectMemory()),
                             ("Fourier signature", baselines.FourierSignature())):
             k = getattr(model, "n_coefficients", None)
-            if k is not None and k > train_images.shape[2] // 2 + 1:
-                model = baselines.FourierSignature(train_images.shape[2] // 2 + 1)
-            model.fit(train_images, train_xy)
+            if k is not None and k > raw_train.shape[2] // 2 + 1:
+                model = baselines.FourierSignature(raw_train.shape[2] // 2 + 1)
+            model.fit(raw_train, train_xy)
             ev.baselines[name] = baselines.benchmark(model, Xq, Yq, coordinate_range=crange)
             b = ev.baselines[name]
             log(f"{name}: MED {b['med']:.3f} m on {len(q)} queries, {b['query_ms']:.2f} ms per query, "
@@ -607,6 +634,46 @@ def evaluate(
         if report:
             ev.report = write_evaluation_report(ev, out / f"{prefix}report.md", title=title, text=text)
     return ev
+
+
+def random_splits_readout(spec: dict[str, Any], features: np.ndarray, xy: np.ndarray, *, n_repeats: int = 100,
+                          seed: int = 0) -> Any:
+    """The thesis 5.1.1 protocol (random 50/50 splits of one run, mean over
+    ``n_repeats``) with any readout ``spec`` (:func:`sfanav.readout.make_readout`;
+    its hyperparameters as chosen on the training run). Returns a
+    :class:`sfanav.regression.RegressionResult`; optimistic on a continuous walk."""
+    from .readout import make_readout
+
+    F = np.asarray(features, float)
+    Y = np.asarray(xy, float)
+    crange = coordinate_range(Y)
+    rng = np.random.default_rng(seed)
+    ms, tms = [], []
+    pred_sum = np.zeros_like(Y)
+    count = np.zeros(len(Y))
+    for _ in range(n_repeats):
+        perm = rng.permutation(len(F))
+        tr, te = perm[: len(F) // 2], perm[len(F) // 2 :]
+        r = make_readout(spec).fit(F[tr], Y[tr])
+        p = r.predict(F[te])
+        ms.append(localization_metrics(p, Y[te], coordinate_range=crange))
+        tms.append(localization_metrics(r.predict(F[tr]), Y[tr], coordinate_range=crange))
+        pred_sum[te] += p
+        count[te] += 1
+    keys = [k for k in ms[0] if isinstance(ms[0][k], (int, float))]
+    mean = {k: float(np.mean([d[k] for d in ms])) for k in keys}
+    std = {k: float(np.std([d[k] for d in ms])) for k in keys}
+    tmean = {k: float(np.mean([d[k] for d in tms])) for k in keys}
+    with np.errstate(invalid="ignore", divide="ignore"):
+        pred = pred_sum / count[:, None]
+    from .readout import describe_spec
+
+    return regression.RegressionResult(
+        protocol=regression.RANDOM_SPLITS,
+        description=f"random 50/50 splits of one run with readout {describe_spec(spec)}, {n_repeats} repeats "
+                    "(thesis 5.1.1 protocol; optimistic on a continuous walk)",
+        n_outputs=int(spec.get("n_outputs", F.shape[1])), ridge=float(spec.get("ridge", 0.0)), metrics=mean,
+        metrics_std=std, train_metrics=tmean, predictions=pred, n_repeats=n_repeats)
 
 
 def _fmt_list(a: np.ndarray) -> str:

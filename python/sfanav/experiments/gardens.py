@@ -20,6 +20,12 @@ training run only) the localization error is measured:
 * the peer baselines (perfect memory with the rotational image difference,
   nearest neighbour on Fourier signatures) on the raw panoramas.
 
+The **sfanav default** (:mod:`sfanav.defaults`: the ``sfanav-default``
+network, the horizon band, the ``"auto"`` readout) is one more row,
+``sfanav default``, trained and read out by the library's own
+:func:`sfanav.defaults.train_default`; its row also records how the readout
+choice's cross-validation compared kernel ridge and kNN.
+
 A *training variant* ``loop closures`` (thesis 6.2.1 with image-based loop
 closures, :mod:`sfanav.loopclosure`) is trained on all rows beside the row
 variants.
@@ -44,7 +50,8 @@ from .. import analysis, baselines, regression, sim
 from ..imagerows import ImageRows
 from ..metrics import localization_metrics
 from ..network import Network, Rotation
-from ..readout import default_candidates, describe_spec, make_readout, select_readout
+from ..readout import (auto_candidates, default_candidates, describe_spec, make_readout, select_auto_readout,
+                       select_readout)
 from ..workflow import Preprocessing, coordinate_range, load_run
 from . import ExperimentResult, register
 from .localization import _log, _tiny_config, simulated
@@ -130,14 +137,70 @@ def _network(quick: bool, shape: tuple[int, int, int], outs: list[int] | None = 
     return Network(cfg)
 
 
+CV_SCHEMES = {"5 contiguous": (5, None), "10 contiguous": (10, None), "10 blocks of 10": (10, 10)}
+
+
+def _cv_diagnostics(F_tr: np.ndarray, xy_tr: np.ndarray, F_te: np.ndarray, xy_te: np.ndarray, crange: np.ndarray,
+                    sel: Any) -> dict[str, Any]:
+    """How blocked CV saw kernel ridge and kNN, per fold scheme (5 or 10
+    contiguous stretches of the run; the default's 10 folds of interleaved
+    10-image blocks): each kind's best CV error (m) and that candidate's
+    test-walk MED and MAE (%), for judging the choice rule."""
+    n_outputs = sorted({c["n_outputs"] for c in sel.candidates})
+    out: dict[str, Any] = {}
+    for scheme, (folds, block) in CV_SCHEMES.items():
+        if block is not None:  # short (quick) runs: shorter blocks, as select_auto_readout does
+            block = max(1, min(block, len(F_tr) // folds))
+        s = select_readout(F_tr, xy_tr, auto_candidates(n_outputs), n_folds=folds, block=block)
+        for kind in ("kernel", "knn"):
+            spec, err = s.best_of(kind)
+            p = make_readout(spec).fit(F_tr, xy_tr).predict(F_te)
+            m = localization_metrics(p, xy_te, coordinate_range=crange)
+            out[f"cv {scheme} {kind}"] = {"spec": describe_spec(spec), "cv (m)": err, "test MED (m)": m["med"],
+                                          "test MAE x (%)": m["mae_x_pct"], "test MAE y (%)": m["mae_y_pct"]}
+    return out
+
+
+def _default_row(X_tr: np.ndarray, xy_tr: np.ndarray, X_te: np.ndarray, xy_te: np.ndarray, crange: np.ndarray,
+                 elev: tuple[float, float], *, quick: bool, seed: int, n_repeats: int, log: Any,
+                 tag: str) -> dict[str, Any]:
+    """The sfanav default, trained by :func:`sfanav.defaults.train_default`
+    exactly as ``sfanav train`` does without a preset, measured as the
+    other rows."""
+    from ..defaults import default_network, train_default
+
+    shape = X_tr.shape[1:] if X_tr.ndim == 4 else X_tr.shape[1:] + (1,)
+    net = Network(_tiny_config(shape[1], shape[0], shape[2], out=12)) if quick else default_network()
+    loc = train_default(X_tr, xy_tr, camera_elevation=elev, network=net)
+    F_tr, F_te = loc.features(X_tr), loc.features(X_te)
+    m = localization_metrics(loc.predict_features(F_te), xy_te, coordinate_range=crange)
+    spec = loc.readout_spec_
+    rs = _random_splits(spec, F_te, xy_te, crange, n_repeats=n_repeats, seed=seed)
+    R = loc.features(X_tr, rotations=True)
+    _, eta_phi = analysis.eta_values(R[:, :, :8])
+    row = {"MAE x (%)": m["mae_x_pct"], "MAE y (%)": m["mae_y_pct"], "MAE x (m)": m["mae_x"], "MAE y (m)": m["mae_y"],
+           "MED (m)": m["med"], "MAE x (%) (random splits)": rs["mae_x_pct"],
+           "MAE y (%) (random splits)": rs["mae_y_pct"], ETA: float(eta_phi.max()),
+           "training (s)": float(loc.info["fit_seconds"]), "readout selection (s)": float(loc.info["readout_seconds"]),
+           "numbers per image": int(loc.n_outputs_), "readout": describe_spec(spec),
+           "readout rule": loc.selection_.rule if loc.selection_ is not None else "-"}
+    if loc.selection_ is not None:
+        row["cv diagnostics"] = _cv_diagnostics(F_tr, xy_tr, F_te, xy_te, crange, loc.selection_)
+    log(f"  {tag} sfanav default: MAE {m['mae_x_pct']:.2f} / {m['mae_y_pct']:.2f} %, MED {m['med']:.3f} m "
+        f"({describe_spec(spec)}; network {loc.info['fit_seconds']:.0f} s, readout {loc.info['readout_seconds']:.0f} s)")
+    return row
+
+
 def run_scene(out: Path, preset: str, seed: int, *, quick: bool, progress: bool, control: bool,
               row_variants: dict[str, ImageRows] = ROW_VARIANTS, readouts: dict[str, Any] = READOUTS,
               train_variants: dict[str, dict[str, Any] | None] = TRAIN_VARIANTS, baselines_too: bool = True,
-              firing_maps: bool = True, n_repeats: int = 20) -> tuple[dict[str, dict[str, Any]], list[str]]:
+              firing_maps: bool = True, n_repeats: int = 20,
+              default_too: bool = True) -> tuple[dict[str, dict[str, Any]], list[str]]:
     """Simulates one scene, trains one network per row variant (all rows
     and each training variant other than the plain one: the training
-    variants are measured on all rows), evaluates every readout; returns
-    ({configuration: {metric: value}}, plots)."""
+    variants are measured on all rows), evaluates every readout, and (with
+    ``default_too``) the sfanav default; returns ({configuration: {metric:
+    value}}, plots)."""
     log = _log(progress)
     if quick:
         ds = simulated(out, preset, seed, quick=True, camera=sim.PanoramicCamera(60, 8), max_frames=60,
@@ -167,6 +230,10 @@ def run_scene(out: Path, preset: str, seed: int, *, quick: bool, progress: bool,
             "MAE y (m)": b["mae_y"], "MED (m)": b["med"], "numbers per image": None,
             "training (s)": None, "query ms": b["query_ms"]}
         log(f"{tag} seed {seed} {name}: MED {b['med']:.3f} m ({time.perf_counter() - t0:.0f} s)")
+    if default_too:
+        res[("control: " if control else "") + "sfanav default"] = _default_row(
+            X_tr, xy_tr, X_te, xy_te, crange, elev, quick=quick, seed=seed, n_repeats=5 if quick else n_repeats,
+            log=log, tag=f"{tag} seed {seed}")
     odo_tr = ds.select(run="train").odometry[:, :2]
     variants = [(rn, r, "", train_variants.get("")) for rn, r in row_variants.items()] if "" in train_variants else []
     variants += [("", ROW_VARIANTS[(opts or {}).get("rows", "")], tn, opts) for tn, opts in train_variants.items() if tn]
@@ -290,7 +357,8 @@ def _exp_gardens(out: Path, *, quick: bool, seed: int, progress: bool) -> Experi
     avg = {**_average(realistic), **_average(control)}
     rows: list[dict[str, Any]] = []
     for cfg, m in avg.items():
-        for k in METRICS + ("readout", "query ms", "loop closures", "loop closures within 0.5 m (%)"):
+        for k in METRICS + ("readout", "readout rule", "readout selection (s)", "query ms", "loop closures",
+                            "loop closures within 0.5 m (%)"):
             if k not in m or m[k] is None:
                 continue
             row = {"metric": f"{k} [{cfg}]", "thesis": None, "sfanav": m[k], "configuration": cfg,
@@ -313,6 +381,10 @@ def _exp_gardens(out: Path, *, quick: bool, seed: int, progress: bool) -> Experi
         "by odometry, accepted if as alike as a frame 2 steps away), aligned by circular cross-correlation; "
         "training time includes finding them. 'capacity: wider layers': Table 5.1 with 20 / 24 / 24 instead of "
         "14 / 16 / 16 outputs in layers 1-3; 'widest': 28 / 32 / 32; '+' combines"
+        + ". 'sfanav default': the library's default (sfanav.defaults.train_default: network sfanav-default = "
+        "Table 5.1 with 20 / 24 / 24 outputs in layers 1-3 and 12 top outputs, horizon band, readout 'auto' = "
+        "kernel ridge or kNN by blocked CV on the training run (10 folds of interleaved 10-image blocks), kNN only if "
+        "its CV error is >10 % lower)"
         + f". Row variants: horizon band = rows of elevation {BAND[0]:g}..{BAND[1]:g} deg resampled to the full "
         "height; row-norm = each row to zero mean, unit variance. Readouts other than the thesis's are chosen "
         "among 8 or 12 outputs and their hyperparameters by 5-fold blocked cross-validation on the training run "

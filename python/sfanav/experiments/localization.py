@@ -117,8 +117,11 @@ def window_network(width: int, height: int, channels: int = 3, *, degree: int = 
 def _run_localization(out: Path, ds: Dataset, net: Network, *, prefix: str, title: str, seed: int, progress: bool,
                       normalize: bool = False, step: int = 5, window: float = 1.0, thesis: dict[str, Any] | None = None,
                       suffix: str = "", baselines: bool = True, data: tuple | None = None, text: tuple = (),
-                      plots: bool = True, baseline_queries: int | None = 1000):
-    """Train on the ``train`` run, evaluate on ``test``; returns (evaluation, rows, info, data)."""
+                      plots: bool = True, baseline_queries: int | None = 1000, readout: str = "quadratic",
+                      rows: Any = None):
+    """Train on the ``train`` run, evaluate on ``test``; returns (evaluation, rows, info, data).
+    ``readout="quadratic"`` (8 outputs, no ``rows``) is the thesis's
+    configuration; ``"auto"`` with 8 or 12 outputs the sfanav default's."""
     log = _log(progress)
     prep = Preprocessing.for_network(net, window=window, normalize=normalize)
     if data is None:
@@ -127,15 +130,18 @@ def _run_localization(out: Path, ds: Dataset, net: Network, *, prefix: str, titl
         data = (X_tr, xy_tr, X_te, xy_te)
     X_tr, xy_tr, X_te, xy_te = data
     t0 = time.perf_counter()
-    loc = fit_localizer(net, X_tr, xy_tr, rotation=Rotation(step=step, window=window), n_outputs=8, prep=prep,
+    loc = fit_localizer(net, X_tr, xy_tr, rotation=Rotation(step=step, window=window),
+                        n_outputs=8 if readout == "quadratic" else None, readout=readout, rows=rows, prep=prep,
                         progress=progress)
     fit_s = time.perf_counter() - t0
-    log(f"{title}: trained on {len(X_tr)} images in {fit_s:.0f} s")
+    log(f"{title}: trained on {len(X_tr)} images in {fit_s:.0f} s; readout {loc.describe_readout()}")
     ev = evaluate(loc, X_te, xy_te, train_images=X_tr, train_xy=xy_tr, out=out if plots else None, prefix=prefix,
                   title=title,
                   run_baselines=baselines, seed=seed, log=log, text=text, baseline_queries=baseline_queries)
     rows = evaluation_rows(ev, suffix=suffix, thesis=thesis)
-    info = {"n_train": len(X_tr), "n_test": len(X_te), "fit_s": fit_s, "prep": prep.describe()}
+    info = {"n_train": len(X_tr), "n_test": len(X_te), "fit_s": fit_s, "prep": prep.describe(),
+            "network_s": loc.info["fit_seconds"], "readout_s": loc.info["readout_seconds"],
+            "readout": loc.describe_readout(), "readout_rule": loc.info.get("readout_rule", "-")}
     return ev, rows, info, data
 
 
@@ -166,8 +172,23 @@ def exp_5_1_1(out: Path, *, quick: bool, seed: int, progress: bool) -> Experimen
     else:
         ds = simulated(out, preset, seed, quick=False, progress=progress)
         net = Network.from_preset("thesis-5.1", out=12)
-    ev, rows, info, _ = _run_localization(out, ds, net, prefix="5.1.1-", title="5.1.1 simulator grid", seed=seed,
-                                          progress=progress, thesis=THESIS_5_1_1)
+    ev, rows, info, data = _run_localization(out, ds, net, prefix="5.1.1-", title="5.1.1 simulator grid",
+                                             seed=seed, progress=progress, thesis=THESIS_5_1_1)
+    # the sfanav default (issue 7) on the same images: rows "<metric> [sfanav default]"
+    from ..defaults import default_network, default_rows
+
+    dnet = Network(_tiny_config(60, 8, 3)) if quick else default_network()
+    elev = tuple(ds.metadata["camera"].get("elevation_deg", (-30.0, 20.0)))
+    dev, drows, dinfo, _ = _run_localization(out, ds, dnet, prefix="5.1.1-default-",
+                                             title="5.1.1 simulator grid, sfanav default", seed=seed,
+                                             progress=progress, suffix=" [sfanav default]", baselines=False,
+                                             data=data, readout="auto", rows=default_rows(elev))
+    rows += [dict(r, configuration="sfanav default") for r in drows]
+    rows.append({"metric": "training (s) [sfanav default]", "thesis": None, "sfanav": dinfo["network_s"],
+                 "configuration": "sfanav default"})
+    rows.append({"metric": "training (s)", "thesis": None, "sfanav": info["network_s"]})
+    rows.append({"metric": "readout [sfanav default]", "thesis": None, "sfanav": dinfo["readout"],
+                 "configuration": "sfanav default"})
     notes = (
         f"Scene: sim preset {preset} (seed {seed}): {info['n_train']} training / {info['n_test']} test panoramas "
         f"({info['prep']}) on regular grids walked as serpentines. Network: "
@@ -178,9 +199,14 @@ def exp_5_1_1(out: Path, *, quick: bool, seed: int, progress: bool) -> Experimen
         + f"; rotation 5 px, 100 % window; training {info['fit_s']:.0f} s. Regression on the 8 slowest outputs.\n"
         "Plain MAE/MED rows: regression fitted on the training grid, error on the separate test grid (honest). "
         "'(random splits)': the thesis's protocol (random 50/50 splits of the test grid, 100 repeats); the "
-        "thesis's 1.83 % / 1.68 % are on that protocol. eta on the training views under all 70 rotations."
+        "thesis's 1.83 % / 1.68 % are on that protocol. eta on the training views under all 70 rotations.\n"
+        "Rows '[sfanav default]': the sfanav default on the same images (network sfanav-default: Table 5.1 with "
+        "20 / 24 / 24 outputs in layers 1-3, 12 top outputs, mixed precision; horizon band of rows -10..+20 deg; "
+        f"readout chosen by blocked CV on the training grid: {dinfo['readout']}, {dinfo['readout_rule']}); "
+        f"training {dinfo['network_s']:.0f} s (thesis configuration {info['network_s']:.0f} s, double precision), "
+        f"readout selection {dinfo['readout_s']:.0f} s. Its random-split rows use the same readout."
     )
-    return ExperimentResult("5.1.1", rows, _plots(ev), notes)
+    return ExperimentResult("5.1.1", rows, _plots(ev) + _plots(dev), notes)
 
 
 # --------------------------------------------------------------------- 5.1.2
