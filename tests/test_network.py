@@ -229,7 +229,32 @@ def test_spatial_pairs_fast_equals_naive_and_validate():
     # zero-weight pairs change nothing
     zero = fit(pairs=(pairs[0], pairs[1], np.zeros(len(pairs[0]))))
     np.testing.assert_allclose(zero.delta_values_, fit().delta_values_, rtol=1e-9)
+    # pairs in some layers only: all layers named == default; the top only differs; bad layers refused
+    n_layers = len(sfanav.Network(tiny_config(top_out=3)).config_["layers"])
+    np.testing.assert_array_equal(fit(pairs=pairs, pair_layers=range(1, n_layers + 1)).delta_values_,
+                                  fast.delta_values_)
+    top = fit(pairs=pairs, pair_layers=[n_layers])
+    np.testing.assert_allclose(top.delta_values_, fit(pairs=pairs, pair_layers=[n_layers], fast=False).delta_values_,
+                               rtol=1e-9)
+    # (the tiny top can fit the same function on these few training views whatever layer 1 does, so compare
+    # layer 1: untouched by top-only pairs, changed by pairs in all layers)
+    first = lambda net: net._net.node_states(False)[0][0]["stages"][-1]["solution"]["delta"]
+    np.testing.assert_array_equal(first(top), first(fit()))
+    assert not np.allclose(first(fast), first(fit()), rtol=1e-3)
+    with pytest.raises(ValueError, match="pair_layers"):
+        fit(pairs=pairs, pair_layers=[n_layers + 1])
+    # shifted pairs (b rolled by a random shift): fast == naive, and they change the result
+    sp = sfanav.spatial_pairs(xy, radius=0.15, k=3, shifts=48, seed=1)
+    assert len(sp) == 4 and sp[3].min() >= 0 and sp[3].max() < 48 and np.any(sp[3] % 48)
+    shifted = fit(pairs=sp)
+    np.testing.assert_allclose(shifted.delta_values_, fit(pairs=sp, fast=False).delta_values_, rtol=1e-9)
+    assert not np.allclose(first(shifted), first(fast), rtol=1e-3)
+    # a full-period shift is no shift
+    full = fit(pairs=(pairs[0], pairs[1], pairs[2], np.full(len(pairs[0]), 48)), cache=False)
+    np.testing.assert_allclose(full.delta_values_, uncached.delta_values_, rtol=1e-12)
     a, b, w = pairs
+    with pytest.raises(ValueError, match="shifts"):
+        fit(pairs=(a, b, w, np.zeros(len(a) - 1, int)))
     with pytest.raises(ValueError, match="index the 36"):
         fit(pairs=(a, b + 100, w))
     with pytest.raises(ValueError, match="finite"):

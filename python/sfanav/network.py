@@ -79,10 +79,13 @@ def _check_transition_weight(w: Any) -> float:
     return w
 
 
-def _check_pairs(pairs: Any, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    if not (isinstance(pairs, (tuple, list)) and len(pairs) == 3):
-        raise TypeError("pairs must be a tuple (idx_a, idx_b, weights)")
-    a, b, w = (np.asarray(x) for x in pairs)
+def _check_pairs(pairs: Any, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    if not (isinstance(pairs, (tuple, list)) and len(pairs) in (3, 4)):
+        raise TypeError("pairs must be a tuple (idx_a, idx_b, weights[, shifts])")
+    a, b, w = (np.asarray(x) for x in pairs[:3])
+    sh = np.asarray(pairs[3]) if len(pairs) == 4 else np.zeros(len(a), dtype=np.int64)
+    if sh.ndim != 1 or len(sh) != len(a) or (len(sh) and sh.dtype.kind not in "iu"):
+        raise ValueError("pairs: shifts must be 1-D integers (pixels), one per pair")
     if not (a.ndim == b.ndim == w.ndim == 1 and len(a) == len(b) == len(w)):
         raise ValueError(
             f"pairs: idx_a, idx_b and weights must be 1-D of one length, got shapes {a.shape}, {b.shape}, {w.shape}"
@@ -97,25 +100,33 @@ def _check_pairs(pairs: Any, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray
     w = w.astype(np.float64)
     if not np.all(np.isfinite(w) & (w >= 0)):
         raise ValueError("pairs: weights must be finite and >= 0")
-    return a.astype(np.int64), b.astype(np.int64), w
+    return a.astype(np.int64), b.astype(np.int64), w, sh.astype(np.int64)
 
 
-def _feed_pairs(trainer: Any, net: Any, images: np.ndarray, pairs: tuple[np.ndarray, np.ndarray, np.ndarray],
-                chunk: int) -> None:
+def _feed_pairs(trainer: Any, net: Any, images: np.ndarray,
+                pairs: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray], chunk: int) -> None:
     """Feeds spatial pairs in chunks of at most ``2 * chunk`` distinct
     images (sorted by the first index, so neighbours in the run share
-    chunks)."""
-    a, b, w = pairs
+    chunks); the second image of a shifted pair is rolled left by its
+    shift."""
+    a, b, w, sh = pairs
     order = np.lexsort((b, np.minimum(a, b)))
     for i in range(0, len(order), chunk):
         sel = order[i : i + chunk]
         ids, inv = np.unique(np.concatenate([a[sel], b[sel]]), return_inverse=True)
         batch = _as_batch(images[ids])
-        trainer.feed_pairs(net, batch, inv[: len(sel)].tolist(), inv[len(sel) :].tolist(), w[sel].tolist())
+        ia, ib = inv[: len(sel)], inv[len(sel) :].copy()
+        rolled = [np.roll(batch[j], -int(s), axis=1) for j, s in zip(ib, sh[sel]) if s % batch.shape[2]]
+        if rolled:
+            k = np.flatnonzero(sh[sel] % batch.shape[2])
+            ib[k] = len(batch) + np.arange(len(k))
+            batch = np.ascontiguousarray(np.concatenate([batch, np.stack(rolled)]))
+        trainer.feed_pairs(net, batch, ia.tolist(), ib.tolist(), w[sel].tolist())
 
 
 def spatial_pairs(xy: Any, radius: float, k: int | None = None, *, min_gap: int = 0, weights: str = "uniform",
-                  scale: float | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                  scale: float | None = None, shifts: int | None = None,
+                  seed: int = 0) -> tuple[np.ndarray, ...]:
     """Spatial-neighbour pairs of training positions for
     :meth:`Network.fit` ``(pairs=...)`` (graph-based SFA, Escalante &
     Wiskott 2013).
@@ -136,10 +147,14 @@ def spatial_pairs(xy: Any, radius: float, k: int | None = None, *, min_gap: int 
     weights : "uniform" or "gaussian"
         1 per pair, or ``exp(-d^2 / (2 scale^2))`` (``scale`` default
         ``radius / 2``).
+    shifts : int or None
+        The panorama width W: also return, per pair, a column shift drawn
+        uniformly from ``0..W-1`` (``seed``), for :meth:`Network.fit` to
+        compare the two images at a random relative orientation.
 
     Returns
     -------
-    (idx_a, idx_b, weights) : int64 (P,), int64 (P,), float64 (P,)
+    (idx_a, idx_b, weights[, shifts]) : int64 (P,), int64 (P,), float64 (P,)[, int64 (P,)]
         Each unordered pair once, ``idx_a < idx_b``, sorted.
     """
     xy = np.asarray(xy, dtype=np.float64)
@@ -167,7 +182,7 @@ def spatial_pairs(xy: Any, radius: float, k: int | None = None, *, min_gap: int 
         found.update((min(i, j), max(i, j)) for j in nb)
     if not found:
         e = np.zeros(0, dtype=np.int64)
-        return e, e.copy(), np.zeros(0)
+        return (e, e.copy(), np.zeros(0)) + ((e.copy(),) if shifts else ())
     ab = np.array(sorted(found), dtype=np.int64)
     d = np.hypot(*(xy[ab[:, 0]] - xy[ab[:, 1]]).T)
     if weights == "uniform":
@@ -175,6 +190,9 @@ def spatial_pairs(xy: Any, radius: float, k: int | None = None, *, min_gap: int 
     else:
         s = radius / 2 if scale is None else float(scale)
         w = np.exp(-(d**2) / (2 * s**2))
+    if shifts:
+        sh = np.random.default_rng(seed).integers(0, int(shifts), len(ab))
+        return ab[:, 0].copy(), ab[:, 1].copy(), w, sh.astype(np.int64)
     return ab[:, 0].copy(), ab[:, 1].copy(), w
 
 
@@ -497,7 +515,8 @@ class Network:
         batch_size: int = 16,
         progress: bool = True,
         transition_weight: float = 1.0,
-        pairs: tuple[Any, Any, Any] | None = None,
+        pairs: tuple[Any, ...] | None = None,
+        pair_layers: Sequence[int] | None = None,
     ) -> "Network":
         """Trains the network layer by layer, in the order the images come.
 
@@ -540,12 +559,19 @@ class Network:
             the change of position a say comparable to the rotation in the
             slowness objective (graph-based SFA, Escalante & Wiskott 2013).
             Finite and >= 0 (0: every image its own sequence).
-        pairs : (idx_a, idx_b, weights) or None
+        pairs : (idx_a, idx_b, weights[, shifts]) or None
             Spatial pairs of training images (graph-based SFA): each
             ``(a, b, w)`` adds, at *every* simulated rotation and RF
             position, a derivative pair between view ``k`` of image ``a``
             and view ``k`` of image ``b`` with weight ``w`` (the rotation
-            pairs have weight 1 each), in every layer and pass. Indices
+            pairs have weight 1 each), in every layer and pass. With
+            ``shifts`` (int pixels, per pair), image ``b`` is first rolled
+            left by its shift, so the pair also compares two different
+            orientations (random shifts penalise orientation-coding
+            features, which same-view pairs of images taken at the same or
+            opposite headings reward); shifts force ``cache=False``.
+            ``pair_layers`` (1-based layer numbers, default all) restricts
+            the pairs to some layers (e.g. the top). Indices
             into ``images`` (which must then be an array or an ``.npy``
             path); weights finite and >= 0. Build them from positions with
             :func:`spatial_pairs` (supervised: the regression needs the
@@ -563,6 +589,14 @@ class Network:
             if not isinstance(images, np.ndarray):
                 raise TypeError("pairs need the images as an array (N, H, W[, C]) or an .npy path")
             pairs = _check_pairs(pairs, len(images))
+            n_layers = len(self.config_["layers"])
+            if pair_layers is None:
+                pair_layers = range(1, n_layers + 1)
+            pair_layers = {int(x) for x in pair_layers}
+            if not pair_layers <= set(range(1, n_layers + 1)):
+                raise ValueError(f"pair_layers must name layers 1..{n_layers}, got {sorted(pair_layers)}")
+            if np.any(pairs[3] != 0):
+                cache = False  # cached fields are of the unrolled images
         batches = _batches_of(images, batch_size)
         h, v, c = self.input_shape
         first = next(iter(batches()), None)
@@ -604,8 +638,8 @@ class Network:
                 if trainer.has_cache:
                     bar = _progress(progress, trainer.cached_images, desc + " (cached)")
                     trainer.feed_cached(net)
-                    if pairs is not None:
-                        trainer.feed_pairs_cached(net, *(x.tolist() for x in pairs))
+                    if pairs is not None and layer + 1 in pair_layers:
+                        trainer.feed_pairs_cached(net, *(x.tolist() for x in pairs[:3]))
                     if bar is not None:
                         bar.update(trainer.cached_images)
                         bar.close()
@@ -623,7 +657,7 @@ class Network:
                     finally:
                         if bar is not None:
                             bar.close()
-                    if pairs is not None:
+                    if pairs is not None and layer + 1 in pair_layers:
                         _feed_pairs(trainer, net, images, pairs, batch_size)
                     if layer == 0 and p == 0:
                         n_images = seen

@@ -82,6 +82,14 @@ TRAIN_VARIANTS: dict[str, dict[str, Any] | None] = {
     **{f"spatial pairs cross+local w={w:g}": {"pairs": [{"radius": 1.2, "k": 4, "min_gap": 4, "weight": float(w)},
                                                        {"radius": 0.6, "k": 4, "weight": float(w)}]}
        for w in (0.1, 1, 10)},
+    # the same, each pair compared at a random relative orientation (image b rolled by a random shift)
+    **{f"spatial pairs cross+local w={w:g} shifted": {
+        "pairs": [{"radius": 1.2, "k": 4, "min_gap": 4, "weight": float(w), "shifts": True},
+                  {"radius": 0.6, "k": 4, "weight": float(w), "shifts": True}]} for w in (0.1, 1)},
+    # shifted pairs in the top layer only (Table 5.1: layer 4); the lower layers learn as in the thesis
+    "spatial pairs cross+local w=1 shifted top": {
+        "pairs": [{"radius": 1.2, "k": 4, "min_gap": 4, "weight": 1.0, "shifts": True},
+                  {"radius": 0.6, "k": 4, "weight": 1.0, "shifts": True}], "pair_layers": [4]},
 }
 READOUTS: dict[str, tuple[str, ...] | None] = {
     "": None,  # the thesis's quadratic regression, 8 outputs, least squares
@@ -190,7 +198,7 @@ def run_scene(out: Path, preset: str, seed: int, *, quick: bool, progress: bool,
         extra: dict[str, Any] = {}
         seq = A_tr
         lc_opts = {k: v for k, v in (topts or {}).items()
-                   if k not in ("network", "rows", "transition_weight", "pairs")}
+                   if k not in ("network", "rows", "transition_weight", "pairs", "pair_layers")}
         tw = float((topts or {}).get("transition_weight", 1.0))
         pairs = None
         if (topts or {}).get("pairs"):
@@ -198,11 +206,12 @@ def run_scene(out: Path, preset: str, seed: int, *, quick: bool, progress: bool,
                 raise ValueError("spatial pairs and loop closures do not combine (the pairs index the run)")
             parts = []
             for po in topts["pairs"]:  # type: ignore[index]
-                pa, pb, pw = spatial_pairs(odo_tr if po.get("odometry") else xy_tr, po["radius"], po.get("k"),
-                                           min_gap=po.get("min_gap", 0))
-                parts.append((pa, pb, pw * float(po.get("weight", 1.0))))
-            pa, pb, pw = (np.concatenate(z) for z in zip(*parts))
-            pairs = (pa, pb, pw)
+                pa, pb, pw, *sh = spatial_pairs(odo_tr if po.get("odometry") else xy_tr, po["radius"], po.get("k"),
+                                                min_gap=po.get("min_gap", 0),
+                                                shifts=A_tr.shape[2] if po.get("shifts") else None, seed=seed)
+                parts.append((pa, pb, pw * float(po.get("weight", 1.0)), sh[0] if sh else np.zeros(len(pa), int)))
+            pa, pb, pw, psh = (np.concatenate(z) for z in zip(*parts))
+            pairs = (pa, pb, pw, psh)
             extra = {"spatial pairs": len(pa)}
             log(f"{tag} seed {seed} {tname}: {len(pa)} spatial pairs")
         if lc_opts:
@@ -215,7 +224,8 @@ def run_scene(out: Path, preset: str, seed: int, *, quick: bool, progress: bool,
                      "loop closures within 0.5 m (%)": float(100 * np.mean(true_d < 0.5)) if len(lc) else None}
             log(f"{tag} seed {seed} {tname}: {len(lc)} loop closures, "
                 f"{extra['loop closures within 0.5 m (%)'] or 0:.0f} % within 0.5 m (ground truth)")
-        net.fit(seq, Rotation(step=5, window=1.0), progress=False, transition_weight=tw, pairs=pairs)
+        net.fit(seq, Rotation(step=5, window=1.0), progress=False, transition_weight=tw, pairs=pairs,
+                pair_layers=(topts or {}).get("pair_layers"))
         fit_s = time.perf_counter() - t0
         F_tr, F_te = net.transform(A_tr), net.transform(A_te)
         R = net.transform(A_tr, rotations=True)
