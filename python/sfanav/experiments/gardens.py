@@ -22,7 +22,10 @@ training run only) the localization error is measured:
 
 A *training variant* ``loop closures`` (thesis 6.2.1 with image-based loop
 closures, :mod:`sfanav.loopclosure`) is trained on all rows beside the row
-variants.
+variants. Further training variants (``TRAIN_VARIANTS``, run with
+``scripts/gardens_subset.py``): node capacity, ``transition weight <w>``
+(``Network.fit(transition_weight=)``) and ``spatial pairs ...`` (supervised
+graph-based SFA pairs, ``Network.fit(pairs=, pair_layers=)``; docs/gardens.md).
 
 Every number is the mean over the seeds (``per_seed`` in the JSON holds
 each). Row names: ``"<metric> [<configuration>]"``, e.g. ``MAE x (%)
