@@ -249,6 +249,10 @@ def test_spatial_pairs_fast_equals_naive_and_validate():
     shifted = fit(pairs=sp)
     np.testing.assert_allclose(shifted.delta_values_, fit(pairs=sp, fast=False).delta_values_, rtol=1e-9)
     assert not np.allclose(first(shifted), first(fast), rtol=1e-3)
+    # shifts in multiples of the step are read from the field cache: same result as rolling the images
+    sp6 = sfanav.spatial_pairs(xy, radius=0.15, k=3, shifts=48, shift_step=6, seed=2)
+    assert np.all(sp6[3] % 6 == 0) and np.any(sp6[3])
+    np.testing.assert_allclose(fit(pairs=sp6).delta_values_, fit(pairs=sp6, cache=False).delta_values_, rtol=1e-9)
     # a full-period shift is no shift
     full = fit(pairs=(pairs[0], pairs[1], pairs[2], np.full(len(pairs[0]), 48)), cache=False)
     np.testing.assert_allclose(full.delta_values_, uncached.delta_values_, rtol=1e-12)

@@ -134,7 +134,12 @@ class LayerTrainer:
         self, network: Network, images: ImageArray, a: Sequence[int], b: Sequence[int], weights: Sequence[float]
     ) -> None: ...
     def feed_pairs_cached(
-        self, network: Network, a: Sequence[int], b: Sequence[int], weights: Sequence[float]
+        self,
+        network: Network,
+        a: Sequence[int],
+        b: Sequence[int],
+        weights: Sequence[float],
+        shifts: Sequence[int] | None = None,
     ) -> None: ...
     def end_pass(self, network: Network) -> bool: ...
     def next_layer(self, network: Network) -> LayerTrainer: ...

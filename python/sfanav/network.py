@@ -125,7 +125,7 @@ def _feed_pairs(trainer: Any, net: Any, images: np.ndarray,
 
 
 def spatial_pairs(xy: Any, radius: float, k: int | None = None, *, min_gap: int = 0, weights: str = "uniform",
-                  scale: float | None = None, shifts: int | None = None,
+                  scale: float | None = None, shifts: int | None = None, shift_step: int = 1,
                   seed: int = 0) -> tuple[np.ndarray, ...]:
     """Spatial-neighbour pairs of training positions for
     :meth:`Network.fit` ``(pairs=...)`` (graph-based SFA, Escalante &
@@ -151,6 +151,9 @@ def spatial_pairs(xy: Any, radius: float, k: int | None = None, *, min_gap: int 
         The panorama width W: also return, per pair, a column shift drawn
         uniformly from ``0..W-1`` (``seed``), for :meth:`Network.fit` to
         compare the two images at a random relative orientation.
+    shift_step : int
+        Draw the shifts as multiples of this (e.g. the rotation step, so
+        that training can read them from the field cache).
 
     Returns
     -------
@@ -191,7 +194,8 @@ def spatial_pairs(xy: Any, radius: float, k: int | None = None, *, min_gap: int 
         s = radius / 2 if scale is None else float(scale)
         w = np.exp(-(d**2) / (2 * s**2))
     if shifts:
-        sh = np.random.default_rng(seed).integers(0, int(shifts), len(ab))
+        q = max(1, int(shift_step))
+        sh = q * np.random.default_rng(seed).integers(0, -(-int(shifts) // q), len(ab))
         return ab[:, 0].copy(), ab[:, 1].copy(), w, sh.astype(np.int64)
     return ab[:, 0].copy(), ab[:, 1].copy(), w
 
@@ -569,7 +573,10 @@ class Network:
             left by its shift, so the pair also compares two different
             orientations (random shifts penalise orientation-coding
             features, which same-view pairs of images taken at the same or
-            opposite headings reward); shifts force ``cache=False``.
+            opposite headings reward). Shifts that are multiples of
+            ``rotation.step`` (with the step dividing the width) are read
+            from the field cache; other shifts force ``cache=False``
+            (slower: ~4x the thesis training time instead of ~1.3x).
             ``pair_layers`` (1-based layer numbers, default all) restricts
             the pairs to some layers (e.g. the top). Indices
             into ``images`` (which must then be an array or an ``.npy``
@@ -581,6 +588,7 @@ class Network:
         """
         rotation = rotation or Rotation()
         transition_weight = _check_transition_weight(transition_weight)
+        shifted = False
         if not isinstance(rotation, Rotation):
             raise TypeError("rotation must be a sfanav.Rotation")
         if pairs is not None:
@@ -595,7 +603,12 @@ class Network:
             pair_layers = {int(x) for x in pair_layers}
             if not pair_layers <= set(range(1, n_layers + 1)):
                 raise ValueError(f"pair_layers must name layers 1..{n_layers}, got {sorted(pair_layers)}")
-            if np.any(pairs[3] != 0):
+            # cached passes read shifted pairs at shifted offsets of the cached fields: exact
+            # when every shift is a multiple of the step and the step divides the period
+            period0 = _as_batch(images[:1]).shape[2]
+            pairs = (*pairs[:3], pairs[3] % period0)
+            shifted = bool(np.any(pairs[3]))
+            if shifted and (period0 % rotation.step or np.any(pairs[3] % rotation.step)):
                 cache = False  # cached fields are of the unrolled images
         batches = _batches_of(images, batch_size)
         h, v, c = self.input_shape
@@ -639,7 +652,8 @@ class Network:
                     bar = _progress(progress, trainer.cached_images, desc + " (cached)")
                     trainer.feed_cached(net)
                     if pairs is not None and layer + 1 in pair_layers:
-                        trainer.feed_pairs_cached(net, *(x.tolist() for x in pairs[:3]))
+                        trainer.feed_pairs_cached(net, *(x.tolist() for x in pairs[:3]),
+                                                  pairs[3].tolist() if shifted else None)
                     if bar is not None:
                         bar.update(trainer.cached_images)
                         bar.close()

@@ -809,12 +809,40 @@ impl LayerTrainer {
                 .collect();
             r.into_iter().collect::<Result<_>>()?
         };
-        self.add_pair_graphs(net, &graphs, pairs)
+        self.add_pair_graphs(net, &graphs, pairs, None)
     }
 
     /// [`feed_pairs`](Self::feed_pairs) for a pass that reads the cached
     /// fields: `a`, `b` index the cached images (the order they were fed).
     pub fn feed_pairs_cached(&mut self, net: &mut Network, pairs: &[(usize, usize, f64)]) -> Result<()> {
+        self.feed_pairs_cached_shifted(net, pairs, None)
+    }
+
+    /// [`feed_pairs_cached`](Self::feed_pairs_cached) where image `b` of
+    /// pair `e` is seen rolled left by `shifts[e]` columns (the pair then
+    /// compares two different orientations), read from the cached field at
+    /// the shifted offsets: exact, and equal to feeding the rolled images,
+    /// when the step divides the period and every shift is a multiple of
+    /// the step.
+    pub fn feed_pairs_cached_shifted(
+        &mut self,
+        net: &mut Network,
+        pairs: &[(usize, usize, f64)],
+        shifts: Option<&[usize]>,
+    ) -> Result<()> {
+        if let Some(sh) = shifts {
+            if sh.len() != pairs.len() {
+                return Err(SfaError::ShapeMismatch { what: "number of pair shifts", expected: pairs.len(), got: sh.len() });
+            }
+            let (step, w) = (self.rot.step, self.rot.period);
+            if let Some(e) = sh.iter().position(|&x| x % w != 0 && (w % step != 0 || x % step != 0)) {
+                return Err(SfaError::InvalidArgument(format!(
+                    "pair {e}: shift {} is not a multiple of the step {step} (or the step does not divide the \
+                     period {w}); roll the image instead",
+                    sh[e]
+                )));
+            }
+        }
         let cache = self
             .cache
             .take()
@@ -857,7 +885,7 @@ impl LayerTrainer {
                         (pos(a), pos(b), w)
                     })
                     .collect();
-                self.add_pair_graphs(net, &graphs, &local)?;
+                self.add_pair_graphs(net, &graphs, &local, shifts.map(|sh| &sh[at..end]))?;
                 at = end;
             }
             Ok(())
@@ -867,9 +895,22 @@ impl LayerTrainer {
     }
 
     /// Adds the pairs between the rows of `graphs[a]` and `graphs[b]`.
-    fn add_pair_graphs(&mut self, net: &mut Network, graphs: &[ImageGraph], pairs: &[(usize, usize, f64)]) -> Result<()> {
+    fn add_pair_graphs(
+        &mut self,
+        net: &mut Network,
+        graphs: &[ImageGraph],
+        pairs: &[(usize, usize, f64)],
+        shifts: Option<&[usize]>,
+    ) -> Result<()> {
         let shared = net.spec().weight_sharing;
-        for &(a, b, w) in pairs {
+        // Fast-path row layout (for shifted pairs): row r * no + oi is
+        // offset offs[oi] of RF row r.
+        let (offs, idx) = {
+            let g = &net.geometry()[self.layer];
+            offset_set(&self.rot, cum_strides(net.geometry())[self.layer], g.n_w)
+        };
+        for (e, &(a, b, w)) in pairs.iter().enumerate() {
+            let shift = shifts.map_or(0, |sh| sh[e] % self.rot.period);
             if w == 0.0 || a == b {
                 continue;
             }
@@ -882,7 +923,19 @@ impl LayerTrainer {
                 rows.extend_from_slice(&ga.rows[ga.lead * d..]);
                 rows.extend_from_slice(&gb.rows[gb.lead * d..]);
                 let zeros = vec![0.0; 2 * n];
-                let edges: Vec<[usize; 2]> = (0..n).map(|k| [k, n + k]).collect();
+                let edges: Vec<[usize; 2]> = if shift == 0 {
+                    (0..n).map(|k| [k, n + k]).collect()
+                } else {
+                    let no = offs.len();
+                    (0..n)
+                        .map(|k| {
+                            let (r, oi) = (k / no, k % no);
+                            let j = idx[(offs[oi] + shift) % self.rot.period];
+                            debug_assert!(j != usize::MAX);
+                            [k, n + r * no + j]
+                        })
+                        .collect()
+                };
                 let ew: Vec<f64> = ga.weights.iter().map(|m| w * m).collect();
                 let x = View::from_slice(&rows, 2 * n, d)?;
                 let node = &mut net.nodes_mut(self.layer)[0];

@@ -460,3 +460,86 @@ fn spatial_pairs_individual_nodes() {
     assert!(d(&net).iter().all(|v| v.is_finite()));
     assert!(max_rel(&d(&net), &d(&plain)) > 1e-3);
 }
+
+/// Shifted pairs read from the cached fields at shifted offsets equal the
+/// pairs with image `b` rolled and recomputed (step 3 divides the period).
+#[test]
+fn shifted_pairs_from_cache_equal_rolled_images() {
+    let (w, n, h) = (24, 24, 6);
+    let imgs = images(n, h, w, 1, 19);
+    let s = NetworkSpec {
+        height: 6,
+        width: 24,
+        channels: 1,
+        layers: vec![
+            LayerSpec { rf: (4, 3), stride: (2, 3), n_out: 4, reduce_to: Some(5), degree: 2 },
+            LayerSpec { rf: (3, 2), stride: (2, 1), n_out: 3, reduce_to: Some(6), degree: 2 },
+            LayerSpec { rf: (5, 1), stride: (1, 1), n_out: 2, reduce_to: Some(5), degree: 2 },
+        ],
+        weight_sharing: true,
+        tol: 1e-10,
+        mixed_precision: false,
+    };
+    let rot = Rotation { step: 3, period: w };
+    let pairs = some_pairs(n);
+    let shifts: Vec<usize> = (0..pairs.len()).map(|e| 3 * ((e * 5) % 8)).collect();
+    // Reference: the rolled second images appended, pairs to them.
+    let mut ext = imgs.clone();
+    let mut ref_pairs = Vec::new();
+    for (e, (&(a, b, wt), &sh)) in pairs.iter().zip(&shifts).enumerate() {
+        let img = &imgs[b * h * w..(b + 1) * h * w];
+        for y in 0..h {
+            for x in 0..w {
+                ext.push(img[y * w + (x + sh) % w]);
+            }
+        }
+        ref_pairs.push((a, n + e, wt));
+    }
+    let m = n + pairs.len();
+    let base = Network::new(s).unwrap();
+    let (mut reference, mut cached) = (base.clone(), base);
+    // Reference: no cache, pairs from the extended images in every pass.
+    let mut tr = LayerTrainer::new(&reference, 0, rot, Path::Fast).unwrap();
+    loop {
+        loop {
+            tr.feed(&mut reference, &imgs, n).unwrap();
+            tr.feed_pairs(&mut reference, &ext, m, &ref_pairs).unwrap();
+            if tr.end_pass(&mut reference).unwrap() {
+                break;
+            }
+        }
+        if reference.is_trained() {
+            break;
+        }
+        tr = tr.next_layer(&reference).unwrap();
+    }
+    // Cached: streamed passes as the reference, cached passes shift offsets.
+    let mut tr = LayerTrainer::new(&cached, 0, rot, Path::Fast).unwrap();
+    tr.set_caching(true);
+    let mut cached_passes = 0;
+    loop {
+        loop {
+            if tr.has_cache() {
+                tr.feed_cached(&mut cached).unwrap();
+                tr.feed_pairs_cached_shifted(&mut cached, &pairs, Some(&shifts)).unwrap();
+                cached_passes += 1;
+            } else {
+                tr.feed(&mut cached, &imgs, n).unwrap();
+                tr.feed_pairs(&mut cached, &ext, m, &ref_pairs).unwrap();
+            }
+            if tr.end_pass(&mut cached).unwrap() {
+                break;
+            }
+        }
+        if cached.is_trained() {
+            break;
+        }
+        tr = tr.next_layer(&cached).unwrap();
+    }
+    assert!(cached_passes >= 3);
+    for (i, ((pa, _), (pb, _))) in projections(&reference).iter().zip(&projections(&cached)).enumerate() {
+        assert!(max_rel(pa, pb) < 1e-9, "stage {i}: {}", max_rel(pa, pb));
+    }
+    let e = tr.feed_pairs_cached_shifted(&mut cached, &pairs[..1], Some(&[4])).unwrap_err().to_string();
+    assert!(e.contains("multiple of the step"), "{e}");
+}

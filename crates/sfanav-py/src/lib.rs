@@ -858,7 +858,10 @@ impl PyLayerTrainer {
         run(py, || tr.feed_pairs(net, &data, n, &pairs))
     }
 
-    /// Spatial pairs between cached images (indices in feeding order).
+    /// Spatial pairs between cached images (indices in feeding order);
+    /// with shifts, image b of each pair is seen rolled left by its shift
+    /// (multiples of the step, which must divide the period).
+    #[pyo3(signature = (network, a, b, weights, shifts=None))]
     fn feed_pairs_cached(
         &mut self,
         py: Python<'_>,
@@ -866,11 +869,12 @@ impl PyLayerTrainer {
         a: Vec<usize>,
         b: Vec<usize>,
         weights: Vec<f64>,
+        shifts: Option<Vec<usize>>,
     ) -> PyResult<()> {
         let pairs = zip_pairs(a, b, weights)?;
         let tr = self.get()?;
         let net = &mut network.inner;
-        run(py, || tr.feed_pairs_cached(net, &pairs))
+        run(py, || tr.feed_pairs_cached_shifted(net, &pairs, shifts.as_deref()))
     }
 
     fn end_pass(&mut self, py: Python<'_>, network: &mut PyNetwork) -> PyResult<bool> {

@@ -93,6 +93,10 @@ TRAIN_VARIANTS: dict[str, dict[str, Any] | None] = {
     "spatial pairs cross+local w=1 shifted top": {
         "pairs": [{"radius": 1.2, "k": 4, "min_gap": 4, "weight": 1.0, "shifts": True},
                   {"radius": 0.6, "k": 4, "weight": 1.0, "shifts": True}], "pair_layers": [4]},
+    # the same with shifts in multiples of the 5 px rotation step: read from the field cache (~1.3x training)
+    "spatial pairs cross+local w=1 shifted5 top": {
+        "pairs": [{"radius": 1.2, "k": 4, "min_gap": 4, "weight": 1.0, "shifts": True, "shift_step": 5},
+                  {"radius": 0.6, "k": 4, "weight": 1.0, "shifts": True, "shift_step": 5}], "pair_layers": [4]},
 }
 READOUTS: dict[str, tuple[str, ...] | None] = {
     "": None,  # the thesis's quadratic regression, 8 outputs, least squares
@@ -211,7 +215,8 @@ def run_scene(out: Path, preset: str, seed: int, *, quick: bool, progress: bool,
             for po in topts["pairs"]:  # type: ignore[index]
                 pa, pb, pw, *sh = spatial_pairs(odo_tr if po.get("odometry") else xy_tr, po["radius"], po.get("k"),
                                                 min_gap=po.get("min_gap", 0),
-                                                shifts=A_tr.shape[2] if po.get("shifts") else None, seed=seed)
+                                                shifts=A_tr.shape[2] if po.get("shifts") else None,
+                                                shift_step=po.get("shift_step", 1), seed=seed)
                 parts.append((pa, pb, pw * float(po.get("weight", 1.0)), sh[0] if sh else np.zeros(len(pa), int)))
             pa, pb, pw, psh = (np.concatenate(z) for z in zip(*parts))
             pairs = (pa, pb, pw, psh)
