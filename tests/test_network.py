@@ -166,6 +166,114 @@ def test_fast_equals_naive():
     np.testing.assert_allclose(fast.transform(imgs[:5]), naive.transform(imgs[:5]), rtol=1e-7, atol=1e-9)
 
 
+def test_transition_weight_fast_equals_naive_and_validates(tmp_path):
+    xy, heading = walk(40, seed=3)
+    noise = np.random.default_rng(5).standard_normal((40, 8, 48)) * 0.05
+    imgs = np.stack([render(p, h) for p, h in zip(xy, heading)]) + noise
+    rot = sfanav.Rotation(step=6)
+    fit = lambda **kw: sfanav.Network(tiny_config(top_out=3)).fit(imgs, rot, progress=False, **kw)
+    thesis = fit()
+    assert thesis.transition_weight_ == 1.0
+    np.testing.assert_array_equal(fit(transition_weight=1).delta_values_, thesis.delta_values_)
+    fast = fit(transition_weight=8.0)
+    naive = fit(transition_weight=8.0, fast=False)
+    np.testing.assert_allclose(fast.delta_values_, naive.delta_values_, rtol=1e-9)
+    assert not np.allclose(fast.delta_values_, thesis.delta_values_, rtol=1e-3)
+    assert fast.transition_weight_ == 8.0
+    fast.save(tmp_path / "tw.sfa")
+    assert sfanav.load(tmp_path / "tw.sfa").transition_weight_ == 8.0
+    for bad in (-1.0, float("nan"), float("inf")):
+        with pytest.raises(ValueError, match="transition_weight"):
+            fit(transition_weight=bad)
+    with pytest.raises(TypeError, match="transition_weight"):
+        fit(transition_weight="10")
+
+
+def test_spatial_pairs_helper():
+    xy = np.array([[0.0, 0.0], [1.0, 0.0], [2.0, 0.0], [0.0, 1.5], [10.0, 10.0]])
+    a, b, w = sfanav.spatial_pairs(xy, radius=1.6)
+    assert list(zip(a, b)) == [(0, 1), (0, 3), (1, 2)]
+    np.testing.assert_array_equal(w, 1.0)
+    # k = 1: every point keeps its nearest neighbour; a pair stays if either end chose it
+    a, b, _ = sfanav.spatial_pairs(xy, radius=1.6, k=1)
+    # (0's nearest is 1, 2's is 1, 3's is 0)
+    assert list(zip(a, b)) == [(0, 1), (0, 3), (1, 2)]
+    a, b, _ = sfanav.spatial_pairs(xy[[0, 3, 4]], radius=1.6, k=1)
+    assert list(zip(a, b)) == [(0, 1)]
+    a, b, _ = sfanav.spatial_pairs(xy, radius=1.6, min_gap=2)
+    assert list(zip(a, b)) == [(0, 3)]
+    _, _, w = sfanav.spatial_pairs(xy, radius=1.6, weights="gaussian", scale=1.0)
+    np.testing.assert_allclose(w, np.exp(-np.array([1.0, 2.25, 1.0]) / 2))
+    a, b, w = sfanav.spatial_pairs(xy, radius=0.5)
+    assert len(a) == len(b) == len(w) == 0
+    for kw, msg in (({"radius": 0}, "radius"), ({"radius": 1, "k": 0}, "k must"),
+                    ({"radius": 1, "weights": "cosine"}, "weights")):
+        with pytest.raises(ValueError, match=msg):
+            sfanav.spatial_pairs(xy, **kw)
+    with pytest.raises(ValueError, match="xy"):
+        sfanav.spatial_pairs(xy[:, :1], radius=1)
+
+
+def test_spatial_pairs_fast_equals_naive_and_validate():
+    xy, heading = walk(36, seed=8)
+    noise = np.random.default_rng(9).standard_normal((36, 8, 48)) * 0.05
+    imgs = np.stack([render(p, h) for p, h in zip(xy, heading)]) + noise
+    rot = sfanav.Rotation(step=6)
+    pairs = sfanav.spatial_pairs(xy, radius=0.15, k=3)
+    assert len(pairs[0]) > 20
+    fit = lambda **kw: sfanav.Network(tiny_config(top_out=3)).fit(imgs, rot, progress=False, **kw)
+    fast = fit(pairs=pairs)
+    naive = fit(pairs=pairs, fast=False)
+    uncached = fit(pairs=pairs, cache=False)
+    np.testing.assert_allclose(fast.delta_values_, naive.delta_values_, rtol=1e-9)
+    np.testing.assert_allclose(uncached.delta_values_, naive.delta_values_, rtol=1e-9)
+    assert fast.n_pairs_ == len(pairs[0])
+    assert not np.allclose(fast.delta_values_, fit().delta_values_, rtol=1e-3)
+    # zero-weight pairs change nothing
+    zero = fit(pairs=(pairs[0], pairs[1], np.zeros(len(pairs[0]))))
+    np.testing.assert_allclose(zero.delta_values_, fit().delta_values_, rtol=1e-9)
+    # pairs in some layers only: all layers named == default; the top only differs; bad layers refused
+    n_layers = len(sfanav.Network(tiny_config(top_out=3)).config_["layers"])
+    np.testing.assert_array_equal(fit(pairs=pairs, pair_layers=range(1, n_layers + 1)).delta_values_,
+                                  fast.delta_values_)
+    top = fit(pairs=pairs, pair_layers=[n_layers])
+    np.testing.assert_allclose(top.delta_values_, fit(pairs=pairs, pair_layers=[n_layers], fast=False).delta_values_,
+                               rtol=1e-9)
+    # (the tiny top can fit the same function on these few training views whatever layer 1 does, so compare
+    # layer 1: untouched by top-only pairs, changed by pairs in all layers)
+    first = lambda net: net._net.node_states(False)[0][0]["stages"][-1]["solution"]["delta"]
+    np.testing.assert_array_equal(first(top), first(fit()))
+    assert not np.allclose(first(fast), first(fit()), rtol=1e-3)
+    with pytest.raises(ValueError, match="pair_layers"):
+        fit(pairs=pairs, pair_layers=[n_layers + 1])
+    # shifted pairs (b rolled by a random shift): fast == naive, and they change the result
+    sp = sfanav.spatial_pairs(xy, radius=0.15, k=3, shifts=48, seed=1)
+    assert len(sp) == 4 and sp[3].min() >= 0 and sp[3].max() < 48 and np.any(sp[3] % 48)
+    shifted = fit(pairs=sp)
+    np.testing.assert_allclose(shifted.delta_values_, fit(pairs=sp, fast=False).delta_values_, rtol=1e-9)
+    assert not np.allclose(first(shifted), first(fast), rtol=1e-3)
+    # shifts in multiples of the step are read from the field cache: same result as rolling the images
+    sp6 = sfanav.spatial_pairs(xy, radius=0.15, k=3, shifts=48, shift_step=6, seed=2)
+    assert np.all(sp6[3] % 6 == 0) and np.any(sp6[3])
+    np.testing.assert_allclose(fit(pairs=sp6).delta_values_, fit(pairs=sp6, cache=False).delta_values_, rtol=1e-9)
+    # a full-period shift is no shift
+    full = fit(pairs=(pairs[0], pairs[1], pairs[2], np.full(len(pairs[0]), 48)), cache=False)
+    np.testing.assert_allclose(full.delta_values_, uncached.delta_values_, rtol=1e-12)
+    a, b, w = pairs
+    with pytest.raises(ValueError, match="shifts"):
+        fit(pairs=(a, b, w, np.zeros(len(a) - 1, int)))
+    with pytest.raises(ValueError, match="index the 36"):
+        fit(pairs=(a, b + 100, w))
+    with pytest.raises(ValueError, match="finite"):
+        fit(pairs=(a, b, -w))
+    with pytest.raises(ValueError, match="one length"):
+        fit(pairs=(a, b[:-1], w))
+    with pytest.raises(TypeError, match="integer"):
+        fit(pairs=(a.astype(float), b, w))
+    with pytest.raises(TypeError, match="array"):
+        sfanav.Network(tiny_config(top_out=3)).fit(list(imgs), rot, progress=False, pairs=pairs)
+
+
 def three_layer_config():
     return {
         "input": {"width": 48, "height": 8, "channels": 1},

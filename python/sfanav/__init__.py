@@ -9,7 +9,7 @@ from . import sim
 from ._core import __version__, get_num_threads, set_num_threads
 from .dataset import Dataset, DatasetWriter, write_dataset
 from .modelfile import load
-from .network import Network, Rotation
+from .network import Network, Rotation, spatial_pairs
 from .sfa import SFA, NotFittedError, Statistics, beta_values, expand, expanded_dim
 
 __all__ = [
@@ -20,6 +20,7 @@ __all__ = [
     "write_dataset",
     "sim",
     "Rotation",
+    "spatial_pairs",
     "Statistics",
     "NotFittedError",
     "beta_values",

@@ -1,6 +1,7 @@
 """Type stubs of the Rust extension ``sfanav._core`` (hand-written; checked
 against the module by tests/test_stubs.py)."""
 
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -106,9 +107,18 @@ class Network:
 
 class LayerTrainer:
     def __init__(
-        self, network: Network, layer: int, step: int, period: int, fast: bool = True, cache: bool = False
+        self,
+        network: Network,
+        layer: int,
+        step: int,
+        period: int,
+        fast: bool = True,
+        cache: bool = False,
+        transition_weight: float = 1.0,
     ) -> None: ...
     def n_passes(self, network: Network) -> int: ...
+    @property
+    def transition_weight(self) -> float: ...
     @property
     def fast(self) -> bool: ...
     def set_caching(self, on: bool) -> None: ...
@@ -120,5 +130,16 @@ class LayerTrainer:
     def cached_images(self) -> int: ...
     def feed(self, network: Network, images: ImageArray) -> None: ...
     def feed_cached(self, network: Network) -> None: ...
+    def feed_pairs(
+        self, network: Network, images: ImageArray, a: Sequence[int], b: Sequence[int], weights: Sequence[float]
+    ) -> None: ...
+    def feed_pairs_cached(
+        self,
+        network: Network,
+        a: Sequence[int],
+        b: Sequence[int],
+        weights: Sequence[float],
+        shifts: Sequence[int] | None = None,
+    ) -> None: ...
     def end_pass(self, network: Network) -> bool: ...
     def next_layer(self, network: Network) -> LayerTrainer: ...

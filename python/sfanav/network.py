@@ -70,6 +70,136 @@ class Rotation:
             raise ValueError(f"Rotation.window must be in (0, 1], got {self.window!r}")
 
 
+def _check_transition_weight(w: Any) -> float:
+    if isinstance(w, bool) or not isinstance(w, (int, float, np.integer, np.floating)):
+        raise TypeError(f"transition_weight must be a number, got {type(w).__name__}")
+    w = float(w)
+    if not (np.isfinite(w) and w >= 0.0):
+        raise ValueError(f"transition_weight must be a finite number >= 0, got {w!r}")
+    return w
+
+
+def _check_pairs(pairs: Any, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    if not (isinstance(pairs, (tuple, list)) and len(pairs) in (3, 4)):
+        raise TypeError("pairs must be a tuple (idx_a, idx_b, weights[, shifts])")
+    a, b, w = (np.asarray(x) for x in pairs[:3])
+    sh = np.asarray(pairs[3]) if len(pairs) == 4 else np.zeros(len(a), dtype=np.int64)
+    if sh.ndim != 1 or len(sh) != len(a) or (len(sh) and sh.dtype.kind not in "iu"):
+        raise ValueError("pairs: shifts must be 1-D integers (pixels), one per pair")
+    if not (a.ndim == b.ndim == w.ndim == 1 and len(a) == len(b) == len(w)):
+        raise ValueError(
+            f"pairs: idx_a, idx_b and weights must be 1-D of one length, got shapes {a.shape}, {b.shape}, {w.shape}"
+        )
+    for name, idx in (("idx_a", a), ("idx_b", b)):
+        if len(idx) and idx.dtype.kind not in "iu":
+            raise TypeError(f"pairs: {name} must hold integer image indices, got dtype {idx.dtype}")
+        if len(idx) and (idx.min() < 0 or idx.max() >= n):
+            raise ValueError(f"pairs: {name} must index the {n} training images (0..{n - 1})")
+    if w.dtype.kind not in "iuf" and len(w):
+        raise TypeError(f"pairs: weights must be numbers, got dtype {w.dtype}")
+    w = w.astype(np.float64)
+    if not np.all(np.isfinite(w) & (w >= 0)):
+        raise ValueError("pairs: weights must be finite and >= 0")
+    return a.astype(np.int64), b.astype(np.int64), w, sh.astype(np.int64)
+
+
+def _feed_pairs(trainer: Any, net: Any, images: np.ndarray,
+                pairs: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray], chunk: int) -> None:
+    """Feeds spatial pairs in chunks of at most ``2 * chunk`` distinct
+    images (sorted by the first index, so neighbours in the run share
+    chunks); the second image of a shifted pair is rolled left by its
+    shift."""
+    a, b, w, sh = pairs
+    order = np.lexsort((b, np.minimum(a, b)))
+    for i in range(0, len(order), chunk):
+        sel = order[i : i + chunk]
+        ids, inv = np.unique(np.concatenate([a[sel], b[sel]]), return_inverse=True)
+        batch = _as_batch(images[ids])
+        ia, ib = inv[: len(sel)], inv[len(sel) :].copy()
+        rolled = [np.roll(batch[j], -int(s), axis=1) for j, s in zip(ib, sh[sel]) if s % batch.shape[2]]
+        if rolled:
+            k = np.flatnonzero(sh[sel] % batch.shape[2])
+            ib[k] = len(batch) + np.arange(len(k))
+            batch = np.ascontiguousarray(np.concatenate([batch, np.stack(rolled)]))
+        trainer.feed_pairs(net, batch, ia.tolist(), ib.tolist(), w[sel].tolist())
+
+
+def spatial_pairs(xy: Any, radius: float, k: int | None = None, *, min_gap: int = 0, weights: str = "uniform",
+                  scale: float | None = None, shifts: int | None = None, shift_step: int = 1,
+                  seed: int = 0) -> tuple[np.ndarray, ...]:
+    """Spatial-neighbour pairs of training positions for
+    :meth:`Network.fit` ``(pairs=...)`` (graph-based SFA, Escalante &
+    Wiskott 2013).
+
+    Parameters
+    ----------
+    xy : array (N, 2)
+        Training positions (ground truth or odometry), in any unit.
+    radius : float
+        Pairs join positions closer than ``radius`` (same unit).
+    k : int or None
+        Each image keeps at most its ``k`` nearest neighbours within the
+        radius (None: all). A pair is kept if either end selects it.
+    min_gap : int
+        Leave out pairs of images fewer than ``min_gap`` frames apart in
+        the run (e.g. neighbours along the same lane, which the sequence
+        already links), so ``k`` goes to other passes and crossings.
+    weights : "uniform" or "gaussian"
+        1 per pair, or ``exp(-d^2 / (2 scale^2))`` (``scale`` default
+        ``radius / 2``).
+    shifts : int or None
+        The panorama width W: also return, per pair, a column shift drawn
+        uniformly from ``0..W-1`` (``seed``), for :meth:`Network.fit` to
+        compare the two images at a random relative orientation.
+    shift_step : int
+        Draw the shifts as multiples of this (e.g. the rotation step, so
+        that training can read them from the field cache).
+
+    Returns
+    -------
+    (idx_a, idx_b, weights[, shifts]) : int64 (P,), int64 (P,), float64 (P,)[, int64 (P,)]
+        Each unordered pair once, ``idx_a < idx_b``, sorted.
+    """
+    xy = np.asarray(xy, dtype=np.float64)
+    if xy.ndim != 2 or xy.shape[1] != 2:
+        raise ValueError(f"xy must have shape (N, 2), got {xy.shape}")
+    if not np.all(np.isfinite(xy)):
+        raise ValueError("xy contains NaN or infinity")
+    if not (np.isfinite(radius) and radius > 0):
+        raise ValueError(f"radius must be a positive number, got {radius!r}")
+    if k is not None and (isinstance(k, bool) or not isinstance(k, (int, np.integer)) or k < 1):
+        raise ValueError(f"k must be a positive integer or None, got {k!r}")
+    if isinstance(min_gap, bool) or not isinstance(min_gap, (int, np.integer)) or min_gap < 0:
+        raise ValueError(f"min_gap must be a non-negative integer, got {min_gap!r}")
+    if weights not in ("uniform", "gaussian"):
+        raise ValueError(f'weights must be "uniform" or "gaussian", got {weights!r}')
+    from scipy.spatial import cKDTree
+
+    tree = cKDTree(xy)
+    found: set[tuple[int, int]] = set()
+    for i, nb in enumerate(tree.query_ball_point(xy, r=radius)):
+        nb = [j for j in nb if abs(j - i) >= max(min_gap, 1)]
+        if k is not None and len(nb) > k:
+            d = np.hypot(*(xy[nb] - xy[i]).T)
+            nb = [nb[j] for j in np.argsort(d, kind="stable")[:k]]
+        found.update((min(i, j), max(i, j)) for j in nb)
+    if not found:
+        e = np.zeros(0, dtype=np.int64)
+        return (e, e.copy(), np.zeros(0)) + ((e.copy(),) if shifts else ())
+    ab = np.array(sorted(found), dtype=np.int64)
+    d = np.hypot(*(xy[ab[:, 0]] - xy[ab[:, 1]]).T)
+    if weights == "uniform":
+        w = np.ones(len(ab))
+    else:
+        s = radius / 2 if scale is None else float(scale)
+        w = np.exp(-(d**2) / (2 * s**2))
+    if shifts:
+        q = max(1, int(shift_step))
+        sh = q * np.random.default_rng(seed).integers(0, -(-int(shifts) // q), len(ab))
+        return ab[:, 0].copy(), ab[:, 1].copy(), w, sh.astype(np.int64)
+    return ab[:, 0].copy(), ab[:, 1].copy(), w
+
+
 # --------------------------------------------------------------------- config
 
 
@@ -391,6 +521,9 @@ class Network:
         cache_limit: float = DEFAULT_CACHE_LIMIT,
         batch_size: int = 16,
         progress: bool = True,
+        transition_weight: float = 1.0,
+        pairs: tuple[Any, ...] | None = None,
+        pair_layers: Sequence[int] | None = None,
     ) -> "Network":
         """Trains the network layer by layer, in the order the images come.
 
@@ -422,10 +555,64 @@ class Network:
             Images converted and processed per Rust call.
         progress : bool
             A progress bar per layer and pass (tqdm).
+        transition_weight : float, default 1.0
+            Weight of the derivative pairs *between* consecutive training
+            images (per RF series, one pair: the last rotated view of image
+            ``i`` and the first view of image ``i + 1``) relative to the
+            pairs between consecutive views *within* an image (weight 1).
+            1.0 is the thesis (one sequence of all views). A panorama gives
+            ``K = ceil(W / step)`` views, so per image there are ``K - 1``
+            rotation pairs and one spatial pair; weights of order ``K`` give
+            the change of position a say comparable to the rotation in the
+            slowness objective (graph-based SFA, Escalante & Wiskott 2013).
+            Finite and >= 0 (0: every image its own sequence).
+        pairs : (idx_a, idx_b, weights[, shifts]) or None
+            Spatial pairs of training images (graph-based SFA): each
+            ``(a, b, w)`` adds, at *every* simulated rotation and RF
+            position, a derivative pair between view ``k`` of image ``a``
+            and view ``k`` of image ``b`` with weight ``w`` (the rotation
+            pairs have weight 1 each), in every layer and pass. With
+            ``shifts`` (int pixels, per pair), image ``b`` is first rolled
+            left by its shift, so the pair also compares two different
+            orientations (random shifts penalise orientation-coding
+            features, which same-view pairs of images taken at the same or
+            opposite headings reward). Shifts that are multiples of
+            ``rotation.step`` (with the step dividing the width) are read
+            from the field cache; other shifts force ``cache=False``
+            (slower: ~4x the thesis training time instead of ~1.3x).
+            ``pair_layers`` (1-based layer numbers, default all) restricts
+            the pairs to some layers (e.g. the top). Indices
+            into ``images`` (which must then be an array or an ``.npy``
+            path); weights finite and >= 0. Build them from positions with
+            :func:`spatial_pairs` (supervised: the regression needs the
+            positions anyway). Each pair costs about one image's share of
+            the derivative statistics, so ``len(pairs) ~ 2 N`` roughly
+            triples the training time.
         """
         rotation = rotation or Rotation()
+        transition_weight = _check_transition_weight(transition_weight)
+        shifted = False
         if not isinstance(rotation, Rotation):
             raise TypeError("rotation must be a sfanav.Rotation")
+        if pairs is not None:
+            if isinstance(images, (str, os.PathLike)):
+                images = np.load(Path(images), mmap_mode="r", allow_pickle=False)
+            if not isinstance(images, np.ndarray):
+                raise TypeError("pairs need the images as an array (N, H, W[, C]) or an .npy path")
+            pairs = _check_pairs(pairs, len(images))
+            n_layers = len(self.config_["layers"])
+            if pair_layers is None:
+                pair_layers = range(1, n_layers + 1)
+            pair_layers = {int(x) for x in pair_layers}
+            if not pair_layers <= set(range(1, n_layers + 1)):
+                raise ValueError(f"pair_layers must name layers 1..{n_layers}, got {sorted(pair_layers)}")
+            # cached passes read shifted pairs at shifted offsets of the cached fields: exact
+            # when every shift is a multiple of the step and the step divides the period
+            period0 = _as_batch(images[:1]).shape[2]
+            pairs = (*pairs[:3], pairs[3] % period0)
+            shifted = bool(np.any(pairs[3]))
+            if shifted and (period0 % rotation.step or np.any(pairs[3] % rotation.step)):
+                cache = False  # cached fields are of the unrolled images
         batches = _batches_of(images, batch_size)
         h, v, c = self.input_shape
         first = next(iter(batches()), None)
@@ -446,7 +633,7 @@ class Network:
             raise ValueError(f"cache_limit must be a non-negative number of bytes, got {cache_limit!r}")
         total = len(images) if hasattr(images, "__len__") and not callable(images) else None
         net = _core.Network(self.config_)
-        trainer = _core.LayerTrainer(net, 0, rotation.step, period, fast, False)
+        trainer = _core.LayerTrainer(net, 0, rotation.step, period, fast, False, transition_weight)
         n_images = 0
         self.cache_plan_ = []
         for layer in range(net.n_layers):
@@ -467,6 +654,9 @@ class Network:
                 if trainer.has_cache:
                     bar = _progress(progress, trainer.cached_images, desc + " (cached)")
                     trainer.feed_cached(net)
+                    if pairs is not None and layer + 1 in pair_layers:
+                        trainer.feed_pairs_cached(net, *(x.tolist() for x in pairs[:3]),
+                                                  pairs[3].tolist() if shifted else None)
                     if bar is not None:
                         bar.update(trainer.cached_images)
                         bar.close()
@@ -484,12 +674,16 @@ class Network:
                     finally:
                         if bar is not None:
                             bar.close()
+                    if pairs is not None and layer + 1 in pair_layers:
+                        _feed_pairs(trainer, net, images, pairs, batch_size)
                     if layer == 0 and p == 0:
                         n_images = seen
                 trainer.end_pass(net)
         self._net = net
         self._period = period
         self._step = rotation.step
+        self.transition_weight_ = transition_weight
+        self.n_pairs_ = 0 if pairs is None else len(pairs[0])
         return self
 
     def _check_images(self, a: np.ndarray, period: int | None, training: bool = False) -> None:
@@ -543,6 +737,7 @@ class Network:
             "trained": self._net.n_trained,
             "step": getattr(self, "_step", None),
             "period": getattr(self, "_period", None),
+            "transition_weight": getattr(self, "transition_weight_", None),
             "nodes": self._net.node_states(include_statistics),
         }
         save_model(path, "Network", state)
@@ -559,6 +754,7 @@ class Network:
         if state.get("step") is not None:
             obj._step = int(state["step"])
             obj._period = int(state["period"])
+            obj.transition_weight_ = float(state.get("transition_weight") or 1.0)
         return obj
 
 

@@ -375,6 +375,23 @@ fn fast_graph(
     Ok((ImageGraph { rows, lead, n, width, from_stage, weights, edges, edge_weights, first, last, moments: None }, computed))
 }
 
+/// Checks spatial pairs `(a, b, w)` against `n` images.
+fn check_pairs(pairs: &[(usize, usize, f64)], n: usize) -> Result<()> {
+    for (e, &(a, b, w)) in pairs.iter().enumerate() {
+        if a >= n || b >= n {
+            return Err(SfaError::InvalidArgument(format!(
+                "pair {e} ({a}, {b}) names an image beyond the {n} given"
+            )));
+        }
+        if !(w.is_finite() && w >= 0.0) {
+            return Err(SfaError::InvalidArgument(format!(
+                "pair {e}: weights must be finite and non-negative, got {w}"
+            )));
+        }
+    }
+    Ok(())
+}
+
 /// View `k` of a `h x period x c` image through a window of `v` columns.
 fn view(image: &[f64], h: usize, period: usize, c: usize, v: usize, shift: usize) -> Vec<f64> {
     let mut out = vec![0.0; h * v * c];
@@ -451,6 +468,10 @@ pub struct LayerTrainer {
     lag_products: bool,
     /// Images whose statistics came from lag products.
     lag_images: usize,
+    /// Weight of the derivative pairs between consecutive images (last
+    /// view of one image -> first view of the next), relative to the
+    /// pairs between consecutive views within an image (weight 1).
+    transition_weight: f64,
 }
 
 impl LayerTrainer {
@@ -481,6 +502,7 @@ impl LayerTrainer {
             reference: None,
             lag_products: true,
             lag_images: 0,
+            transition_weight: 1.0,
         })
     }
 
@@ -497,6 +519,29 @@ impl LayerTrainer {
     /// outer product per patch. Results agree up to rounding.
     pub fn set_lag_products(&mut self, on: bool) {
         self.lag_products = on;
+    }
+
+    /// Sets the weight of the derivative pairs between consecutive images
+    /// (one pair per RF series: the last view of image `i` and the first
+    /// view of image `i + 1`), relative to the pairs between consecutive
+    /// views within an image, which keep weight 1. Default 1 (the thesis:
+    /// one sequence of all views). Larger values make the slowness
+    /// objective weigh the change from one training position to the next
+    /// more against the change under rotation. Must be finite and `>= 0`.
+    /// Inherited by [`next_layer`](Self::next_layer).
+    pub fn set_transition_weight(&mut self, w: f64) -> Result<()> {
+        if !(w.is_finite() && w >= 0.0) {
+            return Err(SfaError::InvalidArgument(format!(
+                "transition_weight must be a finite number >= 0, got {w}"
+            )));
+        }
+        self.transition_weight = w;
+        Ok(())
+    }
+
+    /// The weight of the pairs between consecutive images (default 1).
+    pub fn transition_weight(&self) -> f64 {
+        self.transition_weight
     }
 
     /// Images whose statistics this trainer formed from lag products.
@@ -529,6 +574,7 @@ impl LayerTrainer {
         }
         let mut next = LayerTrainer::new(net, self.layer + 1, self.rot, self.path)?;
         next.caching = self.caching;
+        next.transition_weight = self.transition_weight;
         let mixed = net.spec().mixed_precision;
         if let (true, Some(cache)) = (self.caching, self.cache) {
             let (layer, rot) = (self.layer, self.rot);
@@ -653,7 +699,7 @@ impl LayerTrainer {
                 w.extend_from_slice(&gr.weights);
                 let mut e: Vec<[usize; 2]> = (0..ns).map(|i| [i, ns + gr.first[i]]).collect();
                 e.extend(gr.edges.iter().map(|[a, b]| [a + ns, b + ns]));
-                let mut ew = vec![1.0; ns];
+                let mut ew = vec![self.transition_weight; ns];
                 ew.extend_from_slice(&gr.edge_weights);
                 (0, ns + gr.n, w, e, ew)
             }
@@ -685,15 +731,239 @@ impl LayerTrainer {
         let np = gr.first.len();
         let kv = gr.n / np;
         let first_image = self.images_seen == 0;
+        let tw = self.transition_weight;
         let nodes = net.nodes_mut(self.layer);
-        nodes.par_iter_mut().enumerate().try_for_each(|(p, node)| {
-            let mut x = vec![0.0; kv * d];
+        if tw == 1.0 {
+            return nodes.par_iter_mut().enumerate().try_for_each(|(p, node)| {
+                let mut x = vec![0.0; kv * d];
+                for k in 0..kv {
+                    let src = (gr.lead + k * np + p) * d;
+                    x[k * d..(k + 1) * d].copy_from_slice(&gr.rows[src..src + d]);
+                }
+                node.partial_fit(View::from_slice(&x, kv, d)?, first_image)
+            });
+        }
+        // Weighted transition: each node's series as a graph, with the
+        // previous image's last view as a weight-0 leading row.
+        let tail = self.tail.take();
+        let r = nodes.par_iter_mut().enumerate().try_for_each(|(p, node)| {
+            let lead = usize::from(tail.is_some());
+            let mut x = vec![0.0; (lead + kv) * d];
+            if let Some(t) = &tail {
+                x[..d].copy_from_slice(&t[p * d..(p + 1) * d]);
+            }
             for k in 0..kv {
                 let src = (gr.lead + k * np + p) * d;
-                x[k * d..(k + 1) * d].copy_from_slice(&gr.rows[src..src + d]);
+                x[(lead + k) * d..(lead + k + 1) * d].copy_from_slice(&gr.rows[src..src + d]);
             }
-            node.partial_fit(View::from_slice(&x, kv, d)?, first_image)
-        })
+            let mut w = vec![1.0; lead + kv];
+            let mut ew = vec![1.0; lead + kv - 1];
+            if lead == 1 {
+                w[0] = 0.0;
+                ew[0] = tw;
+            }
+            let edges: Vec<[usize; 2]> = (0..lead + kv - 1).map(|i| [i, i + 1]).collect();
+            node.partial_fit_graph(View::from_slice(&x, lead + kv, d)?, Some(&w), &edges, Some(&ew))
+        });
+        let mut next = vec![0.0; np * d];
+        for p in 0..np {
+            let src = (gr.lead + (kv - 1) * np + p) * d;
+            next[p * d..(p + 1) * d].copy_from_slice(&gr.rows[src..src + d]);
+        }
+        self.tail = Some(next);
+        r
+    }
+
+    /// Adds *spatial pairs* of training images to this pass (graph-based
+    /// SFA, Escalante & Wiskott 2013): every `(a, b, w)` in `pairs` makes,
+    /// at **every** simulated rotation `k` and RF position, a derivative
+    /// pair between the RF input of view `k` of image `a` and that of view
+    /// `k` of image `b`, with weight `w` (images index `images`, `n x
+    /// height x period x channels`). With weight sharing (fast path) this is
+    /// one pair per distinct periodic offset, weighted `w` x the offset's
+    /// multiplicity; the naive path forms every view. No samples are added
+    /// and the sequence (the pairs between consecutive images fed with
+    /// [`feed`](Self::feed)) is untouched; call in any pass, before
+    /// [`end_pass`](Self::end_pass), in every pass of every layer to get the
+    /// same graph throughout.
+    pub fn feed_pairs(
+        &mut self,
+        net: &mut Network,
+        images: &[f64],
+        n: usize,
+        pairs: &[(usize, usize, f64)],
+    ) -> Result<()> {
+        let (h, _, c) = net.input_shape();
+        let size = h * self.rot.period * c;
+        check_images(images, n, size, 0)?;
+        check_pairs(pairs, n)?;
+        let (layer, rot, path) = (self.layer, self.rot, self.path);
+        let graphs: Vec<ImageGraph> = {
+            let net_ref: &Network = net;
+            let r: Vec<Result<ImageGraph>> = images
+                .par_chunks(size)
+                .map(|img| match path {
+                    Path::Fast => fast_graph(net_ref, &rot, img, layer, None, None).map(|(g, _)| g),
+                    Path::Naive => naive_graph(net_ref, &rot, img, layer),
+                })
+                .collect();
+            r.into_iter().collect::<Result<_>>()?
+        };
+        self.add_pair_graphs(net, &graphs, pairs, None)
+    }
+
+    /// [`feed_pairs`](Self::feed_pairs) for a pass that reads the cached
+    /// fields: `a`, `b` index the cached images (the order they were fed).
+    pub fn feed_pairs_cached(&mut self, net: &mut Network, pairs: &[(usize, usize, f64)]) -> Result<()> {
+        self.feed_pairs_cached_shifted(net, pairs, None)
+    }
+
+    /// [`feed_pairs_cached`](Self::feed_pairs_cached) where image `b` of
+    /// pair `e` is seen rolled left by `shifts[e]` columns (the pair then
+    /// compares two different orientations), read from the cached field at
+    /// the shifted offsets: exact, and equal to feeding the rolled images,
+    /// when the step divides the period and every shift is a multiple of
+    /// the step.
+    pub fn feed_pairs_cached_shifted(
+        &mut self,
+        net: &mut Network,
+        pairs: &[(usize, usize, f64)],
+        shifts: Option<&[usize]>,
+    ) -> Result<()> {
+        if let Some(sh) = shifts {
+            if sh.len() != pairs.len() {
+                return Err(SfaError::ShapeMismatch { what: "number of pair shifts", expected: pairs.len(), got: sh.len() });
+            }
+            let (step, w) = (self.rot.step, self.rot.period);
+            if let Some(e) = sh.iter().position(|&x| x % w != 0 && (w % step != 0 || x % step != 0)) {
+                return Err(SfaError::InvalidArgument(format!(
+                    "pair {e}: shift {} is not a multiple of the step {step} (or the step does not divide the \
+                     period {w}); roll the image instead",
+                    sh[e]
+                )));
+            }
+        }
+        let cache = self
+            .cache
+            .take()
+            .ok_or_else(|| SfaError::InvalidArgument("this trainer has no cached fields".into()))?;
+        let result = (|| {
+            check_pairs(pairs, cache.len())?;
+            let (layer, rot) = (self.layer, self.rot);
+            // Graphs of the images the pairs touch, in chunks of distinct images.
+            let chunk = 64;
+            let mut at = 0;
+            while at < pairs.len() {
+                // Pairs whose images fit in one chunk of distinct images.
+                let mut ids: Vec<usize> = Vec::new();
+                let mut end = at;
+                while end < pairs.len() {
+                    let (a, b, _) = pairs[end];
+                    let extra = usize::from(!ids.contains(&a)) + usize::from(!ids.contains(&b) && a != b);
+                    if ids.len() + extra > chunk && end > at {
+                        break;
+                    }
+                    for i in [a, b] {
+                        if !ids.contains(&i) {
+                            ids.push(i);
+                        }
+                    }
+                    end += 1;
+                }
+                let graphs: Vec<ImageGraph> = {
+                    let net_ref: &Network = net;
+                    let r: Vec<Result<ImageGraph>> = ids
+                        .par_iter()
+                        .map(|&i| fast_graph(net_ref, &rot, &[], layer, Some(&cache[i]), None).map(|(g, _)| g))
+                        .collect();
+                    r.into_iter().collect::<Result<_>>()?
+                };
+                let local: Vec<(usize, usize, f64)> = pairs[at..end]
+                    .iter()
+                    .map(|&(a, b, w)| {
+                        let pos = |x: usize| ids.iter().position(|&y| y == x).expect("id");
+                        (pos(a), pos(b), w)
+                    })
+                    .collect();
+                self.add_pair_graphs(net, &graphs, &local, shifts.map(|sh| &sh[at..end]))?;
+                at = end;
+            }
+            Ok(())
+        })();
+        self.cache = Some(cache);
+        result
+    }
+
+    /// Adds the pairs between the rows of `graphs[a]` and `graphs[b]`.
+    fn add_pair_graphs(
+        &mut self,
+        net: &mut Network,
+        graphs: &[ImageGraph],
+        pairs: &[(usize, usize, f64)],
+        shifts: Option<&[usize]>,
+    ) -> Result<()> {
+        let shared = net.spec().weight_sharing;
+        // Fast-path row layout (for shifted pairs): row r * no + oi is
+        // offset offs[oi] of RF row r.
+        let (offs, idx) = {
+            let g = &net.geometry()[self.layer];
+            offset_set(&self.rot, cum_strides(net.geometry())[self.layer], g.n_w)
+        };
+        for (e, &(a, b, w)) in pairs.iter().enumerate() {
+            let shift = shifts.map_or(0, |sh| sh[e] % self.rot.period);
+            if w == 0.0 || a == b {
+                continue;
+            }
+            let (ga, gb) = (&graphs[a], &graphs[b]);
+            let d = ga.width;
+            let n = ga.n;
+            debug_assert_eq!((gb.n, gb.width, gb.from_stage), (n, d, ga.from_stage));
+            if shared {
+                let mut rows = Vec::with_capacity(2 * n * d);
+                rows.extend_from_slice(&ga.rows[ga.lead * d..]);
+                rows.extend_from_slice(&gb.rows[gb.lead * d..]);
+                let zeros = vec![0.0; 2 * n];
+                let edges: Vec<[usize; 2]> = if shift == 0 {
+                    (0..n).map(|k| [k, n + k]).collect()
+                } else {
+                    let no = offs.len();
+                    (0..n)
+                        .map(|k| {
+                            let (r, oi) = (k / no, k % no);
+                            let j = idx[(offs[oi] + shift) % self.rot.period];
+                            debug_assert!(j != usize::MAX);
+                            [k, n + r * no + j]
+                        })
+                        .collect()
+                };
+                let ew: Vec<f64> = ga.weights.iter().map(|m| w * m).collect();
+                let x = View::from_slice(&rows, 2 * n, d)?;
+                let node = &mut net.nodes_mut(self.layer)[0];
+                if ga.from_stage == 0 {
+                    node.partial_fit_graph(x, Some(&zeros), &edges, Some(&ew))?;
+                } else {
+                    node.partial_fit_graph_from(ga.from_stage, x, Some(&zeros), &edges, Some(&ew))?;
+                }
+            } else {
+                // Naive graphs: rows (view, position); one node per position.
+                let np = ga.first.len();
+                let kv = n / np;
+                net.nodes_mut(self.layer).par_iter_mut().enumerate().try_for_each(|(p, node)| {
+                    let mut x = vec![0.0; 2 * kv * d];
+                    for (half, g) in [ga, gb].into_iter().enumerate() {
+                        for k in 0..kv {
+                            let src = (g.lead + k * np + p) * d;
+                            let dst = (half * kv + k) * d;
+                            x[dst..dst + d].copy_from_slice(&g.rows[src..src + d]);
+                        }
+                    }
+                    let edges: Vec<[usize; 2]> = (0..kv).map(|k| [k, kv + k]).collect();
+                    let ew = vec![w; kv];
+                    node.partial_fit_graph(View::from_slice(&x, 2 * kv, d)?, Some(&vec![0.0; 2 * kv]), &edges, Some(&ew))
+                })?;
+            }
+        }
+        Ok(())
     }
 
     /// Ends a pass over the data: solves the node stage trained in it.
@@ -789,8 +1059,23 @@ pub fn transform_rotations(net: &Network, rot: Rotation, images: &[f64], n: usiz
 
 /// Convenience: trains every untrained layer on an in-memory batch.
 pub fn train(net: &mut Network, rot: Rotation, images: &[f64], n: usize, path: Path, cache: bool) -> Result<()> {
+    train_weighted(net, rot, images, n, path, cache, 1.0)
+}
+
+/// [`train`] with the weight of the pairs between consecutive images
+/// ([`LayerTrainer::set_transition_weight`]).
+pub fn train_weighted(
+    net: &mut Network,
+    rot: Rotation,
+    images: &[f64],
+    n: usize,
+    path: Path,
+    cache: bool,
+    transition_weight: f64,
+) -> Result<()> {
     let mut tr = LayerTrainer::new(net, net.n_trained(), rot, path)?;
     tr.set_caching(cache);
+    tr.set_transition_weight(transition_weight)?;
     loop {
         loop {
             if tr.has_cache() {

@@ -1,6 +1,6 @@
 mod common;
 use common::Rng;
-use sfa_core::rotation::{train, transform_rotations};
+use sfa_core::rotation::{train, train_weighted, transform_rotations};
 use sfa_core::LayerTrainer;
 use sfa_core::{LayerSpec, Network, NetworkSpec, Path, Rotation};
 
@@ -48,14 +48,18 @@ fn max_rel(a: &[f64], b: &[f64]) -> f64 {
 }
 
 fn compare(v: usize, stride: usize, step: usize, c: usize, cache: bool) {
+    compare_weighted(v, stride, step, c, cache, 1.0)
+}
+
+fn compare_weighted(v: usize, stride: usize, step: usize, c: usize, cache: bool, tw: f64) {
     let w = 24;
     let n = 40;
     let imgs = images(n, 6, w, c, 7 + step as u64);
     let rot = Rotation { step, period: w };
     let mut naive = Network::new(spec(v, c, stride, true)).unwrap();
     let mut fast = naive.clone();
-    train(&mut naive, rot, &imgs, n, Path::Naive, false).unwrap();
-    train(&mut fast, rot, &imgs, n, Path::Fast, cache).unwrap();
+    train_weighted(&mut naive, rot, &imgs, n, Path::Naive, false, tw).unwrap();
+    train_weighted(&mut fast, rot, &imgs, n, Path::Fast, cache, tw).unwrap();
     for l in 0..2 {
         let (a, b) = (naive.nodes(l)[0].state(true), fast.nodes(l)[0].state(true));
         for (sa, sb) in a.stages.iter().zip(&b.stages) {
@@ -100,6 +104,84 @@ fn fast_equals_naive_step_not_dividing_stride() {
 #[test]
 fn fast_equals_naive_narrow_window_rgb() {
     compare(16, 2, 5, 3, true);
+}
+
+/// Weighted pairs between consecutive images: fast == naive for weights
+/// above, below and at zero.
+#[test]
+fn fast_equals_naive_transition_weights() {
+    for tw in [0.0, 0.25, 10.0, 300.0] {
+        compare_weighted(24, 2, 2, 1, true, tw);
+        compare_weighted(16, 2, 5, 3, false, tw);
+    }
+}
+
+/// Pair weight of the first stage of the first layer after training, with
+/// the given transition weight and lag products on or off.
+fn first_pair_weight(spec: NetworkSpec, rot: Rotation, imgs: &[f64], n: usize, tw: f64, lag: bool) -> f64 {
+    let mut net = Network::new(spec).unwrap();
+    let mut tr = LayerTrainer::new(&net, 0, rot, Path::Fast).unwrap();
+    tr.set_lag_products(lag);
+    tr.set_transition_weight(tw).unwrap();
+    tr.feed(&mut net, imgs, n).unwrap();
+    net.nodes(0)[0].statistics().unwrap().pair_weight_sum()
+}
+
+/// The between-image pairs enter with exactly the transition weight: the
+/// first stage's pair weight is `W_in + tw * (n - 1) * n_series`, with and
+/// without lag products; and the naive path gives the same sums.
+#[test]
+fn transition_weight_scales_the_between_image_pairs() {
+    let (w, n, step) = (48, 12, 3);
+    let imgs = images(n, 6, w, 1, 21);
+    let rot = Rotation { step, period: w };
+    let s = wide_spec(48, 1, 2, false);
+    // 19 RF columns x 3 RF rows.
+    let n_series = Network::new(s.clone()).unwrap().geometry()[0].n_positions();
+    assert_eq!(n_series, 57);
+    for lag in [false, true] {
+        let w0 = first_pair_weight(s.clone(), rot, &imgs, n, 0.0, lag);
+        let w1 = first_pair_weight(s.clone(), rot, &imgs, n, 1.0, lag);
+        let w7 = first_pair_weight(s.clone(), rot, &imgs, n, 7.0, lag);
+        let between = ((n - 1) * n_series) as f64;
+        assert!((w1 - w0 - between).abs() < 1e-9, "lag={lag}: {w1} - {w0} != {between}");
+        assert!((w7 - w0 - 7.0 * between).abs() < 1e-9, "lag={lag}");
+        // Within-image pairs: (K - 1) per series and image.
+        let within = (n * (rot.n_views() - 1) * n_series) as f64;
+        assert!((w0 - within).abs() < 1e-9, "lag={lag}: {w0} != {within}");
+    }
+    let net = Network::new(s).unwrap();
+    for v in [-1.0, f64::NAN, f64::INFINITY] {
+        let mut t = LayerTrainer::new(&net, 0, rot, Path::Fast).unwrap();
+        let e = t.set_transition_weight(v).unwrap_err().to_string();
+        assert!(e.contains("transition_weight"), "{e}");
+    }
+}
+
+/// Individual nodes: the weighted graph path (any weight != 1) agrees with
+/// the sequence path at weight 1 (up to rounding), and a large weight
+/// changes the solution.
+#[test]
+fn individual_nodes_transition_weight() {
+    let (w, n) = (24, 30);
+    let imgs = images(n, 6, w, 1, 3);
+    let rot = Rotation { step: 2, period: w };
+    let base = Network::new(spec(24, 1, 4, false)).unwrap();
+    let (mut seq, mut graph, mut heavy) = (base.clone(), base.clone(), base);
+    train(&mut seq, rot, &imgs, n, Path::Fast, false).unwrap();
+    train_weighted(&mut graph, rot, &imgs, n, Path::Fast, false, 1.0 + 1e-15).unwrap();
+    train_weighted(&mut heavy, rot, &imgs, n, Path::Fast, false, 50.0).unwrap();
+    for l in 0..2 {
+        for (i, (a, b)) in seq.nodes(l).iter().zip(graph.nodes(l)).enumerate() {
+            let (sa, sb) = (a.state(false), b.state(false));
+            for (x, y) in sa.stages.iter().zip(&sb.stages) {
+                let (px, py) = (x.solution.as_ref().unwrap(), y.solution.as_ref().unwrap());
+                assert!(max_rel(&px.delta, &py.delta) < 1e-9, "layer {l} node {i}");
+            }
+        }
+    }
+    let d = |net: &Network| net.nodes(1)[0].state(false).stages[1].solution.clone().unwrap().delta;
+    assert!(max_rel(&d(&seq), &d(&heavy)) > 1e-3);
 }
 
 #[test]
@@ -251,4 +333,213 @@ fn lag_products_mixed_precision_close_to_plain() {
     let (a, b) = (&projections(&plain)[0].1, &projections(&lag)[0].1);
     let e = max_rel(a, b);
     assert!(e < 1e-4, "first-stage Delta values differ by {e}");
+}
+
+/// Trains every layer with the spatial pairs fed in every pass (from the
+/// cache when the pass reads it).
+fn train_pairs(net: &mut Network, rot: Rotation, imgs: &[f64], n: usize, path: Path, cache: bool, pairs: &[(usize, usize, f64)]) {
+    let mut tr = LayerTrainer::new(net, 0, rot, path).unwrap();
+    tr.set_caching(cache);
+    loop {
+        loop {
+            if tr.has_cache() {
+                tr.feed_cached(net).unwrap();
+                tr.feed_pairs_cached(net, pairs).unwrap();
+            } else {
+                tr.feed(net, imgs, n).unwrap();
+                tr.feed_pairs(net, imgs, n, pairs).unwrap();
+            }
+            if tr.end_pass(net).unwrap() {
+                break;
+            }
+        }
+        if net.is_trained() {
+            return;
+        }
+        tr = tr.next_layer(net).unwrap();
+    }
+}
+
+fn some_pairs(n: usize) -> Vec<(usize, usize, f64)> {
+    (0..n).flat_map(|i| [(i, (i * 7 + 3) % n, 0.5 + (i % 3) as f64), (i, (i + 11) % n, 2.0)]).collect()
+}
+
+/// Spatial pairs at every rotation: the fast path (one pair per periodic
+/// offset, weighted by multiplicity) equals the naive path (one pair per
+/// view and RF position), with and without the field cache, for steps that
+/// do and do not divide the stride, narrow windows and RGB.
+#[test]
+fn spatial_pairs_fast_equals_naive() {
+    for (v, stride, step, c, cache) in [(24, 2, 2, 1, true), (24, 2, 3, 1, false), (16, 2, 5, 3, true)] {
+        let (w, n) = (24, 30);
+        let imgs = images(n, 6, w, c, 31 + step as u64);
+        let rot = Rotation { step, period: w };
+        let pairs = some_pairs(n);
+        let base = Network::new(spec(v, c, stride, true)).unwrap();
+        let (mut naive, mut fast, mut plain) = (base.clone(), base.clone(), base);
+        train_pairs(&mut naive, rot, &imgs, n, Path::Naive, false, &pairs);
+        train_pairs(&mut fast, rot, &imgs, n, Path::Fast, cache, &pairs);
+        train(&mut plain, rot, &imgs, n, Path::Fast, cache).unwrap();
+        for (i, ((pa, da), (pb, db))) in projections(&naive).iter().zip(&projections(&fast)).enumerate() {
+            let e = max_rel(pa, pb);
+            assert!(e < 1e-9, "v={v} step={step} c={c} stage {i}: projection differs by {e}");
+            assert!(max_rel(da, db) < 1e-9);
+        }
+        // The pairs change the solution.
+        let (a, b) = (&projections(&plain)[3].1, &projections(&fast)[3].1);
+        assert!(max_rel(a, b) > 1e-3);
+    }
+}
+
+/// A three-layer network: pairs from cached fields (layers 2 and 3) equal
+/// pairs recomputed from the images.
+#[test]
+fn spatial_pairs_cached_equal_streamed() {
+    let (w, n) = (24, 30);
+    let imgs = images(n, 6, w, 1, 13);
+    let s = NetworkSpec {
+        height: 6,
+        width: 24,
+        channels: 1,
+        layers: vec![
+            LayerSpec { rf: (4, 3), stride: (2, 3), n_out: 4, reduce_to: Some(5), degree: 2 },
+            LayerSpec { rf: (3, 2), stride: (2, 1), n_out: 3, reduce_to: Some(6), degree: 2 },
+            LayerSpec { rf: (5, 1), stride: (1, 1), n_out: 2, reduce_to: Some(5), degree: 2 },
+        ],
+        weight_sharing: true,
+        tol: 1e-10,
+        mixed_precision: false,
+    };
+    let rot = Rotation { step: 3, period: w };
+    let pairs = some_pairs(n);
+    let mut streamed = Network::new(s).unwrap();
+    let mut cached = streamed.clone();
+    train_pairs(&mut streamed, rot, &imgs, n, Path::Fast, false, &pairs);
+    train_pairs(&mut cached, rot, &imgs, n, Path::Fast, true, &pairs);
+    for (i, ((pa, _), (pb, _))) in projections(&streamed).iter().zip(&projections(&cached)).enumerate() {
+        assert!(max_rel(pa, pb) < 1e-9, "stage {i}");
+    }
+}
+
+/// Each pair adds weight `w x K x n_positions` (every view, every RF
+/// position) and no samples; bad pairs are refused.
+#[test]
+fn spatial_pairs_weight_and_validation() {
+    let (w, n) = (24, 10);
+    let imgs = images(n, 6, w, 1, 17);
+    let rot = Rotation { step: 5, period: w };
+    let mut net = Network::new(spec(24, 1, 2, true)).unwrap();
+    let np = net.geometry()[0].n_positions();
+    let mut tr = LayerTrainer::new(&net, 0, rot, Path::Fast).unwrap();
+    tr.feed(&mut net, &imgs, n).unwrap();
+    let before = net.nodes(0)[0].statistics().unwrap().clone();
+    tr.feed_pairs(&mut net, &imgs, n, &[(0, 4, 2.5), (3, 9, 1.0), (5, 5, 3.0)]).unwrap();
+    let after = net.nodes(0)[0].statistics().unwrap();
+    let added = after.pair_weight_sum() - before.pair_weight_sum();
+    let expect = 3.5 * (rot.n_views() * np) as f64;
+    assert!((added - expect).abs() < 1e-9, "{added} != {expect}");
+    assert_eq!(after.weight_sum(), before.weight_sum());
+    let e = tr.feed_pairs(&mut net, &imgs, n, &[(0, 10, 1.0)]).unwrap_err().to_string();
+    assert!(e.contains("beyond"), "{e}");
+    let e = tr.feed_pairs(&mut net, &imgs, n, &[(0, 1, -1.0)]).unwrap_err().to_string();
+    assert!(e.contains("non-negative"), "{e}");
+    assert!(tr.feed_pairs_cached(&mut net, &[(0, 1, 1.0)]).is_err());
+}
+
+/// Individual nodes take the pairs too (one pair per view per node).
+#[test]
+fn spatial_pairs_individual_nodes() {
+    let (w, n) = (24, 20);
+    let imgs = images(n, 6, w, 1, 3);
+    let rot = Rotation { step: 2, period: w };
+    let mut net = Network::new(spec(24, 1, 4, false)).unwrap();
+    let mut plain = net.clone();
+    train_pairs(&mut net, rot, &imgs, n, Path::Fast, false, &some_pairs(n));
+    train(&mut plain, rot, &imgs, n, Path::Fast, false).unwrap();
+    let d = |x: &Network| x.nodes(1)[0].state(false).stages[1].solution.clone().unwrap().delta;
+    assert!(d(&net).iter().all(|v| v.is_finite()));
+    assert!(max_rel(&d(&net), &d(&plain)) > 1e-3);
+}
+
+/// Shifted pairs read from the cached fields at shifted offsets equal the
+/// pairs with image `b` rolled and recomputed (step 3 divides the period).
+#[test]
+fn shifted_pairs_from_cache_equal_rolled_images() {
+    let (w, n, h) = (24, 24, 6);
+    let imgs = images(n, h, w, 1, 19);
+    let s = NetworkSpec {
+        height: 6,
+        width: 24,
+        channels: 1,
+        layers: vec![
+            LayerSpec { rf: (4, 3), stride: (2, 3), n_out: 4, reduce_to: Some(5), degree: 2 },
+            LayerSpec { rf: (3, 2), stride: (2, 1), n_out: 3, reduce_to: Some(6), degree: 2 },
+            LayerSpec { rf: (5, 1), stride: (1, 1), n_out: 2, reduce_to: Some(5), degree: 2 },
+        ],
+        weight_sharing: true,
+        tol: 1e-10,
+        mixed_precision: false,
+    };
+    let rot = Rotation { step: 3, period: w };
+    let pairs = some_pairs(n);
+    let shifts: Vec<usize> = (0..pairs.len()).map(|e| 3 * ((e * 5) % 8)).collect();
+    // Reference: the rolled second images appended, pairs to them.
+    let mut ext = imgs.clone();
+    let mut ref_pairs = Vec::new();
+    for (e, (&(a, b, wt), &sh)) in pairs.iter().zip(&shifts).enumerate() {
+        let img = &imgs[b * h * w..(b + 1) * h * w];
+        for y in 0..h {
+            for x in 0..w {
+                ext.push(img[y * w + (x + sh) % w]);
+            }
+        }
+        ref_pairs.push((a, n + e, wt));
+    }
+    let m = n + pairs.len();
+    let base = Network::new(s).unwrap();
+    let (mut reference, mut cached) = (base.clone(), base);
+    // Reference: no cache, pairs from the extended images in every pass.
+    let mut tr = LayerTrainer::new(&reference, 0, rot, Path::Fast).unwrap();
+    loop {
+        loop {
+            tr.feed(&mut reference, &imgs, n).unwrap();
+            tr.feed_pairs(&mut reference, &ext, m, &ref_pairs).unwrap();
+            if tr.end_pass(&mut reference).unwrap() {
+                break;
+            }
+        }
+        if reference.is_trained() {
+            break;
+        }
+        tr = tr.next_layer(&reference).unwrap();
+    }
+    // Cached: streamed passes as the reference, cached passes shift offsets.
+    let mut tr = LayerTrainer::new(&cached, 0, rot, Path::Fast).unwrap();
+    tr.set_caching(true);
+    let mut cached_passes = 0;
+    loop {
+        loop {
+            if tr.has_cache() {
+                tr.feed_cached(&mut cached).unwrap();
+                tr.feed_pairs_cached_shifted(&mut cached, &pairs, Some(&shifts)).unwrap();
+                cached_passes += 1;
+            } else {
+                tr.feed(&mut cached, &imgs, n).unwrap();
+                tr.feed_pairs(&mut cached, &ext, m, &ref_pairs).unwrap();
+            }
+            if tr.end_pass(&mut cached).unwrap() {
+                break;
+            }
+        }
+        if cached.is_trained() {
+            break;
+        }
+        tr = tr.next_layer(&cached).unwrap();
+    }
+    assert!(cached_passes >= 3);
+    for (i, ((pa, _), (pb, _))) in projections(&reference).iter().zip(&projections(&cached)).enumerate() {
+        assert!(max_rel(pa, pb) < 1e-9, "stage {i}: {}", max_rel(pa, pb));
+    }
+    let e = tr.feed_pairs_cached_shifted(&mut cached, &pairs[..1], Some(&[4])).unwrap_err().to_string();
+    assert!(e.contains("multiple of the step"), "{e}");
 }

@@ -731,6 +731,18 @@ impl PyNetwork {
     }
 }
 
+fn zip_pairs(a: Vec<usize>, b: Vec<usize>, w: Vec<f64>) -> PyResult<Vec<(usize, usize, f64)>> {
+    if a.len() != b.len() || a.len() != w.len() {
+        return Err(PyValueError::new_err(format!(
+            "pairs: a, b and weights must have the same length, got {}, {} and {}",
+            a.len(),
+            b.len(),
+            w.len()
+        )));
+    }
+    Ok(a.into_iter().zip(b).zip(w).map(|((a, b), w)| (a, b, w)).collect())
+}
+
 /// Trains one layer pass by pass (see sfa_core::rotation::LayerTrainer).
 #[pyclass(name = "LayerTrainer", module = "sfanav._core")]
 struct PyLayerTrainer {
@@ -748,12 +760,28 @@ impl PyLayerTrainer {
 #[pymethods]
 impl PyLayerTrainer {
     #[new]
-    #[pyo3(signature = (network, layer, step, period, fast=true, cache=false))]
-    fn new(network: &PyNetwork, layer: usize, step: usize, period: usize, fast: bool, cache: bool) -> PyResult<Self> {
+    #[pyo3(signature = (network, layer, step, period, fast=true, cache=false, transition_weight=1.0))]
+    fn new(
+        network: &PyNetwork,
+        layer: usize,
+        step: usize,
+        period: usize,
+        fast: bool,
+        cache: bool,
+        transition_weight: f64,
+    ) -> PyResult<Self> {
         let path = if fast { Path::Fast } else { Path::Naive };
         let mut inner = LayerTrainer::new(&network.inner, layer, Rotation { step, period }, path).map_err(to_py)?;
         inner.set_caching(cache);
+        inner.set_transition_weight(transition_weight).map_err(to_py)?;
         Ok(PyLayerTrainer { inner: Some(inner) })
+    }
+
+    /// Weight of the derivative pairs between consecutive images relative
+    /// to the pairs within an image (1: the thesis); inherited by next_layer().
+    #[getter]
+    fn transition_weight(&mut self) -> PyResult<f64> {
+        Ok(self.get()?.transition_weight())
     }
 
     fn n_passes(&mut self, network: &PyNetwork) -> PyResult<usize> {
@@ -804,6 +832,49 @@ impl PyLayerTrainer {
         let tr = self.get()?;
         let net = &mut network.inner;
         run(py, || tr.feed_cached(net))
+    }
+
+    /// Spatial pairs (a[e], b[e], weights[e]) between the given images, at
+    /// every simulated rotation (see sfa_core LayerTrainer::feed_pairs).
+    fn feed_pairs(
+        &mut self,
+        py: Python<'_>,
+        network: &mut PyNetwork,
+        images: &Bound<'_, PyAny>,
+        a: Vec<usize>,
+        b: Vec<usize>,
+        weights: Vec<f64>,
+    ) -> PyResult<()> {
+        let pairs = zip_pairs(a, b, weights)?;
+        let (data, [n, h, _w, c]) = images_f64(images)?;
+        let (eh, _, ec) = network.inner.input_shape();
+        if (h, c) != (eh, ec) {
+            return Err(PyValueError::new_err(format!(
+                "training images are {h} px high with {c} channel(s), the network takes {eh} with {ec}"
+            )));
+        }
+        let tr = self.get()?;
+        let net = &mut network.inner;
+        run(py, || tr.feed_pairs(net, &data, n, &pairs))
+    }
+
+    /// Spatial pairs between cached images (indices in feeding order);
+    /// with shifts, image b of each pair is seen rolled left by its shift
+    /// (multiples of the step, which must divide the period).
+    #[pyo3(signature = (network, a, b, weights, shifts=None))]
+    fn feed_pairs_cached(
+        &mut self,
+        py: Python<'_>,
+        network: &mut PyNetwork,
+        a: Vec<usize>,
+        b: Vec<usize>,
+        weights: Vec<f64>,
+        shifts: Option<Vec<usize>>,
+    ) -> PyResult<()> {
+        let pairs = zip_pairs(a, b, weights)?;
+        let tr = self.get()?;
+        let net = &mut network.inner;
+        run(py, || tr.feed_pairs_cached_shifted(net, &pairs, shifts.as_deref()))
     }
 
     fn end_pass(&mut self, py: Python<'_>, network: &mut PyNetwork) -> PyResult<bool> {

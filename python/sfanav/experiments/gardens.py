@@ -28,7 +28,10 @@ choice's cross-validation compared kernel ridge and kNN.
 
 A *training variant* ``loop closures`` (thesis 6.2.1 with image-based loop
 closures, :mod:`sfanav.loopclosure`) is trained on all rows beside the row
-variants.
+variants. Further training variants (``TRAIN_VARIANTS``, run with
+``scripts/gardens_subset.py``): node capacity, ``transition weight <w>``
+(``Network.fit(transition_weight=)``) and ``spatial pairs ...`` (supervised
+graph-based SFA pairs, ``Network.fit(pairs=, pair_layers=)``; docs/gardens.md).
 
 Every number is the mean over the seeds (``per_seed`` in the JSON holds
 each). Row names: ``"<metric> [<configuration>]"``, e.g. ``MAE x (%)
@@ -49,7 +52,7 @@ import numpy as np
 from .. import analysis, baselines, regression, sim
 from ..imagerows import ImageRows
 from ..metrics import localization_metrics
-from ..network import Network, Rotation
+from ..network import Network, Rotation, spatial_pairs
 from ..readout import (auto_candidates, default_candidates, describe_spec, make_readout, select_auto_readout,
                        select_readout)
 from ..workflow import Preprocessing, coordinate_range, load_run
@@ -78,6 +81,29 @@ TRAIN_VARIANTS: dict[str, dict[str, Any] | None] = {
     "capacity: widest layers": WIDEST,
     "capacity: wider layers + rows: band": {**WIDER, "rows": "rows: band"},
     "capacity: wider layers + loop closures": {**WIDER, **LOOP_CLOSURES},
+    # graph weights (Escalante & Wiskott 2013): the pairs between consecutive
+    # training images weigh w against the K - 1 = 69 rotation pairs per image
+    **{f"transition weight {w:g}": {"transition_weight": float(w)} for w in (10, 70, 300)},
+    # supervised GSFA: pairs of training images (ground-truth positions) at every simulated rotation, weight w
+    # per pair and view (a rotation pair weighs 1). "cross": within 1.2 m, at least 4 frames apart (other
+    # lanes, crossings), the 4 nearest per image; "local": within 0.6 m, any (mostly the same lane)
+    **{f"spatial pairs cross w={w:g}": {"pairs": [{"radius": 1.2, "k": 4, "min_gap": 4, "weight": float(w)}]}
+       for w in (0.1, 1, 10)},
+    **{f"spatial pairs cross+local w={w:g}": {"pairs": [{"radius": 1.2, "k": 4, "min_gap": 4, "weight": float(w)},
+                                                       {"radius": 0.6, "k": 4, "weight": float(w)}]}
+       for w in (0.1, 1, 10)},
+    # the same, each pair compared at a random relative orientation (image b rolled by a random shift)
+    **{f"spatial pairs cross+local w={w:g} shifted": {
+        "pairs": [{"radius": 1.2, "k": 4, "min_gap": 4, "weight": float(w), "shifts": True},
+                  {"radius": 0.6, "k": 4, "weight": float(w), "shifts": True}]} for w in (0.1, 1)},
+    # shifted pairs in the top layer only (Table 5.1: layer 4); the lower layers learn as in the thesis
+    "spatial pairs cross+local w=1 shifted top": {
+        "pairs": [{"radius": 1.2, "k": 4, "min_gap": 4, "weight": 1.0, "shifts": True},
+                  {"radius": 0.6, "k": 4, "weight": 1.0, "shifts": True}], "pair_layers": [4]},
+    # the same with shifts in multiples of the 5 px rotation step: read from the field cache (~1.3x training)
+    "spatial pairs cross+local w=1 shifted5 top": {
+        "pairs": [{"radius": 1.2, "k": 4, "min_gap": 4, "weight": 1.0, "shifts": True, "shift_step": 5},
+                  {"radius": 0.6, "k": 4, "weight": 1.0, "shifts": True, "shift_step": 5}], "pair_layers": [4]},
 }
 READOUTS: dict[str, tuple[str, ...] | None] = {
     "": None,  # the thesis's quadratic regression, 8 outputs, least squares
@@ -245,7 +271,24 @@ def run_scene(out: Path, preset: str, seed: int, *, quick: bool, progress: bool,
         t0 = time.perf_counter()
         extra: dict[str, Any] = {}
         seq = A_tr
-        lc_opts = {k: v for k, v in (topts or {}).items() if k not in ("network", "rows")}
+        lc_opts = {k: v for k, v in (topts or {}).items()
+                   if k not in ("network", "rows", "transition_weight", "pairs", "pair_layers")}
+        tw = float((topts or {}).get("transition_weight", 1.0))
+        pairs = None
+        if (topts or {}).get("pairs"):
+            if lc_opts:
+                raise ValueError("spatial pairs and loop closures do not combine (the pairs index the run)")
+            parts = []
+            for po in topts["pairs"]:  # type: ignore[index]
+                pa, pb, pw, *sh = spatial_pairs(odo_tr if po.get("odometry") else xy_tr, po["radius"], po.get("k"),
+                                                min_gap=po.get("min_gap", 0),
+                                                shifts=A_tr.shape[2] if po.get("shifts") else None,
+                                                shift_step=po.get("shift_step", 1), seed=seed)
+                parts.append((pa, pb, pw * float(po.get("weight", 1.0)), sh[0] if sh else np.zeros(len(pa), int)))
+            pa, pb, pw, psh = (np.concatenate(z) for z in zip(*parts))
+            pairs = (pa, pb, pw, psh)
+            extra = {"spatial pairs": len(pa)}
+            log(f"{tag} seed {seed} {tname}: {len(pa)} spatial pairs")
         if lc_opts:
             from ..loopclosure import find_loop_closures, interleave
 
@@ -256,7 +299,8 @@ def run_scene(out: Path, preset: str, seed: int, *, quick: bool, progress: bool,
                      "loop closures within 0.5 m (%)": float(100 * np.mean(true_d < 0.5)) if len(lc) else None}
             log(f"{tag} seed {seed} {tname}: {len(lc)} loop closures, "
                 f"{extra['loop closures within 0.5 m (%)'] or 0:.0f} % within 0.5 m (ground truth)")
-        net.fit(seq, Rotation(step=5, window=1.0), progress=False)
+        net.fit(seq, Rotation(step=5, window=1.0), progress=False, transition_weight=tw, pairs=pairs,
+                pair_layers=(topts or {}).get("pair_layers"))
         fit_s = time.perf_counter() - t0
         F_tr, F_te = net.transform(A_tr), net.transform(A_te)
         R = net.transform(A_tr, rotations=True)
