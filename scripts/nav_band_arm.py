@@ -12,7 +12,10 @@ same trials; other seeds: other trials, for choosing settings).
     PYTHONPATH=python python3 scripts/nav_band_arm.py --out DIR [--frames 1500]
         [--trials 25] [--trial-seed 0] [--n 8]
 
-Writes DIR/nav-band-arm-s<trial seed>.json and a trajectory plot; the
+With ``--full-network PATH`` the same arms run on the 7.1-open network
+(full panorama) instead.
+
+Writes DIR/nav-<band|full>-arm-s<trial seed>.json and a trajectory plot; the
 network is cached in DIR/cache.
 """
 
@@ -55,14 +58,23 @@ def main() -> None:
     ap.add_argument("--trial-seed", type=int, default=0)
     ap.add_argument("--n", type=int, default=8)
     ap.add_argument("--grid", action="store_true", help="also the position-code error on a 0.5 m grid")
+    ap.add_argument("--only-weighted", action="store_true",
+                    help="run only the robust descent with n weighted outputs (the n = 2 arms of the full "
+                         "network are 7.1-open's own rows)")
+    ap.add_argument("--full-network", type=Path, default=None, metavar="SFANAV",
+                    help="instead: the 7.1-open network (full panorama, e.g. OUT/cache/thesis-7.1-open-seed0.sfanav)")
     a = ap.parse_args()
     if not 1 <= a.trials <= 50:
         raise SystemExit("--trials must be in 1..50")
     base = EN.scene("open", 0)
-    sc = dataclasses.replace(base, name="thesis-7.1-open-band", camera=PanoramicCamera(600, 60, elevation_deg=BAND),
-                             _sim=None)
     t0 = time.time()
-    net = band_network(sc, a.frames, a.out / "cache" / f"band-open-seed0-{a.frames}.sfanav")
+    if a.full_network is not None:
+        sc, tag = base, "full"
+        net = load(a.full_network)
+    else:
+        sc, tag = dataclasses.replace(base, name="thesis-7.1-open-band",
+                                      camera=PanoramicCamera(600, 60, elevation_deg=BAND), _sim=None), "band"
+        net = band_network(sc, a.frames, a.out / "cache" / f"band-open-seed0-{a.frames}.sfanav")
     t_fit = time.time() - t0
     beta = np.asarray(net.beta_values_, float)
     w = nav.beta_weights(beta, relative=True)
@@ -73,6 +85,8 @@ def main() -> None:
     arms = [("thesis rule, n=2", nav.ThesisDescent(EN.ETA, EN.GAMMA), 2, None),
             ("robust descent, n=2", nav.RobustDescent(), 2, None),
             (f"robust descent, n={a.n} weighted", nav.RobustDescent(), a.n, w)]
+    if a.only_weighted:
+        arms = arms[2:]
     rows, results = [], {}
     for label, d, n, ww in arms:
         t = time.time()
@@ -81,25 +95,25 @@ def main() -> None:
         rows.append({"arm": label, "success": s.success_rate, "efficiency": s.efficiency,
                      "mean_stops": s.mean_iterations, "reasons": s.reasons, "seconds": time.time() - t})
         print(rows[-1], flush=True)
-    out = {"trial_seed": a.trial_seed, "trials": a.trials, "frames": a.frames, "band_deg": BAND,
+    out = {"trial_seed": a.trial_seed, "trials": a.trials, "frames": a.frames, "network": tag, "band_deg": BAND if tag == "band" else None,
            "beta": beta.tolist(), "fit_seconds": t_fit, "rows": rows}
     if a.grid:
         xs, ys, F = EN._grid_features(sc, net, 0.5, False)
         out["position_code_rms_m"] = {n: EN.position_code_error(xs, ys, F, n) for n in range(2, 9)}
         tf = F[np.argmin(abs(ys - T[0][1])), np.argmin(abs(xs - T[0][0]))]
-        nav.plot_cost_surface(xs, ys, F, tf, a.out / f"nav-band-arm-cost-surface.png", ns=(2, a.n), weights=w,
+        nav.plot_cost_surface(xs, ys, F, tf, a.out / f"nav-{tag}-arm-cost-surface.png", ns=(2, a.n), weights=w,
                               n_firing=4, target=T[0], world=sc.world,
                               title="7.1 open, horizon-band network: s1-s4, cost n = 2 and weighted")
         print(out["position_code_rms_m"], flush=True)
     label = f"robust descent, n={a.n} weighted"
     s = results[label]
     sel = EN._pick(s.results, 8)
-    nav.plot_trajectories([s.results[i] for i in sel], a.out / f"nav-band-arm-s{a.trial_seed}.png", world=sc.world,
+    nav.plot_trajectories([s.results[i] for i in sel], a.out / f"nav-{tag}-arm-s{a.trial_seed}.png", world=sc.world,
                           titles=[("reached" if s.results[i].success else s.results[i].reason)
                                   + (f" e={s.efficiencies[i]:.2f}" if s.results[i].success else "") for i in sel],
-                          title=f"7.1 open, horizon-band network: {label}")
+                          title=f"7.1 open, {tag} network: {label}")
     a.out.mkdir(parents=True, exist_ok=True)
-    (a.out / f"nav-band-arm-s{a.trial_seed}.json").write_text(json.dumps(out, indent=1, default=float))
+    (a.out / f"nav-{tag}-arm-s{a.trial_seed}.json").write_text(json.dumps(out, indent=1, default=float))
 
 
 if __name__ == "__main__":
