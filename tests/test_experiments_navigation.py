@@ -100,3 +100,17 @@ def test_722_rows(results):
     assert "halfplane: transition point error m (robust descent)" in rows
     _check_values(r)
     assert len(r.plots) == 8
+
+
+def test_image_trials_from_the_environment(monkeypatch):
+    from sfanav.experiments import navigation as EN
+
+    monkeypatch.delenv(EN.IMAGE_TRIALS_ENV, raising=False)
+    assert EN.image_trials(50) == 50
+    monkeypatch.setenv(EN.IMAGE_TRIALS_ENV, "12")
+    assert EN.image_trials(50) == 12
+    assert EN.image_trials(8) == 8  # never more than the experiment's own count
+    for bad in ("0", "-3", "many"):
+        monkeypatch.setenv(EN.IMAGE_TRIALS_ENV, bad)
+        with pytest.raises(ValueError, match=EN.IMAGE_TRIALS_ENV):
+            EN.image_trials(50)

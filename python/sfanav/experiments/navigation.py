@@ -25,6 +25,7 @@ into the same directory).
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -44,6 +45,24 @@ THESIS = {
 ETA, GAMMA = 1.0, 0.5  # thesis 7.1.2
 SUCCESS_RADIUS, MAX_ITERATIONS = 0.5, 400
 QUICK_ITERATIONS = 40
+IMAGE_TRIALS_ENV = "SFANAV_NAV_IMAGE_TRIALS"
+
+
+def image_trials(default: int) -> int:
+    """Trials run with the image network (each up to 400 stops of rendering
+    and SFA on two cameras): ``default``, or the first N of the trials when
+    the environment variable ``SFANAV_NAV_IMAGE_TRIALS`` is set to N (for
+    runs on a slow machine; the coordinate-SFA arm always runs all)."""
+    v = os.environ.get(IMAGE_TRIALS_ENV)
+    if v is None or v == "":
+        return default
+    try:
+        k = int(v)
+    except ValueError:
+        raise ValueError(f"{IMAGE_TRIALS_ENV} must be a positive integer, got {v!r}") from None
+    if k < 1:
+        raise ValueError(f"{IMAGE_TRIALS_ENV} must be a positive integer, got {v!r}")
+    return min(k, default)
 
 
 @dataclass
@@ -266,9 +285,12 @@ def _run_71(kind: str, out: Path, *, quick: bool, seed: int, progress: bool) -> 
     plots: list[str] = []
     notes_runs = []
     summaries = {}
+    n_img = n_trials if quick else image_trials(n_trials)
     for d in _descents():
         navi = _navigator(sc, net, d)
-        s = nav.evaluate_trials(navi, starts, targets, optimal_lengths=optimal, progress=progress, desc=d.name)
+        s = nav.evaluate_trials(navi, starts[:n_img], targets[:n_img],
+                                optimal_lengths=None if optimal is None else optimal[:n_img], progress=progress,
+                                desc=d.name)
         summaries[d.name] = s
         rows += _summary_rows(d.name, s, THESIS[kind] if d.name == "thesis rule" else None)
         if geo is not None:
@@ -313,7 +335,7 @@ def _run_71(kind: str, out: Path, *, quick: bool, seed: int, progress: bool) -> 
     notes = (
         f"{'QUICK smoke version: ' if quick else ''}scene {sc.name} (seed {seed}), {len(sc.trajectory)} training frames, "
         f"network {'two-layer 120x16 gray' if quick else 'thesis-5.2 (600x60 RGB), precision mixed'}, rotation step {10 if quick else 5} px; "
-        f"{n_trials} trials, two cameras 0.7 m apart, n = 2 outputs, success radius {SUCCESS_RADIUS} m, "
+        f"{n_trials} trials ({n_img} of them with the image network), two cameras 0.7 m apart, n = 2 outputs, success radius {SUCCESS_RADIUS} m, "
         f"at most {QUICK_ITERATIONS if quick else MAX_ITERATIONS} stops; thesis rule eta {ETA}, gamma {GAMMA}; robust descent "
         "defaults (see docs/navigation.md). "
         + ("Start-target >= %.1f m apart, efficiency = direct distance / travelled. " % (3.5 if quick else 15.0)
@@ -357,7 +379,7 @@ def exp_721(out: Path, *, quick: bool = False, seed: int = 0, progress: bool = T
     cbeta = np.asarray(model.sfa.beta_values_, float)
     cw = nav.beta_weights(cbeta, relative=True)
     n_trials = 1 if quick else 50
-    n_img = 1 if quick else N_TRIALS_721_IMAGES
+    n_img = 1 if quick else image_trials(N_TRIALS_721_IMAGES)
     ns = list(range(2, 9))
     rng = _rng(seed, 721)
     starts, targets = nav.sample_trials(n_trials, sc.area, free=_free(sc), min_distance=3.5 if quick else 15.0,
