@@ -104,6 +104,11 @@ TRAIN_VARIANTS: dict[str, dict[str, Any] | None] = {
     "spatial pairs cross+local w=1 shifted5 top": {
         "pairs": [{"radius": 1.2, "k": 4, "min_gap": 4, "weight": 1.0, "shifts": True, "shift_step": 5},
                   {"radius": 0.6, "k": 4, "weight": 1.0, "shifts": True, "shift_step": 5}], "pair_layers": [4]},
+    # the sfanav default's network and rows with those pairs
+    "capacity: wider layers + rows: band + spatial pairs shifted5 top": {
+        **WIDER, "rows": "rows: band",
+        "pairs": [{"radius": 1.2, "k": 4, "min_gap": 4, "weight": 1.0, "shifts": True, "shift_step": 5},
+                  {"radius": 0.6, "k": 4, "weight": 1.0, "shifts": True, "shift_step": 5}], "pair_layers": [4]},
 }
 READOUTS: dict[str, tuple[str, ...] | None] = {
     "": None,  # the thesis's quadratic regression, 8 outputs, least squares
