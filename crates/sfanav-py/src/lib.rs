@@ -551,6 +551,19 @@ impl PySfaNode {
 
 /// Image batches as contiguous f64 (N, H, W, C) data: converts float32,
 /// float64 or uint8 arrays of 3 (gray) or 4 dimensions.
+/// Panoramas as f64 with their shape, checked against the network's input
+/// height and channel count (the width is the panorama period, free).
+fn network_images(obj: &Bound<'_, PyAny>, net: &Network, what: &str) -> PyResult<(Vec<f64>, [usize; 4])> {
+    let (data, [n, h, w, c]) = images_f64(obj)?;
+    let (eh, _, ec) = net.input_shape();
+    if (h, c) != (eh, ec) {
+        return Err(PyValueError::new_err(format!(
+            "{what} are {h} px high with {c} channel(s), the network takes {eh} with {ec}"
+        )));
+    }
+    Ok((data, [n, h, w, c]))
+}
+
 fn images_f64(obj: &Bound<'_, PyAny>) -> PyResult<(Vec<f64>, [usize; 4])> {
     fn shape4(sh: &[usize]) -> PyResult<[usize; 4]> {
         match sh.len() {
@@ -677,13 +690,7 @@ impl PyNetwork {
 
     /// transform_rotations(images, step) -> (N, K, n_outputs)
     fn transform_rotations<'py>(&self, py: Python<'py>, images: &Bound<'py, PyAny>, step: usize) -> PyResult<Bound<'py, PyAny>> {
-        let (data, [n, h, w, c]) = images_f64(images)?;
-        let (eh, _, ec) = self.inner.input_shape();
-        if (h, c) != (eh, ec) {
-            return Err(PyValueError::new_err(format!(
-                "images are {h} px high with {c} channel(s), the network takes {eh} with {ec}"
-            )));
-        }
+        let (data, [n, _, w, _]) = network_images(images, &self.inner, "images")?;
         let rot = Rotation { step, period: w };
         let net = &self.inner;
         let y = run(py, || sfa_core::rotation::transform_rotations(net, rot, &data, n))?;
@@ -816,13 +823,7 @@ impl PyLayerTrainer {
     }
 
     fn feed(&mut self, py: Python<'_>, network: &mut PyNetwork, images: &Bound<'_, PyAny>) -> PyResult<()> {
-        let (data, [n, h, _w, c]) = images_f64(images)?;
-        let (eh, _, ec) = network.inner.input_shape();
-        if (h, c) != (eh, ec) {
-            return Err(PyValueError::new_err(format!(
-                "training images are {h} px high with {c} channel(s), the network takes {eh} with {ec}"
-            )));
-        }
+        let (data, [n, ..]) = network_images(images, &network.inner, "training images")?;
         let tr = self.get()?;
         let net = &mut network.inner;
         run(py, || tr.feed(net, &data, n))
@@ -846,13 +847,7 @@ impl PyLayerTrainer {
         weights: Vec<f64>,
     ) -> PyResult<()> {
         let pairs = zip_pairs(a, b, weights)?;
-        let (data, [n, h, _w, c]) = images_f64(images)?;
-        let (eh, _, ec) = network.inner.input_shape();
-        if (h, c) != (eh, ec) {
-            return Err(PyValueError::new_err(format!(
-                "training images are {h} px high with {c} channel(s), the network takes {eh} with {ec}"
-            )));
-        }
+        let (data, [n, ..]) = network_images(images, &network.inner, "training images")?;
         let tr = self.get()?;
         let net = &mut network.inner;
         run(py, || tr.feed_pairs(net, &data, n, &pairs))
