@@ -32,19 +32,28 @@ import numpy as np
 from sfanav import navigation as nav
 from sfanav.experiments import navigation as EN
 from sfanav.modelfile import load
-from sfanav.network import Network, Rotation
+from sfanav.network import Network, Rotation, spatial_pairs
 from sfanav.sim.render import PanoramicCamera
 
 BAND = (-10.0, 20.0)
 
 
-def band_network(sc: EN.Scene, frames: int, cache: Path) -> Network:
+def band_network(sc: EN.Scene, frames: int, cache: Path, pairs: bool = False) -> Network:
     if cache.exists():
         return load(cache)
     r = sc.simulator.renderer
-    imgs = np.stack([r.render(sc.camera, p) for p in sc.trajectory.poses[:frames]])
+    poses = sc.trajectory.poses[:frames]
+    imgs = np.stack([r.render(sc.camera, p) for p in poses])
     net = Network.from_preset("thesis-5.2", precision="mixed")
-    net.fit(imgs, rotation=Rotation(5), progress=False)
+    kw = {}
+    if pairs:
+        # supervised GSFA pairs of the training positions in the top layer, each compared at a random
+        # relative orientation in 5 px steps (docs/gardens.md, "graph weights": the gardens' best variant)
+        xy = np.asarray(poses)[:, :2]
+        parts = [spatial_pairs(xy, 1.2, 4, min_gap=4, shifts=imgs.shape[2], shift_step=5, seed=0),
+                 spatial_pairs(xy, 0.6, 4, shifts=imgs.shape[2], shift_step=5, seed=1)]
+        kw = {"pairs": tuple(np.concatenate(z) for z in zip(*parts)), "pair_layers": [4]}
+    net.fit(imgs, rotation=Rotation(5), progress=False, **kw)
     cache.parent.mkdir(parents=True, exist_ok=True)
     net.save(cache)
     return net
@@ -61,6 +70,9 @@ def main() -> None:
     ap.add_argument("--only-weighted", action="store_true",
                     help="run only the robust descent with n weighted outputs (the n = 2 arms of the full "
                          "network are 7.1-open's own rows)")
+    ap.add_argument("--pairs", action="store_true",
+                    help="train the network with top-layer spatial pairs of the training positions")
+    ap.add_argument("--no-band", action="store_true", help="train on the full panorama (with --pairs)")
     ap.add_argument("--full-network", type=Path, default=None, metavar="SFANAV",
                     help="instead: the 7.1-open network (full panorama, e.g. OUT/cache/thesis-7.1-open-seed0.sfanav)")
     a = ap.parse_args()
@@ -71,10 +83,14 @@ def main() -> None:
     if a.full_network is not None:
         sc, tag = base, "full"
         net = load(a.full_network)
+    elif a.no_band:
+        sc, tag = base, "full-pairs" if a.pairs else "full-retrained"
+        net = band_network(sc, a.frames, a.out / "cache" / f"{tag}-open-seed0-{a.frames}.sfanav", a.pairs)
     else:
         sc, tag = dataclasses.replace(base, name="thesis-7.1-open-band",
                                       camera=PanoramicCamera(600, 60, elevation_deg=BAND), _sim=None), "band"
-        net = band_network(sc, a.frames, a.out / "cache" / f"band-open-seed0-{a.frames}.sfanav")
+        tag += "-pairs" if a.pairs else ""
+        net = band_network(sc, a.frames, a.out / "cache" / f"{tag}-open-seed0-{a.frames}.sfanav", a.pairs)
     t_fit = time.time() - t0
     beta = np.asarray(net.beta_values_, float)
     w = nav.beta_weights(beta, relative=True)
