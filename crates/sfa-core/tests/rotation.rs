@@ -184,11 +184,10 @@ fn individual_nodes_transition_weight() {
     assert!(max_rel(&d(&seq), &d(&heavy)) > 1e-3);
 }
 
-#[test]
-fn cached_fields_advance_through_three_layers() {
-    let (w, n) = (24, 40);
-    let imgs = images(n, 6, w, 1, 11);
-    let spec = NetworkSpec {
+/// A small three-layer gray network on 6 x 24 panoramas (reductions in
+/// every layer), for the tests that follow fields through layers 2 and 3.
+fn three_layer_spec() -> NetworkSpec {
+    NetworkSpec {
         height: 6,
         width: 24,
         channels: 1,
@@ -200,7 +199,14 @@ fn cached_fields_advance_through_three_layers() {
         weight_sharing: true,
         tol: 1e-10,
         mixed_precision: false,
-    };
+    }
+}
+
+#[test]
+fn cached_fields_advance_through_three_layers() {
+    let (w, n) = (24, 40);
+    let imgs = images(n, 6, w, 1, 11);
+    let spec = three_layer_spec();
     let rot = Rotation { step: 3, period: w };
     let mut naive = Network::new(spec).unwrap();
     let mut cached = naive.clone();
@@ -397,19 +403,7 @@ fn spatial_pairs_fast_equals_naive() {
 fn spatial_pairs_cached_equal_streamed() {
     let (w, n) = (24, 30);
     let imgs = images(n, 6, w, 1, 13);
-    let s = NetworkSpec {
-        height: 6,
-        width: 24,
-        channels: 1,
-        layers: vec![
-            LayerSpec { rf: (4, 3), stride: (2, 3), n_out: 4, reduce_to: Some(5), degree: 2 },
-            LayerSpec { rf: (3, 2), stride: (2, 1), n_out: 3, reduce_to: Some(6), degree: 2 },
-            LayerSpec { rf: (5, 1), stride: (1, 1), n_out: 2, reduce_to: Some(5), degree: 2 },
-        ],
-        weight_sharing: true,
-        tol: 1e-10,
-        mixed_precision: false,
-    };
+    let s = three_layer_spec();
     let rot = Rotation { step: 3, period: w };
     let pairs = some_pairs(n);
     let mut streamed = Network::new(s).unwrap();
@@ -467,19 +461,7 @@ fn spatial_pairs_individual_nodes() {
 fn shifted_pairs_from_cache_equal_rolled_images() {
     let (w, n, h) = (24, 24, 6);
     let imgs = images(n, h, w, 1, 19);
-    let s = NetworkSpec {
-        height: 6,
-        width: 24,
-        channels: 1,
-        layers: vec![
-            LayerSpec { rf: (4, 3), stride: (2, 3), n_out: 4, reduce_to: Some(5), degree: 2 },
-            LayerSpec { rf: (3, 2), stride: (2, 1), n_out: 3, reduce_to: Some(6), degree: 2 },
-            LayerSpec { rf: (5, 1), stride: (1, 1), n_out: 2, reduce_to: Some(5), degree: 2 },
-        ],
-        weight_sharing: true,
-        tol: 1e-10,
-        mixed_precision: false,
-    };
+    let s = three_layer_spec();
     let rot = Rotation { step: 3, period: w };
     let pairs = some_pairs(n);
     let shifts: Vec<usize> = (0..pairs.len()).map(|e| 3 * ((e * 5) % 8)).collect();
