@@ -14,8 +14,9 @@ import sfanav
 from sfanav import sim
 from sfanav.imagerows import ImageRows
 from sfanav.modelfile import read_model, save_model
-from sfanav.readout import (AUTO_BLOCK, AUTO_FOLDS, KernelRidgeReadout, KNNReadout, auto_candidates, make_readout,
-                            select_auto_readout, select_readout)
+from sfanav.readout import (AUTO_BLOCK, AUTO_FOLDS, GPReadout, KernelRidgeReadout, KNNReadout, auto_candidates,
+                            describe_spec, make_readout, readout_from_state, readout_state, select_auto_readout,
+                            select_readout)
 from sfanav.regression import QuadraticRegression
 from sfanav.sim import trajectories as T
 
@@ -44,21 +45,28 @@ def test_auto_readout_prefers_kernel_ridge_within_the_tolerance_and_is_the_argmi
     rng = np.random.default_rng(0)
     xy = _serpentine()
     F = _rings(xy, rng)
-    sel = select_auto_readout(F, xy)
+    sel = select_auto_readout(F, xy, gp=False)
     assert sel.spec["kind"] in ("kernel", "knn") and sel.spec["n_outputs"] in (8, 12)
     assert f"{AUTO_FOLDS}-fold blocked CV" in sel.rule
     (k_spec, k_err), (n_spec, n_err) = sel.best_of("kernel"), sel.best_of("knn")
     # the rule: kNN only when its CV error is more than 10 % below kernel ridge's
     assert sel.spec == (n_spec if n_err < 0.9 * k_err else k_spec)
     # tolerance 0 is the plain argmin over the same candidates and folds
-    plain = select_auto_readout(F, xy, tolerance=0.0)
+    plain = select_auto_readout(F, xy, tolerance=0.0, gp=False)
     ref = select_readout(F, xy, auto_candidates((8, 12)), n_folds=AUTO_FOLDS, block=AUTO_BLOCK)
     assert plain.spec == ref.spec
     np.testing.assert_allclose(plain.scores, ref.scores)
     # a tolerance near 1 keeps kernel ridge unless kNN is 100x better
-    assert select_auto_readout(F, xy, tolerance=0.99).spec["kind"] == "kernel"
+    assert select_auto_readout(F, xy, tolerance=0.99, gp=False).spec["kind"] == "kernel"
     # the chosen readout is refitted on the whole run
     np.testing.assert_allclose(sel.readout.predict(F), make_readout(sel.spec).fit(F, xy).predict(F))
+    # with the GP (the default): the GP unless the best other candidate's CV error is 10 % lower
+    full = select_auto_readout(F, xy)
+    gp_err = float(full.scores[-1])
+    assert full.candidates[-1]["kind"] == "gp" and len(full.candidates[-1]["length_scale"]) == 12
+    other = min(float(e) for c, e in zip(full.candidates, full.scores) if c["kind"] != "gp")
+    assert (full.spec["kind"] == "gp") == (not other < 0.9 * gp_err), (other, gp_err, full.rule)
+    assert select_auto_readout(F, xy, tolerance=0.99).spec == {"kind": "gp", "n_outputs": 12}
 
 
 def test_auto_readout_on_smooth_features_is_kernel_ridge_and_nearly_exact():
@@ -67,11 +75,14 @@ def test_auto_readout_on_smooth_features_is_kernel_ridge_and_nearly_exact():
     xy = _serpentine(16)
     f = lambda p: np.column_stack([p[:, 0], p[:, 1], p[:, 0] * p[:, 1], np.sin(p[:, 0]), np.cos(p[:, 1]),  # noqa: E731
                                    p[:, 0] ** 2, p[:, 1] ** 2, np.sin(p[:, 0] + p[:, 1])])
-    sel = select_auto_readout(f(xy), xy)
-    assert sel.spec["kind"] == "kernel" and sel.spec["n_outputs"] == 8  # only 8 features: 12 is not a candidate
     te = np.random.default_rng(1).uniform(-2.8, 2.8, (200, 2))
+    sel = select_auto_readout(f(xy), xy, gp=False)
+    assert sel.spec["kind"] == "kernel" and sel.spec["n_outputs"] == 8  # only 8 features: 12 is not a candidate
     err = np.hypot(*(sel.readout.predict(f(te)) - te).T).mean()
     assert err < 0.05, err  # grid spacing 0.4 m
+    sel = select_auto_readout(f(xy), xy)  # the default: the GP on all 8, at least as exact
+    assert sel.spec == {"kind": "gp", "n_outputs": 8} and "GP (ARD, marginal likelihood)" in sel.rule
+    assert np.hypot(*(sel.readout.predict(f(te)) - te).T).mean() < err
 
 
 def test_auto_readout_picks_knn_when_its_cv_error_is_much_lower():
@@ -86,9 +97,63 @@ def test_auto_readout_picks_knn_when_its_cv_error_is_much_lower():
     F = table[cell] + 0.001 * rng.standard_normal((len(xy), 8))
     F2 = np.repeat(F, 2, axis=0) + 0.001 * rng.standard_normal((2 * len(F), 8))  # each place seen twice
     xy2 = np.repeat(xy, 2, axis=0)
-    sel = select_auto_readout(F2, xy2, n_outputs=8)
+    sel = select_auto_readout(F2, xy2, n_outputs=8, gp=False)
     k_err, n_err = sel.best_of("kernel")[1], sel.best_of("knn")[1]
     assert n_err < 0.9 * k_err and sel.spec["kind"] == "knn", (k_err, n_err)
+    # with the GP: kNN must beat the GP's CV error by the same margin
+    sel = select_auto_readout(F2, xy2, n_outputs=8)
+    gp_err = float(sel.scores[-1])
+    assert (sel.spec["kind"] == "knn") == (n_err < 0.9 * gp_err), (n_err, gp_err)
+    assert ("beats the GP's CV" in sel.rule) == (sel.spec["kind"] == "knn")
+
+
+def test_gp_readout_learns_which_features_code_position():
+    """ARD: two smooth codes of position plus two pure-noise features; the
+    noise features get length scales far longer than the codes', the fit is
+    accurate on a separate walk, fixed hyperparameters reproduce it, and it
+    survives a model-file state round trip."""
+    rng = np.random.default_rng(5)
+    xy = _serpentine(14)
+    f = lambda p, r: np.column_stack([np.sin(0.5 * p[:, 0]), np.sin(0.4 * p[:, 1]), r.standard_normal(len(p)),  # noqa: E731
+                                      r.standard_normal(len(p))])
+    gp = GPReadout(n_outputs=4).fit(f(xy, rng), xy)
+    ls = gp.length_scale_
+    assert min(ls[2:]) > 10 * max(ls[:2]), ls
+    assert gp.log_marginal_likelihood_ is not None and gp.noise_ > 0
+    te = rng.uniform(-2.8, 2.8, (200, 2))
+    Fte = f(te, rng)
+    err = np.hypot(*(gp.predict(Fte) - te).T).mean()
+    assert err < 0.05, err
+    fixed = make_readout(gp.fixed_spec()).fit(f(xy, np.random.default_rng(5)), xy)
+    np.testing.assert_allclose(fixed.predict(Fte), gp.predict(Fte), atol=1e-9)
+    assert fixed.log_marginal_likelihood_ is None
+    back = readout_from_state(readout_state({"kind": "gp", "n_outputs": 4}, gp))
+    np.testing.assert_allclose(back.predict(Fte), gp.predict(Fte))
+    assert describe_spec(gp.fixed_spec()).startswith("gp(n_outputs=4, noise=")
+
+
+def test_gp_readout_bad_input():
+    xy = _serpentine(4)
+    F = np.c_[xy, xy[:, ::-1]]
+    with pytest.raises(ValueError, match="give both length_scale and noise"):
+        GPReadout(length_scale=[1.0, 1.0])
+    with pytest.raises(ValueError, match="length_scale must be positive"):
+        GPReadout(length_scale=[1.0, -1.0], noise=0.1)
+    with pytest.raises(ValueError, match="noise must be positive"):
+        GPReadout(length_scale=[1.0], noise=0.0)
+    with pytest.raises(ValueError, match="length_scale has 1 entries for 4 features"):
+        GPReadout(n_outputs=None, length_scale=[1.0], noise=0.1).fit(F, xy)
+    with pytest.raises(ValueError, match="at least 3 training samples"):
+        GPReadout(n_outputs=4).fit(F[:2], xy[:2])
+    with pytest.raises(ValueError, match="fewer than n_outputs=12"):
+        GPReadout().fit(F, xy)
+    with pytest.raises(sfanav.NotFittedError):
+        GPReadout().predict(F)
+    with pytest.raises(ValueError, match="invalid GPReadout state"):
+        g = GPReadout(n_outputs=4).fit(F, xy)
+        st = readout_state({"kind": "gp"}, g)
+        st["state"]["length_scale"] = st["state"]["length_scale"][:2]
+        readout_from_state(st)
 
 
 def test_block_folds_contiguous_and_interleaved():
@@ -127,16 +192,17 @@ def test_auto_readout_errors_and_short_runs():
 
 
 @pytest.mark.parametrize("readout", ["auto", "quadratic", {"kind": "knn", "n_outputs": 6, "k": 3},
-                                     {"kind": "kernel", "n_outputs": 8, "gamma": 0.5, "alpha": 1e-3}])
+                                     {"kind": "kernel", "n_outputs": 8, "gamma": 0.5, "alpha": 1e-3},
+                                     {"kind": "gp", "n_outputs": 8}])
 def test_localizer_readouts_save_and_load(readout, tmp_path):
     rng = np.random.default_rng(0)
     xy = _serpentine(14)
     F = _rings(xy, rng)
     loc = sfanav.Localizer(None, readout=readout).fit_features(F, xy)
     if isinstance(readout, dict):
-        cls = KNNReadout if readout["kind"] == "knn" else KernelRidgeReadout
+        cls = {"knn": KNNReadout, "kernel": KernelRidgeReadout, "gp": GPReadout}[readout["kind"]]
     else:
-        cls = QuadraticRegression if readout == "quadratic" else (KernelRidgeReadout, KNNReadout)
+        cls = QuadraticRegression if readout == "quadratic" else (GPReadout, KernelRidgeReadout, KNNReadout)
     assert isinstance(loc.regression_, cls)
     if readout == "quadratic":
         assert loc.readout_spec_ == {"kind": "quadratic", "n_outputs": 8, "ridge": 0.0, "degree": 2}
@@ -147,7 +213,7 @@ def test_localizer_readouts_save_and_load(readout, tmp_path):
     with zipfile.ZipFile(path) as z:
         manifest = json.loads(z.read("manifest.json"))
     # the thesis's readout stays readable by older sfanav (format 1, "regression" kept); the others need format 2
-    assert manifest["version"] == (1 if loc.readout_spec_["kind"] == "quadratic" else 2)
+    assert manifest["version"] == {"quadratic": 1, "gp": 3}.get(loc.readout_spec_["kind"], 2)
     assert ("regression" in manifest["state"]) == (loc.readout_spec_["kind"] == "quadratic")
 
 
@@ -286,11 +352,12 @@ def test_cli_default_train_localize_round_trip(tmp_path, capsys):
     model = tmp_path / "m.sfa"
     assert cli.main(["train", "--dataset", str(ds.root), "--out", str(model), "--no-progress"]) == 0
     out = capsys.readouterr().out
-    assert "readout kernel(" in out or "readout knn(" in out
+    assert "readout gp(" in out or "readout kernel(" in out or "readout knn(" in out
     loc = sfanav.load(model)
     assert loc.readout == "auto" and loc.rows.band == (-10.0, 20.0) and loc.info["configuration"] == "sfanav default"
     kind, state, manifest = read_model(model)
-    assert manifest["version"] == 2 and state["readout"]["spec"]["kind"] in ("kernel", "knn")
+    assert manifest["version"] == {"gp": 3}.get(state["readout"]["spec"]["kind"], 2)
+    assert state["readout"]["spec"]["kind"] in ("gp", "kernel", "knn")
     assert cli.main(["localize", str(model), str(ds.root), "--run", "test", "--out", str(tmp_path / "p.csv"),
                      "--no-progress"]) == 0
     assert len((tmp_path / "p.csv").read_text().splitlines()) == 31

@@ -239,7 +239,8 @@ def _add_train(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                     "order), then the readout from its slowest outputs to the ground-truth x, y (metres). "
                     "Without --preset or --config: the sfanav default (network sfanav-default: Table 5.1 with "
                     "wider layers and 12 outputs, 350x40 RGB; image rows of elevation -10..+20 deg; readout "
-                    "kernel ridge or kNN chosen by blocked cross-validation on the training run). With a thesis "
+                    "a Gaussian process with learned relevance per output, or kernel ridge / kNN if clearly better "
+                    "by blocked cross-validation on the training run). With a thesis "
                     "preset: the thesis's configuration (all rows, quadratic regression of 8 outputs). Writes "
                     "one model file (network, readout and the image preprocessing) for sfanav localize / "
                     "evaluate. Images of another size are resized, omnidirectional images unwarped (with "
@@ -273,7 +274,8 @@ def _add_train(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                    help="slowest outputs read out (default: 8 with the quadratic readout, the thesis's; "
                         "8 or 12 by cross-validation with auto)")
     p.add_argument("--readout", choices=("auto", "quadratic"), default=None,
-                   help="auto: kernel ridge or kNN chosen by blocked cross-validation on the training run "
+                   help="auto: a Gaussian process (ARD, marginal likelihood), or kernel ridge / kNN if >10%% better by blocked "
+                        "cross-validation on the training run "
                         "(default); quadratic: the thesis's regression (default with thesis presets)")
     p.add_argument("--rows", choices=("all", "band"), default=None,
                    help="image rows: band = elevation -10..+20 deg only (default for the sfanav default "

@@ -11,11 +11,12 @@ ablation measured is the **sfanav default**:
   outputs, mixed precision (:func:`default_network`);
 * image rows: the horizon band, elevation -10 .. +20 degrees, resampled to
   the full height (:func:`default_rows`; drops the near ground);
-* readout: ``"auto"``, Gaussian kernel ridge or kNN on the 8 or 12 slowest
-  outputs chosen by blocked cross-validation on the training run (10 folds
-  of interleaved blocks of 10 consecutive images),
-  kNN only if its CV error is more than 10 % lower
-  (:func:`sfanav.readout.select_auto_readout`);
+* readout: ``"auto"``, a Gaussian process on the 12 slowest outputs with
+  one length scale per output (ARD) by maximum marginal likelihood
+  (:class:`sfanav.readout.GPReadout`), unless Gaussian kernel ridge or kNN
+  on 8 or 12 outputs has a CV error more than 10 % lower by blocked
+  cross-validation on the training run (10 folds of interleaved blocks of
+  10 consecutive images; :func:`sfanav.readout.select_auto_readout`);
 * simulated rotation: 5 px, 100 % window (as the thesis).
 
 ``sfanav train`` without ``--preset``/``--config`` and :func:`train_default`

@@ -2,8 +2,10 @@
 features to metric positions, saved and loaded as one model file.
 
 The default readout is the sfanav default's (issue 7; docs/gardens.md):
-Gaussian kernel ridge or kNN on the 8 or 12 slowest outputs, chosen by
-blocked cross-validation on the training run (``readout="auto"``).
+a Gaussian process with one learned length scale per output (ARD, marginal
+likelihood) on the 12 slowest outputs, or Gaussian kernel ridge / kNN if
+blocked cross-validation on the training run finds one clearly better
+(``readout="auto"``).
 ``readout="quadratic"`` is the thesis's quadratic regression of the 8
 slowest outputs (thesis 3.5, 5.1-5.2)."""
 
@@ -51,9 +53,10 @@ class Localizer:
     degree : int, default 2
         Degree of the quadratic regression's expansion (2: the thesis's).
     readout : {"auto", "quadratic"} or dict, default "auto"
-        ``"auto"``: the sfanav default, Gaussian kernel ridge or kNN chosen
-        with its hyperparameters by blocked cross-validation on the training
-        data (:func:`sfanav.readout.select_auto_readout`); ``"quadratic"``:
+        ``"auto"``: the sfanav default, a GP readout (ARD kernel, marginal
+        likelihood) unless Gaussian kernel ridge or kNN is more than 10 %
+        better by blocked cross-validation on the training data
+        (:func:`sfanav.readout.select_auto_readout`); ``"quadratic"``:
         the thesis's quadratic regression (with ``ridge``, ``degree``); a
         dict: one readout spec (:func:`sfanav.readout.make_readout`, e.g.
         ``{"kind": "knn", "n_outputs": 8, "k": 3}``).
@@ -278,8 +281,10 @@ class Localizer:
             "train_metrics": dict(self.train_metrics_),
             "info": dict(self.info or {}),
         }
-        # format version 2: a kernel ridge or kNN readout (older readers cannot rebuild it)
-        return save_model(path, "Localizer", state, version=1 if self.readout_spec_["kind"] == "quadratic" else 2)
+        # format version 2: a GP, kernel ridge or kNN readout (older readers cannot rebuild it)
+        kind = self.readout_spec_["kind"]
+        # format version 3: the GP readout (version-2 readers cannot rebuild it)
+        return save_model(path, "Localizer", state, version={"quadratic": 1, "gp": 3}.get(kind, 2))
 
     @classmethod
     def _from_state(cls, state: dict[str, Any]) -> "Localizer":

@@ -44,6 +44,7 @@ from .regression import QuadraticRegression
 from .sfa import NotFittedError
 
 __all__ = [
+    "GPReadout",
     "KNNReadout",
     "KernelRidgeReadout",
     "ReadoutSelection",
@@ -224,7 +225,8 @@ def readout_from_state(state: dict[str, Any]) -> Any:
     """The fitted readout a :func:`readout_state` describes."""
     try:
         kind = state["spec"]["kind"]
-        cls = {"quadratic": QuadraticRegression, "knn": KNNReadout, "kernel": KernelRidgeReadout}[kind]
+        cls = {"quadratic": QuadraticRegression, "knn": KNNReadout, "kernel": KernelRidgeReadout,
+               "gp": GPReadout}[kind]
         return cls._from_state(state["state"])
     except (KeyError, TypeError) as exc:
         raise ValueError(f"invalid readout state: {exc}") from None
@@ -233,7 +235,8 @@ def readout_from_state(state: dict[str, Any]) -> Any:
 def make_readout(spec: dict[str, Any]) -> Any:
     """A readout from a spec: ``{"kind": "quadratic", "n_outputs", "ridge"}``,
     ``{"kind": "knn", "n_outputs", "k", "weights"}`` or ``{"kind": "kernel",
-    "n_outputs", "gamma", "alpha"}``."""
+    "n_outputs", "gamma", "alpha"}`` or ``{"kind": "gp", "n_outputs"}`` (plus
+    ``length_scale`` and ``noise`` to fix its hyperparameters)."""
     s = dict(spec)
     kind = s.pop("kind", None)
     if kind == "quadratic":
@@ -242,10 +245,13 @@ def make_readout(spec: dict[str, Any]) -> Any:
         return KNNReadout(**s)
     if kind == "kernel":
         return KernelRidgeReadout(**s)
-    raise ValueError(f"unknown readout kind {kind!r}; use 'quadratic', 'knn' or 'kernel'")
+    if kind == "gp":
+        return GPReadout(**s)
+    raise ValueError(f"unknown readout kind {kind!r}; use 'quadratic', 'knn', 'kernel' or 'gp'")
 
 
-_KEY_ORDER = ("n_outputs", "k", "weights", "gamma", "alpha", "ridge", "degree", "max_train")
+_KEY_ORDER = ("n_outputs", "k", "weights", "gamma", "alpha", "ridge", "degree", "noise", "length_scale",
+              "max_train")
 
 
 def describe_spec(spec: dict[str, Any]) -> str:
@@ -253,7 +259,14 @@ def describe_spec(spec: dict[str, Any]) -> str:
     s = dict(spec)
     kind = s.pop("kind")
     keys = sorted(s, key=lambda k: (_KEY_ORDER.index(k) if k in _KEY_ORDER else len(_KEY_ORDER), k))
-    return kind + "(" + ", ".join(f"{k}={s[k]:g}" if isinstance(s[k], float) else f"{k}={s[k]}" for k in keys) + ")"
+    def fmt(v: Any) -> str:
+        if isinstance(v, float):
+            return f"{v:g}"
+        if isinstance(v, (list, tuple, np.ndarray)):
+            return "[" + " ".join(f"{float(x):.2g}" for x in v) + "]"
+        return str(v)
+
+    return kind + "(" + ", ".join(f"{k}={fmt(s[k])}" for k in keys) + ")"
 
 
 def default_candidates(kinds: Sequence[str] = ("quadratic", "knn", "kernel"),
@@ -298,11 +311,146 @@ def block_folds(n: int, n_folds: int = 5, block: int | None = None) -> list[tupl
     return [(idx[fold != k], idx[fold == k]) for k in range(n_folds)]
 
 
-# The sfanav default readout ("auto", issue 7): Gaussian kernel ridge or kNN,
-# chosen by blocked CV on the training run (AUTO_FOLDS folds of interleaved
-# blocks of AUTO_BLOCK consecutive images); kNN only when its CV error is
-# lower than kernel ridge's by more than AUTO_TOLERANCE (relative). Measured
-# in docs/gardens.md ("Choosing the readout").
+class GPReadout(_Standardised):
+    """Gaussian-process regression (the posterior mean) with an ARD squared
+    exponential kernel ``exp(-sum_i (a_i - b_i)^2 / (2 l_i^2))`` on the
+    standardised features plus white noise (Rasmussen and Williams 2006,
+    ch. 2 and 5): one length scale ``l_i`` per slow feature, so features
+    that do not code position get long scales and drop out.
+
+    The hyperparameters (length scales, signal and noise variance; shared by
+    x and y, each standardised) maximise the log marginal likelihood of the
+    training run (type-II maximum likelihood, scikit-learn's optimiser) on at
+    most ``max_fit`` evenly spaced samples; no cross-validation is needed.
+    Given ``length_scale`` and ``noise`` (noise / signal variance) they are
+    fixed instead. The posterior mean uses at most ``max_train`` evenly
+    spaced samples (the solve is cubic in their number).
+
+    Fitted attributes: ``length_scale_`` (n_outputs,), ``noise_`` (noise /
+    signal variance), ``log_marginal_likelihood_`` (None if fixed)."""
+
+    def __init__(self, n_outputs: int | None = 12, length_scale: Sequence[float] | None = None,
+                 noise: float | None = None, max_fit: int = 1000, max_train: int = 3000) -> None:
+        if (length_scale is None) != (noise is None):
+            raise ValueError("give both length_scale and noise (fixed hyperparameters) or neither (learned)")
+        if length_scale is not None:
+            ls = np.asarray(length_scale, float)
+            if ls.ndim != 1 or not np.all(np.isfinite(ls)) or np.any(ls <= 0):
+                raise ValueError(f"length_scale must be positive finite numbers, got {length_scale!r}")
+            if not (np.isfinite(noise) and noise > 0):  # type: ignore[arg-type]
+                raise ValueError(f"noise must be positive, got {noise}")
+        if int(max_fit) < 2 or int(max_train) < 2:
+            raise ValueError(f"max_fit and max_train must be at least 2, got {max_fit}, {max_train}")
+        self.n_outputs = n_outputs
+        self.length_scale = None if length_scale is None else [float(v) for v in length_scale]
+        self.noise = None if noise is None else float(noise)
+        self.max_fit, self.max_train = int(max_fit), int(max_train)
+
+    def __repr__(self) -> str:
+        return f"GPReadout(n_outputs={self.n_outputs})"
+
+    @staticmethod
+    def _even(n: int, m: int) -> np.ndarray:
+        return np.unique(np.linspace(0, n - 1, min(n, m)).round().astype(int))
+
+    def _learn(self, Xs: np.ndarray, Y: np.ndarray) -> tuple[np.ndarray, float, float]:
+        import warnings
+
+        from sklearn.exceptions import ConvergenceWarning
+        from sklearn.gaussian_process import GaussianProcessRegressor
+        from sklearn.gaussian_process.kernels import RBF, ConstantKernel, WhiteKernel
+
+        d = Xs.shape[1]
+        kernel = (ConstantKernel(1.0, (1e-3, 1e3)) * RBF(np.ones(d), (1e-2, 1e3))
+                  + WhiteKernel(1e-2, (1e-8, 1e1)))
+        keep = self._even(len(Xs), self.max_fit)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", ConvergenceWarning)  # a length scale at its bound: feature unused
+            gp = GaussianProcessRegressor(kernel, normalize_y=True, random_state=0).fit(Xs[keep], Y[keep])
+        k = gp.kernel_
+        signal, ls, noise = float(k.k1.k1.constant_value), np.atleast_1d(k.k1.k2.length_scale).astype(float), \
+            float(k.k2.noise_level)
+        return ls, noise / signal, float(gp.log_marginal_likelihood_value_)
+
+    def _kernel(self, A: np.ndarray, B: np.ndarray) -> np.ndarray:
+        d2 = (A**2).sum(axis=1)[:, None] + (B**2).sum(axis=1)[None, :] - 2.0 * A @ B.T
+        return np.exp(-0.5 * np.maximum(d2, 0.0))
+
+    def fit(self, features: Any, xy: Any) -> "GPReadout":
+        X = _cols(features, self.n_outputs)
+        Y = as_matrix(xy, "xy")
+        check_same_length(X, Y, "features", "xy")
+        if len(X) < 3:
+            raise ValueError(f"a GP readout needs at least 3 training samples, got {len(X)}")
+        Xs = self._fit_scale(X)
+        if self.length_scale is None:
+            ls, noise, lml = self._learn(Xs, Y)
+        else:
+            ls, noise, lml = np.asarray(self.length_scale, float), float(self.noise), None  # type: ignore[arg-type]
+            if len(ls) != X.shape[1]:
+                raise ValueError(f"length_scale has {len(ls)} entries for {X.shape[1]} features")
+        self.length_scale_, self.noise_, self.log_marginal_likelihood_ = ls, noise, lml
+        keep = self._even(len(Xs), self.max_train)
+        A, Yk = Xs[keep] / ls, Y[keep]
+        self.y_mean_ = Yk.mean(axis=0)
+        K = self._kernel(A, A)
+        K[np.diag_indices_from(K)] += max(noise, 1e-10)
+        try:
+            self.dual_ = cho_solve(cho_factor(K, overwrite_a=True, check_finite=False), Yk - self.y_mean_,
+                                   check_finite=False)
+        except np.linalg.LinAlgError:
+            K = self._kernel(A, A)
+            K[np.diag_indices_from(K)] += max(noise, 1e-10)
+            self.dual_ = np.linalg.lstsq(K, Yk - self.y_mean_, rcond=None)[0]
+        self.X_ = A
+        return self
+
+    def predict(self, features: Any, chunk: int = 2048) -> np.ndarray:
+        if not hasattr(self, "dual_"):
+            raise NotFittedError("this GPReadout is not fitted; call fit first")
+        Q = self._scaled(features) / self.length_scale_
+        out = np.empty((len(Q), self.dual_.shape[1]))
+        for s in range(0, len(Q), chunk):
+            out[s : s + chunk] = self._kernel(Q[s : s + chunk], self.X_) @ self.dual_ + self.y_mean_
+        return out
+
+    def fixed_spec(self) -> dict[str, Any]:
+        """The spec of this readout with its learned hyperparameters fixed
+        (refitting it only solves for the posterior mean)."""
+        if not hasattr(self, "length_scale_"):
+            raise NotFittedError("this GPReadout is not fitted; call fit first")
+        return {"kind": "gp", "n_outputs": self.n_outputs, "length_scale": [float(v) for v in self.length_scale_],
+                "noise": float(self.noise_)}
+
+    def _get_state(self) -> dict[str, Any]:
+        if not hasattr(self, "dual_"):
+            raise NotFittedError("this GPReadout is not fitted; call fit first")
+        return {"params": {"n_outputs": self.n_outputs, "max_fit": self.max_fit, "max_train": self.max_train},
+                "mean": self.mean_, "scale": self.scale_, "X": self.X_, "dual": self.dual_, "y_mean": self.y_mean_,
+                "length_scale": self.length_scale_, "noise": float(self.noise_)}
+
+    @classmethod
+    def _from_state(cls, state: dict[str, Any]) -> "GPReadout":
+        r = cls(**state["params"])
+        r.mean_, r.scale_ = np.asarray(state["mean"], float), np.asarray(state["scale"], float)
+        r.X_, r.dual_ = np.asarray(state["X"], float), np.asarray(state["dual"], float)
+        r.y_mean_ = np.asarray(state["y_mean"], float)
+        r.length_scale_, r.noise_ = np.asarray(state["length_scale"], float), float(state["noise"])
+        r.log_marginal_likelihood_ = None
+        d = r.mean_.shape
+        if (r.X_.ndim != 2 or r.dual_.ndim != 2 or len(r.X_) != len(r.dual_) or d != (r.X_.shape[1],)
+                or r.length_scale_.shape != d or r.y_mean_.shape != (r.dual_.shape[1],)
+                or not np.all(r.length_scale_ > 0)):
+            raise ValueError("invalid GPReadout state: inconsistent array shapes")
+        return r
+
+
+# The sfanav default readout ("auto"): a Gaussian process with ARD length
+# scales (marginal likelihood) unless Gaussian kernel ridge or kNN, chosen by
+# blocked CV on the training run (AUTO_FOLDS folds of interleaved blocks of
+# AUTO_BLOCK consecutive images), has a CV error lower by more than
+# AUTO_TOLERANCE (relative); kNN over kernel ridge by the same margin.
+# Measured in docs/gardens.md ("Choosing the readout").
 AUTO_FOLDS = 10
 AUTO_BLOCK = 10  # consecutive training images per CV block
 AUTO_TOLERANCE = 0.1
@@ -386,23 +534,29 @@ def _scores(cands: list[dict[str, Any]], F: np.ndarray, Y: np.ndarray, n_folds: 
 def select_auto_readout(features: Any, xy: Any, *, n_outputs: int | Sequence[int] | None = None,
                         n_folds: int = AUTO_FOLDS, block: int | None = AUTO_BLOCK,
                         tolerance: float = AUTO_TOLERANCE,
-                        max_cv_samples: int | None = AUTO_MAX_CV_SAMPLES) -> ReadoutSelection:
-    """The sfanav default readout (``"auto"``): kernel ridge or kNN by
-    blocked cross-validation on the training run only.
+                        max_cv_samples: int | None = AUTO_MAX_CV_SAMPLES, gp: bool = True) -> ReadoutSelection:
+    """The sfanav default readout (``"auto"``), chosen on the training run only.
 
-    Every candidate of :func:`auto_candidates` (on 8 and 12 outputs, or
-    ``n_outputs``; only those the features have) is scored by blocked CV
-    (mean held-out Euclidean error, m): the run cut into blocks of
-    ``block`` consecutive images, block ``i`` held out in fold ``i mod
-    n_folds`` (``block=None``: ``n_folds`` contiguous stretches). The best
-    kernel ridge candidate is taken unless the best kNN candidate's error is
-    lower by more than ``tolerance`` (relative). On the gardens and 5.1.1
-    runs, 5 contiguous folds picked kNN where kernel ridge was better on the
-    test run, and contiguous folds (whole strips of the area held out)
-    chose too smooth kernels (docs/gardens.md). Runs too short for
-    ``n_folds`` folds of ``block`` images use fewer folds (at least 2) and
-    shorter blocks. Returns a :class:`ReadoutSelection` whose ``rule`` says
-    why."""
+    1. A Gaussian-process readout (:class:`GPReadout`) on the most slowest
+       outputs offered (12, or ``max(n_outputs)``), its ARD hyperparameters
+       by maximum marginal likelihood on the whole run.
+    2. Every candidate of :func:`auto_candidates` (Gaussian kernel ridge and
+       kNN on 8 and 12 outputs, or ``n_outputs``; only those the features
+       have) and the GP with its hyperparameters fixed are scored by blocked
+       CV (mean held-out Euclidean error, m): the run cut into blocks of
+       ``block`` consecutive images, block ``i`` held out in fold ``i mod
+       n_folds`` (``block=None``: ``n_folds`` contiguous stretches).
+    3. The GP is taken unless the best other candidate's CV error is lower by
+       more than ``tolerance`` (relative); among the others kNN only if it
+       beats kernel ridge by more than ``tolerance``.
+
+    ``gp=False`` leaves the GP out (the issue-7 default: kernel ridge unless
+    kNN is better by ``tolerance``). On the gardens and 5.1.1 runs, 5
+    contiguous folds picked kNN where kernel ridge was better on the test
+    run, and contiguous folds (whole strips of the area held out) chose too
+    smooth kernels (docs/gardens.md). Runs too short for ``n_folds`` folds of
+    ``block`` images use fewer folds (at least 2) and shorter blocks.
+    Returns a :class:`ReadoutSelection` whose ``rule`` says why."""
     F = as_matrix(features, "features")
     Y = as_matrix(xy, "xy")
     check_same_length(F, Y, "features", "xy")
@@ -421,15 +575,28 @@ def select_auto_readout(features: Any, xy: Any, *, n_outputs: int | Sequence[int
     n_cv = min(len(F), max_cv_samples or len(F))
     blk = None if block is None else max(1, min(int(block), n_cv // folds))
     cands = auto_candidates(ns)
+    gp_fit = None
+    if gp:
+        gp_fit = GPReadout(n_outputs=max(ns)).fit(F, Y)
+        cands.append(gp_fit.fixed_spec())
     scores = _scores(cands, F, Y, folds, max_cv_samples, blk)
     sel = ReadoutSelection({}, None, [dict(c) for c in cands], scores)
     k_spec, k_err = sel.best_of("kernel")
     n_spec, n_err = sel.best_of("knn")
     if np.isfinite(n_err) and (not np.isfinite(k_err) or n_err < (1.0 - tolerance) * k_err):
-        spec, why = n_spec, f"kNN: CV {n_err:.3f} m < (1 - {tolerance:g}) x kernel ridge's {k_err:.3f} m"
+        spec, err, why = n_spec, n_err, f"kNN: CV {n_err:.3f} m < (1 - {tolerance:g}) x kernel ridge's {k_err:.3f} m"
     else:
-        spec, why = k_spec, f"kernel ridge: CV {k_err:.3f} m (kNN {n_err:.3f} m not {tolerance:.0%} lower)"
+        spec, err, why = k_spec, k_err, f"kernel ridge: CV {k_err:.3f} m (kNN {n_err:.3f} m not {tolerance:.0%} lower)"
     how = f"{folds}-fold blocked CV" + (f" (blocks of {blk} images)" if blk is not None else " (contiguous)")
+    if gp_fit is not None:
+        g_err = float(scores[-1])
+        if not (np.isfinite(err) and err < (1.0 - tolerance) * g_err):
+            sel.spec = {"kind": "gp", "n_outputs": max(ns)}
+            sel.rule = (f"{how}; GP (ARD, marginal likelihood): CV {g_err:.3f} m (best other "
+                        f"{describe_spec(spec)} {err:.3f} m not {tolerance:.0%} lower)")
+            sel.readout = gp_fit
+            return sel
+        why = f"{why}; beats the GP's CV {g_err:.3f} m by more than {tolerance:.0%}"
     sel.spec, sel.rule = spec, f"{how}; {why}"
     sel.readout = make_readout(spec).fit(F, Y)
     return sel

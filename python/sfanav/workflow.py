@@ -418,7 +418,7 @@ def fit_localizer(
     ``xy`` (N, 2) metres.
 
     ``readout``, ``n_outputs``: as :class:`Localizer` (default ``"auto"``:
-    the sfanav default's kernel ridge / kNN chosen by blocked CV on this
+    the sfanav default's GP, or kernel ridge / kNN by blocked CV, on this
     run; ``readout="quadratic", n_outputs=8`` is the thesis's). ``rows``: an
     :class:`sfanav.imagerows.ImageRows` applied to the images before the
     network, in training and (stored in the localizer) at every query. The
