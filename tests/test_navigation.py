@@ -380,3 +380,114 @@ def test_robust_descent_follows_a_wall_out_of_a_local_minimum():
     assert r.success and r.follows >= 1
     assert world.free(r.path[:, 0], r.path[:, 1], 0.35 - 1e-9).all()
     assert r.direct / r.travelled > 0.4
+
+
+# --------------------------------------------------------------------- metric space (beyond the thesis)
+
+
+def _wall_world():
+    return World.generate(3, area=(12.0, 12.0), n_objects=4, obstacles=({"kind": "box", "x": 0.0, "y": 0.0,
+                                                                         "length": 6.0, "width": 0.3},))
+
+
+def _exploration(world, n=6000, seed=0):
+    """Random lines bouncing off the wall and the border (an exploration run)."""
+    from sfanav.sim import trajectories as T
+
+    return T.random_lines(world.area, n, 0.2, margin=0.35, world=world, rng=seed).poses[:, :2]
+
+
+def test_geodesic_field_goes_around_a_wall():
+    """Places on the two sides of a wall: the run's geodesic distance is the
+    way round the wall's end, not the straight line; the waypoint from one
+    side heads for an end of the wall; unreachable places still get a
+    finite cost; bad input is refused."""
+    world = _wall_world()
+    run = _exploration(world)
+    field = nav.GeodesicField(run)
+    a, b = np.array([0.0, -1.5]), np.array([0.0, 1.5])
+    straight = 3.0
+    around = 2 * np.hypot(3.0, 1.5)  # via an end of the 6 m wall
+    g = float(field(a, b))
+    assert g > 1.8 * straight and abs(g - around) < 0.3 * around, g
+    # symmetric, and zero at the target
+    assert abs(float(field(b, a)) - g) < 0.5 and float(field(b, b)) < 0.2
+    # the open side: nearly the straight distance
+    c, d = np.array([-4.5, -4.0]), np.array([-4.5, 4.0])
+    assert abs(float(field(c, d)) - 8.0) < 1.2
+    w = field.waypoint(a, b, lookahead=1.5)
+    assert abs(w[0]) > 0.8 and world.free(w[0], w[1], 0.3)  # sideways towards an end, in free space
+    assert field.visible(c, d) and not field.visible(a, b)
+    # a separate island of the run: finite, larger than everything reachable
+    island = np.vstack([run, [[20.0, 20.0], [20.1, 20.0]]])
+    f2 = nav.GeodesicField(island)
+    D = f2.distances_from(a)
+    assert np.isfinite(D).all() and D[-1] > D[:-2].max()
+    cost = field.cost(b, 2)
+    np.testing.assert_allclose(cost(np.array([a, b])), [g, float(field(b, b))])
+    with pytest.raises(ValueError, match="positions must be"):
+        nav.GeodesicField(np.zeros((1, 2)))
+    with pytest.raises(ValueError, match="NaN"):
+        nav.GeodesicField(np.array([[0.0, 0.0], [np.nan, 1.0]]))
+    with pytest.raises(ValueError, match="radius must be"):
+        nav.GeodesicField(run, radius=0.0)
+    with pytest.raises(ValueError, match="n_outputs must be 2"):
+        field.cost(b, 3)
+
+
+def test_metric_descent_aligns_odometry_to_the_map():
+    """The rigid fit recovers a known rotation and translation exactly."""
+    rng = np.random.default_rng(0)
+    P = rng.uniform(-3, 3, (12, 2))
+    a = 0.7
+    R = np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]])
+    Q = P @ R.T + [1.5, -2.0]
+    rot, t = nav.MetricDescent.align(P, Q)
+    np.testing.assert_allclose(rot, R, atol=1e-12)
+    np.testing.assert_allclose(t, [1.5, -2.0], atol=1e-12)
+    with pytest.raises(ValueError, match="detour"):
+        nav.MetricDescent(detour=0.5)
+    with pytest.raises(ValueError, match="window"):
+        nav.MetricDescent(window=1)
+
+
+def test_metric_descent_reaches_targets_in_the_open_and_behind_a_wall():
+    """Features = position estimates with noise (what MetricFeatures gives),
+    odometry with its default noise: the metric descent drives nearly
+    straight in the open, and with the run's geodesic field round the wall
+    to a target behind it, where the straight-line metric descent fails."""
+    world = _wall_world()
+    field = nav.GeodesicField(_exploration(world))
+    rng = np.random.default_rng(1)
+    feats = nav.CoordinateFeatures(lambda X: X + 0.1 * rng.standard_normal(X.shape))
+    robot = Robot.two_cameras(0.7, noise=OdometryNoise())
+
+    def run(descent, start, target):
+        sim = nav.PointSimulator(robot=robot, world=world)
+        return nav.Navigator(sim, feats, descent, max_iterations=150).run(start, target)
+
+    r = run(nav.MetricDescent(), (-4.5, -4.5), (-4.0, 4.5))
+    assert r.success and r.direct / r.travelled > 0.85, (r.reason, r.direct / r.travelled)
+    behind = ((0.5, -2.0), (-0.5, 2.0))
+    plain = run(nav.MetricDescent(), *behind)
+    geo = run(nav.MetricDescent(field=field), *behind)
+    assert geo.success and geo.direct / geo.travelled > 0.4, (geo.reason, geo.direct / geo.travelled)
+    assert geo.travelled < plain.travelled or not plain.success
+    assert world.free(geo.path[:, 0], geo.path[:, 1], 0.35 - 1e-9).all()
+
+
+def test_metric_features_localize_rendered_views(tiny_world):
+    """MetricFeatures: a fitted Localizer's position estimates of rendered
+    camera poses; refused unfitted."""
+    from sfanav.sim import trajectories as T
+
+    world, cam, sim, net = tiny_world
+    poses = T.random_lines(world.area, 60, 0.3, margin=0.35, world=world, rng=1).poses
+    images = np.stack([sim.renderer.render(cam, p) for p in poses])
+    loc = sfanav.Localizer(net, readout={"kind": "gp", "n_outputs": 4}).fit(images, poses[:, :2])
+    f = nav.MetricFeatures(loc, sim.renderer, cam)
+    est = f(poses[:3])
+    assert est.shape == (3, 2) and f.images == 3
+    np.testing.assert_allclose(est, loc.predict(images[:3]), atol=1e-9)
+    with pytest.raises(ValueError, match="fitted"):
+        nav.MetricFeatures(sfanav.Localizer(net), sim.renderer, cam)

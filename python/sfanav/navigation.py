@@ -51,8 +51,11 @@ __all__ = [
     "Descent",
     "ThesisDescent",
     "RobustDescent",
+    "MetricDescent",
     "ImageFeatures",
     "CoordinateFeatures",
+    "MetricFeatures",
+    "GeodesicField",
     "PointSimulator",
     "Navigator",
     "NavigationResult",
@@ -285,8 +288,9 @@ class StepInfo:
     gradient was estimated: ``"difference"`` or ``"plane"``), ``jacobian``
     (n, 2: each weighted output's gradient, from the same plane fits),
     ``residual`` (n: weighted features minus the target's, mean of the two
-    cameras) and ``history`` (odometry camera positions (2k, 2) and their
-    residuals (2k, n) at all stops so far)."""
+    cameras), ``history`` (odometry camera positions (2k, 2) and their
+    residuals (2k, n) at all stops so far) and ``target`` (the cost's
+    target features)."""
 
     iteration: int = 0
     blocked: bool = False
@@ -297,6 +301,7 @@ class StepInfo:
     jacobian: np.ndarray | None = None
     residual: np.ndarray | None = None
     history: tuple[np.ndarray, np.ndarray] | None = None
+    target: np.ndarray | None = None
 
 
 class Descent(Protocol):
@@ -600,6 +605,126 @@ class RobustDescent:
         return self._last.copy()
 
 
+class MetricDescent:
+    """Steps towards the target in a learned metric space (beyond the
+    thesis; docs/navigation.md).
+
+    For features that are position estimates (:class:`MetricFeatures`;
+    the navigator's cost on ``n_outputs=2`` without weights), each stop's
+    residual is a camera's estimated position relative to the target's,
+    and the navigator knows the same cameras' positions by odometry. A 2-D
+    rigid transform (least squares, Umeyama 1991 without scale) from the
+    odometry frame to the target-centred map, fitted over the last
+    ``window`` stops, places the robot and its heading in the map; the step
+    heads straight for the target, or with a :class:`GeodesicField`, when
+    the run's shortest path to it is longer than ``detour`` times the
+    straight distance plus ``slack`` m (something in the way; tested only
+    beyond ``near`` m of the target, where the estimates' errors are small
+    against the distances), for the farthest visible
+    point within ``lookahead`` m along that path
+    (:meth:`GeodesicField.waypoint`); at most ``max_step`` m long. Until the cameras have spread over
+    ``min_spread`` m (the first stops), or when the fit is poor: a
+    normalised step along the estimated negative gradient. After a bump the
+    wanted direction is turned by ``bump_turn`` degrees to one side, after
+    the next bump to the other, then by twice the angle, ..., until a move
+    is free (short steps of ``bump_step`` m meanwhile). Within ``near`` metres of the target (by the
+    cost) the position estimates' errors are as large as the distance
+    left, so the last metres are a :class:`RobustDescent` on the measured
+    costs.
+    """
+
+    name = "metric descent"
+
+    def __init__(self, *, field: "GeodesicField | None" = None, max_step: float = 1.0, lookahead: float = 3.0,
+                 window: int = 20, min_spread: float = 0.5, bump_turn: float = 45.0, bump_step: float = 0.4, near: float = 1.5,
+                 detour: float = 1.2, slack: float = 0.0,
+                 probe_first: bool = True) -> None:
+        for nm, v in (("max_step", max_step), ("lookahead", lookahead), ("min_spread", min_spread)):
+            if not (np.isfinite(v) and v > 0):
+                raise ValueError(f"{nm} must be positive, got {v}")
+        if int(window) < 2:
+            raise ValueError(f"window must be at least 2 stops, got {window}")
+        self.field = field
+        self.max_step, self.lookahead, self.window = float(max_step), float(lookahead), int(window)
+        self.min_spread, self.bump_turn = float(min_spread), float(np.radians(bump_turn))
+        if not bump_step > 0:
+            raise ValueError(f"bump_step must be positive, got {bump_step}")
+        self.bump_step = float(bump_step)
+        if not detour >= 1:
+            raise ValueError(f"detour must be >= 1, got {detour}")
+        self.detour = float(detour)
+        if not slack >= 0:
+            raise ValueError(f"slack must be >= 0, got {slack}")
+        self.slack = float(slack)
+        if not near >= 0:
+            raise ValueError(f"near must be >= 0, got {near}")
+        self.near = float(near)
+        self.probe_first = bool(probe_first)
+        self._local = RobustDescent(probe_first=False)
+        self.reset()
+
+    def reset(self) -> None:
+        self._bumps = 0
+        self._last: np.ndarray | None = None
+        self.escapes = 0
+        self.follows = 0
+        self._local.reset()
+
+    @staticmethod
+    def align(P: np.ndarray, Q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Rotation ``Rot`` (2, 2) and translation ``t`` minimising
+        ``sum |Rot p + t - q|^2`` over rows of ``P``, ``Q`` (k, 2)."""
+        mp, mq = P.mean(axis=0), Q.mean(axis=0)
+        U, _, Vt = np.linalg.svd((P - mp).T @ (Q - mq))
+        D = np.diag([1.0, float(np.sign(np.linalg.det(Vt.T @ U.T))) or 1.0])
+        rot = Vt.T @ D @ U.T
+        return rot, mq - rot @ mp
+
+    def step(self, gradient: np.ndarray, cost: float, position: np.ndarray, info: StepInfo) -> np.ndarray:
+        d = None
+        blocked_view = False  # the run's paths say something lies between robot and target
+        if info.history is not None:
+            P, R = info.history
+            k = min(len(P), 2 * self.window)
+            P, R = np.asarray(P[-k:], float), np.asarray(R[-k:, :2], float)
+            if R.shape[1] == 2 and np.hypot(*(P - P.mean(axis=0)).T).max() * 2 >= self.min_spread:
+                rot, t = self.align(P, R)
+                m = rot @ np.asarray(position, float) + t  # robot in the target-centred map
+                goal = np.zeros(2)
+                if self.field is not None and info.target is not None:
+                    tgt = np.asarray(info.target, float)[:2]
+                    geo = float(self.field(m + tgt, tgt))
+                    dist = float(np.hypot(*m))
+                    if dist >= self.near and geo > self.detour * dist + self.slack:  # something in the way
+                        blocked_view = True
+                        goal = self.field.waypoint(m + tgt, tgt, self.lookahead) - tgt
+                d = rot.T @ (goal - m)
+        if float(cost) < self.near and not blocked_view:
+            d = np.asarray(self._local.step(gradient, cost, position, info), float)
+            self.escapes, self._last = self._local.escapes, d
+            return d
+        if d is None:
+            u = _unit(-np.asarray(gradient, float))
+            if u is None:
+                u = np.array([np.cos(info.heading), np.sin(info.heading)])
+            d = u * min(self.max_step, max(0.15, 0.7 * float(cost)))
+        L = float(np.hypot(*d))
+        if L > self.max_step:
+            d = d * (self.max_step / L)
+        if info.blocked:
+            self._bumps += 1
+            self.follows += 1
+            k = self._bumps
+            angle = ((k + 1) // 2) * self.bump_turn * (1.0 if k % 2 else -1.0)  # +a, -a, +2a, -2a, ...
+            u = _unit(d)
+            if u is not None and k <= 2 * int(np.pi / self.bump_turn):
+                d = _rot(u * self.bump_step, angle)
+        else:
+            self._bumps = 0
+        self._last = np.asarray(d, float)
+        return d
+
+
 # --------------------------------------------------------------------- features
 
 
@@ -635,6 +760,173 @@ class CoordinateFeatures:
         P = np.atleast_2d(np.asarray(poses, float))
         self.images += len(P)
         return np.asarray(self.model(P[:, :2]), float)
+
+
+class MetricFeatures:
+    """Positions in a learned metric space as navigation features: each
+    camera pose is rendered and localized by a fitted
+    :class:`sfanav.Localizer` (image rows, network, readout), so
+    ``features(poses (k, 3)) -> (k, 2)`` estimated x, y in metres.
+
+    With ``n_outputs=2`` the thesis's cost becomes the Euclidean distance
+    between the estimated positions of the robot's cameras and of the
+    target's image (images -> slow features -> metric space ->
+    navigation); with :class:`GeodesicField` the exploration run's
+    geodesic distance. ``images`` counts the images processed."""
+
+    def __init__(self, localizer: Any, renderer: Any, camera: Any, *, lighting: Any = None) -> None:
+        if not getattr(localizer, "is_fitted_", False):
+            raise ValueError("MetricFeatures needs a fitted sfanav.Localizer")
+        self.localizer, self.renderer, self.camera, self.lighting = localizer, renderer, camera, lighting
+        self.images = 0
+
+    def __call__(self, poses: Any) -> np.ndarray:
+        P = np.atleast_2d(np.asarray(poses, float))
+        imgs = np.stack([self.renderer.render(self.camera, p, 0.0, self.lighting) for p in P])
+        self.images += len(P)
+        return np.asarray(self.localizer.predict(imgs), float)
+
+
+class GeodesicField:
+    """Shortest-path distances over the places an exploration run visited
+    (beyond the thesis; docs/navigation.md).
+
+    The thesis expects slow features to "flow" around obstacles because the
+    robot's temporal distance between the two sides of an obstacle is
+    large (7.1). This makes that distance explicit: the run's positions
+    (N, 2) in metres (ground truth in the simulator, or the metric map a
+    robot learned from odometry, :mod:`sfanav.metric`) are the nodes of a
+    graph whose edges join consecutive frames (``temporal``) and frames at
+    most ``radius`` metres apart, with their distance as length. A place's
+    cost to a target is the shortest-path distance between their nearest
+    frames plus the two offsets. Obstacles the robot kept clear of (by at
+    least its radius on each side, more than ``radius`` in all) cut no
+    edges through them, so paths go around. Unreachable places cost the
+    largest finite distance plus their Euclidean distance to the target.
+    Runs are thinned to one frame per ``thin`` metres cell first.
+
+    ``GeodesicField(run_xy).cost`` is a ``cost=`` for :class:`Navigator`
+    on :class:`MetricFeatures` (``n_outputs=2``)."""
+
+    def __init__(self, positions: Any, *, radius: float = 0.5, thin: float = 0.1, temporal: bool = True) -> None:
+        from scipy.sparse import coo_matrix
+        from scipy.spatial import cKDTree
+
+        P = np.asarray(positions, dtype=float)
+        if P.ndim != 2 or P.shape[1] != 2 or len(P) < 2:
+            raise ValueError(f"positions must be (N >= 2, 2) metres, got shape {P.shape}")
+        if not np.isfinite(P).all():
+            raise ValueError("positions contain NaN or inf")
+        for name, v in (("radius", radius), ("thin", thin)):
+            if not (np.isfinite(v) and v > 0):
+                raise ValueError(f"{name} must be a positive number of metres, got {v}")
+        self.radius, self.thin = float(radius), float(thin)
+        # thin: one node per occupied cell of `thin` metres (the first frame in it)
+        ij = np.floor((P - P.min(axis=0)) / self.thin).astype(np.int64)
+        _, first, node = np.unique(ij, axis=0, return_index=True, return_inverse=True)
+        node = node.ravel()
+        centres = P[first]
+        n = len(centres)
+        tree = cKDTree(centres)
+        pairs = tree.query_pairs(self.radius, output_type="ndarray")
+        r, c = pairs[:, 0], pairs[:, 1]
+        if temporal:
+            a, b = node[:-1], node[1:]
+            m = a != b
+            r, c = np.concatenate([r, a[m]]), np.concatenate([c, b[m]])
+        w = np.hypot(*(centres[r] - centres[c]).T) + 1e-9
+        self.graph = coo_matrix((np.concatenate([w, w]), (np.concatenate([r, c]), np.concatenate([c, r]))),
+                                shape=(n, n)).tocsr()
+        self.centres = centres
+        self.tree = tree
+        self._cache: dict[int, np.ndarray] = {}
+
+    @property
+    def n_nodes(self) -> int:
+        return len(self.centres)
+
+    def distances_from(self, target: Any) -> np.ndarray:
+        """Shortest-path distance (m) from the target to every node (frame)."""
+        from scipy.sparse.csgraph import dijkstra
+
+        t = _vec2(target, "target")
+        k = int(self.tree.query(t)[1])
+        if k not in self._cache:
+            if len(self._cache) > 64:
+                self._cache.clear()
+            self._cache[k] = dijkstra(self.graph, directed=False, indices=k, return_predecessors=True)
+        D = self._cache[k][0].copy()
+        finite = np.isfinite(D)
+        D[~finite] = (D[finite].max() if finite.any() else 0.0) + np.hypot(*(self.centres[~finite] - t).T)
+        return D + float(np.hypot(*(self.centres[k] - t)))
+
+    def visible(self, a: Any, b: Any, clearance: float | None = None) -> bool:
+        """Whether the straight segment from ``a`` to ``b`` stays within
+        ``clearance`` metres (default ``0.6 * radius``) of the run's
+        positions everywhere (sampled every 0.1 m): known free space."""
+        a, b = _vec2(a, "a"), _vec2(b, "b")
+        c = 0.6 * self.radius if clearance is None else float(clearance)
+        n = max(2, int(np.ceil(np.hypot(*(b - a)) / 0.1)) + 1)
+        pts = a + np.linspace(0.0, 1.0, n)[:, None] * (b - a)
+        return bool((self.tree.query(pts)[0] <= c).all())
+
+    def waypoint(self, xy: Any, target: Any, lookahead: float = 3.0) -> np.ndarray:
+        """Where to head from ``xy`` (2,) towards ``target``: the farthest
+        point of the shortest path within ``lookahead`` metres (path length)
+        that ``xy`` sees in a straight line through known free space
+        (:meth:`visible`; the path's first node if none); the target itself
+        when it is that near, visible, or unreachable."""
+        x, t = _vec2(xy, "xy"), _vec2(target, "target")
+        self.distances_from(t)  # fills the cache
+        pred = self._cache[int(self.tree.query(t)[1])][1]
+        i = int(self.tree.query(x)[1])
+        travelled, cur = 0.0, x
+        path: list[np.ndarray] = []
+        for _ in range(self.n_nodes):
+            j = int(pred[i])
+            if j < 0:  # the target's node (or unreachable)
+                path.append(t)
+                break
+            nxt = self.centres[j]
+            travelled += float(np.hypot(*(nxt - cur)))
+            if travelled > lookahead:
+                break
+            path.append(nxt)
+            cur, i = nxt, j
+        if not path:
+            return self.centres[int(pred[i])].copy() if pred[i] >= 0 else t
+        for q in reversed(path):
+            if self.visible(x, q):
+                return np.array(q, float)
+        return np.array(path[0], float)
+
+    def __call__(self, xy: Any, target: Any) -> np.ndarray:
+        """Geodesic distance (m) of places ``xy`` (..., 2) to ``target``."""
+        return _GeodesicCost(self, target)(xy)
+
+    def cost(self, target_features: Any, n_outputs: int = 2, weights: Any = None) -> "SlowFeatureCost":
+        """The cost of a run to a target (its estimated position, from
+        :class:`MetricFeatures`); the signature of :class:`Navigator`'s ``cost``."""
+        if int(n_outputs) != 2:
+            raise ValueError(f"a geodesic cost works on metric positions: n_outputs must be 2, got {n_outputs}")
+        if weights is not None:
+            raise ValueError("a geodesic cost takes no per-output weights")
+        return _GeodesicCost(self, np.asarray(target_features, float).ravel()[:2])
+
+
+class _GeodesicCost(SlowFeatureCost):
+    def __init__(self, field: GeodesicField, target: Any) -> None:
+        super().__init__(target, 2)
+        self.field = field
+        self._D = field.distances_from(self.target)
+
+    def __call__(self, features: Any) -> np.ndarray:
+        f = np.asarray(features, dtype=float)
+        if f.shape[-1] < 2:
+            raise ValueError(f"features have {f.shape[-1]} outputs, the geodesic cost needs x, y")
+        xy = f[..., :2]
+        d, k = self.field.tree.query(xy.reshape(-1, 2))
+        return (self._D[k] + d).reshape(xy.shape[:-1])
 
 
 class PointSimulator:
@@ -764,6 +1056,12 @@ class Navigator:
     stop_when_stuck : bool
         End a run when stuck (default False: run to ``max_iterations``,
         as the thesis did).
+    cost : callable, optional
+        ``cost(target_features, n_outputs, weights) -> SlowFeatureCost``
+        (or a subclass): how a run's cost is built from the target's
+        features; default :class:`SlowFeatureCost` (the thesis's distance
+        in slow-feature space). :meth:`GeodesicField.cost` gives the
+        geodesic distance of the exploration run in a metric space.
     """
 
     def __init__(
@@ -781,6 +1079,7 @@ class Navigator:
         stop_when_stuck: bool = False,
         drive_piece: float = 0.1,
         gradient: PlaneGradient | None = None,
+        cost: Callable[..., SlowFeatureCost] | None = None,
     ) -> None:
         cams = getattr(getattr(simulator, "robot", None), "cameras", {})
         if "left" not in cams or "right" not in cams:
@@ -800,6 +1099,7 @@ class Navigator:
         self.stop_when_stuck = bool(stop_when_stuck)
         self.drive_piece = float(drive_piece)
         self.gradient = gradient or PlaneGradient()
+        self.cost = cost if cost is not None else SlowFeatureCost
 
     def target_features(self, target: Any) -> np.ndarray:
         """SFA outputs of an image taken at the target (a camera at the target position)."""
@@ -850,7 +1150,7 @@ class Navigator:
         ``target_features`` is given."""
         s, t = _vec2(start, "start"), _vec2(target, "target")
         tf = self.target_features(t) if target_features is None else np.asarray(target_features, float)
-        cost = SlowFeatureCost(tf, self.n_outputs, self.weights)
+        cost = self.cost(tf, self.n_outputs, self.weights)
         sim = self.simulator
         sim.reset((s[0], s[1], float(heading)))
         self.descent.reset()
@@ -891,6 +1191,7 @@ class Navigator:
             info.method = self.gradient.last_method
             info.jacobian = self.gradient.jacobian
             info.residual = R.mean(axis=0)
+            info.target = cost.target
             hist_P.append(pos)
             hist_R.append(R)
             info.history = (np.concatenate(hist_P), np.concatenate(hist_R))
