@@ -618,9 +618,10 @@ class MetricDescent:
     ``window`` stops, places the robot and its heading in the map; the step
     heads straight for the target, or with a :class:`GeodesicField`, when
     the run's shortest path to it is longer than ``detour`` times the
-    straight distance plus ``slack`` m (something in the way; tested only
-    beyond ``near`` m of the target, where the estimates' errors are small
-    against the distances), for the farthest visible
+    straight distance plus ``slack`` m and the straight line is not
+    :meth:`GeodesicField.visible` with ``clearance`` (something in the way;
+    tested only beyond ``near`` m of the target, where the estimates'
+    errors are small against the distances), for the farthest visible
     point within ``lookahead`` m along that path
     (:meth:`GeodesicField.waypoint`); at most ``max_step`` m long. Until the cameras have spread over
     ``min_spread`` m (the first stops), or when the fit is poor: a
@@ -637,7 +638,7 @@ class MetricDescent:
 
     def __init__(self, *, field: "GeodesicField | None" = None, max_step: float = 1.0, lookahead: float = 3.0,
                  window: int = 20, min_spread: float = 0.5, bump_turn: float = 45.0, bump_step: float = 0.4, near: float = 1.5,
-                 detour: float = 1.2, slack: float = 0.0,
+                 detour: float = 1.2, slack: float = 0.0, clearance: float = 0.4,
                  probe_first: bool = True) -> None:
         for nm, v in (("max_step", max_step), ("lookahead", lookahead), ("min_spread", min_spread)):
             if not (np.isfinite(v) and v > 0):
@@ -656,6 +657,9 @@ class MetricDescent:
         if not slack >= 0:
             raise ValueError(f"slack must be >= 0, got {slack}")
         self.slack = float(slack)
+        if not clearance > 0:
+            raise ValueError(f"clearance must be positive, got {clearance}")
+        self.clearance = float(clearance)
         if not near >= 0:
             raise ValueError(f"near must be >= 0, got {near}")
         self.near = float(near)
@@ -695,7 +699,8 @@ class MetricDescent:
                     tgt = np.asarray(info.target, float)[:2]
                     geo = float(self.field(m + tgt, tgt))
                     dist = float(np.hypot(*m))
-                    if dist >= self.near and geo > self.detour * dist + self.slack:  # something in the way
+                    if (dist >= self.near and geo > self.detour * dist + self.slack
+                            and not self.field.visible(m + tgt, tgt, self.clearance)):  # something in the way
                         blocked_view = True
                         goal = self.field.waypoint(m + tgt, tgt, self.lookahead) - tgt
                 d = rot.T @ (goal - m)
