@@ -744,11 +744,15 @@ class ImageFeatures:
         self.network, self.renderer, self.camera, self.lighting = network, renderer, camera, lighting
         self.images = 0
 
-    def __call__(self, poses: Any) -> np.ndarray:
+    def render(self, poses: Any) -> np.ndarray:
+        """The camera's images (k, H, W[, C]) at ``poses`` (k, 3); counted in ``images``."""
         P = np.atleast_2d(np.asarray(poses, float))
         imgs = np.stack([self.renderer.render(self.camera, p, 0.0, self.lighting) for p in P])
         self.images += len(P)
-        return np.asarray(self.network.transform(imgs), float)
+        return imgs
+
+    def __call__(self, poses: Any) -> np.ndarray:
+        return np.asarray(self.network.transform(self.render(poses)), float)
 
 
 class CoordinateFeatures:
@@ -767,7 +771,7 @@ class CoordinateFeatures:
         return np.asarray(self.model(P[:, :2]), float)
 
 
-class MetricFeatures:
+class MetricFeatures(ImageFeatures):
     """Positions in a learned metric space as navigation features: each
     camera pose is rendered and localized by a fitted
     :class:`sfanav.Localizer` (image rows, network, readout), so
@@ -782,14 +786,11 @@ class MetricFeatures:
     def __init__(self, localizer: Any, renderer: Any, camera: Any, *, lighting: Any = None) -> None:
         if not getattr(localizer, "is_fitted_", False):
             raise ValueError("MetricFeatures needs a fitted sfanav.Localizer")
-        self.localizer, self.renderer, self.camera, self.lighting = localizer, renderer, camera, lighting
-        self.images = 0
+        super().__init__(localizer._network(), renderer, camera, lighting=lighting)
+        self.localizer = localizer
 
     def __call__(self, poses: Any) -> np.ndarray:
-        P = np.atleast_2d(np.asarray(poses, float))
-        imgs = np.stack([self.renderer.render(self.camera, p, 0.0, self.lighting) for p in P])
-        self.images += len(P)
-        return np.asarray(self.localizer.predict(imgs), float)
+        return np.asarray(self.localizer.predict(self.render(poses)), float)
 
 
 class GeodesicField:

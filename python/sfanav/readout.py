@@ -86,6 +86,45 @@ class _Standardised:
         return (_cols(F, self.n_outputs) - self.mean_) / self.scale_
 
 
+class _KernelMachine(_Standardised):
+    """A fitted kernel expansion ``k(q, X) @ dual + y_mean`` on standardised
+    features: the shared prediction and model-file state of
+    :class:`KernelRidgeReadout` and :class:`GPReadout`."""
+
+    X_: np.ndarray
+    dual_: np.ndarray
+    y_mean_: np.ndarray
+
+    def _kernel(self, A: np.ndarray, B: np.ndarray) -> np.ndarray:  # pragma: no cover - overridden
+        raise NotImplementedError
+
+    def _query(self, Q: np.ndarray) -> np.ndarray:
+        """Standardised queries in the coordinates of ``X_``."""
+        return Q
+
+    def predict(self, features: Any, chunk: int = 2048) -> np.ndarray:
+        if not hasattr(self, "dual_"):
+            raise NotFittedError(f"this {type(self).__name__} is not fitted; call fit first")
+        Q = self._query(self._scaled(features))
+        out = np.empty((len(Q), self.dual_.shape[1]))
+        for s in range(0, len(Q), chunk):
+            out[s : s + chunk] = self._kernel(Q[s : s + chunk], self.X_) @ self.dual_ + self.y_mean_
+        return out
+
+    def _arrays(self) -> dict[str, Any]:
+        if not hasattr(self, "dual_"):
+            raise NotFittedError(f"this {type(self).__name__} is not fitted; call fit first")
+        return {"mean": self.mean_, "scale": self.scale_, "X": self.X_, "dual": self.dual_, "y_mean": self.y_mean_}
+
+    def _load_arrays(self, state: dict[str, Any]) -> None:
+        self.mean_, self.scale_ = np.asarray(state["mean"], float), np.asarray(state["scale"], float)
+        self.X_, self.dual_ = np.asarray(state["X"], float), np.asarray(state["dual"], float)
+        self.y_mean_ = np.asarray(state["y_mean"], float)
+        if (self.X_.ndim != 2 or self.dual_.ndim != 2 or len(self.X_) != len(self.dual_)
+                or self.mean_.shape != (self.X_.shape[1],) or self.y_mean_.shape != (self.dual_.shape[1],)):
+            raise ValueError(f"invalid {type(self).__name__} state: inconsistent array shapes")
+
+
 class KNNReadout(_Standardised):
     """k-nearest-neighbour readout: the mean position of the ``k`` training
     samples nearest in the standardised feature space, weighted by inverse
@@ -146,7 +185,7 @@ class KNNReadout(_Standardised):
         return r
 
 
-class KernelRidgeReadout(_Standardised):
+class KernelRidgeReadout(_KernelMachine):
     """Kernel ridge regression with the Gaussian kernel ``exp(-gamma |a -
     b|^2 / n)`` on the standardised features (``gamma`` relative to the
     number of features ``n``), ridge ``alpha``; the intercept is the
@@ -189,29 +228,14 @@ class KernelRidgeReadout(_Standardised):
             self.dual_ = np.linalg.solve(K, Y - self.y_mean_)
         return self
 
-    def predict(self, features: Any, chunk: int = 2048) -> np.ndarray:
-        Q = self._scaled(features)
-        out = np.empty((len(Q), self.dual_.shape[1]))
-        for s in range(0, len(Q), chunk):
-            out[s : s + chunk] = self._kernel(Q[s : s + chunk], self.X_) @ self.dual_ + self.y_mean_
-        return out
-
     def _get_state(self) -> dict[str, Any]:
-        if not hasattr(self, "dual_"):
-            raise NotFittedError("this KernelRidgeReadout is not fitted; call fit first")
         return {"params": {"n_outputs": self.n_outputs, "gamma": self.gamma, "alpha": self.alpha,
-                           "max_train": self.max_train},
-                "mean": self.mean_, "scale": self.scale_, "X": self.X_, "dual": self.dual_, "y_mean": self.y_mean_}
+                           "max_train": self.max_train}, **self._arrays()}
 
     @classmethod
     def _from_state(cls, state: dict[str, Any]) -> "KernelRidgeReadout":
         r = cls(**state["params"])
-        r.mean_, r.scale_ = np.asarray(state["mean"], float), np.asarray(state["scale"], float)
-        r.X_, r.dual_ = np.asarray(state["X"], float), np.asarray(state["dual"], float)
-        r.y_mean_ = np.asarray(state["y_mean"], float)
-        if (r.X_.ndim != 2 or r.dual_.ndim != 2 or len(r.X_) != len(r.dual_) or r.mean_.shape != (r.X_.shape[1],)
-                or r.y_mean_.shape != (r.dual_.shape[1],)):
-            raise ValueError("invalid KernelRidgeReadout state: inconsistent array shapes")
+        r._load_arrays(state)
         return r
 
 
@@ -311,7 +335,7 @@ def block_folds(n: int, n_folds: int = 5, block: int | None = None) -> list[tupl
     return [(idx[fold != k], idx[fold == k]) for k in range(n_folds)]
 
 
-class GPReadout(_Standardised):
+class GPReadout(_KernelMachine):
     """Gaussian-process regression (the posterior mean) with an ARD squared
     exponential kernel ``exp(-sum_i (a_i - b_i)^2 / (2 l_i^2))`` on the
     standardised features plus white noise (Rasmussen and Williams 2006,
@@ -405,14 +429,8 @@ class GPReadout(_Standardised):
         self.X_ = A
         return self
 
-    def predict(self, features: Any, chunk: int = 2048) -> np.ndarray:
-        if not hasattr(self, "dual_"):
-            raise NotFittedError("this GPReadout is not fitted; call fit first")
-        Q = self._scaled(features) / self.length_scale_
-        out = np.empty((len(Q), self.dual_.shape[1]))
-        for s in range(0, len(Q), chunk):
-            out[s : s + chunk] = self._kernel(Q[s : s + chunk], self.X_) @ self.dual_ + self.y_mean_
-        return out
+    def _query(self, Q: np.ndarray) -> np.ndarray:
+        return Q / self.length_scale_
 
     def fixed_spec(self) -> dict[str, Any]:
         """The spec of this readout with its learned hyperparameters fixed
@@ -423,24 +441,17 @@ class GPReadout(_Standardised):
                 "noise": float(self.noise_)}
 
     def _get_state(self) -> dict[str, Any]:
-        if not hasattr(self, "dual_"):
-            raise NotFittedError("this GPReadout is not fitted; call fit first")
+        arrays = self._arrays()
         return {"params": {"n_outputs": self.n_outputs, "max_fit": self.max_fit, "max_train": self.max_train},
-                "mean": self.mean_, "scale": self.scale_, "X": self.X_, "dual": self.dual_, "y_mean": self.y_mean_,
-                "length_scale": self.length_scale_, "noise": float(self.noise_)}
+                **arrays, "length_scale": self.length_scale_, "noise": float(self.noise_)}
 
     @classmethod
     def _from_state(cls, state: dict[str, Any]) -> "GPReadout":
         r = cls(**state["params"])
-        r.mean_, r.scale_ = np.asarray(state["mean"], float), np.asarray(state["scale"], float)
-        r.X_, r.dual_ = np.asarray(state["X"], float), np.asarray(state["dual"], float)
-        r.y_mean_ = np.asarray(state["y_mean"], float)
+        r._load_arrays(state)
         r.length_scale_, r.noise_ = np.asarray(state["length_scale"], float), float(state["noise"])
         r.log_marginal_likelihood_ = None
-        d = r.mean_.shape
-        if (r.X_.ndim != 2 or r.dual_.ndim != 2 or len(r.X_) != len(r.dual_) or d != (r.X_.shape[1],)
-                or r.length_scale_.shape != d or r.y_mean_.shape != (r.dual_.shape[1],)
-                or not np.all(r.length_scale_ > 0)):
+        if r.length_scale_.shape != r.mean_.shape or not np.all(r.length_scale_ > 0):
             raise ValueError("invalid GPReadout state: inconsistent array shapes")
         return r
 
