@@ -640,36 +640,25 @@ class MetricDescent:
                  window: int = 20, min_spread: float = 0.5, bump_turn: float = 45.0, bump_step: float = 0.4, near: float = 1.5,
                  detour: float = 1.2, slack: float = 0.0, clearance: float = 0.4,
                  probe_first: bool = True) -> None:
-        for nm, v in (("max_step", max_step), ("lookahead", lookahead), ("min_spread", min_spread)):
-            if not (np.isfinite(v) and v > 0):
+        for nm, v, lo in (("max_step", max_step, 0.0), ("lookahead", lookahead, 0.0), ("min_spread", min_spread, 0.0),
+                          ("bump_turn", bump_turn, 0.0), ("bump_step", bump_step, 0.0), ("clearance", clearance, 0.0)):
+            if not (np.isfinite(v) and v > lo):
                 raise ValueError(f"{nm} must be positive, got {v}")
+        for nm, v, lo in (("detour", detour, 1.0), ("slack", slack, 0.0), ("near", near, 0.0)):
+            if not (np.isfinite(v) and v >= lo):
+                raise ValueError(f"{nm} must be >= {lo:g}, got {v}")
         if int(window) < 2:
             raise ValueError(f"window must be at least 2 stops, got {window}")
         self.field = field
         self.max_step, self.lookahead, self.window = float(max_step), float(lookahead), int(window)
-        self.min_spread, self.bump_turn = float(min_spread), float(np.radians(bump_turn))
-        if not bump_step > 0:
-            raise ValueError(f"bump_step must be positive, got {bump_step}")
-        self.bump_step = float(bump_step)
-        if not detour >= 1:
-            raise ValueError(f"detour must be >= 1, got {detour}")
-        self.detour = float(detour)
-        if not slack >= 0:
-            raise ValueError(f"slack must be >= 0, got {slack}")
-        self.slack = float(slack)
-        if not clearance > 0:
-            raise ValueError(f"clearance must be positive, got {clearance}")
-        self.clearance = float(clearance)
-        if not near >= 0:
-            raise ValueError(f"near must be >= 0, got {near}")
-        self.near = float(near)
+        self.min_spread, self.bump_turn, self.bump_step = float(min_spread), float(np.radians(bump_turn)), float(bump_step)
+        self.detour, self.slack, self.clearance, self.near = float(detour), float(slack), float(clearance), float(near)
         self.probe_first = bool(probe_first)
         self._local = RobustDescent(probe_first=False)
         self.reset()
 
     def reset(self) -> None:
         self._bumps = 0
-        self._last: np.ndarray | None = None
         self.escapes = 0
         self.follows = 0
         self._local.reset()
@@ -706,7 +695,7 @@ class MetricDescent:
                 d = rot.T @ (goal - m)
         if float(cost) < self.near and not blocked_view:
             d = np.asarray(self._local.step(gradient, cost, position, info), float)
-            self.escapes, self._last = self._local.escapes, d
+            self.escapes = self._local.escapes
             return d
         if d is None:
             u = _unit(-np.asarray(gradient, float))
@@ -726,7 +715,6 @@ class MetricDescent:
                 d = _rot(u * self.bump_step, angle)
         else:
             self._bumps = 0
-        self._last = np.asarray(d, float)
         return d
 
 
