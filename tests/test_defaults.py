@@ -308,6 +308,8 @@ def test_tiny_realistic_garden_default_beats_the_thesis_configuration():
 def test_cli_train_uses_the_default_without_a_preset_and_the_thesis_with_one(tmp_path, monkeypatch, capsys):
     """Which configuration ``sfanav train`` builds: captured at fit_localizer
     (no training here)."""
+    import sfanav.demo  # noqa: F401  modules that bind fit_localizer at import: before the patch, not during it
+    import sfanav.experiments.localization  # noqa: F401
     from sfanav import cli, workflow
 
     ds = sim.simulate("realistic-garden", tmp_path / "d", 0, max_frames=6, camera=sim.PanoramicCamera(70, 8),
@@ -356,11 +358,16 @@ def test_cli_default_train_localize_round_trip(tmp_path, capsys):
     loc = sfanav.load(model)
     assert loc.readout == "auto" and loc.rows.band == (-10.0, 20.0) and loc.info["configuration"] == "sfanav default"
     kind, state, manifest = read_model(model)
-    assert manifest["version"] == {"gp": 3}.get(state["readout"]["spec"]["kind"], 2)
+    assert manifest["version"] == 4 and loc.rotation_pooling_ == 8  # rotation-pooled features: format 4
     assert state["readout"]["spec"]["kind"] in ("gp", "kernel", "knn")
     assert cli.main(["localize", str(model), str(ds.root), "--run", "test", "--out", str(tmp_path / "p.csv"),
                      "--no-progress"]) == 0
     assert len((tmp_path / "p.csv").read_text().splitlines()) == 31
+    # pooled features: --rotations has nothing left to average, and says so
+    with pytest.raises(SystemExit) as exc:
+        cli.main(["localize", str(model), str(ds.root), "--run", "test", "--out", str(tmp_path / "q.csv"),
+                  "--no-progress", "--rotations"])
+    assert exc.value.code == 2 and "rotation pooling" in capsys.readouterr().err
     # evaluate: the network sees the band, the baselines the panoramas as they are
     assert cli.main(["evaluate", str(model), str(ds.root), "--out", str(tmp_path / "ev"), "--no-progress"]) == 0
     m = json.loads((tmp_path / "ev" / "metrics.json").read_text())
@@ -381,8 +388,10 @@ def test_gardens_experiment_has_the_default_row(tmp_path):
 
     res, plots = run_scene(tmp_path, "realistic-garden", 0, quick=True, progress=False, control=True,
                            row_variants={}, train_variants={}, baselines_too=False, firing_maps=False)
-    assert list(res) == ["control: sfanav default"] and plots == []
+    assert list(res) == ["control: sfanav default", "control: sfanav default without rotation pooling"]
+    assert plots == []
     row = res["control: sfanav default"]
+    assert row["rotation pooling"] == 8 and res["control: sfanav default without rotation pooling"]["rotation pooling"] == 1
     assert row["readout"].startswith(("kernel(", "knn(")) and row["numbers per image"] in (8, 12)
     assert "blocked CV (blocks of" in row["readout rule"] and row["MAE x (%)"] > 0
     diag = row["cv diagnostics"]

@@ -71,20 +71,61 @@ def test_localizes_a_separate_test_run(world, fitted):
     assert m["med"] < 0.25, m  # 2 x 2 m area; guessing the center gives about 0.75 m
     assert fitted.score(timgs, txy) == pytest.approx(m["med"])
     assert fitted.train_metrics_["med"] < m["med"] + 0.1
-    # averaging over the simulated rotations gives (N, 2) too, and not worse than chance
-    rot = fitted.predict(timgs[:20], rotations=True)
-    assert rot.shape == (20, 2) and np.abs(rot - pred[:20]).mean() < 0.2
+    # the default pools its features over 8 rotations: rotations=True has nothing left to average
+    assert fitted.rotation_pooling_ == 8
+    with pytest.raises(ValueError, match="averages its features over 8 rotations"):
+        fitted.predict(timgs[:2], rotations=True)
     # one image in, one position out
     np.testing.assert_allclose(fitted.predict(timgs[3]), pred[3])
 
 
+def test_without_pooling_rotations_average_the_estimates(world):
+    net, imgs, xy, timgs, txy = world
+    plain = sfanav.Localizer(net, n_outputs=6, rotation_pooling=None).fit(imgs, xy)
+    assert plain.rotation_pooling_ == 1
+    pred = plain.predict(timgs[:20])
+    rot = plain.predict(timgs[:20], rotations=True)  # mean over the simulated rotations
+    assert rot.shape == (20, 2) and np.abs(rot - pred).mean() < 0.2
+    Fr = net.transform(timgs[:10], rotations=True)  # (10, K, 6)
+    np.testing.assert_allclose(plain.predict_features(Fr), plain.predict(timgs[:10], rotations=True), atol=1e-10)
+
+
+def test_rotation_pooling_is_the_mean_over_evenly_spaced_rotations(world, fitted):
+    net, imgs, xy, timgs, txy = world
+    W = timgs.shape[2]  # 48 px: 8 rotations in steps of 6 px
+    F = fitted.features(timgs[:10])
+    np.testing.assert_allclose(F, net.transform(timgs[:10], rotations=True, step=W // 8).mean(axis=1), atol=1e-12)
+    # a rotation by one pooling step permutes the pooled rotations: exactly the same features
+    np.testing.assert_allclose(fitted.features(np.roll(timgs[:10], W // 8, axis=2)), F, atol=1e-9)
+    # under rotations by any angle the pooled features move much less than the network's own outputs
+    shifts = [np.roll(timgs[:10], s, axis=2) for s in range(0, W, 5)]
+    spread_pooled = np.std([fitted.features(a) for a in shifts], axis=0).mean()
+    spread_plain = np.std([net.transform(a) for a in shifts], axis=0).mean()
+    assert spread_pooled < 0.75 * spread_plain, (spread_pooled, spread_plain)  # measured 0.54x
+    # pooling over all W rotations (steps of 1 px) is exactly rotation invariant
+    full = sfanav.Localizer(net, n_outputs=6, rotation_pooling=W).fit(imgs[:60], xy[:60])
+    Ff = full.features(timgs[:5])
+    for s in (1, 7, 30):
+        np.testing.assert_allclose(full.features(np.roll(timgs[:5], s, axis=2)), Ff, atol=1e-9)
+
+
+def test_rotation_pooling_parameter_is_checked(world):
+    net, imgs, xy, *_ = world
+    for bad, exc in (("all", ValueError), (0, ValueError), (2.5, TypeError), (True, TypeError)):
+        with pytest.raises(exc, match="rotation_pooling"):
+            sfanav.Localizer(net, rotation_pooling=bad).fit(imgs[:40], xy[:40])
+    with pytest.raises(ValueError, match="at least 60 px wide"):
+        sfanav.Localizer(net, rotation_pooling=60).fit(imgs[:40], xy[:40])
+    # the thesis's quadratic readout is not pooled by default; a features-only localizer neither
+    assert sfanav.Localizer(net, n_outputs=6, readout="quadratic").fit(imgs, xy).rotation_pooling_ == 1
+    assert sfanav.Localizer(None, n_outputs=4).fit_features(net.transform(imgs), xy).rotation_pooling_ == 1
+
+
 def test_features_api_matches_the_image_api(world, fitted):
     net, imgs, xy, timgs, txy = world
-    F, Ft = net.transform(imgs), net.transform(timgs)
+    F, Ft = fitted.features(imgs), fitted.features(timgs)  # rotation pooled, as the localizer's readout sees them
     loc = sfanav.Localizer(net, n_outputs=6).fit_features(F, xy)
     np.testing.assert_allclose(loc.predict_features(Ft), fitted.predict(timgs), atol=1e-10)
-    Fr = net.transform(timgs[:10], rotations=True)  # (10, K, 6)
-    np.testing.assert_allclose(loc.predict_features(Fr), fitted.predict(timgs[:10], rotations=True), atol=1e-10)
     # features-only localizer (no network)
     bare = sfanav.Localizer(None, n_outputs=4).fit_features(F, xy)
     assert bare.evaluate_features(Ft, txy)["med"] < 0.4
@@ -99,6 +140,8 @@ def test_save_load_round_trip(world, fitted, tmp_path):
     assert isinstance(back, sfanav.Localizer) and isinstance(back.network, sfanav.Network)
     np.testing.assert_array_equal(back.predict(timgs), fitted.predict(timgs))
     assert back.n_outputs == 6 and back.train_metrics_ == fitted.train_metrics_
+    assert back.rotation_pooling_ == 8 and back.rotation_pooling == "auto"
+    assert sfanav.modelfile.read_model(path)[2]["version"] == 4  # pooled features: format 4
     F = fitted.features(timgs)
     bare = sfanav.Localizer(None, n_outputs=3, ridge=0.1).fit_features(F, np.c_[F[:, 0], F[:, 1]])
     bare.save(tmp_path / "bare.sfa")

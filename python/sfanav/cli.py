@@ -280,6 +280,9 @@ def _add_train(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--rows", choices=("all", "band"), default=None,
                    help="image rows: band = elevation -10..+20 deg only (default for the sfanav default "
                         "network), all = every row (default with --preset thesis-* or --config)")
+    p.add_argument("--rotation-pooling", type=_pos_int, default=None, metavar="K",
+                   help="average the network's outputs over K evenly spaced rotations of each panorama before "
+                        "the readout (default: 8 with the auto readout, none with quadratic; 1 = none)")
     p.add_argument("--normalize", action="store_true",
                    help="normalize every image to zero mean and unit variance (thesis 5.2)")
     p.add_argument("--mirror", default=None, metavar="CX,CY,INNER,OUTER",
@@ -350,6 +353,7 @@ def _run_train(args: argparse.Namespace) -> int:
     loc = fit_localizer(net, images, xy, rotation=Rotation(step=args.step, window=args.window),
                         n_outputs=args.n_outputs if args.n_outputs is not None or readout == "auto" else 8,
                         readout=readout, rows=rows, prep=prep, progress=not args.no_progress,
+                        rotation_pooling="auto" if args.rotation_pooling is None else args.rotation_pooling,
                         info={"dataset": str(args.dataset), "run": run,
                               "network": args.preset or (str(args.config) if args.config else "sfanav-default"),
                               **({"configuration": "sfanav default"}
@@ -407,6 +411,9 @@ def _run_localize(args: argparse.Namespace) -> int:
     from .workflow import Conformer, Preprocessing, _bar, open_images
 
     loc = _load_localizer(args.model)
+    if args.rotations and loc.rotation_pooling_ > 1:
+        raise _UsageError(f"{args.model} averages its features over {loc.rotation_pooling_} rotations already "
+                          "(rotation pooling): --rotations applies to models without it")
     out = _new_file(args.out, args.overwrite, "CSV")
     src = open_images(args.input, run=args.run_name, camera=args.camera)
     prep = Preprocessing.of_model(loc)

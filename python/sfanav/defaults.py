@@ -17,6 +17,10 @@ ablation measured is the **sfanav default**:
   on 8 or 12 outputs has a CV error more than 10 % lower by blocked
   cross-validation on the training run (10 folds of interleaved blocks of
   10 consecutive images; :func:`sfanav.readout.select_auto_readout`);
+* rotation pooling: the readout sees the network's outputs averaged over
+  8 evenly spaced rotations of each panorama (group averaging; the network
+  alone is only approximately rotation invariant), ``Localizer``'s
+  ``rotation_pooling="auto"``;
 * simulated rotation: 5 px, 100 % window (as the thesis).
 
 ``sfanav train`` without ``--preset``/``--config`` and :func:`train_default`

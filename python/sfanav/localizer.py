@@ -6,8 +6,12 @@ a Gaussian process with one learned length scale per output (ARD, marginal
 likelihood) on the 12 slowest outputs, or Gaussian kernel ridge / kNN if
 blocked cross-validation on the training run finds one clearly better
 (``readout="auto"``).
+With such a readout the features are also *rotation pooled*: the
+network's outputs averaged over 8 evenly spaced rotations of the panorama
+(``rotation_pooling="auto"``), which removes what is left of their
+dependence on the robot's heading.
 ``readout="quadratic"`` is the thesis's quadratic regression of the 8
-slowest outputs (thesis 3.5, 5.1-5.2)."""
+slowest outputs (thesis 3.5, 5.1-5.2), without pooling."""
 
 from __future__ import annotations
 
@@ -31,6 +35,7 @@ __all__ = ["Localizer"]
 
 
 READOUTS = ("auto", "quadratic")
+ROTATION_POOLING = 8  # rotations averaged by rotation_pooling="auto" (docs/gardens.md)
 
 
 class Localizer:
@@ -65,6 +70,15 @@ class Localizer:
         (:class:`sfanav.imagerows.ImageRows`, e.g. the sfanav default's
         horizon band); it must be what the network was trained on
         (:func:`sfanav.workflow.fit_localizer` takes care of that).
+    rotation_pooling : "auto", int or None, default "auto"
+        Rotation pooling (group averaging over the panorama's rotations): an
+        image's features are the network's outputs averaged over K rotations
+        of the panorama in steps of ``ceil(W / K)`` px (W its width), so the
+        readout sees features that no longer depend on the heading (the
+        network is only approximately invariant: eta_phi > 0). K times the
+        network's work per image. ``"auto"``: K = 8 (the sfanav default;
+        docs/gardens.md) unless ``readout="quadratic"`` (the thesis's
+        configuration: no pooling); None or 1: no pooling.
 
     Attributes
     ----------
@@ -77,6 +91,8 @@ class Localizer:
     selection_ : ReadoutSelection or None
         With ``readout="auto"``: the cross-validation (candidates, errors,
         the rule that decided); not saved in the model file.
+    rotation_pooling_ : int
+        Rotations averaged per image (1: none).
     n_features_in_ : int
         Feature columns seen in fit.
     train_metrics_ : dict
@@ -95,7 +111,8 @@ class Localizer:
     """
 
     def __init__(self, network: Network | None, n_outputs: int | None = None, ridge: float = 0.0, degree: int = 2,
-                 readout: str | dict[str, Any] = "auto", rows: ImageRows | None = None) -> None:
+                 readout: str | dict[str, Any] = "auto", rows: ImageRows | None = None,
+                 rotation_pooling: int | str | None = "auto") -> None:
         if network is not None and not isinstance(network, Network):
             raise TypeError(f"network must be a sfanav.Network or None, got {type(network).__name__}")
         if rows is not None and not isinstance(rows, ImageRows):
@@ -106,18 +123,21 @@ class Localizer:
         self.degree = degree
         self.readout = readout
         self.rows = rows
+        self.rotation_pooling = rotation_pooling
         self.info: dict[str, Any] = {}
 
     def get_params(self, deep: bool = True) -> dict[str, Any]:
         return {"network": self.network, "n_outputs": self.n_outputs, "ridge": self.ridge, "degree": self.degree,
-                "readout": self.readout, "rows": self.rows}
+                "readout": self.readout, "rows": self.rows, "rotation_pooling": self.rotation_pooling}
 
     def __repr__(self) -> str:
         net = "None" if self.network is None else repr(self.network)
         state = f"fitted: {self.describe_readout()}" if self.is_fitted_ else "not fitted"
         ro = self.readout if isinstance(self.readout, str) else "spec"
         rows = "" if self.rows is None or self.rows.identity else f", rows={self.rows.describe()!r}"
-        return f"<sfanav.Localizer readout={ro!r}, n_outputs={self.n_outputs}{rows}, {state}, network={net}>"
+        pool = "" if self.rotation_pooling == "auto" else f", rotation_pooling={self.rotation_pooling!r}"
+        return (f"<sfanav.Localizer readout={ro!r}, n_outputs={self.n_outputs}{rows}{pool}, {state}, "
+                f"network={net}>")
 
     def describe_readout(self) -> str:
         """The fitted readout in words, e.g. ``kernel(n_outputs=12, gamma=0.5, alpha=0.001)``."""
@@ -140,16 +160,57 @@ class Localizer:
         return self.network
 
     def features(self, images: Any, *, rotations: bool = False) -> np.ndarray:
-        """The network's slow features of images (N, H, W[, C]) (after
-        ``rows``): (N, n) or, with ``rotations=True``, (N, K, n) under the
-        simulated rotations."""
+        """The features the readout sees of images (N, H, W[, C]): the
+        network's slow features (after ``rows``), rotation pooled if
+        :attr:`rotation_pooling_` > 1; (N, n), or (H, W[, C]) -> (n,).
+
+        ``rotations=True``: (N, K, n) under the K simulated rotations (the
+        training step), for a localizer without pooling only (pooled
+        features are already averaged over rotations)."""
         net = self._network()
+        a = np.asarray(images)
+        one = a.ndim == (2 if net.input_shape[2] == 1 else 3)
         if self.rows is not None and not self.rows.identity:
-            a = np.asarray(images)
-            one = a.ndim == (2 if net.input_shape[2] == 1 else 3)
             images = self.rows(a[None] if one else a)
             images = images[0] if one else images
-        return net.transform(images, rotations=rotations)
+        return self.transform_rows(images, rotations=rotations)
+
+    def transform_rows(self, images: Any, *, rotations: bool = False) -> np.ndarray:
+        """As :meth:`features` for images the localizer's ``rows`` were
+        already applied to (what its network sees)."""
+        net = self._network()
+        k = self._pooling()
+        if k == 1:
+            return net.transform(images, rotations=rotations)
+        if rotations:
+            raise ValueError(
+                f"this Localizer averages its features over {k} rotations already (rotation_pooling); "
+                "rotations=True needs a localizer without pooling (rotation_pooling=None)"
+            )
+        a = np.asarray(images)
+        single = a.ndim == (2 if net.input_shape[2] == 1 else 3)
+        width = a.shape[1] if single else (a.shape[2] if a.ndim >= 3 else 0)
+        if width < k:
+            raise ValueError(f"rotation_pooling={k} needs panoramas at least {k} px wide, got {width} px")
+        step = -(-width // k)
+        return net.transform(images, rotations=True, step=step).mean(axis=-2)
+
+    def _pooling(self) -> int:
+        """The rotations averaged per image: the fitted value, else the
+        parameter resolved."""
+        if hasattr(self, "rotation_pooling_"):
+            return self.rotation_pooling_
+        return self._resolve_pooling()
+
+    def _resolve_pooling(self) -> int:
+        p = self.rotation_pooling
+        if p is None or (p == "auto" and self.network is None):  # features-only: the caller's features
+            return 1
+        if isinstance(p, str):
+            if p != "auto":
+                raise ValueError(f"rotation_pooling must be 'auto', a positive integer or None, got {p!r}")
+            return 1 if self.readout == "quadratic" else ROTATION_POOLING
+        return check_int(p, "rotation_pooling")
 
     def _check_params(self) -> tuple[int | None, float, int]:
         n = None if self.n_outputs is None else check_int(self.n_outputs, "n_outputs")
@@ -168,15 +229,18 @@ class Localizer:
         their positions (N, 2) in metres (the network is not retrained).
         Returns ``self``."""
         Y = as_matrix(xy, "xy", n_cols=2)
+        self.rotation_pooling_ = self._resolve_pooling()
         F = self.features(images)
         if F.ndim == 1:
             F = F[None]
         return self.fit_features(F, Y)
 
     def fit_features(self, features: Any, xy: Any) -> "Localizer":
-        """Fits on precomputed slow features (N, m >= n_outputs), slowest
-        first, and positions (N, 2) in metres. Returns ``self``."""
+        """Fits on precomputed features (N, m >= n_outputs), slowest first,
+        and positions (N, 2) in metres: what :meth:`features` returns (rotation
+        pooled as ``rotation_pooling`` says). Returns ``self``."""
         n, ridge, degree = self._check_params()
+        self.rotation_pooling_ = self._resolve_pooling()
         F = as_matrix(features, "features")
         Y = as_matrix(xy, "xy", n_cols=2)
         check_same_length(F, Y, "features", "xy")
@@ -212,9 +276,9 @@ class Localizer:
     def predict(self, images: Any, *, rotations: bool = False) -> np.ndarray:
         """Positions (N, 2) in metres of images (N, H, W[, C]).
 
-        With ``rotations=True`` the estimate is the mean over the simulated
-        rotations of each image (as the thesis's Fig. 5.2b, 5.5b): K times
-        the work, smoother estimates."""
+        With ``rotations=True`` (a localizer without rotation pooling) the
+        estimate is the mean over the simulated rotations of each image (as
+        the thesis's Fig. 5.2b, 5.5b): K times the work, smoother estimates."""
         self._check_fitted()
         a = np.asarray(images)
         single = a.ndim == (2 if self._network().input_shape[2] == 1 else 3)  # one (H, W[, C]) image
@@ -270,7 +334,10 @@ class Localizer:
                 kind, net_state, _ = read_model(tmp_path)
         state = {
             "params": {"n_outputs": None if self.n_outputs is None else int(self.n_outputs),
-                       "ridge": float(self.ridge), "degree": int(self.degree)},
+                       "ridge": float(self.ridge), "degree": int(self.degree),
+                       "rotation_pooling": (self.rotation_pooling if isinstance(self.rotation_pooling, str)
+                                            or self.rotation_pooling is None else int(self.rotation_pooling))},
+            "rotation_pooling": int(self.rotation_pooling_),
             "readout_param": dict(self.readout) if isinstance(self.readout, dict) else str(self.readout),
             "rows": None if self.rows is None else self.rows.to_dict(),
             "network": net_state,
@@ -284,14 +351,21 @@ class Localizer:
         # format version 2: a GP, kernel ridge or kNN readout (older readers cannot rebuild it)
         kind = self.readout_spec_["kind"]
         # format version 3: the GP readout (version-2 readers cannot rebuild it)
-        return save_model(path, "Localizer", state, version={"quadratic": 1, "gp": 3}.get(kind, 2))
+        version = {"quadratic": 1, "gp": 3}.get(kind, 2)
+        # format version 4: rotation-pooled features (older readers would silently skip the pooling)
+        if self.rotation_pooling_ > 1:
+            version = 4
+        return save_model(path, "Localizer", state, version=version)
 
     @classmethod
     def _from_state(cls, state: dict[str, Any]) -> "Localizer":
         try:
             net = None if state["network"] is None else Network._from_state(state["network"])
             rows = state.get("rows")
-            loc = cls(net, rows=None if rows is None else ImageRows.from_dict(rows), **state["params"])
+            params = dict(state["params"])
+            params.setdefault("rotation_pooling", None)  # files before format 4: no pooling
+            loc = cls(net, rows=None if rows is None else ImageRows.from_dict(rows), **params)
+            loc.rotation_pooling_ = check_int(state.get("rotation_pooling", 1), "rotation_pooling")
             loc.readout = state.get("readout_param", "quadratic")
             if "readout" in state:  # since sfanav 0.2 (issue 7): any readout
                 loc.regression_ = readout_from_state(state["readout"])

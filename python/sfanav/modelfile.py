@@ -30,7 +30,7 @@ from typing import Any, Callable
 import numpy as np
 
 FORMAT = "sfanav-model"
-VERSION = 3  # the newest version this sfanav reads and writes (see docs/model-format.md)
+VERSION = 4  # the newest version this sfanav reads and writes (see docs/model-format.md)
 
 _LOADERS: dict[str, Callable[[dict[str, Any]], Any]] = {}
 

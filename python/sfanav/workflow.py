@@ -412,6 +412,7 @@ def fit_localizer(
     prep: Preprocessing | None = None,
     progress: bool = True,
     info: dict[str, Any] | None = None,
+    rotation_pooling: int | str | None = "auto",
 ) -> Localizer:
     """Trains ``network`` on ``images`` (the training run, in temporal order)
     under simulated rotation and fits the readout of its slowest outputs to
@@ -421,7 +422,9 @@ def fit_localizer(
     the sfanav default's GP, or kernel ridge / kNN by blocked CV, on this
     run; ``readout="quadratic", n_outputs=8`` is the thesis's). ``rows``: an
     :class:`sfanav.imagerows.ImageRows` applied to the images before the
-    network, in training and (stored in the localizer) at every query. The
+    network, in training and (stored in the localizer) at every query.
+    ``rotation_pooling``: as :class:`Localizer` (``"auto"``: 8 rotations
+    unless the readout is the thesis's quadratic one). The
     returned localizer's ``info`` records preprocessing, rotation, training
     time (seconds: network) and readout selection time."""
     rotation = rotation or Rotation()
@@ -434,16 +437,17 @@ def fit_localizer(
     fit_s = time.perf_counter() - t0
     if n_outputs is not None and n_outputs > network.n_outputs_:
         raise ValueError(f"n_outputs={n_outputs}, but the network has only {network.n_outputs_} outputs")
-    loc = Localizer(network, n_outputs=n_outputs, readout=readout, rows=rows)
+    loc = Localizer(network, n_outputs=n_outputs, readout=readout, rows=rows, rotation_pooling=rotation_pooling)
     t1 = time.perf_counter()
-    loc.fit_features(network.transform(images), xy)
+    loc.fit_features(loc.transform_rows(images), xy)
     readout_s = time.perf_counter() - t1
     loc.info = dict(info or {})
     if prep is not None:
         loc.info["preprocessing"] = prep.to_dict()
     loc.info.update({"rotation": {"step": rotation.step, "window": rotation.window},
                      "n_train_images": int(len(images)), "fit_seconds": round(fit_s, 2),
-                     "readout_seconds": round(readout_s, 2), "readout": loc.describe_readout()})
+                     "readout_seconds": round(readout_s, 2), "readout": loc.describe_readout(),
+                     "rotation_pooling": int(loc.rotation_pooling_)})
     if loc.selection_ is not None:
         loc.info["readout_rule"] = loc.selection_.rule
     return loc
@@ -555,7 +559,7 @@ def evaluate(
         test_images = loc.rows(test_images)
         train_images = None if train_images is None else loc.rows(train_images)
     t0 = time.perf_counter()
-    F_test = net.transform(test_images)
+    F_test = loc.transform_rows(test_images)  # rotation pooled if the localizer pools
     sfa_ms = 1000.0 * (time.perf_counter() - t0) / len(test_images)
     pred = loc.predict_features(F_test)
     crange = coordinate_range(test_xy)
@@ -585,7 +589,7 @@ def evaluate(
         R = net.transform(train_images, rotations=True)
         ep, ef = analysis.eta_values(R[:, :, :n_eta])
         ev.eta_source = "training views under all simulated rotations (thesis 3.5)"
-        F_train = net.transform(train_images)
+        F_train = loc.transform_rows(train_images)
         ev.curve = regression.error_vs_n(F_train, train_xy, F_test, test_xy, ns=ns)
         map_xy = train_xy
     else:

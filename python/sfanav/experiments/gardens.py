@@ -51,6 +51,7 @@ import numpy as np
 
 from .. import analysis, baselines, regression, sim
 from ..imagerows import ImageRows
+from ..localizer import Localizer
 from ..metrics import localization_metrics
 from ..network import Network, Rotation, spatial_pairs
 from ..readout import (auto_candidates, default_candidates, describe_spec, make_readout, select_auto_readout,
@@ -194,10 +195,11 @@ def _cv_diagnostics(F_tr: np.ndarray, xy_tr: np.ndarray, F_te: np.ndarray, xy_te
 
 def _default_row(X_tr: np.ndarray, xy_tr: np.ndarray, X_te: np.ndarray, xy_te: np.ndarray, crange: np.ndarray,
                  elev: tuple[float, float], *, quick: bool, seed: int, n_repeats: int, log: Any,
-                 tag: str) -> dict[str, Any]:
+                 tag: str) -> tuple[dict[str, Any], dict[str, Any]]:
     """The sfanav default, trained by :func:`sfanav.defaults.train_default`
     exactly as ``sfanav train`` does without a preset, measured as the
-    other rows."""
+    other rows; and the same network and rows without rotation pooling
+    (the pooling's ablation row)."""
     from ..defaults import default_network, train_default
 
     shape = X_tr.shape[1:] if X_tr.ndim == 4 else X_tr.shape[1:] + (1,)
@@ -207,19 +209,31 @@ def _default_row(X_tr: np.ndarray, xy_tr: np.ndarray, X_te: np.ndarray, xy_te: n
     m = localization_metrics(loc.predict_features(F_te), xy_te, coordinate_range=crange)
     spec = loc.readout_spec_
     rs = _random_splits(spec, F_te, xy_te, crange, n_repeats=n_repeats, seed=seed)
-    R = loc.features(X_tr, rotations=True)
+    X_rows = X_tr if loc.rows is None else loc.rows(X_tr)
+    R = loc.network.transform(X_rows, rotations=True)  # the network's outputs, before rotation pooling
     _, eta_phi = analysis.eta_values(R[:, :, :8])
+    # ablation: the same network and rows without rotation pooling (readout chosen as for the default)
+    plain = Localizer(loc.network, readout="auto", rows=loc.rows, rotation_pooling=None).fit(X_tr, xy_tr)
+    mp = localization_metrics(plain.predict(X_te), xy_te, coordinate_range=crange)
     row = {"MAE x (%)": m["mae_x_pct"], "MAE y (%)": m["mae_y_pct"], "MAE x (m)": m["mae_x"], "MAE y (m)": m["mae_y"],
            "MED (m)": m["med"], "MAE x (%) (random splits)": rs["mae_x_pct"],
            "MAE y (%) (random splits)": rs["mae_y_pct"], ETA: float(eta_phi.max()),
            "training (s)": float(loc.info["fit_seconds"]), "readout selection (s)": float(loc.info["readout_seconds"]),
            "numbers per image": int(loc.n_outputs_), "readout": describe_spec(spec),
+           "rotation pooling": int(loc.rotation_pooling_),
            "readout rule": loc.selection_.rule if loc.selection_ is not None else "-"}
     if loc.selection_ is not None:
         row["cv diagnostics"] = _cv_diagnostics(F_tr, xy_tr, F_te, xy_te, crange, loc.selection_)
     log(f"  {tag} sfanav default: MAE {m['mae_x_pct']:.2f} / {m['mae_y_pct']:.2f} %, MED {m['med']:.3f} m "
-        f"({describe_spec(spec)}; network {loc.info['fit_seconds']:.0f} s, readout {loc.info['readout_seconds']:.0f} s)")
-    return row
+        f"({describe_spec(spec)}, {loc.rotation_pooling_} rotations pooled; network {loc.info['fit_seconds']:.0f} s, "
+        f"readout {loc.info['readout_seconds']:.0f} s)")
+    plain_row = {"MAE x (%)": mp["mae_x_pct"], "MAE y (%)": mp["mae_y_pct"], "MAE x (m)": mp["mae_x"],
+                 "MAE y (m)": mp["mae_y"], "MED (m)": mp["med"], ETA: float(eta_phi.max()),
+                 "numbers per image": int(plain.n_outputs_), "readout": plain.describe_readout(),
+                 "rotation pooling": 1}
+    log(f"  {tag} sfanav default without rotation pooling: MAE {mp['mae_x_pct']:.2f} / {mp['mae_y_pct']:.2f} %, "
+        f"MED {mp['med']:.3f} m ({plain.describe_readout()})")
+    return row, plain_row
 
 
 def run_scene(out: Path, preset: str, seed: int, *, quick: bool, progress: bool, control: bool,
@@ -262,7 +276,8 @@ def run_scene(out: Path, preset: str, seed: int, *, quick: bool, progress: bool,
             "training (s)": None, "query ms": b["query_ms"]}
         log(f"{tag} seed {seed} {name}: MED {b['med']:.3f} m ({time.perf_counter() - t0:.0f} s)")
     if default_too:
-        res[("control: " if control else "") + "sfanav default"] = _default_row(
+        pre = "control: " if control else ""
+        res[pre + "sfanav default"], res[pre + "sfanav default without rotation pooling"] = _default_row(
             X_tr, xy_tr, X_te, xy_te, crange, elev, quick=quick, seed=seed, n_repeats=5 if quick else n_repeats,
             log=log, tag=f"{tag} seed {seed}")
     odo_tr = ds.select(run="train").odometry[:, :2]
