@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 import sfanav
+from sfanav.localizer import pooling_step
 from sfanav.analysis import eta_values
 from sfanav.regression import error_vs_n
 
@@ -92,11 +93,11 @@ def test_without_pooling_rotations_average_the_estimates(world):
 
 def test_rotation_pooling_is_the_mean_over_evenly_spaced_rotations(world, fitted):
     net, imgs, xy, timgs, txy = world
-    W = timgs.shape[2]  # 48 px: 8 rotations in steps of 6 px
+    W = timgs.shape[2]  # 48 px
+    step = pooling_step(net, W, 8)
+    assert step >= W // 8 and -(-W // step) <= 8
     F = fitted.features(timgs[:10])
-    np.testing.assert_allclose(F, net.transform(timgs[:10], rotations=True, step=W // 8).mean(axis=1), atol=1e-12)
-    # a rotation by one pooling step permutes the pooled rotations: exactly the same features
-    np.testing.assert_allclose(fitted.features(np.roll(timgs[:10], W // 8, axis=2)), F, atol=1e-9)
+    np.testing.assert_allclose(F, net.transform(timgs[:10], rotations=True, step=step).mean(axis=1), atol=1e-12)
     # under rotations by any angle the pooled features move much less than the network's own outputs
     shifts = [np.roll(timgs[:10], s, axis=2) for s in range(0, W, 5)]
     spread_pooled = np.std([fitted.features(a) for a in shifts], axis=0).mean()
@@ -107,6 +108,21 @@ def test_rotation_pooling_is_the_mean_over_evenly_spaced_rotations(world, fitted
     Ff = full.features(timgs[:5])
     for s in (1, 7, 30):
         np.testing.assert_allclose(full.features(np.roll(timgs[:5], s, axis=2)), Ff, atol=1e-9)
+
+
+def test_pooling_step_is_coprime_with_the_receptive_field_grid():
+    """Pooled rotations must not all share one alignment of the network's RF grid."""
+    import math
+
+    default = sfanav.Network.from_preset("sfanav-default")  # horizontal strides 5, 3, 2, 1: period 30
+    assert pooling_step(default, 350, 8) == 47  # ceil(350 / 8) = 44 shares a factor 2 with 30
+    thesis = sfanav.Network.from_preset("thesis-5.2")
+    period = math.prod(layer["stride"][0] for layer in thesis.config_["layers"])
+    step = pooling_step(thesis, 600, 8)
+    assert step >= 75 and math.gcd(step, period) == 1 and -(-600 // step) <= 8
+    flat = sfanav.Network({"input": {"width": 20, "height": 4, "channels": 1},
+                           "layers": [{"rf": "full", "out": 2}]})
+    assert pooling_step(flat, 350, 8) == 44  # stride 1: any step
 
 
 def test_rotation_pooling_parameter_is_checked(world):

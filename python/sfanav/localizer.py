@@ -15,6 +15,7 @@ slowest outputs (thesis 3.5, 5.1-5.2), without pooling."""
 
 from __future__ import annotations
 
+import math
 import os
 import tempfile
 from pathlib import Path
@@ -31,11 +32,30 @@ from .readout import make_readout, readout_from_state, readout_state, select_aut
 from .regression import QuadraticRegression
 from .sfa import NotFittedError
 
-__all__ = ["Localizer"]
+__all__ = ["Localizer", "pooling_step"]
 
 
 READOUTS = ("auto", "quadratic")
 ROTATION_POOLING = 8  # rotations averaged by rotation_pooling="auto" (docs/gardens.md)
+
+
+def pooling_step(network: Network, width: int, k: int) -> int:
+    """The rotation step (px) of rotation pooling over ``k`` rotations of
+    ``width``-px panoramas: the smallest step >= ceil(width / k) that is
+    coprime with the network's receptive-field grid period (the product of
+    its layers' horizontal strides), so the pooled rotations see the grid at
+    different alignments (pooling over rotations by multiples of the
+    first layer's stride only, the alignments the network was trained on
+    with 5 px steps, gains about half as much; docs/gardens.md). The
+    rotations are then ceil(width / step) <= k."""
+    base = -(-int(width) // int(k))
+    period = 1
+    for layer in network.config_["layers"]:
+        period *= int(layer["stride"][0])
+    for step in range(base, int(width)):
+        if math.gcd(step, period) == 1:
+            return step
+    return base
 
 
 class Localizer:
@@ -73,10 +93,11 @@ class Localizer:
     rotation_pooling : "auto", int or None, default "auto"
         Rotation pooling (group averaging over the panorama's rotations): an
         image's features are the network's outputs averaged over K rotations
-        of the panorama in steps of ``ceil(W / K)`` px (W its width), so the
-        readout sees features that no longer depend on the heading (the
-        network is only approximately invariant: eta_phi > 0). K times the
-        network's work per image. ``"auto"``: K = 8 (the sfanav default;
+        of the panorama in steps of about W / K px (W its width; the step
+        :func:`pooling_step` picks), so the readout sees features that no
+        longer depend on the heading (the network is only approximately
+        invariant: eta_phi > 0). About twice the network's work per image
+        for K = 8 (the core shares the lower layers across rotations). ``"auto"``: K = 8 (the sfanav default;
         docs/gardens.md) unless ``readout="quadratic"`` (the thesis's
         configuration: no pooling); None or 1: no pooling.
 
@@ -192,8 +213,7 @@ class Localizer:
         width = a.shape[1] if single else (a.shape[2] if a.ndim >= 3 else 0)
         if width < k:
             raise ValueError(f"rotation_pooling={k} needs panoramas at least {k} px wide, got {width} px")
-        step = -(-width // k)
-        return net.transform(images, rotations=True, step=step).mean(axis=-2)
+        return net.transform(images, rotations=True, step=pooling_step(net, width, k)).mean(axis=-2)
 
     def _pooling(self) -> int:
         """The rotations averaged per image: the fitted value, else the
