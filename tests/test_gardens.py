@@ -285,3 +285,19 @@ def test_loop_closures_found_aligned_and_interleaved():
     assert np.allclose(seq[k + 1], np.roll(run[lc.past[0]], lc.shift[0], axis=1))
     # without odometry the gate is the temporal gap only; the first pass has no earlier partner
     assert np.all(find_loop_closures(run, None, min_gap=10, neighbor_lag=1).current >= 10)
+
+
+def test_gardens_ablation_has_rotation_pooled_readouts(tmp_path):
+    """The ablation measures rotation pooling on its own (the thesis network and
+    readout on pooled features) beside the plain readout (quick: tiny images)."""
+    from sfanav.experiments.gardens import ROW_VARIANTS, run_scene
+
+    res, _ = run_scene(tmp_path, "realistic-garden", 0, quick=True, progress=False, control=False,
+                       row_variants={"": ROW_VARIANTS[""]}, readouts={"": None, "rotation pooling": None},
+                       train_variants={"": None}, baselines_too=False, firing_maps=False, default_too=False)
+    assert set(res) == {"thesis config", "rotation pooling"}
+    plain, pooled = res["thesis config"], res["rotation pooling"]
+    for row in (plain, pooled):
+        assert np.isfinite(row["MAE x (%)"]) and row["MAE x (%)"] > 0 and row["numbers per image"] == 8
+    # same network (same eta and training time), different features
+    assert plain["training (s)"] == pooled["training (s)"] and plain["MAE x (%)"] != pooled["MAE x (%)"]

@@ -51,7 +51,7 @@ import numpy as np
 
 from .. import analysis, baselines, regression, sim
 from ..imagerows import ImageRows
-from ..localizer import Localizer
+from ..localizer import ROTATION_POOLING, Localizer, pooling_step
 from ..metrics import localization_metrics
 from ..network import Network, Rotation, spatial_pairs
 from ..readout import (auto_candidates, default_candidates, describe_spec, make_readout, select_auto_readout,
@@ -117,7 +117,11 @@ READOUTS: dict[str, tuple[str, ...] | None] = {
     "readout: kNN": ("knn",),
     "readout: kernel ridge": ("kernel",),
     "readout: best": ("quadratic", "knn", "kernel"),
+    # the thesis's readout and kernel ridge on rotation-pooled features (8 rotations, localizer.pooling_step)
+    "rotation pooling": None,
+    "readout: kernel ridge + rotation pooling": ("kernel",),
 }
+POOLED_READOUTS = ("rotation pooling", "readout: kernel ridge + rotation pooling")
 THESIS_SPEC = {"kind": "quadratic", "n_outputs": 8, "ridge": 0.0}
 ETA = "max eta_phi (outputs 1-8)"
 METRICS = ("MAE x (%)", "MAE y (%)", "MAE x (m)", "MAE y (m)", "MED (m)", "MAE x (%) (random splits)",
@@ -332,20 +336,27 @@ def run_scene(out: Path, preset: str, seed: int, *, quick: bool, progress: bool,
             p = out / f"gardens-{tag}-seed{seed}-{vname.replace('rows: ', '').replace(' + ', '+').replace(' ', '-')}-firing_maps.png"
             plots.append(str(analysis.plot_firing_maps(R, xy_tr, p, which=(0, 1, 2, 3), angles=angles,
                                                        title=f"{preset} seed {seed}, {tname or rows.describe()}")))
-        sels: dict[str, Any] = {}  # one CV per readout kind; "best" takes the lowest CV error among them
+        sels: dict[Any, Any] = {}  # one CV per readout kind; "best" takes the lowest CV error among them
+        pooled = [k for k in POOLED_READOUTS if k in readouts]
+        if pooled:
+            step = pooling_step(net, A_tr.shape[2], ROTATION_POOLING)
+            P_tr = net.transform(A_tr, rotations=True, step=step).mean(axis=1)
+            P_te = net.transform(A_te, rotations=True, step=step).mean(axis=1)
         for oname, kinds in readouts.items():
+            G_tr, G_te = (P_tr, P_te) if oname in pooled else (F_tr, F_te)
             if kinds is None:
                 spec = dict(THESIS_SPEC)
-                reader = make_readout(spec).fit(F_tr, xy_tr)
+                reader = make_readout(spec).fit(G_tr, xy_tr)
             else:
                 for kind in kinds:
-                    if kind not in sels:
-                        sels[kind] = select_readout(F_tr, xy_tr, default_candidates((kind,), n_outputs=(8, 12)))
-                sel = min((sels[k] for k in kinds), key=lambda z: float(z.scores.min()))
+                    if (kind, oname in pooled) not in sels:
+                        sels[kind, oname in pooled] = select_readout(G_tr, xy_tr, default_candidates(
+                            (kind,), n_outputs=(8, 12)))
+                sel = min((sels[k, oname in pooled] for k in kinds), key=lambda z: float(z.scores.min()))
                 spec, reader = sel.spec, sel.readout
-            pred = reader.predict(F_te)
+            pred = reader.predict(G_te)
             m = localization_metrics(pred, xy_te, coordinate_range=crange)
-            rs = _random_splits(spec, F_te, xy_te, crange, n_repeats=5 if quick else n_repeats, seed=seed)
+            rs = _random_splits(spec, G_te, xy_te, crange, n_repeats=5 if quick else n_repeats, seed=seed)
             name = config_name(rname, oname, control, tname)
             res[name] = {"MAE x (%)": m["mae_x_pct"], "MAE y (%)": m["mae_y_pct"], "MAE x (m)": m["mae_x"],
                          "MAE y (m)": m["mae_y"], "MED (m)": m["med"],
