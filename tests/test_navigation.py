@@ -476,6 +476,40 @@ def test_metric_descent_reaches_targets_in_the_open_and_behind_a_wall():
     assert world.free(geo.path[:, 0], geo.path[:, 1], 0.35 - 1e-9).all()
 
 
+def test_scaled_cost_puts_metric_costs_on_the_slow_feature_scale():
+    """ScaledCost divides any cost by the run's spread; run_spread of a
+    uniform square of side 2a is a / sqrt(3); with the scale, the thesis's
+    rule (eta 1, gamma 0.5) on noisy position estimates reaches targets
+    nearly straight."""
+    rng = np.random.default_rng(0)
+    sq = rng.uniform(-3.0, 3.0, (200000, 2))
+    assert abs(nav.run_spread(sq) - 3.0 / np.sqrt(3.0)) < 0.01
+    t, F = np.array([1.0, 2.0]), rng.normal(size=(5, 2))
+    np.testing.assert_allclose(nav.ScaledCost(2.5)(t, 2)(F), nav.SlowFeatureCost(t, 2)(F) / 2.5)
+    world = _wall_world()
+    field = nav.GeodesicField(_exploration(world))
+    np.testing.assert_allclose(nav.ScaledCost(4.0, field.cost)(t, 2)(F), field.cost(t, 2)(F) / 4.0)
+    for bad, exc in ((0.0, ValueError), (-1.0, ValueError), (float("nan"), ValueError), ("1", TypeError)):
+        with pytest.raises(exc, match="scale"):
+            nav.ScaledCost(bad)
+    with pytest.raises(ValueError, match="positions must be"):
+        nav.run_spread(np.zeros(3))
+    with pytest.raises(ValueError, match="spread"):
+        nav.run_spread(np.ones((4, 2)))
+    # closed loop in an open 12 x 12 m world: features = noisy positions (metres)
+    open_world = World.generate(3, area=(12.0, 12.0), n_objects=4)
+    feats = nav.CoordinateFeatures(lambda X: X + 0.1 * rng.standard_normal(X.shape))
+    robot = Robot.two_cameras(0.7, noise=OdometryNoise())
+    cost = nav.ScaledCost(nav.run_spread(_exploration(open_world)))
+    effs = []
+    for start, target in (((-4.5, -4.5), (-4.0, 4.5)), ((-4.5, 4.0), (3.0, -4.0)), ((4.0, -4.5), (-4.5, 3.0))):
+        sim = nav.PointSimulator(robot=robot, world=open_world)
+        r = nav.Navigator(sim, feats, nav.ThesisDescent(1.0, 0.5), max_iterations=150, cost=cost).run(start, target)
+        assert r.success, r.reason
+        effs.append(r.direct / r.travelled)
+    assert np.mean(effs) > 0.8, effs
+
+
 def test_metric_features_localize_rendered_views(tiny_world):
     """MetricFeatures: a fitted Localizer's position estimates of rendered
     camera poses; refused unfitted."""

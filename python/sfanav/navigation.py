@@ -43,6 +43,8 @@ import numpy as np
 
 __all__ = [
     "SlowFeatureCost",
+    "ScaledCost",
+    "run_spread",
     "beta_weights",
     "difference_quotient",
     "plane_gradient",
@@ -779,6 +781,58 @@ class MetricFeatures(ImageFeatures):
 
     def __call__(self, poses: Any) -> np.ndarray:
         return np.asarray(self.localizer.predict(self.render(poses)), float)
+
+
+def run_spread(positions: Any) -> float:
+    """The spread (m) of an exploration run's positions (N, 2): the RMS of
+    their standard deviations along x and y. SFA's outputs have unit
+    variance over the training run, so metric positions divided by this are
+    on the scale of slow features (see :class:`ScaledCost`)."""
+    P = np.asarray(positions, dtype=float)
+    if P.ndim != 2 or P.shape[1] != 2 or len(P) < 2:
+        raise ValueError(f"positions must be (N >= 2, 2) metres, got shape {P.shape}")
+    if not np.isfinite(P).all():
+        raise ValueError("positions contain NaN or inf")
+    spread = float(np.sqrt(np.mean(P.var(axis=0))))
+    if not spread > 0:
+        raise ValueError("the positions do not spread: all at one place")
+    return spread
+
+
+class ScaledCost:
+    """A :class:`Navigator` ``cost=``: another cost divided by ``scale``.
+
+    The thesis's descent rule (eta 1, gamma 0.5) was set for costs in
+    slow-feature space, whose outputs have unit variance over the training
+    run. On metric features (:class:`MetricFeatures`, metres) the same rule
+    takes steps ``scale`` times too long; ``ScaledCost(run_spread(run_xy))``
+    puts the metric cost on the slow features' scale, as if the outputs were
+    the ideal x / y codes of unit variance (beyond the thesis;
+    docs/navigation.md). ``cost``: the cost factory to scale
+    (default :class:`SlowFeatureCost`; e.g. ``GeodesicField(run_xy).cost``)."""
+
+    def __init__(self, scale: float, cost: Callable[..., SlowFeatureCost] | None = None) -> None:
+        if isinstance(scale, bool) or not isinstance(scale, (int, float, np.integer, np.floating)):
+            raise TypeError(f"scale must be a number, got {type(scale).__name__}")
+        if not (np.isfinite(scale) and scale > 0):
+            raise ValueError(f"scale must be a positive finite number (metres per unit), got {scale}")
+        self.scale = float(scale)
+        self.base = cost if cost is not None else SlowFeatureCost
+
+    def __call__(self, target_features: Any, n_outputs: int = 2, weights: Any = None) -> SlowFeatureCost:
+        return _Scaled(self.base(target_features, n_outputs, weights), self.scale)
+
+    def __repr__(self) -> str:
+        return f"ScaledCost({self.scale:.4g}, {getattr(self.base, '__qualname__', repr(self.base))})"
+
+
+class _Scaled(SlowFeatureCost):
+    def __init__(self, inner: SlowFeatureCost, scale: float) -> None:
+        self.inner, self.scale = inner, scale
+        self.n, self.target, self.weights = inner.n, inner.target, inner.weights
+
+    def __call__(self, features: Any) -> np.ndarray:
+        return np.asarray(self.inner(features), dtype=float) / self.scale
 
 
 class GeodesicField:

@@ -287,34 +287,38 @@ def metric_localizer(sc: Scene, out: Path, seed: int, *, progress: bool = False)
 def metric_arms(sc: Scene, out: Path, seed: int, starts: np.ndarray, targets: np.ndarray,
                 optimal: np.ndarray | None, *, progress: bool = False) -> tuple[list[dict[str, Any]], list[str], list[str]]:
     """Navigation in the learned metric space on the same trials: the thesis
-    rule on the distance between estimated positions, :class:`MetricDescent`
-    without and with the exploration run's :class:`GeodesicField`. Returns
-    (rows, plots, notes)."""
+    rule (eta 1, gamma 0.5) on the distance between estimated positions and
+    on the exploration run's geodesic distance, both divided by the run's
+    spread (:class:`ScaledCost`: the slow features' unit-variance scale the
+    rule was set for), and :class:`MetricDescent` without and with the
+    run's :class:`GeodesicField`. Returns (rows, plots, notes)."""
     loc, cam = metric_localizer(sc, out, seed, progress=progress)
     feats = nav.MetricFeatures(loc, sc.simulator.renderer, cam)
-    field = nav.GeodesicField(sc.trajectory.poses[:, :2])
-    arms = [("thesis rule, metric cost", nav.ThesisDescent(ETA, GAMMA)),
-            ("metric descent", nav.MetricDescent()),
-            ("metric descent + geodesic field", nav.MetricDescent(field=field))]
+    run_xy = sc.trajectory.poses[:, :2]
+    field = nav.GeodesicField(run_xy)
+    spread = nav.run_spread(run_xy)  # metres per slow-feature unit: the thesis rule's eta and gamma apply
+    arms = [("thesis rule, metric cost", nav.ThesisDescent(ETA, GAMMA), nav.ScaledCost(spread)),
+            ("thesis rule, geodesic metric cost", nav.ThesisDescent(ETA, GAMMA), nav.ScaledCost(spread, field.cost)),
+            ("metric descent", nav.MetricDescent(), None),
+            ("metric descent + geodesic field", nav.MetricDescent(field=field), None)]
     rows: list[dict[str, Any]] = []
     plots: list[str] = []
     notes: list[str] = []
-    for name, d in arms:
+    for name, d, cost in arms:
         navi = nav.Navigator(sc.simulator, feats, d, n_outputs=2, success_radius=SUCCESS_RADIUS,
-                             max_iterations=QUICK_ITERATIONS if sc.quick else MAX_ITERATIONS)
+                             max_iterations=QUICK_ITERATIONS if sc.quick else MAX_ITERATIONS, cost=cost)
         s = nav.evaluate_trials(navi, starts, targets, optimal_lengths=optimal, progress=progress, desc=name)
         rows += _summary_rows(name, s, None)
         rows.append({"metric": f"mean stops ({name})", "thesis": None, "sfanav": s.mean_iterations})
         notes.append(f"{name}: {_reasons(s)}")
-        if name != "thesis rule, metric cost":
-            sel = _pick(s.results, 8)
-            tag = name.replace(" ", "-").replace("+", "plus").replace(",", "")
-            plots.append(str(nav.plot_trajectories(
-                [s.results[i] for i in sel], out / f"7.1-{sc.name.split('-')[-1]}-trajectories-{tag}.png",
-                world=sc.world,
-                titles=[("reached" if s.results[i].success else s.results[i].reason)
-                        + (f" e={s.efficiencies[i]:.2f}" if s.results[i].success else "") for i in sel],
-                title=f"7.1: {name}")))
+        sel = _pick(s.results, 8)
+        tag = name.replace(" ", "-").replace("+", "plus").replace(",", "")
+        plots.append(str(nav.plot_trajectories(
+            [s.results[i] for i in sel], out / f"7.1-{sc.name.split('-')[-1]}-trajectories-{tag}.png",
+            world=sc.world,
+            titles=[("reached" if s.results[i].success else s.results[i].reason)
+                    + (f" e={s.efficiencies[i]:.2f}" if s.results[i].success else "") for i in sel],
+            title=f"7.1: {name}")))
     return rows, plots, notes
 
 
@@ -429,8 +433,10 @@ def _run_71(kind: str, out: Path, *, quick: bool, seed: int, progress: bool) -> 
         + ("a GP readout of the quick network" if quick else
            "the sfanav default (horizon band, 12 outputs, 350x40 RGB renders of the training run, GP readout, "
            "8 rotations pooled)")
-        + "; the cost is the distance between the cameras' and the target image's estimated positions; "
-        "MetricDescent heads for the target through a rigid odometry-to-map fit, with the geodesic field over the "
+        + "; the cost is the distance between the cameras' and the target image's estimated positions (or the "
+        "training run's geodesic distance between them), divided by the run's spread (RMS std of its positions, "
+        f"{nav.run_spread(sc.trajectory.poses[:, :2]):.2f} m) for the thesis rule, which then runs with the thesis's eta and gamma on unit-variance 'ideal' "
+        "x / y features; MetricDescent heads for the target through a rigid odometry-to-map fit, with the geodesic field over the "
         "training run's positions (ground truth here) when the run's path is > 1.2x the straight line. "
         + "Outcomes: " + "; ".join(notes_runs) + "."
     )
