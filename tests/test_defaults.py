@@ -355,6 +355,7 @@ def test_cli_default_train_localize_round_trip(tmp_path, capsys):
     assert cli.main(["train", "--dataset", str(ds.root), "--out", str(model), "--no-progress"]) == 0
     out = capsys.readouterr().out
     assert "readout gp(" in out or "readout kernel(" in out or "readout knn(" in out
+    assert "on features pooled over 8 rotations" in out
     loc = sfanav.load(model)
     assert loc.readout == "auto" and loc.rows.band == (-10.0, 20.0) and loc.info["configuration"] == "sfanav default"
     kind, state, manifest = read_model(model)

@@ -362,7 +362,8 @@ def _run_train(args: argparse.Namespace) -> int:
         loc.info["mirror"] = list(conformer.mirror_used)  # localize and evaluate reuse it
     loc.save(out)
     m = loc.train_metrics_
-    print(f"trained on {len(images)} images in {loc.info['fit_seconds']:.1f} s, readout {loc.describe_readout()} "
+    pool = f" on features pooled over {loc.rotation_pooling_} rotations" if loc.rotation_pooling_ > 1 else ""
+    print(f"trained on {len(images)} images in {loc.info['fit_seconds']:.1f} s, readout {loc.describe_readout()}{pool} "
           f"in {loc.info['readout_seconds']:.1f} s (total {time.perf_counter() - t0:.1f} s); "
           f"training-run fit: MED {m['med']:.3f} m, MAE x {m['mae_x_pct']:.2f} %, y {m['mae_y_pct']:.2f} %")
     print(f"wrote {out}")
