@@ -301,3 +301,24 @@ def test_gardens_ablation_has_rotation_pooled_readouts(tmp_path):
         assert np.isfinite(row["MAE x (%)"]) and row["MAE x (%)"] > 0 and row["numbers per image"] == 8
     # same network (same eta and training time), different features
     assert plain["training (s)"] == pooled["training (s)"] and plain["MAE x (%)"] != pooled["MAE x (%)"]
+
+
+def test_gardens_experiment_quick_runs_every_configuration(tmp_path):
+    """`sfanav experiment gardens --quick` end to end: every row and training
+    variant (incl. top-layer spatial pairs on the two-layer quick network),
+    the default and its pooling ablation, written as JSON."""
+    import json
+
+    from sfanav import experiments
+    from sfanav.experiments.gardens import TRAIN_VARIANTS
+
+    res = experiments.run("gardens", tmp_path, quick=True, seed=0, progress=False)
+    metrics = {r["metric"] for r in res.rows}
+    for cfg in ("thesis config", "sfanav default", "sfanav default without rotation pooling", "rotation pooling",
+                "readout: kernel ridge + rotation pooling", "control: sfanav default"):
+        assert f"MAE x (%) [{cfg}]" in metrics, cfg
+    for variant in TRAIN_VARIANTS:
+        if variant:
+            assert f"MAE x (%) [{variant}]" in metrics, variant
+    saved = json.loads((tmp_path / "gardens.json").read_text())
+    assert saved["experiment"] == "gardens" and len(saved["rows"]) == len(res.rows)

@@ -323,8 +323,11 @@ def run_scene(out: Path, preset: str, seed: int, *, quick: bool, progress: bool,
                      "loop closures within 0.5 m (%)": float(100 * np.mean(true_d < 0.5)) if len(lc) else None}
             log(f"{tag} seed {seed} {tname}: {len(lc)} loop closures, "
                 f"{extra['loop closures within 0.5 m (%)'] or 0:.0f} % within 0.5 m (ground truth)")
+        pair_layers = (topts or {}).get("pair_layers")
+        if quick and pair_layers:  # "top" = Table 5.1's layer 4; the quick network's top is its last layer
+            pair_layers = [len(net.config_["layers"])]
         net.fit(seq, Rotation(step=5, window=1.0), progress=False, transition_weight=tw, pairs=pairs,
-                pair_layers=(topts or {}).get("pair_layers"))
+                pair_layers=pair_layers)
         fit_s = time.perf_counter() - t0
         F_tr, F_te = net.transform(A_tr), net.transform(A_te)
         R = net.transform(A_tr, rotations=True)
