@@ -96,7 +96,7 @@ class Localizer:
         of the panorama in steps of about W / K px (W its width; the step
         :func:`pooling_step` picks), so the readout sees features that no
         longer depend on the heading (the network is only approximately
-        invariant: eta_phi > 0). About twice the network's work per image
+        invariant: eta_phi > 0). About 3x the network's work per image
         for K = 8 (the core shares the lower layers across rotations). ``"auto"``: K = 8 (the sfanav default;
         docs/gardens.md) unless ``readout="quadratic"`` (the thesis's
         configuration: no pooling); None or 1: no pooling.
