@@ -97,13 +97,14 @@ class Localizer:
         :func:`pooling_step` picks), so the readout sees features that no
         longer depend on the heading (the network is only approximately
         invariant: eta_phi > 0). About 3x the network's work per image
-        for K = 8 (the core shares the lower layers across rotations). ``"auto"``: K = 8 (the sfanav default;
-        docs/gardens.md) unless ``readout="quadratic"`` (the thesis's
-        configuration: no pooling); None or 1: no pooling.
+        for K = 8 (the core shares the lower layers across rotations).
+        ``"auto"``: K = 8 (the sfanav default; docs/gardens.md) unless
+        ``readout="quadratic"`` (the thesis's configuration: no pooling);
+        None or 1: no pooling.
 
     Attributes
     ----------
-    regression_ : QuadraticRegression, KernelRidgeReadout or KNNReadout
+    regression_ : QuadraticRegression, GPReadout, KernelRidgeReadout or KNNReadout
         The fitted readout (``predict(features)`` -> (N, 2) metres).
     readout_spec_ : dict
         Its spec (kind, n_outputs and hyperparameters).
