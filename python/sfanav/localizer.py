@@ -32,7 +32,7 @@ from .readout import make_readout, readout_from_state, readout_state, select_aut
 from .regression import QuadraticRegression
 from .sfa import NotFittedError
 
-__all__ = ["Localizer", "pooling_step"]
+__all__ = ["Localizer", "pooled_transform", "pooling_step"]
 
 
 READOUTS = ("auto", "quadratic")
@@ -56,6 +56,18 @@ def pooling_step(network: Network, width: int, k: int) -> int:
         if math.gcd(step, period) == 1:
             return step
     return base
+
+
+def pooled_transform(network: Network, images: Any, k: int) -> np.ndarray:
+    """``network``'s outputs of images (N, H, W[, C]) or one image, averaged
+    over ``k`` rotations of each panorama in steps of
+    :func:`pooling_step` px: (N, n) or (n,)."""
+    a = np.asarray(images)
+    single = a.ndim == (2 if network.input_shape[2] == 1 else 3)
+    width = a.shape[1] if single else (a.shape[2] if a.ndim >= 3 else 0)
+    if width < k:
+        raise ValueError(f"rotation_pooling={k} needs panoramas at least {k} px wide, got {width} px")
+    return network.transform(a, rotations=True, step=pooling_step(network, width, k)).mean(axis=-2)
 
 
 class Localizer:
@@ -209,12 +221,7 @@ class Localizer:
                 f"this Localizer averages its features over {k} rotations already (rotation_pooling); "
                 "rotations=True needs a localizer without pooling (rotation_pooling=None)"
             )
-        a = np.asarray(images)
-        single = a.ndim == (2 if net.input_shape[2] == 1 else 3)
-        width = a.shape[1] if single else (a.shape[2] if a.ndim >= 3 else 0)
-        if width < k:
-            raise ValueError(f"rotation_pooling={k} needs panoramas at least {k} px wide, got {width} px")
-        return net.transform(images, rotations=True, step=pooling_step(net, width, k)).mean(axis=-2)
+        return pooled_transform(net, images, k)
 
     def _pooling(self) -> int:
         """The rotations averaged per image: the fitted value, else the

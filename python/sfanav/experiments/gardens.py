@@ -51,7 +51,7 @@ import numpy as np
 
 from .. import analysis, baselines, regression, sim
 from ..imagerows import ImageRows
-from ..localizer import ROTATION_POOLING, Localizer, pooling_step
+from ..localizer import ROTATION_POOLING, Localizer, pooled_transform
 from ..metrics import localization_metrics
 from ..network import Network, Rotation, spatial_pairs
 from ..readout import (auto_candidates, default_candidates, describe_spec, make_readout, select_auto_readout,
@@ -342,9 +342,8 @@ def run_scene(out: Path, preset: str, seed: int, *, quick: bool, progress: bool,
         sels: dict[Any, Any] = {}  # one CV per readout kind; "best" takes the lowest CV error among them
         pooled = [k for k in POOLED_READOUTS if k in readouts]
         if pooled:
-            step = pooling_step(net, A_tr.shape[2], ROTATION_POOLING)
-            P_tr = net.transform(A_tr, rotations=True, step=step).mean(axis=1)
-            P_te = net.transform(A_te, rotations=True, step=step).mean(axis=1)
+            P_tr = pooled_transform(net, A_tr, ROTATION_POOLING)
+            P_te = pooled_transform(net, A_te, ROTATION_POOLING)
         for oname, kinds in readouts.items():
             G_tr, G_te = (P_tr, P_te) if oname in pooled else (F_tr, F_te)
             if kinds is None:
