@@ -242,6 +242,24 @@ def test_ground_shadows(garden):
     assert ren._shadow_map(Lighting(shadows=False)).max() == 0
 
 
+
+def test_uniform_lawn_has_one_colour_and_the_same_objects():
+    kw = dict(seed=3, area=(6.0, 6.0), n_objects=8, depth=6.0)
+    patchy, uniform = World.generate(**kw), World.generate(**kw, lawn="uniform")
+    assert uniform.to_dict()["objects"] == patchy.to_dict()["objects"]
+    # the colour map under the area: several metres-scale shades on the patchy lawn, one on the uniform
+    for world, spread in ((patchy, (0.02, None)), (uniform, (None, 1e-4))):
+        ren = Renderer(world)
+        n, res, o = ren._gmap_n, ren._gmap_res, ren._gmap_origin
+        i = ((np.linspace(-3, 3, 31) - o) / res).astype(int)
+        col = ren._gmap[np.ix_(i, i)].reshape(-1, 3)
+        sd = float(col.std(axis=0).max())
+        lo, hi = spread
+        assert (lo is None or sd > lo) and (hi is None or sd < hi), (world.ground, sd)
+    assert World.from_dict(uniform.to_dict()).ground == uniform.ground
+    with pytest.raises(ValueError, match="lawn must be one of 'patchy', 'uniform', got 'striped'"):
+        World.generate(n_objects=0, lawn="striped")
+
 def test_dynamic_object_moves_and_circles_back():
     world = posts((0.0, 15.0, 0.1, (0.2, 0.2, 0.2)))
     world.add_dynamic({"orbit": 5.0, "period": 40.0})

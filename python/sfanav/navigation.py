@@ -727,11 +727,16 @@ class ImageFeatures:
     """Slow features of camera poses: renders each pose with ``renderer``
     and ``camera`` and transforms the images with a trained ``network``.
 
+    ``rows``: an :class:`sfanav.ImageRows` applied to the rendered images
+    before the network (e.g. a fitted Localizer's ``rows``: the sfanav
+    default's horizon band).
+
     ``features(poses (k, 3)) -> (k, n_outputs)``; ``images`` counts the
     images processed."""
 
-    def __init__(self, network: Any, renderer: Any, camera: Any, *, lighting: Any = None) -> None:
+    def __init__(self, network: Any, renderer: Any, camera: Any, *, lighting: Any = None, rows: Any = None) -> None:
         self.network, self.renderer, self.camera, self.lighting = network, renderer, camera, lighting
+        self.rows = None if rows is None or getattr(rows, "identity", False) else rows
         self.images = 0
 
     def render(self, poses: Any) -> np.ndarray:
@@ -742,7 +747,10 @@ class ImageFeatures:
         return imgs
 
     def __call__(self, poses: Any) -> np.ndarray:
-        return np.asarray(self.network.transform(self.render(poses)), float)
+        imgs = self.render(poses)
+        if self.rows is not None:
+            imgs = self.rows(imgs)
+        return np.asarray(self.network.transform(imgs), float)
 
 
 class CoordinateFeatures:

@@ -48,6 +48,7 @@ THESIS = {
 ETA, GAMMA = 1.0, 0.5  # thesis 7.1.2
 SUCCESS_RADIUS, MAX_ITERATIONS = 0.5, 400
 QUICK_ITERATIONS = 40
+DEFAULT_NET_WEIGHTED_N = 8  # outputs of the sfanav default network in its weighted arms (7.2.1's remedy)
 IMAGE_TRIALS_ENV = "SFANAV_NAV_IMAGE_TRIALS"
 
 
@@ -128,6 +129,19 @@ def scene(kind: str, seed: int = 0, *, quick: bool = False) -> Scene:
     return Scene(name, world, p.camera(), p.robot(), traj, False)
 
 
+def _cache_name(sc: Scene, what: str, seed: int, *parts: Any) -> str:
+    """``<what>-seed<seed>-<key>.sfanav``: ``key`` hashes the world, the
+    training trajectory and ``parts`` (the network's configuration), so a
+    cached network of another scene version is never reused."""
+    import hashlib
+    import json
+
+    h = hashlib.sha1(json.dumps(sc.world.to_dict(), sort_keys=True, default=str).encode())
+    h.update(np.ascontiguousarray(sc.trajectory.poses, np.float64).tobytes())
+    h.update(json.dumps(parts, sort_keys=True, default=str).encode())
+    return f"{what}-seed{seed}-{h.hexdigest()[:10]}.sfanav"
+
+
 def network_config(quick: bool) -> dict[str, Any]:
     """The network: thesis Table 5.2 (600 x 60 RGB) in mixed precision, or a
     two-layer network for 120 x 16 gray panoramas (quick)."""
@@ -151,7 +165,7 @@ def scene_network(sc: Scene, out: Path, seed: int, *, progress: bool = False) ->
     from ..modelfile import load
     from ..network import Network, Rotation
 
-    cache = Path(out) / "cache" / f"{sc.name}-seed{seed}.sfanav"
+    cache = Path(out) / "cache" / _cache_name(sc, sc.name, seed, network_config(sc.quick), "rotation 5/10 px")
     if cache.exists():
         return load(cache)
     renderer = sc.simulator.renderer
@@ -186,8 +200,11 @@ def _descents() -> list[Any]:
     return [nav.ThesisDescent(ETA, GAMMA), nav.RobustDescent()]
 
 
-def _grid_features(sc: Scene, net: Any, spacing: float, progress: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """SFA outputs on a grid over the area (NaN where the robot cannot stand)."""
+def _grid_features(sc: Scene, net: Any, spacing: float, progress: bool, *, camera: Any = None,
+                   rows: Any = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """SFA outputs on a grid over the area (NaN where the robot cannot stand),
+    rendered with ``camera`` (default: the scene's), ``rows`` applied."""
+    camera = sc.camera if camera is None else camera
     w, h = sc.area
     xs = np.arange(-w / 2 + spacing / 2, w / 2, spacing)
     ys = np.arange(-h / 2 + spacing / 2, h / 2, spacing)
@@ -203,8 +220,8 @@ def _grid_features(sc: Scene, net: Any, spacing: float, progress: bool) -> tuple
         it = tqdm(it, desc="cost surface", unit="batch", leave=False)
     for k in it:
         chunk = idx[k : k + 64]
-        imgs = np.stack([renderer.render(sc.camera, (X[i, j], Y[i, j], 0.0)) for i, j in chunk])
-        F[chunk[:, 0], chunk[:, 1]] = net.transform(imgs)
+        imgs = np.stack([renderer.render(camera, (X[i, j], Y[i, j], 0.0)) for i, j in chunk])
+        F[chunk[:, 0], chunk[:, 1]] = net.transform(imgs if rows is None else rows(imgs))
     return xs, ys, F
 
 
@@ -262,7 +279,7 @@ def metric_localizer(sc: Scene, out: Path, seed: int, *, progress: bool = False)
     from ..sim.render import PanoramicCamera
 
     cam = sc.camera if sc.quick else PanoramicCamera(350, 40)
-    cache = Path(out) / "cache" / f"metric-{sc.name}-seed{seed}.sfanav"
+    cache = Path(out) / "cache" / _cache_name(sc, f"metric-{sc.name}", seed, "sfanav default + gp, pooled", cam.to_dict())
     if cache.exists():
         loc = load(cache)
         if isinstance(loc, Localizer):
@@ -386,6 +403,32 @@ def _run_71(kind: str, out: Path, *, quick: bool, seed: int, progress: bool) -> 
             titles=[("reached" if s.results[i].success else s.results[i].reason)
                     + (f" e={s.efficiencies[i]:.2f}" if s.results[i].success else "") for i in sel],
             title=f"7.1 {kind}: {d.name}")))
+    # the sfanav default network's slow features (horizon band, wider layers: the metric arms' localizer's
+    # network, unpooled), n = 2 raw (the thesis's setting) and n = 8 weighted by beta_1 / beta_i (7.2.1's remedy)
+    loc, dcam = metric_localizer(sc, out, seed, progress=progress)
+    dnet = loc.network
+    n_w = min(DEFAULT_NET_WEIGHTED_N, dnet.n_outputs_)
+    dw = nav.beta_weights(np.asarray(dnet.beta_values_, float)[:n_w], relative=True)
+    for n, wts, tag in ((2, None, "n = 2"), (n_w, dw, f"n = {n_w} weighted")):
+        for d in _descents():
+            label = f"{d.name}, sfanav default network, {tag}"
+            navi = nav.Navigator(sc.simulator, nav.ImageFeatures(dnet, sc.simulator.renderer, dcam, rows=loc.rows),
+                                 d, n_outputs=n, weights=wts, success_radius=SUCCESS_RADIUS,
+                                 max_iterations=QUICK_ITERATIONS if quick else MAX_ITERATIONS)
+            s = nav.evaluate_trials(navi, starts[:n_img], targets[:n_img],
+                                    optimal_lengths=None if optimal is None else optimal[:n_img], progress=progress,
+                                    desc=label)
+            rows += _summary_rows(label, s, None)
+            rows.append({"metric": f"mean stops ({label})", "thesis": None, "sfanav": s.mean_iterations})
+            notes_runs.append(f"{label}: {_reasons(s)}")
+            if d.name == "thesis rule":
+                sel = _pick(s.results, 8)
+                plots.append(str(nav.plot_trajectories(
+                    [s.results[i] for i in sel], out / f"7.1-{kind}-trajectories-default-network-n{n}.png",
+                    world=sc.world, optimal=[opt_paths[i] for i in sel],
+                    titles=[("reached" if s.results[i].success else s.results[i].reason)
+                            + (f" e={s.efficiencies[i]:.2f}" if s.results[i].success else "") for i in sel],
+                    title=f"7.1 {kind}: {label}")))
     # the same trials with slow features of the coordinates (the ideal case of the image network)
     model = coordinate_model(sc)
     for d in _descents():
@@ -410,6 +453,17 @@ def _run_71(kind: str, out: Path, *, quick: bool, seed: int, progress: bool) -> 
     for n in (2, 8):
         rows.append({"metric": f"position code: RMS of x, y from s1-s{n} (m)", "thesis": None,
                      "sfanav": position_code_error(xs, ys, F, n)})
+    dxs, dys, DF = _grid_features(sc, dnet, 0.75 if quick else 0.5, progress, camera=dcam, rows=loc.rows)
+    for n in (2, n_w):
+        rows.append({"metric": f"position code: RMS of x, y from s1-s{n} (m), sfanav default network", "thesis": None,
+                     "sfanav": position_code_error(dxs, dys, DF, n)})
+    dtf = nav.ImageFeatures(dnet, sc.simulator.renderer, dcam, rows=loc.rows)(
+        np.array([[targets[0][0], targets[0][1], 0.0]]))[0]
+    plots.append(str(nav.plot_cost_surface(dxs, dys, DF, dtf, out / f"7.1-{kind}-cost-surface-default-network.png",
+                                           ns=(2, n_w), weights=np.concatenate([dw, np.ones(DF.shape[-1] - n_w)]),
+                                           n_firing=4, target=targets[0], world=sc.world,
+                                           title=f"7.1 {kind}: sfanav default network, s1-s4, cost n = 2 and "
+                                                 f"{n_w} (weighted)")))
     tf = _navigator(sc, net, None).target_features(targets[0])
     plots.append(str(nav.plot_cost_surface(xs, ys, F, tf, out / f"7.1-{kind}-cost-surface.png", ns=(2,), n_firing=4,
                                            target=targets[0], world=sc.world,
@@ -429,6 +483,11 @@ def _run_71(kind: str, out: Path, *, quick: bool, seed: int, progress: bool) -> 
         "training trajectory's positions, the image network's ideal case), a point robot with exact odometry. "
         "'position code' rows: RMS error of x, y fitted as a quadratic function of the image network's first 2 / 8 "
         "outputs on a 0.5 m grid (how well the representation codes position). "
+        "Rows 'sfanav default network': the same trials (as many as the image network's) on the raw slow features "
+        "of the network of the metric arms' localizer (" + ("the quick two-layer network" if quick else
+        "the sfanav default: horizon band, wider layers, 350x40 renders, unpooled") + f"), n = 2 raw and n = {n_w} "
+        "weighted by beta_1/beta_i (7.2.1's remedy), thesis rule eta 1 and robust descent; position-code rows "
+        "likewise on its outputs. "
         "Rows 'metric cost' / 'metric descent' (beyond the thesis): the same trials with the cameras localized by "
         + ("a GP readout of the quick network" if quick else
            "the sfanav default (horizon band, 12 outputs, 350x40 RGB renders of the training run, GP readout, "

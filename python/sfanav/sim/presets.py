@@ -200,9 +200,10 @@ _add(Preset(
 ))
 _add(Preset(
     "thesis-7.1-open", "7.1.2",
-    "18x22 m open field, two cameras on the robot's left and right (0.7 m apart), 5000 frames along random "
-    "straight lines at 0.2 m per step, 600x60 RGB panoramas per camera",
-    _garden((18.0, 22.0), 36),
+    "18x22 m open field on a uniformly coloured lawn (the thesis's textured ground plane), two cameras on the "
+    "robot's left and right (0.7 m apart), 5000 frames along random straight lines at 0.2 m per step, 600x60 RGB "
+    "panoramas per camera",
+    _garden((18.0, 22.0), 36, lawn="uniform"),
     lambda: PanoramicCamera(600, 60),
     lambda rng: [RunSpec("train", lambda w, r: T.random_lines(w.area, 5000, 0.2, margin=0.35, world=w, rng=r))],
     robot=lambda: Robot.two_cameras(0.7),
@@ -210,7 +211,7 @@ _add(Preset(
 _add(Preset(
     "thesis-7.1-obstacle", "7.1.2",
     "as thesis-7.1-open with a v-shaped wall in the area; the random lines bounce off it",
-    _garden((18.0, 22.0), 36, obstacles=("v-wall",)),
+    _garden((18.0, 22.0), 36, obstacles=("v-wall",), lawn="uniform"),
     lambda: PanoramicCamera(600, 60),
     lambda rng: [RunSpec("train", lambda w, r: T.random_lines(w.area, 5000, 0.2, margin=0.35, world=w, rng=r))],
     robot=lambda: Robot.two_cameras(0.7),

@@ -185,6 +185,9 @@ class GroundSpec:
     patches: tuple = ()  # ground patches painted over the lawn (see PATCH_KINDS)
 
 
+LAWNS = ("patchy", "uniform")
+
+
 @dataclass
 class SkySpec:
     """Sky gradient with clouds and a distant tree line at the horizon
@@ -277,6 +280,7 @@ class World:
         cloud_cover: float = 0.45,
         inner: dict[str, int] | None = None,
         patches: dict[str, int] | None = None,
+        lawn: str = "patchy",
     ) -> "World":
         """Generates a garden, deterministically from ``seed``.
 
@@ -325,6 +329,14 @@ class World:
             Ground patches inside the area, counts per kind from
             ``PATCH_KINDS`` (``patio``, ``path``, ``bed``); see
             :class:`GroundSpec`. Also their own random stream.
+        lawn : {"patchy", "uniform"}
+            ``"patchy"`` (default): the lawn's colour varies over metres (two
+            greens mixed by fractal noise, with drier patches), as real lawns
+            do. ``"uniform"``: one green everywhere, only the tiled grass
+            detail and the objects' shadows vary (the thesis's Blender
+            garden: "a textured ground plane"). A hierarchical SFA network
+            trained on a patchy lawn codes the lawn's colour around the robot
+            in its slowest outputs (docs/navigation.md).
         """
         if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)):
             raise TypeError(f"seed must be an integer, got {type(seed).__name__}")
@@ -340,6 +352,8 @@ class World:
             raise ValueError(f"depth must be positive (m), got {depth}")
         if not 0 <= cloud_cover <= 1:
             raise ValueError(f"cloud_cover must be in [0, 1], got {cloud_cover}")
+        if lawn not in LAWNS:
+            raise ValueError(f"lawn must be one of {', '.join(map(repr, LAWNS))}, got {lawn!r}")
         wts = dict(DEFAULT_WEIGHTS if weights is None else weights)
         unknown = set(wts) - set(OBJECT_TYPES)
         if unknown:
@@ -352,6 +366,9 @@ class World:
         r_out = r_free + depth
         world = cls(area=(w, h), free_radius=r_free, outer_radius=r_out, seed=int(seed))
         world.ground = GroundSpec(seed=int(rng.integers(2**31)))
+        if lawn == "uniform":
+            world.ground.green2 = world.ground.green
+            world.ground.dry_fraction = 0.0
         world.sky = SkySpec(seed=int(rng.integers(2**31)), cloud_cover=float(cloud_cover))
         b = _Builder(world, rng)
         placed: list[WorldObject] = []
