@@ -100,11 +100,13 @@ def _rng(seed: int, *tags: int) -> np.random.Generator:
     return np.random.default_rng(np.random.SeedSequence([int(seed), *tags]))
 
 
-def scene(kind: str, seed: int = 0, *, quick: bool = False) -> Scene:
+def scene(kind: str, seed: int = 0, *, quick: bool = False, lawn: str | None = None) -> Scene:
     """The scene of ``7.1-open`` (``kind="open"``) or ``7.1-obstacle``
     (``"obstacle"``): the preset ``thesis-7.1-<kind>`` with its own
     training trajectory, or with ``quick`` a 6 x 6 m garden with 120 x 16
-    gray panoramas and a 400-frame random-lines run."""
+    gray panoramas and a 400-frame random-lines run. ``lawn`` overrides the
+    preset's lawn (``"uniform"``; ``"patchy"``: the scenes before
+    2026-11-24, see :meth:`sfanav.sim.World.generate`)."""
     from ..sim import presets as P
     from ..sim import trajectories as T
     from ..sim.render import PanoramicCamera
@@ -116,7 +118,7 @@ def scene(kind: str, seed: int = 0, *, quick: bool = False) -> Scene:
     if quick:
         r = _rng(seed, 7, 1 if kind == "open" else 2)
         world = World.generate(int(r.integers(2**31)), area=(6.0, 6.0), n_objects=14, depth=6.0,
-                               obstacles=("v-wall",) if kind == "obstacle" else ())
+                               obstacles=("v-wall",) if kind == "obstacle" else (), lawn=lawn or "uniform")
         traj = T.random_lines(world.area, 400, 0.2, margin=0.35, world=world, rng=r)
         cam = PanoramicCamera(120, 16, rgb=False)
         robot = Robot.two_cameras(0.7, noise=OdometryNoise())
@@ -124,7 +126,7 @@ def scene(kind: str, seed: int = 0, *, quick: bool = False) -> Scene:
     name = f"thesis-7.1-{kind}"
     p = P.get(name)
     s_world, s_runs, s_traj, _ = P._streams(seed)
-    world = World.generate(int(s_world.integers(2**31)), **p.world)
+    world = World.generate(int(s_world.integers(2**31)), **{**p.world, **({"lawn": lawn} if lawn else {})})
     traj = p.runs(s_runs)[0].trajectory(world, s_traj)
     return Scene(name, world, p.camera(), p.robot(), traj, False)
 
