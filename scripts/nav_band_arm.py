@@ -73,12 +73,14 @@ def main() -> None:
     ap.add_argument("--pairs", action="store_true",
                     help="train the network with top-layer spatial pairs of the training positions")
     ap.add_argument("--no-band", action="store_true", help="train on the full panorama (with --pairs)")
+    ap.add_argument("--lawn", choices=("patchy", "uniform"), default="patchy",
+                    help="the scene's lawn (patchy: the 7.1 scenes until 2026-11-24, which the docs' numbers used)")
     ap.add_argument("--full-network", type=Path, default=None, metavar="SFANAV",
                     help="instead: the 7.1-open network (full panorama, e.g. OUT/cache/thesis-7.1-open-seed0.sfanav)")
     a = ap.parse_args()
     if not 1 <= a.trials <= 50:
         raise SystemExit("--trials must be in 1..50")
-    base = EN.scene("open", 0)
+    base = EN.scene("open", 0, lawn=a.lawn)
     t0 = time.time()
     if a.full_network is not None:
         sc, tag = base, "full"

@@ -640,7 +640,7 @@ class MetricDescent:
 
     def __init__(self, *, field: "GeodesicField | None" = None, max_step: float = 1.0, lookahead: float = 3.0,
                  window: int = 20, min_spread: float = 0.5, bump_turn: float = 45.0, bump_step: float = 0.4, near: float = 1.5,
-                 detour: float = 1.3, slack: float = 0.0, clearance: float = 0.4,
+                 detour: float = 1.2, slack: float = 0.0, clearance: float = 0.4,
                  probe_first: bool = True) -> None:
         for nm, v, lo in (("max_step", max_step, 0.0), ("lookahead", lookahead, 0.0), ("min_spread", min_spread, 0.0),
                           ("bump_turn", bump_turn, 0.0), ("bump_step", bump_step, 0.0), ("clearance", clearance, 0.0)):

@@ -498,7 +498,7 @@ def _run_71(kind: str, out: Path, *, quick: bool, seed: int, progress: bool) -> 
         "training run's geodesic distance between them), divided by the run's spread (RMS std of its positions, "
         f"{nav.run_spread(sc.trajectory.poses[:, :2]):.2f} m) for the thesis rule, which then runs with the thesis's eta and gamma on unit-variance 'ideal' "
         "x / y features; MetricDescent heads for the target through a rigid odometry-to-map fit, with the geodesic field over the "
-        "training run's positions (ground truth here) when the run's path is > 1.3x the straight line. "
+        "training run's positions (ground truth here) when the run's path is > 1.2x the straight line. "
         + "Outcomes: " + "; ".join(notes_runs) + "."
     )
     return ExperimentResult(f"7.1-{kind}", rows, plots, notes)

@@ -1,0 +1,72 @@
+"""MetricDescent's geodesic-field settings on trials other than the reported ones.
+
+Runs ``MetricDescent`` with and without the exploration run's
+``GeodesicField`` and with other ``detour`` / ``slack`` settings on 30
+trials of a 7.1 scene drawn with another trial seed (7) than
+``sfanav experiment 7.1-*`` (0), using that experiment's cached metric
+localizer; every variant starts from the same odometry noise. Prints success, efficiency and mean stops per variant.
+
+    PYTHONPATH=python python3 scripts/nav_metric_detour.py --kind open --localizer OUT/cache/metric-thesis-7.1-open-seed0-*.sfanav
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from pathlib import Path
+
+import numpy as np
+
+from sfanav import navigation as nav
+from sfanav.experiments import navigation as E
+from sfanav.modelfile import load
+from sfanav.sim.render import PanoramicCamera
+from sfanav.sim.robot import Simulator
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--kind", choices=("open", "obstacle"), default="open")
+    ap.add_argument("--localizer", type=Path, required=True, help="the experiment's cached metric localizer")
+    ap.add_argument("--trials", type=int, default=30)
+    ap.add_argument("--trial-seed", type=int, default=7)
+    a = ap.parse_args()
+    sc = E.scene(a.kind, 0)
+    loc = load(a.localizer)
+    rng = E._rng(a.trial_seed, 71, 0 if a.kind == "open" else 1)
+    free = E._free(sc)
+    opt = None
+    if a.kind == "open":
+        starts, targets = nav.sample_trials(a.trials, sc.area, free=free, min_distance=15.0, margin=0.4, rng=rng)
+    else:
+        w, h = sc.area
+        apex_y, arm = -0.15 * h, 0.3 * min(w, h)
+        target = np.array([0.0, apex_y + 0.45 * arm])
+        starts, targets = nav.sample_trials(a.trials, sc.area, free=free, min_distance=4.0, margin=0.4, target=target,
+                                            start_region=lambda x, y: y < 0 and y < apex_y + abs(x) - 0.3, rng=rng)
+        grid = nav.occupancy_grid(sc.area, lambda x, y: sc.world.free(x, y, sc.robot.size / 2), resolution=0.1,
+                                  margin=sc.robot.size / 2)
+        opt = np.array([nav.shortest_path(grid, s, t)[1] for s, t in zip(starts, targets)])
+    field = nav.GeodesicField(sc.trajectory.poses[:, :2])
+    feats = nav.MetricFeatures(loc, sc.simulator.renderer, PanoramicCamera(350, 40))
+    variants = {
+        "metric descent": {},
+        "+ geodesic field, detour 1.2": {"field": field, "detour": 1.2},
+        "+ geodesic field, detour 1.3": {"field": field, "detour": 1.3},
+        "+ geodesic field, detour 1.4": {"field": field, "detour": 1.4},
+        "+ geodesic field, detour 1.2, slack 1 m": {"field": field, "detour": 1.2, "slack": 1.0},
+        "+ geodesic field, detour 1.2, slack 2 m": {"field": field, "detour": 1.2, "slack": 2.0},
+    }
+    for name, kw in variants.items():
+        t = time.time()
+        sim = Simulator(sc.world, sc.camera, sc.robot, seed=0)  # the same odometry noise for every variant
+        sim.renderer = sc.simulator.renderer
+        navi = nav.Navigator(sim, feats, nav.MetricDescent(**kw), n_outputs=2,
+                             success_radius=E.SUCCESS_RADIUS, max_iterations=E.MAX_ITERATIONS)
+        s = nav.evaluate_trials(navi, starts, targets, optimal_lengths=opt, progress=False)
+        print(f"{a.kind} | {name} | success {s.success_rate:.2f} | efficiency {s.efficiency:.3f} | "
+              f"stops {s.mean_iterations:.1f} | {time.time() - t:.0f} s", flush=True)
+
+
+if __name__ == "__main__":
+    main()
