@@ -11,7 +11,7 @@ Networks (trained on the scene's 5000-frame run, cached in ``--cache``):
 
 For each: the position code (RMS of x, y fitted quadratically from s1-s2 and
 s1-s8 on a 0.5 m grid) and the thesis rule (eta 1, gamma 0.5) with n = 2 raw
-outputs and n = 8 weighted by beta_1/beta_i.
+outputs and n = 8 weighted by beta_1/beta_i, every arm from the same odometry noise.
 
     PYTHONPATH=python python3 scripts/nav_lawn_arms.py --lawn patchy uniform --networks thesis default --trials 10
 """
@@ -31,6 +31,7 @@ from sfanav.experiments import navigation as E
 from sfanav.modelfile import load
 from sfanav.network import Network, Rotation
 from sfanav.sim.render import PanoramicCamera
+from sfanav.sim.robot import Simulator
 
 
 class RowNorm:
@@ -105,7 +106,9 @@ def main() -> None:
             cells = []
             for n in (2, 8):
                 w = None if n == 2 else nav.beta_weights(np.asarray(net.beta_values_, float)[:n], relative=True)
-                navi = nav.Navigator(sc.simulator, nav.ImageFeatures(net, sc.simulator.renderer, cam, rows=rows),
+                sim = Simulator(sc.world, sc.camera, sc.robot, seed=0)  # every arm from the same odometry noise
+                sim.renderer = sc.simulator.renderer
+                navi = nav.Navigator(sim, nav.ImageFeatures(net, sc.simulator.renderer, cam, rows=rows),
                                      nav.ThesisDescent(E.ETA, E.GAMMA), n_outputs=n, weights=w,
                                      success_radius=E.SUCCESS_RADIUS, max_iterations=E.MAX_ITERATIONS)
                 s = nav.evaluate_trials(navi, starts, targets, optimal_lengths=opt, progress=False)
