@@ -119,3 +119,16 @@ def test_image_trials_from_the_environment(monkeypatch):
         monkeypatch.setenv(EN.IMAGE_TRIALS_ENV, bad)
         with pytest.raises(ValueError, match=EN.IMAGE_TRIALS_ENV):
             EN.image_trials(50)
+
+
+def test_cache_names_follow_the_scene():
+    from sfanav.experiments import navigation as EN
+
+    a, b = EN.scene("open", 0, quick=True), EN.scene("open", 0, quick=True)
+    cfg = EN.network_config(True)
+    assert EN._cache_name(a, a.name, 0, cfg) == EN._cache_name(b, b.name, 0, cfg)
+    patchy = EN.scene("open", 0, quick=True, lawn="patchy")
+    assert a.world.ground != patchy.world.ground
+    assert EN._cache_name(a, a.name, 0, cfg) != EN._cache_name(patchy, patchy.name, 0, cfg)
+    assert EN._cache_name(a, a.name, 0, cfg) != EN._cache_name(a, a.name, 0, {**cfg, "layers": []})
+    assert EN._cache_name(a, a.name, 0, cfg).startswith("quick-open-seed0-")

@@ -525,3 +525,23 @@ def test_metric_features_localize_rendered_views(tiny_world):
     np.testing.assert_allclose(est, loc.predict(images[:3]), atol=1e-9)
     with pytest.raises(ValueError, match="fitted"):
         nav.MetricFeatures(sfanav.Localizer(net), sim.renderer, cam)
+
+
+def test_image_features_apply_rows_before_the_network(tiny_world):
+    world, cam, sim, net = tiny_world
+
+    class Crop:  # an ImageRows stand-in: keeps rows 2..5 of 8 and repeats them back to 8
+        identity = False
+        calls = 0
+
+        def __call__(self, imgs):
+            Crop.calls += 1
+            a = np.asarray(imgs)
+            return np.concatenate([a[:, 2:6], a[:, 2:6]], axis=1)
+
+    poses = np.array([[0.5, -1.0, 0.3], [1.0, 1.5, -2.0]])
+    plain = nav.ImageFeatures(net, sim.renderer, cam)(poses)
+    cropped = nav.ImageFeatures(net, sim.renderer, cam, rows=Crop())(poses)
+    imgs = np.stack([sim.renderer.render(cam, p) for p in poses])
+    np.testing.assert_allclose(cropped, net.transform(Crop()(imgs)))
+    assert Crop.calls == 2 and not np.allclose(plain, cropped)
