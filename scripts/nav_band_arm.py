@@ -97,9 +97,7 @@ def main() -> None:
     beta = np.asarray(net.beta_values_, float)
     w = nav.beta_weights(beta, relative=True)
     # the trials of 7.1-open (50 drawn, the first --trials used)
-    rng = EN._rng(a.trial_seed, 71, 0)
-    S, T = nav.sample_trials(50, sc.area, free=EN._free(sc), min_distance=15.0, margin=0.4, rng=rng)
-    S, T = S[: a.trials], T[: a.trials]
+    S, T, *_ = EN.trials_71(sc, "open", a.trial_seed, a.trials)
     arms = [("thesis rule, n=2", nav.ThesisDescent(EN.ETA, EN.GAMMA), 2, None),
             ("robust descent, n=2", nav.RobustDescent(), 2, None),
             (f"robust descent, n={a.n} weighted", nav.RobustDescent(), a.n, w)]

@@ -68,24 +68,6 @@ def network(kind: str, sc: E.Scene, lawn: str, cache: Path) -> tuple[Any, Any, A
     return net, cam, rows
 
 
-def trials(sc: E.Scene, kind: str, k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
-    """The first k trials of the experiment (the same sampling as sfanav experiment 7.1-*)."""
-    rng = E._rng(0, 71, 0 if kind == "open" else 1)
-    free = E._free(sc)
-    if kind == "open":
-        s, t = nav.sample_trials(50, sc.area, free=free, min_distance=15.0, margin=0.4, rng=rng)
-        return s[:k], t[:k], None
-    w, h = sc.area
-    apex_y, arm = -0.15 * h, 0.3 * min(w, h)
-    target = np.array([0.0, apex_y + 0.45 * arm])
-    s, t = nav.sample_trials(50, sc.area, free=free, min_distance=4.0, margin=0.4, target=target,
-                             start_region=lambda x, y: y < 0 and y < apex_y + abs(x) - 0.3, rng=rng)
-    grid = nav.occupancy_grid(sc.area, lambda x, y: sc.world.free(x, y, sc.robot.size / 2), resolution=0.1,
-                              margin=sc.robot.size / 2)
-    opt = np.array([nav.shortest_path(grid, a, b)[1] for a, b in zip(s[:k], t[:k])])
-    return s[:k], t[:k], opt
-
-
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--kind", choices=("open", "obstacle"), default="open")
@@ -98,7 +80,7 @@ def main() -> None:
     print("|---|---|---|---|---|")
     for lawn in a.lawn:
         sc = E.scene(a.kind, 0, lawn=lawn)
-        starts, targets, opt = trials(sc, a.kind, a.trials)
+        starts, targets, opt, _, _ = E.trials_71(sc, a.kind, 0, a.trials)  # the experiment's first trials
         for kind in a.networks:
             net, cam, rows = network(kind, sc, lawn, a.cache)
             xs, ys, F = E._grid_features(sc, net, 0.5, False, camera=cam, rows=rows)

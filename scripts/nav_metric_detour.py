@@ -15,7 +15,6 @@ import argparse
 import time
 from pathlib import Path
 
-import numpy as np
 
 from sfanav import navigation as nav
 from sfanav.experiments import navigation as E
@@ -33,20 +32,7 @@ def main() -> None:
     a = ap.parse_args()
     sc = E.scene(a.kind, 0)
     loc = load(a.localizer)
-    rng = E._rng(a.trial_seed, 71, 0 if a.kind == "open" else 1)
-    free = E._free(sc)
-    opt = None
-    if a.kind == "open":
-        starts, targets = nav.sample_trials(a.trials, sc.area, free=free, min_distance=15.0, margin=0.4, rng=rng)
-    else:
-        w, h = sc.area
-        apex_y, arm = -0.15 * h, 0.3 * min(w, h)
-        target = np.array([0.0, apex_y + 0.45 * arm])
-        starts, targets = nav.sample_trials(a.trials, sc.area, free=free, min_distance=4.0, margin=0.4, target=target,
-                                            start_region=lambda x, y: y < 0 and y < apex_y + abs(x) - 0.3, rng=rng)
-        grid = nav.occupancy_grid(sc.area, lambda x, y: sc.world.free(x, y, sc.robot.size / 2), resolution=0.1,
-                                  margin=sc.robot.size / 2)
-        opt = np.array([nav.shortest_path(grid, s, t)[1] for s, t in zip(starts, targets)])
+    starts, targets, opt, _, _ = E.trials_71(sc, a.kind, a.trial_seed, a.trials)
     field = nav.GeodesicField(sc.trajectory.poses[:, :2])
     feats = nav.MetricFeatures(loc, sc.simulator.renderer, PanoramicCamera(350, 40))
     variants = {

@@ -344,39 +344,50 @@ def metric_arms(sc: Scene, out: Path, seed: int, starts: np.ndarray, targets: np
 # --------------------------------------------------------------------- 7.1
 
 
+def trials_71(sc: Scene, kind: str, seed: int, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray | None,
+                                                                np.ndarray | None, list[Any]]:
+    """The trials of ``7.1-<kind>`` from trial stream ``seed`` (the
+    experiment's is its seed; other streams give other trials; the first k
+    of n are the trials drawn with n = k). Open field: start and target
+    uniform in the free area, >= 15 m apart (3.5 m in the quick scene).
+    Obstacle: the target fixed inside the V, starts in the lower half
+    outside it, >= 4 m away (2 m quick), with the A* length (8-connected,
+    0.1 m grid, obstacles inflated by the robot radius), the any-angle
+    length and the any-angle path of each. Returns (starts (n, 2), targets
+    (n, 2), A* lengths (n,) or None, any-angle lengths (n,) or None, paths:
+    a list of n arrays or None)."""
+    rng = _rng(seed, 71, 0 if kind == "open" else 1)
+    free = _free(sc)
+    w, h = sc.area
+    if kind == "open":
+        starts, targets = nav.sample_trials(n, sc.area, free=free, min_distance=3.5 if sc.quick else 15.0,
+                                            margin=0.4, rng=rng)
+        return starts, targets, None, None, [None] * n
+    apex_y = -0.15 * h
+    arm = 0.3 * min(w, h)
+    target = np.array([0.0, apex_y + 0.45 * arm])  # inside the V, on the side it opens to
+
+    def below(x: float, y: float) -> bool:  # lower half, outside the V's cup
+        return y < 0 and y < apex_y + abs(x) - 0.3
+
+    starts, targets = nav.sample_trials(n, sc.area, free=free, min_distance=2.0 if sc.quick else 4.0,
+                                        margin=0.4, target=target, start_region=below, rng=rng)
+    grid = nav.occupancy_grid(sc.area, lambda x, y: sc.world.free(x, y, sc.robot.size / 2), resolution=0.1,
+                              margin=sc.robot.size / 2)
+    optimal, geo, paths = [], [], []
+    for s_, t_ in zip(starts, targets):
+        optimal.append(nav.shortest_path(grid, s_, t_)[1])
+        Ps, Ls = nav.shortest_path(grid, s_, t_, smooth=True)
+        geo.append(Ls)
+        paths.append(Ps)
+    return starts, targets, np.array(optimal), np.array(geo), paths
+
+
 def _run_71(kind: str, out: Path, *, quick: bool, seed: int, progress: bool) -> ExperimentResult:
     sc = scene(kind, seed, quick=quick)
     net = scene_network(sc, out, seed, progress=progress)
     n_trials = 3 if quick else 50
-    rng = _rng(seed, 71, 0 if kind == "open" else 1)
-    free = _free(sc)
-    w, h = sc.area
-    optimal = None
-    opt_paths: list[Any] = [None] * n_trials
-    if kind == "open":
-        min_d = 3.5 if quick else 15.0
-        starts, targets = nav.sample_trials(n_trials, sc.area, free=free, min_distance=min_d, margin=0.4, rng=rng)
-        geo = None
-    else:
-        apex_y = -0.15 * h
-        arm = 0.3 * min(w, h)
-        target = np.array([0.0, apex_y + 0.45 * arm])  # inside the V, on the side it opens to
-
-        def below(x: float, y: float) -> bool:  # lower half, outside the V's cup
-            return y < 0 and y < apex_y + abs(x) - 0.3
-
-        starts, targets = nav.sample_trials(n_trials, sc.area, free=free, min_distance=2.0 if quick else 4.0,
-                                            margin=0.4, target=target, start_region=below, rng=rng)
-        grid = nav.occupancy_grid(sc.area, lambda x, y: sc.world.free(x, y, sc.robot.size / 2), resolution=0.1,
-                                  margin=sc.robot.size / 2)
-        optimal, geo = [], []
-        for s_, t_ in zip(starts, targets):
-            P, L = nav.shortest_path(grid, s_, t_)
-            Ps, Ls = nav.shortest_path(grid, s_, t_, smooth=True)
-            optimal.append(L)
-            geo.append(Ls)
-            opt_paths[len(optimal) - 1] = Ps
-        optimal, geo = np.array(optimal), np.array(geo)
+    starts, targets, optimal, geo, opt_paths = trials_71(sc, kind, seed, n_trials)
     rows: list[dict[str, Any]] = []
     plots: list[str] = []
     notes_runs = []
