@@ -418,6 +418,24 @@ def test_geodesic_field_goes_around_a_wall():
     w = field.waypoint(a, b, lookahead=1.5)
     assert abs(w[0]) > 0.8 and world.free(w[0], w[1], 0.3)  # sideways towards an end, in free space
     assert field.visible(c, d) and not field.visible(a, b)
+    # a wall is a jump of the geodesic distance along the segment; open ground is not, even across coverage gaps
+    assert field.crosses_wall(a, b, b) and not field.crosses_wall(c, d, d)
+    assert not field.crosses_wall(a, a + [0.0, -0.8], b)  # along one side of the wall
+    wj = field.waypoint(a, b, lookahead=1.5, jump=3.0)
+    assert abs(wj[0]) > 0.8 and world.free(wj[0], wj[1], 0.3)
+    sparse = nav.GeodesicField(run[::4])  # every 4th frame: gaps wider than visible()'s clearance
+    far = [(p, q) for p, q in ((np.array([-4.5, -4.0 + i]), np.array([-4.5, 4.0 - i])) for i in range(3))]
+    assert not any(sparse.crosses_wall(p, q, q) for p, q in far)
+    with pytest.raises(ValueError, match="jump"):
+        field.crosses_wall(a, b, b, jump=0.0)
+    with pytest.raises(ValueError, match="jump"):
+        nav.MetricDescent(jump=-1.0)
+    # opt-in: heads straight over open ground that the sparse run covers with gaps
+    rng = np.random.default_rng(2)
+    feats = nav.CoordinateFeatures(lambda X: X + 0.1 * rng.standard_normal(X.shape))
+    sim = nav.PointSimulator(robot=Robot.two_cameras(0.7, noise=OdometryNoise()), world=world)
+    r = nav.Navigator(sim, feats, nav.MetricDescent(field=sparse, jump=3.0), max_iterations=150).run(c, d)
+    assert r.success and r.direct / r.travelled > 0.85, (r.reason, r.direct / r.travelled)
     # a separate island of the run: finite, larger than everything reachable
     island = np.vstack([run, [[20.0, 20.0], [20.1, 20.0]]])
     f2 = nav.GeodesicField(island)

@@ -621,7 +621,13 @@ class MetricDescent:
     heads straight for the target, or with a :class:`GeodesicField`, when
     the run's shortest path to it is longer than ``detour`` times the
     straight distance plus ``slack`` m and the straight line is not
-    :meth:`GeodesicField.visible` with ``clearance`` (something in the way;
+    :meth:`GeodesicField.visible` with ``clearance`` (which gaps in the
+    run's coverage of open ground also trigger) or, with ``jump`` (m),
+    crosses a wall by :meth:`GeodesicField.crosses_wall` (the geodesic
+    distance jumps by more than ``jump`` along it: open ground rarely
+    triggers it, but near a wall's end, where the way round is short, it
+    lets the robot head into the wall; opt-in, see docs/navigation.md)
+    (something in the way;
     tested only beyond ``near`` m of the target, where the estimates'
     errors are small against the distances), for the farthest visible
     point within ``lookahead`` m along that path
@@ -640,7 +646,7 @@ class MetricDescent:
 
     def __init__(self, *, field: "GeodesicField | None" = None, max_step: float = 1.0, lookahead: float = 3.0,
                  window: int = 20, min_spread: float = 0.5, bump_turn: float = 45.0, bump_step: float = 0.4, near: float = 1.5,
-                 detour: float = 1.2, slack: float = 0.0, clearance: float = 0.4,
+                 detour: float = 1.2, slack: float = 0.0, clearance: float = 0.4, jump: float | None = None,
                  probe_first: bool = True) -> None:
         for nm, v, lo in (("max_step", max_step, 0.0), ("lookahead", lookahead, 0.0), ("min_spread", min_spread, 0.0),
                           ("bump_turn", bump_turn, 0.0), ("bump_step", bump_step, 0.0), ("clearance", clearance, 0.0)):
@@ -655,6 +661,9 @@ class MetricDescent:
         self.max_step, self.lookahead, self.window = float(max_step), float(lookahead), int(window)
         self.min_spread, self.bump_turn, self.bump_step = float(min_spread), float(np.radians(bump_turn)), float(bump_step)
         self.detour, self.slack, self.clearance, self.near = float(detour), float(slack), float(clearance), float(near)
+        if jump is not None and not (np.isfinite(jump) and jump > 0):
+            raise ValueError(f"jump must be a positive number of metres or None, got {jump}")
+        self.jump = None if jump is None else float(jump)
         self.probe_first = bool(probe_first)
         self._local = RobustDescent(probe_first=False)
         self.reset()
@@ -691,9 +700,10 @@ class MetricDescent:
                     geo = float(self.field(m + tgt, tgt))
                     dist = float(np.hypot(*m))
                     if (dist >= self.near and geo > self.detour * dist + self.slack
-                            and not self.field.visible(m + tgt, tgt, self.clearance)):  # something in the way
+                            and (not self.field.visible(m + tgt, tgt, self.clearance) if self.jump is None
+                                 else self.field.crosses_wall(m + tgt, tgt, tgt, self.jump))):  # something in the way
                         blocked_view = True
-                        goal = self.field.waypoint(m + tgt, tgt, self.lookahead) - tgt
+                        goal = self.field.waypoint(m + tgt, tgt, self.lookahead, jump=self.jump) - tgt
                 d = rot.T @ (goal - m)
         if float(cost) < self.near and not blocked_view:
             d = np.asarray(self._local.step(gradient, cost, position, info), float)
@@ -926,12 +936,30 @@ class GeodesicField:
         pts = a + np.linspace(0.0, 1.0, n)[:, None] * (b - a)
         return bool((self.tree.query(pts)[0] <= c).all())
 
-    def waypoint(self, xy: Any, target: Any, lookahead: float = 3.0) -> np.ndarray:
+    def crosses_wall(self, a: Any, b: Any, target: Any, jump: float = 3.0) -> bool:
+        """Whether the straight segment from ``a`` to ``b`` passes between
+        places the run connects only the long way round: the geodesic
+        distance to ``target`` of the nearest run position, sampled every
+        0.1 m along the segment, jumps by more than ``jump`` metres between
+        neighbouring samples (a wall the run never crossed). Unlike
+        :meth:`visible`, gaps in the run's coverage of open ground do not
+        count."""
+        a, b = _vec2(a, "a"), _vec2(b, "b")
+        if not (np.isfinite(jump) and jump > 0):
+            raise ValueError(f"jump must be a positive number of metres, got {jump}")
+        n = max(2, int(np.ceil(np.hypot(*(b - a)) / 0.1)) + 1)
+        pts = a + np.linspace(0.0, 1.0, n)[:, None] * (b - a)
+        D = self.distances_from(target)
+        k = self.tree.query(pts)[1]
+        return bool(np.abs(np.diff(D[k])).max() > jump)
+
+    def waypoint(self, xy: Any, target: Any, lookahead: float = 3.0, *, jump: float | None = None) -> np.ndarray:
         """Where to head from ``xy`` (2,) towards ``target``: the farthest
         point of the shortest path within ``lookahead`` metres (path length)
         that ``xy`` sees in a straight line through known free space
-        (:meth:`visible`; the path's first node if none); the target itself
-        when it is that near, visible, or unreachable."""
+        (:meth:`visible`; with ``jump``: no :meth:`crosses_wall` on the way;
+        the path's first node if none); the target itself when it is that
+        near, visible, or unreachable."""
         x, t = _vec2(xy, "xy"), _vec2(target, "target")
         self.distances_from(t)  # fills the cache
         pred = self._cache[int(self.tree.query(t)[1])][1]
@@ -952,7 +980,7 @@ class GeodesicField:
         if not path:
             return self.centres[int(pred[i])].copy() if pred[i] >= 0 else t
         for q in reversed(path):
-            if self.visible(x, q):
+            if self.visible(x, q) if jump is None else not self.crosses_wall(x, q, t, jump):
                 return np.array(q, float)
         return np.array(path[0], float)
 
