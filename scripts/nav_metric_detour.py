@@ -29,6 +29,7 @@ def main() -> None:
     ap.add_argument("--localizer", type=Path, required=True, help="the experiment's cached metric localizer")
     ap.add_argument("--trials", type=int, default=30)
     ap.add_argument("--trial-seed", type=int, default=7)
+    ap.add_argument("--only", nargs="+", help="run only these variants (names as printed)")
     a = ap.parse_args()
     sc = E.scene(a.kind, 0)
     loc = load(a.localizer)
@@ -42,8 +43,12 @@ def main() -> None:
         "+ geodesic field, detour 1.4": {"field": field, "detour": 1.4},
         "+ geodesic field, detour 1.2, slack 1 m": {"field": field, "detour": 1.2, "slack": 1.0},
         "+ geodesic field, detour 1.2, slack 2 m": {"field": field, "detour": 1.2, "slack": 2.0},
+        "+ geodesic field, detour 1.2, jump 1.5 m": {"field": field, "detour": 1.2, "jump": 1.5},
+        "+ geodesic field, detour 1.2, jump 3 m": {"field": field, "detour": 1.2, "jump": 3.0},
     }
     for name, kw in variants.items():
+        if a.only and name not in a.only:
+            continue
         t = time.time()
         sim = Simulator(sc.world, sc.camera, sc.robot, seed=0)  # the same odometry noise for every variant
         sim.renderer = sc.simulator.renderer
