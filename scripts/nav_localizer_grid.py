@@ -1,0 +1,50 @@
+"""Single-image localization error of a 7.1 metric localizer on a grid.
+
+Renders 350x40 panoramas on a 1 m grid over the free area of a 7.1 scene,
+each at a random heading, localizes them with the experiment's cached metric
+localizer (``OUT/cache/metric-thesis-7.1-<kind>-seed0-*.sfanav``) and prints
+the mean, median and 95th percentile of the position error (m).
+
+    PYTHONPATH=python python3 scripts/nav_localizer_grid.py --kind open --localizer OUT/cache/metric-thesis-7.1-open-seed0-*.sfanav
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import numpy as np
+
+from sfanav.experiments import navigation as E
+from sfanav.modelfile import load
+from sfanav.sim.render import PanoramicCamera
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--kind", choices=("open", "obstacle"), default="open")
+    ap.add_argument("--lawn", choices=("patchy", "uniform"), default=None, help="default: the preset's")
+    ap.add_argument("--localizer", type=Path, required=True)
+    ap.add_argument("--spacing", type=float, default=1.0, help="grid spacing (m)")
+    ap.add_argument("--seed", type=int, default=0, help="random headings")
+    a = ap.parse_args()
+    sc = E.scene(a.kind, 0, lawn=a.lawn)
+    loc = load(a.localizer)
+    w, h = sc.area
+    xs = np.arange(-w / 2 + a.spacing / 2, w / 2, a.spacing)
+    ys = np.arange(-h / 2 + a.spacing / 2, h / 2, a.spacing)
+    X, Y = (g.ravel() for g in np.meshgrid(xs, ys))
+    ok = np.asarray(sc.world.free(X, Y, sc.robot.size / 2))
+    X, Y = X[ok], Y[ok]
+    heading = np.random.default_rng(a.seed).uniform(-np.pi, np.pi, len(X))
+    cam = PanoramicCamera(350, 40)
+    ren = sc.simulator.renderer
+    imgs = np.stack([ren.render(cam, (x, y, t)) for x, y, t in zip(X, Y, heading)])
+    err = np.hypot(*(loc.predict(imgs) - np.column_stack([X, Y])).T)
+    print(f"{sc.name} ({sc.world.ground.dry_fraction and 'patchy' or 'uniform'} lawn), {len(X)} places on a "
+          f"{a.spacing:g} m grid, random headings: mean {err.mean():.2f} m, median {np.median(err):.2f} m, "
+          f"95th percentile {np.percentile(err, 95):.2f} m")
+
+
+if __name__ == "__main__":
+    main()
