@@ -304,14 +304,16 @@ def metric_localizer(sc: Scene, out: Path, seed: int, *, progress: bool = False)
 
 
 def metric_arms(sc: Scene, out: Path, seed: int, starts: np.ndarray, targets: np.ndarray,
-                optimal: np.ndarray | None, *, progress: bool = False) -> tuple[list[dict[str, Any]], list[str], list[str]]:
+                optimal: np.ndarray | None, *, progress: bool = False,
+                localizer: tuple[Any, Any] | None = None) -> tuple[list[dict[str, Any]], list[str], list[str]]:
     """Navigation in the learned metric space on the same trials: the thesis
     rule (eta 1, gamma 0.5) on the distance between estimated positions and
     on the exploration run's geodesic distance, both divided by the run's
     spread (:class:`ScaledCost`: the slow features' unit-variance scale the
     rule was set for), and :class:`MetricDescent` without and with the
-    run's :class:`GeodesicField`. Returns (rows, plots, notes)."""
-    loc, cam = metric_localizer(sc, out, seed, progress=progress)
+    run's :class:`GeodesicField`. ``localizer``: (localizer, camera) from
+    :func:`metric_localizer` if the caller has it. Returns (rows, plots, notes)."""
+    loc, cam = localizer if localizer is not None else metric_localizer(sc, out, seed, progress=progress)
     feats = nav.MetricFeatures(loc, sc.simulator.renderer, cam)
     run_xy = sc.trajectory.poses[:, :2]
     field = nav.GeodesicField(run_xy)
@@ -458,7 +460,8 @@ def _run_71(kind: str, out: Path, *, quick: bool, seed: int, progress: bool) -> 
                 [s.results[i] for i in sel], out / f"7.1-{kind}-trajectories-coordinate-sfa.png", world=sc.world,
                 optimal=[opt_paths[i] for i in sel], title=f"7.1 {kind}: robust descent on coordinate SFA")))
     # beyond the thesis: the same trials in the learned metric space (images -> slow features -> positions)
-    mrows, mplots, mnotes = metric_arms(sc, out, seed, starts, targets, optimal, progress=progress)
+    mrows, mplots, mnotes = metric_arms(sc, out, seed, starts, targets, optimal, progress=progress,
+                                        localizer=(loc, dcam))
     rows += mrows
     plots += mplots
     notes_runs += mnotes
