@@ -864,8 +864,13 @@ class GeodesicField:
     robot learned from odometry, :mod:`sfanav.metric`) are the nodes of a
     graph whose edges join consecutive frames (``temporal``) and frames at
     most ``radius`` metres apart, with their distance as length. A place's
-    cost to a target is the shortest-path distance between their nearest
-    frames plus the two offsets. Obstacles the robot kept clear of (by at
+    cost to a target is the smallest, over the place's ``neighbours``
+    nearest frames, of that frame's shortest-path distance to the target's
+    nearest frame plus the straight offset to it (and the target's own
+    offset). With one neighbour the cost steps wherever the nearest frame
+    changes and shows the graph's zig-zag between the run's lines; the
+    minimum over a few is a smoother and tighter estimate of the geodesic
+    distance (docs/navigation.md). Obstacles the robot kept clear of (by at
     least its radius on each side, more than ``radius`` in all) cut no
     edges through them, so paths go around. Unreachable places cost the
     largest finite distance plus their Euclidean distance to the target.
@@ -874,7 +879,8 @@ class GeodesicField:
     ``GeodesicField(run_xy).cost`` is a ``cost=`` for :class:`Navigator`
     on :class:`MetricFeatures` (``n_outputs=2``)."""
 
-    def __init__(self, positions: Any, *, radius: float = 0.5, thin: float = 0.1, temporal: bool = True) -> None:
+    def __init__(self, positions: Any, *, radius: float = 0.5, thin: float = 0.1, temporal: bool = True,
+                 neighbours: int = 8) -> None:
         from scipy.sparse import coo_matrix
         from scipy.spatial import cKDTree
 
@@ -886,7 +892,10 @@ class GeodesicField:
         for name, v in (("radius", radius), ("thin", thin)):
             if not (np.isfinite(v) and v > 0):
                 raise ValueError(f"{name} must be a positive number of metres, got {v}")
+        if isinstance(neighbours, bool) or int(neighbours) != neighbours or int(neighbours) < 1:
+            raise ValueError(f"neighbours must be a positive integer, got {neighbours!r}")
         self.radius, self.thin = float(radius), float(thin)
+        self.neighbours = int(neighbours)
         # thin: one node per occupied cell of `thin` metres (the first frame in it)
         ij = np.floor((P - P.min(axis=0)) / self.thin).astype(np.int64)
         _, first, node = np.unique(ij, axis=0, return_index=True, return_inverse=True)
@@ -906,6 +915,17 @@ class GeodesicField:
         self.centres = centres
         self.tree = tree
         self._cache: dict[int, np.ndarray] = {}
+
+    def evaluate(self, D: np.ndarray, xy: Any) -> np.ndarray:
+        """Geodesic distances of places ``xy`` (..., 2) given the node
+        distances ``D`` (from :meth:`distances_from`): the minimum over the
+        ``neighbours`` nearest nodes of node distance plus offset."""
+        xy = np.asarray(xy, dtype=float)
+        flat = xy.reshape(-1, 2)
+        k = min(self.neighbours, self.n_nodes)
+        d, i = self.tree.query(flat, k=k)
+        d, i = np.asarray(d).reshape(len(flat), k), np.asarray(i).reshape(len(flat), k)
+        return (D[i] + d).min(axis=1).reshape(xy.shape[:-1])
 
     @property
     def n_nodes(self) -> int:
@@ -1008,9 +1028,7 @@ class _GeodesicCost(SlowFeatureCost):
         f = np.asarray(features, dtype=float)
         if f.shape[-1] < 2:
             raise ValueError(f"features have {f.shape[-1]} outputs, the geodesic cost needs x, y")
-        xy = f[..., :2]
-        d, k = self.field.tree.query(xy.reshape(-1, 2))
-        return (self._D[k] + d).reshape(xy.shape[:-1])
+        return self.field.evaluate(self._D, f[..., :2])
 
 
 class PointSimulator:
