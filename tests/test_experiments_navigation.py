@@ -62,7 +62,9 @@ def test_71_rows_for_both_descents(results, name):
               "thesis rule, metric cost", "thesis rule, geodesic metric cost", "metric descent",
               "metric descent + geodesic field", "thesis rule, sfanav default network, n = 2",
               "thesis rule, sfanav default network, n = 8 weighted", "robust descent, sfanav default network, n = 2",
-              "robust descent, sfanav default network, n = 8 weighted"):
+              "robust descent, sfanav default network, n = 8 weighted",
+              "thesis rule, graph SFA of the run (ideal slow features, n = 2)",
+              "thesis rule, geodesic cost of the run (true positions)"):
         assert f"success ({d})" in rows and f"efficiency ({d})" in rows
     assert rows["position code: RMS of x, y from s1-s2 (m)"]["sfanav"] > 0
     assert rows["position code: RMS of x, y from s1-s8 (m), sfanav default network"]["sfanav"] > 0
@@ -132,3 +134,22 @@ def test_cache_names_follow_the_scene():
     assert EN._cache_name(a, a.name, 0, cfg) != EN._cache_name(patchy, patchy.name, 0, cfg)
     assert EN._cache_name(a, a.name, 0, cfg) != EN._cache_name(a, a.name, 0, {**cfg, "layers": []})
     assert EN._cache_name(a, a.name, 0, cfg).startswith("quick-open-seed0-")
+
+
+def test_fresh_noise_gives_every_arm_the_same_odometry_noise():
+    """Scene.fresh_noise restarts the simulator's odometry noise: the same
+    moves after it give the same odometry, whatever ran before."""
+    from sfanav.experiments import navigation as navexp
+
+    sc = navexp.scene("open", quick=True)
+
+    def drive():
+        sim = sc.fresh_noise()
+        sim.reset((0.0, 0.0, 0.0))
+        for _ in range(5):
+            sim.step(0.2, 0.1, 1.0)
+        return sim.odometry_pose.copy(), sim.pose.copy()
+
+    (o1, p1), (o2, p2) = drive(), drive()
+    assert (o1 == o2).all() and (p1 == p2).all()
+    assert abs(o1 - p1).max() > 0  # the odometry is noisy

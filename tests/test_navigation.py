@@ -480,6 +480,45 @@ def test_geodesic_field_neighbours_tighten_and_smooth_the_estimate():
             nav.GeodesicField(run, neighbours=bad)
 
 
+def test_run_graph_features_are_the_ideal_slow_features():
+    """Exactly zero mean, unit variance and decorrelated over the run's
+    frames (SFA's constraints); in an open rectangle the slowest is a
+    monotone code of the long axis (a half cosine: flat at the borders);
+    behind a wall places a short step apart across it differ far more than
+    the same step in the open; bad input is refused."""
+    from sfanav.sim import trajectories as T
+
+    open_world = World.generate(3, area=(12.0, 4.0), n_objects=4)
+    run = T.random_lines(open_world.area, 3000, 0.2, margin=0.35, world=open_world, rng=0).poses[:, :2]
+    g = nav.RunGraphFeatures(run, 3)
+    F = g.run_features_
+    np.testing.assert_allclose(F.mean(axis=0), 0.0, atol=1e-9)
+    np.testing.assert_allclose(np.cov(F.T, bias=True), np.eye(3), atol=1e-8)
+    assert g.delta_values_[0] < g.delta_values_[1] < g.delta_values_[2]
+    np.testing.assert_allclose(g.beta_values_, np.sqrt(g.delta_values_) / (2 * np.pi))
+    xs = np.linspace(-5.5, 5.5, 23)
+    s1 = g(np.column_stack([xs, np.zeros_like(xs)]))[:, 0]
+    assert abs(np.corrcoef(s1, xs)[0, 1]) > 0.95
+    assert np.all(np.diff(s1) * np.sign(s1[-1] - s1[0]) > -0.02)  # monotone up to interpolation
+    mid, edge = abs(s1[12] - s1[10]), abs(s1[-1] - s1[-3])
+    assert edge < 0.5 * mid  # the half cosine flattens at the border
+    world = _wall_world()
+    wr = nav.RunGraphFeatures(_exploration(world), 2)
+    a, b = np.array([[0.0, -0.6]]), np.array([[0.0, 0.6]])  # across the 6 m wall
+    c, d = np.array([[-4.5, -0.6]]), np.array([[-4.5, 0.6]])  # the same step in the open
+    assert np.linalg.norm(wr(a) - wr(b)) > 3 * np.linalg.norm(wr(c) - wr(d))
+    with pytest.raises(ValueError, match="n_components"):
+        nav.RunGraphFeatures(run, 0)
+    with pytest.raises(ValueError, match="sigma"):
+        nav.RunGraphFeatures(run, 2, sigma=-1.0)
+    with pytest.raises(ValueError, match="positions must be"):
+        nav.RunGraphFeatures(run[:1], 2)
+    with pytest.raises(ValueError, match="too few"):
+        nav.RunGraphFeatures(run[:3], 2)
+    with pytest.raises(ValueError, match="poses"):
+        g(np.zeros(3))
+
+
 def test_metric_descent_aligns_odometry_to_the_map():
     """The rigid fit recovers a known rotation and translation exactly."""
     rng = np.random.default_rng(0)

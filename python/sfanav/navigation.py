@@ -58,6 +58,7 @@ __all__ = [
     "CoordinateFeatures",
     "MetricFeatures",
     "GeodesicField",
+    "RunGraphFeatures",
     "PointSimulator",
     "Navigator",
     "NavigationResult",
@@ -853,6 +854,23 @@ class _Scaled(SlowFeatureCost):
         return np.asarray(self.inner(features), dtype=float) / self.scale
 
 
+def _run_positions(positions: Any) -> np.ndarray:
+    P = np.asarray(positions, dtype=float)
+    if P.ndim != 2 or P.shape[1] != 2 or len(P) < 2:
+        raise ValueError(f"positions must be (N >= 2, 2) metres, got shape {P.shape}")
+    if not np.isfinite(P).all():
+        raise ValueError("positions contain NaN or inf")
+    return P
+
+
+def _thin_run(P: np.ndarray, thin: float) -> tuple[np.ndarray, np.ndarray]:
+    """One node per occupied cell of ``thin`` metres (the first frame in it):
+    (node positions (n, 2), each frame's node (N,))."""
+    ij = np.floor((P - P.min(axis=0)) / thin).astype(np.int64)
+    _, first, node = np.unique(ij, axis=0, return_index=True, return_inverse=True)
+    return P[first], node.ravel()
+
+
 class GeodesicField:
     """Shortest-path distances over the places an exploration run visited
     (beyond the thesis; docs/navigation.md).
@@ -884,11 +902,7 @@ class GeodesicField:
         from scipy.sparse import coo_matrix
         from scipy.spatial import cKDTree
 
-        P = np.asarray(positions, dtype=float)
-        if P.ndim != 2 or P.shape[1] != 2 or len(P) < 2:
-            raise ValueError(f"positions must be (N >= 2, 2) metres, got shape {P.shape}")
-        if not np.isfinite(P).all():
-            raise ValueError("positions contain NaN or inf")
+        P = _run_positions(positions)
         for name, v in (("radius", radius), ("thin", thin)):
             if not (np.isfinite(v) and v > 0):
                 raise ValueError(f"{name} must be a positive number of metres, got {v}")
@@ -896,11 +910,7 @@ class GeodesicField:
             raise ValueError(f"neighbours must be a positive integer, got {neighbours!r}")
         self.radius, self.thin = float(radius), float(thin)
         self.neighbours = int(neighbours)
-        # thin: one node per occupied cell of `thin` metres (the first frame in it)
-        ij = np.floor((P - P.min(axis=0)) / self.thin).astype(np.int64)
-        _, first, node = np.unique(ij, axis=0, return_index=True, return_inverse=True)
-        node = node.ravel()
-        centres = P[first]
+        centres, node = _thin_run(P, self.thin)
         n = len(centres)
         tree = cKDTree(centres)
         pairs = tree.query_pairs(self.radius, output_type="ndarray")
@@ -1029,6 +1039,112 @@ class _GeodesicCost(SlowFeatureCost):
         if f.shape[-1] < 2:
             raise ValueError(f"features have {f.shape[-1]} outputs, the geodesic cost needs x, y")
         return self.field.evaluate(self._D, f[..., :2])
+
+
+class RunGraphFeatures:
+    """The slowest features of an exploration run with no limit on the
+    function class: a reference for what SFA can at best learn from the run
+    (beyond the thesis; docs/navigation.md).
+
+    SFA minimises the mean squared change of unit-variance, decorrelated
+    outputs along the run. Over *all* functions of position, with the
+    transitions of a random exploration standing in by a graph joining the
+    run's places (nodes: one per ``thin`` m cell the run visited, weighted
+    by its number of frames ``c``; edges: places at most ``radius`` m
+    apart, weight ``exp(-d^2 / 2 sigma^2)``), this is the generalized
+    eigenproblem ``L f = lambda C f`` of the graph Laplacian ``L`` (Laplacian
+    eigenmaps; Sprekeler 2011 relates SFA's slowest functions of a random
+    walk to them). Its smallest non-trivial solutions are exactly zero-mean,
+    unit-variance and decorrelated over the run's frames, ordered by
+    slowness; in an open rectangle they are the half-cosine modes of x and
+    y (the thesis's ideal x / y codes, flat at the borders), and they flow
+    around obstacles the run kept clear of, since no edge crosses them.
+
+    Parameters
+    ----------
+    positions : array (N, 2)
+        The run's positions (m), in time order.
+    n_components : int
+        Number of features.
+    radius, sigma, thin : float
+        Edge radius, edge width and node cell size (m).
+
+    Attributes
+    ----------
+    centres_ : (n, 2) node positions; ``values_`` : (n, n_components)
+    features of the nodes; ``run_features_`` : (N, n_components) features of
+    the run's frames (their nodes'); ``delta_values_`` : mean squared change
+    of ``run_features_`` between consecutive frames (SFA's Delta, ascending
+    up to the graph's approximation); ``beta_values_`` = sqrt(Delta) / 2 pi;
+    ``n_dropped_`` : nodes outside the graph's largest connected part (they
+    take the values of their nearest node in it).
+
+    ``features(poses (k, >= 2)) -> (k, n_components)``: the mean of the 8
+    nearest nodes' values weighted by inverse distance (a
+    :class:`CoordinateFeatures`-style callable for :class:`Navigator`).
+    """
+
+    def __init__(self, positions: Any, n_components: int = 8, *, radius: float = 0.5, sigma: float = 0.25,
+                 thin: float = 0.1) -> None:
+        from scipy.sparse import coo_matrix, diags
+        from scipy.sparse.csgraph import connected_components
+        from scipy.sparse.linalg import eigsh
+        from scipy.spatial import cKDTree
+
+        P = _run_positions(positions)
+        if isinstance(n_components, bool) or int(n_components) != n_components or int(n_components) < 1:
+            raise ValueError(f"n_components must be a positive integer, got {n_components!r}")
+        for name, v in (("radius", radius), ("sigma", sigma), ("thin", thin)):
+            if not (np.isfinite(v) and v > 0):
+                raise ValueError(f"{name} must be a positive number of metres, got {v}")
+        k = int(n_components)
+        centres, node = _thin_run(P, float(thin))
+        counts = np.bincount(node, minlength=len(centres)).astype(float)
+        tree = cKDTree(centres)
+        pairs = tree.query_pairs(float(radius), output_type="ndarray")
+        n = len(centres)
+        d = np.hypot(*(centres[pairs[:, 0]] - centres[pairs[:, 1]]).T)
+        w = np.exp(-(d * d) / (2.0 * float(sigma) ** 2))
+        W = coo_matrix((np.r_[w, w], (np.r_[pairs[:, 0], pairs[:, 1]], np.r_[pairs[:, 1], pairs[:, 0]])),
+                       shape=(n, n)).tocsr()
+        _, label = connected_components(W, directed=False)
+        main = np.flatnonzero(label == np.bincount(label).argmax())
+        if len(main) < k + 2:
+            raise ValueError(f"the run's graph has too few connected places ({len(main)}) for "
+                             f"{k} features: a longer run or a larger radius")
+        Wm = W[main][:, main]
+        L = diags(np.asarray(Wm.sum(axis=1)).ravel()) - Wm
+        M = diags(counts[main])
+        shift = -1e-8 * float(L.diagonal().max() / counts[main].min())
+        vals, vecs = eigsh(L.tocsc(), k=k + 1, M=M.tocsc(), sigma=shift, which="LM")
+        order = np.argsort(vals)
+        vecs = vecs[:, order[1:]]  # drop the constant
+        V = np.empty((n, k))
+        V[main] = vecs
+        self.n_dropped_ = int(n - len(main))
+        if self.n_dropped_:
+            other = np.setdiff1d(np.arange(n), main)
+            V[other] = vecs[cKDTree(centres[main]).query(centres[other])[1]]
+        frames = V[node]
+        mu, sd = frames.mean(axis=0), frames.std(axis=0)
+        V = (V - mu) / sd
+        sign = np.sign(V[np.abs(V).argmax(axis=0), np.arange(k)])
+        V *= np.where(sign == 0, 1.0, sign)
+        self.centres_, self.values_, self.tree_ = centres, V, tree
+        self.run_features_ = V[node]
+        self.delta_values_ = np.mean(np.diff(self.run_features_, axis=0) ** 2, axis=0)
+        self.beta_values_ = np.sqrt(self.delta_values_) / (2 * np.pi)
+        self.n_components = k
+
+    def __call__(self, poses: Any) -> np.ndarray:
+        P = np.asarray(poses, dtype=float)
+        if P.ndim != 2 or P.shape[1] < 2:
+            raise ValueError(f"poses must be (k, >= 2), got shape {P.shape}")
+        m = min(8, len(self.centres_))
+        d, i = self.tree_.query(P[:, :2], k=m)
+        d, i = np.asarray(d).reshape(len(P), m), np.asarray(i).reshape(len(P), m)
+        wt = 1.0 / (d + 0.05)
+        return np.einsum("km,kmc->kc", wt, self.values_[i]) / wt.sum(axis=1, keepdims=True)
 
 
 class PointSimulator:

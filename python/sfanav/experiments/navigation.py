@@ -91,6 +91,14 @@ class Scene:
             self._sim = Simulator(self.world, self.camera, self.robot, seed=0)
         return self._sim
 
+    def fresh_noise(self) -> Any:
+        """The scene's simulator with its odometry noise stream restarted
+        (seed 0), so that every arm of an experiment drives with the same
+        noise whatever ran before it (common random numbers)."""
+        sim = self.simulator
+        sim.rng = np.random.default_rng(0)
+        return sim
+
     @property
     def area(self) -> tuple[float, float]:
         return tuple(float(a) for a in self.world.area)  # type: ignore[return-value]
@@ -187,7 +195,7 @@ def scene_network(sc: Scene, out: Path, seed: int, *, progress: bool = False) ->
 
 def _navigator(sc: Scene, net: Any, descent: Any, *, n: int = 2, weights: Any = None) -> nav.Navigator:
     """A navigator in the scene's simulator."""
-    sim = sc.simulator
+    sim = sc.fresh_noise()
     feats = nav.ImageFeatures(net, sim.renderer, sc.camera)
     return nav.Navigator(sim, feats, descent, n_outputs=n, weights=weights, success_radius=SUCCESS_RADIUS,
                          max_iterations=QUICK_ITERATIONS if sc.quick else MAX_ITERATIONS)
@@ -326,7 +334,7 @@ def metric_arms(sc: Scene, out: Path, seed: int, starts: np.ndarray, targets: np
     plots: list[str] = []
     notes: list[str] = []
     for name, d, cost in arms:
-        navi = nav.Navigator(sc.simulator, feats, d, n_outputs=2, success_radius=SUCCESS_RADIUS,
+        navi = nav.Navigator(sc.fresh_noise(), feats, d, n_outputs=2, success_radius=SUCCESS_RADIUS,
                              max_iterations=QUICK_ITERATIONS if sc.quick else MAX_ITERATIONS, cost=cost)
         s = nav.evaluate_trials(navi, starts, targets, optimal_lengths=optimal, progress=progress, desc=name)
         rows += _summary_rows(name, s, None)
@@ -427,7 +435,7 @@ def _run_71(kind: str, out: Path, *, quick: bool, seed: int, progress: bool) -> 
     for n, wts, tag in ((2, None, "n = 2"), (n_w, dw, f"n = {n_w} weighted")):
         for d in _descents():
             label = f"{d.name}, sfanav default network, {tag}"
-            navi = nav.Navigator(sc.simulator, nav.ImageFeatures(dnet, sc.simulator.renderer, dcam, rows=loc.rows),
+            navi = nav.Navigator(sc.fresh_noise(), nav.ImageFeatures(dnet, sc.simulator.renderer, dcam, rows=loc.rows),
                                  d, n_outputs=n, weights=wts, success_radius=SUCCESS_RADIUS,
                                  max_iterations=QUICK_ITERATIONS if quick else MAX_ITERATIONS)
             s = nav.evaluate_trials(navi, starts[:n_img], targets[:n_img],
@@ -459,6 +467,22 @@ def _run_71(kind: str, out: Path, *, quick: bool, seed: int, progress: bool) -> 
             plots.append(str(nav.plot_trajectories(
                 [s.results[i] for i in sel], out / f"7.1-{kind}-trajectories-coordinate-sfa.png", world=sc.world,
                 optimal=[opt_paths[i] for i in sel], title=f"7.1 {kind}: robust descent on coordinate SFA")))
+    # the thesis rule on ideal features of the exploration run itself (a point robot at true positions): the
+    # slowest functions of the run with no limit on the function class (graph SFA: Laplacian eigenmaps of the
+    # run's places, which flow around the obstacle), and the run's geodesic distance (what SFA's slowness
+    # stands for around obstacles) on the unit-variance scale of slow features
+    run_xy = sc.trajectory.poses[:, :2]
+    ideal = [("thesis rule, graph SFA of the run (ideal slow features, n = 2)",
+              nav.CoordinateFeatures(nav.RunGraphFeatures(run_xy, 2)), None),
+             ("thesis rule, geodesic cost of the run (true positions)", nav.CoordinateFeatures(lambda X: X),
+              nav.ScaledCost(nav.run_spread(run_xy), nav.GeodesicField(run_xy).cost))]
+    for label, feats, cost in ideal:
+        psim = nav.PointSimulator(robot=sc.robot, world=sc.world)
+        navi = nav.Navigator(psim, feats, nav.ThesisDescent(ETA, GAMMA), n_outputs=2, success_radius=SUCCESS_RADIUS,
+                             max_iterations=QUICK_ITERATIONS if quick else MAX_ITERATIONS, cost=cost)
+        s = nav.evaluate_trials(navi, starts, targets, optimal_lengths=optimal, progress=progress, desc=label)
+        rows += _summary_rows(label, s, None)
+        notes_runs.append(f"{label}: {_reasons(s)}")
     # beyond the thesis: the same trials in the learned metric space (images -> slow features -> positions)
     mrows, mplots, mnotes = metric_arms(sc, out, seed, starts, targets, optimal, progress=progress,
                                         localizer=(loc, dcam))
@@ -495,6 +519,11 @@ def _run_71(kind: str, out: Path, *, quick: bool, seed: int, progress: bool) -> 
            f"Target fixed inside the V at ({targets[0][0]:.2f}, {targets[0][1]:.2f}); starts in the lower half outside "
            "the V; efficiency = A* length (8-connected, 0.1 m grid, obstacles inflated by the robot radius) / "
            "travelled; the any-angle row uses the line-of-sight-shortened A* path. ")
+        + "Rows 'graph SFA of the run' and 'geodesic cost of the run': the thesis rule on ideal features of the "
+        "training run itself, a point robot at true positions: its slowest functions with no limit on the function "
+        "class (Laplacian eigenmaps of the run's places, nav.RunGraphFeatures, n = 2) and its geodesic distance "
+        "(nav.GeodesicField) divided by the run's spread. Every closed-loop arm starts from the same odometry noise "
+        "stream. "
         + "Rows 'coordinate SFA': the same trials with slow features of the coordinates (degree-7 monomials of the "
         "training trajectory's positions, the image network's ideal case), a point robot with exact odometry. "
         "'position code' rows: RMS error of x, y fitted as a quadratic function of the image network's first 2 / 8 "
