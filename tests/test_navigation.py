@@ -440,8 +440,9 @@ def test_geodesic_field_goes_around_a_wall():
     # a separate island of the run: finite, larger than everything reachable
     island = np.vstack([run, [[20.0, 20.0], [20.1, 20.0]]])
     f2 = nav.GeodesicField(island)
-    D = f2.distances_from(a)
-    assert np.isfinite(D).all() and D[-1] > D[:-2].max()
+    assert np.isfinite(f2.distances_from(a)).all()
+    far_cost = float(f2(np.array([20.05, 20.0]), a))
+    assert np.isfinite(far_cost) and far_cost > float(f2(run[::50], a).max())
     cost = field.cost(b, 2)
     np.testing.assert_allclose(cost(np.array([a, b])), [g, float(field(b, b))])
     with pytest.raises(ValueError, match="positions must be"):
@@ -454,27 +455,28 @@ def test_geodesic_field_goes_around_a_wall():
         field.cost(b, 3)
 
 
-def test_geodesic_field_neighbours_tighten_and_smooth_the_estimate():
-    """In open ground the geodesic distance is the straight distance. The
-    minimum over a place's nearest frames (default 8) is closer to it than
-    the nearest frame alone, changes less between places 0.1 m apart, never
-    undercuts the straight distance by more than the offsets, and still
-    goes round the wall; neighbours must be a positive integer."""
+def test_geodesic_field_is_nearly_straight_in_open_ground():
+    """In open ground the geodesic distance is the straight distance: the
+    grid of covered space gives it within a few per cent (the run's own
+    frames joined by their neighbours zig-zag 10-25 % longer), it changes
+    smoothly between places 0.1 m apart, never undercuts the straight
+    distance, and still goes round the wall; neighbours must be a positive
+    integer."""
     world = _wall_world()
     run = _exploration(world)
-    f1, f8 = nav.GeodesicField(run, neighbours=1), nav.GeodesicField(run)
-    assert f8.neighbours == 8
+    field = nav.GeodesicField(run)
+    assert field.neighbours == 8
     rng = np.random.default_rng(3)
     t = np.array([-4.5, 4.5])
     P = np.column_stack([rng.uniform(-5.5, -3.5, 300), rng.uniform(-5.5, 3.5, 300)])  # open strip left of the wall
     straight = np.hypot(*(P - t).T)
-    e1, e8 = f1(P, t) - straight, f8(P, t) - straight
-    assert e8.mean() < 0.7 * e1.mean(), (e1.mean(), e8.mean())
-    assert e8.min() > -0.3
+    ratio = field(P, t) / straight
+    assert np.median(ratio) < 1.06 and np.percentile(ratio, 90) < 1.15, (np.median(ratio), np.percentile(ratio, 90))
+    assert ratio.min() > 0.97
     line = np.column_stack([np.full(60, -4.5), np.linspace(-5.0, 1.0, 60)])  # 0.1 m apart
-    assert np.abs(np.diff(f8(line, t))).max() < np.abs(np.diff(f1(line, t))).max()
+    assert np.abs(np.diff(field(line, t))).max() < 0.16
     a, b = np.array([0.0, -1.5]), np.array([0.0, 1.5])
-    assert float(f8(a, b)) > 1.8 * 3.0
+    assert float(field(a, b)) > 1.8 * 3.0
     for bad in (0, -2, 1.5, True):
         with pytest.raises(ValueError, match="neighbours"):
             nav.GeodesicField(run, neighbours=bad)
