@@ -1,7 +1,8 @@
 """MetricDescent's geodesic-field settings on trials other than the reported ones.
 
 Runs ``MetricDescent`` with and without the exploration run's
-``GeodesicField`` and with other ``detour`` / ``slack`` settings on 30
+``GeodesicField`` and with other ``detour`` / ``slack`` / ``jump`` settings
+and field radius on 30
 trials of a 7.1 scene drawn with another trial seed (7) than
 ``sfanav experiment 7.1-*`` (0), using that experiment's cached metric
 localizer; every variant starts from the same odometry noise. Prints success, efficiency and mean stops per variant.
@@ -20,7 +21,6 @@ from sfanav import navigation as nav
 from sfanav.experiments import navigation as E
 from sfanav.modelfile import load
 from sfanav.sim.render import PanoramicCamera
-from sfanav.sim.robot import Simulator
 
 
 def main() -> None:
@@ -35,6 +35,7 @@ def main() -> None:
     loc = load(a.localizer)
     starts, targets, opt, _, _ = E.trials_71(sc, a.kind, a.trial_seed, a.trials)
     field = nav.GeodesicField(sc.trajectory.poses[:, :2])
+    wide = nav.GeodesicField(sc.trajectory.poses[:, :2], radius=0.6)
     feats = nav.MetricFeatures(loc, sc.simulator.renderer, PanoramicCamera(350, 40))
     variants = {
         "metric descent": {},
@@ -45,13 +46,13 @@ def main() -> None:
         "+ geodesic field, detour 1.2, slack 2 m": {"field": field, "detour": 1.2, "slack": 2.0},
         "+ geodesic field, detour 1.2, jump 1.5 m": {"field": field, "detour": 1.2, "jump": 1.5},
         "+ geodesic field, detour 1.2, jump 3 m": {"field": field, "detour": 1.2, "jump": 3.0},
+        "+ geodesic field (radius 0.6 m), detour 1.2": {"field": wide, "detour": 1.2},
     }
     for name, kw in variants.items():
         if a.only and name not in a.only:
             continue
         t = time.time()
-        sim = Simulator(sc.world, sc.camera, sc.robot, seed=0)  # the same odometry noise for every variant
-        sim.renderer = sc.simulator.renderer
+        sim = sc.fresh_noise()  # the same odometry noise for every variant
         navi = nav.Navigator(sim, feats, nav.MetricDescent(**kw), n_outputs=2,
                              success_radius=E.SUCCESS_RADIUS, max_iterations=E.MAX_ITERATIONS)
         s = nav.evaluate_trials(navi, starts, targets, optimal_lengths=opt, progress=False)

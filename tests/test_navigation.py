@@ -451,6 +451,10 @@ def test_geodesic_field_goes_around_a_wall():
         nav.GeodesicField(np.array([[0.0, 0.0], [np.nan, 1.0]]))
     with pytest.raises(ValueError, match="radius must be"):
         nav.GeodesicField(run, radius=0.0)
+    with pytest.raises(ValueError, match="at least 1.5 x the cell size"):
+        nav.GeodesicField(run, radius=0.1, thin=0.1)
+    with pytest.raises(ValueError, match="too large"):
+        nav.GeodesicField(np.array([[0.0, 0.0], [500.0, 500.0]]), temporal=False)
     with pytest.raises(ValueError, match="n_outputs must be 2"):
         field.cost(b, 3)
 

@@ -916,6 +916,9 @@ class GeodesicField:
         if isinstance(neighbours, bool) or int(neighbours) != neighbours or int(neighbours) < 1:
             raise ValueError(f"neighbours must be a positive integer, got {neighbours!r}")
         self.radius, self.thin = float(radius), float(thin)
+        if self.radius < 1.5 * self.thin:
+            raise ValueError(f"radius ({radius} m) must be at least 1.5 x the cell size thin ({thin} m), "
+                             "or the run's own cells may not count as covered")
         self.neighbours = int(neighbours)
         self.centres, _ = _thin_run(P, self.thin)  # the run's places (for visible())
         self.tree = cKDTree(self.centres)
@@ -931,7 +934,7 @@ class GeodesicField:
             path = np.vstack([start[idx] + frac[:, None] * seg[idx], P])
         lo = P.min(axis=0) - self.radius
         shape = (np.ceil((P.max(axis=0) + self.radius - lo) / self.thin).astype(int) + 1)[::-1]  # (ny, nx)
-        if int(shape[0]) * int(shape[1]) > 50_000_000:
+        if int(shape[0]) * int(shape[1]) > 4_000_000:
             raise ValueError(f"a grid of {shape[1]} x {shape[0]} cells of {self.thin} m is too large: "
                              "the run spans too far for this cell size")
         self._lo, self._shape = lo, (int(shape[0]), int(shape[1]))
