@@ -44,6 +44,17 @@ def main() -> None:
     print(f"{sc.name} ({sc.world.ground.dry_fraction and 'patchy' or 'uniform'} lawn), {len(X)} places on a "
           f"{a.spacing:g} m grid, random headings: mean {err.mean():.2f} m, median {np.median(err):.2f} m, "
           f"95th percentile {np.percentile(err, 95):.2f} m")
+    near = ~np.asarray(sc.world.free(X, Y, 1.0 + sc.robot.size / 2))  # within 1 m of an obstacle or the border
+    regions = {"within 1 m of an obstacle or the border": near, "elsewhere": ~near}
+    if a.kind == "obstacle":  # the V of experiments.navigation.trials_71: apex at -0.15 h, arms 0.3 min(w, h) at 45 deg
+        apex, arm = -0.15 * h, 0.3 * min(w, h)
+        cup = (Y > apex + np.abs(X)) & (Y < apex + arm / np.sqrt(2))
+        regions = {"inside the V's cup": cup, "within 1 m of an obstacle or the border, outside the cup": near & ~cup,
+                   "elsewhere": ~near & ~cup}
+    for name, m in regions.items():
+        if m.any():
+            print(f"  {name}: {int(m.sum())} places, mean {err[m].mean():.2f} m, median {np.median(err[m]):.2f} m, "
+                  f"95th percentile {np.percentile(err[m], 95):.2f} m")
 
 
 if __name__ == "__main__":

@@ -525,6 +525,62 @@ def test_run_graph_features_are_the_ideal_slow_features():
         g(np.zeros(3))
 
 
+def test_map_tracker_fuses_estimates_with_odometry():
+    """Odometry in a rotated, shifted frame and noisy estimates with a few
+    far-off ones: the fused positions are far closer to the truth than the
+    estimates, barely moved by the outliers; until the cameras spread the
+    estimates pass through; reset forgets; bad input is refused."""
+    rng = np.random.default_rng(4)
+    a = 0.7
+    rot = np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]])
+    tr = nav.MapTracker(window=20)
+    errs_raw, errs_fused = [], []
+    for k in range(40):
+        true = np.array([[0.3 * k, 0.35], [0.3 * k, -0.35]])  # two cameras driving along x
+        odo = (true - [1.0, 2.0]) @ rot  # the odometry frame: rotated and shifted
+        est = true + 0.25 * rng.standard_normal((2, 2))
+        if k % 7 == 3:
+            est[0] += [3.0, -2.5]  # a far-off estimate (near a wall)
+        F = np.column_stack([est, np.full(2, 5.0)])  # a third output passes through
+        out = tr.update(odo, F)
+        assert out.shape == F.shape and (out[:, 2] == 5.0).all()
+        if k >= 10:
+            errs_raw.append(np.hypot(*(est - true).T))
+            errs_fused.append(np.hypot(*(out[:, :2] - true).T))
+    assert np.mean(errs_fused) < 0.35 * np.mean(errs_raw), (np.mean(errs_fused), np.mean(errs_raw))
+    assert np.max(errs_fused) < 0.4
+    tr.reset()  # forgets: one stop of two cameras 0.7 m apart spreads less than 1 m, so it passes through
+    wide = nav.MapTracker(min_spread=1.0)
+    F = np.array([[1.0, 2.0], [1.5, 2.0]])
+    odo = np.array([[0.0, 0.35], [0.0, -0.35]])
+    np.testing.assert_array_equal(wide.update(odo, F), F)
+    assert not np.array_equal(tr.update(odo, F), F)  # 0.7 m >= 0.5 m: fitted (rigid: 0.7 m apart)
+    wide.reset()
+    np.testing.assert_array_equal(wide.update(odo + 5.0, F), F)
+    for kw in ({"window": 1}, {"window": 2.5}, {"huber": 0.0}, {"min_spread": -1.0}, {"iterations": 0}):
+        with pytest.raises(ValueError):
+            nav.MapTracker(**kw)
+    with pytest.raises(ValueError, match="features must be"):
+        tr.update(np.zeros((2, 2)), np.zeros((3, 2)))
+    with pytest.raises(ValueError, match="NaN"):
+        tr.update(np.zeros((2, 2)), np.array([[np.nan, 0.0], [0.0, 0.0]]))
+
+
+def test_navigator_with_a_tracker_reaches_a_target_on_noisy_positions():
+    """The thesis rule on noisy position estimates, fused with odometry by
+    a MapTracker, drives nearly straight to the target."""
+    rng = np.random.default_rng(5)
+    feats = nav.CoordinateFeatures(lambda X: X + 0.3 * rng.standard_normal(X.shape))
+    sim = nav.PointSimulator((12.0, 12.0), Robot.two_cameras(0.7))
+    cost = nav.ScaledCost(2.0)
+    plain = nav.Navigator(sim, feats, nav.ThesisDescent(), cost=cost, max_iterations=200)
+    fused = nav.Navigator(sim, feats, nav.ThesisDescent(), cost=cost, max_iterations=200, tracker=nav.MapTracker())
+    s_plain = nav.evaluate_trials(plain, [(-4.0, -4.0), (4.0, -4.0)], [(4.0, 4.0), (-4.0, 3.0)])
+    s_fused = nav.evaluate_trials(fused, [(-4.0, -4.0), (4.0, -4.0)], [(4.0, 4.0), (-4.0, 3.0)])
+    assert s_fused.success_rate == 1.0 and s_fused.efficiency > 0.9, s_fused.efficiency
+    assert s_fused.efficiency > s_plain.efficiency or s_plain.success_rate < 1.0
+
+
 def test_metric_descent_aligns_odometry_to_the_map():
     """The rigid fit recovers a known rotation and translation exactly."""
     rng = np.random.default_rng(0)

@@ -54,6 +54,7 @@ __all__ = [
     "ThesisDescent",
     "RobustDescent",
     "MetricDescent",
+    "MapTracker",
     "ImageFeatures",
     "CoordinateFeatures",
     "MetricFeatures",
@@ -608,6 +609,84 @@ class RobustDescent:
         return self._last.copy()
 
 
+def _rigid_fit(P: np.ndarray, Q: np.ndarray, w: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Rotation ``Rot`` (2, 2) and translation ``t`` minimising
+    ``sum w |Rot p + t - q|^2`` over rows of ``P``, ``Q`` (k, 2) (Umeyama
+    1991 without scale; ``w`` default ones)."""
+    w = np.ones(len(P)) if w is None else np.asarray(w, float)
+    mp, mq = (w @ P) / w.sum(), (w @ Q) / w.sum()
+    U, _, Vt = np.linalg.svd(((P - mp) * w[:, None]).T @ (Q - mq))
+    D = np.diag([1.0, float(np.sign(np.linalg.det(Vt.T @ U.T))) or 1.0])
+    rot = Vt.T @ D @ U.T
+    return rot, mq - rot @ mp
+
+
+class MapTracker:
+    """Odometry-fused positions for metric features: a filter between the
+    learned metric space and navigation (beyond the thesis; cf. its
+    odometry fusion, 5.3.2).
+
+    Single-image position estimates (:class:`MetricFeatures`) scatter by
+    tenths of a metre and, near walls, by metres; the robot's odometry is
+    precise over a few metres. At every stop :meth:`update` takes the
+    cameras' odometry positions and their estimates; a rigid transform
+    (rotation and translation) from the odometry frame to the map, fitted
+    to the last ``window`` stops by iteratively reweighted least squares
+    (weights ``min(1, huber / residual)``, ``iterations`` rounds, so a few
+    far-off estimates barely pull), maps the current odometry positions into
+    the map, and these replace the estimates' x, y. Until the cameras'
+    odometry positions in the window span ``min_spread`` metres along x or
+    y the estimates pass through unchanged (two cameras 0.7 m apart span
+    the default 0.5 m from the first stop on; the fit then keeps their
+    estimates' mean and direction at the baseline's length).
+
+    ``Navigator(..., tracker=MapTracker())`` applies it to every stop's
+    features (their first two outputs must be x, y in metres) before the
+    cost; the navigator calls :meth:`reset` at the start of every run.
+    """
+
+    def __init__(self, window: int = 20, *, min_spread: float = 0.5, huber: float = 0.6, iterations: int = 3) -> None:
+        if isinstance(window, bool) or int(window) != window or int(window) < 2:
+            raise ValueError(f"window must be an integer >= 2 stops, got {window!r}")
+        for nm, v in (("min_spread", min_spread), ("huber", huber)):
+            if not (np.isfinite(v) and v > 0):
+                raise ValueError(f"{nm} must be a positive number of metres, got {v}")
+        if isinstance(iterations, bool) or int(iterations) != iterations or int(iterations) < 1:
+            raise ValueError(f"iterations must be a positive integer, got {iterations!r}")
+        self.window, self.min_spread, self.huber, self.iterations = int(window), float(min_spread), float(huber), int(iterations)
+        self.reset()
+
+    def reset(self) -> None:
+        self._odo: list[np.ndarray] = []
+        self._est: list[np.ndarray] = []
+
+    def update(self, odometry: Any, features: Any) -> np.ndarray:
+        """``odometry`` (k, 2): the cameras' positions by odometry (m);
+        ``features`` (k, m >= 2): their features, x, y first. Returns the
+        features with x, y replaced by the fused positions (a copy)."""
+        P = np.array(odometry, dtype=float, ndmin=2)
+        if P.ndim != 2 or P.shape[1] != 2:
+            raise ValueError(f"odometry must be (k, 2) positions in metres, got shape {P.shape}")
+        F = np.array(features, dtype=float, ndmin=2)
+        if F.shape[0] != len(P) or F.shape[1] < 2:
+            raise ValueError(f"features must be ({len(P)}, >= 2) with x, y first, got shape {F.shape}")
+        if not (np.isfinite(P).all() and np.isfinite(F[:, :2]).all()):
+            raise ValueError("odometry or position estimates contain NaN or inf")
+        self._odo.append(P)
+        self._est.append(F[:, :2].copy())
+        del self._odo[: -self.window], self._est[: -self.window]
+        A, B = np.concatenate(self._odo), np.concatenate(self._est)
+        if float(np.ptp(A, axis=0).max()) < self.min_spread:
+            return F
+        w = np.ones(len(A))
+        for _ in range(self.iterations):
+            rot, t = _rigid_fit(A, B, w)
+            r = np.hypot(*(A @ rot.T + t - B).T)
+            w = np.minimum(1.0, self.huber / np.maximum(r, 1e-12))
+        F[:, :2] = P @ rot.T + t
+        return F
+
+
 class MetricDescent:
     """Steps towards the target in a learned metric space (beyond the
     thesis; docs/navigation.md).
@@ -679,11 +758,7 @@ class MetricDescent:
     def align(P: np.ndarray, Q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Rotation ``Rot`` (2, 2) and translation ``t`` minimising
         ``sum |Rot p + t - q|^2`` over rows of ``P``, ``Q`` (k, 2)."""
-        mp, mq = P.mean(axis=0), Q.mean(axis=0)
-        U, _, Vt = np.linalg.svd((P - mp).T @ (Q - mq))
-        D = np.diag([1.0, float(np.sign(np.linalg.det(Vt.T @ U.T))) or 1.0])
-        rot = Vt.T @ D @ U.T
-        return rot, mq - rot @ mp
+        return _rigid_fit(P, Q)
 
     def step(self, gradient: np.ndarray, cost: float, position: np.ndarray, info: StepInfo) -> np.ndarray:
         d = None
@@ -1322,6 +1397,9 @@ class Navigator:
         features; default :class:`SlowFeatureCost` (the thesis's distance
         in slow-feature space). :meth:`GeodesicField.cost` gives the
         geodesic distance of the exploration run in a metric space.
+    tracker : MapTracker, optional
+        Fuses every stop's position estimates with odometry before the
+        cost (features whose first two outputs are x, y in metres).
     """
 
     def __init__(
@@ -1340,6 +1418,7 @@ class Navigator:
         drive_piece: float = 0.1,
         gradient: PlaneGradient | None = None,
         cost: Callable[..., SlowFeatureCost] | None = None,
+        tracker: "MapTracker | None" = None,
     ) -> None:
         cams = getattr(getattr(simulator, "robot", None), "cameras", {})
         if "left" not in cams or "right" not in cams:
@@ -1360,6 +1439,7 @@ class Navigator:
         self.drive_piece = float(drive_piece)
         self.gradient = gradient or PlaneGradient()
         self.cost = cost if cost is not None else SlowFeatureCost
+        self.tracker = tracker
 
     def target_features(self, target: Any) -> np.ndarray:
         """SFA outputs of an image taken at the target (a camera at the target position)."""
@@ -1399,6 +1479,8 @@ class Navigator:
         odo_cams = sim.robot.camera_poses(np.asarray(sim.odometry_pose, float)[None, :])
         F = np.asarray(self.features(np.vstack([true_cams["left"], true_cams["right"]])), float)
         pos = np.vstack([odo_cams["left"][0, :2], odo_cams["right"][0, :2]])
+        if self.tracker is not None:
+            F = self.tracker.update(pos, F)
         R = F[:, : cost.n] - cost.target
         if cost.weights is not None:
             R = R * cost.weights
@@ -1415,6 +1497,8 @@ class Navigator:
         sim.reset((s[0], s[1], float(heading)))
         self.descent.reset()
         self.gradient.reset()
+        if self.tracker is not None:
+            self.tracker.reset()
         images0 = getattr(self.features, "images", 0)
         path = [np.array(sim.pose[:2], float)]
         odo_path = [np.array(sim.odometry_pose[:2], float)]

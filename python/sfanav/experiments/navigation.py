@@ -318,24 +318,31 @@ def metric_arms(sc: Scene, out: Path, seed: int, starts: np.ndarray, targets: np
     rule (eta 1, gamma 0.5) on the distance between estimated positions and
     on the exploration run's geodesic distance, both divided by the run's
     spread (:class:`ScaledCost`: the slow features' unit-variance scale the
-    rule was set for), and :class:`MetricDescent` without and with the
-    run's :class:`GeodesicField`. ``localizer``: (localizer, camera) from
+    rule was set for), on single-image estimates and on positions fused
+    with odometry (:class:`MapTracker`), and :class:`MetricDescent` without
+    and with the run's :class:`GeodesicField`. ``localizer``: (localizer, camera) from
     :func:`metric_localizer` if the caller has it. Returns (rows, plots, notes)."""
     loc, cam = localizer if localizer is not None else metric_localizer(sc, out, seed, progress=progress)
     feats = nav.MetricFeatures(loc, sc.simulator.renderer, cam)
     run_xy = sc.trajectory.poses[:, :2]
     field = nav.GeodesicField(run_xy)
     spread = nav.run_spread(run_xy)  # metres per slow-feature unit: the thesis rule's eta and gamma apply
-    arms = [("thesis rule, metric cost", nav.ThesisDescent(ETA, GAMMA), nav.ScaledCost(spread)),
-            ("thesis rule, geodesic metric cost", nav.ThesisDescent(ETA, GAMMA), nav.ScaledCost(spread, field.cost)),
-            ("metric descent", nav.MetricDescent(), None),
-            ("metric descent + geodesic field", nav.MetricDescent(field=field), None)]
+    arms = [("thesis rule, metric cost", nav.ThesisDescent(ETA, GAMMA), nav.ScaledCost(spread), None),
+            ("thesis rule, geodesic metric cost", nav.ThesisDescent(ETA, GAMMA), nav.ScaledCost(spread, field.cost),
+             None),
+            ("thesis rule, metric cost, tracked positions", nav.ThesisDescent(ETA, GAMMA), nav.ScaledCost(spread),
+             nav.MapTracker()),
+            ("thesis rule, geodesic metric cost, tracked positions", nav.ThesisDescent(ETA, GAMMA),
+             nav.ScaledCost(spread, field.cost), nav.MapTracker()),
+            ("metric descent", nav.MetricDescent(), None, None),
+            ("metric descent + geodesic field", nav.MetricDescent(field=field), None, None)]
     rows: list[dict[str, Any]] = []
     plots: list[str] = []
     notes: list[str] = []
-    for name, d, cost in arms:
+    for name, d, cost, tracker in arms:
         navi = nav.Navigator(sc.fresh_noise(), feats, d, n_outputs=2, success_radius=SUCCESS_RADIUS,
-                             max_iterations=QUICK_ITERATIONS if sc.quick else MAX_ITERATIONS, cost=cost)
+                             max_iterations=QUICK_ITERATIONS if sc.quick else MAX_ITERATIONS, cost=cost,
+                             tracker=tracker)
         s = nav.evaluate_trials(navi, starts, targets, optimal_lengths=optimal, progress=progress, desc=name)
         rows += _summary_rows(name, s, None)
         rows.append({"metric": f"mean stops ({name})", "thesis": None, "sfanav": s.mean_iterations})
@@ -538,7 +545,8 @@ def _run_71(kind: str, out: Path, *, quick: bool, seed: int, progress: bool) -> 
            "the sfanav default (horizon band, 12 outputs, 350x40 RGB renders of the training run, GP readout, "
            "8 rotations pooled)")
         + "; the cost is the distance between the cameras' and the target image's estimated positions (or the "
-        "training run's geodesic distance between them), divided by the run's spread (RMS std of its positions, "
+        "training run's geodesic distance between them; 'tracked positions': the cameras' estimates fused with "
+        "odometry by a robust rigid fit over the last 20 stops, nav.MapTracker), divided by the run's spread (RMS std of its positions, "
         f"{nav.run_spread(sc.trajectory.poses[:, :2]):.2f} m) for the thesis rule, which then runs with the thesis's eta and gamma on unit-variance 'ideal' "
         "x / y features; MetricDescent heads for the target through a rigid odometry-to-map fit, with the geodesic field over the "
         "training run's positions (ground truth here) when the run's path is > 1.2x the straight line. "
