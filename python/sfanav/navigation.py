@@ -21,6 +21,11 @@ between what it sees and what it saw at the target:
   :class:`ImageFeatures` (render + trained :class:`~sfanav.Network`) or any
   function of the camera poses (:class:`CoordinateFeatures` for SFA on
   coordinates, 7.2.2).
+* **Beyond the thesis**: the learned metric space (:class:`MetricFeatures`,
+  :class:`ScaledCost`, :class:`MapTracker` fusing estimates with odometry),
+  the exploration run's :class:`GeodesicField` and the improved descent
+  :class:`MetricDescent`; :class:`RunGraphFeatures`, the ideal slow
+  features of a run (a reference for what SFA can at best learn).
 * **Evaluation** (7.1.2): :func:`sample_trials`, :func:`evaluate_trials`
   (success rate, efficiency = optimal / travelled length), :func:`astar` on
   an occupancy grid (:func:`shortest_path` for worlds, weighted for velocity
