@@ -1017,16 +1017,15 @@ class GeodesicField:
         if int(shape[0]) * int(shape[1]) > 4_000_000:
             raise ValueError(f"a grid of {shape[1]} x {shape[0]} cells of {self.thin} m is too large: "
                              "the run spans too far for this cell size")
-        self._lo, self._shape = lo, (int(shape[0]), int(shape[1]))
-        gy, gx = np.mgrid[0 : self._shape[0], 0 : self._shape[1]]
+        ny, nx = int(shape[0]), int(shape[1])
+        gy, gx = np.mgrid[0:ny, 0:nx]
         cell_xy = np.column_stack([lo[0] + gx.ravel() * self.thin, lo[1] + gy.ravel() * self.thin])
         near = cKDTree(path).query(cell_xy, distance_upper_bound=self.radius / 2)[0]
-        free = np.isfinite(near).reshape(self._shape)
-        index = np.full(self._shape, -1, dtype=np.int64)
+        free = np.isfinite(near).reshape(ny, nx)
+        index = np.full((ny, nx), -1, dtype=np.int64)
         index[free] = np.arange(int(free.sum()))
         self.cells = cell_xy[free.ravel()]
         self._cell_tree = cKDTree(self.cells)
-        ny, nx = self._shape
         rows, cols, lens = [], [], []
         for di, dj, over in self._MOVES:
             i0, i1 = max(0, -di), ny - max(0, di)

@@ -313,7 +313,8 @@ def metric_localizer(sc: Scene, out: Path, seed: int, *, progress: bool = False)
 
 def metric_arms(sc: Scene, out: Path, seed: int, starts: np.ndarray, targets: np.ndarray,
                 optimal: np.ndarray | None, *, progress: bool = False,
-                localizer: tuple[Any, Any] | None = None) -> tuple[list[dict[str, Any]], list[str], list[str]]:
+                localizer: tuple[Any, Any] | None = None,
+                field: Any = None) -> tuple[list[dict[str, Any]], list[str], list[str]]:
     """Navigation in the learned metric space on the same trials: the thesis
     rule (eta 1, gamma 0.5) on the distance between estimated positions and
     on the exploration run's geodesic distance, both divided by the run's
@@ -321,11 +322,12 @@ def metric_arms(sc: Scene, out: Path, seed: int, starts: np.ndarray, targets: np
     rule was set for), on single-image estimates and on positions fused
     with odometry (:class:`MapTracker`), and :class:`MetricDescent` without
     and with the run's :class:`GeodesicField`. ``localizer``: (localizer, camera) from
-    :func:`metric_localizer` if the caller has it. Returns (rows, plots, notes)."""
+    :func:`metric_localizer` if the caller has it; ``field``: the run's
+    GeodesicField if the caller built it. Returns (rows, plots, notes)."""
     loc, cam = localizer if localizer is not None else metric_localizer(sc, out, seed, progress=progress)
     feats = nav.MetricFeatures(loc, sc.simulator.renderer, cam)
     run_xy = sc.trajectory.poses[:, :2]
-    field = nav.GeodesicField(run_xy)
+    field = nav.GeodesicField(run_xy) if field is None else field
     spread = nav.run_spread(run_xy)  # metres per slow-feature unit: the thesis rule's eta and gamma apply
     arms = [("thesis rule, metric cost", nav.ThesisDescent(ETA, GAMMA), nav.ScaledCost(spread), None),
             ("thesis rule, geodesic metric cost", nav.ThesisDescent(ETA, GAMMA), nav.ScaledCost(spread, field.cost),
@@ -479,10 +481,11 @@ def _run_71(kind: str, out: Path, *, quick: bool, seed: int, progress: bool) -> 
     # run's places, which flow around the obstacle), and the run's geodesic distance (what SFA's slowness
     # stands for around obstacles) on the unit-variance scale of slow features
     run_xy = sc.trajectory.poses[:, :2]
+    field = nav.GeodesicField(run_xy)
     ideal = [("thesis rule, graph SFA of the run (ideal slow features, n = 2)",
               nav.CoordinateFeatures(nav.RunGraphFeatures(run_xy, 2)), None),
              ("thesis rule, geodesic cost of the run (true positions)", nav.CoordinateFeatures(lambda X: X),
-              nav.ScaledCost(nav.run_spread(run_xy), nav.GeodesicField(run_xy).cost))]
+              nav.ScaledCost(nav.run_spread(run_xy), field.cost))]
     for label, feats, cost in ideal:
         psim = nav.PointSimulator(robot=sc.robot, world=sc.world)
         navi = nav.Navigator(psim, feats, nav.ThesisDescent(ETA, GAMMA), n_outputs=2, success_radius=SUCCESS_RADIUS,
@@ -492,7 +495,7 @@ def _run_71(kind: str, out: Path, *, quick: bool, seed: int, progress: bool) -> 
         notes_runs.append(f"{label}: {_reasons(s)}")
     # beyond the thesis: the same trials in the learned metric space (images -> slow features -> positions)
     mrows, mplots, mnotes = metric_arms(sc, out, seed, starts, targets, optimal, progress=progress,
-                                        localizer=(loc, dcam))
+                                        localizer=(loc, dcam), field=field)
     rows += mrows
     plots += mplots
     notes_runs += mnotes
