@@ -51,7 +51,7 @@ def main(argv=None) -> int:
     a = p.parse_args(argv)
 
     import sfanav
-    from sfanav.localizer import pooling_step
+    from sfanav.localization import pooling_step
 
     X = make_images(0, a.n, 40, 350, 3, seed=7)
     Q = make_images(a.n, a.n + a.queries, 40, 350, 3, seed=7)

@@ -33,7 +33,7 @@ import time
 import numpy as np
 
 from sfanav import sim
-from sfanav.dataset import write_image
+from sfanav.data import write_image
 
 
 def timed(fn, frames, repeats):

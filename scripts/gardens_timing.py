@@ -4,7 +4,7 @@ at most 2x the thesis configuration).
 
     PYTHONPATH=python python3 scripts/gardens_timing.py DATASET_DIR [--repeats 2] [--only "thesis config" "sfanav default"]
 
-"sfanav default" is the whole default training (sfanav.defaults.train_default:
+"sfanav default" is the whole default training (sfanav.localization.train_default:
 horizon band, the sfanav-default network, the "auto" readout's
 cross-validation and fit); "thesis config" the network plus its quadratic
 regression (a least-squares fit, milliseconds).
@@ -17,11 +17,11 @@ import time
 
 import numpy as np
 
-from sfanav.dataset import Dataset
+from sfanav.data import Dataset
 from sfanav.experiments.gardens import LOOP_CLOSURES, WIDER, WIDEST, _network
-from sfanav.loopclosure import find_loop_closures, interleave
-from sfanav.network import Rotation
-from sfanav.workflow import Preprocessing, load_run
+from sfanav.odometry import find_loop_closures, interleave
+from sfanav.sfa import Rotation
+from sfanav.data import Preprocessing, load_run
 
 
 def main() -> None:
@@ -40,8 +40,8 @@ def main() -> None:
                                      "loop closures": [], "sfanav default": []}
     if a.only:
         times = {k: v for k, v in times.items() if k in a.only}
-    from sfanav.defaults import train_default
-    from sfanav.regression import QuadraticRegression
+    from sfanav.localization import train_default
+    from sfanav.localization import QuadraticRegression
 
     for _ in range(a.repeats):
         for name in times:

@@ -25,12 +25,14 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from sfanav import analysis
-from sfanav.dataset import Dataset
+from sfanav.data import Dataset
 from sfanav.experiments.gardens import THESIS_SPEC, _random_splits
-from sfanav.metrics import localization_metrics
-from sfanav.network import Network, Rotation, spatial_pairs
-from sfanav.readout import default_candidates, describe_spec, make_readout, select_readout
-from sfanav.workflow import Preprocessing, coordinate_range, load_run
+from sfanav.localization import localization_metrics
+from sfanav.sfa import Network, Rotation, spatial_pairs
+from sfanav.localization import default_candidates, make_readout, select_readout
+from sfanav.localization.readouts import describe_spec
+from sfanav.data import Preprocessing, load_run
+from sfanav.localization.evaluation import coordinate_range
 
 
 def parse(v: str) -> dict:

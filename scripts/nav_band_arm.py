@@ -1,7 +1,7 @@
 """Navigation in the open field (thesis 7.1.2) with a horizon-band network.
 
 The thesis-5.2 network trained on panoramas of the elevation band -10 .. +20
-degrees (a camera without the near ground, cf. ``sfanav.imagerows``) of the
+degrees (a camera without the near ground, cf. ``sfanav.data.image_rows``) of the
 first ``--frames`` poses of the ``7.1-open`` training run, in mixed precision
 with simulated rotation in 5 px steps; navigation with the thesis rule (n = 2
 raw outputs, the thesis's setting) and the robust descent with n = 2 raw and
@@ -31,8 +31,8 @@ import numpy as np
 
 from sfanav import navigation as nav
 from sfanav.experiments import navigation as EN
-from sfanav.modelfile import load
-from sfanav.network import Network, Rotation, spatial_pairs
+from sfanav.sfa import load
+from sfanav.sfa import Network, Rotation, spatial_pairs
 from sfanav.sim.render import PanoramicCamera
 
 BAND = (-10.0, 20.0)

@@ -26,10 +26,11 @@ from typing import Any
 import numpy as np
 
 from sfanav import navigation as nav
-from sfanav.defaults import CAMERA_ELEVATION, default_network, default_rows
+from sfanav.localization.recipe import CAMERA_ELEVATION
+from sfanav.localization import default_network, default_rows
 from sfanav.experiments import navigation as E
-from sfanav.modelfile import load
-from sfanav.network import Network, Rotation
+from sfanav.sfa import load
+from sfanav.sfa import Network, Rotation
 from sfanav.sim.render import PanoramicCamera
 from sfanav.sim.robot import Simulator
 

@@ -22,8 +22,8 @@ import cv2
 import numpy as np
 
 from sfanav.experiments import navigation as E
-from sfanav.modelfile import load
-from sfanav.network import Network, Rotation
+from sfanav.sfa import load
+from sfanav.sfa import Network, Rotation
 
 
 def r2(A: np.ndarray, y: np.ndarray) -> float:

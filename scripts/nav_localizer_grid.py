@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from sfanav.experiments import navigation as E
-from sfanav.modelfile import load
+from sfanav.sfa import load
 from sfanav.sim.render import PanoramicCamera
 
 

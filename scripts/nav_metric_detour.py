@@ -19,7 +19,7 @@ from pathlib import Path
 
 from sfanav import navigation as nav
 from sfanav.experiments import navigation as E
-from sfanav.modelfile import load
+from sfanav.sfa import load
 from sfanav.sim.render import PanoramicCamera
 
 

@@ -28,11 +28,11 @@ from dataclasses import asdict
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from sfanav.experiments_odometry import experiment_5_3_1
-from sfanav.metric import DEFAULT_ODOMETRY_NOISE, MetricLearner
-from sfanav.metrics import align, med
+from sfanav.experiments.thesis_5_3 import experiment_5_3_1
+from sfanav.odometry import DEFAULT_ODOMETRY_NOISE, MetricLearner
+from sfanav.localization import align, med
 from sfanav.odometry import lines_from_odometry, segment_lines
-from sfanav.regression import QuadraticRegression
+from sfanav.localization import QuadraticRegression
 from sfanav.sim import OdometryNoise, simulate_odometry
 
 
@@ -107,7 +107,7 @@ def part_sim(path: str) -> None:
 
 
 def part_drift(path: str) -> None:
-    from sfanav.experiments_odometry import make_odometry_run
+    from sfanav.experiments.synthetic_odometry import make_odometry_run
 
     print("synthetic make_odometry_run, training-line MED (m) [heading_drift_ used]")
     for bias in (0.002, 0.0002, 0.0):

@@ -4,10 +4,10 @@ back to back on realistic-garden seed 0 (docs/gardens.md).
     PYTHONPATH=python python3 scripts/spatial_pairs_timing.py
 """
 import time, numpy as np, os
-from sfanav.dataset import Dataset
+from sfanav.data import Dataset
 from sfanav.experiments.gardens import _network
-from sfanav.network import Rotation, spatial_pairs
-from sfanav.workflow import Preprocessing, load_run
+from sfanav.sfa import Rotation, spatial_pairs
+from sfanav.data import Preprocessing, load_run
 ds = Dataset("/work/gardens-runs/full1/data/realistic-garden-seed0").select(run="train")
 cam = ds.metadata["camera"]
 X, xy = load_run(ds, Preprocessing(int(cam["width"]), int(cam["height"]), False, False), log=lambda m: None)

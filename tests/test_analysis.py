@@ -4,17 +4,9 @@ import numpy as np
 import pytest
 
 import sfanav
-from sfanav.analysis import (
-    delta_values,
-    eta_values,
-    orientation_angles,
-    plot_error_vs_n,
-    plot_eta,
-    plot_firing_maps,
-    plot_trajectory,
-    write_report,
-)
-from sfanav.regression import error_vs_n, evaluate_test_run
+from sfanav.sfa import delta_values, eta_values, orientation_angles, plot_eta
+from sfanav.localization import plot_error_vs_n, plot_firing_maps, plot_trajectory, write_report
+from sfanav.localization import error_vs_n, evaluate_test_run
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 
@@ -77,7 +69,7 @@ def test_delta_values_match_sfa():
     X = np.c_[np.sin(t) + np.cos(11 * t) ** 2, np.cos(11 * t)]
     sfa = sfanav.SFA(2, degree=2).fit(X)
     np.testing.assert_allclose(delta_values(sfa.transform(X)), sfa.delta_values_, rtol=1e-6)
-    np.testing.assert_allclose(sfanav.analysis.beta_values(sfa.delta_values_), sfa.beta_values_)
+    np.testing.assert_allclose(sfanav.sfa.beta_values(sfa.delta_values_), sfa.beta_values_)
     with pytest.raises(ValueError, match="at least 2 rows"):
         delta_values(np.zeros((1, 3)))
 

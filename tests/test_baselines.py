@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 import sfanav
-from sfanav.baselines import FourierSignature, PerfectMemory, benchmark
+from sfanav.localization import FourierSignature, PerfectMemory, benchmark
 
 
 @pytest.fixture(scope="module")

@@ -9,8 +9,8 @@ import pytest
 
 import sfanav
 from sfanav import sim
-from sfanav.cli import main
-from sfanav.dataset import write_image
+from sfanav.app.cli import main
+from sfanav.data import write_image
 
 TINY_TOML = """
 [input]

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from sfanav import Dataset, sim
-from sfanav.cli import main
+from sfanav.app.cli import main
 
 
 def run(capsys, *args):
@@ -101,7 +101,7 @@ def test_existing_output_is_refused(tmp_path, capsys):
 
 
 def test_command_line_entry_point_without_traceback(tmp_path):
-    code = "import sys; from sfanav.cli import main; sys.exit(main())"
+    code = "import sys; from sfanav.app.cli import main; sys.exit(main())"
     r = subprocess.run([sys.executable, "-c", code, "simulate", "--preset", "bogus", "--out", str(tmp_path / "o")],
                        capture_output=True, text=True, env=dict(os.environ))
     assert r.returncode == 2 and "unknown preset 'bogus'" in r.stderr and "Traceback" not in r.stderr

@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 
 import sfanav
 from sfanav import Dataset, DatasetWriter, write_dataset
-from sfanav.dataset import read_image, write_image
+from sfanav.data import read_image, write_image
 
 
 def images(n, h=6, w=10, rgb=True, seed=0):
@@ -173,7 +173,7 @@ def test_recording_import_interpolates_exactly(tmp_path):
 @settings(max_examples=30, deadline=None)
 @given(st.lists(st.floats(0.0, 10.0), min_size=1, max_size=20), st.floats(-3.0, 3.0), st.floats(-3.0, 3.0))
 def test_heading_interpolation_is_exact_on_linear_motion(ts, w, th0):
-    from sfanav.dataset import _interp_angle
+    from sfanav.data.dataset import _interp_angle
 
     tp = np.linspace(0.0, 10.0, 11)
     ang = (th0 + w * tp + np.pi) % (2 * np.pi) - np.pi  # turning at w rad/s, wrapped

@@ -12,12 +12,11 @@ import pytest
 
 import sfanav
 from sfanav import sim
-from sfanav.imagerows import ImageRows
-from sfanav.modelfile import read_model, save_model
-from sfanav.readout import (AUTO_BLOCK, AUTO_FOLDS, GPReadout, KernelRidgeReadout, KNNReadout, auto_candidates,
-                            describe_spec, make_readout, readout_from_state, readout_state, select_auto_readout,
-                            select_readout)
-from sfanav.regression import QuadraticRegression
+from sfanav.data import ImageRows
+from sfanav.sfa import read_model, save_model
+from sfanav.localization import AUTO_BLOCK, AUTO_FOLDS, GPReadout, KernelRidgeReadout, KNNReadout, auto_candidates, make_readout, readout_from_state, readout_state, select_auto_readout, select_readout
+from sfanav.localization.readouts import describe_spec
+from sfanav.localization import QuadraticRegression
 from sfanav.sim import trajectories as T
 
 
@@ -157,7 +156,7 @@ def test_gp_readout_bad_input():
 
 
 def test_block_folds_contiguous_and_interleaved():
-    from sfanav.readout import block_folds
+    from sfanav.localization import block_folds
 
     for folds in (block_folds(47, 5), block_folds(47, 5, block=4)):
         held = np.concatenate([te for _, te in folds])
@@ -255,7 +254,7 @@ def test_localizer_rows_are_applied_before_the_network_and_saved(tmp_path):
 
 
 def test_default_network_preset_is_table_5_1_wider_with_12_outputs():
-    from sfanav.defaults import BAND, default_network, default_rows
+    from sfanav.localization import BAND, default_network, default_rows
 
     d, t = sfanav.Network.from_preset("sfanav-default").config, sfanav.Network.from_preset("thesis-5.1").config
     assert [layer["out"] for layer in d["layers"]] == [20, 24, 24, 12]
@@ -276,9 +275,9 @@ def test_tiny_realistic_garden_default_beats_the_thesis_configuration():
     layer, horizon band, auto readout) on a tiny network beats the thesis's
     (the same tiny network at the thesis's width, all rows, quadratic
     regression of 8 outputs), end to end through fit_localizer/evaluate."""
-    from sfanav.defaults import default_rows
+    from sfanav.localization import default_rows
     from sfanav.experiments.localization import _tiny_config
-    from sfanav.workflow import fit_localizer
+    from sfanav.localization import fit_localizer
 
     w = sim.World.generate(0, area=(7, 7), n_objects=16, depth=6.0, inner={"tree": 1, "bush": 1, "pole": 2},
                            patches={"path": 1, "bed": 2})
@@ -308,9 +307,10 @@ def test_tiny_realistic_garden_default_beats_the_thesis_configuration():
 def test_cli_train_uses_the_default_without_a_preset_and_the_thesis_with_one(tmp_path, monkeypatch, capsys):
     """Which configuration ``sfanav train`` builds: captured at fit_localizer
     (no training here)."""
-    import sfanav.demo  # noqa: F401  modules that bind fit_localizer at import: before the patch, not during it
+    import sfanav.app.demo  # noqa: F401  modules that bind fit_localizer at import: before the patch, not during it
     import sfanav.experiments.localization  # noqa: F401
-    from sfanav import cli, workflow
+    from sfanav.app import cli
+    from sfanav.localization import training as workflow
 
     ds = sim.simulate("realistic-garden", tmp_path / "d", 0, max_frames=6, camera=sim.PanoramicCamera(70, 8),
                       progress=False)
@@ -347,7 +347,7 @@ def test_cli_train_uses_the_default_without_a_preset_and_the_thesis_with_one(tmp
 
 def test_cli_default_train_localize_round_trip(tmp_path, capsys):
     """The default path for real, on a tiny dataset (resized to 350x40)."""
-    from sfanav import cli
+    from sfanav.app import cli
 
     ds = sim.simulate("realistic-garden", tmp_path / "d", 0, max_frames=30, camera=sim.PanoramicCamera(70, 8),
                       progress=False)
@@ -378,7 +378,7 @@ def test_cli_default_train_localize_round_trip(tmp_path, capsys):
 
 
 def _test_run(ds, loc):
-    from sfanav.workflow import Preprocessing, load_run
+    from sfanav.data import Preprocessing, load_run
 
     return load_run(ds.select(run="test"), Preprocessing.of_model(loc), log=lambda m: None)
 

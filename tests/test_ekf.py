@@ -5,8 +5,8 @@ import pytest
 
 import sfanav
 from sfanav import OdometryEKF
-from sfanav.ekf import ctrv_jacobians, ctrv_motion, grid_search, plot_fusion
-from sfanav.experiments_odometry import make_odometry_run
+from sfanav.odometry import ctrv_jacobians, ctrv_motion, grid_search, plot_fusion
+from sfanav.experiments.synthetic_odometry import make_odometry_run
 
 
 @pytest.fixture(scope="module")

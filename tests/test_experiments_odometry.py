@@ -3,15 +3,9 @@
 import numpy as np
 import pytest
 
-from sfanav.experiments_odometry import (
-    THESIS,
-    compare_solvers,
-    experiment_5_3_1,
-    experiment_5_3_2,
-    format_rows,
-    make_line_problem,
-    make_odometry_run,
-)
+from sfanav.experiments.thesis_5_3 import THESIS, experiment_5_3_1, experiment_5_3_2, format_rows
+
+from sfanav.experiments.synthetic_odometry import compare_solvers, make_line_problem, make_odometry_run
 
 SMALL_GRID = dict(distance_noise=(0.003, 0.01), heading_noise=(0.03,), measurement_noise=(0.05, 0.1))
 

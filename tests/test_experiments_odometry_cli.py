@@ -69,7 +69,7 @@ def test_5_3_1_quick(name, out):
 def test_5_3_2_cli_quick(out):
     # after 5.3.1-real in the same directory: reuses its dataset and features
     env = {**os.environ, "PYTHONPATH": str(Path(experiments.__file__).parents[2])}
-    p = subprocess.run([sys.executable, "-m", "sfanav.cli", "experiment", "5.3.2", "--quick", "--out", str(out),
+    p = subprocess.run([sys.executable, "-m", "sfanav.app.cli", "experiment", "5.3.2", "--quick", "--out", str(out),
                         "--no-progress"], capture_output=True, text=True, env=env, timeout=600)
     assert p.returncode == 0, p.stderr
     assert "EKF MED (m)" in p.stdout and "odometry MED (m)" in p.stdout

@@ -4,9 +4,9 @@ import numpy as np
 import pytest
 
 import sfanav
-from sfanav.localizer import pooling_step
-from sfanav.analysis import eta_values
-from sfanav.regression import error_vs_n
+from sfanav.localization import pooling_step
+from sfanav.sfa import eta_values
+from sfanav.localization import error_vs_n
 
 # A tiny world as in test_network.py (copied so the two files evolve independently).
 LANDMARKS = np.array([[-1.0, -0.6], [1.6, -0.4], [0.4, 1.8], [-0.8, 1.5], [2.0, 1.2], [0.5, -1.4]])
@@ -157,7 +157,7 @@ def test_save_load_round_trip(world, fitted, tmp_path):
     np.testing.assert_array_equal(back.predict(timgs), fitted.predict(timgs))
     assert back.n_outputs == 6 and back.train_metrics_ == fitted.train_metrics_
     assert back.rotation_pooling_ == 8 and back.rotation_pooling == "auto"
-    assert sfanav.modelfile.read_model(path)[2]["version"] == 4  # pooled features: format 4
+    assert sfanav.sfa.read_model(path)[2]["version"] == 4  # pooled features: format 4
     F = fitted.features(timgs)
     bare = sfanav.Localizer(None, n_outputs=3, ridge=0.1).fit_features(F, np.c_[F[:, 0], F[:, 1]])
     bare.save(tmp_path / "bare.sfa")

@@ -5,9 +5,9 @@ import pytest
 
 import sfanav
 from sfanav import MetricLearner, expand
-from sfanav.experiments_odometry import make_line_problem, synthetic_features
-from sfanav.metric import metric_cost, plot_metric_lines
-from sfanav.metrics import align, med
+from sfanav.experiments.synthetic_odometry import make_line_problem, synthetic_features
+from sfanav.odometry import metric_cost, plot_metric_lines
+from sfanav.localization import align, med
 from sfanav.odometry import lines_from_labels
 
 
@@ -187,7 +187,7 @@ def test_bad_inputs(problem):
 
 
 def test_fit_on_odometry_poses_segments_them():
-    from sfanav.experiments_odometry import make_odometry_run
+    from sfanav.experiments.synthetic_odometry import make_odometry_run
     from sfanav.odometry import segment_lines
 
     run = make_odometry_run(n_legs=10, random_state=4)
@@ -245,7 +245,7 @@ def test_transit_term_gradients_match_finite_differences(small, angle_term):
 
 @pytest.fixture(scope="module")
 def odo_run():
-    from sfanav.experiments_odometry import make_odometry_run
+    from sfanav.experiments.synthetic_odometry import make_odometry_run
 
     return make_odometry_run(n_legs=14, random_state=2)
 
@@ -276,7 +276,7 @@ def test_varpro_with_transits_is_a_minimum_of_the_full_cost(odo_run):
 
 
 def test_odometry_variances_follow_the_noise_model():
-    from sfanav.metric import DEFAULT_ODOMETRY_NOISE, odometry_variances
+    from sfanav.odometry import DEFAULT_ODOMETRY_NOISE, odometry_variances
     from sfanav.odometry import lines_from_odometry
 
     # two lines along x (1 m each, 11 samples), a turn on the spot by pi between them, no drive
@@ -328,7 +328,7 @@ def lanes():
 
 
 def test_noise_weighted_cost_does_not_bend_where_the_thesis_cost_does(lanes):
-    from sfanav.regression import QuadraticRegression
+    from sfanav.localization import QuadraticRegression
 
     F, xy, lines = lanes
     on = lines.mask
@@ -349,7 +349,7 @@ def test_noise_weighted_cost_does_not_bend_where_the_thesis_cost_does(lanes):
     R = ml.line_points()[on] - ml.transform(F[on])
     n_par = 3 * lines.n_lines + 2 * ml.weights_.shape[0]
     assert ml.feature_noise_ == pytest.approx(np.sqrt((R**2).sum() / (2 * on.sum() - n_par)), rel=2e-3)
-    from sfanav.metric import odometry_variances
+    from sfanav.odometry import odometry_variances
 
     var_a, var_t = odometry_variances(lines)
     np.testing.assert_allclose(ml.angle_weights_, ml.feature_noise_**2 / var_a, rtol=1e-12)
@@ -384,8 +384,8 @@ def test_noise_weights_bad_inputs(problem, lanes):
 def test_heading_drift_is_estimated_and_removed(odo_run):
     """A systematic heading drift (0.002 rad per 4 cm step = 0.05 rad/m) biases every
     measured heading change; heading_drift='estimate' recovers it and the map improves."""
-    from sfanav.experiments_odometry import make_odometry_run
-    from sfanav.metric import _Problem, _VarPro
+    from sfanav.experiments.synthetic_odometry import make_odometry_run
+    from sfanav.odometry.metric_cost import LineProblem as _Problem, VarPro as _VarPro
     from sfanav.odometry import segment_lines
 
     run = make_odometry_run(n_legs=14, random_state=0)  # heading_bias 0.002 rad per moving step

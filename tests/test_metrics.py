@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from sfanav.metrics import align, euclidean_errors, localization_metrics, mae, mae_percent, med
+from sfanav.localization import align, euclidean_errors, localization_metrics, mae, mae_percent, med
 
 
 def rot2(deg):

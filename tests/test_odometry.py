@@ -3,15 +3,7 @@
 import numpy as np
 import pytest
 
-from sfanav.odometry import (
-    Lines,
-    dead_reckon,
-    increments,
-    lines_from_labels,
-    lines_from_odometry,
-    segment_lines,
-    wrap_angle,
-)
+from sfanav.odometry import Lines, dead_reckon, increments, lines_from_labels, lines_from_odometry, segment_lines, wrap_angle
 
 
 def square_walk(side_steps=20, turn_steps=5, step=0.2, laps=1):

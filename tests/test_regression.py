@@ -4,14 +4,7 @@ import numpy as np
 import pytest
 
 import sfanav
-from sfanav.regression import (
-    RANDOM_SPLITS,
-    TEST_RUN,
-    QuadraticRegression,
-    error_vs_n,
-    evaluate_random_splits,
-    evaluate_test_run,
-)
+from sfanav.localization import RANDOM_SPLITS, TEST_RUN, QuadraticRegression, error_vs_n, evaluate_random_splits, evaluate_test_run
 
 
 def quadratic_map(F):

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from sfanav.unwarp import Mirror, Unwarper, estimate_mirror
+from sfanav.data import Mirror, Unwarper, estimate_mirror
 
 CENTER, R_IN, R_OUT, OMNI = (101.3, 88.7), 20.0, 80.0, (210, 180)  # OMNI = (W, H)
 

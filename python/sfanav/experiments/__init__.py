@@ -21,8 +21,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-__all__ = ["Experiment", "ExperimentResult", "register", "get", "names", "run"]
-
 # Modules that register experiments (imported on first lookup).
 FAMILIES = ("localization", "odometry", "navigation", "gardens")
 
@@ -82,6 +80,8 @@ class Experiment:
 
 
 _REGISTRY: dict[str, Experiment] = {}
+
+
 _loaded = False
 
 

@@ -20,14 +20,14 @@ training run only) the localization error is measured:
 * the peer baselines (perfect memory with the rotational image difference,
   nearest neighbour on Fourier signatures) on the raw panoramas.
 
-The **sfanav default** (:mod:`sfanav.defaults`: the ``sfanav-default``
+The **sfanav default** (:mod:`sfanav.localization.recipe`: the ``sfanav-default``
 network, the horizon band, the ``"auto"`` readout) is one more row,
 ``sfanav default``, trained and read out by the library's own
-:func:`sfanav.defaults.train_default`; its row also records how the readout
+:func:`sfanav.localization.train_default`; its row also records how the readout
 choice's cross-validation compared kernel ridge and kNN.
 
 A *training variant* ``loop closures`` (thesis 6.2.1 with image-based loop
-closures, :mod:`sfanav.loopclosure`) is trained on all rows beside the row
+closures, :mod:`sfanav.odometry.loop_closures`) is trained on all rows beside the row
 variants. Further training variants (``TRAIN_VARIANTS``, run with
 ``scripts/gardens_subset.py``): node capacity, ``transition weight <w>``
 (``Network.fit(transition_weight=)``) and ``spatial pairs ...`` (supervised
@@ -49,31 +49,49 @@ from typing import Any
 
 import numpy as np
 
-from .. import analysis, baselines, regression, sim
-from ..imagerows import ImageRows
-from ..localizer import ROTATION_POOLING, Localizer, pooled_transform
-from ..metrics import localization_metrics
-from ..network import Network, Rotation, spatial_pairs
-from ..readout import (auto_candidates, default_candidates, describe_spec, make_readout, select_auto_readout,
-                       select_readout)
-from ..workflow import Preprocessing, coordinate_range, load_run
+from .. import sim
+from ..data.image_rows import ImageRows
+from ..data.preprocessing import Preprocessing
+from ..data.sources import load_run
+from ..localization import baselines
+from ..localization.error_metrics import localization_metrics
+from ..localization.evaluation import coordinate_range
+from ..localization.localizer import ROTATION_POOLING, Localizer, pooled_transform
+from ..localization.plots import plot_firing_maps
+from ..localization.protocols import RANDOM_SPLITS, TEST_RUN
+from ..localization.readout_selection import (
+    auto_candidates,
+    default_candidates,
+    select_readout,
+)
+from ..localization.readouts import describe_spec, make_readout
+from ..sfa.diagnostics import eta_values, orientation_angles
+from ..sfa.network import Network, Rotation, spatial_pairs
 from . import ExperimentResult, register
-from .localization import _log, _tiny_config, simulated
-
-__all__ = ["ROW_VARIANTS", "READOUTS", "run_scene"]
+from .localization import progress_log, simulated, tiny_config
 
 BAND = (-10.0, 20.0)
+
+
 ROW_VARIANTS: dict[str, ImageRows] = {
     "": ImageRows(),
     "rows: band": ImageRows(band=BAND),
     "rows: row-norm": ImageRows(normalize=True),
     "rows: band + row-norm": ImageRows(band=BAND, normalize=True),
 }
+
+
 # training variants: name -> options (None: the thesis's temporally ordered sequence)
 LOOP_CLOSURES = {"accept": 1.0, "min_gap": 40, "max_odometry_distance": 3.0}
+
+
 # node capacity: wider lower layers (Table 5.1: 14 / 16 / 16 outputs)
 WIDER = {"network": {"outs": [20, 24, 24]}}
+
+
 WIDEST = {"network": {"outs": [28, 32, 32]}}
+
+
 # combinations: "rows" names a row variant applied with the training variant
 TRAIN_VARIANTS: dict[str, dict[str, Any] | None] = {
     "": None,
@@ -111,6 +129,8 @@ TRAIN_VARIANTS: dict[str, dict[str, Any] | None] = {
         "pairs": [{"radius": 1.2, "k": 4, "min_gap": 4, "weight": 1.0, "shifts": True, "shift_step": 5},
                   {"radius": 0.6, "k": 4, "weight": 1.0, "shifts": True, "shift_step": 5}], "pair_layers": [4]},
 }
+
+
 READOUTS: dict[str, tuple[str, ...] | None] = {
     "": None,  # the thesis's quadratic regression, 8 outputs, least squares
     "readout: ridge quadratic": ("quadratic",),
@@ -121,11 +141,21 @@ READOUTS: dict[str, tuple[str, ...] | None] = {
     "rotation pooling": None,
     "readout: kernel ridge + rotation pooling": ("kernel",),
 }
+
+
 POOLED_READOUTS = ("rotation pooling", "readout: kernel ridge + rotation pooling")
+
+
 THESIS_SPEC = {"kind": "quadratic", "n_outputs": 8, "ridge": 0.0}
+
+
 ETA = "max eta_phi (outputs 1-8)"
+
+
 METRICS = ("MAE x (%)", "MAE y (%)", "MAE x (m)", "MAE y (m)", "MED (m)", "MAE x (%) (random splits)",
            "MAE y (%) (random splits)", ETA, "training (s)", "numbers per image")
+
+
 TARGETS = {"realistic": 3.0, "control": 1.8}
 
 
@@ -159,7 +189,7 @@ def _network(quick: bool, shape: tuple[int, int, int], outs: list[int] | None = 
     lower layers' output dims and ``max_expanded`` replaced (node capacity)."""
     h, w, c = shape
     if quick:
-        return Network(_tiny_config(w, h, c, out=12))
+        return Network(tiny_config(w, h, c, out=12))
     net = Network.from_preset("thesis-5.1", out=12, precision="mixed")
     if outs is None and max_expanded is None:
         return net
@@ -200,14 +230,14 @@ def _cv_diagnostics(F_tr: np.ndarray, xy_tr: np.ndarray, F_te: np.ndarray, xy_te
 def _default_row(X_tr: np.ndarray, xy_tr: np.ndarray, X_te: np.ndarray, xy_te: np.ndarray, crange: np.ndarray,
                  elev: tuple[float, float], *, quick: bool, seed: int, n_repeats: int, log: Any,
                  tag: str) -> tuple[dict[str, Any], dict[str, Any]]:
-    """The sfanav default, trained by :func:`sfanav.defaults.train_default`
+    """The sfanav default, trained by :func:`sfanav.localization.train_default`
     exactly as ``sfanav train`` does without a preset, measured as the
     other rows; and the same network and rows without rotation pooling
     (the pooling's ablation row)."""
-    from ..defaults import default_network, train_default
+    from ..localization.recipe import default_network, train_default
 
     shape = X_tr.shape[1:] if X_tr.ndim == 4 else X_tr.shape[1:] + (1,)
-    net = Network(_tiny_config(shape[1], shape[0], shape[2], out=12)) if quick else default_network()
+    net = Network(tiny_config(shape[1], shape[0], shape[2], out=12)) if quick else default_network()
     loc = train_default(X_tr, xy_tr, camera_elevation=elev, network=net)
     F_tr, F_te = loc.features(X_tr), loc.features(X_te)
     m = localization_metrics(loc.predict_features(F_te), xy_te, coordinate_range=crange)
@@ -215,7 +245,7 @@ def _default_row(X_tr: np.ndarray, xy_tr: np.ndarray, X_te: np.ndarray, xy_te: n
     rs = _random_splits(spec, F_te, xy_te, crange, n_repeats=n_repeats, seed=seed)
     X_rows = X_tr if loc.rows is None else loc.rows(X_tr)
     R = loc.network.transform(X_rows, rotations=True)  # the network's outputs, before rotation pooling
-    _, eta_phi = analysis.eta_values(R[:, :, :8])
+    _, eta_phi = eta_values(R[:, :, :8])
     # ablation: the same network and rows without rotation pooling (readout chosen as for the default)
     plain = Localizer(loc.network, readout="auto", rows=loc.rows, rotation_pooling=None).fit(X_tr, xy_tr)
     mp = localization_metrics(plain.predict(X_te), xy_te, coordinate_range=crange)
@@ -250,7 +280,7 @@ def run_scene(out: Path, preset: str, seed: int, *, quick: bool, progress: bool,
     variants are measured on all rows), evaluates every readout, and (with
     ``default_too``) the sfanav default; returns ({configuration: {metric:
     value}}, plots)."""
-    log = _log(progress)
+    log = progress_log(progress)
     if quick:
         ds = simulated(out, preset, seed, quick=True, camera=sim.PanoramicCamera(60, 8), max_frames=60,
                        progress=progress)
@@ -314,7 +344,7 @@ def run_scene(out: Path, preset: str, seed: int, *, quick: bool, progress: bool,
             extra = {"spatial pairs": len(pa)}
             log(f"{tag} seed {seed} {tname}: {len(pa)} spatial pairs")
         if lc_opts:
-            from ..loopclosure import find_loop_closures, interleave
+            from ..odometry.loop_closures import find_loop_closures, interleave
 
             lc = find_loop_closures(X_tr, odo_tr, **lc_opts)
             seq = interleave(A_tr, lc)
@@ -331,13 +361,13 @@ def run_scene(out: Path, preset: str, seed: int, *, quick: bool, progress: bool,
         fit_s = time.perf_counter() - t0
         F_tr, F_te = net.transform(A_tr), net.transform(A_te)
         R = net.transform(A_tr, rotations=True)
-        _, eta_phi = analysis.eta_values(R[:, :, :8])
+        _, eta_phi = eta_values(R[:, :, :8])
         vname = rname or tname or "all rows"
         log(f"{tag} seed {seed} {vname}: trained in {fit_s:.0f} s, max eta_phi {eta_phi.max():.3f}")
         if firing_maps and (not quick or vname == "all rows"):  # quick: the plain network's maps only
-            angles = analysis.orientation_angles(R.shape[1], step=5, width=A_tr.shape[2])
+            angles = orientation_angles(R.shape[1], step=5, width=A_tr.shape[2])
             p = out / f"gardens-{tag}-seed{seed}-{vname.replace('rows: ', '').replace(' + ', '+').replace(' ', '-')}-firing_maps.png"
-            plots.append(str(analysis.plot_firing_maps(R, xy_tr, p, which=(0, 1, 2, 3), angles=angles,
+            plots.append(str(plot_firing_maps(R, xy_tr, p, which=(0, 1, 2, 3), angles=angles,
                                                        title=f"{preset} seed {seed}, {tname or rows.describe()}")))
         sels: dict[Any, Any] = {}  # one CV per readout kind; "best" takes the lowest CV error among them
         pooled = [k for k in POOLED_READOUTS if k in readouts]
@@ -439,7 +469,7 @@ def _exp_gardens(out: Path, *, quick: bool, seed: int, progress: bool) -> Experi
             if k not in m or m[k] is None:
                 continue
             row = {"metric": f"{k} [{cfg}]", "thesis": None, "sfanav": m[k], "configuration": cfg,
-                   "protocol": regression.RANDOM_SPLITS if "random splits" in k else regression.TEST_RUN}
+                   "protocol": RANDOM_SPLITS if "random splits" in k else TEST_RUN}
             if k + " per seed" in m:
                 row["per_seed"] = m[k + " per seed"]
             if k.startswith("MAE") and "random" not in k and "(%)" in k:
@@ -458,7 +488,7 @@ def _exp_gardens(out: Path, *, quick: bool, seed: int, progress: bool) -> Experi
         "by odometry, accepted if as alike as a frame 2 steps away), aligned by circular cross-correlation; "
         "training time includes finding them. 'capacity: wider layers': Table 5.1 with 20 / 24 / 24 instead of "
         "14 / 16 / 16 outputs in layers 1-3; 'widest': 28 / 32 / 32; '+' combines"
-        + ". 'sfanav default': the library's default (sfanav.defaults.train_default: network sfanav-default = "
+        + ". 'sfanav default': the library's default (sfanav.localization.train_default: network sfanav-default = "
         "Table 5.1 with 20 / 24 / 24 outputs in layers 1-3 and 12 top outputs, horizon band, readout 'auto' = "
         "a GP (ARD kernel, marginal likelihood) on 12 outputs unless kernel ridge or kNN is >10 % better by blocked CV "
         "on the training run (10 folds of interleaved 10-image blocks))"

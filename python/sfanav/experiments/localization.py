@@ -16,7 +16,7 @@
 
 Every experiment also runs perfect memory (rotational image difference
 function) and the Fourier signature on the same images
-(:mod:`sfanav.baselines`), with error, bytes per stored place and query
+(:mod:`sfanav.localization.baselines`), with error, bytes per stored place and query
 time in the same table. Metrics come with both protocols: the plain rows
 fit the regression on the training run and measure on the separate test run
 (honest); rows marked ``(random splits)`` use the thesis 5.1.1 protocol
@@ -33,17 +33,18 @@ from typing import Any
 import numpy as np
 
 from .. import sim
-from ..dataset import Dataset
-from ..network import Network, Rotation
-from ..workflow import Preprocessing, evaluate, evaluation_rows, fit_localizer, load_run
+from ..data.dataset import Dataset
+from ..data.preprocessing import Preprocessing
+from ..data.sources import load_run
+from ..localization.evaluation import evaluate, evaluation_rows
+from ..localization.training import fit_localizer
+from ..sfa.network import Network, Rotation
 from . import ExperimentResult, register
-
-__all__ = ["window_network", "simulated"]
 
 ETA = "max eta_phi (outputs 1-8)"
 
 
-def _log(progress: bool):
+def progress_log(progress: bool):
     def log(msg: str) -> None:
         if progress:
             import sys
@@ -51,9 +52,6 @@ def _log(progress: bool):
             print(msg, file=sys.stderr, flush=True)
 
     return log
-
-
-# --------------------------------------------------------------------- scenes
 
 
 def simulated(out: Path, preset: str, seed: int, *, quick: bool, camera: Any = None, max_frames: int | None = None,
@@ -69,14 +67,14 @@ def simulated(out: Path, preset: str, seed: int, *, quick: bool, camera: Any = N
             md = ds.metadata
             if (md.get("preset") == preset and md.get("seed") == seed and md.get("max_frames") == max_frames
                     and md.get("camera") == json.loads(json.dumps(cam_dict))):
-                _log(progress)(f"reusing the simulated dataset {path}")
+                progress_log(progress)(f"reusing the simulated dataset {path}")
                 return ds
         except (ValueError, OSError):
             pass
     return sim.simulate(preset, path, seed, max_frames=max_frames, camera=camera, overwrite=True, progress=progress)
 
 
-def _tiny_config(width: int, height: int, channels: int, out: int = 12, degree: int = 2,
+def tiny_config(width: int, height: int, channels: int, out: int = 12, degree: int = 2,
                  shared: bool = True) -> dict[str, Any]:
     """A two-layer network for quick smoke runs on tiny images."""
     rf_w = min(6, width)
@@ -122,7 +120,7 @@ def _run_localization(out: Path, ds: Dataset, net: Network, *, prefix: str, titl
     """Train on the ``train`` run, evaluate on ``test``; returns (evaluation, rows, info, data).
     ``readout="quadratic"`` (8 outputs, no ``rows``) is the thesis's
     configuration; ``"auto"`` with 8 or 12 outputs the sfanav default's."""
-    log = _log(progress)
+    log = progress_log(progress)
     prep = Preprocessing.for_network(net, window=window, normalize=normalize)
     if data is None:
         X_tr, xy_tr = load_run(ds.select(run="train"), prep, log=log)
@@ -149,8 +147,6 @@ def _plots(ev: Any) -> list[str]:
     return [str(p) for _, p in ev.plots] + ([str(ev.report)] if ev.report else [])
 
 
-# --------------------------------------------------------------------- 5.1.1
-
 THESIS_5_1_1 = {
     "MAE x (%) (random splits)": 1.83,
     "MAE y (%) (random splits)": 1.68,
@@ -168,16 +164,16 @@ def exp_5_1_1(out: Path, *, quick: bool, seed: int, progress: bool) -> Experimen
     if quick:
         ds = simulated(out, preset, seed, quick=True, camera=sim.PanoramicCamera(60, 8), max_frames=40,
                        progress=progress)
-        net = Network(_tiny_config(60, 8, 3))
+        net = Network(tiny_config(60, 8, 3))
     else:
         ds = simulated(out, preset, seed, quick=False, progress=progress)
         net = Network.from_preset("thesis-5.1", out=12)
     ev, rows, info, data = _run_localization(out, ds, net, prefix="5.1.1-", title="5.1.1 simulator grid",
                                              seed=seed, progress=progress, thesis=THESIS_5_1_1)
     # the sfanav default (issue 7) on the same images: rows "<metric> [sfanav default]"
-    from ..defaults import default_network, default_rows
+    from ..localization.recipe import default_network, default_rows
 
-    dnet = Network(_tiny_config(60, 8, 3)) if quick else default_network()
+    dnet = Network(tiny_config(60, 8, 3)) if quick else default_network()
     elev = tuple(ds.metadata["camera"].get("elevation_deg", (-30.0, 20.0)))
     dev, drows, dinfo, _ = _run_localization(out, ds, dnet, prefix="5.1.1-default-",
                                              title="5.1.1 simulator grid, sfanav default", seed=seed,
@@ -209,8 +205,6 @@ def exp_5_1_1(out: Path, *, quick: bool, seed: int, progress: bool) -> Experimen
     return ExperimentResult("5.1.1", rows, _plots(ev) + _plots(dev), notes)
 
 
-# --------------------------------------------------------------------- 5.1.2
-
 THESIS_5_1_2 = {
     "MAE x (m)": 0.23,
     "MAE y (m)": 0.175,
@@ -230,7 +224,7 @@ def exp_5_1_2(out: Path, *, quick: bool, seed: int, progress: bool) -> Experimen
     if quick:
         ds = simulated(out, preset, seed, quick=True, camera=sim.PanoramicCamera(60, 8), max_frames=40,
                        progress=progress)
-        net = Network(_tiny_config(60, 8, 3))
+        net = Network(tiny_config(60, 8, 3))
     else:
         ds = simulated(out, preset, seed, quick=False, progress=progress)
         net = Network.from_preset("thesis-5.2", out=12, precision="mixed")
@@ -253,9 +247,9 @@ def exp_5_1_2(out: Path, *, quick: bool, seed: int, progress: bool) -> Experimen
     return ExperimentResult("5.1.2", rows, _plots(ev), notes)
 
 
-# --------------------------------------------------------------------- 5.1.3
-
 WINDOWS = (10, 20, 30, 40, 50, 60, 70, 80, 90, 100)
+
+
 MODIFIED = "window 50 % cubic individual"
 
 
@@ -295,7 +289,7 @@ def _plot_windows(windows: list[int], eta_phi: list[np.ndarray], med: list[float
 @register("5.1.3", "window size of the simulated rotation: 10..100 %, plus 50 % with cubic individual nodes")
 def exp_5_1_3(out: Path, *, quick: bool, seed: int, progress: bool) -> ExperimentResult:
     preset = "thesis-5.1.1-grid"
-    log = _log(progress)
+    log = progress_log(progress)
     if quick:
         W, H = 100, 10
         ds = simulated(out, preset, seed, quick=True, camera=sim.PanoramicCamera(W, H), max_frames=30,
@@ -371,8 +365,6 @@ def exp_5_1_3(out: Path, *, quick: bool, seed: int, progress: bool) -> Experimen
     return ExperimentResult("5.1.3", rows, plots, notes)
 
 
-# --------------------------------------------------------------------- 5.2
-
 THESIS_5_2 = {"MED (m) indoor I": 0.21, "MED (m) indoor II": 0.13}
 
 
@@ -385,7 +377,7 @@ def exp_5_2(out: Path, *, quick: bool, seed: int, progress: bool) -> ExperimentR
         if quick:
             ds = simulated(out, preset, seed, quick=True, camera=sim.PanoramicCamera(60, 8, rgb=False),
                            max_frames=40, progress=progress)
-            net = Network(_tiny_config(60, 8, 1))
+            net = Network(tiny_config(60, 8, 1))
         else:
             ds = simulated(out, preset, seed, quick=False, progress=progress)
             net = Network.from_preset("thesis-5.3", out=12)

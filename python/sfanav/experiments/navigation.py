@@ -35,7 +35,7 @@ from typing import Any
 
 import numpy as np
 
-from .. import navigation as nav
+from ..navigation import navigator as nav
 from . import ExperimentResult, register
 
 # The thesis's figures (chapter 7, thesis-figures.md).
@@ -45,10 +45,20 @@ THESIS = {
     "7.2.1": {("raw", 2): (0.98, 0.94), ("raw", 8): (0.16, None), ("weighted", 3): (0.98, 0.92),
               ("weighted", 8): (0.86, 0.86)},
 }
+
+
 ETA, GAMMA = 1.0, 0.5  # thesis 7.1.2
+
+
 SUCCESS_RADIUS, MAX_ITERATIONS = 0.5, 400
+
+
 QUICK_ITERATIONS = 40
+
+
 DEFAULT_NET_WEIGHTED_N = 8  # outputs of the sfanav default network in its weighted arms (7.2.1's remedy)
+
+
 IMAGE_TRIALS_ENV = "SFANAV_NAV_IMAGE_TRIALS"
 
 
@@ -155,7 +165,7 @@ def _cache_name(sc: Scene, what: str, seed: int, *parts: Any) -> str:
 def network_config(quick: bool) -> dict[str, Any]:
     """The network: thesis Table 5.2 (600 x 60 RGB) in mixed precision, or a
     two-layer network for 120 x 16 gray panoramas (quick)."""
-    from ..network import _preset_config
+    from ..sfa.network import preset_config
 
     if quick:
         return {
@@ -163,7 +173,7 @@ def network_config(quick: bool) -> dict[str, Any]:
             "network": {"weight_sharing": True},
             "layers": [{"rf": [10, 8], "stride": [5, 4], "out": 6}, {"rf": "full", "out": 8}],
         }
-    cfg = _preset_config("thesis-5.2")
+    cfg = preset_config("thesis-5.2")
     cfg.setdefault("network", {})["precision"] = "mixed"
     return cfg
 
@@ -172,8 +182,8 @@ def scene_network(sc: Scene, out: Path, seed: int, *, progress: bool = False) ->
     """Trains (or loads from ``out/cache``) the network of a scene on the
     images of its training trajectory (robot centre poses, in time order),
     with simulated rotation in steps of 5 px over the whole panorama."""
-    from ..modelfile import load
-    from ..network import Network, Rotation
+    from ..sfa.modelfile import load
+    from ..sfa.network import Network, Rotation
 
     cache = Path(out) / "cache" / _cache_name(sc, sc.name, seed, network_config(sc.quick), "rotation 5/10 px")
     if cache.exists():
@@ -282,10 +292,10 @@ def metric_localizer(sc: Scene, out: Path, seed: int, *, progress: bool = False)
     outputs to the run's positions, rotation pooled (the default's); with
     ``quick`` the scene's camera and the two-layer network. Cached as a model
     file under ``out/cache``. Returns (localizer, camera)."""
-    from ..defaults import CAMERA_ELEVATION, default_network, default_rows
-    from ..localizer import Localizer
-    from ..modelfile import load
-    from ..network import Network, Rotation
+    from ..localization.localizer import Localizer
+    from ..localization.recipe import CAMERA_ELEVATION, default_network, default_rows
+    from ..sfa.modelfile import load
+    from ..sfa.network import Network, Rotation
     from ..sim.render import PanoramicCamera
 
     cam = sc.camera if sc.quick else PanoramicCamera(350, 40)
@@ -358,9 +368,6 @@ def metric_arms(sc: Scene, out: Path, seed: int, starts: np.ndarray, targets: np
                     + (f" e={s.efficiencies[i]:.2f}" if s.results[i].success else "") for i in sel],
             title=f"7.1: {name}")))
     return rows, plots, notes
-
-
-# --------------------------------------------------------------------- 7.1
 
 
 def trials_71(sc: Scene, kind: str, seed: int, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray | None,
@@ -569,9 +576,6 @@ def exp_71_obstacle(out: Path, *, quick: bool = False, seed: int = 0, progress: 
     return _run_71("obstacle", Path(out), quick=quick, seed=seed, progress=progress)
 
 
-# --------------------------------------------------------------------- 7.2.1
-
-
 N_TRIALS_721_IMAGES = 20  # image-based runs per setting (28 settings; the thesis: 50)
 
 
@@ -646,9 +650,9 @@ def exp_721(out: Path, *, quick: bool = False, seed: int = 0, progress: bool = T
 
 
 def _plot_721(outcome: list[tuple[int, str, str, float, float]], path: Path) -> Path:
-    from ..analysis import _figure, _save
+    from .._plotting import figure, save_figure
 
-    fig = _figure(8.0, 3.2)
+    fig = figure(8.0, 3.2)
     axes = fig.subplots(1, 2)
     for (mode, dname), style in {("raw", "thesis rule"): "o-", ("weighted", "thesis rule"): "s-",
                                  ("raw", "robust descent"): "o--", ("weighted", "robust descent"): "s--"}.items():
@@ -666,10 +670,7 @@ def _plot_721(outcome: list[tuple[int, str, str, float, float]], path: Path) -> 
         ax.set_xlabel("number of SFA outputs n")
         ax.set_ylim(0, 1.05)
     axes[0].legend(fontsize="x-small")
-    return _save(fig, path, 110)
-
-
-# --------------------------------------------------------------------- 7.2.2
+    return save_figure(fig, path, 110)
 
 
 def _coordinate_scene(kind: str, seed: int, quick: bool) -> tuple[Any, Any, Any]:

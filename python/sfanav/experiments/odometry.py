@@ -6,7 +6,7 @@
   orientation >= 8 m sampled every 0.2 m, a 1090-frame test walk). The
   Table 5.2 network is trained on the grid run; the slow features of the
   lines run, the known lines and the odometry's distances along them feed
-  :func:`sfanav.experiments_odometry.experiment_5_3_1` (``variant="sim"``:
+  :func:`sfanav.experiments.thesis_5_3.experiment_5_3_1` (``variant="sim"``:
   random initialisation, cost 5.1).
 * ``5.3.1-real``: the same on the indoor-style scene with noisy odometry
   (sim preset ``thesis-5.2-indoor-II``: 4x4 m, a grid driven as straight
@@ -14,7 +14,7 @@
   network): lines segmented from the training run's odometry, initialisation
   from odometry, cost 5.5 (``variant="real"``).
 * ``5.3.2``: EKF fusion of the unsupervised SFA estimates of ``5.3.1-real``'s
-  test walk with its odometry (:func:`sfanav.experiments_odometry.experiment_5_3_2`).
+  test walk with its odometry (:func:`sfanav.experiments.thesis_5_3.experiment_5_3_2`).
 
 The trained network's features are cached under ``out/data`` (beside the
 simulated datasets), so ``5.3.2`` after ``5.3.1-real`` with the same
@@ -35,27 +35,29 @@ from typing import Any
 import numpy as np
 
 from .. import sim
-from ..experiments_odometry import THESIS, experiment_5_3_1, experiment_5_3_2
-from ..metric import MetricLearner, plot_metric_lines
-from ..metrics import align, med
-from ..network import Network, Rotation
-from ..odometry import increments, lines_from_labels, lines_from_odometry
-from ..regression import QuadraticRegression
-from ..workflow import Preprocessing, load_run
+from ..data.preprocessing import Preprocessing
+from ..data.sources import load_run
+from ..localization.error_metrics import align, med
+from ..localization.quadratic import QuadraticRegression
+from ..odometry.dead_reckoning import increments
+from ..odometry.lines import lines_from_labels, lines_from_odometry
+from ..odometry.metric_learning import MetricLearner
+from ..odometry.plots import plot_metric_lines
+from ..sfa.network import Network, Rotation
 from . import ExperimentResult, register
-from .localization import _log, _tiny_config, simulated
-
-__all__ = ["scene_features", "sim_lines", "EKF_GRID"]
+from .localization import progress_log, simulated, tiny_config
+from .thesis_5_3 import THESIS, experiment_5_3_1, experiment_5_3_2
 
 #: Noise candidates of the EKF grid search: a decade each way around the
 #: per-step noise of a robot moving a few centimetres per frame (chosen before
-#: any run; the odometry's default grid in :func:`sfanav.ekf.grid_search`
+#: any run; the odometry's default grid in :func:`sfanav.odometry.grid_search`
 #: starts at 3 mm / 3 mrad per step).
 EKF_GRID = {
     "distance_noise": (0.0003, 0.001, 0.003, 0.01, 0.03),
     "heading_noise": (0.0003, 0.001, 0.003, 0.01, 0.03),
     "measurement_noise": (0.05, 0.1, 0.2, 0.4),
 }
+
 
 #: The scenes: preset, network preset, normalisation, runs whose features are needed.
 SCENES: dict[str, dict[str, Any]] = {
@@ -65,15 +67,21 @@ SCENES: dict[str, dict[str, Any]] = {
              "runs": ("train", "test")},
 }
 
+
 # quick smoke runs: tiny panoramas, the first frames of every run, few outputs
 QUICK_CAMERA = (60, 8)
+
+
 QUICK_FRAMES = {"sim": 260, "real": 300}
+
+
 QUICK_OUTPUTS = 4
+
+
 N_OUTPUTS = 8  # thesis: the eight slowest features
+
+
 TOP_OUTPUTS = 12  # trained (SFA outputs are nested: the 8 slowest are the 8-output network's)
-
-
-# --------------------------------------------------------------------- features
 
 
 def scene_features(out: Path, scene: str, seed: int, *, quick: bool, progress: bool) -> dict[str, Any]:
@@ -82,12 +90,12 @@ def scene_features(out: Path, scene: str, seed: int, *, quick: bool, progress: b
     (N, outputs), ``poses`` (N, 3), ``odometry`` (N, 3) and ``segment`` (N,)
     (-1 where the run has none), plus ``info``. Cached in ``out/data``."""
     spec = SCENES[scene]
-    log = _log(progress)
+    log = progress_log(progress)
     preset = spec["preset"]
     if quick:
         camera = sim.PanoramicCamera(*QUICK_CAMERA, rgb=not spec["gray"])
         ds = simulated(out, preset, seed, quick=True, camera=camera, max_frames=QUICK_FRAMES[scene], progress=progress)
-        net = Network(_tiny_config(*QUICK_CAMERA, 1 if spec["gray"] else 3))
+        net = Network(tiny_config(*QUICK_CAMERA, 1 if spec["gray"] else 3))
         net_name = "tiny"
     else:
         ds = simulated(out, preset, seed, quick=False, progress=progress)
@@ -167,9 +175,6 @@ def sim_lines(segment: Any, odometry: Any) -> Any:
             raise ValueError(f"segment {n} is not contiguous")
         dist[idx] = np.concatenate([[0.0], np.cumsum(U[idx[:-1], 0])])
     return lines_from_labels(seg, dist)
-
-
-# --------------------------------------------------------------------- helpers
 
 
 def _plain(v: Any) -> Any:
@@ -349,9 +354,6 @@ def _notes_5_3_1(variant: str, data: dict[str, Any], res: Any, seed: int, quick:
             "thesis's cost (5.1 sim, 5.5 real) at its minimum (rows 'thesis cost') and the thesis's solver "
             "(momentum gradient descent, 1000 iterations, rows 'thesis gradient descent', fig. 5.19); see "
             "docs/odometry.md.")
-
-
-# --------------------------------------------------------------------- experiments
 
 
 @register("5.3.1-sim", "unsupervised metric learning, simulated garden: 10 random lines >= 8 m, random init; "

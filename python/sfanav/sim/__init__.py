@@ -13,8 +13,23 @@
 
 from . import presets, trajectories
 from .presets import PRESETS, simulate
-from .render import Lighting, OmniCamera, PanoramicCamera, Renderer, bearings, camera_from_dict, column_of_bearing
-from .robot import OdometryNoise, Robot, Simulator, simulate_odometry, unicycle_step, wrap_angle
+from .render import (
+    Lighting,
+    OmniCamera,
+    PanoramicCamera,
+    Renderer,
+    bearings,
+    camera_from_dict,
+    column_of_bearing,
+)
+from .robot import (
+    OdometryNoise,
+    Robot,
+    Simulator,
+    simulate_odometry,
+    unicycle_step,
+    wrap_angle,
+)
 from .textures import Texture
 from .trajectories import Trajectory, VelocityRegions
 from .world import DynamicCylinder, Primitive, World, WorldObject

@@ -1,7 +1,7 @@
 """Scene presets: the thesis's simulator experiments as ready-made datasets.
 
 ``simulate(name, out, seed)`` generates a preset's world, drives its runs
-and writes one sfanav dataset (see :mod:`sfanav.dataset`) with a ``run``
+and writes one sfanav dataset (see :mod:`sfanav.data.dataset`) with a ``run``
 column (``train``, ``test``, ...), the world as ``world.json`` and the whole
 recipe in ``metadata.json``. ``sfanav simulate --preset NAME --out DIR`` is
 the same from the command line.
@@ -9,7 +9,6 @@ the same from the command line.
 
 from __future__ import annotations
 
-import json
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -89,6 +88,8 @@ _add(Preset(
     lambda rng: [RunSpec("train", lambda w, r: T.grid(w.area, spacing=1.5, step=0.25)),
                  RunSpec("test", lambda w, r: T.random_walk(w.area, 150, rng=r, world=w))],
 ))
+
+
 _add(Preset(
     "thesis-5.1.1-grid", "5.1.1",
     "30x30 m garden seen on regular grids walked as serpentines: 624 training (26x24) and 196 test (14x14) "
@@ -99,6 +100,7 @@ _add(Preset(
                  RunSpec("test", lambda w, r: T.grid_points(w.area, 14, 14, margin=2.0))],
 ))
 
+
 _add(Preset(
     "thesis-5.1.2-outdoor", "5.1.2",
     "5x7 m area (the thesis's outdoor experiment) in a garden: a grid exploration with crossings and large-radius "
@@ -108,7 +110,11 @@ _add(Preset(
     lambda rng: [RunSpec("train", lambda w, r: T.grid(w.area, spacing=0.5, step=0.0204, turn="arc", margin=0.3)),
                  RunSpec("test", lambda w, r: T.random_walk(w.area, 2800, 0.04, margin=0.3, rng=r, world=w))],
 ))
+
+
 _INDOOR_WEIGHTS = {"house": 0.25, "shed": 0.2, "fence": 0.15, "hedge": 0.15, "bush": 0.1, "tree": 0.1, "rock": 0.05}
+
+
 _add(Preset(
     "thesis-5.2-indoor-I", "5.2.2",
     "indoor-style 4x4 m area closely walled by sheds, houses, fences and hedges: grid exploration with crossings "
@@ -118,6 +124,8 @@ _add(Preset(
     lambda rng: [RunSpec("train", lambda w, r: T.grid(w.area, spacing=0.5, step=0.03, turn="arc", margin=0.3)),
                  RunSpec("test", lambda w, r: T.random_walk(w.area, 800, 0.04, margin=0.3, rng=r, world=w))],
 ))
+
+
 _add(Preset(
     "thesis-5.2-indoor-II", "5.2.2",
     "as thesis-5.2-indoor-I, but turns on the spot and denser lanes (more crossings, ~2600 frames); an 800-frame "
@@ -147,6 +155,8 @@ _add(Preset(
     lambda: PanoramicCamera(600, 60),
     _garden_runs(lines=True),
 ))
+
+
 # Thesis 5.3.1 simulator experiment: the 5.3 garden's world, training grid and
 # test walk, but the 10 lines are whole chords of the area through a random
 # point in a random direction (>= 8 m), which gives the thesis's point count
@@ -164,6 +174,8 @@ _add(Preset(
                  RunSpec("test", lambda w, r: T.random_walk(w.area, 1090, rng=r, world=w)),
                  RunSpec("lines", lambda w, r: T.line_segments(w.area, 10, 8.0, 0.2, rng=r, world=w, through=True))],
 ))
+
+
 _add(Preset(
     "thesis-6.2.1-static", "6.2.1",
     "the 16x18 m garden seen by a 500x500 omnidirectional camera (unwarp to 600x55): grid exploration "
@@ -172,6 +184,8 @@ _add(Preset(
     lambda: OmniCamera(500),
     _garden_runs(lines=False),
 ))
+
+
 _add(Preset(
     "thesis-6.2.1-light", "6.2.1",
     "as thesis-6.2.1-static, but the light intensity rises from 0.4 to 1.4 through the training run "
@@ -182,6 +196,8 @@ _add(Preset(
                          {"light-ramp": _ramp(0.4, 1.4)}),
                  RunSpec("test", lambda w, r: T.random_walk(w.area, 1090, rng=r, world=w))],
 ))
+
+
 _add(Preset(
     "thesis-6.2.1-dynamic", "6.2.1",
     "as thesis-6.2.1-static, plus a textured cylinder circling the area once during the training run",
@@ -190,6 +206,8 @@ _add(Preset(
     _garden_runs(lines=False),
     dynamic=True,
 ))
+
+
 _add(Preset(
     "thesis-6.2.2-conditions", "6.2.2",
     "15x15 m garden, a border-wire loop of 279 frames driven under 10 random lighting conditions "
@@ -198,6 +216,8 @@ _add(Preset(
     lambda: PanoramicCamera(600, 60),
     lambda rng: [RunSpec("loop", lambda w, r: T.border_loop(w.area, 279, rng=r), _random_conditions(rng, 10))],
 ))
+
+
 _add(Preset(
     "thesis-7.1-open", "7.1.2",
     "18x22 m open field on a uniformly coloured lawn (the thesis's textured ground plane), two cameras on the "
@@ -208,6 +228,8 @@ _add(Preset(
     lambda rng: [RunSpec("train", lambda w, r: T.random_lines(w.area, 5000, 0.2, margin=0.35, world=w, rng=r))],
     robot=lambda: Robot.two_cameras(0.7),
 ))
+
+
 _add(Preset(
     "thesis-7.1-obstacle", "7.1.2",
     "as thesis-7.1-open with a v-shaped wall in the area; the random lines bounce off it",
@@ -216,6 +238,8 @@ _add(Preset(
     lambda rng: [RunSpec("train", lambda w, r: T.random_lines(w.area, 5000, 0.2, margin=0.35, world=w, rng=r))],
     robot=lambda: Robot.two_cameras(0.7),
 ))
+
+
 _add(Preset(
     "thesis-7.2.2-halfplane", "7.2.2",
     "18x22 m field, random lines (5000 frames) moving 3x farther per step in the right half (x > 0) than in the "
@@ -225,6 +249,8 @@ _add(Preset(
     lambda rng: [RunSpec("train", lambda w, r: T.random_lines(
         w.area, 5000, 0.2, margin=0.35, world=w, rng=r, speed=T.VelocityRegions.half_plane(0.0, "left", 3.0)))],
 ))
+
+
 _add(Preset(
     "thesis-7.2.2-disc", "7.2.2",
     "18x22 m field, random lines (5000 frames), 3x slower inside a central disc of radius 5 m; column "
@@ -236,9 +262,9 @@ _add(Preset(
 ))
 
 
-# --------------------------------------------------------------------- issue 7: realistic gardens
-
 GARDEN_INNER = {"tree": 3, "bush": 4, "pole": 4, "shed": 1}
+
+
 GARDEN_PATCHES = {"patio": 1, "path": 1, "bed": 3}
 
 
@@ -259,6 +285,8 @@ _add(Preset(
     lambda: PanoramicCamera(350, 40),
     _realistic_runs,
 ))
+
+
 _add(Preset(
     "realistic-garden-control", "issue 7",
     "the thesis-like control of realistic-garden: the same 12x12 m garden and outer objects (same seed), but "
@@ -320,7 +348,8 @@ def simulate(preset: str, out: str | os.PathLike, seed: int = 0, *, max_frames: 
     -------
     sfanav.Dataset
     """
-    from ..dataset import Dataset, DatasetWriter
+    from ..data.dataset import Dataset
+    from ..data.writer import DatasetWriter
 
     p = get(preset)
     if max_frames is not None and (isinstance(max_frames, bool) or not isinstance(max_frames, (int, np.integer))

@@ -39,6 +39,8 @@ from .textures import Pyramid, fractal_noise, make_texture, photo
 from .world import Primitive, World
 
 _LUMA = np.array([0.299, 0.587, 0.114], np.float32)
+
+
 FOG_DISTANCE = 250.0  # m; aerial perspective: far surfaces fade to the horizon colour
 
 
@@ -100,9 +102,6 @@ class Lighting:
             "ambient": self.ambient,
             "shadows": self.shadows,
         }
-
-
-# ------------------------------------------------------------------ cameras
 
 
 class _Grid:
@@ -374,9 +373,6 @@ def camera_from_dict(d: dict[str, Any]) -> Camera:
     if kind == "omni":
         return OmniCamera(**d)
     raise ValueError(f"unknown camera type {kind!r}; available: 'panorama', 'omni'")
-
-
-# ------------------------------------------------------------------ renderer
 
 
 SHAPE_CODE = {"ellipsoid": 0, "box": 1, "cylinder": 2}

@@ -23,6 +23,8 @@ from typing import Any
 import numpy as np
 
 PHOTOS = ("grass", "gravel", "brick")
+
+
 KINDS = PHOTOS + ("noise", "bark", "leaves", "planks", "facade", "roof", "marker", "stripes")
 
 
@@ -74,9 +76,6 @@ class Texture:
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> "Texture":
         return cls(**d)
-
-
-# ----------------------------------------------------------------- sources
 
 
 def periodic_component(img: np.ndarray) -> np.ndarray:
@@ -174,9 +173,6 @@ def marker_image(marker_id: int, dictionary: str = "DICT_ARUCO_ORIGINAL", bits_p
     return (quiet / 255.0).astype(np.float32)
 
 
-# ----------------------------------------------------------------- synthesis
-
-
 def _rgba(albedo: np.ndarray, color: tuple[float, float, float], alpha: np.ndarray | None = None) -> np.ndarray:
     """Gray modulation (mean ~1) times an RGB color -> (h, w, 4) float32."""
     rgb = albedo[..., None] * np.asarray(color, np.float32)[None, None, :]
@@ -271,9 +267,6 @@ def make_texture(spec: Texture) -> np.ndarray:
         a = np.ones(m.shape + (1,), np.float32)
         return np.concatenate([rgb, a], axis=2)
     raise AssertionError(k)  # pragma: no cover - checked in Texture
-
-
-# ----------------------------------------------------------------- mip maps
 
 
 class Pyramid:

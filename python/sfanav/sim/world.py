@@ -31,14 +31,25 @@ import numpy as np
 from .textures import Texture
 
 FORMAT = "sfanav-world"
+
+
 VERSION = 1
 
+
 OBJECT_TYPES = ("tree", "conifer", "bush", "house", "shed", "fence", "hedge", "rock")
+
+
 INNER_TYPES = ("tree", "bush", "pole", "shed")  # objects that can stand inside the area (issue 7)
+
+
 PATCH_KINDS = ("patio", "path", "bed")
+
+
 # parts whose bottom is at least this high (m) do not block the robot (a mower
 # drives under a tree's crown, not through its trunk)
 BLOCK_HEIGHT = 0.6
+
+
 DEFAULT_WEIGHTS = {
     "tree": 0.28,
     "conifer": 0.1,
@@ -49,6 +60,8 @@ DEFAULT_WEIGHTS = {
     "hedge": 0.07,
     "rock": 0.13,
 }
+
+
 SHAPES = ("cylinder", "box", "ellipsoid")
 
 

@@ -1,0 +1,652 @@
+"""The ``sfanav`` command.
+
+Subcommands:
+
+* ``sfanav simulate --preset NAME --out DIR [--seed N]``: a dataset from the
+  built-in garden simulator.
+* ``sfanav train --dataset DIR --preset NAME|--config FILE --out MODEL``:
+  train a network under simulated rotation and the regression to metres.
+* ``sfanav localize MODEL INPUT --out CSV``: positions of a dataset, an image
+  folder or a video, one CSV row ``frame,x,y`` per image.
+* ``sfanav evaluate MODEL DATASET --out DIR``: metrics, baselines, plots and a
+  Markdown report.
+* ``sfanav demo``: simulate, train, localize and evaluate the demo garden.
+* ``sfanav experiment NAME`` / ``--list``: rerun a thesis experiment.
+
+Errors in the input (unknown preset, bad size, an existing output directory,
+a missing dataset, a bad network config, ...) end with a one-line message on
+stderr and exit status 2, never a traceback (set ``SFANAV_DEBUG=1`` to see
+the traceback). Results go to stdout, progress and notes to stderr.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+from collections.abc import Callable, Sequence
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from pathlib import Path
+
+
+EXIT_USAGE = 2
+
+
+# subcommand name -> function that adds its parser (with a ``run`` default)
+_COMMANDS: dict[str, Callable[[argparse._SubParsersAction], argparse.ArgumentParser]] = {}
+
+
+def command(name: str) -> Callable:
+    """Registers a subcommand: the decorated function adds its parser to the
+    subparsers and sets the parser's ``run`` default to the function that
+    executes it (returning the exit status)."""
+
+    def deco(add_parser: Callable[[argparse._SubParsersAction], argparse.ArgumentParser]) -> Callable:
+        _COMMANDS[name] = add_parser
+        return add_parser
+
+    return deco
+
+
+class _UsageError(Exception):
+    pass
+
+
+def _size(text: str) -> tuple[int, int]:
+    try:
+        if "x" in text.lower():
+            w, h = (int(v) for v in text.lower().split("x"))
+        else:
+            w = h = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"size must be WIDTHxHEIGHT (e.g. 600x60) or one number, got {text!r}") from None
+    if w < 1 or h < 1:
+        raise argparse.ArgumentTypeError(f"size must be positive, got {text!r}")
+    return w, h
+
+
+def _nonneg_int(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+    if v < 0:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 0, got {text!r}")
+    return v
+
+
+def _pos_int(text: str) -> int:
+    v = _nonneg_int(text)
+    if v < 1:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 1, got {text!r}")
+    return v
+
+
+@command("simulate")
+def _add_simulate(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    from ..sim import presets
+
+    p = sub.add_parser(
+        "simulate",
+        help="generate a dataset with the built-in garden simulator",
+        description="Generate a dataset (PNG images, frames.csv, metadata.json, world.json) from one of the "
+                    "simulator presets of the thesis's scenes.",
+        epilog="presets:\n" + "\n".join("  " + ln for ln in presets.describe().splitlines()),
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument("--preset", required=True, metavar="NAME", help="scene preset (listed below)")
+    p.add_argument("--out", required=True, metavar="DIR", help="output directory (new or empty)")
+    p.add_argument("--seed", type=_nonneg_int, default=0, help="seed of world, trajectories and noise (default 0)")
+    p.add_argument("--max-frames", type=_pos_int, default=None, metavar="N",
+                   help="keep only the first N frames of every run (quick looks)")
+    p.add_argument("--camera", choices=("panorama", "omni"), default=None,
+                   help="replace the preset's camera by a panoramic or an omnidirectional one")
+    p.add_argument("--size", type=_size, default=None, metavar="WxH",
+                   help="image size (panorama WIDTHxHEIGHT, omni SIZE); default the preset's")
+    p.add_argument("--gray", action="store_true", help="gray images instead of RGB")
+    p.add_argument("--overwrite", action="store_true", help="replace an existing dataset in --out")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.set_defaults(run=_run_simulate)
+    return p
+
+
+def _run_simulate(args: argparse.Namespace) -> int:
+    from ..sim import OmniCamera, PanoramicCamera, presets
+
+    if args.preset not in presets.PRESETS:
+        raise _UsageError(f"unknown preset {args.preset!r}; available: {', '.join(presets.PRESETS)}")
+    p = presets.get(args.preset)
+    camera = None
+    if args.camera or args.size or args.gray:
+        base = p.camera()
+        kind = args.camera or base.kind
+        if kind == "omni":
+            size = args.size[0] if args.size else (base.size if isinstance(base, OmniCamera) else 500)
+            if args.size and args.size[0] != args.size[1]:
+                raise _UsageError(f"an omni image is square: give --size N or NxN, got {args.size[0]}x{args.size[1]}")
+            camera = OmniCamera(size, rgb=not args.gray)
+        else:
+            if args.size:
+                w, h = args.size
+            elif isinstance(base, PanoramicCamera):
+                w, h = base.width, base.height
+            else:
+                w, h = 600, 60
+            el = base.elevation_deg if isinstance(base, PanoramicCamera) else (-30.0, 20.0)
+            camera = PanoramicCamera(w, h, el, rgb=not args.gray)
+    ds = presets.simulate(args.preset, args.out, args.seed, max_frames=args.max_frames, camera=camera,
+                          overwrite=args.overwrite, progress=not args.no_progress)
+    print(f"wrote {len(ds)} images to {args.out}")
+    return 0
+
+
+def _log(message: str) -> None:
+    """Progress and notes go to stderr; results to stdout."""
+    print(message, file=sys.stderr, flush=True)
+
+
+def _existing_path(text: str, what: str) -> "Path":
+    from pathlib import Path
+
+    p = Path(text)
+    if not p.exists():
+        raise _UsageError(f"{what} {text} does not exist")
+    return p
+
+
+def _new_file(text: str, overwrite: bool, what: str = "output") -> "Path":
+    from pathlib import Path
+
+    p = Path(text)
+    if p.exists() and not overwrite:
+        raise _UsageError(f"{what} {p} exists; pass --overwrite to replace it")
+    if p.exists() and p.is_dir():
+        raise _UsageError(f"{what} {p} is a directory")
+    p.parent.mkdir(parents=True, exist_ok=True)
+    return p
+
+
+def _load_localizer(path: str) -> "Any":
+    from .. import load
+    from ..localization.localizer import Localizer
+
+    model = load(_existing_path(path, "model file"))
+    if not isinstance(model, Localizer):
+        raise _UsageError(f"{path} holds a {type(model).__name__}, not a localizer (make one with sfanav train)")
+    if model.network is None:
+        raise _UsageError(f"{path} is a features-only localizer (no network): it cannot read images")
+    return model
+
+
+def _mirror_of(args: argparse.Namespace, loc: "Any") -> "Any":
+    """--mirror, else the mirror the model was trained with (if it unwarped)."""
+    if args.mirror is not None:
+        return args.mirror
+    m = (loc.info or {}).get("mirror")
+    if m is not None:
+        _log("using the mirror the model was trained with (--mirror overrides it)")
+    return m
+
+
+def _fraction(text: str) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if v > 1.0:
+        v /= 100.0  # "50" means 50 %
+    if not 0.0 < v <= 1.0:
+        raise argparse.ArgumentTypeError(f"expected a fraction in (0, 1] or a percentage, got {text!r}")
+    return v
+
+
+def _wrap(text: str) -> str:
+    """A help description wrapped to 79 columns (the raw formatter keeps
+    the examples in the epilogs as written)."""
+    import textwrap
+
+    return textwrap.fill(" ".join(text.split()), 79)
+
+
+def _table(rows: "list[tuple[str, str]]") -> str:
+    w = max(len(a) for a, _ in rows)
+    return "\n".join(f"{a:<{w}}  {b}" for a, b in rows)
+
+
+def _fmt(v: "Any") -> str:
+    if v is None:
+        return "-"
+    if isinstance(v, float):
+        return f"{v:.4g}"
+    return str(v)
+
+
+@command("train")
+def _add_train(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    p = sub.add_parser(
+        "train",
+        help="train a localizer (network + regression to metres) on a dataset",
+        description=_wrap("Train an SFA network under simulated rotation on one run of a dataset (images in temporal "
+                    "order), then the readout from its slowest outputs to the ground-truth x, y (metres). "
+                    "Without --preset or --config: the sfanav default (network sfanav-default: Table 5.1 with "
+                    "wider layers and 12 outputs, 350x40 RGB; image rows of elevation -10..+20 deg; readout "
+                    "a Gaussian process with learned relevance per output, or kernel ridge / kNN if clearly better "
+                    "by blocked cross-validation on the training run). With a thesis "
+                    "preset: the thesis's configuration (all rows, quadratic regression of 8 outputs). Writes "
+                    "one model file (network, readout and the image preprocessing) for sfanav localize / "
+                    "evaluate. Images of another size are resized, omnidirectional images unwarped (with "
+                    "--mirror or an estimated mirror)."),
+        epilog="network presets: thesis-5.1 (350x40 RGB), thesis-5.2 (600x60 RGB), thesis-5.3 (409x40 gray) "
+               "(thesis tables), sfanav-default (350x40 RGB). A config file is TOML or JSON in the presets' "
+               "format (sfanav.Network.preset_path('thesis-5.1') shows one).\n\n"
+               "example:\n  sfanav simulate --preset demo --out garden\n"
+               "  sfanav train --dataset garden --out garden.sfa                       # the sfanav default\n"
+               "  sfanav train --dataset garden --preset thesis-5.2 --precision mixed --out thesis.sfa",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    net = p.add_mutually_exclusive_group(required=False)
+    net.add_argument("--preset", metavar="NAME",
+                     help="network preset: thesis-5.1, thesis-5.2 or thesis-5.3 (the thesis's configuration: all "
+                          "rows, quadratic regression of 8 outputs), or sfanav-default (the default)")
+    net.add_argument("--config", metavar="FILE", help="network config file (TOML or JSON)")
+    p.add_argument("--dataset", required=True, metavar="DIR", help="dataset directory (sfanav format)")
+    p.add_argument("--out", required=True, metavar="MODEL", help="model file to write (e.g. garden.sfa)")
+    p.add_argument("--run", dest="run_name", default=None, metavar="RUN",
+                   help="run to train on (default: 'train' if the dataset has one, else all images)")
+    p.add_argument("--camera", default=None, metavar="NAME", help="camera to use if the dataset has several")
+    p.add_argument("--step", type=_pos_int, default=5, metavar="PX",
+                   help="simulated rotation step in pixels (default 5, the thesis's)")
+    p.add_argument("--window", type=_fraction, default=1.0, metavar="FRACTION",
+                   help="window of the simulated rotation, fraction of the panorama or percent (default 1.0); "
+                        "the network's input width must equal window x panorama width")
+    p.add_argument("--precision", choices=("double", "mixed"), default=None,
+                   help="statistics precision (default: the config's; mixed is ~1.4x faster)")
+    p.add_argument("--n-outputs", type=_pos_int, default=None, metavar="N",
+                   help="slowest outputs read out (default: 8 with the quadratic readout, the thesis's; "
+                        "8 or 12 by cross-validation with auto)")
+    p.add_argument("--readout", choices=("auto", "quadratic"), default=None,
+                   help="auto: a Gaussian process (ARD, marginal likelihood), or kernel ridge / kNN if >10%% better by blocked "
+                        "cross-validation on the training run "
+                        "(default); quadratic: the thesis's regression (default with thesis presets)")
+    p.add_argument("--rows", choices=("all", "band"), default=None,
+                   help="image rows: band = elevation -10..+20 deg only (default for the sfanav default "
+                        "network), all = every row (default with --preset thesis-* or --config)")
+    p.add_argument("--rotation-pooling", type=_pos_int, default=None, metavar="K",
+                   help="average the network's outputs over K evenly spaced rotations of each panorama before "
+                        "the readout (default: 8 with the auto readout, none with quadratic; 1 = none)")
+    p.add_argument("--normalize", action="store_true",
+                   help="normalize every image to zero mean and unit variance (thesis 5.2)")
+    p.add_argument("--mirror", default=None, metavar="CX,CY,INNER,OUTER",
+                   help="mirror of omnidirectional images, pixels (default: estimated)")
+    p.add_argument("--overwrite", action="store_true", help="replace an existing model file")
+    p.add_argument("--no-progress", action="store_true", help="no progress bars")
+    p.set_defaults(run=_run_train)
+    return p
+
+
+def _network_from_args(args: argparse.Namespace) -> "Any":
+    from ..sfa.network import Network, read_config_file
+
+    if args.preset is not None or args.config is None:
+        over = {"precision": args.precision} if args.precision else {}
+        return Network.from_preset(args.preset or "sfanav-default", **over)
+    config = read_config_file(_existing_path(args.config, "network config"))
+    if args.precision:
+        if not isinstance(config, dict):
+            raise _UsageError(f"{args.config}: not a network config")
+        config.setdefault("network", {})["precision"] = args.precision
+    return Network(config)
+
+
+def _run_train(args: argparse.Namespace) -> int:
+    import time
+
+    import numpy as np
+
+    from ..data.dataset import Dataset
+    from ..data.preprocessing import Preprocessing, Preprocessor
+    from ..data.sources import load_run, select_run
+    from ..localization.training import fit_localizer
+    from ..sfa.network import Rotation
+
+    t0 = time.perf_counter()
+    out = _new_file(args.out, args.overwrite, "model file")
+    ds = Dataset(_existing_path(args.dataset, "dataset"))
+    run = args.run_name
+    if run is None and "train" in set(ds.runs.tolist()):
+        run = "train"
+    train = select_run(ds, run, args.camera)
+    net = _network_from_args(args)
+    if args.n_outputs is not None and args.n_outputs > net.n_outputs_:
+        raise _UsageError(f"--n-outputs {args.n_outputs}, but the network has only {net.n_outputs_} outputs")
+    thesis = args.preset is not None and args.preset.startswith("thesis-")
+    default = args.config is None and not thesis
+    readout = args.readout or ("quadratic" if thesis else "auto")
+    rows = None
+    if (args.rows or ("band" if default else "all")) == "band":
+        from ..localization.recipe import CAMERA_ELEVATION, default_rows
+
+        elev = (ds.metadata.get("camera") or {}).get("elevation_deg") if isinstance(ds.metadata, dict) else None
+        if elev is None:
+            elev = CAMERA_ELEVATION
+            _log(f"the dataset does not say its rows' elevations: assuming {elev[0]:g}..{elev[1]:g} deg "
+                 "(the simulator's) for the horizon band; --rows all uses every row")
+        try:
+            rows = default_rows(elev)
+        except ValueError as exc:
+            raise _UsageError(f"horizon band: {exc}") from None
+    prep = Preprocessing.for_network(net, window=args.window, normalize=args.normalize)
+    _log(f"training on {len(train)} images of {args.dataset}" + (f" (run {run})" if run else "")
+         + f" as {prep.describe()} panoramas; network: {net!r}; rows: {rows.describe() if rows else 'all'}; "
+         + f"readout: {readout}" + (" (the sfanav default)" if default else ""))
+    conformer = Preprocessor(prep, mirror=args.mirror, log=_log)
+    images, xy = load_run(train, prep, conformer=conformer, progress=not args.no_progress)
+    if not np.isfinite(xy).all():
+        raise _UsageError(f"{args.dataset} lacks ground-truth x, y for some images: the regression needs them")
+    loc = fit_localizer(net, images, xy, rotation=Rotation(step=args.step, window=args.window),
+                        n_outputs=args.n_outputs if args.n_outputs is not None or readout == "auto" else 8,
+                        readout=readout, rows=rows, prep=prep, progress=not args.no_progress,
+                        rotation_pooling="auto" if args.rotation_pooling is None else args.rotation_pooling,
+                        info={"dataset": str(args.dataset), "run": run,
+                              "network": args.preset or (str(args.config) if args.config else "sfanav-default"),
+                              **({"configuration": "sfanav default"}
+                                 if default and readout == "auto" and rows is not None else {})})
+    if conformer.mirror_used is not None:
+        loc.info["mirror"] = list(conformer.mirror_used)  # localize and evaluate reuse it
+    loc.save(out)
+    m = loc.train_metrics_
+    pool = f" on features pooled over {loc.rotation_pooling_} rotations" if loc.rotation_pooling_ > 1 else ""
+    print(f"trained on {len(images)} images in {loc.info['fit_seconds']:.1f} s, readout {loc.describe_readout()}{pool} "
+          f"in {loc.info['readout_seconds']:.1f} s (total {time.perf_counter() - t0:.1f} s); "
+          f"training-run fit: MED {m['med']:.3f} m, MAE x {m['mae_x_pct']:.2f} %, y {m['mae_y_pct']:.2f} %")
+    print(f"wrote {out}")
+    return 0
+
+
+@command("localize")
+def _add_localize(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    p = sub.add_parser(
+        "localize",
+        help="estimate x, y for every image of a dataset, an image folder or a video",
+        description=_wrap("Localize every image of INPUT with a trained model: a dataset directory, a folder of "
+                    "images (png, jpg, ...; sorted by name) or a video file. Writes a CSV with columns "
+                    "frame,x,y (frame: the dataset's frame id, else the image's index; x, y in metres). "
+                    "Images are converted as the model was trained: panoramas of another size are resized, "
+                    "omnidirectional (mirror) images unwarped with --mirror or an estimated mirror, and "
+                    "a message says which."),
+        epilog="example:\n  sfanav localize garden.sfa garden --run test --out test.csv",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument("model", metavar="MODEL", help="model file from sfanav train")
+    p.add_argument("input", metavar="INPUT", help="dataset directory, image folder or video file")
+    p.add_argument("--out", required=True, metavar="CSV", help="CSV file to write (frame,x,y)")
+    p.add_argument("--run", dest="run_name", default=None, metavar="RUN", help="only this run of a dataset (default: all images)")
+    p.add_argument("--camera", default=None, metavar="NAME", help="camera of a multi-camera dataset")
+    p.add_argument("--mirror", default=None, metavar="CX,CY,INNER,OUTER",
+                   help="mirror center and radii of omnidirectional images, pixels (default: estimated)")
+    p.add_argument("--rotations", action="store_true",
+                   help="average the estimates over all simulated rotations of each image (slower, smoother)")
+    p.add_argument("--batch-size", type=_pos_int, default=64, metavar="N", help="images per batch (default 64)")
+    p.add_argument("--overwrite", action="store_true", help="replace an existing CSV")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.set_defaults(run=_run_localize)
+    return p
+
+
+def _run_localize(args: argparse.Namespace) -> int:
+    import csv
+
+    import numpy as np
+
+    from .._progress import progress_bar
+    from ..data.preprocessing import Preprocessing, Preprocessor
+    from ..data.sources import open_images
+    from ..localization.error_metrics import med
+
+    loc = _load_localizer(args.model)
+    if args.rotations and loc.rotation_pooling_ > 1:
+        raise _UsageError(f"{args.model} averages its features over {loc.rotation_pooling_} rotations already "
+                          "(rotation pooling): --rotations applies to models without it")
+    out = _new_file(args.out, args.overwrite, "CSV")
+    src = open_images(args.input, run=args.run_name, camera=args.camera)
+    prep = Preprocessing.of_model(loc)
+    conform = Preprocessor(prep, mirror=_mirror_of(args, loc), log=_log)
+    _log(f"localizing {src.description} with {args.model} ({prep.describe()} panoramas)")
+    bar = progress_bar(not args.no_progress, src.n, "localize")
+    preds = []
+    for batch in src.batches(args.batch_size):
+        preds.append(loc.predict(conform(batch), rotations=args.rotations))
+        if bar is not None:
+            bar.update(len(batch))
+    if bar is not None:
+        bar.close()
+    if not preds:
+        raise _UsageError(f"{args.input} has no images (an empty or unreadable video?)")
+    xy = np.concatenate(preds)
+    frames = src.frames if src.frames is not None else np.arange(len(xy))
+    tmp = out.with_name(out.name + ".part")
+    with open(tmp, "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(["frame", "x", "y"])
+        for fr, (x, y) in zip(frames, xy):
+            w.writerow([int(fr), f"{x:.4f}", f"{y:.4f}"])
+    tmp.replace(out)
+    msg = f"wrote {len(xy)} positions to {out}"
+    if src.xy is not None and np.isfinite(src.xy).all():
+        msg += f" (MED from the dataset's ground truth: {med(xy, src.xy):.3f} m)"
+    print(msg)
+    return 0
+
+
+@command("evaluate")
+def _add_evaluate(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    p = sub.add_parser(
+        "evaluate",
+        help="metrics, baselines, plots and a report of a model on a dataset with ground truth",
+        description=_wrap("Evaluate a trained model on a run of a dataset with ground truth: MAE per axis (m and % "
+                    "of the coordinate range), MED, percentiles (regression fitted on the training run: the "
+                    "honest protocol) and the thesis 5.1.1 protocol (random 50/50 splits of the evaluated "
+                    "run, 100 repeats; optimistic on a continuous walk); eta_p / eta_phi of the outputs; "
+                    "error vs number of outputs; the baselines perfect memory (RIDF) and Fourier signature "
+                    "fitted on the training run (error, bytes per place, query time). Writes report.md, "
+                    "metrics.json and PNG plots (firing maps, trajectory, error vs n, eta) under --out."),
+        epilog="example:\n  sfanav evaluate garden.sfa garden --out garden-report",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument("model", metavar="MODEL", help="model file from sfanav train")
+    p.add_argument("dataset", metavar="DATASET", help="dataset directory with ground-truth positions")
+    p.add_argument("--out", required=True, metavar="DIR", help="directory for report.md, metrics.json and plots")
+    p.add_argument("--run", dest="run_name", default=None, metavar="RUN",
+                   help="run to evaluate (default: 'test' if the dataset has one, else all images)")
+    p.add_argument("--train-run", default=None, metavar="RUN",
+                   help="training run for eta, the error curve and the baselines (default: 'train' if present)")
+    p.add_argument("--camera", default=None, metavar="NAME", help="camera of a multi-camera dataset")
+    p.add_argument("--mirror", default=None, metavar="CX,CY,INNER,OUTER",
+                   help="mirror of omnidirectional images, pixels (default: estimated)")
+    p.add_argument("--no-baselines", action="store_true", help="skip perfect memory and the Fourier signature")
+    p.add_argument("--no-progress", action="store_true", help="no progress bars")
+    p.set_defaults(run=_run_evaluate)
+    return p
+
+
+def _run_evaluate(args: argparse.Namespace) -> int:
+    import json
+    from pathlib import Path
+
+    import numpy as np
+
+    from ..data.dataset import Dataset
+    from ..data.preprocessing import Preprocessing
+    from ..data.sources import load_run, select_run
+    from ..localization.evaluation import evaluate, evaluation_rows, metrics_json
+
+    loc = _load_localizer(args.model)
+    ds = Dataset(_existing_path(args.dataset, "dataset"))
+    runs = set(ds.runs.tolist())
+    run = args.run_name if args.run_name is not None else ("test" if "test" in runs else None)
+    train_run = args.train_run if args.train_run is not None else ("train" if "train" in runs and run != "train" else None)
+    prep = Preprocessing.of_model(loc)
+    test = select_run(ds, run, args.camera)
+    mirror = _mirror_of(args, loc)
+    images, xy = load_run(test, prep, mirror=mirror, log=_log, progress=not args.no_progress)
+    if not np.isfinite(xy).all():
+        raise _UsageError(f"{args.dataset} lacks ground-truth x, y: evaluation needs them")
+    tr_images = tr_xy = None
+    if train_run is not None:
+        tr = select_run(ds, train_run, args.camera)
+        tr_images, tr_xy = load_run(tr, prep, mirror=mirror, log=_log, progress=not args.no_progress)
+    out = Path(args.out)
+    _log(f"evaluating {args.model} on {len(images)} images" + (f" (run {run})" if run else "")
+         + (f", training run {train_run}" if train_run else ""))
+    ev = evaluate(loc, images, xy, train_images=tr_images, train_xy=tr_xy, out=out,
+                  title=f"sfanav evaluation: {Path(args.model).name} on {args.dataset}",
+                  run_baselines=not args.no_baselines, log=_log,
+                  text=[f"Model `{args.model}`, dataset `{args.dataset}`, evaluated run: {run or 'all images'}, "
+                        f"training run: {train_run or 'none'}."])
+    (out / "metrics.json").write_text(json.dumps(metrics_json(ev), indent=2) + "\n")
+    rows = evaluation_rows(ev)
+    print(_table([("metric", "sfanav")] + [(r["metric"], _fmt(r["sfanav"])) for r in rows]))
+    print(f"wrote {ev.report}, {out / 'metrics.json'} and {len(ev.plots)} plots")
+    return 0
+
+
+@command("demo")
+def _add_demo(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    from .demo import DEMO_NETWORK
+
+    p = sub.add_parser(
+        "demo",
+        help="simulate a garden, train, localize a test run and report (a few minutes)",
+        description=_wrap("The whole pipeline on the built-in simulator: generates the 'demo' garden (8x8 m, a "
+                    "grid exploration run and a test walk), trains the "
+                    f"{DEMO_NETWORK} network under simulated rotation (mixed precision), localizes the test "
+                    "walk, prints MAE, MED and eta beside the thesis's section 5.1.1 figures and the two "
+                    "baselines, and writes the dataset, the model, the estimates (CSV), plots and a Markdown "
+                    "report under --out. Takes a few minutes on a 2-core machine."),
+        epilog="outputs: DIR/dataset, DIR/model.sfa, DIR/test-estimates.csv, DIR/report.md, DIR/*.png, DIR/demo.json",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument("--out", default="sfanav-demo", metavar="DIR", help="output directory (default sfanav-demo)")
+    p.add_argument("--seed", type=_nonneg_int, default=0, help="seed of the garden and the runs (default 0)")
+    p.add_argument("--overwrite", action="store_true", help="replace the outputs of an earlier demo in --out")
+    p.add_argument("--quick", action="store_true",
+                   help="a seconds-long smoke run (tiny images, few frames, a small network); not meaningful")
+    p.add_argument("--no-progress", action="store_true", help="no progress bars")
+    p.set_defaults(run=_run_demo)
+    return p
+
+
+def _run_demo(args: argparse.Namespace) -> int:
+    from .demo import run_demo
+
+    result = run_demo(args.out, seed=args.seed, overwrite=args.overwrite, quick=args.quick,
+                      progress=not args.no_progress, log=_log)
+    print(result.table())
+    if result.notes:
+        print()
+        print(result.notes)
+    return 0
+
+
+@command("experiment")
+def _add_experiment(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    from .. import experiments
+
+    p = sub.add_parser(
+        "experiment",
+        help="rerun one of the thesis's experiments on the simulator (--list lists them)",
+        description=_wrap("Rerun one of the thesis's experiments on the built-in simulator: simulates the scene, "
+                    "trains, evaluates, prints a table of each metric with the thesis's value beside "
+                    "sfanav's, and writes the same as JSON ({\"experiment\": NAME, \"rows\": [{\"metric\", "
+                    "\"thesis\", \"sfanav\"}, ...]}) plus plots under --out. Localization experiments also "
+                    "run the perfect-memory and Fourier-signature baselines on the same images."),
+        epilog="experiments:\n" + "\n".join(f"  {n:<8} {experiments.get(n).title}" for n in experiments.names())
+               + "\n\nexample:\n  sfanav experiment --list\n  sfanav experiment 5.1.1 --out results",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument("name", nargs="?", metavar="NAME", help="experiment name (see --list)")
+    p.add_argument("--list", action="store_true", help="list the experiments and exit")
+    p.add_argument("--out", default=None, metavar="DIR",
+                   help="output directory (default sfanav-results/NAME); writes NAME.json and plots")
+    p.add_argument("--quick", action="store_true",
+                   help="a seconds-long smoke run (tiny images and grids, few frames); numbers not meaningful")
+    p.add_argument("--seed", type=_nonneg_int, default=0, help="seed of scenes and runs (default 0)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bars")
+    p.set_defaults(run=_run_experiment)
+    return p
+
+
+def _run_experiment(args: argparse.Namespace) -> int:
+    import time
+    from pathlib import Path
+
+    from .. import experiments
+
+    if args.list:
+        if args.name:
+            raise _UsageError("give either NAME or --list")
+        names = experiments.names()
+        width = max((len(n) for n in names), default=0)
+        for n in names:
+            print(f"{n:<{width}}  {experiments.get(n).title}")
+        return 0
+    if not args.name:
+        raise _UsageError("give an experiment NAME (sfanav experiment --list shows them)")
+    exp = experiments.get(args.name)  # ValueError with the known names
+    out = Path(args.out) if args.out else Path("sfanav-results") / args.name
+    if out.exists() and not out.is_dir():
+        raise _UsageError(f"--out {out} is a file")
+    _log(f"experiment {exp.name}: {exp.title}" + (" (quick smoke run)" if args.quick else ""))
+    t0 = time.perf_counter()
+    result = experiments.run(exp.name, out, quick=args.quick, seed=args.seed, progress=not args.no_progress)
+    print(result.table())
+    if result.notes:
+        print()
+        print(result.notes)
+    print(f"\nwrote {out / (exp.name + '.json')} and {len(result.plots)} plots in {time.perf_counter() - t0:.0f} s")
+    return 0
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with one-line usage errors (no usage dump)."""
+
+    def error(self, message: str) -> None:  # type: ignore[override]
+        self.exit(EXIT_USAGE, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = _Parser(
+        prog="sfanav",
+        description="Localization and navigation from a panoramic camera with hierarchical Slow Feature Analysis.",
+    )
+    from .. import __version__
+
+    parser.add_argument("--version", action="version", version=f"sfanav {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    sub.required = True
+    for add in _COMMANDS.values():
+        add(sub)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``sfanav`` command; returns the exit status."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args.run(args) or 0)
+    except (_UsageError, ValueError, TypeError, OSError, ImportError, KeyError) as exc:
+        if os.environ.get("SFANAV_DEBUG") and not isinstance(exc, _UsageError):
+            raise  # the traceback, for bug reports
+        msg = str(exc.args[0]) if isinstance(exc, KeyError) and exc.args else str(exc)
+        msg = " ".join(msg.split()) or type(exc).__name__
+        parser.exit(EXIT_USAGE, f"sfanav {args.command}: error: {msg}\n")
+    except KeyboardInterrupt:
+        parser.exit(130, "interrupted\n")
+    return 0  # pragma: no cover
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

@@ -1,0 +1,63 @@
+"""Reading and writing single images (OpenCV), RGB in memory, optionally
+converted to gray or resized on read."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .schema import as_size
+
+
+def _cv2() -> Any:
+    try:
+        import cv2
+    except ImportError as exc:  # pragma: no cover - a declared dependency
+        raise ImportError("reading and writing images needs OpenCV (pip install opencv-python-headless)") from exc
+    return cv2
+
+
+def read_image(path: str | os.PathLike, gray: bool = False, size: tuple[int, int] | None = None) -> np.ndarray:
+    """Reads an image as uint8 RGB (H, W, 3) or gray (H, W).
+
+    Parameters
+    ----------
+    gray : bool
+        Convert to gray (ITU-R 601 luma).
+    size : (width, height), optional
+        Resize (area interpolation).
+    """
+    cv2 = _cv2()
+    path = Path(path)
+    if not path.exists():
+        raise FileNotFoundError(f"image file {path} does not exist")
+    img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    if img is None:
+        raise ValueError(f"cannot read image {path} (not an image OpenCV can decode)")
+    if img.dtype != np.uint8:
+        img = (img / (256 if img.dtype == np.uint16 else 1)).clip(0, 255).astype(np.uint8)
+    if img.ndim == 3:
+        img = cv2.cvtColor(img, cv2.COLOR_BGRA2RGB if img.shape[2] == 4 else cv2.COLOR_BGR2RGB)
+        if gray:
+            img = cv2.cvtColor(img, cv2.COLOR_RGB2GRAY)
+    if size is not None:
+        w, h = as_size(size)
+        img = cv2.resize(img, (w, h), interpolation=cv2.INTER_AREA)
+    return img
+
+
+def write_image(path: str | os.PathLike, image: np.ndarray) -> None:
+    """Writes a uint8 RGB (H, W, 3) or gray (H, W) image (PNG by extension)."""
+    cv2 = _cv2()
+    img = np.asarray(image)
+    if img.dtype != np.uint8:
+        raise TypeError(f"images must be uint8, got {img.dtype}")
+    if img.ndim == 3 and img.shape[2] == 3:
+        img = cv2.cvtColor(img, cv2.COLOR_RGB2BGR)
+    elif img.ndim != 2:
+        raise ValueError(f"an image must be (H, W) gray or (H, W, 3) RGB, got shape {img.shape}")
+    if not cv2.imwrite(str(path), img, [cv2.IMWRITE_PNG_COMPRESSION, 1]):
+        raise OSError(f"could not write image {path}")

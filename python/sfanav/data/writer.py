@@ -1,0 +1,208 @@
+"""Writing sfanav datasets: :class:`DatasetWriter` streams images and their
+rows, :func:`write_dataset` writes a whole run at once. A dataset is complete
+only once its ``metadata.json`` exists, which is written last."""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import os
+import shutil
+from collections.abc import Iterable, Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from .._progress import progress_bar
+from .images import write_image
+
+if TYPE_CHECKING:
+    from .dataset import Dataset
+from .schema import COLUMNS, FORMAT, UNITS, VERSION, check_name, format_float
+
+
+class DatasetWriter:
+    """Writes an sfanav dataset image by image (rows are streamed to
+    ``frames.csv``; ``metadata.json`` is written on :meth:`close`).
+
+    Parameters
+    ----------
+    path : directory to create
+    metadata : dict, optional
+        Extra metadata (JSON-able), e.g. world, cameras, conditions.
+    overwrite : bool
+        Replace an existing dataset at ``path`` (refused otherwise).
+    extra_columns : sequence of str
+        Names of extra per-image columns given to :meth:`add`.
+
+    Examples
+    --------
+    >>> with DatasetWriter("out") as w:                       # doctest: +SKIP
+    ...     w.add(img, frame=0, timestamp=0.0, pose=(0, 0, 0))
+    """
+
+    def __init__(self, path: str | os.PathLike, metadata: dict[str, Any] | None = None, *,
+                 overwrite: bool = False, extra_columns: Sequence[str] = ()):
+        self.path = Path(path)
+        if self.path.exists():
+            if not self.path.is_dir():
+                raise FileExistsError(f"{self.path} exists and is not a directory")
+            if any(self.path.iterdir()):
+                if not overwrite:
+                    raise FileExistsError(f"{self.path} is not empty; pass overwrite=True (--overwrite) to replace it")
+                if not (self.path / "metadata.json").exists() and not (self.path / "frames.csv").exists():
+                    raise FileExistsError(f"{self.path} is not empty and not an sfanav dataset; refusing to overwrite it")
+                shutil.rmtree(self.path)
+        (self.path / "images").mkdir(parents=True, exist_ok=True)
+        self.metadata = dict(metadata or {})
+        json.dumps(self.metadata)  # fail early on non-JSON metadata
+        self.extra = [check_name(c, "extra column name") for c in extra_columns]
+        clash = set(self.extra) & set(COLUMNS)
+        if clash:
+            raise ValueError(f"extra columns {sorted(clash)} clash with the standard columns")
+        self._file = open(self.path / "frames.csv", "w", newline="")
+        self._csv = csv.writer(self._file)
+        self._csv.writerow(list(COLUMNS) + self.extra)
+        self._seen: set[tuple[int, str]] = set()
+        self.count = 0
+        self._shapes: dict[str, list[int]] = {}
+
+    def add(self, image: np.ndarray, *, frame: int, timestamp: float, pose: Sequence[float],
+            odometry: Sequence[float] | None = None, camera: str = "center", condition: str = "default",
+            run: str = "0", **extra: Any) -> str:
+        """Writes one image and its row; returns the image's relative path."""
+        if self._file.closed:
+            raise ValueError("this DatasetWriter is closed")
+        if isinstance(frame, bool) or not isinstance(frame, (int, np.integer)) or frame < 0:
+            raise ValueError(f"frame must be a non-negative integer, got {frame!r}")
+        camera = check_name(camera, "camera")
+        condition = check_name(condition, "condition")
+        run = check_name(run, "run")
+        key = (int(frame), camera)
+        if key in self._seen:
+            raise ValueError(f"frame {frame} of camera {camera!r} was already written")
+        x, y, th = _triple(pose, "pose")
+        ox, oy, oth = _triple(odometry, "odometry") if odometry is not None else (math.nan,) * 3
+        t = float(timestamp)
+        if not math.isfinite(t):
+            raise ValueError(f"timestamp must be finite, got {timestamp!r}")
+        unknown = set(extra) - set(self.extra)
+        if unknown:
+            raise ValueError(f"unknown extra columns {sorted(unknown)}; declare them in extra_columns")
+        rel = f"images/{int(frame):06d}_{camera}.png"
+        img = np.asarray(image)
+        write_image(self.path / rel, img)
+        self._shapes.setdefault(camera, list(img.shape))
+        self._seen.add(key)
+        self._csv.writerow([int(frame), run, repr(t), format_float(x), format_float(y), format_float(th), format_float(ox), format_float(oy), format_float(oth),
+                            camera, condition, rel] + [_cell(extra.get(c)) for c in self.extra])
+        self.count += 1
+        return rel
+
+    def close(self) -> None:
+        if self._file.closed:
+            return
+        self._file.close()
+        meta = {"format": FORMAT, "version": VERSION, "units": UNITS, "n_images": self.count,
+                "image_shapes": self._shapes, **self.metadata}
+        (self.path / "metadata.json").write_text(json.dumps(meta, indent=1, default=_json_default))
+
+    def __enter__(self) -> "DatasetWriter":
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.close()
+
+
+def _json_default(o: Any) -> Any:
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    if isinstance(o, (np.integer, np.floating, np.bool_)):
+        return o.item()
+    raise TypeError(f"metadata value of type {type(o).__name__} is not JSON-able")
+
+
+def _cell(v: Any) -> str:
+    if v is None:
+        return ""
+    if isinstance(v, (float, np.floating)):
+        return format_float(float(v))
+    if isinstance(v, (int, np.integer)):
+        return str(int(v))
+    return check_name(v, "extra value")
+
+
+def _triple(v: Any, what: str) -> tuple[float, float, float]:
+    try:
+        a, b, c = (float(e) for e in v)
+    except (TypeError, ValueError):
+        raise ValueError(f"{what} must be (x m, y m, heading rad), got {v!r}") from None
+    if not all(math.isfinite(e) for e in (a, b, c)):
+        raise ValueError(f"{what} must be finite, got {v!r}")
+    return a, b, c
+
+
+def write_dataset(path: str | os.PathLike, images: Iterable[np.ndarray], poses: Any, *,
+                  timestamps: Any = None, odometry: Any = None, cameras: Any = None, conditions: Any = None,
+                  runs: Any = None, frames: Any = None, extra: dict[str, Any] | None = None,
+                  metadata: dict[str, Any] | None = None, overwrite: bool = False,
+                  progress: bool = False) -> "Dataset":
+    """Writes an sfanav dataset from arrays and returns it opened.
+
+    Parameters
+    ----------
+    images : iterable of uint8 (H, W[, 3]) arrays, N of them (read lazily)
+    poses : (N, 3) x m, y m, heading rad
+    timestamps : (N,) s, default 0, 1, 2, ...
+    odometry : (N, 3), optional
+    cameras, conditions, runs : (N,) names or one name; default ``center``,
+        ``default``, ``0``
+    frames : (N,) int, default 0 .. N-1
+    extra : dict of name to (N,) extra columns
+    """
+    P = np.asarray(poses, float)
+    if P.ndim != 2 or P.shape[1] != 3:
+        raise ValueError(f"poses must have shape (N, 3), got {P.shape}")
+    n = len(P)
+
+    def col(v: Any, default: Any, name: str) -> np.ndarray:
+        if v is None:
+            return np.full(n, default, dtype=object)
+        if isinstance(v, str):
+            return np.full(n, v, dtype=object)
+        a = np.asarray(v)
+        if a.shape[:1] != (n,):
+            raise ValueError(f"{name} must have {n} entries (one per pose), got shape {a.shape}")
+        return a
+
+    ts = col(timestamps, None, "timestamps") if timestamps is not None else np.arange(n, dtype=float)
+    O = None if odometry is None else np.asarray(odometry, float)
+    if O is not None and O.shape != (n, 3):
+        raise ValueError(f"odometry must have shape ({n}, 3), got {O.shape}")
+    cams = col(cameras, "center", "cameras")
+    conds = col(conditions, "default", "conditions")
+    rns = col(runs, "0", "runs")
+    frs = col(frames, None, "frames") if frames is not None else np.arange(n)
+    ext = {k: col(v, None, f"extra column {k!r}") for k, v in (extra or {}).items()}
+    it = iter(images)
+    with DatasetWriter(path, metadata, overwrite=overwrite, extra_columns=list(ext)) as w:
+        bar = progress_bar(progress, n, "writing")
+        for i in range(n):
+            try:
+                img = next(it)
+            except StopIteration:
+                raise ValueError(f"got {i} images for {n} poses") from None
+            w.add(img, frame=int(frs[i]), timestamp=float(ts[i]), pose=P[i],
+                  odometry=None if O is None else O[i], camera=str(cams[i]), condition=str(conds[i]),
+                  run=str(rns[i]), **{k: v[i] for k, v in ext.items()})
+            if bar is not None:
+                bar.update(1)
+        if bar is not None:
+            bar.close()
+        if next(it, None) is not None:
+            raise ValueError(f"got more images than the {n} poses")
+    from .dataset import Dataset  # the reader imports this module
+
+    return Dataset(path)

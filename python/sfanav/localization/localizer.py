@@ -1,0 +1,424 @@
+"""``sfanav.Localizer``: a trained network, its image rows and the readout from
+its slow features to metric positions, saved and loaded as one model file.
+
+``readout="auto"`` (the sfanav default) chooses among a GP with one length
+scale per output, Gaussian kernel ridge and kNN by blocked cross-validation
+on the training run, and then reads position from *rotation pooled*
+features: the network's outputs averaged over evenly spaced rotations of
+the panorama. ``readout="quadratic"`` is the thesis's quadratic regression
+of the 8 slowest outputs (3.5, 5.1-5.2), without pooling. Which pooling goes
+with which readout is decided in :mod:`sfanav.localization.recipe`."""
+
+from __future__ import annotations
+
+import math
+import os
+import tempfile
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .._checks import (
+    as_matrix,
+    as_real_array,
+    check_finite,
+    check_int,
+    check_nonneg_float,
+    check_same_length,
+)
+from ..data.image_rows import ImageRows
+from ..sfa.modelfile import read_model, register_loader, save_model
+from ..sfa.network import Network
+from ..sfa.node import NotFittedError
+from .error_metrics import euclidean_errors, localization_metrics
+from .quadratic import QuadraticRegression
+from .readout_selection import select_auto_readout
+from .readouts import make_readout, readout_from_state, readout_state
+
+READOUTS = ("auto", "quadratic")
+
+
+ROTATION_POOLING = 8  # rotations averaged by rotation_pooling="auto" (docs/gardens.md)
+
+
+def pooling_step(network: Network, width: int, k: int) -> int:
+    """The rotation step (px) of rotation pooling over ``k`` rotations of
+    ``width``-px panoramas: the smallest step >= ceil(width / k) that is
+    coprime with the network's receptive-field grid period (the product of
+    its layers' horizontal strides), so the pooled rotations see the grid at
+    different alignments (pooling over rotations by multiples of the
+    first layer's stride only, the alignments the network was trained on
+    with 5 px steps, gains about half as much; docs/gardens.md). The
+    rotations are then ceil(width / step) <= k."""
+    base = -(-int(width) // int(k))
+    period = 1
+    for layer in network.config_["layers"]:
+        period *= int(layer["stride"][0])
+    for step in range(base, int(width)):
+        if math.gcd(step, period) == 1:
+            return step
+    return base
+
+
+def pooled_transform(network: Network, images: Any, k: int) -> np.ndarray:
+    """``network``'s outputs of images (N, H, W[, C]) or one image, averaged
+    over ``k`` rotations of each panorama in steps of
+    :func:`pooling_step` px: (N, n) or (n,)."""
+    a = np.asarray(images)
+    single = a.ndim == (2 if network.input_shape[2] == 1 else 3)
+    width = a.shape[1] if single else (a.shape[2] if a.ndim >= 3 else 0)
+    if width < k:
+        raise ValueError(f"rotation_pooling={k} needs panoramas at least {k} px wide, got {width} px")
+    return network.transform(a, rotations=True, step=pooling_step(network, width, k)).mean(axis=-2)
+
+
+class Localizer:
+    """Absolute position from one panoramic image: slow features of a trained
+    :class:`sfanav.Network`, then a readout of the slowest ones to metric
+    (x, y).
+
+    Parameters
+    ----------
+    network : Network or None
+        A fitted network. None for a features-only localizer (use
+        :meth:`fit_features` / :meth:`predict_features`, e.g. with features
+        stacked from several networks).
+    n_outputs : int or None, default None
+        Number of slowest outputs read out. None: with ``readout="auto"``
+        8 or 12 (whichever the cross-validation prefers; those the network
+        has), with ``"quadratic"`` 8 (the thesis's best n).
+    ridge : float, default 0.0
+        L2 penalty of the quadratic regression (0: ordinary least squares).
+    degree : int, default 2
+        Degree of the quadratic regression's expansion (2: the thesis's).
+    readout : {"auto", "quadratic"} or dict, default "auto"
+        ``"auto"``: the sfanav default, a GP readout (ARD kernel, marginal
+        likelihood) unless Gaussian kernel ridge or kNN is more than 10 %
+        better by blocked cross-validation on the training data
+        (:func:`sfanav.localization.select_auto_readout`); ``"quadratic"``:
+        the thesis's quadratic regression (with ``ridge``, ``degree``); a
+        dict: one readout spec (:func:`sfanav.localization.make_readout`, e.g.
+        ``{"kind": "knn", "n_outputs": 8, "k": 3}``).
+    rows : ImageRows or None, default None
+        Row handling applied to images before the network
+        (:class:`sfanav.data.ImageRows`, e.g. the sfanav default's
+        horizon band); it must be what the network was trained on
+        (:func:`sfanav.localization.fit_localizer` takes care of that).
+    rotation_pooling : "auto", int or None, default "auto"
+        Rotation pooling (group averaging over the panorama's rotations): an
+        image's features are the network's outputs averaged over K rotations
+        of the panorama in steps of about W / K px (W its width; the step
+        :func:`pooling_step` picks), so the readout sees features that no
+        longer depend on the heading (the network is only approximately
+        invariant: eta_phi > 0). About 3x the network's work per image
+        for K = 8 (the core shares the lower layers across rotations).
+        ``"auto"``: K = 8 (the sfanav default; docs/gardens.md) unless
+        ``readout="quadratic"`` (the thesis's configuration: no pooling);
+        None or 1: no pooling.
+
+    Attributes
+    ----------
+    regression_ : QuadraticRegression, GPReadout, KernelRidgeReadout or KNNReadout
+        The fitted readout (``predict(features)`` -> (N, 2) metres).
+    readout_spec_ : dict
+        Its spec (kind, n_outputs and hyperparameters).
+    n_outputs_ : int
+        Slowest outputs the fitted readout uses.
+    selection_ : ReadoutSelection or None
+        With ``readout="auto"``: the cross-validation (candidates, errors,
+        the rule that decided); not saved in the model file.
+    rotation_pooling_ : int
+        Rotations averaged per image (1: none).
+    n_features_in_ : int
+        Feature columns seen in fit.
+    train_metrics_ : dict
+        :func:`sfanav.localization.localization_metrics` on the training data
+        (optimistic; evaluate on a separate test run).
+    info : dict
+        Free JSON metadata saved with the model (the ``sfanav`` command
+        stores the image preprocessing and training settings here).
+
+    Examples
+    --------
+    >>> loc = sfanav.Localizer(net, n_outputs=8).fit(train_images, train_xy)  # doctest: +SKIP
+    >>> xy = loc.predict(test_images)           # (N, 2) metres              # doctest: +SKIP
+    >>> loc.evaluate(test_images, test_xy)["med"]                            # doctest: +SKIP
+    >>> loc.save("garden.sfa"); loc = sfanav.load("garden.sfa")             # doctest: +SKIP
+    """
+
+    def __init__(self, network: Network | None, n_outputs: int | None = None, ridge: float = 0.0, degree: int = 2,
+                 readout: str | dict[str, Any] = "auto", rows: ImageRows | None = None,
+                 rotation_pooling: int | str | None = "auto") -> None:
+        if network is not None and not isinstance(network, Network):
+            raise TypeError(f"network must be a sfanav.Network or None, got {type(network).__name__}")
+        if rows is not None and not isinstance(rows, ImageRows):
+            raise TypeError(f"rows must be a sfanav.data.ImageRows or None, got {type(rows).__name__}")
+        self.network = network
+        self.n_outputs = n_outputs
+        self.ridge = ridge
+        self.degree = degree
+        self.readout = readout
+        self.rows = rows
+        self.rotation_pooling = rotation_pooling
+        self.info: dict[str, Any] = {}
+
+    def get_params(self, deep: bool = True) -> dict[str, Any]:
+        return {"network": self.network, "n_outputs": self.n_outputs, "ridge": self.ridge, "degree": self.degree,
+                "readout": self.readout, "rows": self.rows, "rotation_pooling": self.rotation_pooling}
+
+    def __repr__(self) -> str:
+        net = "None" if self.network is None else repr(self.network)
+        state = f"fitted: {self.describe_readout()}" if self.is_fitted_ else "not fitted"
+        ro = self.readout if isinstance(self.readout, str) else "spec"
+        rows = "" if self.rows is None or self.rows.identity else f", rows={self.rows.describe()!r}"
+        pool = "" if self.rotation_pooling == "auto" else f", rotation_pooling={self.rotation_pooling!r}"
+        return (f"<sfanav.Localizer readout={ro!r}, n_outputs={self.n_outputs}{rows}{pool}, {state}, "
+                f"network={net}>")
+
+    def describe_readout(self) -> str:
+        """The fitted readout in words, e.g. ``kernel(n_outputs=12, gamma=0.5, alpha=0.001)``."""
+        from .readouts import describe_spec
+
+        return describe_spec(self.readout_spec_) if self.is_fitted_ else "not fitted"
+
+    @property
+    def is_fitted_(self) -> bool:
+        return hasattr(self, "regression_")
+
+    # ------------------------------------------------------------ features
+    def _network(self) -> Network:
+        if self.network is None:
+            raise ValueError(
+                "this Localizer has no network: use fit_features/predict_features with precomputed features"
+            )
+        if not self.network.is_fitted_:
+            raise NotFittedError("the Localizer's network is not fitted; fit the network first")
+        return self.network
+
+    def features(self, images: Any, *, rotations: bool = False) -> np.ndarray:
+        """The features the readout sees of images (N, H, W[, C]): the
+        network's slow features (after ``rows``), rotation pooled if
+        :attr:`rotation_pooling_` > 1; (N, n), or (H, W[, C]) -> (n,).
+
+        ``rotations=True``: (N, K, n) under the K simulated rotations (the
+        training step), for a localizer without pooling only (pooled
+        features are already averaged over rotations)."""
+        net = self._network()
+        a = np.asarray(images)
+        one = a.ndim == (2 if net.input_shape[2] == 1 else 3)
+        if self.rows is not None and not self.rows.identity:
+            images = self.rows(a[None] if one else a)
+            images = images[0] if one else images
+        return self.transform_rows(images, rotations=rotations)
+
+    def transform_rows(self, images: Any, *, rotations: bool = False) -> np.ndarray:
+        """As :meth:`features` for images the localizer's ``rows`` were
+        already applied to (what its network sees)."""
+        net = self._network()
+        k = self._pooling()
+        if k == 1:
+            return net.transform(images, rotations=rotations)
+        if rotations:
+            raise ValueError(
+                f"this Localizer averages its features over {k} rotations already (rotation_pooling); "
+                "rotations=True needs a localizer without pooling (rotation_pooling=None)"
+            )
+        return pooled_transform(net, images, k)
+
+    def _pooling(self) -> int:
+        """The rotations averaged per image: the fitted value, else the
+        parameter resolved."""
+        if hasattr(self, "rotation_pooling_"):
+            return self.rotation_pooling_
+        return self._resolve_pooling()
+
+    def _resolve_pooling(self) -> int:
+        p = self.rotation_pooling
+        if p is None or (p == "auto" and self.network is None):  # features-only: the caller's features
+            return 1
+        if isinstance(p, str):
+            if p != "auto":
+                raise ValueError(f"rotation_pooling must be 'auto', a positive integer or None, got {p!r}")
+            return 1 if self.readout == "quadratic" else ROTATION_POOLING
+        return check_int(p, "rotation_pooling")
+
+    def _check_params(self) -> tuple[int | None, float, int]:
+        n = None if self.n_outputs is None else check_int(self.n_outputs, "n_outputs")
+        ridge = check_nonneg_float(self.ridge, "ridge")
+        degree = check_int(self.degree, "degree")
+        if n is not None and self.network is not None and self.network.is_fitted_ and n > self.network.n_outputs_:
+            raise ValueError(f"n_outputs={n}, but the network has only {self.network.n_outputs_} outputs")
+        ro = self.readout
+        if not (isinstance(ro, dict) or ro in READOUTS):
+            raise ValueError(f"readout must be 'auto', 'quadratic' or a readout spec dict, got {ro!r}")
+        return n, ridge, degree
+
+    # ------------------------------------------------------------ training
+    def fit(self, images: Any, xy: Any) -> "Localizer":
+        """Fits the regression on images (N, H, W[, C]) of a training run and
+        their positions (N, 2) in metres (the network is not retrained).
+        Returns ``self``."""
+        Y = as_matrix(xy, "xy", n_cols=2)
+        self.rotation_pooling_ = self._resolve_pooling()
+        F = self.features(images)
+        if F.ndim == 1:
+            F = F[None]
+        return self.fit_features(F, Y)
+
+    def fit_features(self, features: Any, xy: Any) -> "Localizer":
+        """Fits on precomputed features (N, m >= n_outputs), slowest first,
+        and positions (N, 2) in metres: what :meth:`features` returns (rotation
+        pooled as ``rotation_pooling`` says). Returns ``self``."""
+        n, ridge, degree = self._check_params()
+        self.rotation_pooling_ = self._resolve_pooling()
+        F = as_matrix(features, "features")
+        Y = as_matrix(xy, "xy", n_cols=2)
+        check_same_length(F, Y, "features", "xy")
+        if n is not None and n > F.shape[1]:
+            raise ValueError(f"n_outputs={n}, but the features have only {F.shape[1]} columns")
+        self.selection_ = None
+        if isinstance(self.readout, dict):
+            spec = dict(self.readout)
+            if n is not None:
+                spec["n_outputs"] = n
+            reg = make_readout(spec).fit(F, Y)
+        elif self.readout == "quadratic":
+            spec = {"kind": "quadratic", "n_outputs": 8 if n is None else n, "ridge": float(ridge), "degree": degree}
+            reg = QuadraticRegression(spec["n_outputs"], ridge, degree).fit(F, Y)
+        else:
+            sel = select_auto_readout(F, Y, n_outputs=n)
+            spec, reg, self.selection_ = sel.spec, sel.readout, sel
+        self.regression_ = reg
+        self.readout_spec_ = spec
+        self.n_outputs_ = int(spec.get("n_outputs") or F.shape[1])
+        self.n_features_in_ = F.shape[1]
+        rng = np.ptp(Y, axis=0)  # a straight training run has no range across it: use the other axis's
+        rng = np.where(rng > 0, rng, max(float(rng.max()), 1.0))
+        self.train_metrics_ = localization_metrics(reg.predict(F), Y, coordinate_range=rng)
+        return self
+
+    # ------------------------------------------------------------ inference
+    def _check_fitted(self) -> Any:
+        if not self.is_fitted_:
+            raise NotFittedError("this Localizer is not fitted yet; call fit or fit_features first")
+        return self.regression_
+
+    def predict(self, images: Any, *, rotations: bool = False) -> np.ndarray:
+        """Positions (N, 2) in metres of images (N, H, W[, C]).
+
+        With ``rotations=True`` (a localizer without rotation pooling) the
+        estimate is the mean over the simulated rotations of each image (as
+        the thesis's Fig. 5.2b, 5.5b): K times the work, smoother estimates."""
+        self._check_fitted()
+        a = np.asarray(images)
+        single = a.ndim == (2 if self._network().input_shape[2] == 1 else 3)  # one (H, W[, C]) image
+        out = self.predict_features(self.features(a[None] if single else a, rotations=rotations))
+        return out[0] if single else out
+
+    def predict_features(self, features: Any) -> np.ndarray:
+        """Positions (N, 2) in metres from precomputed features: (N, m), or
+        (N, K, m) under K rotations, whose K estimates are averaged."""
+        reg = self._check_fitted()
+        a = as_real_array(features, "features")
+        if a.ndim == 3:
+            check_finite(a.astype(np.float64, copy=False), "features")
+            N, K, m = a.shape
+            if m != self.n_features_in_:
+                raise ValueError(f"features have {m} columns, but this Localizer was fitted with {self.n_features_in_}")
+            return reg.predict(a.reshape(N * K, m)).reshape(N, K, -1).mean(axis=1)
+        F = as_matrix(a, "features")
+        if F.shape[1] != self.n_features_in_:
+            raise ValueError(
+                f"features have {F.shape[1]} columns, but this Localizer was fitted with {self.n_features_in_}"
+            )
+        return reg.predict(F)
+
+    def score(self, images: Any, xy: Any, *, rotations: bool = False) -> float:
+        """Mean Euclidean distance (MED, metres) of the estimates for images
+        from the true positions ``xy`` (N, 2): the thesis's accuracy figure.
+        Lower is better (unlike scikit-learn's higher-is-better ``score``); see
+        :meth:`evaluate` for all metrics."""
+        return float(euclidean_errors(self.predict(images, rotations=rotations), xy).mean())
+
+    def evaluate(self, images: Any, xy: Any, *, rotations: bool = False, coordinate_range: Any = None) -> dict[str, float]:
+        """All metrics (:func:`sfanav.localization.localization_metrics`) of the
+        estimates for images against ``xy`` (N, 2): MED, MAE per axis in
+        metres and in % of the coordinate range, percentiles."""
+        return localization_metrics(self.predict(images, rotations=rotations), xy, coordinate_range=coordinate_range)
+
+    def evaluate_features(self, features: Any, xy: Any, *, coordinate_range: Any = None) -> dict[str, float]:
+        """As :meth:`evaluate`, from precomputed features."""
+        return localization_metrics(self.predict_features(features), xy, coordinate_range=coordinate_range)
+
+    # ------------------------------------------------------------ persistence
+    def save(self, path: str | os.PathLike) -> Path:
+        """Saves the localizer with its network as one model file (pickle-free;
+        kind ``"Localizer"``); read back with :func:`sfanav.load`."""
+        reg = self._check_fitted()
+        net_state = None
+        if self.network is not None:
+            # The network's own save() defines its state: write it and read it back.
+            with tempfile.TemporaryDirectory(prefix="sfanav-") as tmp:
+                tmp_path = Path(tmp) / "network.sfa"
+                self.network.save(tmp_path)
+                kind, net_state, _ = read_model(tmp_path)
+        state = {
+            "params": {"n_outputs": None if self.n_outputs is None else int(self.n_outputs),
+                       "ridge": float(self.ridge), "degree": int(self.degree),
+                       "rotation_pooling": (self.rotation_pooling if isinstance(self.rotation_pooling, str)
+                                            or self.rotation_pooling is None else int(self.rotation_pooling))},
+            "rotation_pooling": int(self.rotation_pooling_),
+            "readout_param": dict(self.readout) if isinstance(self.readout, dict) else str(self.readout),
+            "rows": None if self.rows is None else self.rows.to_dict(),
+            "network": net_state,
+            "readout": readout_state(self.readout_spec_, reg),
+            # the thesis's readout also as version 1 had it, so older sfanav reads such files
+            **({"regression": reg._get_state()} if self.readout_spec_["kind"] == "quadratic" else {}),
+            "n_features_in": int(self.n_features_in_),
+            "train_metrics": dict(self.train_metrics_),
+            "info": dict(self.info or {}),
+        }
+        # format version 2: a GP, kernel ridge or kNN readout (older readers cannot rebuild it)
+        kind = self.readout_spec_["kind"]
+        # format version 3: the GP readout (version-2 readers cannot rebuild it)
+        version = {"quadratic": 1, "gp": 3}.get(kind, 2)
+        # format version 4: rotation-pooled features (older readers would silently skip the pooling)
+        if self.rotation_pooling_ > 1:
+            version = 4
+        return save_model(path, "Localizer", state, version=version)
+
+    @classmethod
+    def _from_state(cls, state: dict[str, Any]) -> "Localizer":
+        try:
+            net = None if state["network"] is None else Network._from_state(state["network"])
+            rows = state.get("rows")
+            params = dict(state["params"])
+            params.setdefault("rotation_pooling", None)  # files before format 4: no pooling
+            loc = cls(net, rows=None if rows is None else ImageRows.from_dict(rows), **params)
+            loc.rotation_pooling_ = check_int(state.get("rotation_pooling", 1), "rotation_pooling")
+            loc.readout = state.get("readout_param", "quadratic")
+            if "readout" in state:  # since sfanav 0.2 (issue 7): any readout
+                loc.regression_ = readout_from_state(state["readout"])
+                loc.readout_spec_ = dict(state["readout"]["spec"])
+            else:  # files written before: the thesis's quadratic regression
+                loc.readout = "quadratic"
+                loc.regression_ = QuadraticRegression._from_state(state["regression"])
+                loc.readout_spec_ = {"kind": "quadratic", "n_outputs": loc.regression_.n_outputs_,
+                                     "ridge": float(loc.ridge), "degree": int(loc.degree)}
+            loc.n_outputs_ = int(loc.readout_spec_.get("n_outputs") or state["n_features_in"])
+            loc.selection_ = None
+            loc.n_features_in_ = int(state["n_features_in"])
+            loc.train_metrics_ = dict(state.get("train_metrics") or {})
+            loc.info = dict(state.get("info") or {})
+        except (KeyError, TypeError) as exc:
+            raise ValueError(f"invalid Localizer model state: {exc}") from None
+        if net is not None and net.is_fitted_ and loc.n_features_in_ != net.n_outputs_:
+            raise ValueError(
+                f"invalid Localizer model state: the regression expects {loc.n_features_in_} features, "
+                f"the network has {net.n_outputs_} outputs"
+            )
+        return loc
+
+
+register_loader("Localizer", Localizer._from_state)

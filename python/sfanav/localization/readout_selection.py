@@ -1,0 +1,236 @@
+"""Choosing a readout by cross-validation on the training run only, in
+contiguous blocks of the run (neighbouring frames are near copies: random
+folds would leak them into the held-out part). The test run never influences
+the choice. :func:`select_readout` picks among candidate specs;
+:func:`select_auto_readout` is the ``readout="auto"`` rule of
+:class:`sfanav.Localizer`."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Sequence
+
+import numpy as np
+
+from .._checks import as_matrix, check_same_length
+from .readouts import GPReadout, describe_spec, make_readout
+
+
+def default_candidates(kinds: Sequence[str] = ("quadratic", "knn", "kernel"),
+                       n_outputs: Sequence[int] = (8, 12)) -> list[dict[str, Any]]:
+    """The grid :func:`select_readout` searches by default: ridge quadratic
+    regression (ridge 0 .. 1 on the centred expansion), kNN (k 1 .. 20,
+    inverse-distance weights) and Gaussian kernel ridge (gamma 0.5 .. 4,
+    alpha 1e-3 .. 1e-1), each on ``n_outputs`` slowest outputs."""
+    out: list[dict[str, Any]] = []
+    for n in n_outputs:
+        if "quadratic" in kinds:
+            out += [{"kind": "quadratic", "n_outputs": n, "ridge": r} for r in (0.0, 1e-2, 1e-1, 1.0, 10.0)]
+        if "knn" in kinds:
+            out += [{"kind": "knn", "n_outputs": n, "k": k, "weights": "distance"} for k in (1, 3, 5, 10, 20)]
+        if "kernel" in kinds:
+            out += [{"kind": "kernel", "n_outputs": n, "gamma": g, "alpha": a}
+                    for g in (0.5, 1.0, 2.0, 4.0) for a in (1e-3, 1e-2, 1e-1)]
+    return out
+
+
+def block_folds(n: int, n_folds: int = 5, block: int | None = None) -> list[tuple[np.ndarray, np.ndarray]]:
+    """(train, held-out) index pairs of a run of ``n`` samples.
+
+    ``block=None``: ``n_folds`` contiguous blocks (each held-out part a
+    ``1/n_folds`` stretch of the run). ``block=b``: the run cut into blocks
+    of ``b`` consecutive samples, block ``i`` held out in fold ``i mod
+    n_folds`` (short held-out stretches spread over the run, as a test run
+    inside the explored area is; consecutive near-duplicate frames still
+    stay on one side)."""
+    if n < 2 * n_folds:
+        raise ValueError(f"{n} samples are too few for {n_folds} folds")
+    idx = np.arange(n)
+    if block is None:
+        edges = np.linspace(0, n, n_folds + 1).round().astype(int)
+        return [(np.concatenate([idx[: edges[i]], idx[edges[i + 1] :]]), idx[edges[i] : edges[i + 1]])
+                for i in range(n_folds)]
+    if int(block) < 1:
+        raise ValueError(f"block must be at least 1, got {block}")
+    fold = (idx // int(block)) % n_folds
+    if len(np.unique(fold)) < n_folds:
+        raise ValueError(f"{n} samples in blocks of {block} are too few for {n_folds} folds")
+    return [(idx[fold != k], idx[fold == k]) for k in range(n_folds)]
+
+
+# The sfanav default readout ("auto"): a Gaussian process with ARD length
+# scales (marginal likelihood) unless Gaussian kernel ridge or kNN, chosen by
+# blocked CV on the training run (AUTO_FOLDS folds of interleaved blocks of
+# AUTO_BLOCK consecutive images), has a CV error lower by more than
+# AUTO_TOLERANCE (relative); kNN over kernel ridge by the same margin.
+# Measured in docs/gardens.md ("Choosing the readout").
+AUTO_FOLDS = 10
+
+
+AUTO_BLOCK = 10  # consecutive training images per CV block
+
+
+AUTO_TOLERANCE = 0.1
+
+
+AUTO_MAX_CV_SAMPLES = 1500
+
+
+def auto_candidates(n_outputs: Sequence[int] = (8, 12)) -> list[dict[str, Any]]:
+    """The grid of the default (``"auto"``) readout: Gaussian kernel ridge
+    (gamma 0.25 .. 2, alpha 1e-3 .. 1e-2; docs/gardens.md) and kNN (k 1 ..
+    10, inverse-distance weights), each on ``n_outputs`` slowest outputs."""
+    out: list[dict[str, Any]] = []
+    for n in n_outputs:
+        out += [{"kind": "kernel", "n_outputs": int(n), "gamma": g, "alpha": a}
+                for g in (0.25, 0.5, 1.0, 2.0) for a in (1e-3, 1e-2)]
+        out += [{"kind": "knn", "n_outputs": int(n), "k": k, "weights": "distance"} for k in (1, 3, 5, 10)]
+    return out
+
+
+@dataclass
+class ReadoutSelection:
+    """What :func:`select_readout` found: the best ``spec``, its readout fitted
+    on the whole training run (``readout``), and each candidate's mean
+    held-out Euclidean error in metres (``scores``, same order as
+    ``candidates``)."""
+
+    spec: dict[str, Any]
+    readout: Any
+    candidates: list[dict[str, Any]] = field(default_factory=list)
+    scores: np.ndarray = field(default_factory=lambda: np.empty(0))
+    rule: str = "lowest CV error"
+
+    def describe(self) -> str:
+        return describe_spec(self.spec)
+
+    def best_of(self, kind: str) -> tuple[dict[str, Any], float]:
+        """The candidate of one ``kind`` with the lowest CV error, and that error (m)."""
+        idx = [i for i, c in enumerate(self.candidates) if c["kind"] == kind]
+        if not idx:
+            raise ValueError(f"no {kind!r} candidates in this selection")
+        i = min(idx, key=lambda j: float(self.scores[j]))
+        return dict(self.candidates[i]), float(self.scores[i])
+
+
+def select_readout(features: Any, xy: Any, candidates: Sequence[dict[str, Any]] | None = None, *,
+                   n_folds: int = 5, max_cv_samples: int | None = None,
+                   block: int | None = None) -> ReadoutSelection:
+    """Chooses a readout by blocked cross-validation on one (training) run.
+
+    Each candidate is fitted on ``n_folds - 1`` contiguous blocks of the run
+    and scored by the mean Euclidean error on the held-out block; the one
+    with the lowest mean is refitted on the whole run. ``features`` (N, m)
+    and ``xy`` (N, 2) in the run's order. ``max_cv_samples``: runs longer
+    than that are subsampled evenly for the CV (not for the final fit).
+    ``block``: folds of interleaved blocks of that many samples instead of
+    contiguous stretches (:func:`block_folds`)."""
+    F = as_matrix(features, "features")
+    Y = as_matrix(xy, "xy")
+    check_same_length(F, Y, "features", "xy")
+    cands = list(candidates) if candidates is not None else default_candidates(n_outputs=tuple(
+        n for n in (8, 12) if n <= F.shape[1]) or (F.shape[1],))
+    if not cands:
+        raise ValueError("no readout candidates")
+    scores = _scores(cands, F, Y, n_folds, max_cv_samples, block)
+    best = int(np.argmin(scores))
+    spec = dict(cands[best])
+    return ReadoutSelection(spec, make_readout(spec).fit(F, Y), [dict(c) for c in cands], scores)
+
+
+def _scores(cands: list[dict[str, Any]], F: np.ndarray, Y: np.ndarray, n_folds: int,
+            max_cv_samples: int | None, block: int | None = None) -> np.ndarray:
+    if max_cv_samples is not None and len(F) > max_cv_samples:
+        keep = np.unique(np.linspace(0, len(F) - 1, int(max_cv_samples)).round().astype(int))
+        F, Y = F[keep], Y[keep]
+    folds = block_folds(len(F), n_folds, block)
+    from threadpoolctl import threadpool_limits
+
+    with threadpool_limits(limits=1, user_api="blas"):  # many small solves: threads only thrash
+        return _cv_scores(cands, folds, F, Y)
+
+
+def select_auto_readout(features: Any, xy: Any, *, n_outputs: int | Sequence[int] | None = None,
+                        n_folds: int = AUTO_FOLDS, block: int | None = AUTO_BLOCK,
+                        tolerance: float = AUTO_TOLERANCE,
+                        max_cv_samples: int | None = AUTO_MAX_CV_SAMPLES, gp: bool = True) -> ReadoutSelection:
+    """The sfanav default readout (``"auto"``), chosen on the training run only.
+
+    1. A Gaussian-process readout (:class:`GPReadout`) on the most slowest
+       outputs offered (12, or ``max(n_outputs)``), its ARD hyperparameters
+       by maximum marginal likelihood on the whole run.
+    2. Every candidate of :func:`auto_candidates` (Gaussian kernel ridge and
+       kNN on 8 and 12 outputs, or ``n_outputs``; only those the features
+       have) and the GP with its hyperparameters fixed are scored by blocked
+       CV (mean held-out Euclidean error, m): the run cut into blocks of
+       ``block`` consecutive images, block ``i`` held out in fold ``i mod
+       n_folds`` (``block=None``: ``n_folds`` contiguous stretches).
+    3. The GP is taken unless the best other candidate's CV error is lower by
+       more than ``tolerance`` (relative); among the others kNN only if it
+       beats kernel ridge by more than ``tolerance``.
+
+    ``gp=False`` leaves the GP out (the issue-7 default: kernel ridge unless
+    kNN is better by ``tolerance``). On the gardens and 5.1.1 runs, 5
+    contiguous folds picked kNN where kernel ridge was better on the test
+    run, and contiguous folds (whole strips of the area held out) chose too
+    smooth kernels (docs/gardens.md). Runs too short for ``n_folds`` folds of
+    ``block`` images use fewer folds (at least 2) and shorter blocks.
+    Returns a :class:`ReadoutSelection` whose ``rule`` says why."""
+    F = as_matrix(features, "features")
+    Y = as_matrix(xy, "xy")
+    check_same_length(F, Y, "features", "xy")
+    if not 0.0 <= float(tolerance) < 1.0:
+        raise ValueError(f"tolerance must be in [0, 1), got {tolerance}")
+    if n_outputs is None:
+        ns = tuple(n for n in (8, 12) if n <= F.shape[1]) or (F.shape[1],)
+    else:
+        ns = (int(n_outputs),) if np.isscalar(n_outputs) else tuple(int(n) for n in n_outputs)  # type: ignore[arg-type]
+        bad = [n for n in ns if not 1 <= n <= F.shape[1]]
+        if bad:
+            raise ValueError(f"n_outputs {bad} out of range: the features have {F.shape[1]} columns")
+    folds = min(int(n_folds), len(F) // 2)
+    if folds < 2:
+        raise ValueError(f"{len(F)} training samples are too few to choose a readout by cross-validation")
+    n_cv = min(len(F), max_cv_samples or len(F))
+    blk = None if block is None else max(1, min(int(block), n_cv // folds))
+    cands = auto_candidates(ns)
+    gp_fit = None
+    if gp:
+        gp_fit = GPReadout(n_outputs=max(ns)).fit(F, Y)
+        cands.append(gp_fit.fixed_spec())
+    scores = _scores(cands, F, Y, folds, max_cv_samples, blk)
+    sel = ReadoutSelection({}, None, [dict(c) for c in cands], scores)
+    k_spec, k_err = sel.best_of("kernel")
+    n_spec, n_err = sel.best_of("knn")
+    if np.isfinite(n_err) and (not np.isfinite(k_err) or n_err < (1.0 - tolerance) * k_err):
+        spec, err, why = n_spec, n_err, f"kNN: CV {n_err:.3f} m < (1 - {tolerance:g}) x kernel ridge's {k_err:.3f} m"
+    else:
+        spec, err, why = k_spec, k_err, f"kernel ridge: CV {k_err:.3f} m (kNN {n_err:.3f} m not {tolerance:.0%} lower)"
+    how = f"{folds}-fold blocked CV" + (f" (blocks of {blk} images)" if blk is not None else " (contiguous)")
+    if gp_fit is not None:
+        g_err = float(scores[-1])
+        if not (np.isfinite(err) and err < (1.0 - tolerance) * g_err):
+            sel.spec = {"kind": "gp", "n_outputs": max(ns)}
+            sel.rule = (f"{how}; GP (ARD, marginal likelihood): CV {g_err:.3f} m (best other "
+                        f"{describe_spec(spec)} {err:.3f} m not {tolerance:.0%} lower)")
+            sel.readout = gp_fit
+            return sel
+        why = f"{why}; beats the GP's CV {g_err:.3f} m by more than {tolerance:.0%}"
+    sel.spec, sel.rule = spec, f"{how}; {why}"
+    sel.readout = make_readout(spec).fit(F, Y)
+    return sel
+
+
+def _cv_scores(cands: list[dict[str, Any]], folds: list[tuple[np.ndarray, np.ndarray]], F: np.ndarray,
+               Y: np.ndarray) -> np.ndarray:
+    scores = np.empty(len(cands))
+    for i, spec in enumerate(cands):
+        errs = []
+        for tr, te in folds:
+            try:
+                pred = make_readout(spec).fit(F[tr], Y[tr]).predict(F[te])
+                errs.append(float(np.hypot(*(pred - Y[te]).T).mean()))
+            except (ValueError, np.linalg.LinAlgError):
+                errs.append(np.inf)
+        scores[i] = float(np.mean(errs))
+    return scores

@@ -1,0 +1,68 @@
+"""Training a localizer from a run: :func:`fit_localizer` trains the network
+on the run's images (simulated rotation), then the readout on the slow
+features and the run's positions, and returns a :class:`sfanav.Localizer`
+that carries how it was made."""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import numpy as np
+
+from ..data.preprocessing import Preprocessing
+from ..sfa.network import Network, Rotation
+from .localizer import Localizer
+
+
+def fit_localizer(
+    network: Network,
+    images: np.ndarray,
+    xy: np.ndarray,
+    *,
+    rotation: Rotation | None = None,
+    n_outputs: int | None = None,
+    readout: str | dict[str, Any] = "auto",
+    rows: Any = None,
+    prep: Preprocessing | None = None,
+    progress: bool = True,
+    info: dict[str, Any] | None = None,
+    rotation_pooling: int | str | None = "auto",
+) -> Localizer:
+    """Trains ``network`` on ``images`` (the training run, in temporal order)
+    under simulated rotation and fits the readout of its slowest outputs to
+    ``xy`` (N, 2) metres.
+
+    ``readout``, ``n_outputs``: as :class:`Localizer` (default ``"auto"``:
+    the sfanav default's GP, or kernel ridge / kNN by blocked CV, on this
+    run; ``readout="quadratic", n_outputs=8`` is the thesis's). ``rows``: an
+    :class:`sfanav.data.ImageRows` applied to the images before the
+    network, in training and (stored in the localizer) at every query.
+    ``rotation_pooling``: as :class:`Localizer` (``"auto"``: 8 rotations
+    unless the readout is the thesis's quadratic one). The
+    returned localizer's ``info`` records preprocessing, rotation, training
+    time (seconds: network) and readout selection time."""
+    rotation = rotation or Rotation()
+    if rows is not None and not rows.identity:
+        images = rows(images)
+    else:
+        rows = None
+    t0 = time.perf_counter()
+    network.fit(images, rotation, progress=progress)
+    fit_s = time.perf_counter() - t0
+    if n_outputs is not None and n_outputs > network.n_outputs_:
+        raise ValueError(f"n_outputs={n_outputs}, but the network has only {network.n_outputs_} outputs")
+    loc = Localizer(network, n_outputs=n_outputs, readout=readout, rows=rows, rotation_pooling=rotation_pooling)
+    t1 = time.perf_counter()
+    loc.fit_features(loc.transform_rows(images), xy)
+    readout_s = time.perf_counter() - t1
+    loc.info = dict(info or {})
+    if prep is not None:
+        loc.info["preprocessing"] = prep.to_dict()
+    loc.info.update({"rotation": {"step": rotation.step, "window": rotation.window},
+                     "n_train_images": int(len(images)), "fit_seconds": round(fit_s, 2),
+                     "readout_seconds": round(readout_s, 2), "readout": loc.describe_readout(),
+                     "rotation_pooling": int(loc.rotation_pooling_)})
+    if loc.selection_ is not None:
+        loc.info["readout_rule"] = loc.selection_.rule
+    return loc

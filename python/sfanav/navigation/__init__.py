@@ -1,0 +1,42 @@
+"""Stage 5: navigation along slow-feature gradients (thesis chapter 7).
+
+* cost (:class:`SlowFeatureCost`, :class:`ScaledCost`), gradient
+  (:class:`PlaneGradient`) and descents (:class:`ThesisDescent`,
+  :class:`RobustDescent`, :class:`MetricDescent`) with one interface;
+* feature sources for the closed loop (:class:`ImageFeatures`,
+  :class:`MetricFeatures`, :class:`CoordinateFeatures`,
+  :class:`RunGraphFeatures`);
+* :class:`GeodesicField`: shortest paths through the space an exploration
+  run covered;
+* :class:`Navigator` (the closed loop on a simulated robot), trials and their
+  evaluation, planning baselines (A*, velocity regions) and plots.
+"""
+
+from __future__ import annotations
+
+from ..odometry.tracker import MapTracker
+from ..sim.point import PointSimulator
+from .cost import ScaledCost, SlowFeatureCost, beta_weights, run_spread
+from .descent import Descent, MetricDescent, RobustDescent, StepInfo, ThesisDescent
+from .features import (
+    CoordinateFeatures,
+    ImageFeatures,
+    MetricFeatures,
+    RunGraphFeatures,
+    fit_coordinate_sfa,
+)
+from .geodesic import GeodesicField
+from .gradient import PlaneGradient, difference_quotient, plane_gradient
+from .navigator import NavigationResult, Navigator
+from .planning import (
+    astar,
+    halfplane_optimal,
+    occupancy_grid,
+    path_length,
+    shortest_path,
+    travel_time,
+)
+from .plots import plot_cost_surface, plot_trajectories
+from .trials import TrialSummary, evaluate_trials, sample_trials
+
+__all__ = ["CoordinateFeatures", "Descent", "GeodesicField", "ImageFeatures", "MapTracker", "MetricDescent", "MetricFeatures", "NavigationResult", "Navigator", "PlaneGradient", "PointSimulator", "RobustDescent", "RunGraphFeatures", "ScaledCost", "SlowFeatureCost", "StepInfo", "ThesisDescent", "TrialSummary", "astar", "beta_weights", "difference_quotient", "evaluate_trials", "fit_coordinate_sfa", "halfplane_optimal", "occupancy_grid", "path_length", "plane_gradient", "plot_cost_surface", "plot_trajectories", "run_spread", "sample_trials", "shortest_path", "travel_time"]

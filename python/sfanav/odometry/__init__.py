@@ -1,0 +1,25 @@
+"""Stage 4: metric space and filtering with wheel odometry.
+
+* :mod:`~sfanav.odometry.dead_reckoning` and :mod:`~sfanav.odometry.lines`:
+  pose increments, dead reckoning, straight-line segmentation;
+* :class:`MetricLearner`: the map from slow features to metric (x, y)
+  learned from odometry alone (thesis 5.3.1), with its cost in
+  :mod:`~sfanav.odometry.metric_cost`;
+* :class:`OdometryEKF`: fusion of position estimates with odometry (5.3.2);
+* :class:`MapTracker`: a robust rigid fit of odometry to recent estimates;
+* :mod:`~sfanav.odometry.loop_closures`: places seen again;
+* plots of the learned lines and the fused track.
+"""
+
+from __future__ import annotations
+
+from .dead_reckoning import arc_factor, dead_reckon, increments, wrap_angle
+from .ekf import GridSearchResult, OdometryEKF, ctrv_jacobians, ctrv_motion, grid_search
+from .lines import Lines, lines_from_labels, lines_from_odometry, segment_lines
+from .loop_closures import LoopClosures, find_loop_closures, interleave
+from .metric_cost import DEFAULT_ODOMETRY_NOISE, metric_cost, odometry_variances
+from .metric_learning import MetricLearner
+from .plots import plot_fusion, plot_metric_lines
+from .tracker import MapTracker
+
+__all__ = ["DEFAULT_ODOMETRY_NOISE", "GridSearchResult", "Lines", "LoopClosures", "MapTracker", "MetricLearner", "OdometryEKF", "arc_factor", "ctrv_jacobians", "ctrv_motion", "dead_reckon", "find_loop_closures", "grid_search", "increments", "interleave", "lines_from_labels", "lines_from_odometry", "metric_cost", "odometry_variances", "plot_fusion", "plot_metric_lines", "segment_lines", "wrap_angle"]

@@ -1,0 +1,428 @@
+"""Fusion of SFA position estimates and odometry in an Extended Kalman
+Filter (thesis 5.3.2).
+
+State ``x = (x, y, theta)``: position in metres, heading in radians.
+
+Prediction (Constant Turn Rate and Velocity model, driven by odometry): the
+odometry increment of step k, ``u_k = (d_k, dtheta_k)`` (metres driven and
+heading change in radians, :func:`sfanav.odometry.increments`), moves the
+robot along a circular arc, i.e. at constant velocity ``d_k / dt`` and turn
+rate ``dtheta_k / dt`` over the step (``dt`` cancels)::
+
+    x'     = x + d k cos(theta + dtheta / 2)
+    y'     = y + d k sin(theta + dtheta / 2)        k = sinc(dtheta / 2)
+    theta' = theta + dtheta
+
+which is the CTRV update ``x + v / w (sin(theta + w dt) - sin theta)``, ...
+written without the division by the turn rate. Process noise enters
+through the odometry: ``Q = V diag(sigma_d^2, sigma_theta^2) V^T``, ``V`` the
+Jacobian of the motion with respect to ``u``, plus ``process_floor`` on the
+diagonal.
+
+Update: the SFA estimate (metric positions, e.g. from
+:class:`sfanav.MetricLearner` after alignment, or a supervised
+:class:`sfanav.QuadraticRegression`) measures ``(x, y)`` directly,
+``H = [[1, 0, 0], [0, 1, 0]]``, noise ``R = sigma_r^2 I``.
+
+Gating (beyond the thesis): a measurement whose squared Mahalanobis
+distance ``y^T S^-1 y`` of the innovation exceeds the chi-square quantile of
+``gate_probability`` (2 degrees of freedom: ``-2 ln(1 - p)``) is skipped, as
+is any row of NaN (a missing estimate). After ``max_consecutive_gated``
+skipped measurements in a row the next one is accepted anyway, so a filter
+that has drifted away can recover.
+
+The filter is :class:`filterpy.kalman.ExtendedKalmanFilter` with the CTRV
+prediction.
+"""
+
+from __future__ import annotations
+
+import itertools
+import time
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from .._checks import (
+    as_matrix,
+    as_real_array,
+    check_finite,
+    check_int,
+    check_nonneg_float,
+    check_same_length,
+)
+from .dead_reckoning import arc_factor, as_poses, dead_reckon, increments, wrap_angle
+
+
+def ctrv_motion(pose: np.ndarray, u: np.ndarray) -> np.ndarray:
+    """One CTRV step: pose (3,) ``(x [m], y [m], theta [rad])`` moved by the
+    increment u (2,) ``(d [m], dtheta [rad])``."""
+    d, dth = float(u[0]), float(u[1])
+    k = float(arc_factor(dth))
+    h = pose[2] + 0.5 * dth
+    return np.array([pose[0] + d * k * np.cos(h), pose[1] + d * k * np.sin(h), pose[2] + dth])
+
+
+def _dsinc_half(dth: float) -> float:
+    """d/d(dth) of sinc(dth / 2)."""
+    h = 0.5 * dth
+    if abs(h) < 1e-4:
+        return 0.5 * (-h / 3.0)
+    return 0.5 * (h * np.cos(h) - np.sin(h)) / (h * h)
+
+
+def ctrv_jacobians(pose: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Jacobians of :func:`ctrv_motion`: F (3, 3) with respect to the pose and
+    V (3, 2) with respect to the increment."""
+    d, dth = float(u[0]), float(u[1])
+    k = float(arc_factor(dth))
+    h = pose[2] + 0.5 * dth
+    c, s = np.cos(h), np.sin(h)
+    F = np.array([[1.0, 0.0, -d * k * s], [0.0, 1.0, d * k * c], [0.0, 0.0, 1.0]])
+    dk = _dsinc_half(dth)
+    V = np.array([
+        [k * c, d * (dk * c - 0.5 * k * s)],
+        [k * s, d * (dk * s + 0.5 * k * c)],
+        [0.0, 1.0],
+    ])
+    return F, V
+
+
+def _chi2_2dof(p: float) -> float:
+    return float(-2.0 * np.log1p(-p))
+
+
+_H = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+
+
+_FILTER_CLASS: Any = None
+
+
+def _ctrv_filter_class() -> Any:
+    """filterpy's ExtendedKalmanFilter with the CTRV state prediction
+    (filterpy's own ``predict_x`` is linear, ``F x + B u``)."""
+    global _FILTER_CLASS
+    if _FILTER_CLASS is None:
+        from filterpy.kalman import ExtendedKalmanFilter
+
+        class CTRVFilter(ExtendedKalmanFilter):
+            def predict_x(self, u: Any = 0) -> None:
+                self.x = ctrv_motion(self.x[:, 0], u).reshape(3, 1)
+
+        _FILTER_CLASS = CTRVFilter
+    return _FILTER_CLASS
+
+
+class OdometryEKF:
+    """EKF fusing odometry (prediction, CTRV model) with absolute SFA position
+    estimates (update), thesis 5.3.2.
+
+    Parameters
+    ----------
+    distance_noise : float, default 0.01
+        Standard deviation of the odometry distance of one step, metres.
+    heading_noise : float, default 0.01
+        Standard deviation of the odometry heading change of one step, radians.
+    measurement_noise : float, default 0.2
+        Standard deviation of each coordinate of an SFA estimate, metres.
+    initial_std : (float, float), default (0.01, 0.01)
+        Standard deviation of the start position (metres, each axis) and
+        heading (radians): the start pose is known (thesis).
+    process_floor : float, default 1e-9
+        Added to the diagonal of Q (numerical safety).
+    gate_probability : float or None, default None
+        Mahalanobis gating of outlying SFA estimates (see the module
+        docstring); e.g. 0.999. None: every estimate is used (thesis).
+    max_consecutive_gated : int, default 20
+        After this many gated estimates in a row the next one is accepted.
+
+    Attributes (after :meth:`run`)
+    ----------
+    poses_ : ndarray (N, 3)
+        Fused poses ``(x [m], y [m], theta [rad])`` (headings wrapped).
+    covariances_ : ndarray (N, 3, 3)
+        Posterior covariances.
+    gated_ : ndarray of bool (N,)
+        True where an available SFA estimate was rejected by the gate.
+    n_gated_ : int
+        Number of gated estimates.
+    n_missing_ : int
+        Number of rows of NaN in the measurements (no estimate).
+    mahalanobis_ : ndarray (N,)
+        Mahalanobis distance of each innovation (NaN where missing).
+    log_likelihood_ : float
+        Sum of the innovations' Gaussian log-likelihoods over the accepted
+        updates (for tuning the noise without ground truth).
+    """
+
+    def __init__(
+        self,
+        distance_noise: float = 0.01,
+        heading_noise: float = 0.01,
+        measurement_noise: float = 0.2,
+        *,
+        initial_std: tuple[float, float] = (0.01, 0.01),
+        process_floor: float = 1e-9,
+        gate_probability: float | None = None,
+        max_consecutive_gated: int = 20,
+    ) -> None:
+        self.distance_noise = distance_noise
+        self.heading_noise = heading_noise
+        self.measurement_noise = measurement_noise
+        self.initial_std = initial_std
+        self.process_floor = process_floor
+        self.gate_probability = gate_probability
+        self.max_consecutive_gated = max_consecutive_gated
+
+    _PARAMS = ("distance_noise", "heading_noise", "measurement_noise", "initial_std", "process_floor",
+               "gate_probability", "max_consecutive_gated")
+
+    def get_params(self, deep: bool = True) -> dict[str, Any]:
+        return {k: getattr(self, k) for k in self._PARAMS}
+
+    def set_params(self, **params: Any) -> "OdometryEKF":
+        for k, v in params.items():
+            if k not in self._PARAMS:
+                raise ValueError(f"unknown parameter {k!r} for OdometryEKF")
+            setattr(self, k, v)
+        return self
+
+    def __repr__(self) -> str:
+        return (
+            f"OdometryEKF(distance_noise={self.distance_noise!r}, heading_noise={self.heading_noise!r}, "
+            f"measurement_noise={self.measurement_noise!r}, gate_probability={self.gate_probability!r})"
+        )
+
+    def _check(self) -> tuple[float, float, float, np.ndarray, float, float | None, int]:
+        sd = check_nonneg_float(self.distance_noise, "distance_noise")
+        sh = check_nonneg_float(self.heading_noise, "heading_noise")
+        sr = check_nonneg_float(self.measurement_noise, "measurement_noise")
+        if sr == 0:
+            raise ValueError("measurement_noise must be > 0 (metres)")
+        init = as_real_array(self.initial_std, "initial_std").astype(np.float64).ravel()
+        if init.shape != (2,) or not np.all(np.isfinite(init)) or np.any(init < 0):
+            raise ValueError(f"initial_std must be (position std [m], heading std [rad]) >= 0, got {self.initial_std!r}")
+        floor = check_nonneg_float(self.process_floor, "process_floor")
+        gp = self.gate_probability
+        gate = None
+        if gp is not None:
+            gp = float(gp)
+            if not 0 < gp < 1:
+                raise ValueError(f"gate_probability must be in (0, 1) or None, got {self.gate_probability!r}")
+            gate = _chi2_2dof(gp)
+        mcg = check_int(self.max_consecutive_gated, "max_consecutive_gated", minimum=0)
+        P0 = np.diag([init[0] ** 2, init[0] ** 2, init[1] ** 2]) + floor * np.eye(3)
+        return sd, sh, sr, P0, floor, gate, mcg
+
+    def run(self, odometry: Any, measurements: Any, start_pose: Any) -> np.ndarray:
+        """Filters one run.
+
+        Parameters
+        ----------
+        odometry : array (N, 3)
+            Odometry poses ``(x [m], y [m], theta [rad])`` in the odometry's own
+            frame; only their increments are used (re-anchored at
+            ``start_pose``).
+        measurements : array (N, 2)
+            SFA position estimates in metres, in the frame of ``start_pose``;
+            rows of NaN are missing estimates (prediction only).
+        start_pose : array (3,)
+            Known start pose ``(x [m], y [m], theta [rad])`` of the first sample.
+
+        Returns
+        -------
+        ndarray (N, 3)
+            Fused poses (also in ``poses_``).
+        """
+        P = as_poses(odometry, min_rows=1)
+        Z = as_real_array(measurements, "measurements").astype(np.float64, copy=False)
+        if Z.ndim != 2 or Z.shape[1] != 2:
+            raise ValueError(f"measurements must have shape (N, 2) (x, y in metres), got shape {Z.shape}")
+        check_same_length(P, Z, "odometry", "measurements")
+        if np.isinf(Z).any():
+            raise ValueError("measurements contain infinity (use NaN rows for missing estimates)")
+        s0 = as_real_array(start_pose, "start_pose").astype(np.float64).ravel()
+        if s0.shape != (3,):
+            raise ValueError(f"start_pose must be (x [m], y [m], heading [rad]), got shape {s0.shape}")
+        check_finite(s0, "start_pose")
+        sd, sh, sr, P0, floor, gate, mcg = self._check()
+        U = increments(P) if len(P) > 1 else np.zeros((0, 2))
+        M = np.diag([sd**2, sh**2])
+        R = sr**2 * np.eye(2)
+
+        ekf = _ctrv_filter_class()(dim_x=3, dim_z=2)
+        ekf.x = s0.reshape(3, 1).copy()
+        ekf.P = P0.copy()
+        ekf.R = R
+
+        def hjac(x):
+            return _H
+
+        def hx(x):
+            return _H @ x
+
+        N = len(P)
+        poses = np.empty((N, 3))
+        covs = np.empty((N, 3, 3))
+        gated = np.zeros(N, bool)
+        maha = np.full(N, np.nan)
+        loglik = 0.0
+        streak = 0
+        n_missing = 0
+        for k in range(N):
+            if k > 0:
+                u = U[k - 1]
+                x = ekf.x[:, 0]
+                F, V = ctrv_jacobians(x, u)
+                ekf.F = F
+                ekf.Q = V @ M @ V.T + floor * np.eye(3)
+                ekf.predict(u=u)  # x = ctrv_motion(x, u), P = F P F^T + Q
+            z = Z[k]
+            if np.isnan(z).any():
+                n_missing += 1
+            else:
+                y = z - ekf.x[:2, 0]
+                S = ekf.P[:2, :2] + R
+                m2 = float(y @ np.linalg.solve(S, y))
+                maha[k] = np.sqrt(m2)
+                if gate is not None and m2 > gate and streak < mcg:
+                    gated[k] = True
+                    streak += 1
+                else:
+                    streak = 0
+                    ekf.update(z.reshape(2, 1), hjac, hx)
+                    loglik += -0.5 * (m2 + np.log(np.linalg.det(S)) + 2 * np.log(2 * np.pi))
+            ekf.x[2, 0] = wrap_angle(ekf.x[2, 0])
+            poses[k] = ekf.x[:, 0]
+            covs[k] = ekf.P
+        self.poses_ = poses
+        self.covariances_ = covs
+        self.gated_ = gated
+        self.n_gated_ = int(gated.sum())
+        self.n_missing_ = n_missing
+        self.mahalanobis_ = maha
+        self.log_likelihood_ = float(loglik)
+        return poses
+
+    @staticmethod
+    def dead_reckoning(odometry: Any, start_pose: Any) -> np.ndarray:
+        """Odometry alone re-anchored at the start pose: (N, 3) poses (what the
+        filter predicts without measurements)."""
+        return dead_reckon(increments(as_poses(odometry)), start_pose)
+
+
+@dataclass
+class GridSearchResult:
+    """Outcome of :func:`grid_search`.
+
+    Attributes
+    ----------
+    best_params : dict
+        ``distance_noise``, ``heading_noise``, ``measurement_noise`` of the best run.
+    best_score : float
+        Its score: MED in metres (``criterion="med"``) or the negative
+        log-likelihood of the innovations (``"nll"``).
+    criterion : str
+    results : list of dict
+        One per grid point: the three noise values and ``score`` (and ``med``
+        when ground truth was given).
+    best_poses : ndarray (N, 3)
+        The best run's fused poses.
+    time : float
+        Wall time in seconds.
+    """
+
+    best_params: dict[str, float]
+    best_score: float
+    criterion: str
+    results: list[dict[str, float]]
+    best_poses: np.ndarray
+    time: float
+
+
+def _grid(values: Any, name: str) -> list[float]:
+    vals = [float(v) for v in (values if isinstance(values, Iterable) else [values])]
+    if not vals or any(not np.isfinite(v) or v < 0 for v in vals):
+        raise ValueError(f"{name} must be one or more finite values >= 0, got {values!r}")
+    return vals
+
+
+def grid_search(
+    odometry: Any,
+    measurements: Any,
+    start_pose: Any,
+    xy_true: Any = None,
+    *,
+    distance_noise: Iterable[float] = (0.003, 0.01, 0.03),
+    heading_noise: Iterable[float] = (0.003, 0.01, 0.03),
+    measurement_noise: Iterable[float] = (0.05, 0.1, 0.2, 0.4),
+    criterion: str | None = None,
+    ekf_params: Mapping[str, Any] | None = None,
+    progress: bool = True,
+) -> GridSearchResult:
+    """Chooses the process and measurement noise of :class:`OdometryEKF` by
+    grid search (thesis 5.3.2: "chosen based on a grid search").
+
+    Parameters
+    ----------
+    odometry, measurements, start_pose
+        As :meth:`OdometryEKF.run`.
+    xy_true : array (N, 2), optional
+        Ground-truth positions in metres (a calibration run).
+    distance_noise, heading_noise, measurement_noise : iterables of float
+        Candidate standard deviations: metres per step, radians per step, metres.
+    criterion : {"med", "nll"} or None
+        ``"med"``: the smallest mean Euclidean distance from ``xy_true``
+        (needs it; what the thesis did). ``"nll"``: the smallest negative
+        log-likelihood of the innovations, which needs no ground truth.
+        Default: "med" with ground truth, else "nll".
+    ekf_params : mapping, optional
+        Other :class:`OdometryEKF` parameters (e.g. ``gate_probability``).
+    progress : bool, default True
+        A tqdm progress bar over the grid.
+    """
+    t0 = time.perf_counter()
+    if criterion is None:
+        criterion = "med" if xy_true is not None else "nll"
+    if criterion not in ("med", "nll"):
+        raise ValueError(f"criterion must be 'med' or 'nll', got {criterion!r}")
+    T = None
+    if xy_true is not None:
+        T = as_matrix(xy_true, "xy_true", n_cols=2)
+        check_same_length(T, as_poses(odometry, min_rows=1), "xy_true", "odometry")
+    elif criterion == "med":
+        raise ValueError("criterion='med' needs ground truth: pass xy_true, or use criterion='nll'")
+    grid = list(itertools.product(_grid(distance_noise, "distance_noise"), _grid(heading_noise, "heading_noise"),
+                                  _grid(measurement_noise, "measurement_noise")))
+    bar = None
+    if progress:
+        try:
+            from tqdm.auto import tqdm
+
+            bar = tqdm(total=len(grid), desc="EKF grid search", unit="run", leave=False)
+        except ImportError:  # pragma: no cover
+            bar = None
+    results = []
+    best = None
+    try:
+        for sd, sh, sr in grid:
+            ekf = OdometryEKF(sd, sh, sr, **dict(ekf_params or {}))
+            poses = ekf.run(odometry, measurements, start_pose)
+            row = {"distance_noise": sd, "heading_noise": sh, "measurement_noise": sr}
+            if T is not None:
+                row["med"] = float(np.linalg.norm(poses[:, :2] - T, axis=1).mean())
+            row["nll"] = -ekf.log_likelihood_
+            row["score"] = row[criterion]
+            results.append(row)
+            if best is None or row["score"] < best[0]["score"]:
+                best = (row, poses)
+            if bar is not None:
+                bar.update(1)
+    finally:
+        if bar is not None:
+            bar.close()
+    assert best is not None
+    bp = {k: best[0][k] for k in ("distance_noise", "heading_noise", "measurement_noise")}
+    return GridSearchResult(bp, float(best[0]["score"]), criterion, results, best[1], time.perf_counter() - t0)

@@ -1,0 +1,755 @@
+"""The hierarchical receptive-field SFA network (thesis sections 3.3-3.4, 5.1).
+
+Layers of SFA nodes on regular grids turn a panoramic image into a few slow
+features that encode the robot's position and not its orientation, learned
+from one exploration run with simulated rotation. The numerics run in Rust
+(``sfanav._core.Network``); this module handles configs, presets, image
+streaming, progress and persistence.
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+import os
+import sys
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import dataclass
+from importlib import resources
+from math import comb
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .. import _core
+from .modelfile import register_loader, save_model
+from .node import NotFittedError
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover
+    import tomli as tomllib
+
+
+from .._progress import progress_bar
+
+PRESETS = ("thesis-5.1", "thesis-5.2", "thesis-5.3", "sfanav-default")
+
+
+DEFAULT_CACHE_LIMIT = 1e9  # bytes of cached lower-layer fields under cache="auto"
+
+
+def _field_bytes(spec: dict[str, Any], layer: int, step: int, period: int) -> int:
+    """Bytes of one image's periodic field of ``layer`` (0-based) on the
+    fast path (``spec`` as from :func:`resolve_config`): RF rows x distinct
+    column offsets x outputs x value size."""
+    mw, mh = spec["width"], spec["height"]
+    t = 1
+    for lspec in spec["layers"][: layer + 1]:
+        (rw, rh), (sw, sh) = lspec["rf"], lspec["stride"]
+        n_w, n_h = (mw - rw) // sw + 1, (mh - rh) // sh + 1
+        mw, mh = n_w, n_h
+        t *= sw
+    views = -(-period // step)
+    offsets = {(k * step + j * t) % period for k in range(views) for j in range(n_w)}
+    size = 4 if spec.get("mixed_precision", False) else 8
+    return n_h * len(offsets) * spec["layers"][layer]["n_out"] * size
+
+
+@dataclass(frozen=True)
+class Rotation:
+    """Simulated rotation (thesis 3.4.1): every training panorama is shown as
+    its lateral circular shifts by ``step`` pixels, seen through a window of
+    ``window`` x the panorama width (1.0: the whole image, rolled)."""
+
+    step: int = 5
+    window: float = 1.0
+
+    def __post_init__(self) -> None:
+        if isinstance(self.step, bool) or not isinstance(self.step, (int, np.integer)) or self.step < 1:
+            raise ValueError(f"Rotation.step must be a positive integer (pixels), got {self.step!r}")
+        if not (isinstance(self.window, (int, float)) and 0.0 < self.window <= 1.0):
+            raise ValueError(f"Rotation.window must be in (0, 1], got {self.window!r}")
+
+
+def _check_transition_weight(w: Any) -> float:
+    if isinstance(w, bool) or not isinstance(w, (int, float, np.integer, np.floating)):
+        raise TypeError(f"transition_weight must be a number, got {type(w).__name__}")
+    w = float(w)
+    if not (np.isfinite(w) and w >= 0.0):
+        raise ValueError(f"transition_weight must be a finite number >= 0, got {w!r}")
+    return w
+
+
+def _check_pairs(pairs: Any, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    if not (isinstance(pairs, (tuple, list)) and len(pairs) in (3, 4)):
+        raise TypeError("pairs must be a tuple (idx_a, idx_b, weights[, shifts])")
+    a, b, w = (np.asarray(x) for x in pairs[:3])
+    sh = np.asarray(pairs[3]) if len(pairs) == 4 else np.zeros(len(a), dtype=np.int64)
+    if sh.ndim != 1 or len(sh) != len(a) or (len(sh) and sh.dtype.kind not in "iu"):
+        raise ValueError("pairs: shifts must be 1-D integers (pixels), one per pair")
+    if not (a.ndim == b.ndim == w.ndim == 1 and len(a) == len(b) == len(w)):
+        raise ValueError(
+            f"pairs: idx_a, idx_b and weights must be 1-D of one length, got shapes {a.shape}, {b.shape}, {w.shape}"
+        )
+    for name, idx in (("idx_a", a), ("idx_b", b)):
+        if len(idx) and idx.dtype.kind not in "iu":
+            raise TypeError(f"pairs: {name} must hold integer image indices, got dtype {idx.dtype}")
+        if len(idx) and (idx.min() < 0 or idx.max() >= n):
+            raise ValueError(f"pairs: {name} must index the {n} training images (0..{n - 1})")
+    if w.dtype.kind not in "iuf" and len(w):
+        raise TypeError(f"pairs: weights must be numbers, got dtype {w.dtype}")
+    w = w.astype(np.float64)
+    if not np.all(np.isfinite(w) & (w >= 0)):
+        raise ValueError("pairs: weights must be finite and >= 0")
+    return a.astype(np.int64), b.astype(np.int64), w, sh.astype(np.int64)
+
+
+def _feed_pairs(trainer: Any, net: Any, images: np.ndarray,
+                pairs: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray], chunk: int) -> None:
+    """Feeds spatial pairs in chunks of at most ``2 * chunk`` distinct
+    images (sorted by the first index, so neighbours in the run share
+    chunks); the second image of a shifted pair is rolled left by its
+    shift."""
+    a, b, w, sh = pairs
+    order = np.lexsort((b, np.minimum(a, b)))
+    for i in range(0, len(order), chunk):
+        sel = order[i : i + chunk]
+        ids, inv = np.unique(np.concatenate([a[sel], b[sel]]), return_inverse=True)
+        batch = _as_batch(images[ids])
+        ia, ib = inv[: len(sel)], inv[len(sel) :].copy()
+        rolled = [np.roll(batch[j], -int(s), axis=1) for j, s in zip(ib, sh[sel]) if s % batch.shape[2]]
+        if rolled:
+            k = np.flatnonzero(sh[sel] % batch.shape[2])
+            ib[k] = len(batch) + np.arange(len(k))
+            batch = np.ascontiguousarray(np.concatenate([batch, np.stack(rolled)]))
+        trainer.feed_pairs(net, batch, ia.tolist(), ib.tolist(), w[sel].tolist())
+
+
+def spatial_pairs(xy: Any, radius: float, k: int | None = None, *, min_gap: int = 0, weights: str = "uniform",
+                  scale: float | None = None, shifts: int | None = None, shift_step: int = 1,
+                  seed: int = 0) -> tuple[np.ndarray, ...]:
+    """Spatial-neighbour pairs of training positions for
+    :meth:`Network.fit` ``(pairs=...)`` (graph-based SFA, Escalante &
+    Wiskott 2013).
+
+    Parameters
+    ----------
+    xy : array (N, 2)
+        Training positions (ground truth or odometry), in any unit.
+    radius : float
+        Pairs join positions closer than ``radius`` (same unit).
+    k : int or None
+        Each image keeps at most its ``k`` nearest neighbours within the
+        radius (None: all). A pair is kept if either end selects it.
+    min_gap : int
+        Leave out pairs of images fewer than ``min_gap`` frames apart in
+        the run (e.g. neighbours along the same lane, which the sequence
+        already links), so ``k`` goes to other passes and crossings.
+    weights : "uniform" or "gaussian"
+        1 per pair, or ``exp(-d^2 / (2 scale^2))`` (``scale`` default
+        ``radius / 2``).
+    shifts : int or None
+        The panorama width W: also return, per pair, a column shift drawn
+        uniformly from ``0..W-1`` (``seed``), for :meth:`Network.fit` to
+        compare the two images at a random relative orientation.
+    shift_step : int
+        Draw the shifts as multiples of this (e.g. the rotation step, so
+        that training can read them from the field cache).
+
+    Returns
+    -------
+    (idx_a, idx_b, weights[, shifts]) : int64 (P,), int64 (P,), float64 (P,)[, int64 (P,)]
+        Each unordered pair once, ``idx_a < idx_b``, sorted.
+    """
+    xy = np.asarray(xy, dtype=np.float64)
+    if xy.ndim != 2 or xy.shape[1] != 2:
+        raise ValueError(f"xy must have shape (N, 2), got {xy.shape}")
+    if not np.all(np.isfinite(xy)):
+        raise ValueError("xy contains NaN or infinity")
+    if not (np.isfinite(radius) and radius > 0):
+        raise ValueError(f"radius must be a positive number, got {radius!r}")
+    if k is not None and (isinstance(k, bool) or not isinstance(k, (int, np.integer)) or k < 1):
+        raise ValueError(f"k must be a positive integer or None, got {k!r}")
+    if isinstance(min_gap, bool) or not isinstance(min_gap, (int, np.integer)) or min_gap < 0:
+        raise ValueError(f"min_gap must be a non-negative integer, got {min_gap!r}")
+    if weights not in ("uniform", "gaussian"):
+        raise ValueError(f'weights must be "uniform" or "gaussian", got {weights!r}')
+    from scipy.spatial import cKDTree
+
+    tree = cKDTree(xy)
+    found: set[tuple[int, int]] = set()
+    for i, nb in enumerate(tree.query_ball_point(xy, r=radius)):
+        nb = [j for j in nb if abs(j - i) >= max(min_gap, 1)]
+        if k is not None and len(nb) > k:
+            d = np.hypot(*(xy[nb] - xy[i]).T)
+            nb = [nb[j] for j in np.argsort(d, kind="stable")[:k]]
+        found.update((min(i, j), max(i, j)) for j in nb)
+    if not found:
+        e = np.zeros(0, dtype=np.int64)
+        return (e, e.copy(), np.zeros(0)) + ((e.copy(),) if shifts else ())
+    ab = np.array(sorted(found), dtype=np.int64)
+    d = np.hypot(*(xy[ab[:, 0]] - xy[ab[:, 1]]).T)
+    if weights == "uniform":
+        w = np.ones(len(ab))
+    else:
+        s = radius / 2 if scale is None else float(scale)
+        w = np.exp(-(d**2) / (2 * s**2))
+    if shifts:
+        q = max(1, int(shift_step))
+        sh = q * np.random.default_rng(seed).integers(0, -(-int(shifts) // q), len(ab))
+        return ab[:, 0].copy(), ab[:, 1].copy(), w, sh.astype(np.int64)
+    return ab[:, 0].copy(), ab[:, 1].copy(), w
+
+
+def read_config_file(path: str | os.PathLike) -> dict[str, Any]:
+    path = Path(path)
+    if not path.exists():
+        raise FileNotFoundError(f"no network config at {path}")
+    text = path.read_text()
+    try:
+        if path.suffix.lower() == ".json":
+            return json.loads(text)
+        return tomllib.loads(text)
+    except (json.JSONDecodeError, tomllib.TOMLDecodeError) as exc:
+        raise ValueError(f"cannot parse network config {path}: {exc}") from None
+
+
+def preset_config(name: str) -> dict[str, Any]:
+    if name not in PRESETS:
+        raise ValueError(f"unknown preset {name!r}; available: {', '.join(PRESETS)}")
+    text = resources.files("sfanav.sfa").joinpath("presets", f"{name}.toml").read_text()
+    return tomllib.loads(text)
+
+
+def _pair(v: Any, what: str) -> tuple[int, int]:
+    if (
+        isinstance(v, (list, tuple))
+        and len(v) == 2
+        and all(isinstance(x, int) and not isinstance(x, bool) for x in v)
+    ):
+        return int(v[0]), int(v[1])
+    raise ValueError(f"{what} must be [width, height] (two integers), got {v!r}")
+
+
+def _default_reduce(in_dim: int, degree: int, max_expanded: int) -> int:
+    k = 1
+    while k < in_dim and comb(k + 1 + degree, degree) - 1 <= max_expanded:
+        k += 1
+    return k
+
+
+def resolve_config(config: dict[str, Any]) -> dict[str, Any]:
+    """Checks a network config (as in the preset TOML files) and resolves it
+    into the spec the Rust core takes: ``"full"`` RFs become the size of the
+    map below, and a missing ``reduce_to`` becomes the largest k whose
+    expansion stays within ``max_expanded``. Raises ValueError naming the
+    layer and the problem."""
+    if not isinstance(config, dict):
+        raise TypeError(f"a network config must be a dict, got {type(config).__name__}")
+    try:
+        inp = config["input"]
+        w, h, c = int(inp["width"]), int(inp["height"]), int(inp.get("channels", 1))
+    except (KeyError, TypeError, ValueError) as exc:
+        raise ValueError(f"network config: [input] needs width, height (and channels): {exc}") from None
+    net = dict(config.get("network", {}))
+    unknown = set(net) - {"weight_sharing", "max_expanded", "tol", "precision"}
+    if unknown:
+        raise ValueError(f"network config: unknown [network] keys {sorted(unknown)}")
+    max_expanded = int(net.get("max_expanded", 300))
+    precision = net.get("precision", "double")
+    if precision not in ("double", "mixed"):
+        raise ValueError(f"network config: precision must be 'double' or 'mixed', got {precision!r}")
+    layers = config.get("layers")
+    if not isinstance(layers, list) or not layers:
+        raise ValueError("network config: needs at least one [[layers]] entry")
+    spec_layers = []
+    mw, mh, mc = w, h, c
+    for i, layer in enumerate(layers, 1):
+        name = f"layer {i}"
+        if not isinstance(layer, dict):
+            raise ValueError(f"{name}: must be a table")
+        unknown = set(layer) - {"rf", "stride", "out", "degree", "reduce_to"}
+        if unknown:
+            raise ValueError(f"{name}: unknown keys {sorted(unknown)}")
+        rf = (mw, mh) if layer.get("rf") == "full" else _pair(layer.get("rf"), f"{name}: rf")
+        stride = _pair(layer.get("stride", [1, 1]), f"{name}: stride")
+        degree = int(layer.get("degree", 2))
+        if "out" not in layer:
+            raise ValueError(f"{name}: missing 'out' (the node's output dim)")
+        out = int(layer["out"])
+        in_dim = rf[0] * rf[1] * mc
+        reduce_to = layer.get("reduce_to")
+        if reduce_to is None:
+            reduce_to = _default_reduce(in_dim, degree, max_expanded)
+        spec_layers.append(
+            {"rf": rf, "stride": stride, "n_out": out, "reduce_to": int(reduce_to), "degree": degree}
+        )
+        if rf[0] > mw or rf[1] > mh or min(stride) < 1:
+            break  # the core names the problem
+        mw, mh, mc = (mw - rf[0]) // stride[0] + 1, (mh - rf[1]) // stride[1] + 1, out
+    return {
+        "height": h,
+        "width": w,
+        "channels": c,
+        "layers": spec_layers,
+        "weight_sharing": bool(net.get("weight_sharing", True)),
+        "tol": float(net.get("tol", _core.DEFAULT_TOL)),
+        "mixed_precision": precision == "mixed",
+    }
+
+
+def _batches_of(images: Any, batch_size: int) -> Callable[[], Iterable[np.ndarray]]:
+    """A function that returns a fresh iterator of image batches (N, H, W[, C])
+    each time it is called (training needs several passes)."""
+    if isinstance(images, (str, os.PathLike)):
+        path = Path(images)
+        if not path.exists():
+            raise FileNotFoundError(f"no image data at {path}")
+        if path.suffix != ".npy":
+            raise ValueError(f"{path}: give an .npy array of images (N, H, W[, C]) or an array")
+        images = np.load(path, mmap_mode="r", allow_pickle=False)
+    if isinstance(images, np.ndarray):
+        if images.ndim not in (3, 4):
+            raise ValueError(f"images must have shape (N, H, W) or (N, H, W, C), got {images.shape}")
+        arr = images
+        return lambda: (arr[i : i + batch_size] for i in range(0, len(arr), batch_size))
+    if callable(images):
+        factory = images
+
+        def from_factory() -> Iterable[np.ndarray]:
+            return _rebatch(factory(), batch_size)
+
+        return from_factory
+    if isinstance(images, Sequence):
+        seq = images
+        return lambda: _rebatch(iter(seq), batch_size)
+    if isinstance(images, Iterable):
+        raise TypeError(
+            "training reads the images several times (two passes per layer): pass an array, "
+            "a list, an .npy path, or a function that returns a fresh iterable, not a one-shot "
+            "iterator or generator"
+        )
+    raise TypeError(f"cannot read images from {type(images).__name__}")
+
+
+def _rebatch(it: Iterable[Any], batch_size: int) -> Iterable[np.ndarray]:
+    buf: list[np.ndarray] = []
+    for item in it:
+        a = np.asarray(item)
+        if a.ndim in (2, 3) and (a.ndim == 2 or a.shape[-1] in (1, 3)):
+            buf.append(a)  # one image
+        elif a.ndim in (3, 4):
+            if buf:
+                yield np.stack(buf)
+                buf = []
+            yield a  # already a batch
+            continue
+        else:
+            raise ValueError(f"an image must be (H, W) or (H, W, C), got shape {a.shape}")
+        if len(buf) == batch_size:
+            yield np.stack(buf)
+            buf = []
+    if buf:
+        yield np.stack(buf)
+
+
+def _as_batch(batch: Any) -> np.ndarray:
+    a = np.asarray(batch)
+    if a.dtype not in (np.float32, np.float64, np.uint8):
+        if a.dtype.kind in "biuf":
+            a = a.astype(np.float64)
+        else:
+            raise TypeError(f"images must be numeric, got dtype {a.dtype}")
+    if a.ndim not in (3, 4):
+        raise ValueError(f"images must have shape (N, H, W) or (N, H, W, C), got {a.shape}")
+    return np.ascontiguousarray(a)
+
+
+class Network:
+    """Hierarchical SFA network over panoramic images.
+
+    Parameters
+    ----------
+    config : dict, or path to a TOML/JSON file
+        Layer grids and node settings, in the format of the preset files
+        (``sfanav/sfa/presets/*.toml``; see :meth:`from_preset`).
+
+    Attributes
+    ----------
+    config_ : dict
+        The resolved spec (explicit RF sizes and reductions).
+    delta_values_ : ndarray of shape (n_outputs,)
+        Delta values of the top node after :meth:`fit`.
+
+    Examples
+    --------
+    >>> net = sfanav.Network.from_preset("thesis-5.1")
+    >>> net.fit(train_images, rotation=sfanav.Rotation(step=5))   # doctest: +SKIP
+    >>> codes = net.transform(test_images)  # (N, 8)               # doctest: +SKIP
+    """
+
+    def __init__(self, config: dict[str, Any] | str | os.PathLike) -> None:
+        if isinstance(config, (str, os.PathLike)):
+            config = read_config_file(config)
+        self.config = copy.deepcopy(config)
+        self.config_ = resolve_config(self.config)
+        self._net = _core.Network(self.config_)
+
+    @classmethod
+    def from_preset(cls, name: str, **overrides: Any) -> "Network":
+        """A network of the thesis's tables: ``"thesis-5.1"`` (350x40 RGB),
+        ``"thesis-5.2"`` (600x60 RGB), ``"thesis-5.3"`` (409x40 gray); or
+        ``"sfanav-default"``, the sfanav default (Table 5.1's geometry with
+        20 / 24 / 24 outputs in layers 1-3 and 12 top outputs, mixed
+        precision; issue 7, docs/gardens.md).
+
+        Overrides: ``weight_sharing``, ``max_expanded``, ``tol``, ``precision``
+        (network settings), ``degree`` and ``reduce_to`` (applied to every layer), and
+        ``out`` (the top node's number of outputs)."""
+        config = preset_config(name)
+        for key, value in overrides.items():
+            if key in ("weight_sharing", "max_expanded", "tol", "precision"):
+                config.setdefault("network", {})[key] = value
+            elif key in ("degree", "reduce_to"):
+                for layer in config["layers"]:
+                    layer[key] = value
+            elif key == "out":
+                config["layers"][-1]["out"] = value
+            else:
+                raise ValueError(
+                    f"unknown override {key!r}; use weight_sharing, max_expanded, tol, precision, degree, "
+                    "reduce_to or out, or edit a copy of the preset file"
+                )
+        return cls(config)
+
+    @staticmethod
+    def presets() -> tuple[str, ...]:
+        """Names of the built-in presets."""
+        return PRESETS
+
+    @staticmethod
+    def preset_path(name: str) -> Path:
+        """Path of a preset's TOML file (copy it to start your own)."""
+        preset_config(name)
+        return Path(str(resources.files("sfanav.sfa").joinpath("presets", f"{name}.toml")))
+
+    # ------------------------------------------------------------ info
+    @property
+    def input_shape(self) -> tuple[int, int, int]:
+        """(height, width, channels) the network takes."""
+        return tuple(self._net.input_shape)  # type: ignore[return-value]
+
+    @property
+    def n_outputs_(self) -> int:
+        return self._net.n_outputs
+
+    @property
+    def delta_values_(self) -> np.ndarray:
+        self._check_trained()
+        return self._net.delta_values
+
+    @property
+    def beta_values_(self) -> np.ndarray:
+        from .node import beta_values
+
+        return beta_values(self.delta_values_)
+
+    @property
+    def is_fitted_(self) -> bool:
+        return self._net.n_trained == self._net.n_layers
+
+    def _check_trained(self) -> None:
+        if not self.is_fitted_:
+            raise NotFittedError(
+                f"this network is not fitted ({self._net.n_trained} of {self._net.n_layers} layers "
+                "trained); call fit first"
+            )
+
+    def describe(self) -> str:
+        """A table of each layer's grid, dims and rank deficits."""
+        h, w, c = self.input_shape
+        lines = [
+            f"Network: input {w}x{h}x{c}, {'shared' if self.config_['weight_sharing'] else 'individual'} "
+            f"nodes, {self._net.n_trained}/{self._net.n_layers} layers trained",
+            f"{'layer':>5} {'input':>11} {'RFs':>7} {'RF size':>7} {'stride':>6} {'in dim':>6} "
+            f"{'k':>4} {'exp dim':>7} {'out':>4} {'rank deficit':>12}",
+        ]
+        for i, g in enumerate(self._net.geometry(), 1):
+            iw, ih, ic = g["input"]
+            exp_dim = comb(g["reduce_to"] + g["degree"], g["degree"]) - 1
+            rd = g["rank_deficits"]
+            deficit = "-" if not any(rd) and i > self._net.n_trained else (
+                "/".join(str(x) for x in rd[0]) if len(rd) == 1 else f"max {max(max(r) if r else 0 for r in rd)}"
+            )
+            lines.append(
+                f"{i:>5} {f'{iw}x{ih}x{ic}':>11} {'{}x{}'.format(*g['grid']):>7} "
+                f"{'{}x{}'.format(*g['rf']):>7} {'{}x{}'.format(*g['stride']):>6} {g['in_dim']:>6} "
+                f"{g['reduce_to']:>4} {exp_dim:>7} {g['n_out']:>4} {deficit:>12}"
+            )
+        return "\n".join(lines)
+
+    def __repr__(self) -> str:
+        h, w, c = self.input_shape
+        return f"<sfanav.Network {w}x{h}x{c}, {self._net.n_layers} layers, {self.n_outputs_} outputs>"
+
+    # ------------------------------------------------------------ training
+    def fit(
+        self,
+        images: Any,
+        rotation: Rotation | None = None,
+        *,
+        fast: bool = True,
+        cache: bool | str = "auto",
+        cache_limit: float = DEFAULT_CACHE_LIMIT,
+        batch_size: int = 16,
+        progress: bool = True,
+        transition_weight: float = 1.0,
+        pairs: tuple[Any, ...] | None = None,
+        pair_layers: Sequence[int] | None = None,
+    ) -> "Network":
+        """Trains the network layer by layer, in the order the images come.
+
+        Parameters
+        ----------
+        images : array (N, H, W[, C]), list of images, path to an ``.npy``
+            file (memory-mapped), or a function returning a fresh iterable of
+            images or batches. Read in batches, several times (two passes per
+            layer); never all expanded at once. ``W`` is the panorama width
+            (the rotation period); the network's input width is the window.
+        rotation : Rotation, default ``Rotation(step=5, window=1.0)``
+        fast : bool, default True
+            Exact fast training (periodic fields with multiplicities); False
+            runs the naive per-view path (same result, slower). Without
+            weight sharing the naive path is always used.
+        cache : bool or "auto", default "auto"
+            Keep each image's periodic field of the layer below in memory
+            (float32 for mixed-precision networks, else float64) so later
+            passes and layers need neither recomputation of the lower layers
+            nor, above the first layer, the images. True caches every
+            layer's input field; False streams the images in every pass and
+            recomputes the lower layers; "auto" caches a layer's input field
+            when all images' fields fit in ``cache_limit`` bytes (for Table
+            5.2 the fields take, per image, 259 / 101 / 38 KB in mixed
+            precision for layers 2 / 3 / 4, twice that in double).
+        cache_limit : float, default 1e9
+            Byte budget of the field cache under ``cache="auto"``.
+        batch_size : int
+            Images converted and processed per Rust call.
+        progress : bool
+            A progress bar per layer and pass (tqdm).
+        transition_weight : float, default 1.0
+            Weight of the derivative pairs *between* consecutive training
+            images (per RF series, one pair: the last rotated view of image
+            ``i`` and the first view of image ``i + 1``) relative to the
+            pairs between consecutive views *within* an image (weight 1).
+            1.0 is the thesis (one sequence of all views). A panorama gives
+            ``K = ceil(W / step)`` views, so per image there are ``K - 1``
+            rotation pairs and one spatial pair; weights of order ``K`` give
+            the change of position a say comparable to the rotation in the
+            slowness objective (graph-based SFA, Escalante & Wiskott 2013).
+            Finite and >= 0 (0: every image its own sequence).
+        pairs : (idx_a, idx_b, weights[, shifts]) or None
+            Spatial pairs of training images (graph-based SFA): each
+            ``(a, b, w)`` adds, at *every* simulated rotation and RF
+            position, a derivative pair between view ``k`` of image ``a``
+            and view ``k`` of image ``b`` with weight ``w`` (the rotation
+            pairs have weight 1 each), in every layer and pass. With
+            ``shifts`` (int pixels, per pair), image ``b`` is first rolled
+            left by its shift, so the pair also compares two different
+            orientations (random shifts penalise orientation-coding
+            features, which same-view pairs of images taken at the same or
+            opposite headings reward). Shifts that are multiples of
+            ``rotation.step`` (with the step dividing the width) are read
+            from the field cache; other shifts force ``cache=False``
+            (slower: ~4x the thesis training time instead of ~1.3x).
+            ``pair_layers`` (1-based layer numbers, default all) restricts
+            the pairs to some layers (e.g. the top). Indices
+            into ``images`` (which must then be an array or an ``.npy``
+            path); weights finite and >= 0. Build them from positions with
+            :func:`spatial_pairs` (supervised: the regression needs the
+            positions anyway). Each pair costs about one image's share of
+            the derivative statistics, so ``len(pairs) ~ 2 N`` roughly
+            triples the training time.
+        """
+        rotation = rotation or Rotation()
+        transition_weight = _check_transition_weight(transition_weight)
+        shifted = False
+        if not isinstance(rotation, Rotation):
+            raise TypeError("rotation must be a sfanav.Rotation")
+        if pairs is not None:
+            if isinstance(images, (str, os.PathLike)):
+                images = np.load(Path(images), mmap_mode="r", allow_pickle=False)
+            if not isinstance(images, np.ndarray):
+                raise TypeError("pairs need the images as an array (N, H, W[, C]) or an .npy path")
+            pairs = _check_pairs(pairs, len(images))
+            n_layers = len(self.config_["layers"])
+            if pair_layers is None:
+                pair_layers = range(1, n_layers + 1)
+            pair_layers = {int(x) for x in pair_layers}
+            if not pair_layers <= set(range(1, n_layers + 1)):
+                raise ValueError(f"pair_layers must name layers 1..{n_layers}, got {sorted(pair_layers)}")
+            # cached passes read shifted pairs at shifted offsets of the cached fields: exact
+            # when every shift is a multiple of the step and the step divides the period
+            period0 = _as_batch(images[:1]).shape[2]
+            pairs = (*pairs[:3], pairs[3] % period0)
+            shifted = bool(np.any(pairs[3]))
+            if shifted and (period0 % rotation.step or np.any(pairs[3] % rotation.step)):
+                cache = False  # cached fields are of the unrolled images
+        batches = _batches_of(images, batch_size)
+        h, v, c = self.input_shape
+        first = next(iter(batches()), None)
+        if first is None:
+            raise ValueError("no training images")
+        first = _as_batch(first)
+        period = first.shape[2]
+        self._check_images(first, period, training=True)
+        expect_v = round(rotation.window * period)
+        if expect_v != v:
+            raise ValueError(
+                f"the network's input is {v} px wide, but a {rotation.window:.0%} window of "
+                f"{period}-px panoramas is {expect_v} px: build the network for that width"
+            )
+        if not (isinstance(cache, bool) or cache == "auto"):
+            raise ValueError(f'cache must be True, False or "auto", got {cache!r}')
+        if not (cache_limit >= 0):
+            raise ValueError(f"cache_limit must be a non-negative number of bytes, got {cache_limit!r}")
+        total = len(images) if hasattr(images, "__len__") and not callable(images) else None
+        net = _core.Network(self.config_)
+        trainer = _core.LayerTrainer(net, 0, rotation.step, period, fast, False, transition_weight)
+        n_images = 0
+        self.cache_plan_ = []
+        for layer in range(net.n_layers):
+            if layer > 0:
+                # Whether the next trainer keeps the fields of this layer.
+                field = _field_bytes(self.config_, layer - 1, rotation.step, period)
+                keep = cache if isinstance(cache, bool) else field * n_images <= cache_limit
+                self.cache_plan_.append((layer + 1, bool(keep), field * n_images))
+                if layer == 1:
+                    trainer = trainer.next_layer(net)
+                    trainer.set_caching(keep)
+                else:
+                    trainer.set_caching(keep)
+                    trainer = trainer.next_layer(net)
+            n_passes = trainer.n_passes(net)
+            for p in range(n_passes):
+                desc = f"layer {layer + 1}/{net.n_layers} pass {p + 1}/{n_passes}"
+                if trainer.has_cache:
+                    bar = progress_bar(progress, trainer.cached_images, desc + " (cached)")
+                    trainer.feed_cached(net)
+                    if pairs is not None and layer + 1 in pair_layers:
+                        trainer.feed_pairs_cached(net, *(x.tolist() for x in pairs[:3]),
+                                                  pairs[3].tolist() if shifted else None)
+                    if bar is not None:
+                        bar.update(trainer.cached_images)
+                        bar.close()
+                else:
+                    bar = progress_bar(progress, total, desc)
+                    try:
+                        seen = 0
+                        for batch in batches():
+                            batch = _as_batch(batch)
+                            self._check_images(batch, period, training=True)
+                            trainer.feed(net, batch)
+                            seen += len(batch)
+                            if bar is not None:
+                                bar.update(len(batch))
+                    finally:
+                        if bar is not None:
+                            bar.close()
+                    if pairs is not None and layer + 1 in pair_layers:
+                        _feed_pairs(trainer, net, images, pairs, batch_size)
+                    if layer == 0 and p == 0:
+                        n_images = seen
+                trainer.end_pass(net)
+        self._net = net
+        self._period = period
+        self._step = rotation.step
+        self.transition_weight_ = transition_weight
+        self.n_pairs_ = 0 if pairs is None else len(pairs[0])
+        return self
+
+    def _check_images(self, a: np.ndarray, period: int | None, training: bool = False) -> None:
+        h, v, c = self.input_shape
+        ac = 1 if a.ndim == 3 else a.shape[3]
+        if a.shape[1] != h or ac != c:
+            raise ValueError(
+                f"images are {a.shape[2]}x{a.shape[1]} with {ac} channel(s); this network takes "
+                f"{h} px high images with {c} channel(s)"
+            )
+        if period is not None and a.shape[2] != period:
+            raise ValueError(f"all images must be {period} px wide, got {a.shape[2]}")
+        if training and a.shape[2] < v:
+            raise ValueError(f"panoramas of {a.shape[2]} px are narrower than the network input ({v} px)")
+
+    # ------------------------------------------------------------ inference
+    def transform(self, images: Any, *, rotations: bool = False, step: int | None = None) -> np.ndarray:
+        """Slow features of images (N, H, W[, C]) or one image (H, W[, C]).
+
+        Returns (N, n_outputs); with ``rotations=True``, (N, K, n_outputs)
+        under every simulated rotation by ``step`` px (default: the training
+        step), K = ceil(W / step). Images wider than the network's input are
+        seen through the window at rotation 0 (their first columns).
+        """
+        self._check_trained()
+        a = np.asarray(images)
+        # One image is (H, W) for a gray network and (H, W, 3) for RGB.
+        single = a.ndim == (2 if self.input_shape[2] == 1 else 3)
+        if single:
+            a = a[None]
+        a = _as_batch(a)
+        self._check_images(a, None)
+        if rotations:
+            s = step or getattr(self, "_step", 5)
+            out = self._net.transform_rotations(a, int(s))
+        else:
+            v = self.input_shape[1]
+            if a.shape[2] < v:
+                raise ValueError(f"images of {a.shape[2]} px are narrower than the network input ({v} px)")
+            if a.shape[2] > v:
+                a = np.ascontiguousarray(a[:, :, :v])
+            out = self._net.transform(a)
+        return out[0] if single else out
+
+    # ------------------------------------------------------------ persistence
+    def save(self, path: str | os.PathLike, *, include_statistics: bool = False) -> None:
+        """Saves the network (config and trained nodes; pickle-free)."""
+        state = {
+            "config": self.config,
+            "spec": _spec_to_json(self.config_),
+            "trained": self._net.n_trained,
+            "step": getattr(self, "_step", None),
+            "period": getattr(self, "_period", None),
+            "transition_weight": getattr(self, "transition_weight_", None),
+            "nodes": self._net.node_states(include_statistics),
+        }
+        save_model(path, "Network", state)
+
+    @classmethod
+    def _from_state(cls, state: dict[str, Any]) -> "Network":
+        try:
+            obj = cls(state["config"])
+            if _spec_to_json(obj.config_) != state["spec"]:
+                raise ValueError("invalid Network model state: config and spec disagree")
+            obj._net = _core.Network.from_states(obj.config_, state["nodes"], int(state["trained"]))
+        except (KeyError, TypeError) as exc:
+            raise ValueError(f"invalid Network model state: {exc}") from None
+        if state.get("step") is not None:
+            obj._step = int(state["step"])
+            obj._period = int(state["period"])
+            obj.transition_weight_ = float(state.get("transition_weight") or 1.0)
+        return obj
+
+
+def _spec_to_json(spec: dict[str, Any]) -> dict[str, Any]:
+    """The resolved spec as stored in model files (pairs as JSON lists); on
+    load the spec is recomputed from the config and compared with it."""
+    s = copy.deepcopy(spec)
+    for layer in s["layers"]:
+        layer["rf"] = list(layer["rf"])
+        layer["stride"] = list(layer["stride"])
+    return s
+
+
+register_loader("Network", Network._from_state)
