@@ -224,7 +224,7 @@ def test_localizer_default_readout_is_auto_and_old_files_load_as_the_thesis_read
     reg = QuadraticRegression(8).fit(F, xy)
     # a format-1 Localizer state as sfanav wrote it before the readouts
     save_model(tmp_path / "old.sfa", "Localizer", {
-        "params": {"n_outputs": 8, "ridge": 0.0, "degree": 2}, "network": None, "regression": reg._get_state(),
+        "params": {"n_outputs": 8, "ridge": 0.0, "degree": 2}, "network": None, "regression": reg.get_state(),
         "n_features_in": 12, "train_metrics": {}, "info": {}})
     old = sfanav.load(tmp_path / "old.sfa")
     assert old.readout == "quadratic" and old.readout_spec_["kind"] == "quadratic" and old.n_outputs_ == 8

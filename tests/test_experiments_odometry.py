@@ -3,7 +3,8 @@
 import numpy as np
 import pytest
 
-from sfanav.experiments.thesis_5_3 import THESIS, experiment_5_3_1, experiment_5_3_2, format_rows
+from sfanav.experiments import format_rows
+from sfanav.experiments.thesis_5_3 import THESIS, experiment_5_3_1, experiment_5_3_2
 
 from sfanav.experiments.synthetic_odometry import compare_solvers, make_line_problem, make_odometry_run
 

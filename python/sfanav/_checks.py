@@ -9,6 +9,18 @@ from typing import Any
 import numpy as np
 
 
+class NotFittedError(ValueError, AttributeError):
+    """Raised when a model is used before it is fitted (as scikit-learn's)."""
+
+
+def check_is_fitted(estimator: Any, attribute: str, what: str | None = None) -> None:
+    """Raises :class:`NotFittedError` unless ``estimator`` has ``attribute``
+    (a trailing-underscore fitted attribute)."""
+    if getattr(estimator, attribute, None) is None:
+        name = what or type(estimator).__name__
+        raise NotFittedError(f"this {name} is not fitted yet; call fit first")
+
+
 def as_real_array(a: Any, name: str) -> np.ndarray:
     """``a`` as a NumPy array of real numbers (bool and complex refused)."""
     try:
@@ -143,3 +155,37 @@ def check_positive_int(value: Any, name: str, *, allow_none: bool = False) -> in
     if value < 1:
         raise ValueError(f"{name} must be at least 1, got {value}")
     return int(value)
+
+
+def check_n_outputs(n: Any, available: int | None, *, what: str = "the network", unit: str = "outputs",
+                    name: str = "n_outputs") -> int | None:
+    """``n`` (slow features to use) as a positive int, or None; ValueError
+    when ``available`` (what ``what`` has) is known and smaller."""
+    if n is None:
+        return None
+    n = check_int(n, name)
+    if available is not None and n > available:
+        raise ValueError(f"{name}={n}, but {what} has only {available} {unit}")
+    return n
+
+
+def is_single_image(a: np.ndarray, channels: int) -> bool:
+    """Whether ``a`` is one image, not a batch, for a model of ``channels``
+    channels: (H, W) when gray, (H, W, C) when colour."""
+    return a.ndim == (2 if channels == 1 else 3)
+
+
+def as_image_batch(a: Any, name: str = "images") -> np.ndarray:
+    """A C-contiguous batch of images (N, H, W) or (N, H, W, C) as uint8,
+    float32 or float64 (other real dtypes become float64; no copy when it
+    already is one of them and contiguous). TypeError for non-numeric data,
+    ValueError for another number of dimensions."""
+    arr = np.asarray(a)
+    if arr.dtype not in (np.float32, np.float64, np.uint8):
+        if arr.dtype.kind in "biuf":
+            arr = arr.astype(np.float64)
+        else:
+            raise TypeError(f"{name} must be numeric, got dtype {arr.dtype}")
+    if arr.ndim not in (3, 4):
+        raise ValueError(f"{name} must have shape (N, H, W) or (N, H, W, C), got {arr.shape}")
+    return np.ascontiguousarray(arr)

@@ -77,12 +77,12 @@ MOVED: dict[str, dict[str, tuple[str, str]]] = {
         'plot_fusion': ('sfanav.odometry.plots', 'plot_fusion'),
     },
     'sfanav.experiments_odometry': {
-        'ExperimentResult': ('sfanav.experiments.thesis_5_3', 'ExperimentResult'),
+        'ExperimentResult': ('sfanav.experiments', 'ExperimentResult'),
         'THESIS': ('sfanav.experiments.thesis_5_3', 'THESIS'),
         'compare_solvers': ('sfanav.experiments.synthetic_odometry', 'compare_solvers'),
         'experiment_5_3_1': ('sfanav.experiments.thesis_5_3', 'experiment_5_3_1'),
         'experiment_5_3_2': ('sfanav.experiments.thesis_5_3', 'experiment_5_3_2'),
-        'format_rows': ('sfanav.experiments.thesis_5_3', 'format_rows'),
+        'format_rows': ('sfanav.experiments', 'format_rows'),
         'make_line_problem': ('sfanav.experiments.synthetic_odometry', 'make_line_problem'),
         'make_odometry_run': ('sfanav.experiments.synthetic_odometry', 'make_odometry_run'),
         'print_solver_comparison': ('sfanav.experiments.synthetic_odometry', 'print_solver_comparison'),
@@ -97,7 +97,7 @@ MOVED: dict[str, dict[str, tuple[str, str]]] = {
     'sfanav.localizer': {
         'Localizer': ('sfanav.localization.localizer', 'Localizer'),
         'READOUTS': ('sfanav.localization.localizer', 'READOUTS'),
-        'ROTATION_POOLING': ('sfanav.localization.localizer', 'ROTATION_POOLING'),
+        'ROTATION_POOLING': ('sfanav.localization.recipe', 'ROTATION_POOLING'),
         'pooled_transform': ('sfanav.localization.localizer', 'pooled_transform'),
         'pooling_step': ('sfanav.localization.localizer', 'pooling_step'),
     },

@@ -305,9 +305,11 @@ def _run_train(args: argparse.Namespace) -> int:
 
     import numpy as np
 
+    from .._checks import check_n_outputs
     from ..data.dataset import Dataset
     from ..data.preprocessing import Preprocessing, Preprocessor
     from ..data.sources import load_run, select_run
+    from ..localization.recipe import CAMERA_ELEVATION, recipe_for
     from ..localization.training import fit_localizer
     from ..sfa.network import Rotation
 
@@ -319,42 +321,36 @@ def _run_train(args: argparse.Namespace) -> int:
         run = "train"
     train = select_run(ds, run, args.camera)
     net = _network_from_args(args)
-    if args.n_outputs is not None and args.n_outputs > net.n_outputs_:
-        raise _UsageError(f"--n-outputs {args.n_outputs}, but the network has only {net.n_outputs_} outputs")
-    thesis = args.preset is not None and args.preset.startswith("thesis-")
-    default = args.config is None and not thesis
-    readout = args.readout or ("quadratic" if thesis else "auto")
+    check_n_outputs(args.n_outputs, net.n_outputs_, name="--n-outputs")
+    recipe = recipe_for(args.preset, config=args.config is not None, readout=args.readout, rows=args.rows,
+                        n_outputs=args.n_outputs, rotation_pooling=args.rotation_pooling)
     rows = None
-    if (args.rows or ("band" if default else "all")) == "band":
-        from ..localization.recipe import CAMERA_ELEVATION, default_rows
-
+    if recipe.rows == "band":
         elev = (ds.metadata.get("camera") or {}).get("elevation_deg") if isinstance(ds.metadata, dict) else None
         if elev is None:
             elev = CAMERA_ELEVATION
             _log(f"the dataset does not say its rows' elevations: assuming {elev[0]:g}..{elev[1]:g} deg "
                  "(the simulator's) for the horizon band; --rows all uses every row")
         try:
-            rows = default_rows(elev)
+            rows = recipe.image_rows(elev)
         except ValueError as exc:
             raise _UsageError(f"horizon band: {exc}") from None
     prep = Preprocessing.for_network(net, window=args.window, normalize=args.normalize)
     _log(f"training on {len(train)} images of {args.dataset}" + (f" (run {run})" if run else "")
          + f" as {prep.describe()} panoramas; network: {net!r}; rows: {rows.describe() if rows else 'all'}; "
-         + f"readout: {readout}" + (" (the sfanav default)" if default else ""))
-    conformer = Preprocessor(prep, mirror=args.mirror, log=_log)
-    images, xy = load_run(train, prep, conformer=conformer, progress=not args.no_progress)
+         + f"readout: {recipe.readout}" + (" (the sfanav default)" if recipe.name == "sfanav default" else ""))
+    preprocessor = Preprocessor(prep, mirror=args.mirror, log=_log)
+    images, xy = load_run(train, prep, preprocessor=preprocessor, progress=not args.no_progress)
     if not np.isfinite(xy).all():
         raise _UsageError(f"{args.dataset} lacks ground-truth x, y for some images: the regression needs them")
     loc = fit_localizer(net, images, xy, rotation=Rotation(step=args.step, window=args.window),
-                        n_outputs=args.n_outputs if args.n_outputs is not None or readout == "auto" else 8,
-                        readout=readout, rows=rows, prep=prep, progress=not args.no_progress,
-                        rotation_pooling="auto" if args.rotation_pooling is None else args.rotation_pooling,
+                        n_outputs=recipe.n_outputs, readout=recipe.readout, rows=rows, prep=prep,
+                        progress=not args.no_progress, rotation_pooling=recipe.rotation_pooling,
                         info={"dataset": str(args.dataset), "run": run,
                               "network": args.preset or (str(args.config) if args.config else "sfanav-default"),
-                              **({"configuration": "sfanav default"}
-                                 if default and readout == "auto" and rows is not None else {})})
-    if conformer.mirror_used is not None:
-        loc.info["mirror"] = list(conformer.mirror_used)  # localize and evaluate reuse it
+                              **recipe.info()})
+    if preprocessor.mirror_used is not None:
+        loc.info["mirror"] = list(preprocessor.mirror_used)  # localize and evaluate reuse it
     loc.save(out)
     m = loc.train_metrics_
     pool = f" on features pooled over {loc.rotation_pooling_} rotations" if loc.rotation_pooling_ > 1 else ""

@@ -26,8 +26,6 @@ from ..localization.training import fit_localizer
 from ..sfa.network import Network, Rotation
 
 DEMO_NETWORK = "thesis-5.2"
-
-
 """Network preset of the demo: Table 5.2, 600x60 RGB, the size the demo garden is rendered at."""
 
 
@@ -40,8 +38,6 @@ THESIS_5_1_1: dict[str, Any] = {
     "min eta_p (outputs 1-8)": 1.0,
     "best n (random splits)": 8,
 }
-
-
 """The thesis's section 5.1.1 figures (simulator: 30x30 grid, Table 5.1 network), by row name."""
 
 

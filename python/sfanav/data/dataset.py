@@ -39,7 +39,6 @@ import csv
 import json
 import math
 import os
-import shutil
 from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Any
@@ -57,7 +56,6 @@ from .schema import (
     UNITS,
     VERSION,
     check_name,
-    format_float,
 )
 from .writer import DatasetWriter
 
@@ -363,16 +361,11 @@ class Dataset:
             return ds
         with DatasetWriter(out, {k: v for k, v in meta.items() if k not in ("format", "version", "units")},
                            overwrite=overwrite) as w:
-            out_root = Path(out)
             for i, src in enumerate(ds.image_paths):
-                if not src.exists():
-                    raise FileNotFoundError(f"image file {src} does not exist")
-                rel = f"images/{i:06d}_{cols['camera'][i]}{src.suffix.lower()}"
-                shutil.copy2(src, out_root / rel)
-                w._csv.writerow([i, cols["run"][i], repr(float(img_t[i])), format_float(cols["x"][i]), format_float(cols["y"][i]),
-                                 format_float(cols["heading"][i]), format_float(cols["odom_x"][i]), format_float(cols["odom_y"][i]),
-                                 format_float(cols["odom_heading"][i]), cols["camera"][i], cols["condition"][i], rel])
-                w.count += 1
+                w.add_file(src, frame=i, timestamp=float(img_t[i]), run=cols["run"][i],
+                           pose=(cols["x"][i], cols["y"][i], cols["heading"][i]),
+                           odometry=(cols["odom_x"][i], cols["odom_y"][i], cols["odom_heading"][i]),
+                           camera=cols["camera"][i], condition=cols["condition"][i])
         return Dataset(out)
 
 

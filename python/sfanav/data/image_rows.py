@@ -28,6 +28,8 @@ from typing import Any, Sequence
 
 import numpy as np
 
+from .._checks import as_image_batch
+
 
 def band_rows(height: int, camera_elevation: Sequence[float] = (-30.0, 20.0),
               band: Sequence[float] = (-10.0, 20.0)) -> tuple[int, int]:
@@ -50,9 +52,7 @@ def horizon_band(images: Any, *, camera_elevation: Sequence[float] = (-30.0, 20.
     resamples them (linear interpolation along the rows) to ``height`` rows
     (default: H, so a network built for the full panorama takes them).
     Returns float32."""
-    a = np.asarray(images)
-    if a.ndim not in (3, 4):
-        raise ValueError(f"images must be (N, H, W) or (N, H, W, C), got shape {a.shape}")
+    a = as_image_batch(images)
     H = a.shape[1]
     r0, r1 = band_rows(H, camera_elevation, band)
     out_h = int(height or H)
@@ -73,9 +73,7 @@ def row_normalize(images: Any, eps: float = 1e-3) -> np.ndarray:
     """Each row of each image (N, H, W[, C]) to zero mean and unit variance
     over its columns and channels (float32). Flat rows (std below ``eps``
     times the image's range, or 0) are only centred."""
-    a = np.asarray(images, dtype=np.float32)
-    if a.ndim not in (3, 4):
-        raise ValueError(f"images must be (N, H, W) or (N, H, W, C), got shape {a.shape}")
+    a = as_image_batch(images).astype(np.float32, copy=False)
     axes = (2,) if a.ndim == 3 else (2, 3)
     mean = a.mean(axis=axes, keepdims=True, dtype=np.float64)
     std = a.std(axis=axes, keepdims=True, dtype=np.float64)

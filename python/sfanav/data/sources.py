@@ -143,11 +143,11 @@ def open_images(path: str | os.PathLike, *, run: str | None = None, camera: str 
 
 def load_run(ds: Dataset, prep: Preprocessing, *, mirror: Any = None, log: Log = stderr_log,
              progress: bool = False, batch_size: int = 64,
-             conformer: Preprocessor | None = None) -> tuple[np.ndarray, np.ndarray]:
+             preprocessor: Preprocessor | None = None) -> tuple[np.ndarray, np.ndarray]:
     """All images of a (one-camera) dataset as the network's input array and
-    their positions (N, 2) in metres (converted by ``conformer``, or a new
+    their positions (N, 2) in metres (converted by ``preprocessor``, or a new
     :class:`Preprocessor` with ``mirror``)."""
-    conform = conformer or Preprocessor(prep, mirror=mirror, log=log)
+    conform = preprocessor or Preprocessor(prep, mirror=mirror, log=log)
     out: np.ndarray | None = None
     bar = progress_bar(progress, len(ds), "reading images")
     i = 0

@@ -72,7 +72,37 @@ class DatasetWriter:
     def add(self, image: np.ndarray, *, frame: int, timestamp: float, pose: Sequence[float],
             odometry: Sequence[float] | None = None, camera: str = "center", condition: str = "default",
             run: str = "0", **extra: Any) -> str:
-        """Writes one image and its row; returns the image's relative path."""
+        """Writes one image (PNG) and its row; returns the image's relative path.
+        ``pose`` and ``odometry`` are (x m, y m, heading rad), finite."""
+        key, camera, condition, run, t = self._check_row(frame, timestamp, camera, condition, run, extra)
+        x, y, th = _triple(pose, "pose")
+        odo = _triple(odometry, "odometry") if odometry is not None else (math.nan,) * 3
+        rel = f"images/{int(frame):06d}_{camera}.png"
+        img = np.asarray(image)
+        write_image(self.path / rel, img)
+        self._shapes.setdefault(camera, list(img.shape))
+        self._write_row(key, run, t, (x, y, th), odo, condition, rel, extra)
+        return rel
+
+    def add_file(self, source: str | os.PathLike, *, frame: int, timestamp: float, pose: Sequence[float],
+                 odometry: Sequence[float] | None = None, camera: str = "center", condition: str = "default",
+                 run: str = "0", **extra: Any) -> str:
+        """Copies an existing image file (any format OpenCV reads, kept as it
+        is) into the dataset with its row; returns its relative path. Pose and
+        odometry entries may be NaN (unknown, written as empty cells)."""
+        src = Path(source)
+        if not src.exists():
+            raise FileNotFoundError(f"image file {src} does not exist")
+        key, camera, condition, run, t = self._check_row(frame, timestamp, camera, condition, run, extra)
+        pose_v = _triple(pose, "pose", allow_nan=True)
+        odo = _triple(odometry, "odometry", allow_nan=True) if odometry is not None else (math.nan,) * 3
+        rel = f"images/{int(frame):06d}_{camera}{src.suffix.lower()}"
+        shutil.copy2(src, self.path / rel)
+        self._write_row(key, run, t, pose_v, odo, condition, rel, extra)
+        return rel
+
+    def _check_row(self, frame: Any, timestamp: Any, camera: Any, condition: Any, run: Any,
+                   extra: dict[str, Any]) -> tuple[tuple[int, str], str, str, str, float]:
         if self._file.closed:
             raise ValueError("this DatasetWriter is closed")
         if isinstance(frame, bool) or not isinstance(frame, (int, np.integer)) or frame < 0:
@@ -83,23 +113,20 @@ class DatasetWriter:
         key = (int(frame), camera)
         if key in self._seen:
             raise ValueError(f"frame {frame} of camera {camera!r} was already written")
-        x, y, th = _triple(pose, "pose")
-        ox, oy, oth = _triple(odometry, "odometry") if odometry is not None else (math.nan,) * 3
         t = float(timestamp)
         if not math.isfinite(t):
             raise ValueError(f"timestamp must be finite, got {timestamp!r}")
         unknown = set(extra) - set(self.extra)
         if unknown:
             raise ValueError(f"unknown extra columns {sorted(unknown)}; declare them in extra_columns")
-        rel = f"images/{int(frame):06d}_{camera}.png"
-        img = np.asarray(image)
-        write_image(self.path / rel, img)
-        self._shapes.setdefault(camera, list(img.shape))
+        return key, camera, condition, run, t
+
+    def _write_row(self, key: tuple[int, str], run: str, t: float, pose: Sequence[float], odo: Sequence[float],
+                   condition: str, rel: str, extra: dict[str, Any]) -> None:
         self._seen.add(key)
-        self._csv.writerow([int(frame), run, repr(t), format_float(x), format_float(y), format_float(th), format_float(ox), format_float(oy), format_float(oth),
-                            camera, condition, rel] + [_cell(extra.get(c)) for c in self.extra])
+        self._csv.writerow([key[0], run, repr(t), *(format_float(v) for v in pose), *(format_float(v) for v in odo),
+                            key[1], condition, rel] + [_cell(extra.get(c)) for c in self.extra])
         self.count += 1
-        return rel
 
     def close(self) -> None:
         if self._file.closed:
@@ -134,12 +161,12 @@ def _cell(v: Any) -> str:
     return check_name(v, "extra value")
 
 
-def _triple(v: Any, what: str) -> tuple[float, float, float]:
+def _triple(v: Any, what: str, *, allow_nan: bool = False) -> tuple[float, float, float]:
     try:
         a, b, c = (float(e) for e in v)
     except (TypeError, ValueError):
         raise ValueError(f"{what} must be (x m, y m, heading rad), got {v!r}") from None
-    if not all(math.isfinite(e) for e in (a, b, c)):
+    if not all(math.isfinite(e) or (allow_nan and math.isnan(e)) for e in (a, b, c)):
         raise ValueError(f"{what} must be finite, got {v!r}")
     return a, b, c
 

@@ -16,10 +16,13 @@ from __future__ import annotations
 
 import importlib
 import json
-from collections.abc import Callable
+import os
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
+
+import numpy as np
 
 # Modules that register experiments (imported on first lookup).
 FAMILIES = ("localization", "odometry", "navigation", "gardens")
@@ -29,42 +32,95 @@ FAMILIES = ("localization", "odometry", "navigation", "gardens")
 class ExperimentResult:
     """What an experiment reports.
 
-    ``rows``: one dict per metric with keys ``metric`` (plain, stable name),
-    ``thesis`` (the thesis's value, or None when it reports none) and
-    ``sfanav`` (ours); optional extra keys (e.g. ``"protocol"``,
-    ``"baseline"``) are kept in the JSON. ``plots``: paths of PNGs written.
-    ``notes``: free text printed under the table (settings, protocol).
+    Attributes
+    ----------
+    experiment : str
+        The registered name (``"5.1.1"``, ``"5.3.2"``, ...); also ``name``.
+    rows : list of dict
+        One dict per metric with keys ``metric`` (plain, stable name),
+        ``thesis`` (the thesis's value, or None when it reports none) and
+        ``sfanav`` (ours); extra keys (e.g. ``"protocol"``) are kept in the
+        JSON.
+    plots : list of str
+        Paths of the PNGs written.
+    notes : str
+        Free text printed under the table (settings, protocol).
+    targets : dict str -> bool
+        Named targets and whether they are met (printed under the table).
+    figures : dict str -> Path
+        Caption -> PNG, where an experiment names its figures.
+    details : dict
+        The objects behind the numbers (learners, estimates, ...), for further
+        use in Python; not written to JSON.
     """
 
     experiment: str
     rows: list[dict[str, Any]]
     plots: list[str] = field(default_factory=list)
     notes: str = ""
+    targets: dict[str, bool] = field(default_factory=dict)
+    figures: dict[str, Path] = field(default_factory=dict)
+    details: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def name(self) -> str:
+        return self.experiment
+
+    def row(self, metric: str) -> Any:
+        """The sfanav value of one metric (KeyError if there is no such row)."""
+        for r in self.rows:
+            if r["metric"] == metric:
+                return r["sfanav"]
+        raise KeyError(f"no row {metric!r} in {self.experiment}")
 
     def to_json(self) -> dict[str, Any]:
-        return {"experiment": self.experiment, "rows": self.rows, "plots": self.plots, "notes": self.notes}
+        out = {"experiment": self.experiment, "rows": self.rows, "plots": self.plots, "notes": self.notes}
+        if self.targets:
+            out["targets"] = self.targets
+        return out
 
     def write_json(self, path: str | Path) -> Path:
+        """Writes :meth:`to_json` to ``path`` atomically (a temporary file
+        renamed into place)."""
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(json.dumps(self.to_json(), indent=2, default=float) + "\n")
+        tmp = path.with_name(path.name + ".tmp")
+        tmp.write_text(json.dumps(self.to_json(), indent=2, default=float) + "\n")
+        os.replace(tmp, path)
         return path
 
     def table(self) -> str:
-        """The rows as an aligned text table (metric, thesis, sfanav)."""
+        """The rows as an aligned text table (metric, thesis, sfanav), then
+        the targets."""
+        return format_rows(self.rows, self.targets)
 
-        def fmt(v: Any) -> str:
-            if v is None:
-                return "-"
-            if isinstance(v, float):
-                return f"{v:.4g}"
-            return str(v)
 
-        rows = [("metric", "thesis", "sfanav")] + [(str(r["metric"]), fmt(r.get("thesis")), fmt(r.get("sfanav"))) for r in self.rows]
-        widths = [max(len(r[i]) for r in rows) for i in range(3)]
-        lines = [f"{a:<{widths[0]}}  {b:>{widths[1]}}  {c:>{widths[2]}}" for a, b, c in rows]
-        lines.insert(1, "-" * (sum(widths) + 4))
-        return "\n".join(lines)
+def format_value(v: Any) -> str:
+    """A table cell: ``-`` for None, yes/no for booleans, 3 significant
+    decimals for small floats."""
+    if v is None:
+        return "-"
+    if isinstance(v, (bool, np.bool_)):
+        return "yes" if v else "no"
+    if isinstance(v, (int, np.integer)):
+        return str(int(v))
+    if isinstance(v, (float, np.floating)):
+        v = float(v)
+        return f"{v:.3g}" if abs(v) < 0.01 and v != 0 else (f"{v:.3f}" if abs(v) < 100 else f"{v:.1f}")
+    return str(v)
+
+
+def format_rows(rows: Sequence[Mapping[str, Any]], targets: Mapping[str, bool] | None = None) -> str:
+    """Rows ``{"metric", "thesis", "sfanav"}`` as an aligned text table, then
+    the targets with ``met`` / ``NOT met``."""
+    cells = [("metric", "thesis", "sfanav")] + [
+        (str(r["metric"]), format_value(r.get("thesis")), format_value(r.get("sfanav"))) for r in rows]
+    w = [max(len(c[i]) for c in cells) for i in range(3)]
+    lines = [f"{a:<{w[0]}}  {b:>{w[1]}}  {c:>{w[2]}}" for a, b, c in cells]
+    lines.insert(1, "-" * (sum(w) + 4))
+    for name, ok in (targets or {}).items():
+        lines.append(f"target: {name}: {'met' if ok else 'NOT met'}")
+    return "\n".join(lines)
 
 
 @dataclass(frozen=True)

@@ -56,7 +56,7 @@ from ..data.sources import load_run
 from ..localization import baselines
 from ..localization.error_metrics import localization_metrics
 from ..localization.evaluation import coordinate_range
-from ..localization.localizer import ROTATION_POOLING, Localizer, pooled_transform
+from ..localization.localizer import Localizer, pooled_transform
 from ..localization.plots import plot_firing_maps
 from ..localization.protocols import RANDOM_SPLITS, TEST_RUN
 from ..localization.readout_selection import (
@@ -65,6 +65,7 @@ from ..localization.readout_selection import (
     select_readout,
 )
 from ..localization.readouts import describe_spec, make_readout
+from ..localization.recipe import ROTATION_POOLING
 from ..sfa.diagnostics import eta_values, orientation_angles
 from ..sfa.network import Network, Rotation, spatial_pairs
 from . import ExperimentResult, register

@@ -143,7 +143,7 @@ def scene(kind: str, seed: int = 0, *, quick: bool = False, lawn: str | None = N
         return Scene(f"quick-{kind}", world, cam, robot, traj, True)
     name = f"thesis-7.1-{kind}"
     p = P.get(name)
-    s_world, s_runs, s_traj, _ = P._streams(seed)
+    s_world, s_runs, s_traj, _ = P.random_streams(seed)
     world = World.generate(int(s_world.integers(2**31)), **{**p.world, **({"lawn": lawn} if lawn else {})})
     traj = p.runs(s_runs)[0].trajectory(world, s_traj)
     return Scene(name, world, p.camera(), p.robot(), traj, False)
@@ -681,7 +681,7 @@ def _coordinate_scene(kind: str, seed: int, quick: bool) -> tuple[Any, Any, Any]
 
     name = f"thesis-7.2.2-{kind}"
     p = P.get(name)
-    s_world, s_runs, s_traj, _ = P._streams(seed)
+    s_world, s_runs, s_traj, _ = P.random_streams(seed)
     world = World.generate(int(s_world.integers(2**31)), **p.world)
     regions = T.VelocityRegions.half_plane(0.0, "left", 3.0) if kind == "halfplane" else T.VelocityRegions.disc(5.0, factor=3.0)
     if quick:

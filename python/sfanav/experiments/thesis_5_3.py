@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import functools
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -25,6 +24,7 @@ from ..odometry.ekf import OdometryEKF, grid_search
 from ..odometry.lines import Lines, segment_lines
 from ..odometry.metric_learning import MetricLearner
 from ..odometry.plots import plot_fusion, plot_metric_lines
+from . import ExperimentResult
 
 #: The thesis's figures (section 5.3, ``shared/thesis-figures.md``).
 THESIS: dict[str, dict[str, Any]] = {
@@ -45,67 +45,6 @@ THESIS: dict[str, dict[str, Any]] = {
         "EKF improvement over SFA alone (%)": 21.0,
     },
 }
-
-
-@dataclass
-class ExperimentResult:
-    """Rows, target checks, figures and the objects behind them.
-
-    Attributes
-    ----------
-    name : str
-        ``"5.3.1-sim"``, ``"5.3.1-real"`` or ``"5.3.2"``.
-    rows : list of dict
-        ``{"metric", "thesis", "sfanav"}``.
-    targets : dict str -> bool
-        The issue's targets and whether they are met.
-    figures : dict str -> Path
-        Caption -> PNG (when an output directory was given).
-    details : dict
-        Learner, alignment, estimates, grid search, ... for further use.
-    """
-
-    name: str
-    rows: list[dict[str, Any]]
-    targets: dict[str, bool] = field(default_factory=dict)
-    figures: dict[str, Path] = field(default_factory=dict)
-    details: dict[str, Any] = field(default_factory=dict)
-
-    def table(self) -> str:
-        """The rows as an aligned text table (metric | thesis | sfanav)."""
-        return format_rows(self.rows, self.targets)
-
-    def row(self, metric: str) -> Any:
-        """The sfanav value of one metric."""
-        for r in self.rows:
-            if r["metric"] == metric:
-                return r["sfanav"]
-        raise KeyError(f"no row {metric!r} in {self.name}")
-
-
-def _fmt(v: Any) -> str:
-    if v is None:
-        return "-"
-    if isinstance(v, (bool, np.bool_)):
-        return "yes" if v else "no"
-    if isinstance(v, (int, np.integer)):
-        return str(int(v))
-    if isinstance(v, (float, np.floating)):
-        v = float(v)
-        return f"{v:.3g}" if abs(v) < 0.01 and v != 0 else (f"{v:.3f}" if abs(v) < 100 else f"{v:.1f}")
-    return str(v)
-
-
-def format_rows(rows: Sequence[Mapping[str, Any]], targets: Mapping[str, bool] | None = None) -> str:
-    """Rows ``{"metric", "thesis", "sfanav"}`` as an aligned text table, then
-    the targets with ``met``/``NOT met``."""
-    cells = [("metric", "thesis", "sfanav")] + [(str(r["metric"]), _fmt(r["thesis"]), _fmt(r["sfanav"])) for r in rows]
-    w = [max(len(c[i]) for c in cells) for i in range(3)]
-    lines = [f"{a:<{w[0]}}  {b:>{w[1]}}  {c:>{w[2]}}" for a, b, c in cells]
-    lines.insert(1, "-" * (sum(w) + 4))
-    for name, ok in (targets or {}).items():
-        lines.append(f"target: {name}: {'met' if ok else 'NOT met'}")
-    return "\n".join(lines)
 
 
 def _single_blas_thread(fn: Callable[..., Any]) -> Callable[..., Any]:

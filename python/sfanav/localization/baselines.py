@@ -24,8 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from .._checks import as_images, as_matrix, check_int, check_same_length
-from ..sfa.node import NotFittedError
+from .._checks import NotFittedError, as_images, as_matrix, check_int, check_same_length
 from .error_metrics import euclidean_errors, localization_metrics
 
 

@@ -128,7 +128,7 @@ def evaluate(
     stored view under every rotation: on 5900 stored 600x60 views a query
     takes seconds); ``Evaluation.baseline_queries`` records how many.
     """
-    net = loc._network()
+    net = loc.trained_network()
     n_out = net.n_outputs_
     raw_test, raw_train = test_images, train_images  # the baselines see the panoramas as they are
     if loc.rows is not None and not loc.rows.identity:  # the network sees the rows the localizer applies

@@ -20,26 +20,28 @@ from typing import Any
 import numpy as np
 
 from .._checks import (
+    NotFittedError,
     as_matrix,
     as_real_array,
     check_finite,
     check_int,
+    check_n_outputs,
     check_nonneg_float,
     check_same_length,
+    is_single_image,
 )
 from ..data.image_rows import ImageRows
 from ..sfa.modelfile import read_model, register_loader, save_model
 from ..sfa.network import Network
-from ..sfa.node import NotFittedError
 from .error_metrics import euclidean_errors, localization_metrics
 from .quadratic import QuadraticRegression
 from .readout_selection import select_auto_readout
 from .readouts import make_readout, readout_from_state, readout_state
+from .recipe import pooling_for
 
 READOUTS = ("auto", "quadratic")
 
 
-ROTATION_POOLING = 8  # rotations averaged by rotation_pooling="auto" (docs/gardens.md)
 
 
 def pooling_step(network: Network, width: int, k: int) -> int:
@@ -66,7 +68,7 @@ def pooled_transform(network: Network, images: Any, k: int) -> np.ndarray:
     over ``k`` rotations of each panorama in steps of
     :func:`pooling_step` px: (N, n) or (n,)."""
     a = np.asarray(images)
-    single = a.ndim == (2 if network.input_shape[2] == 1 else 3)
+    single = is_single_image(a, network.input_shape[2])
     width = a.shape[1] if single else (a.shape[2] if a.ndim >= 3 else 0)
     if width < k:
         raise ValueError(f"rotation_pooling={k} needs panoramas at least {k} px wide, got {width} px")
@@ -187,7 +189,9 @@ class Localizer:
         return hasattr(self, "regression_")
 
     # ------------------------------------------------------------ features
-    def _network(self) -> Network:
+    def trained_network(self) -> Network:
+        """The fitted network; ValueError if this localizer works on
+        precomputed features, NotFittedError if the network is not fitted."""
         if self.network is None:
             raise ValueError(
                 "this Localizer has no network: use fit_features/predict_features with precomputed features"
@@ -204,7 +208,7 @@ class Localizer:
         ``rotations=True``: (N, K, n) under the K simulated rotations (the
         training step), for a localizer without pooling only (pooled
         features are already averaged over rotations)."""
-        net = self._network()
+        net = self.trained_network()
         a = np.asarray(images)
         one = a.ndim == (2 if net.input_shape[2] == 1 else 3)
         if self.rows is not None and not self.rows.identity:
@@ -215,7 +219,7 @@ class Localizer:
     def transform_rows(self, images: Any, *, rotations: bool = False) -> np.ndarray:
         """As :meth:`features` for images the localizer's ``rows`` were
         already applied to (what its network sees)."""
-        net = self._network()
+        net = self.trained_network()
         k = self._pooling()
         if k == 1:
             return net.transform(images, rotations=rotations)
@@ -234,21 +238,13 @@ class Localizer:
         return self._resolve_pooling()
 
     def _resolve_pooling(self) -> int:
-        p = self.rotation_pooling
-        if p is None or (p == "auto" and self.network is None):  # features-only: the caller's features
-            return 1
-        if isinstance(p, str):
-            if p != "auto":
-                raise ValueError(f"rotation_pooling must be 'auto', a positive integer or None, got {p!r}")
-            return 1 if self.readout == "quadratic" else ROTATION_POOLING
-        return check_int(p, "rotation_pooling")
+        return pooling_for(self.readout, self.rotation_pooling, has_network=self.network is not None)
 
     def _check_params(self) -> tuple[int | None, float, int]:
-        n = None if self.n_outputs is None else check_int(self.n_outputs, "n_outputs")
+        fitted = self.network is not None and self.network.is_fitted_
+        n = check_n_outputs(self.n_outputs, self.network.n_outputs_ if fitted else None)
         ridge = check_nonneg_float(self.ridge, "ridge")
         degree = check_int(self.degree, "degree")
-        if n is not None and self.network is not None and self.network.is_fitted_ and n > self.network.n_outputs_:
-            raise ValueError(f"n_outputs={n}, but the network has only {self.network.n_outputs_} outputs")
         ro = self.readout
         if not (isinstance(ro, dict) or ro in READOUTS):
             raise ValueError(f"readout must be 'auto', 'quadratic' or a readout spec dict, got {ro!r}")
@@ -275,8 +271,7 @@ class Localizer:
         F = as_matrix(features, "features")
         Y = as_matrix(xy, "xy", n_cols=2)
         check_same_length(F, Y, "features", "xy")
-        if n is not None and n > F.shape[1]:
-            raise ValueError(f"n_outputs={n}, but the features have only {F.shape[1]} columns")
+        check_n_outputs(n, F.shape[1], what="the features", unit="columns")
         self.selection_ = None
         if isinstance(self.readout, dict):
             spec = dict(self.readout)
@@ -312,7 +307,7 @@ class Localizer:
         the thesis's Fig. 5.2b, 5.5b): K times the work, smoother estimates."""
         self._check_fitted()
         a = np.asarray(images)
-        single = a.ndim == (2 if self._network().input_shape[2] == 1 else 3)  # one (H, W[, C]) image
+        single = is_single_image(a, self.trained_network().input_shape[2])
         out = self.predict_features(self.features(a[None] if single else a, rotations=rotations))
         return out[0] if single else out
 
@@ -374,7 +369,7 @@ class Localizer:
             "network": net_state,
             "readout": readout_state(self.readout_spec_, reg),
             # the thesis's readout also as version 1 had it, so older sfanav reads such files
-            **({"regression": reg._get_state()} if self.readout_spec_["kind"] == "quadratic" else {}),
+            **({"regression": reg.get_state()} if self.readout_spec_["kind"] == "quadratic" else {}),
             "n_features_in": int(self.n_features_in_),
             "train_metrics": dict(self.train_metrics_),
             "info": dict(self.info or {}),
@@ -389,9 +384,9 @@ class Localizer:
         return save_model(path, "Localizer", state, version=version)
 
     @classmethod
-    def _from_state(cls, state: dict[str, Any]) -> "Localizer":
+    def from_state(cls, state: dict[str, Any]) -> "Localizer":
         try:
-            net = None if state["network"] is None else Network._from_state(state["network"])
+            net = None if state["network"] is None else Network.from_state(state["network"])
             rows = state.get("rows")
             params = dict(state["params"])
             params.setdefault("rotation_pooling", None)  # files before format 4: no pooling
@@ -403,7 +398,7 @@ class Localizer:
                 loc.readout_spec_ = dict(state["readout"]["spec"])
             else:  # files written before: the thesis's quadratic regression
                 loc.readout = "quadratic"
-                loc.regression_ = QuadraticRegression._from_state(state["regression"])
+                loc.regression_ = QuadraticRegression.from_state(state["regression"])
                 loc.readout_spec_ = {"kind": "quadratic", "n_outputs": loc.regression_.n_outputs_,
                                      "ridge": float(loc.ridge), "degree": int(loc.degree)}
             loc.n_outputs_ = int(loc.readout_spec_.get("n_outputs") or state["n_features_in"])
@@ -421,4 +416,4 @@ class Localizer:
         return loc
 
 
-register_loader("Localizer", Localizer._from_state)
+register_loader("Localizer", Localizer.from_state)

@@ -8,8 +8,14 @@ from typing import Any
 
 import numpy as np
 
-from .._checks import as_matrix, check_int, check_nonneg_float, check_same_length
-from ..sfa.node import NotFittedError, expand, expanded_dim
+from .._checks import (
+    NotFittedError,
+    as_matrix,
+    check_int,
+    check_nonneg_float,
+    check_same_length,
+)
+from ..sfa.node import expand, expanded_dim
 from .error_metrics import euclidean_errors
 
 
@@ -118,7 +124,7 @@ class QuadraticRegression:
         return float(euclidean_errors(self.predict(features), xy).mean())
 
     # ---------------------------------------------------------- persistence
-    def _get_state(self) -> dict[str, Any]:
+    def get_state(self) -> dict[str, Any]:
         self._check_fitted()
         return {
             "params": {"n_outputs": self.n_outputs_, "ridge": float(self.ridge), "degree": int(self.degree)},
@@ -129,7 +135,7 @@ class QuadraticRegression:
         }
 
     @classmethod
-    def _from_state(cls, state: dict[str, Any]) -> "QuadraticRegression":
+    def from_state(cls, state: dict[str, Any]) -> "QuadraticRegression":
         try:
             reg = cls(**state["params"])
             reg.coef_ = np.asarray(state["coef"], dtype=np.float64)

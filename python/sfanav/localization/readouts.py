@@ -20,8 +20,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from .._checks import as_matrix, check_same_length
-from ..sfa.node import NotFittedError
+from .._checks import NotFittedError, as_matrix, check_same_length
 from .quadratic import QuadraticRegression
 
 try:  # loaded here, before any threadpool_limits: a BLAS library loaded inside one escapes the limit
@@ -137,14 +136,14 @@ class KNNReadout(_Standardised):
             out[s : s + chunk] = np.einsum("qk,qkd->qd", w, self.y_[idx])
         return out
 
-    def _get_state(self) -> dict[str, Any]:
+    def get_state(self) -> dict[str, Any]:
         if not hasattr(self, "X_"):
             raise NotFittedError("this KNNReadout is not fitted; call fit first")
         return {"params": {"n_outputs": self.n_outputs, "k": self.k, "weights": self.weights},
                 "mean": self.mean_, "scale": self.scale_, "X": self.X_, "y": self.y_}
 
     @classmethod
-    def _from_state(cls, state: dict[str, Any]) -> "KNNReadout":
+    def from_state(cls, state: dict[str, Any]) -> "KNNReadout":
         r = cls(**state["params"])
         r.mean_, r.scale_ = np.asarray(state["mean"], float), np.asarray(state["scale"], float)
         r.X_, r.y_ = np.asarray(state["X"], float), np.asarray(state["y"], float)
@@ -196,12 +195,12 @@ class KernelRidgeReadout(_KernelMachine):
             self.dual_ = np.linalg.solve(K, Y - self.y_mean_)
         return self
 
-    def _get_state(self) -> dict[str, Any]:
+    def get_state(self) -> dict[str, Any]:
         return {"params": {"n_outputs": self.n_outputs, "gamma": self.gamma, "alpha": self.alpha,
                            "max_train": self.max_train}, **self._arrays()}
 
     @classmethod
-    def _from_state(cls, state: dict[str, Any]) -> "KernelRidgeReadout":
+    def from_state(cls, state: dict[str, Any]) -> "KernelRidgeReadout":
         r = cls(**state["params"])
         r._load_arrays(state)
         return r
@@ -210,7 +209,7 @@ class KernelRidgeReadout(_KernelMachine):
 def readout_state(spec: dict[str, Any], readout: Any) -> dict[str, Any]:
     """A fitted readout as a model-file state: ``{"spec": spec, "state": ...}``
     (arrays inside; no pickle). Read back with :func:`readout_from_state`."""
-    return {"spec": dict(spec), "state": readout._get_state()}
+    return {"spec": dict(spec), "state": readout.get_state()}
 
 
 def readout_from_state(state: dict[str, Any]) -> Any:
@@ -219,7 +218,7 @@ def readout_from_state(state: dict[str, Any]) -> Any:
         kind = state["spec"]["kind"]
         cls = {"quadratic": QuadraticRegression, "knn": KNNReadout, "kernel": KernelRidgeReadout,
                "gp": GPReadout}[kind]
-        return cls._from_state(state["state"])
+        return cls.from_state(state["state"])
     except (KeyError, TypeError) as exc:
         raise ValueError(f"invalid readout state: {exc}") from None
 
@@ -366,13 +365,13 @@ class GPReadout(_KernelMachine):
         return {"kind": "gp", "n_outputs": self.n_outputs, "length_scale": [float(v) for v in self.length_scale_],
                 "noise": float(self.noise_)}
 
-    def _get_state(self) -> dict[str, Any]:
+    def get_state(self) -> dict[str, Any]:
         arrays = self._arrays()
         return {"params": {"n_outputs": self.n_outputs, "max_fit": self.max_fit, "max_train": self.max_train},
                 **arrays, "length_scale": self.length_scale_, "noise": float(self.noise_)}
 
     @classmethod
-    def _from_state(cls, state: dict[str, Any]) -> "GPReadout":
+    def from_state(cls, state: dict[str, Any]) -> "GPReadout":
         r = cls(**state["params"])
         r._load_arrays(state)
         r.length_scale_, r.noise_ = np.asarray(state["length_scale"], float), float(state["noise"])

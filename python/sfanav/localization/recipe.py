@@ -14,23 +14,109 @@ and :class:`sfanav.Localizer` all ask it. Why these choices: docs/gardens.md."""
 
 from __future__ import annotations
 
-from typing import Any, Sequence
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
+from .._checks import check_int
 from ..data.image_rows import ImageRows
 from ..sfa.network import Network, Rotation
 
 NETWORK_PRESET = "sfanav-default"
-
-
+"""The network preset of the sfanav default."""
 BAND = (-10.0, 20.0)
-
-
+"""The default image rows: elevation band in degrees (lowest, highest)."""
 READOUT = "auto"
+"""The default readout (chosen by blocked cross-validation)."""
+CAMERA_ELEVATION = (-30.0, 20.0)
+"""Elevation range (degrees) of the simulator's and the thesis's panoramas, assumed when a dataset does not say."""
+ROTATION_POOLING = 8
+"""Rotations the features are averaged over under ``rotation_pooling="auto"`` with a non-quadratic readout."""
+THESIS_N_OUTPUTS = 8
+"""Slow features the thesis's quadratic regression reads."""
+
+ROWS = ("band", "all")
 
 
-CAMERA_ELEVATION = (-30.0, 20.0)  # the simulator's and the thesis's panoramas
+@dataclass(frozen=True)
+class Recipe:
+    """How a localizer is trained on top of a network.
+
+    Attributes
+    ----------
+    name : str
+        ``"thesis"``, ``"sfanav default"`` or ``"custom"``.
+    readout : "auto", "quadratic" or a readout spec dict
+    rows : "band" or "all"
+        The horizon band (:data:`BAND`) or every image row.
+    n_outputs : int or None
+        Slow features the readout reads (None: the readout's choice).
+    rotation_pooling : "auto", int or None
+        As :class:`sfanav.Localizer` takes it; :func:`pooling_for` resolves it.
+    """
+
+    name: str
+    readout: Any
+    rows: str
+    n_outputs: int | None
+    rotation_pooling: Any = "auto"
+
+    def image_rows(self, camera_elevation: Sequence[float] | None = None) -> ImageRows | None:
+        """The :class:`ImageRows` step for panoramas whose rows span
+        ``camera_elevation`` (degrees; default :data:`CAMERA_ELEVATION`), or
+        None for all rows."""
+        if self.rows == "all":
+            return None
+        return default_rows(CAMERA_ELEVATION if camera_elevation is None else camera_elevation)
+
+    def info(self) -> dict[str, Any]:
+        """What the model file records about the recipe."""
+        return {"configuration": "sfanav default"} if self.name == "sfanav default" else {}
+
+
+def recipe_for(preset: str | None = None, *, config: bool = False, readout: Any = None, rows: str | None = None,
+               n_outputs: int | None = None, rotation_pooling: Any = None) -> Recipe:
+    """The recipe for a network chosen by ``preset`` (a name) or by a config
+    file (``config=True``), with the user's explicit choices on top (None:
+    the recipe decides). A ``thesis-*`` preset gets the thesis's recipe (all
+    rows, quadratic regression of 8 outputs, no pooling); the sfanav default
+    (no preset and no config, or the ``sfanav-default`` preset) the horizon
+    band, the ``"auto"`` readout and pooling; a config file the ``"auto"``
+    readout on all rows."""
+    if rows is not None and rows not in ROWS:
+        raise ValueError(f"rows must be one of {ROWS}, got {rows!r}")
+    if n_outputs is not None:
+        n_outputs = check_int(n_outputs, "n_outputs")
+    thesis = preset is not None and preset.startswith("thesis-")
+    default = not config and not thesis
+    readout = readout or ("quadratic" if thesis else READOUT)
+    rows = rows or ("band" if default else "all")
+    if n_outputs is None and readout == "quadratic":
+        n_outputs = THESIS_N_OUTPUTS
+    if default and readout == READOUT and rows == "band":
+        name = "sfanav default"
+    elif thesis and readout == "quadratic" and rows == "all":
+        name = "thesis"
+    else:
+        name = "custom"
+    return Recipe(name, readout, rows, n_outputs, "auto" if rotation_pooling is None else rotation_pooling)
+
+
+def pooling_for(readout: Any, rotation_pooling: Any, *, has_network: bool = True) -> int:
+    """How many rotations the features are averaged over: ``"auto"`` means
+    none with the thesis's quadratic readout or without a network (the
+    caller's own features), else :data:`ROTATION_POOLING`; None means none;
+    an integer is taken as it is (>= 1)."""
+    p = rotation_pooling
+    if p is None or (isinstance(p, str) and p == "auto" and not has_network):
+        return 1
+    if isinstance(p, str):
+        if p != "auto":
+            raise ValueError(f"rotation_pooling must be 'auto', a positive integer or None, got {p!r}")
+        return 1 if (isinstance(readout, str) and readout == "quadratic") else ROTATION_POOLING
+    return check_int(p, "rotation_pooling")
 
 
 def default_network(**overrides: Any) -> Network:
@@ -40,9 +126,9 @@ def default_network(**overrides: Any) -> Network:
 
 
 def default_rows(camera_elevation: Sequence[float] = CAMERA_ELEVATION) -> ImageRows:
-    """The default image rows: the horizon band (-10 .. +20 degrees) of
-    panoramas whose rows span ``camera_elevation`` (degrees, lowest,
-    highest; equiangular rows, row 0 highest)."""
+    """The default image rows: the horizon band (:data:`BAND`) of panoramas
+    whose rows span ``camera_elevation`` (degrees, lowest, highest;
+    equiangular rows, row 0 highest)."""
     lo, hi = (float(v) for v in camera_elevation)
     return ImageRows(band=BAND, camera_elevation=(lo, hi))
 
@@ -55,9 +141,12 @@ def train_default(images: Any, xy: Any, *, camera_elevation: Sequence[float] = C
     :class:`sfanav.Localizer` (network, rows and readout; ``save`` it as one
     model file). ``network`` replaces the default network (e.g. for other
     image sizes)."""
-    from .training import fit_localizer
+    from .training import (
+        fit_localizer,  # training imports the localizer, which imports this module
+    )
 
+    recipe = recipe_for()
     net = network if network is not None else default_network()
     return fit_localizer(net, np.asarray(images), np.asarray(xy, float), rotation=rotation or Rotation(5, 1.0),
-                         readout=READOUT, rows=default_rows(camera_elevation), progress=progress,
-                         info={"configuration": "sfanav default", **(info or {})})
+                         readout=recipe.readout, rows=recipe.image_rows(camera_elevation), progress=progress,
+                         info={**recipe.info(), **(info or {})})

@@ -10,6 +10,7 @@ from typing import Any
 
 import numpy as np
 
+from .._checks import check_n_outputs
 from ..data.preprocessing import Preprocessing
 from ..sfa.network import Network, Rotation
 from .localizer import Localizer
@@ -50,8 +51,7 @@ def fit_localizer(
     t0 = time.perf_counter()
     network.fit(images, rotation, progress=progress)
     fit_s = time.perf_counter() - t0
-    if n_outputs is not None and n_outputs > network.n_outputs_:
-        raise ValueError(f"n_outputs={n_outputs}, but the network has only {network.n_outputs_} outputs")
+    check_n_outputs(n_outputs, network.n_outputs_)
     loc = Localizer(network, n_outputs=n_outputs, readout=readout, rows=rows, rotation_pooling=rotation_pooling)
     t1 = time.perf_counter()
     loc.fit_features(loc.transform_rows(images), xy)

@@ -77,7 +77,7 @@ class MetricFeatures(ImageFeatures):
     def __init__(self, localizer: Any, renderer: Any, camera: Any, *, lighting: Any = None) -> None:
         if not getattr(localizer, "is_fitted_", False):
             raise ValueError("MetricFeatures needs a fitted sfanav.Localizer")
-        super().__init__(localizer._network(), renderer, camera, lighting=lighting)
+        super().__init__(localizer.trained_network(), renderer, camera, lighting=lighting)
         self.localizer = localizer
 
     def __call__(self, poses: Any) -> np.ndarray:

@@ -17,11 +17,11 @@ from typing import Any
 
 import numpy as np
 
-from .._checks import as_matrix, check_int, check_nonneg_float
+from .._checks import NotFittedError, as_matrix, check_int, check_nonneg_float
 from .._progress import progress_bar
 from .._threads import one_blas_thread
 from ..sfa.modelfile import register_loader, save_model
-from ..sfa.node import NotFittedError, expand, expanded_dim
+from ..sfa.node import expand, expanded_dim
 from .lines import Lines, segment_lines
 from .metric_cost import (
     ANGLE_TERMS,
@@ -821,7 +821,7 @@ class MetricLearner:
         return save_model(path, "MetricLearner", state)
 
     @classmethod
-    def _from_state(cls, state: dict[str, Any]) -> "MetricLearner":
+    def from_state(cls, state: dict[str, Any]) -> "MetricLearner":
         try:
             p = dict(state["params"])
             p["fix_alpha"] = {int(k): float(v) for k, v in p["fix_alpha"]} or None
@@ -869,4 +869,4 @@ class MetricLearner:
         return m
 
 
-register_loader("MetricLearner", MetricLearner._from_state)
+register_loader("MetricLearner", MetricLearner.from_state)

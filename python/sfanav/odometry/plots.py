@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from .._checks import as_matrix, as_real_array, check_same_length
+from .._checks import as_matrix, as_real_array, check_is_fitted, check_same_length
 from .metric_learning import MetricLearner
 
 
@@ -98,7 +98,7 @@ def plot_metric_lines(
     """
     from .._plotting import figure, save_figure
 
-    learner._check_fitted()
+    check_is_fitted(learner, "weights_")
     F = as_matrix(features, "features")
     check_same_length(F, learner.lines_.labels, "features", "the fitted lines")
     its = sorted(learner.snapshots_) if iterations is None else [int(i) for i in iterations]

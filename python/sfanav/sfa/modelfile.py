@@ -90,7 +90,7 @@ def save_model(path: str | os.PathLike, kind: str, state: dict[str, Any], *, ver
     something older readers cannot rebuild; at most :data:`VERSION`)."""
     if not 1 <= int(version) <= VERSION:
         raise ValueError(f"version must be 1 .. {VERSION}, got {version}")
-    from .. import __version__
+    from .._core import __version__
 
     path = Path(path)
     if path.is_dir():

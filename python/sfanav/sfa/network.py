@@ -23,8 +23,8 @@ from typing import Any
 import numpy as np
 
 from .. import _core
+from .._checks import NotFittedError
 from .modelfile import register_loader, save_model
-from .node import NotFittedError
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -727,7 +727,7 @@ class Network:
         save_model(path, "Network", state)
 
     @classmethod
-    def _from_state(cls, state: dict[str, Any]) -> "Network":
+    def from_state(cls, state: dict[str, Any]) -> "Network":
         try:
             obj = cls(state["config"])
             if _spec_to_json(obj.config_) != state["spec"]:
@@ -752,4 +752,4 @@ def _spec_to_json(spec: dict[str, Any]) -> dict[str, Any]:
     return s
 
 
-register_loader("Network", Network._from_state)
+register_loader("Network", Network.from_state)

@@ -19,12 +19,8 @@ from typing import Any
 import numpy as np
 
 from .. import _core
-from .._checks import as_float_2d, check_positive_int
+from .._checks import NotFittedError, as_float_2d, check_positive_int
 from .modelfile import register_loader, save_model
-
-
-class NotFittedError(ValueError, AttributeError):
-    """Raised when a model is used before it is fitted (as scikit-learn's)."""
 
 
 def beta_values(delta: np.ndarray) -> np.ndarray:
@@ -298,7 +294,7 @@ class SFA:
         save_model(path, "SFA", state)
 
     @classmethod
-    def _from_state(cls, state: dict[str, Any]) -> "SFA":
+    def from_state(cls, state: dict[str, Any]) -> "SFA":
         try:
             params = state["params"]
             model = cls(**params)
@@ -310,7 +306,7 @@ class SFA:
         return model
 
 
-register_loader("SFA", SFA._from_state)
+register_loader("SFA", SFA.from_state)
 
 
 def expand(X: np.ndarray, degree: int) -> np.ndarray:

@@ -310,7 +310,9 @@ def get(name: str) -> Preset:
     return PRESETS[name]
 
 
-def _streams(seed: int) -> list[np.random.Generator]:
+def random_streams(seed: int) -> list[np.random.Generator]:
+    """The four independent random streams of a preset seed (world, runs,
+    trajectories, odometry noise), as every preset draws them."""
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
         raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
     return [np.random.default_rng(s) for s in np.random.SeedSequence(int(seed)).spawn(4)]
@@ -320,7 +322,7 @@ def preset_world(preset: str, seed: int = 0) -> World:
     """The world that ``simulate(preset, ..., seed)`` uses (without the
     dynamic object, whose period depends on the run)."""
     p = get(preset)
-    return World.generate(int(_streams(seed)[0].integers(2**31)), **p.world)
+    return World.generate(int(random_streams(seed)[0].integers(2**31)), **p.world)
 
 
 def simulate(preset: str, out: str | os.PathLike, seed: int = 0, *, max_frames: int | None = None,
@@ -355,7 +357,7 @@ def simulate(preset: str, out: str | os.PathLike, seed: int = 0, *, max_frames: 
     if max_frames is not None and (isinstance(max_frames, bool) or not isinstance(max_frames, (int, np.integer))
                                    or max_frames < 1):
         raise ValueError(f"max_frames must be a positive integer, got {max_frames!r}")
-    s_world, s_runs, s_traj, s_odo = _streams(seed)
+    s_world, s_runs, s_traj, s_odo = random_streams(seed)
     world = World.generate(int(s_world.integers(2**31)), **p.world)
     cam = camera or p.camera()
     robot = p.robot()
