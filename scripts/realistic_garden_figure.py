@@ -29,7 +29,7 @@ def main() -> None:
     out.mkdir(parents=True, exist_ok=True)
     p = sim.presets.get("realistic-garden")
     world = sim.presets.preset_world("realistic-garden", a.seed)
-    s_runs, s_traj = sim.presets._streams(a.seed)[1:3]
+    s_runs, s_traj = sim.presets.random_streams(a.seed)[1:3]
     runs = p.runs(s_runs)
     train = runs[0].trajectory(world, s_traj)
     test = runs[1].trajectory(world, s_traj)
@@ -53,10 +53,10 @@ def main() -> None:
     ax.legend(fontsize=7, loc="upper left")
     ax.set_title("layout (m)")
     ax2 = fig.add_subplot(gs[0, 1])
-    res, o = r._gmap_res, r._gmap_origin
+    gmap, res, o = r.ground_colour_map()
     i0, i1 = int((-w / 2 - 1 - o) / res), int((w / 2 + 1 - o) / res)
     j0, j1 = int((-h / 2 - 1 - o) / res), int((h / 2 + 1 - o) / res)
-    ax2.imshow(np.clip(r._gmap[j0:j1, i0:i1], 0, 1), origin="lower",
+    ax2.imshow(np.clip(gmap[j0:j1, i0:i1], 0, 1), origin="lower",
                extent=(-w / 2 - 1, w / 2 + 1, -h / 2 - 1, h / 2 + 1))
     ax2.set_title("lawn colour map with the ground patches")
     ax3 = fig.add_subplot(gs[1, :])

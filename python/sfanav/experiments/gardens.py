@@ -29,7 +29,7 @@ choice's cross-validation compared kernel ridge and kNN.
 A *training variant* ``loop closures`` (thesis 6.2.1 with image-based loop
 closures, :mod:`sfanav.odometry.loop_closures`) is trained on all rows beside the row
 variants. Further training variants (``TRAIN_VARIANTS``, run with
-``scripts/gardens_subset.py``): node capacity, ``transition weight <w>``
+``scripts/investigations/gardens_subset.py``): node capacity, ``transition weight <w>``
 (``Network.fit(transition_weight=)``) and ``spatial pairs ...`` (supervised
 graph-based SFA pairs, ``Network.fit(pairs=, pair_layers=)``; docs/gardens.md).
 
@@ -165,7 +165,7 @@ def config_name(rows: str, readout: str, control: bool = False, train: str = "")
     return ("control: " + name) if control else name
 
 
-def _random_splits(spec: dict[str, Any], F: np.ndarray, xy: np.ndarray, crange: np.ndarray, *, n_repeats: int,
+def random_splits_errors(spec: dict[str, Any], F: np.ndarray, xy: np.ndarray, crange: np.ndarray, *, n_repeats: int,
                    seed: int) -> dict[str, float]:
     """The thesis 5.1.1 protocol with any readout: random 50/50 splits of
     one run, fitted on one half, measured on the other, averaged."""
@@ -184,7 +184,7 @@ def _random_splits(spec: dict[str, Any], F: np.ndarray, xy: np.ndarray, crange: 
     return {k: float(np.mean([m[k] for m in ms])) for k in ("mae_x_pct", "mae_y_pct", "med")}
 
 
-def _network(quick: bool, shape: tuple[int, int, int], outs: list[int] | None = None,
+def network_variant(quick: bool, shape: tuple[int, int, int], outs: list[int] | None = None,
              max_expanded: int | None = None) -> Network:
     """Table 5.1 (12 top outputs, mixed precision), or with ``outs`` the
     lower layers' output dims and ``max_expanded`` replaced (node capacity)."""
@@ -243,7 +243,7 @@ def _default_row(X_tr: np.ndarray, xy_tr: np.ndarray, X_te: np.ndarray, xy_te: n
     F_tr, F_te = loc.features(X_tr), loc.features(X_te)
     m = localization_metrics(loc.predict_features(F_te), xy_te, coordinate_range=crange)
     spec = loc.readout_spec_
-    rs = _random_splits(spec, F_te, xy_te, crange, n_repeats=n_repeats, seed=seed)
+    rs = random_splits_errors(spec, F_te, xy_te, crange, n_repeats=n_repeats, seed=seed)
     X_rows = X_tr if loc.rows is None else loc.rows(X_tr)
     R = loc.network.transform(X_rows, rotations=True)  # the network's outputs, before rotation pooling
     _, eta_phi = eta_values(R[:, :, :8])
@@ -322,7 +322,7 @@ def run_scene(out: Path, preset: str, seed: int, *, quick: bool, progress: bool,
         rows = ImageRows(rows.band, rows.normalize, elev)  # type: ignore[arg-type]
         A_tr, A_te = rows(X_tr), rows(X_te)
         nopts = dict((topts or {}).get("network", {}))
-        net = _network(quick, A_tr.shape[1:] if A_tr.ndim == 4 else A_tr.shape[1:] + (1,), **nopts)
+        net = network_variant(quick, A_tr.shape[1:] if A_tr.ndim == 4 else A_tr.shape[1:] + (1,), **nopts)
         t0 = time.perf_counter()
         extra: dict[str, Any] = {}
         seq = A_tr
@@ -389,7 +389,7 @@ def run_scene(out: Path, preset: str, seed: int, *, quick: bool, progress: bool,
                 spec, reader = sel.spec, sel.readout
             pred = reader.predict(G_te)
             m = localization_metrics(pred, xy_te, coordinate_range=crange)
-            rs = _random_splits(spec, G_te, xy_te, crange, n_repeats=5 if quick else n_repeats, seed=seed)
+            rs = random_splits_errors(spec, G_te, xy_te, crange, n_repeats=5 if quick else n_repeats, seed=seed)
             name = config_name(rname, oname, control, tname)
             res[name] = {"MAE x (%)": m["mae_x_pct"], "MAE y (%)": m["mae_y_pct"], "MAE x (m)": m["mae_x"],
                          "MAE y (m)": m["mae_y"], "MED (m)": m["med"],
@@ -401,7 +401,7 @@ def run_scene(out: Path, preset: str, seed: int, *, quick: bool, progress: bool,
     return res, plots
 
 
-def _average(per_seed: list[dict[str, dict[str, Any]]]) -> dict[str, dict[str, Any]]:
+def average_seeds(per_seed: list[dict[str, dict[str, Any]]]) -> dict[str, dict[str, Any]]:
     out: dict[str, dict[str, Any]] = {}
     for cfg in per_seed[0]:
         out[cfg] = {}
@@ -462,7 +462,7 @@ def _exp_gardens(out: Path, *, quick: bool, seed: int, progress: bool) -> Experi
                          firing_maps=(s == seeds[0]))
         control.append(c)
         plots += p
-    avg = {**_average(realistic), **_average(control)}
+    avg = {**average_seeds(realistic), **average_seeds(control)}
     rows: list[dict[str, Any]] = []
     for cfg, m in avg.items():
         for k in METRICS + ("readout", "readout rule", "readout selection (s)", "query ms", "loop closures",

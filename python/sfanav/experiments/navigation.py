@@ -29,7 +29,7 @@ into the same directory).
 from __future__ import annotations
 
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -89,7 +89,7 @@ class Scene:
     robot: Any
     trajectory: Any
     quick: bool
-    _sim: Any = None
+    _sim: Any = field(default=None, init=False, repr=False, compare=False)  # built on first use
 
     @property
     def simulator(self) -> Any:
@@ -114,7 +114,7 @@ class Scene:
         return tuple(float(a) for a in self.world.area)  # type: ignore[return-value]
 
 
-def _rng(seed: int, *tags: int) -> np.random.Generator:
+def trial_rng(seed: int, *tags: int) -> np.random.Generator:
     return np.random.default_rng(np.random.SeedSequence([int(seed), *tags]))
 
 
@@ -134,7 +134,7 @@ def scene(kind: str, seed: int = 0, *, quick: bool = False, lawn: str | None = N
     if kind not in ("open", "obstacle"):
         raise ValueError(f"kind must be 'open' or 'obstacle', got {kind!r}")
     if quick:
-        r = _rng(seed, 7, 1 if kind == "open" else 2)
+        r = trial_rng(seed, 7, 1 if kind == "open" else 2)
         world = World.generate(int(r.integers(2**31)), area=(6.0, 6.0), n_objects=14, depth=6.0,
                                obstacles=("v-wall",) if kind == "obstacle" else (), lawn=lawn or "uniform")
         traj = T.random_lines(world.area, 400, 0.2, margin=0.35, world=world, rng=r)
@@ -203,7 +203,7 @@ def scene_network(sc: Scene, out: Path, seed: int, *, progress: bool = False) ->
     return net
 
 
-def _navigator(sc: Scene, net: Any, descent: Any, *, n: int = 2, weights: Any = None) -> nav.Navigator:
+def navigator(sc: Scene, net: Any, descent: Any, *, n: int = 2, weights: Any = None) -> nav.Navigator:
     """A navigator in the scene's simulator."""
     sim = sc.fresh_noise()
     feats = nav.ImageFeatures(net, sim.renderer, sc.camera)
@@ -211,7 +211,7 @@ def _navigator(sc: Scene, net: Any, descent: Any, *, n: int = 2, weights: Any = 
                          max_iterations=QUICK_ITERATIONS if sc.quick else MAX_ITERATIONS)
 
 
-def _free(sc: Scene, extra: float = 0.05):
+def free_space(sc: Scene, extra: float = 0.05):
     r = sc.robot.size / 2 + extra
     return lambda x, y: sc.world.free(x, y, r)
 
@@ -220,7 +220,7 @@ def _descents() -> list[Any]:
     return [nav.ThesisDescent(ETA, GAMMA), nav.RobustDescent()]
 
 
-def _grid_features(sc: Scene, net: Any, spacing: float, progress: bool, *, camera: Any = None,
+def grid_features(sc: Scene, net: Any, spacing: float, progress: bool, *, camera: Any = None,
                    rows: Any = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """SFA outputs on a grid over the area (NaN where the robot cannot stand),
     rendered with ``camera`` (default: the scene's), ``rows`` applied."""
@@ -277,7 +277,7 @@ def _reasons(s: nav.TrialSummary) -> str:
     return ", ".join(f"{k} {v}" for k, v in sorted(s.reasons.items()))
 
 
-def _pick(results: list[nav.NavigationResult], k: int) -> list[int]:
+def pick_trials(results: list[nav.NavigationResult], k: int) -> list[int]:
     """Indices of up to k runs to plot: failures first, then successes."""
     fail = [i for i, r in enumerate(results) if not r.success]
     ok = [i for i, r in enumerate(results) if r.success]
@@ -359,7 +359,7 @@ def metric_arms(sc: Scene, out: Path, seed: int, starts: np.ndarray, targets: np
         rows += _summary_rows(name, s, None)
         rows.append({"metric": f"mean stops ({name})", "thesis": None, "sfanav": s.mean_iterations})
         notes.append(f"{name}: {_reasons(s)}")
-        sel = _pick(s.results, 8)
+        sel = pick_trials(s.results, 8)
         tag = name.replace(" ", "-").replace("+", "plus").replace(",", "")
         plots.append(str(nav.plot_trajectories(
             [s.results[i] for i in sel], out / f"7.1-{sc.name.split('-')[-1]}-trajectories-{tag}.png",
@@ -382,8 +382,8 @@ def trials_71(sc: Scene, kind: str, seed: int, n: int) -> tuple[np.ndarray, np.n
     length and the any-angle path of each. Returns (starts (n, 2), targets
     (n, 2), A* lengths (n,) or None, any-angle lengths (n,) or None, paths:
     a list of n arrays or None)."""
-    rng = _rng(seed, 71, 0 if kind == "open" else 1)
-    free = _free(sc)
+    rng = trial_rng(seed, 71, 0 if kind == "open" else 1)
+    free = free_space(sc)
     w, h = sc.area
     if kind == "open":
         starts, targets = nav.sample_trials(n, sc.area, free=free, min_distance=3.5 if sc.quick else 15.0,
@@ -420,7 +420,7 @@ def _run_71(kind: str, out: Path, *, quick: bool, seed: int, progress: bool) -> 
     summaries = {}
     n_img = n_trials if quick else image_trials(n_trials)
     for d in _descents():
-        navi = _navigator(sc, net, d)
+        navi = navigator(sc, net, d)
         s = nav.evaluate_trials(navi, starts[:n_img], targets[:n_img],
                                 optimal_lengths=None if optimal is None else optimal[:n_img], progress=progress,
                                 desc=d.name)
@@ -434,7 +434,7 @@ def _run_71(kind: str, out: Path, *, quick: bool, seed: int, progress: bool) -> 
         rows.append({"metric": f"mean stops ({d.name})", "thesis": None, "sfanav": s.mean_iterations})
         notes_runs.append(f"{d.name}: {_reasons(s)}" + (f", escapes {sum(r.escapes for r in s.results)}"
                                                         if d.name == "robust descent" else ""))
-        sel = _pick(s.results, 8)
+        sel = pick_trials(s.results, 8)
         tag = d.name.replace(" ", "-")
         plots.append(str(nav.plot_trajectories(
             [s.results[i] for i in sel], out / f"7.1-{kind}-trajectories-{tag}.png", world=sc.world,
@@ -461,7 +461,7 @@ def _run_71(kind: str, out: Path, *, quick: bool, seed: int, progress: bool) -> 
             rows.append({"metric": f"mean stops ({label})", "thesis": None, "sfanav": s.mean_iterations})
             notes_runs.append(f"{label}: {_reasons(s)}")
             if d.name == "thesis rule":
-                sel = _pick(s.results, 8)
+                sel = pick_trials(s.results, 8)
                 plots.append(str(nav.plot_trajectories(
                     [s.results[i] for i in sel], out / f"7.1-{kind}-trajectories-default-network-n{n}.png",
                     world=sc.world, optimal=[opt_paths[i] for i in sel],
@@ -479,7 +479,7 @@ def _run_71(kind: str, out: Path, *, quick: bool, seed: int, progress: bool) -> 
         rows += _summary_rows(f"{d.name}, coordinate SFA", s, None)
         notes_runs.append(f"{d.name} with coordinate SFA: {_reasons(s)}")
         if d.name == "robust descent":
-            sel = _pick(s.results, 8)
+            sel = pick_trials(s.results, 8)
             plots.append(str(nav.plot_trajectories(
                 [s.results[i] for i in sel], out / f"7.1-{kind}-trajectories-coordinate-sfa.png", world=sc.world,
                 optimal=[opt_paths[i] for i in sel], title=f"7.1 {kind}: robust descent on coordinate SFA")))
@@ -506,11 +506,11 @@ def _run_71(kind: str, out: Path, *, quick: bool, seed: int, progress: bool) -> 
     rows += mrows
     plots += mplots
     notes_runs += mnotes
-    xs, ys, F = _grid_features(sc, net, 0.75 if quick else 0.5, progress)
+    xs, ys, F = grid_features(sc, net, 0.75 if quick else 0.5, progress)
     for n in (2, 8):
         rows.append({"metric": f"position code: RMS of x, y from s1-s{n} (m)", "thesis": None,
                      "sfanav": position_code_error(xs, ys, F, n)})
-    dxs, dys, DF = _grid_features(sc, dnet, 0.75 if quick else 0.5, progress, camera=dcam, rows=loc.rows)
+    dxs, dys, DF = grid_features(sc, dnet, 0.75 if quick else 0.5, progress, camera=dcam, rows=loc.rows)
     for n in (2, n_w):
         rows.append({"metric": f"position code: RMS of x, y from s1-s{n} (m), sfanav default network", "thesis": None,
                      "sfanav": position_code_error(dxs, dys, DF, n)})
@@ -521,7 +521,7 @@ def _run_71(kind: str, out: Path, *, quick: bool, seed: int, progress: bool) -> 
                                            n_firing=4, target=targets[0], world=sc.world,
                                            title=f"7.1 {kind}: sfanav default network, s1-s4, cost n = 2 and "
                                                  f"{n_w} (weighted)")))
-    tf = _navigator(sc, net, None).target_features(targets[0])
+    tf = navigator(sc, net, None).target_features(targets[0])
     plots.append(str(nav.plot_cost_surface(xs, ys, F, tf, out / f"7.1-{kind}-cost-surface.png", ns=(2,), n_firing=4,
                                            target=targets[0], world=sc.world,
                                            title=f"7.1 {kind}: firing maps s1-s4, cost to the first trial's target")))
@@ -592,8 +592,8 @@ def exp_721(out: Path, *, quick: bool = False, seed: int = 0, progress: bool = T
     n_trials = 1 if quick else 50
     n_img = 1 if quick else image_trials(N_TRIALS_721_IMAGES)
     ns = list(range(2, 9))
-    rng = _rng(seed, 721)
-    starts, targets = nav.sample_trials(n_trials, sc.area, free=_free(sc), min_distance=3.5 if quick else 15.0,
+    rng = trial_rng(seed, 721)
+    starts, targets = nav.sample_trials(n_trials, sc.area, free=free_space(sc), min_distance=3.5 if quick else 15.0,
                                         margin=0.4, rng=rng)
     rows: list[dict[str, Any]] = []
     outcome = []
@@ -602,7 +602,7 @@ def exp_721(out: Path, *, quick: bool = False, seed: int = 0, progress: bool = T
             for mode in ("raw", "weighted"):
                 for d in _descents():
                     if arm == "images":
-                        navi = _navigator(sc, net, d, n=n, weights=wrel if mode == "weighted" else None)
+                        navi = navigator(sc, net, d, n=n, weights=wrel if mode == "weighted" else None)
                         S, T = starts[:n_img], targets[:n_img]
                         label = d.name
                     else:
@@ -621,8 +621,8 @@ def exp_721(out: Path, *, quick: bool = False, seed: int = 0, progress: bool = T
                                  "sfanav": s.efficiency})
                     outcome.append((n, mode, label, s.success_rate, s.efficiency))
     plots = []
-    xs, ys, F = _grid_features(sc, net, 0.75 if quick else 0.5, progress)
-    tf = _navigator(sc, net, None).target_features(targets[0])
+    xs, ys, F = grid_features(sc, net, 0.75 if quick else 0.5, progress)
+    tf = navigator(sc, net, None).target_features(targets[0])
     plots.append(str(nav.plot_cost_surface(xs, ys, F, tf, out / "7.2.1-cost-surfaces.png", ns=ns, weights=wrel,
                                            n_firing=8, target=targets[0],
                                            title="7.2.1: firing maps s1-s8; cost n = 2..8 raw and 1/beta-weighted")))
@@ -706,7 +706,7 @@ def exp_722(out: Path, *, quick: bool = False, seed: int = 0, progress: bool = T
         model = nav.fit_coordinate_sfa(traj.poses[:, :2], area, n_components=8, expansion="rbf", spacing=1.5)
         beta = model.sfa.beta_values_
         w = nav.beta_weights(beta, relative=True)
-        rng = _rng(seed, 722, 0 if kind == "halfplane" else 1)
+        rng = trial_rng(seed, 722, 0 if kind == "halfplane" else 1)
         hw, hh = area[0] / 2 - 0.5, area[1] / 2 - 0.5
         if kind == "halfplane":
             starts, targets = nav.sample_trials(n_trials, area, min_distance=8.0, margin=0.5,

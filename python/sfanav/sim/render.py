@@ -531,6 +531,13 @@ class Renderer:
             _paint_patches(col, g.patches, self._gmap_origin, g.resolution)
         self._gmap = col.astype(np.float32)  # (n, n, 3), row = y index, col = x index
 
+    def ground_colour_map(self) -> tuple[np.ndarray, float, float]:
+        """The lawn's colour map before light and texture: ``(map, resolution,
+        origin)``, map (n, n, 3) float32 RGB in [0, 1] (row = y index, column
+        = x index), cells of ``resolution`` metres starting at ``origin``
+        metres on both axes (periodic beyond)."""
+        return self._gmap, float(self._gmap_res), float(self._gmap_origin)
+
     def _shadow_map(self, light: Lighting) -> np.ndarray:
         """Fraction of direct sun blocked, (n, n) in [0, 1], on the ground map grid."""
         import cv2

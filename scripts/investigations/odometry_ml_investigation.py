@@ -13,7 +13,7 @@
 * ``drift``: systematic heading drift on the synthetic ``make_odometry_run``
   (no cached features needed) and the drift estimated on 5.3.1-real.
 
-    PYTHONPATH=python python3 scripts/odometry_ml_investigation.py \\
+    PYTHONPATH=python python3 scripts/investigations/odometry_ml_investigation.py \\
         --real RESULTS/data/thesis-5.2-indoor-II-seed0-features.npz \\
         --sim RESULTS/data/thesis-5.3.1-sim-seed0-features.npz [--parts real noise sim drift]
 

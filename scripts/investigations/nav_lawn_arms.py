@@ -13,7 +13,7 @@ For each: the position code (RMS of x, y fitted quadratically from s1-s2 and
 s1-s8 on a 0.5 m grid) and the thesis rule (eta 1, gamma 0.5) with n = 2 raw
 outputs and n = 8 weighted by beta_1/beta_i, every arm from the same odometry noise.
 
-    PYTHONPATH=python python3 scripts/nav_lawn_arms.py --lawn patchy uniform --networks thesis default --trials 10
+    PYTHONPATH=python python3 scripts/investigations/nav_lawn_arms.py --lawn patchy uniform --networks thesis default --trials 10
 """
 
 from __future__ import annotations
@@ -84,7 +84,7 @@ def main() -> None:
         starts, targets, opt, _, _ = E.trials_71(sc, a.kind, 0, a.trials)  # the experiment's first trials
         for kind in a.networks:
             net, cam, rows = network(kind, sc, lawn, a.cache)
-            xs, ys, F = E._grid_features(sc, net, 0.5, False, camera=cam, rows=rows)
+            xs, ys, F = E.grid_features(sc, net, 0.5, False, camera=cam, rows=rows)
             code = " / ".join(f"{E.position_code_error(xs, ys, F, n):.2f}" for n in (2, 8))
             cells = []
             for n in (2, 8):

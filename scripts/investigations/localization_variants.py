@@ -3,7 +3,7 @@ the thesis configuration: transition weight between consecutive images and
 supervised spatial pairs (graph-based SFA). Does not change the thesis
 experiments; reads a dataset they simulated.
 
-    PYTHONPATH=python python3 scripts/localization_variants.py DATASET OUT \\
+    PYTHONPATH=python python3 scripts/investigations/localization_variants.py DATASET OUT \\
         --variant "thesis" --variant "tw=70" --variant "pairs r=1.3 k=4 gap=2 w=1"
 
 Variant syntax: ``thesis``; ``tw=<w>``; ``pairs r=<radius m> k=<k> gap=<min_gap> w=<weight> [shifted]`` (ground-truth
@@ -26,7 +26,7 @@ from threadpoolctl import threadpool_limits
 
 from sfanav import analysis
 from sfanav.data import Dataset
-from sfanav.experiments.gardens import THESIS_SPEC, _random_splits
+from sfanav.experiments.gardens import THESIS_SPEC, random_splits_errors
 from sfanav.localization import localization_metrics
 from sfanav.sfa import Network, Rotation, spatial_pairs
 from sfanav.localization import default_candidates, make_readout, select_readout
@@ -103,7 +103,7 @@ def main() -> None:
                 sel = select_readout(F_tr, xy_tr, default_candidates(kinds, n_outputs=(8, 12)))
                 spec, reader = sel.spec, sel.readout
             m = localization_metrics(reader.predict(F_te), xy_te, coordinate_range=crange)
-            rs = _random_splits(spec, F_te, xy_te, crange, n_repeats=20, seed=0)
+            rs = random_splits_errors(spec, F_te, xy_te, crange, n_repeats=20, seed=0)
             row[name] = {"MAE x (%)": m["mae_x_pct"], "MAE y (%)": m["mae_y_pct"], "MED (m)": m["med"],
                          "random splits MAE x (%)": rs["mae_x_pct"], "random splits MAE y (%)": rs["mae_y_pct"],
                          "readout": describe_spec(spec)}

@@ -8,8 +8,8 @@ run, the share of variance (R^2) explained linearly by the mean lawn colour
 cubic polynomial of the position; and Delta (mean squared step difference of
 the unit-variance outputs) beside that of SFA on the coordinates.
 
-    PYTHONPATH=python python3 scripts/nav_lawn_colour.py --lawn patchy --out OUT
-    PYTHONPATH=python python3 scripts/nav_lawn_colour.py --lawn uniform --network OUT/cache/....sfanav
+    PYTHONPATH=python python3 scripts/investigations/nav_lawn_colour.py --lawn patchy --out OUT
+    PYTHONPATH=python python3 scripts/investigations/nav_lawn_colour.py --lawn uniform --network OUT/cache/....sfanav
 """
 
 from __future__ import annotations
@@ -54,7 +54,7 @@ def main() -> None:
         print(f"trained in {time.time() - t:.0f} s: {path}")
     Y = np.asarray(net.transform(imgs), float)
     xy = poses[:, :2]
-    gm, res, o = ren._gmap, ren._gmap_res, ren._gmap_origin
+    gm, res, o = ren.ground_colour_map()
     ix = ((xy[:, 0] - o) / res).astype(int)
     iy = ((xy[:, 1] - o) / res).astype(int)
     print(f"scene {sc.name}, lawn {a.lawn}: R^2 of the network's outputs on the {len(poses)} training frames")

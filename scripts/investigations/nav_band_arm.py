@@ -9,7 +9,7 @@ n = ``--n`` outputs weighted by beta_1 / beta_i (thesis 7.2.1). Trials are
 drawn exactly like ``sfanav experiment 7.1-open`` (``--trial-seed 0``: the
 same trials; other seeds: other trials, for choosing settings).
 
-    PYTHONPATH=python python3 scripts/nav_band_arm.py --out DIR [--frames 1500]
+    PYTHONPATH=python python3 scripts/investigations/nav_band_arm.py --out DIR [--frames 1500]
         [--trials 25] [--trial-seed 0] [--n 8]
 
 With ``--full-network PATH`` the same arms run on the 7.1-open network
@@ -90,7 +90,7 @@ def main() -> None:
         net = band_network(sc, a.frames, a.out / "cache" / f"{tag}-open-seed0-{a.frames}.sfanav", a.pairs)
     else:
         sc, tag = dataclasses.replace(base, name="thesis-7.1-open-band",
-                                      camera=PanoramicCamera(600, 60, elevation_deg=BAND), _sim=None), "band"
+                                      camera=PanoramicCamera(600, 60, elevation_deg=BAND)), "band"
         tag += "-pairs" if a.pairs else ""
         net = band_network(sc, a.frames, a.out / "cache" / f"{tag}-open-seed0-{a.frames}.sfanav", a.pairs)
     t_fit = time.time() - t0
@@ -106,7 +106,7 @@ def main() -> None:
     rows, results = [], {}
     for label, d, n, ww in arms:
         t = time.time()
-        s = nav.evaluate_trials(EN._navigator(sc, net, d, n=n, weights=ww), S, T)
+        s = nav.evaluate_trials(EN.navigator(sc, net, d, n=n, weights=ww), S, T)
         results[label] = s
         rows.append({"arm": label, "success": s.success_rate, "efficiency": s.efficiency,
                      "mean_stops": s.mean_iterations, "reasons": s.reasons, "seconds": time.time() - t})
@@ -114,7 +114,7 @@ def main() -> None:
     out = {"trial_seed": a.trial_seed, "trials": a.trials, "frames": a.frames, "network": tag, "band_deg": BAND if tag == "band" else None,
            "beta": beta.tolist(), "fit_seconds": t_fit, "rows": rows}
     if a.grid:
-        xs, ys, F = EN._grid_features(sc, net, 0.5, False)
+        xs, ys, F = EN.grid_features(sc, net, 0.5, False)
         out["position_code_rms_m"] = {n: EN.position_code_error(xs, ys, F, n) for n in range(2, 9)}
         tf = F[np.argmin(abs(ys - T[0][1])), np.argmin(abs(xs - T[0][0]))]
         nav.plot_cost_surface(xs, ys, F, tf, a.out / f"nav-{tag}-arm-cost-surface.png", ns=(2, a.n), weights=w,
@@ -123,7 +123,7 @@ def main() -> None:
         print(out["position_code_rms_m"], flush=True)
     label = f"robust descent, n={a.n} weighted"
     s = results[label]
-    sel = EN._pick(s.results, 8)
+    sel = EN.pick_trials(s.results, 8)
     nav.plot_trajectories([s.results[i] for i in sel], a.out / f"nav-{tag}-arm-s{a.trial_seed}.png", world=sc.world,
                           titles=[("reached" if s.results[i].success else s.results[i].reason)
                                   + (f" e={s.efficiencies[i]:.2f}" if s.results[i].success else "") for i in sel],

@@ -7,7 +7,7 @@ trials of a 7.1 scene drawn with another trial seed (7) than
 ``sfanav experiment 7.1-*`` (0), using that experiment's cached metric
 localizer; every variant starts from the same odometry noise. Prints success, efficiency and mean stops per variant.
 
-    PYTHONPATH=python python3 scripts/nav_metric_detour.py --kind open --localizer OUT/cache/metric-thesis-7.1-open-seed0-*.sfanav
+    PYTHONPATH=python python3 scripts/investigations/nav_metric_detour.py --kind open --localizer OUT/cache/metric-thesis-7.1-open-seed0-*.sfanav
 """
 
 from __future__ import annotations

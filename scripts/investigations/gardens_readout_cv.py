@@ -7,7 +7,7 @@ errors)
 and prints, per rule, how often it picked the readout that was better on the
 test walk and the mean test MAE of its picks.
 
-    PYTHONPATH=python python3 scripts/gardens_readout_cv.py RUN_DIR/gardens-subset.json [more.json ...]
+    PYTHONPATH=python python3 scripts/investigations/gardens_readout_cv.py RUN_DIR/gardens-subset.json [more.json ...]
 """
 
 from __future__ import annotations

@@ -3,8 +3,8 @@ over seeds, on data the full experiment simulated (or simulates now), and
 writes ``OUT/gardens-subset.json`` and ``OUT/gardens-subset.md`` (the
 ablation table of those configurations, mean over the seeds).
 
-    PYTHONPATH=python python3 scripts/gardens_subset.py OUT --train "loop closures" [--rows ""] [--seeds 0 1 2]
-    PYTHONPATH=python python3 scripts/gardens_subset.py OUT --default          # the sfanav default only
+    PYTHONPATH=python python3 scripts/investigations/gardens_subset.py OUT --train "loop closures" [--rows ""] [--seeds 0 1 2]
+    PYTHONPATH=python python3 scripts/investigations/gardens_subset.py OUT --default          # the sfanav default only
 """
 
 from __future__ import annotations
@@ -44,7 +44,7 @@ def main() -> None:
                 res[scene].append(r)
     avg = {}
     for scene in a.scenes:
-        avg.update(G._average(res[scene]))
+        avg.update(G.average_seeds(res[scene]))
     (out / "gardens-subset.json").write_text(json.dumps(avg, indent=1, default=float))
     (out / "gardens-subset.md").write_text(G.ablation_markdown(avg, a.seeds))
     print(G.ablation_markdown(avg, a.seeds))

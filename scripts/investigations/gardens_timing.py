@@ -2,7 +2,7 @@
 configuration, back to back on the same training run (issue 7's budget:
 at most 2x the thesis configuration).
 
-    PYTHONPATH=python python3 scripts/gardens_timing.py DATASET_DIR [--repeats 2] [--only "thesis config" "sfanav default"]
+    PYTHONPATH=python python3 scripts/investigations/gardens_timing.py DATASET_DIR [--repeats 2] [--only "thesis config" "sfanav default"]
 
 "sfanav default" is the whole default training (sfanav.localization.train_default:
 horizon band, the sfanav-default network, the "auto" readout's
@@ -18,7 +18,7 @@ import time
 import numpy as np
 
 from sfanav.data import Dataset
-from sfanav.experiments.gardens import LOOP_CLOSURES, WIDER, WIDEST, _network
+from sfanav.experiments.gardens import LOOP_CLOSURES, WIDER, WIDEST, network_variant
 from sfanav.odometry import find_loop_closures, interleave
 from sfanav.sfa import Rotation
 from sfanav.data import Preprocessing, load_run
@@ -55,11 +55,11 @@ def main() -> None:
             if name == "loop closures":
                 lc = find_loop_closures(X, odo, **LOOP_CLOSURES)
                 seq = interleave(X, lc)
-                net = _network(False, shape)
+                net = network_variant(False, shape)
             else:
                 seq = X
                 opts = {"capacity: wider layers": WIDER, "capacity: widest layers": WIDEST}.get(name, {})
-                net = _network(False, shape, **opts.get("network", {}))
+                net = network_variant(False, shape, **opts.get("network", {}))
             net.fit(seq, Rotation(5, 1.0), progress=False)
             if name == "thesis config":
                 QuadraticRegression(8).fit(net.transform(X), xy)

@@ -5,7 +5,7 @@ each at a random heading, localizes them with the experiment's cached metric
 localizer (``OUT/cache/metric-thesis-7.1-<kind>-seed0-*.sfanav``) and prints
 the mean, median and 95th percentile of the position error (m).
 
-    PYTHONPATH=python python3 scripts/nav_localizer_grid.py --kind open --localizer OUT/cache/metric-thesis-7.1-open-seed0-*.sfanav
+    PYTHONPATH=python python3 scripts/investigations/nav_localizer_grid.py --kind open --localizer OUT/cache/metric-thesis-7.1-open-seed0-*.sfanav
 """
 
 from __future__ import annotations
