@@ -238,13 +238,13 @@ def test_localizer_default_readout_is_auto_and_old_files_load_as_the_thesis_read
 
 
 def test_localizer_rows_are_applied_before_the_network_and_saved(tmp_path):
-    from sfanav.experiments.localization import _tiny_config
+    from sfanav.experiments.localization import tiny_config
 
     rng = np.random.default_rng(0)
     X = rng.integers(0, 255, (40, 16, 30, 3)).astype(np.uint8)
     X = (X + np.roll(X, 1, axis=0)) // 2
     rows = ImageRows(band=(-10.0, 20.0), camera_elevation=(-30.0, 20.0))
-    net = sfanav.Network(_tiny_config(30, 16, 3, out=8)).fit(rows(X), sfanav.Rotation(5, 1.0), progress=False)
+    net = sfanav.Network(tiny_config(30, 16, 3, out=8)).fit(rows(X), sfanav.Rotation(5, 1.0), progress=False)
     loc = sfanav.Localizer(net, rows=rows, readout="quadratic", n_outputs=4).fit(X, rng.uniform(0, 1, (40, 2)))
     np.testing.assert_allclose(loc.features(X), net.transform(rows(X)))
     np.testing.assert_allclose(loc.features(X[3]), net.transform(rows(X[3:4]))[0])  # one image in
@@ -276,7 +276,7 @@ def test_tiny_realistic_garden_default_beats_the_thesis_configuration():
     (the same tiny network at the thesis's width, all rows, quadratic
     regression of 8 outputs), end to end through fit_localizer/evaluate."""
     from sfanav.localization import default_rows
-    from sfanav.experiments.localization import _tiny_config
+    from sfanav.experiments.localization import tiny_config
     from sfanav.localization import fit_localizer
 
     w = sim.World.generate(0, area=(7, 7), n_objects=16, depth=6.0, inner={"tree": 1, "bush": 1, "pole": 2},
@@ -288,8 +288,8 @@ def test_tiny_realistic_garden_default_beats_the_thesis_configuration():
     X_tr = np.stack([r.render(cam, p) for p in tr.poses])
     X_te = np.stack([r.render(cam, p) for p in te.poses])
     xy_tr, xy_te = tr.poses[:, :2], te.poses[:, :2]
-    thesis_cfg = _tiny_config(99, 16, 3, out=12)
-    wide_cfg = _tiny_config(99, 16, 3, out=12)
+    thesis_cfg = tiny_config(99, 16, 3, out=12)
+    wide_cfg = tiny_config(99, 16, 3, out=12)
     wide_cfg["layers"][0]["out"] = 12  # "wider layers", as sfanav-default widens Table 5.1's
     thesis = fit_localizer(sfanav.Network(thesis_cfg), X_tr, xy_tr, rotation=sfanav.Rotation(5, 1.0), n_outputs=8,
                            readout="quadratic", progress=False)

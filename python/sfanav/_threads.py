@@ -7,8 +7,8 @@ from __future__ import annotations
 def one_blas_thread():
     """One BLAS thread for the optimisation loops: their matrices are tiny, and
     scipy's L-BFGS-B calls BLAS on vectors of a few hundred entries thousands
-    of times, where thread start-up dominates (measured 20x slower with two
-    threads on a busy two-core machine)."""
+    of times, where thread start-up dominates (measured in docs/odometry.md).
+    A context manager; a no-op without threadpoolctl."""
     try:
         from threadpoolctl import threadpool_limits
     except ImportError:  # pragma: no cover

@@ -262,7 +262,7 @@ def _add_train(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                    help="window of the simulated rotation, fraction of the panorama or percent (default 1.0); "
                         "the network's input width must equal window x panorama width")
     p.add_argument("--precision", choices=("double", "mixed"), default=None,
-                   help="statistics precision (default: the config's; mixed is ~1.4x faster)")
+                   help="statistics precision (default: the config's; mixed is faster, docs/benchmarks.md)")
     p.add_argument("--n-outputs", type=_pos_int, default=None, metavar="N",
                    help="slowest outputs read out (default: 8 with the quadratic readout, the thesis's; "
                         "8 or 12 by cross-validation with auto)")

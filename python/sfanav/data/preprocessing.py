@@ -72,7 +72,7 @@ class Preprocessing:
         if loc.network is None:
             raise ValueError("this model has no network: it localizes from features, not images")
         net = loc.network
-        period = getattr(net, "_period", None)
+        period = net.period_
         h, v, c = net.input_shape
         return cls(int(period or v), h, c == 1, False)
 

@@ -35,7 +35,7 @@ from typing import Any
 
 import numpy as np
 
-from ..navigation import navigator as nav
+from .. import navigation as nav
 from . import ExperimentResult, register
 
 # The thesis's figures (chapter 7, thesis-figures.md).

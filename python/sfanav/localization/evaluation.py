@@ -174,8 +174,8 @@ def evaluate(
         ev.eta_source = "test views under all simulated rotations, normalised by each output's variance"
         map_xy = test_xy
     ev.eta_p, ev.eta_phi = ep, ef
-    step = getattr(net, "_step", None)
-    period = getattr(net, "_period", None) or test_images.shape[2]
+    step = net.step_
+    period = net.period_ or test_images.shape[2]
     rot_angles = orientation_angles(R.shape[1], step=step, width=period) if step else None
     try:
         ev.curve_splits = error_vs_n(F_test, test_xy, ns=ns, n_repeats=n_repeats, random_state=seed)

@@ -49,9 +49,7 @@ def pooling_step(network: Network, width: int, k: int) -> int:
     ``width``-px panoramas: the smallest step >= ceil(width / k) that is
     coprime with the network's receptive-field grid period (the product of
     its layers' horizontal strides), so the pooled rotations see the grid at
-    different alignments (pooling over rotations by multiples of the
-    first layer's stride only, the alignments the network was trained on
-    with 5 px steps, gains about half as much; docs/gardens.md). The
+    different alignments (why: docs/localization.md, rotation pooling). The
     rotations are then ceil(width / step) <= k."""
     base = -(-int(width) // int(k))
     period = 1

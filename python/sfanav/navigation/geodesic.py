@@ -43,9 +43,9 @@ class GeodesicField:
     drove there), so gaps of up to ``radius`` between the run's lines are
     bridged. Distances are
     shortest paths between free cells, 16-connected (straight, diagonal and
-    knight moves, the cells a move passes over free too; at most 2.7 %
-    longer than the straight line in open ground, where the run's own
-    frames joined by their neighbours zig-zag 10-25 % longer). An obstacle
+    knight moves, the cells a move passes over free too, so paths in open
+    ground are nearly straight; docs/navigation.md compares this with a
+    graph of the run's frames). An obstacle
     the robot kept clear of by at least its radius on each side (more than
     ``radius / 2``) leaves blocked cells along it, so paths go round it. A
     place's cost to a target is the smallest, over the place's

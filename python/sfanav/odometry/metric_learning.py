@@ -64,7 +64,7 @@ class MetricLearner:
     solver : {"varpro", "gd", "lbfgs"}, default "varpro"
         ``"gd"``: the thesis's momentum gradient descent; ``"lbfgs"``: L-BFGS-B
         on all parameters; ``"varpro"``: L-BFGS-B on the line orientations with
-        origins and W eliminated (fastest). See the module docstring.
+        origins and W eliminated (fastest; docs/odometry.md compares them).
     angle_term : {"auto", "cos", "signed", None}, default "auto"
         None: cost (5.1). ``"cos"``: cost (5.5), the thesis's term on the
         cosine of the measured heading change between consecutive lines
@@ -110,9 +110,8 @@ class MetricLearner:
     ridge : float, default 0.0
         L2 penalty ``ridge / 2 * ||W||^2`` on the weights of the expanded
         features (not the bias); beyond the thesis. It shrinks the map
-        towards a constant, which the distances resist: on the synthetic
-        problems of ``docs/odometry.md`` it did not lower the error, so the
-        default is off.
+        towards a constant, which the distances resist; off by default
+        (docs/odometry.md).
     init : {"random", "odometry"} or mapping, default "random"
         ``"random"`` (thesis, simulator): alpha uniform in [0, 2 pi), origins
         uniform in +-``origin_range``, W uniform in +-``weight_range``.

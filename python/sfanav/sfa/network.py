@@ -403,7 +403,7 @@ class Network:
         ``"thesis-5.2"`` (600x60 RGB), ``"thesis-5.3"`` (409x40 gray); or
         ``"sfanav-default"``, the sfanav default (Table 5.1's geometry with
         20 / 24 / 24 outputs in layers 1-3 and 12 top outputs, mixed
-        precision; issue 7, docs/gardens.md).
+        precision; why: docs/gardens.md).
 
         Overrides: ``weight_sharing``, ``max_expanded``, ``tol``, ``precision``
         (network settings), ``degree`` and ``reduce_to`` (applied to every layer), and
@@ -444,6 +444,18 @@ class Network:
     @property
     def n_outputs_(self) -> int:
         return self._net.n_outputs
+
+    @property
+    def period_(self) -> int | None:
+        """Width in px of the panoramas the network was trained on (the
+        rotation period), or None before :meth:`fit`."""
+        return getattr(self, "_period", None)
+
+    @property
+    def step_(self) -> int | None:
+        """The simulated-rotation step (px) of training, or None before
+        :meth:`fit`."""
+        return getattr(self, "_step", None)
 
     @property
     def delta_values_(self) -> np.ndarray:

@@ -70,7 +70,7 @@ class SFA:
         ``n_components`` directions remain, fitting raises ValueError.
     precision : {"double", "mixed"}, default "double"
         "mixed" forms the outer products of each cache-sized block of rows
-        in float32 and sums them in float64: about 1.8x faster statistics,
+        in float32 and sums them in float64: faster statistics (docs/benchmarks.md),
         relative error about 1e-6 instead of 1e-15, and ``tol`` is raised to
         at least 1e-6. For image-derived data; keep "double" otherwise.
 
