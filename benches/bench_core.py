@@ -70,7 +70,7 @@ TARGET_DELTA_RELDIFF = 1e-6  # max |Delta_sfanav - Delta_mdp| / |Delta_mdp|
 # scipy 1.11.4 is the newest SciPy that supports NumPy 1.23 on Python 3.11.
 
 # Environment variables that slow a current OpenBLAS down on some machines (see
-# shared/stack-notes.md): unset together, only in the NumPy-reference subprocess.
+# docs/benchmarks.md): unset together, only in the NumPy-reference subprocess.
 
 CHUNK = 1 << 16  # rows per generation chunk; fixed, so the RNG stream is fixed
 

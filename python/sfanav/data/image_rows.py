@@ -1,4 +1,4 @@
-"""Image rows and the near field (issue 7).
+"""Image rows and the near field.
 
 A panorama's rows look at different distances: rows above the horizon see
 far objects and the sky, rows below it the ground, the lowest ones the

@@ -1,4 +1,4 @@
-"""Issue 7: spatial codes in realistic gardens, measured honestly.
+"""Spatial codes in realistic gardens, measured honestly (docs/gardens.md).
 
 ``gardens``: for each seed (three by default), the ``realistic-garden``
 preset (objects and ground patches inside the area) and its thesis-like
@@ -439,7 +439,7 @@ def ablation_markdown(avg: dict[str, dict[str, Any]], seeds: list[int]) -> str:
             "training run -> test run unless marked.\n\n" + head + "\n".join(lines) + "\n")
 
 
-@register("gardens", "issue 7: realistic gardens (objects inside the area, ground patches) vs the thesis-like "
+@register("gardens", "realistic gardens (objects inside the area, ground patches) vs the thesis-like "
           "control; ablation of readouts and image rows, peer baselines, 3 seeds")
 def exp_gardens(out: Path, *, quick: bool, seed: int, progress: bool) -> ExperimentResult:
     from threadpoolctl import threadpool_limits
@@ -497,7 +497,7 @@ def _exp_gardens(out: Path, *, quick: bool, seed: int, progress: bool) -> Experi
         "height; row-norm = each row to zero mean, unit variance. Readouts other than the thesis's are chosen "
         "among 8 or 12 outputs and their hyperparameters by 5-fold blocked cross-validation on the training run "
         "only. Plain rows: fitted on the training run, measured on the test walk; '(random splits)': 20 random "
-        "50/50 splits of the test walk with the same readout (thesis 5.1.1, optimistic). Targets (issue 7): "
+        "50/50 splits of the test walk with the same readout (thesis 5.1.1, optimistic). Targets: "
         "realistic MAE <= 3 % on both axes, control <= 1.8 %. Mean over seeds; per_seed in the JSON. "
         f"Wall time {time.perf_counter() - t_all:.0f} s.\n\n" + md
     )

@@ -170,7 +170,7 @@ def exp_5_1_1(out: Path, *, quick: bool, seed: int, progress: bool) -> Experimen
         net = Network.from_preset("thesis-5.1", out=12)
     ev, rows, info, data = _run_localization(out, ds, net, prefix="5.1.1-", title="5.1.1 simulator grid",
                                              seed=seed, progress=progress, thesis=THESIS_5_1_1)
-    # the sfanav default (issue 7) on the same images: rows "<metric> [sfanav default]"
+    # the sfanav default on the same images: rows "<metric> [sfanav default]"
     from ..localization.recipe import default_network, default_rows
 
     dnet = Network(tiny_config(60, 8, 3)) if quick else default_network()

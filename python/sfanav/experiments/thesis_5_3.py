@@ -26,7 +26,7 @@ from ..odometry.metric_learning import MetricLearner
 from ..odometry.plots import plot_fusion, plot_metric_lines
 from . import ExperimentResult
 
-#: The thesis's figures (section 5.3, ``shared/thesis-figures.md``).
+#: The thesis's figures (section 5.3, ``docs/thesis-figures.md``).
 THESIS: dict[str, dict[str, Any]] = {
     "5.3.1-sim": {
         "lines": 10, "points on lines": 862, "iterations": 1000,

@@ -391,7 +391,7 @@ class Localizer:
             loc = cls(net, rows=None if rows is None else ImageRows.from_dict(rows), **params)
             loc.rotation_pooling_ = check_int(state.get("rotation_pooling", 1), "rotation_pooling")
             loc.readout = state.get("readout_param", "quadratic")
-            if "readout" in state:  # since sfanav 0.2 (issue 7): any readout
+            if "readout" in state:  # model format 2 and later: any readout
                 loc.regression_ = readout_from_state(state["readout"])
                 loc.readout_spec_ = dict(state["readout"]["spec"])
             else:  # files written before: the thesis's quadratic regression

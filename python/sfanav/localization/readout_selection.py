@@ -169,7 +169,7 @@ def select_auto_readout(features: Any, xy: Any, *, n_outputs: int | Sequence[int
        more than ``tolerance`` (relative); among the others kNN only if it
        beats kernel ridge by more than ``tolerance``.
 
-    ``gp=False`` leaves the GP out (the issue-7 default: kernel ridge unless
+    ``gp=False`` leaves the GP out (the earlier default: kernel ridge unless
     kNN is better by ``tolerance``). On the gardens and 5.1.1 runs, 5
     contiguous folds picked kNN where kernel ridge was better on the test
     run, and contiguous folds (whole strips of the area held out) chose too

@@ -276,7 +276,7 @@ def _realistic_runs(rng: np.random.Generator) -> list[RunSpec]:
 
 
 _add(Preset(
-    "realistic-garden", "issue 7",
+    "realistic-garden", "- (docs/gardens.md)",
     "12x12 m lawn with objects INSIDE the area (3 small trees, 4 bushes, 4 poles, a shed against the border) and "
     "ground patches (a patio, a gravel path, 3 flower beds), 30 garden objects around; a grid exploration with "
     "crossings and large-radius turns led around the objects (~1200 frames), a 400-frame random test walk; "
@@ -288,7 +288,7 @@ _add(Preset(
 
 
 _add(Preset(
-    "realistic-garden-control", "issue 7",
+    "realistic-garden-control", "- (docs/gardens.md)",
     "the thesis-like control of realistic-garden: the same 12x12 m garden and outer objects (same seed), but "
     "nothing inside the area and a plain lawn; the same grid exploration (~1130 frames) and a 400-frame random "
     "test walk; 350x40 RGB panoramas",

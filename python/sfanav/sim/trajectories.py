@@ -19,7 +19,7 @@ a ``world`` also keep clear of its obstacles.
   minimum length, for unsupervised metric learning (5.3.1).
 * :func:`random_walk`: a smooth random test walk.
 * :func:`detour`: a trajectory (e.g. a grid) led around a world's obstacles
-  (issue 7's realistic gardens, with objects inside the area).
+  (the realistic gardens, with objects inside the area).
 """
 
 from __future__ import annotations

@@ -39,7 +39,7 @@ VERSION = 1
 OBJECT_TYPES = ("tree", "conifer", "bush", "house", "shed", "fence", "hedge", "rock")
 
 
-INNER_TYPES = ("tree", "bush", "pole", "shed")  # objects that can stand inside the area (issue 7)
+INNER_TYPES = ("tree", "bush", "pole", "shed")  # objects that can stand inside the area
 
 
 PATCH_KINDS = ("patio", "path", "bed")
@@ -178,7 +178,7 @@ class GroundSpec:
     ``detail_tile`` metres) times a large-scale colour map (two greens mixed
     by fractal noise, with drier patches) sampled every ``resolution`` m.
 
-    ``patches``: dicts painted over the lawn's colour map (issue 7's
+    ``patches``: dicts painted over the lawn's colour map (the realistic gardens'
     realistic gardens), each with a ``kind`` from ``PATCH_KINDS``:
     ``{"kind": "patio", "x", "y", "length", "width", "yaw", "tile"}`` (grey
     stone slabs of ``tile`` m with dark joints), ``{"kind": "path",
@@ -330,7 +330,7 @@ class World:
         cloud_cover : float
             Fraction of the sky under clouds, in [0, 1].
         inner : dict, optional
-            Objects standing *inside* the free area (issue 7's realistic
+            Objects standing *inside* the free area (the realistic
             gardens), counts per type from ``INNER_TYPES``: ``tree`` (small
             garden trees; the robot drives under the crown, around the
             trunk), ``bush``, ``pole`` (thin painted posts: washing-line and
@@ -699,7 +699,7 @@ class _Builder:
         # local -y face carries the marker; place() turns it towards the centre
         self._set("marker", size / 2 + 0.1, parts, marker_id, tangential=True)
 
-    # ---------------------------------------------------- inside the area (issue 7)
+    # ---------------------------------------------------- inside the area
 
     def pole(self) -> None:
         paint = self.rng.choice([(0.92, 0.92, 0.90), (0.35, 0.36, 0.38), (0.18, 0.32, 0.20), (0.55, 0.40, 0.25)])
