@@ -157,15 +157,16 @@ def check_positive_int(value: Any, name: str, *, allow_none: bool = False) -> in
     return int(value)
 
 
-def check_n_outputs(n: Any, available: int | None, *, what: str = "the network", unit: str = "outputs",
+def check_n_outputs(n: Any, available: int | None, *, what: str = "the network has", unit: str = "outputs",
                     name: str = "n_outputs") -> int | None:
     """``n`` (slow features to use) as a positive int, or None; ValueError
-    when ``available`` (what ``what`` has) is known and smaller."""
+    when ``available`` is known and smaller (``what``: "the network has",
+    "the features have")."""
     if n is None:
         return None
     n = check_int(n, name)
     if available is not None and n > available:
-        raise ValueError(f"{name}={n}, but {what} has only {available} {unit}")
+        raise ValueError(f"{name}={n}, but {what} only {available} {unit}")
     return n
 
 

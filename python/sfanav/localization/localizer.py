@@ -269,7 +269,7 @@ class Localizer:
         F = as_matrix(features, "features")
         Y = as_matrix(xy, "xy", n_cols=2)
         check_same_length(F, Y, "features", "xy")
-        check_n_outputs(n, F.shape[1], what="the features", unit="columns")
+        check_n_outputs(n, F.shape[1], what="the features have", unit="columns")
         self.selection_ = None
         if isinstance(self.readout, dict):
             spec = dict(self.readout)
