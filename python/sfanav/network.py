@@ -37,23 +37,6 @@ PRESETS = ("thesis-5.1", "thesis-5.2", "thesis-5.3", "sfanav-default")
 DEFAULT_CACHE_LIMIT = 1e9  # bytes of cached lower-layer fields under cache="auto"
 
 
-def _field_bytes(spec: dict[str, Any], layer: int, step: int, period: int) -> int:
-    """Bytes of one image's periodic field of ``layer`` (0-based) on the
-    fast path (``spec`` as from :func:`resolve_config`): RF rows x distinct
-    column offsets x outputs x value size."""
-    mw, mh = spec["width"], spec["height"]
-    t = 1
-    for lspec in spec["layers"][: layer + 1]:
-        (rw, rh), (sw, sh) = lspec["rf"], lspec["stride"]
-        n_w, n_h = (mw - rw) // sw + 1, (mh - rh) // sh + 1
-        mw, mh = n_w, n_h
-        t *= sw
-    views = -(-period // step)
-    offsets = {(k * step + j * t) % period for k in range(views) for j in range(n_w)}
-    size = 4 if spec.get("mixed_precision", False) else 8
-    return n_h * len(offsets) * spec["layers"][layer]["n_out"] * size
-
-
 @dataclass(frozen=True)
 class Rotation:
     """Simulated rotation (thesis 3.4.1): every training panorama is shown as
@@ -101,27 +84,6 @@ def _check_pairs(pairs: Any, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray
     if not np.all(np.isfinite(w) & (w >= 0)):
         raise ValueError("pairs: weights must be finite and >= 0")
     return a.astype(np.int64), b.astype(np.int64), w, sh.astype(np.int64)
-
-
-def _feed_pairs(trainer: Any, net: Any, images: np.ndarray,
-                pairs: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray], chunk: int) -> None:
-    """Feeds spatial pairs in chunks of at most ``2 * chunk`` distinct
-    images (sorted by the first index, so neighbours in the run share
-    chunks); the second image of a shifted pair is rolled left by its
-    shift."""
-    a, b, w, sh = pairs
-    order = np.lexsort((b, np.minimum(a, b)))
-    for i in range(0, len(order), chunk):
-        sel = order[i : i + chunk]
-        ids, inv = np.unique(np.concatenate([a[sel], b[sel]]), return_inverse=True)
-        batch = _as_batch(images[ids])
-        ia, ib = inv[: len(sel)], inv[len(sel) :].copy()
-        rolled = [np.roll(batch[j], -int(s), axis=1) for j, s in zip(ib, sh[sel]) if s % batch.shape[2]]
-        if rolled:
-            k = np.flatnonzero(sh[sel] % batch.shape[2])
-            ib[k] = len(batch) + np.arange(len(k))
-            batch = np.ascontiguousarray(np.concatenate([batch, np.stack(rolled)]))
-        trainer.feed_pairs(net, batch, ia.tolist(), ib.tolist(), w[sel].tolist())
 
 
 def spatial_pairs(xy: Any, radius: float, k: int | None = None, *, min_gap: int = 0, weights: str = "uniform",
@@ -379,6 +341,31 @@ def _progress(enabled: bool, total: int | None, desc: str):
         return None
     return tqdm(total=total, desc=desc, unit="img", leave=False)
 
+class _PassBars:
+    """A tqdm bar per training pass, driven by the core's progress reports
+    (``_core.Network.fit``)."""
+
+    def __init__(self) -> None:
+        self.bar: Any = None
+        self.done = 0
+
+    def __call__(self, event: str, layer: int, n_layers: int, pass_: int, n_passes: int, done: int,
+                 total: int | None, cached: bool) -> None:
+        if event == "start":
+            self.close()
+            desc = f"layer {layer + 1}/{n_layers} pass {pass_ + 1}/{n_passes}" + (" (cached)" if cached else "")
+            self.bar, self.done = _progress(True, total, desc), 0
+        elif self.bar is not None:
+            self.bar.update(done - self.done)
+            self.done = done
+            if event == "finish":
+                self.close()
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.close()
+            self.bar = None
+
 
 # --------------------------------------------------------------------- Network
 
@@ -632,53 +619,34 @@ class Network:
         if not (cache_limit >= 0):
             raise ValueError(f"cache_limit must be a non-negative number of bytes, got {cache_limit!r}")
         total = len(images) if hasattr(images, "__len__") and not callable(images) else None
+
+        def checked() -> Iterable[np.ndarray]:
+            for batch in batches():
+                batch = _as_batch(batch)
+                self._check_images(batch, period, training=True)
+                yield batch
+
+        core_pairs: tuple[Any, ...] | None = None
+        gather: Callable[[list[int]], np.ndarray] | None = None
+        if pairs is not None:
+            arr = images
+            core_pairs = (*(x.tolist() for x in pairs[:3]), pairs[3].tolist() if shifted else None)
+
+            def gather(ids: list[int]) -> np.ndarray:
+                return _as_batch(arr[ids])
+        bars = _PassBars() if progress else None
         net = _core.Network(self.config_)
-        trainer = _core.LayerTrainer(net, 0, rotation.step, period, fast, False, transition_weight)
-        n_images = 0
-        self.cache_plan_ = []
-        for layer in range(net.n_layers):
-            if layer > 0:
-                # Whether the next trainer keeps the fields of this layer.
-                field = _field_bytes(self.config_, layer - 1, rotation.step, period)
-                keep = cache if isinstance(cache, bool) else field * n_images <= cache_limit
-                self.cache_plan_.append((layer + 1, bool(keep), field * n_images))
-                if layer == 1:
-                    trainer = trainer.next_layer(net)
-                    trainer.set_caching(keep)
-                else:
-                    trainer.set_caching(keep)
-                    trainer = trainer.next_layer(net)
-            n_passes = trainer.n_passes(net)
-            for p in range(n_passes):
-                desc = f"layer {layer + 1}/{net.n_layers} pass {p + 1}/{n_passes}"
-                if trainer.has_cache:
-                    bar = _progress(progress, trainer.cached_images, desc + " (cached)")
-                    trainer.feed_cached(net)
-                    if pairs is not None and layer + 1 in pair_layers:
-                        trainer.feed_pairs_cached(net, *(x.tolist() for x in pairs[:3]),
-                                                  pairs[3].tolist() if shifted else None)
-                    if bar is not None:
-                        bar.update(trainer.cached_images)
-                        bar.close()
-                else:
-                    bar = _progress(progress, total, desc)
-                    try:
-                        seen = 0
-                        for batch in batches():
-                            batch = _as_batch(batch)
-                            self._check_images(batch, period, training=True)
-                            trainer.feed(net, batch)
-                            seen += len(batch)
-                            if bar is not None:
-                                bar.update(len(batch))
-                    finally:
-                        if bar is not None:
-                            bar.close()
-                    if pairs is not None and layer + 1 in pair_layers:
-                        _feed_pairs(trainer, net, images, pairs, batch_size)
-                    if layer == 0 and p == 0:
-                        n_images = seen
-                trainer.end_pass(net)
+        try:
+            plan = net.fit(
+                checked, rotation.step, period, fast=fast, cache=None if cache == "auto" else bool(cache),
+                cache_limit=float(cache_limit), transition_weight=transition_weight, pairs=core_pairs,
+                pair_layers=None if pairs is None else sorted(pair_layers), gather=gather, pair_chunk=batch_size,
+                total=total, progress=bars,
+            )
+        finally:
+            if bars is not None:
+                bars.close()
+        self.cache_plan_ = [(layer, bool(kept), int(size)) for layer, kept, size in plan]
         self._net = net
         self._period = period
         self._step = rotation.step
