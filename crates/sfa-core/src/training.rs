@@ -213,7 +213,7 @@ pub fn fit<S: BatchSource + ?Sized>(
         return Err(SfaError::InvalidArgument("every layer of this network is already trained".into()));
     }
     if let CachePolicy::Auto(limit) = opts.cache {
-        if !(limit >= 0.0) {
+        if limit.is_nan() || limit < 0.0 {
             return Err(SfaError::InvalidArgument(format!(
                 "cache_limit must be a non-negative number of bytes, got {limit}"
             )));

@@ -28,6 +28,9 @@ fn network_images<'py>(obj: &Bound<'py, PyAny>, net: &Network, what: &str) -> Py
     Ok(images)
 }
 
+/// Spatial pairs as Python passes them: (a, b, weights, shifts or None).
+type PairsArg = (Vec<usize>, Vec<usize>, Vec<f64>, Option<Vec<usize>>);
+
 fn zip_pairs(a: Vec<usize>, b: Vec<usize>, w: Vec<f64>) -> PyResult<Vec<(usize, usize, f64)>> {
     if a.len() != b.len() || a.len() != w.len() {
         return Err(PyValueError::new_err(format!(
@@ -245,7 +248,7 @@ impl PyNetwork {
         cache: Option<bool>,
         cache_limit: f64,
         transition_weight: f64,
-        pairs: Option<(Vec<usize>, Vec<usize>, Vec<f64>, Option<Vec<usize>>)>,
+        pairs: Option<PairsArg>,
         pair_layers: Option<Vec<usize>>,
         gather: Option<Py<PyAny>>,
         pair_chunk: usize,
