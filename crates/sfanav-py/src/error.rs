@@ -50,9 +50,8 @@ impl Raised {
         match r {
             Ok(r) => r,
             Err(e) => {
-                let msg = format!("a Python callback raised {e}");
                 self.0.get_or_insert(e);
-                Err(SfaError::Interrupted(msg))
+                Err(SfaError::Interrupted("a Python callback raised an exception".into()))
             }
         }
     }
