@@ -1,7 +1,7 @@
 """Type stubs of the Rust extension ``sfanav._core`` (hand-written; checked
 against the module by tests/test_stubs.py)."""
 
-from collections.abc import Sequence
+from collections.abc import Callable, Iterable, Sequence
 from typing import Any
 
 import numpy as np
@@ -100,46 +100,24 @@ class Network:
     def delta_values(self) -> npt.NDArray[np.float64]: ...
     def transform(self, images: ImageArray) -> npt.NDArray[np.float64]: ...
     def transform_rotations(self, images: ImageArray, step: int) -> npt.NDArray[np.float64]: ...
+    def fit(
+        self,
+        batches: Callable[[], Iterable[ImageArray]],
+        step: int,
+        period: int,
+        *,
+        fast: bool = True,
+        cache: bool | None = None,
+        cache_limit: float = 1e9,
+        transition_weight: float = 1.0,
+        pairs: tuple[Sequence[int], Sequence[int], Sequence[float], Sequence[int] | None] | None = None,
+        pair_layers: Sequence[int] | None = None,
+        gather: Callable[[list[int]], ImageArray] | None = None,
+        pair_chunk: int = 16,
+        total: int | None = None,
+        progress: Callable[[str, int, int, int, int, int, int | None, bool], object] | None = None,
+    ) -> list[tuple[int, bool, int]]: ...
     def node_states(self, with_statistics: bool = False) -> list[list[dict[str, Any]]]: ...
     @staticmethod
     def from_states(spec: dict[str, Any], states: list[list[dict[str, Any]]], trained: int) -> Network: ...
     def copy(self) -> Network: ...
-
-class LayerTrainer:
-    def __init__(
-        self,
-        network: Network,
-        layer: int,
-        step: int,
-        period: int,
-        fast: bool = True,
-        cache: bool = False,
-        transition_weight: float = 1.0,
-    ) -> None: ...
-    def n_passes(self, network: Network) -> int: ...
-    @property
-    def transition_weight(self) -> float: ...
-    @property
-    def fast(self) -> bool: ...
-    def set_caching(self, on: bool) -> None: ...
-    @property
-    def has_cache(self) -> bool: ...
-    @property
-    def cache_bytes(self) -> int: ...
-    @property
-    def cached_images(self) -> int: ...
-    def feed(self, network: Network, images: ImageArray) -> None: ...
-    def feed_cached(self, network: Network) -> None: ...
-    def feed_pairs(
-        self, network: Network, images: ImageArray, a: Sequence[int], b: Sequence[int], weights: Sequence[float]
-    ) -> None: ...
-    def feed_pairs_cached(
-        self,
-        network: Network,
-        a: Sequence[int],
-        b: Sequence[int],
-        weights: Sequence[float],
-        shifts: Sequence[int] | None = None,
-    ) -> None: ...
-    def end_pass(self, network: Network) -> bool: ...
-    def next_layer(self, network: Network) -> LayerTrainer: ...

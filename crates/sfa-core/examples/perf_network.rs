@@ -1,10 +1,12 @@
 //! Per-layer, per-pass training time of the Table 5.2 network (600x60 RGB,
 //! step 5, whole panorama, field cache on) on synthetic smooth panoramas:
 //! `cargo run --release --example perf_network -p sfa-core -- [N] [mixed|double]`.
-//! Prints ms per image for every pass, the basis of the profile in
-//! docs/benchmarks.md.
+//! Prints ms per image for every pass (reading the images or the field
+//! cache), and for the solve and cache advance after it, the basis of the
+//! profile in docs/benchmarks.md. Trains with `sfa_core::fit`, timed through
+//! its progress reports.
 use sfa_core::network::{LayerSpec, Network, NetworkSpec};
-use sfa_core::rotation::{LayerTrainer, Path, Rotation};
+use sfa_core::{fit, CachePolicy, FitOptions, InMemory, Progress, ProgressEvent, Rotation, SfaError};
 use std::time::Instant;
 
 fn images(n: usize, h: usize, w: usize, c: usize) -> Vec<f64> {
@@ -59,52 +61,48 @@ fn main() {
     let imgs = images(n, 60, 600, 3);
     let rot = Rotation { step: 5, period: 600 };
     let batch = 16;
-    let mut tr = LayerTrainer::new(&net, 0, rot, Path::Fast).unwrap();
-    tr.set_caching(true);
+    let mut opts = FitOptions::new(rot);
+    opts.cache = CachePolicy::Always;
     // PERF_PASSES=k stops after k passes (for profiling one pass).
     let max_passes: usize = std::env::var("PERF_PASSES").ok().and_then(|v| v.parse().ok()).unwrap_or(usize::MAX);
     let mut passes_done = 0;
     let total = Instant::now();
     let total_cpu = cpu_seconds();
-    loop {
-        let mut pass = 0;
-        loop {
-            let t = Instant::now();
-            let c = cpu_seconds();
-            if tr.has_cache() {
-                tr.feed_cached(&mut net).unwrap();
-            } else {
-                for chunk in imgs.chunks(batch * 60 * 600 * 3) {
-                    tr.feed(&mut net, chunk, chunk.len() / (60 * 600 * 3)).unwrap();
+    // (wall, cpu) at the last pass start and end.
+    let mut started = (Instant::now(), 0.0);
+    let mut ended: Option<(Instant, f64)> = None;
+    let mut report = |p: &Progress| {
+        match p.event {
+            ProgressEvent::Start => {
+                if let Some((t, _)) = ended {
+                    println!("  solve / advance cache: {:.0} ms", 1e3 * t.elapsed().as_secs_f64());
+                }
+                started = (Instant::now(), cpu_seconds());
+            }
+            ProgressEvent::Finish => {
+                let (feed, feed_cpu) = (started.0.elapsed().as_secs_f64(), cpu_seconds() - started.1);
+                println!(
+                    "layer {} pass {}{}: {:.1} ms/image, cpu {:.1} ms/image",
+                    p.layer + 1,
+                    p.pass + 1,
+                    if p.cached { " (cached)" } else { "" },
+                    1e3 * feed / n as f64,
+                    1e3 * feed_cpu / n as f64,
+                );
+                ended = Some((Instant::now(), cpu_seconds()));
+                passes_done += 1;
+                if passes_done == max_passes {
+                    return Err(SfaError::Interrupted("PERF_PASSES reached".into()));
                 }
             }
-            let feed = t.elapsed().as_secs_f64();
-            let feed_cpu = cpu_seconds() - c;
-            let t = Instant::now();
-            let done = tr.end_pass(&mut net).unwrap();
-            println!(
-                "layer {} pass {}: {:.1} ms/image, cpu {:.1} ms/image (+ solve {:.0} ms)",
-                net.n_trained() + usize::from(!done),
-                pass + 1,
-                1e3 * feed / n as f64,
-                1e3 * feed_cpu / n as f64,
-                1e3 * t.elapsed().as_secs_f64()
-            );
-            pass += 1;
-            passes_done += 1;
-            if passes_done == max_passes {
-                return;
-            }
-            if done {
-                break;
-            }
+            ProgressEvent::Advance => {}
         }
-        if net.is_trained() {
-            break;
-        }
-        let t = Instant::now();
-        tr = tr.next_layer(&net).unwrap();
-        println!("  advance cache: {:.1} ms/image", 1e3 * t.elapsed().as_secs_f64() / n as f64);
+        Ok(())
+    };
+    match fit(&mut net, &mut InMemory::new(&imgs, n, batch).unwrap(), &opts, &mut report) {
+        Ok(_) => {}
+        Err(SfaError::Interrupted(_)) => return,
+        Err(e) => panic!("{e}"),
     }
     println!(
         "total {:.1} ms/image, cpu {:.1} ms/image ({} images, {}, {} threads)",

@@ -40,6 +40,9 @@ pub enum SfaError {
     InvalidState(String),
     /// A linear-algebra routine failed to converge.
     Numerical(String),
+    /// A caller's callback (an image source, a progress report) failed;
+    /// the caller holds the reason.
+    Interrupted(String),
 }
 
 impl fmt::Display for SfaError {
@@ -71,6 +74,7 @@ impl fmt::Display for SfaError {
             SfaError::NotFitted(m) => write!(f, "not fitted: {m}"),
             SfaError::InvalidState(m) => write!(f, "invalid model state: {m}"),
             SfaError::Numerical(m) => write!(f, "numerical failure: {m}"),
+            SfaError::Interrupted(m) => write!(f, "interrupted: {m}"),
         }
     }
 }

@@ -8,18 +8,26 @@
 //! * [`solve`]: the generalized symmetric eigenproblem by whitening with a
 //!   relative tolerance and reported rank deficit;
 //! * [`node`]: the SFA node (linear or polynomial, with the thesis's optional
-//!   linear reduction stage) and beta values.
+//!   linear reduction stage) and beta values;
+//! * [`network`]: the hierarchical receptive-field network;
+//! * [`rotation`], [`trainer`], [`training`]: training under simulated
+//!   rotation, one layer at a time ([`LayerTrainer`]) and the whole loop
+//!   ([`fit`]) over images of any [`Pixel`] type from a [`BatchSource`].
 //!
 //! Nothing here depends on Python; the `sfanav-py` crate binds it.
 
 pub mod error;
+mod fields;
 pub mod expansion;
 pub mod network;
 pub mod node;
 mod periodic;
+pub mod pixel;
 pub mod rotation;
 pub mod solve;
 pub mod stats;
+pub mod trainer;
+pub mod training;
 pub mod view;
 
 pub use error::{Result, SfaError};
@@ -29,4 +37,10 @@ pub use solve::{solve, solve_up_to, GeneralizedEigen, DEFAULT_TOL};
 pub use stats::{Accumulator, AccumulatorState};
 pub use view::{Sample, View};
 pub use network::{LayerGeometry, LayerSpec, Network, NetworkSpec};
-pub use rotation::{LayerTrainer, Path, Rotation};
+pub use pixel::{Batch, Pixel, Pixels};
+pub use rotation::{transform_rotations, Rotation, TrainingPath};
+pub use trainer::LayerTrainer;
+pub use training::{
+    fit, BatchSource, CacheDecision, CachePolicy, FitOptions, FitReport, InMemory, Progress, ProgressEvent,
+    SpatialPairs,
+};

@@ -12,11 +12,13 @@
 //! RFs of every position and used at all of them; otherwise every position
 //! has its own node.
 //!
-//! Training under simulated rotation lives in [`crate::rotation`].
+//! Training under simulated rotation lives in [`crate::rotation`],
+//! [`crate::trainer`] and [`crate::training`].
 
 use crate::error::{Result, SfaError};
 use crate::expansion::expanded_dim;
 use crate::node::{NodeConfig, NodeState, SfaNode};
+use crate::pixel::Pixel;
 use crate::view::View;
 use rayon::prelude::*;
 
@@ -100,7 +102,7 @@ impl LayerGeometry {
 
 /// Checks a batch of `n` images of `size` values each: the length, and that
 /// every value is finite (the error names the image, numbered from `first`).
-pub(crate) fn check_images(images: &[f64], n: usize, size: usize, first: usize) -> Result<()> {
+pub(crate) fn check_images<P: Pixel>(images: &[P], n: usize, size: usize, first: usize) -> Result<()> {
     if images.len() != n * size {
         return Err(SfaError::ShapeMismatch {
             what: "image data length (n x height x width x channels)",
@@ -108,7 +110,10 @@ pub(crate) fn check_images(images: &[f64], n: usize, size: usize, first: usize) 
             got: images.len(),
         });
     }
-    if let Some(i) = images.iter().position(|v| !v.is_finite()) {
+    if P::ALWAYS_FINITE {
+        return Ok(());
+    }
+    if let Some(i) = images.iter().position(|v| !v.to_f64().is_finite()) {
         return Err(SfaError::InvalidArgument(format!(
             "image {} contains NaN or infinity",
             first + i / size.max(1)
@@ -325,8 +330,8 @@ impl Network {
 
     /// Runs layers `0..upto` on one image (`height x width x channels`,
     /// row-major) and returns the field layer `upto` sees.
-    pub fn field_below(&self, image: &[f64], upto: usize) -> Result<Vec<f64>> {
-        let mut f = image.to_vec();
+    pub fn field_below<P: Pixel>(&self, image: &[P], upto: usize) -> Result<Vec<f64>> {
+        let mut f: Vec<f64> = image.iter().map(|v| v.to_f64()).collect();
         for l in 0..upto {
             f = self.apply_layer(l, &f)?;
         }
@@ -334,8 +339,9 @@ impl Network {
     }
 
     /// Slow features of a batch of images (`n x height x width x channels`,
-    /// row-major, values as `f64`): `n x n_outputs`, in parallel over images.
-    pub fn transform(&self, images: &[f64], n: usize) -> Result<Vec<f64>> {
+    /// row-major, `u8`, `f32` or `f64` pixels): `n x n_outputs`, in parallel
+    /// over images (each converted to `f64` on its own).
+    pub fn transform<P: Pixel>(&self, images: &[P], n: usize) -> Result<Vec<f64>> {
         if !self.is_trained() {
             return Err(SfaError::NotFitted(format!(
                 "only {} of {} layers are trained",

@@ -1,8 +1,39 @@
 mod common;
 use common::Rng;
-use sfa_core::rotation::{train, train_weighted, transform_rotations};
-use sfa_core::LayerTrainer;
-use sfa_core::{LayerSpec, Network, NetworkSpec, Path, Rotation};
+use sfa_core::{
+    fit, transform_rotations, CachePolicy, FitOptions, FitReport, InMemory, LayerSpec, LayerTrainer, Network,
+    NetworkSpec, Progress, ProgressEvent, Result, Rotation, SfaError, SpatialPairs, TrainingPath,
+};
+
+/// Options of [`fit`] for a path, cache on or off and a transition weight.
+fn options(rot: Rotation, path: TrainingPath, cache: bool, tw: f64) -> FitOptions {
+    let mut opts = FitOptions::new(rot);
+    opts.path = path;
+    opts.cache = if cache { CachePolicy::Always } else { CachePolicy::Never };
+    opts.transition_weight = tw;
+    opts
+}
+
+/// Trains every layer with [`fit`] on in-memory images (batches of 16).
+fn fit_with(net: &mut Network, imgs: &[f64], n: usize, opts: &FitOptions) -> Result<FitReport> {
+    fit(net, &mut InMemory::new(imgs, n, 16)?, opts, &mut |_| Ok(()))
+}
+
+fn train(net: &mut Network, rot: Rotation, imgs: &[f64], n: usize, path: TrainingPath, cache: bool) -> Result<FitReport> {
+    fit_with(net, imgs, n, &options(rot, path, cache, 1.0))
+}
+
+fn train_weighted(
+    net: &mut Network,
+    rot: Rotation,
+    imgs: &[f64],
+    n: usize,
+    path: TrainingPath,
+    cache: bool,
+    tw: f64,
+) -> Result<FitReport> {
+    fit_with(net, imgs, n, &options(rot, path, cache, tw))
+}
 
 /// `n` periodic random images `h x w x c` with smooth structure.
 fn images(n: usize, h: usize, w: usize, c: usize, seed: u64) -> Vec<f64> {
@@ -58,8 +89,8 @@ fn compare_weighted(v: usize, stride: usize, step: usize, c: usize, cache: bool,
     let rot = Rotation { step, period: w };
     let mut naive = Network::new(spec(v, c, stride, true)).unwrap();
     let mut fast = naive.clone();
-    train_weighted(&mut naive, rot, &imgs, n, Path::Naive, false, tw).unwrap();
-    train_weighted(&mut fast, rot, &imgs, n, Path::Fast, cache, tw).unwrap();
+    train_weighted(&mut naive, rot, &imgs, n, TrainingPath::Naive, false, tw).unwrap();
+    train_weighted(&mut fast, rot, &imgs, n, TrainingPath::Fast, cache, tw).unwrap();
     for l in 0..2 {
         let (a, b) = (naive.nodes(l)[0].state(true), fast.nodes(l)[0].state(true));
         for (sa, sb) in a.stages.iter().zip(&b.stages) {
@@ -120,7 +151,7 @@ fn fast_equals_naive_transition_weights() {
 /// the given transition weight and lag products on or off.
 fn first_pair_weight(spec: NetworkSpec, rot: Rotation, imgs: &[f64], n: usize, tw: f64, lag: bool) -> f64 {
     let mut net = Network::new(spec).unwrap();
-    let mut tr = LayerTrainer::new(&net, 0, rot, Path::Fast).unwrap();
+    let mut tr = LayerTrainer::new(&net, 0, rot, TrainingPath::Fast).unwrap();
     tr.set_lag_products(lag);
     tr.set_transition_weight(tw).unwrap();
     tr.feed(&mut net, imgs, n).unwrap();
@@ -152,7 +183,7 @@ fn transition_weight_scales_the_between_image_pairs() {
     }
     let net = Network::new(s).unwrap();
     for v in [-1.0, f64::NAN, f64::INFINITY] {
-        let mut t = LayerTrainer::new(&net, 0, rot, Path::Fast).unwrap();
+        let mut t = LayerTrainer::new(&net, 0, rot, TrainingPath::Fast).unwrap();
         let e = t.set_transition_weight(v).unwrap_err().to_string();
         assert!(e.contains("transition_weight"), "{e}");
     }
@@ -168,9 +199,9 @@ fn individual_nodes_transition_weight() {
     let rot = Rotation { step: 2, period: w };
     let base = Network::new(spec(24, 1, 4, false)).unwrap();
     let (mut seq, mut graph, mut heavy) = (base.clone(), base.clone(), base);
-    train(&mut seq, rot, &imgs, n, Path::Fast, false).unwrap();
-    train_weighted(&mut graph, rot, &imgs, n, Path::Fast, false, 1.0 + 1e-15).unwrap();
-    train_weighted(&mut heavy, rot, &imgs, n, Path::Fast, false, 50.0).unwrap();
+    train(&mut seq, rot, &imgs, n, TrainingPath::Fast, false).unwrap();
+    train_weighted(&mut graph, rot, &imgs, n, TrainingPath::Fast, false, 1.0 + 1e-15).unwrap();
+    train_weighted(&mut heavy, rot, &imgs, n, TrainingPath::Fast, false, 50.0).unwrap();
     for l in 0..2 {
         for (i, (a, b)) in seq.nodes(l).iter().zip(graph.nodes(l)).enumerate() {
             let (sa, sb) = (a.state(false), b.state(false));
@@ -210,8 +241,8 @@ fn cached_fields_advance_through_three_layers() {
     let rot = Rotation { step: 3, period: w };
     let mut naive = Network::new(spec).unwrap();
     let mut cached = naive.clone();
-    train(&mut naive, rot, &imgs, n, Path::Naive, false).unwrap();
-    train(&mut cached, rot, &imgs, n, Path::Fast, true).unwrap();
+    train(&mut naive, rot, &imgs, n, TrainingPath::Naive, false).unwrap();
+    train(&mut cached, rot, &imgs, n, TrainingPath::Fast, true).unwrap();
     for l in 0..3 {
         let (a, b) = (naive.nodes(l)[0].state(false), cached.nodes(l)[0].state(false));
         let (pa, pb) = (a.stages[1].solution.as_ref().unwrap(), b.stages[1].solution.as_ref().unwrap());
@@ -225,7 +256,7 @@ fn individual_nodes_train() {
     let imgs = images(n, 6, w, 1, 3);
     let mut net = Network::new(spec(24, 1, 4, false)).unwrap();
     assert_eq!(net.nodes(0).len(), 6 * 2);
-    train(&mut net, Rotation { step: 2, period: w }, &imgs, n, Path::Fast, true).unwrap();
+    train(&mut net, Rotation { step: 2, period: w }, &imgs, n, TrainingPath::Fast, true).unwrap();
     let y = net.transform(&imgs[..6 * w], 1).unwrap();
     assert_eq!(y.len(), 3);
     assert!(y.iter().all(|v| v.is_finite()));
@@ -267,27 +298,9 @@ fn wide_spec(v: usize, c: usize, stride: usize, mixed: bool) -> NetworkSpec {
 /// Trains every layer on the fast path with the field cache; returns how
 /// many images the first layer took through lag products.
 fn train_fast(net: &mut Network, rot: Rotation, imgs: &[f64], n: usize, lag: bool) -> usize {
-    let mut tr = LayerTrainer::new(net, 0, rot, Path::Fast).unwrap();
-    tr.set_caching(true);
-    tr.set_lag_products(lag);
-    let mut lag_images = 0;
-    loop {
-        loop {
-            if tr.has_cache() {
-                tr.feed_cached(net).unwrap();
-            } else {
-                tr.feed(net, imgs, n).unwrap();
-            }
-            if tr.end_pass(net).unwrap() {
-                break;
-            }
-        }
-        lag_images += tr.lag_product_images();
-        if net.is_trained() {
-            return lag_images;
-        }
-        tr = tr.next_layer(net).unwrap();
-    }
+    let mut opts = options(rot, TrainingPath::Fast, true, 1.0);
+    opts.lag_products = lag;
+    fit_with(net, imgs, n, &opts).unwrap().lag_product_images
 }
 
 fn projections(net: &Network) -> Vec<(Vec<f64>, Vec<f64>)> {
@@ -314,7 +327,7 @@ fn lag_product_statistics_equal_naive() {
         let rot = Rotation { step, period: w };
         let mut naive = Network::new(wide_spec(v, c, stride, false)).unwrap();
         let mut fast = naive.clone();
-        train(&mut naive, rot, &imgs, n, Path::Naive, false).unwrap();
+        train(&mut naive, rot, &imgs, n, TrainingPath::Naive, false).unwrap();
         let used = train_fast(&mut fast, rot, &imgs, n, true);
         assert_eq!(used, n, "lag products not used for v={v} stride={stride} step={step}");
         for (i, ((pa, da), (pb, db))) in projections(&naive).iter().zip(&projections(&fast)).enumerate() {
@@ -343,27 +356,10 @@ fn lag_products_mixed_precision_close_to_plain() {
 
 /// Trains every layer with the spatial pairs fed in every pass (from the
 /// cache when the pass reads it).
-fn train_pairs(net: &mut Network, rot: Rotation, imgs: &[f64], n: usize, path: Path, cache: bool, pairs: &[(usize, usize, f64)]) {
-    let mut tr = LayerTrainer::new(net, 0, rot, path).unwrap();
-    tr.set_caching(cache);
-    loop {
-        loop {
-            if tr.has_cache() {
-                tr.feed_cached(net).unwrap();
-                tr.feed_pairs_cached(net, pairs).unwrap();
-            } else {
-                tr.feed(net, imgs, n).unwrap();
-                tr.feed_pairs(net, imgs, n, pairs).unwrap();
-            }
-            if tr.end_pass(net).unwrap() {
-                break;
-            }
-        }
-        if net.is_trained() {
-            return;
-        }
-        tr = tr.next_layer(net).unwrap();
-    }
+fn train_pairs(net: &mut Network, rot: Rotation, imgs: &[f64], n: usize, path: TrainingPath, cache: bool, pairs: &[(usize, usize, f64)]) {
+    let mut opts = options(rot, path, cache, 1.0);
+    opts.pairs = Some(SpatialPairs { pairs: pairs.to_vec(), shifts: None, layers: (0..net.n_layers()).collect(), chunk: 7 });
+    fit_with(net, imgs, n, &opts).unwrap();
 }
 
 fn some_pairs(n: usize) -> Vec<(usize, usize, f64)> {
@@ -383,9 +379,9 @@ fn spatial_pairs_fast_equals_naive() {
         let pairs = some_pairs(n);
         let base = Network::new(spec(v, c, stride, true)).unwrap();
         let (mut naive, mut fast, mut plain) = (base.clone(), base.clone(), base);
-        train_pairs(&mut naive, rot, &imgs, n, Path::Naive, false, &pairs);
-        train_pairs(&mut fast, rot, &imgs, n, Path::Fast, cache, &pairs);
-        train(&mut plain, rot, &imgs, n, Path::Fast, cache).unwrap();
+        train_pairs(&mut naive, rot, &imgs, n, TrainingPath::Naive, false, &pairs);
+        train_pairs(&mut fast, rot, &imgs, n, TrainingPath::Fast, cache, &pairs);
+        train(&mut plain, rot, &imgs, n, TrainingPath::Fast, cache).unwrap();
         for (i, ((pa, da), (pb, db))) in projections(&naive).iter().zip(&projections(&fast)).enumerate() {
             let e = max_rel(pa, pb);
             assert!(e < 1e-9, "v={v} step={step} c={c} stage {i}: projection differs by {e}");
@@ -408,8 +404,8 @@ fn spatial_pairs_cached_equal_streamed() {
     let pairs = some_pairs(n);
     let mut streamed = Network::new(s).unwrap();
     let mut cached = streamed.clone();
-    train_pairs(&mut streamed, rot, &imgs, n, Path::Fast, false, &pairs);
-    train_pairs(&mut cached, rot, &imgs, n, Path::Fast, true, &pairs);
+    train_pairs(&mut streamed, rot, &imgs, n, TrainingPath::Fast, false, &pairs);
+    train_pairs(&mut cached, rot, &imgs, n, TrainingPath::Fast, true, &pairs);
     for (i, ((pa, _), (pb, _))) in projections(&streamed).iter().zip(&projections(&cached)).enumerate() {
         assert!(max_rel(pa, pb) < 1e-9, "stage {i}");
     }
@@ -424,7 +420,7 @@ fn spatial_pairs_weight_and_validation() {
     let rot = Rotation { step: 5, period: w };
     let mut net = Network::new(spec(24, 1, 2, true)).unwrap();
     let np = net.geometry()[0].n_positions();
-    let mut tr = LayerTrainer::new(&net, 0, rot, Path::Fast).unwrap();
+    let mut tr = LayerTrainer::new(&net, 0, rot, TrainingPath::Fast).unwrap();
     tr.feed(&mut net, &imgs, n).unwrap();
     let before = net.nodes(0)[0].statistics().unwrap().clone();
     tr.feed_pairs(&mut net, &imgs, n, &[(0, 4, 2.5), (3, 9, 1.0), (5, 5, 3.0)]).unwrap();
@@ -448,8 +444,8 @@ fn spatial_pairs_individual_nodes() {
     let rot = Rotation { step: 2, period: w };
     let mut net = Network::new(spec(24, 1, 4, false)).unwrap();
     let mut plain = net.clone();
-    train_pairs(&mut net, rot, &imgs, n, Path::Fast, false, &some_pairs(n));
-    train(&mut plain, rot, &imgs, n, Path::Fast, false).unwrap();
+    train_pairs(&mut net, rot, &imgs, n, TrainingPath::Fast, false, &some_pairs(n));
+    train(&mut plain, rot, &imgs, n, TrainingPath::Fast, false).unwrap();
     let d = |x: &Network| x.nodes(1)[0].state(false).stages[1].solution.clone().unwrap().delta;
     assert!(d(&net).iter().all(|v| v.is_finite()));
     assert!(max_rel(&d(&net), &d(&plain)) > 1e-3);
@@ -481,7 +477,7 @@ fn shifted_pairs_from_cache_equal_rolled_images() {
     let base = Network::new(s).unwrap();
     let (mut reference, mut cached) = (base.clone(), base);
     // Reference: no cache, pairs from the extended images in every pass.
-    let mut tr = LayerTrainer::new(&reference, 0, rot, Path::Fast).unwrap();
+    let mut tr = LayerTrainer::new(&reference, 0, rot, TrainingPath::Fast).unwrap();
     loop {
         loop {
             tr.feed(&mut reference, &imgs, n).unwrap();
@@ -495,33 +491,99 @@ fn shifted_pairs_from_cache_equal_rolled_images() {
         }
         tr = tr.next_layer(&reference).unwrap();
     }
-    // Cached: streamed passes as the reference, cached passes shift offsets.
-    let mut tr = LayerTrainer::new(&cached, 0, rot, Path::Fast).unwrap();
-    tr.set_caching(true);
+    // fit: streamed passes roll image b of each pair, cached passes read
+    // the cached fields at shifted offsets.
+    let mut opts = options(rot, TrainingPath::Fast, true, 1.0);
+    opts.pairs = Some(SpatialPairs { pairs: pairs.clone(), shifts: Some(shifts.clone()), layers: vec![0, 1, 2], chunk: 5 });
     let mut cached_passes = 0;
-    loop {
-        loop {
-            if tr.has_cache() {
-                tr.feed_cached(&mut cached).unwrap();
-                tr.feed_pairs_cached_shifted(&mut cached, &pairs, Some(&shifts)).unwrap();
-                cached_passes += 1;
-            } else {
-                tr.feed(&mut cached, &imgs, n).unwrap();
-                tr.feed_pairs(&mut cached, &ext, m, &ref_pairs).unwrap();
-            }
-            if tr.end_pass(&mut cached).unwrap() {
-                break;
-            }
-        }
-        if cached.is_trained() {
-            break;
-        }
-        tr = tr.next_layer(&cached).unwrap();
-    }
+    let mut count = |p: &Progress| {
+        cached_passes += usize::from(p.cached && p.event == ProgressEvent::Start);
+        Ok(())
+    };
+    fit(&mut cached, &mut InMemory::new(&imgs, n, 7).unwrap(), &opts, &mut count).unwrap();
     assert!(cached_passes >= 3);
     for (i, ((pa, _), (pb, _))) in projections(&reference).iter().zip(&projections(&cached)).enumerate() {
         assert!(max_rel(pa, pb) < 1e-9, "stage {i}: {}", max_rel(pa, pb));
     }
+    let mut tr = LayerTrainer::new(&cached, 0, rot, TrainingPath::Fast).unwrap();
     let e = tr.feed_pairs_cached_shifted(&mut cached, &pairs[..1], Some(&[4])).unwrap_err().to_string();
     assert!(e.contains("multiple of the step"), "{e}");
+}
+
+/// u8 images train to the same weights as the same values in f64, and
+/// transform to the same features.
+#[test]
+fn u8_pixels_equal_f64() {
+    let (w, n) = (24, 20);
+    let imgs = images(n, 6, w, 3, 5);
+    let bytes: Vec<u8> = imgs.iter().map(|v| ((v + 2.5) * 50.0).clamp(0.0, 255.0) as u8).collect();
+    let as_f64: Vec<f64> = bytes.iter().map(|&v| v as f64).collect();
+    let rot = Rotation { step: 2, period: w };
+    let base = Network::new(spec(24, 3, 2, true)).unwrap();
+    let (mut a, mut b) = (base.clone(), base);
+    let opts = options(rot, TrainingPath::Fast, true, 1.0);
+    fit(&mut a, &mut InMemory::new(&bytes, n, 6).unwrap(), &opts, &mut |_| Ok(())).unwrap();
+    fit(&mut b, &mut InMemory::new(&as_f64, n, 6).unwrap(), &opts, &mut |_| Ok(())).unwrap();
+    assert_eq!(projections(&a), projections(&b));
+    assert_eq!(a.transform(&bytes, n).unwrap(), b.transform(&as_f64, n).unwrap());
+    let (ra, rb) = (transform_rotations(&a, rot, &bytes, n).unwrap(), transform_rotations(&b, rot, &as_f64, n).unwrap());
+    assert_eq!(ra, rb);
+}
+
+/// fit reports every pass (start, batches, finish), decides the cache per
+/// layer by its byte limit, and ends at the first error of the progress
+/// callback or of the image source.
+#[test]
+fn fit_progress_cache_plan_and_errors() {
+    let (w, n) = (24, 20);
+    let imgs = images(n, 6, w, 1, 9);
+    let rot = Rotation { step: 3, period: w };
+    let base = Network::new(three_layer_spec()).unwrap();
+    let mut events = Vec::new();
+    let mut net = base.clone();
+    let mut opts = FitOptions::new(rot);
+    // Layer 2's input fields (layer 1: 2 x 24 offsets x 4 outputs x 8 bytes
+    // x 20 images) exceed the limit; layer 3's do not.
+    opts.cache = CachePolicy::Auto(15_000.0);
+    let report = fit(&mut net, &mut InMemory::new(&imgs, n, 8).unwrap(), &opts, &mut |p: &Progress| {
+        events.push(*p);
+        Ok(())
+    })
+    .unwrap();
+    assert!(net.is_trained());
+    assert_eq!(report.n_images, n);
+    let plan: Vec<(usize, bool)> = report.cache_plan.iter().map(|d| (d.layer, d.kept)).collect();
+    assert_eq!(plan, vec![(1, false), (2, true)], "{:?}", report.cache_plan);
+    assert_eq!(report.cache_plan[0].bytes, 2 * 24 * 4 * 8 * n);
+    let starts: Vec<(usize, usize, bool)> =
+        events.iter().filter(|p| p.event == ProgressEvent::Start).map(|p| (p.layer, p.pass, p.cached)).collect();
+    assert_eq!(starts, vec![(0, 0, false), (0, 1, false), (1, 0, false), (1, 1, false), (2, 0, false), (2, 1, true)]);
+    let first_pass: Vec<usize> = events.iter().take_while(|p| p.pass == 0 && p.layer == 0).map(|p| p.done).collect();
+    assert_eq!(first_pass, vec![0, 8, 16, 20, 20]);
+    assert!(events.iter().all(|p| p.total == Some(n) && p.n_layers == 3 && p.n_passes == 2));
+    // The same weights as a run that caches nothing.
+    let mut plain = base.clone();
+    fit_with(&mut plain, &imgs, n, &options(rot, TrainingPath::Fast, false, 1.0)).unwrap();
+    for (x, y) in projections(&net).iter().zip(&projections(&plain)) {
+        assert!(max_rel(&x.0, &y.0) < 1e-9);
+    }
+    // A failing progress callback ends training with its error.
+    let mut net = base.clone();
+    let e = fit(&mut net, &mut InMemory::new(&imgs, n, 8).unwrap(), &opts, &mut |p: &Progress| {
+        if p.layer == 1 { Err(SfaError::Interrupted("stop".into())) } else { Ok(()) }
+    })
+    .unwrap_err();
+    assert_eq!(e, SfaError::Interrupted("stop".into()));
+    assert_eq!(net.n_trained(), 1);
+    // So does a failing source; a trained network is refused.
+    struct Failing;
+    impl sfa_core::BatchSource for Failing {
+        fn for_each_batch(&mut self, _: &mut (dyn FnMut(sfa_core::Batch<'_>) -> Result<()> + Send)) -> Result<()> {
+            Err(SfaError::Interrupted("no images".into()))
+        }
+    }
+    let mut net = base.clone();
+    assert!(matches!(fit(&mut net, &mut Failing, &opts, &mut |_| Ok(())), Err(SfaError::Interrupted(_))));
+    let mut done = plain.clone();
+    assert!(fit_with(&mut done, &imgs, n, &opts).unwrap_err().to_string().contains("already trained"));
 }

@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 
 from .. import _core
-from .._checks import NotFittedError
+from .._checks import NotFittedError, as_image_batch, is_single_image
 from .modelfile import register_loader, save_model
 
 if sys.version_info >= (3, 11):
@@ -38,23 +38,6 @@ PRESETS = ("thesis-5.1", "thesis-5.2", "thesis-5.3", "sfanav-default")
 
 
 DEFAULT_CACHE_LIMIT = 1e9  # bytes of cached lower-layer fields under cache="auto"
-
-
-def _field_bytes(spec: dict[str, Any], layer: int, step: int, period: int) -> int:
-    """Bytes of one image's periodic field of ``layer`` (0-based) on the
-    fast path (``spec`` as from :func:`resolve_config`): RF rows x distinct
-    column offsets x outputs x value size."""
-    mw, mh = spec["width"], spec["height"]
-    t = 1
-    for lspec in spec["layers"][: layer + 1]:
-        (rw, rh), (sw, sh) = lspec["rf"], lspec["stride"]
-        n_w, n_h = (mw - rw) // sw + 1, (mh - rh) // sh + 1
-        mw, mh = n_w, n_h
-        t *= sw
-    views = -(-period // step)
-    offsets = {(k * step + j * t) % period for k in range(views) for j in range(n_w)}
-    size = 4 if spec.get("mixed_precision", False) else 8
-    return n_h * len(offsets) * spec["layers"][layer]["n_out"] * size
 
 
 @dataclass(frozen=True)
@@ -104,27 +87,6 @@ def _check_pairs(pairs: Any, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray
     if not np.all(np.isfinite(w) & (w >= 0)):
         raise ValueError("pairs: weights must be finite and >= 0")
     return a.astype(np.int64), b.astype(np.int64), w, sh.astype(np.int64)
-
-
-def _feed_pairs(trainer: Any, net: Any, images: np.ndarray,
-                pairs: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray], chunk: int) -> None:
-    """Feeds spatial pairs in chunks of at most ``2 * chunk`` distinct
-    images (sorted by the first index, so neighbours in the run share
-    chunks); the second image of a shifted pair is rolled left by its
-    shift."""
-    a, b, w, sh = pairs
-    order = np.lexsort((b, np.minimum(a, b)))
-    for i in range(0, len(order), chunk):
-        sel = order[i : i + chunk]
-        ids, inv = np.unique(np.concatenate([a[sel], b[sel]]), return_inverse=True)
-        batch = _as_batch(images[ids])
-        ia, ib = inv[: len(sel)], inv[len(sel) :].copy()
-        rolled = [np.roll(batch[j], -int(s), axis=1) for j, s in zip(ib, sh[sel]) if s % batch.shape[2]]
-        if rolled:
-            k = np.flatnonzero(sh[sel] % batch.shape[2])
-            ib[k] = len(batch) + np.arange(len(k))
-            batch = np.ascontiguousarray(np.concatenate([batch, np.stack(rolled)]))
-        trainer.feed_pairs(net, batch, ia.tolist(), ib.tolist(), w[sel].tolist())
 
 
 def spatial_pairs(xy: Any, radius: float, k: int | None = None, *, min_gap: int = 0, weights: str = "uniform",
@@ -355,16 +317,33 @@ def _rebatch(it: Iterable[Any], batch_size: int) -> Iterable[np.ndarray]:
         yield np.stack(buf)
 
 
-def _as_batch(batch: Any) -> np.ndarray:
-    a = np.asarray(batch)
-    if a.dtype not in (np.float32, np.float64, np.uint8):
-        if a.dtype.kind in "biuf":
-            a = a.astype(np.float64)
-        else:
-            raise TypeError(f"images must be numeric, got dtype {a.dtype}")
-    if a.ndim not in (3, 4):
-        raise ValueError(f"images must have shape (N, H, W) or (N, H, W, C), got {a.shape}")
-    return np.ascontiguousarray(a)
+class _PassBars:
+    """A tqdm bar per training pass, driven by the core's progress reports
+    (``_core.Network.fit``)."""
+
+    def __init__(self) -> None:
+        self.bar: Any = None
+        self.done = 0
+
+    def __call__(self, event: str, layer: int, n_layers: int, pass_: int, n_passes: int, done: int,
+                 total: int | None, cached: bool) -> None:
+        if event == "start":
+            self.close()
+            desc = f"layer {layer + 1}/{n_layers} pass {pass_ + 1}/{n_passes}" + (" (cached)" if cached else "")
+            self.bar, self.done = progress_bar(True, total, desc), 0
+        elif self.bar is not None:
+            self.bar.update(done - self.done)
+            self.done = done
+            if event == "finish":
+                self.close()
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.close()
+            self.bar = None
+
+
+# --------------------------------------------------------------------- Network
 
 
 class Network:
@@ -542,13 +521,14 @@ class Network:
             nor, above the first layer, the images. True caches every
             layer's input field; False streams the images in every pass and
             recomputes the lower layers; "auto" caches a layer's input field
-            when all images' fields fit in ``cache_limit`` bytes (for Table
-            5.2 the fields take, per image, 259 / 101 / 38 KB in mixed
-            precision for layers 2 / 3 / 4, twice that in double).
+            when all images' fields fit in ``cache_limit`` bytes (the sizes
+            per layer: docs/benchmarks.md). ``cache_plan_`` records the
+            choice per layer.
         cache_limit : float, default 1e9
             Byte budget of the field cache under ``cache="auto"``.
         batch_size : int
-            Images converted and processed per Rust call.
+            Images per batch read from ``images`` (and per chunk of spatial
+            pairs).
         progress : bool
             A progress bar per layer and pass (tqdm).
         transition_weight : float, default 1.0
@@ -556,12 +536,11 @@ class Network:
             images (per RF series, one pair: the last rotated view of image
             ``i`` and the first view of image ``i + 1``) relative to the
             pairs between consecutive views *within* an image (weight 1).
-            1.0 is the thesis (one sequence of all views). A panorama gives
-            ``K = ceil(W / step)`` views, so per image there are ``K - 1``
-            rotation pairs and one spatial pair; weights of order ``K`` give
-            the change of position a say comparable to the rotation in the
-            slowness objective (graph-based SFA, Escalante & Wiskott 2013).
-            Finite and >= 0 (0: every image its own sequence).
+            1.0 is the thesis (one sequence of all views). Finite and >= 0
+            (0: every image its own sequence). Weights of order ``K =
+            ceil(W / step)`` (the views per image) give the change of
+            position a say comparable to the rotation (graph-based SFA,
+            Escalante & Wiskott 2013).
         pairs : (idx_a, idx_b, weights[, shifts]) or None
             Spatial pairs of training images (graph-based SFA): each
             ``(a, b, w)`` adds, at *every* simulated rotation and RF
@@ -575,15 +554,20 @@ class Network:
             opposite headings reward). Shifts that are multiples of
             ``rotation.step`` (with the step dividing the width) are read
             from the field cache; other shifts force ``cache=False``
-            (slower: ~4x the thesis training time instead of ~1.3x).
+            (slower; docs/gardens.md measures both).
             ``pair_layers`` (1-based layer numbers, default all) restricts
             the pairs to some layers (e.g. the top). Indices
             into ``images`` (which must then be an array or an ``.npy``
             path); weights finite and >= 0. Build them from positions with
             :func:`spatial_pairs` (supervised: the regression needs the
             positions anyway). Each pair costs about one image's share of
-            the derivative statistics, so ``len(pairs) ~ 2 N`` roughly
-            triples the training time.
+            the derivative statistics.
+
+        Returns ``self``. Raises ValueError / TypeError for images of the
+        wrong shape, size or dtype, a window that does not match the
+        network, or bad pairs; an exception raised while ``images`` is read
+        comes out unchanged. The training loop runs in the Rust core
+        (``sfa_core::training::fit``) with the GIL released.
         """
         rotation = rotation or Rotation()
         transition_weight = _check_transition_weight(transition_weight)
@@ -604,7 +588,7 @@ class Network:
                 raise ValueError(f"pair_layers must name layers 1..{n_layers}, got {sorted(pair_layers)}")
             # cached passes read shifted pairs at shifted offsets of the cached fields: exact
             # when every shift is a multiple of the step and the step divides the period
-            period0 = _as_batch(images[:1]).shape[2]
+            period0 = as_image_batch(images[:1]).shape[2]
             pairs = (*pairs[:3], pairs[3] % period0)
             shifted = bool(np.any(pairs[3]))
             if shifted and (period0 % rotation.step or np.any(pairs[3] % rotation.step)):
@@ -614,7 +598,7 @@ class Network:
         first = next(iter(batches()), None)
         if first is None:
             raise ValueError("no training images")
-        first = _as_batch(first)
+        first = as_image_batch(first)
         period = first.shape[2]
         self._check_images(first, period, training=True)
         expect_v = round(rotation.window * period)
@@ -628,53 +612,34 @@ class Network:
         if not (cache_limit >= 0):
             raise ValueError(f"cache_limit must be a non-negative number of bytes, got {cache_limit!r}")
         total = len(images) if hasattr(images, "__len__") and not callable(images) else None
+
+        def checked() -> Iterable[np.ndarray]:
+            for batch in batches():
+                batch = as_image_batch(batch)
+                self._check_images(batch, period, training=True)
+                yield batch
+
+        core_pairs: tuple[Any, ...] | None = None
+        gather: Callable[[list[int]], np.ndarray] | None = None
+        if pairs is not None:
+            arr = images
+            core_pairs = (*(x.tolist() for x in pairs[:3]), pairs[3].tolist() if shifted else None)
+
+            def gather(ids: list[int]) -> np.ndarray:
+                return as_image_batch(arr[ids])
+        bars = _PassBars() if progress else None
         net = _core.Network(self.config_)
-        trainer = _core.LayerTrainer(net, 0, rotation.step, period, fast, False, transition_weight)
-        n_images = 0
-        self.cache_plan_ = []
-        for layer in range(net.n_layers):
-            if layer > 0:
-                # Whether the next trainer keeps the fields of this layer.
-                field = _field_bytes(self.config_, layer - 1, rotation.step, period)
-                keep = cache if isinstance(cache, bool) else field * n_images <= cache_limit
-                self.cache_plan_.append((layer + 1, bool(keep), field * n_images))
-                if layer == 1:
-                    trainer = trainer.next_layer(net)
-                    trainer.set_caching(keep)
-                else:
-                    trainer.set_caching(keep)
-                    trainer = trainer.next_layer(net)
-            n_passes = trainer.n_passes(net)
-            for p in range(n_passes):
-                desc = f"layer {layer + 1}/{net.n_layers} pass {p + 1}/{n_passes}"
-                if trainer.has_cache:
-                    bar = progress_bar(progress, trainer.cached_images, desc + " (cached)")
-                    trainer.feed_cached(net)
-                    if pairs is not None and layer + 1 in pair_layers:
-                        trainer.feed_pairs_cached(net, *(x.tolist() for x in pairs[:3]),
-                                                  pairs[3].tolist() if shifted else None)
-                    if bar is not None:
-                        bar.update(trainer.cached_images)
-                        bar.close()
-                else:
-                    bar = progress_bar(progress, total, desc)
-                    try:
-                        seen = 0
-                        for batch in batches():
-                            batch = _as_batch(batch)
-                            self._check_images(batch, period, training=True)
-                            trainer.feed(net, batch)
-                            seen += len(batch)
-                            if bar is not None:
-                                bar.update(len(batch))
-                    finally:
-                        if bar is not None:
-                            bar.close()
-                    if pairs is not None and layer + 1 in pair_layers:
-                        _feed_pairs(trainer, net, images, pairs, batch_size)
-                    if layer == 0 and p == 0:
-                        n_images = seen
-                trainer.end_pass(net)
+        try:
+            plan = net.fit(
+                checked, rotation.step, period, fast=fast, cache=None if cache == "auto" else bool(cache),
+                cache_limit=float(cache_limit), transition_weight=transition_weight, pairs=core_pairs,
+                pair_layers=None if pairs is None else sorted(pair_layers), gather=gather, pair_chunk=batch_size,
+                total=total, progress=bars,
+            )
+        finally:
+            if bars is not None:
+                bars.close()
+        self.cache_plan_ = [(layer, bool(kept), int(size)) for layer, kept, size in plan]
         self._net = net
         self._period = period
         self._step = rotation.step
@@ -707,10 +672,10 @@ class Network:
         self._check_trained()
         a = np.asarray(images)
         # One image is (H, W) for a gray network and (H, W, 3) for RGB.
-        single = a.ndim == (2 if self.input_shape[2] == 1 else 3)
+        single = is_single_image(a, self.input_shape[2])
         if single:
             a = a[None]
-        a = _as_batch(a)
+        a = as_image_batch(a)
         self._check_images(a, None)
         if rotations:
             s = step or getattr(self, "_step", 5)

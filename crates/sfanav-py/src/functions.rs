@@ -1,0 +1,55 @@
+//! Module-level functions: polynomial expansion and the generalized
+//! eigenproblem.
+
+use crate::arrays::{arr2, mat_to_py, out2, vec1, view_of, Arr};
+use crate::error::{run, to_py};
+use pyo3::prelude::*;
+
+/// expand(x, degree) -> ndarray: all monomials of degree 1..=degree.
+#[pyfunction]
+pub(crate) fn expand<'py>(py: Python<'py>, x: &Bound<'py, PyAny>, degree: usize) -> PyResult<Bound<'py, PyAny>> {
+    let a = arr2(x, "X")?;
+    match &a {
+        Arr::F64(a) => {
+            let v = view_of(a);
+            let e = sfa_core::Expansion::new(v.ncols(), degree).map_err(to_py)?;
+            let od = e.out_dim();
+            let n = v.nrows();
+            let out = run(py, || e.expand(v))?;
+            out2(py, out, n, od)
+        }
+        Arr::F32(a) => {
+            let v = view_of(a);
+            let e = sfa_core::Expansion::new(v.ncols(), degree).map_err(to_py)?;
+            let od = e.out_dim();
+            let n = v.nrows();
+            let out = run(py, || e.expand(v))?;
+            out2(py, out, n, od)
+        }
+    }
+}
+
+/// expanded_dim(n_features, degree) -> int: C(n + d, d) - 1.
+#[pyfunction]
+pub(crate) fn expanded_dim(n_features: usize, degree: usize) -> PyResult<usize> {
+    sfa_core::expanded_dim(n_features, degree).map_err(to_py)
+}
+
+/// solve_generalized(a, b, n, tol) -> (values, vectors, rank, dropped)
+#[pyfunction]
+pub(crate) fn solve_generalized<'py>(
+    py: Python<'py>,
+    a: numpy::PyReadonlyArray2<'py, f64>,
+    b: numpy::PyReadonlyArray2<'py, f64>,
+    n: usize,
+    tol: f64,
+) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyAny>, usize, Bound<'py, PyAny>)> {
+    let to_mat = |x: &numpy::PyReadonlyArray2<'py, f64>| {
+        let v = x.as_array();
+        faer::Mat::from_fn(v.nrows(), v.ncols(), |i, j| v[(i, j)])
+    };
+    let (am, bm) = (to_mat(&a), to_mat(&b));
+    let g = run(py, || sfa_core::solve(am.as_ref(), bm.as_ref(), n, tol))?;
+    Ok((vec1(py, g.values), mat_to_py(py, g.vectors)?, g.rank, vec1(py, g.dropped)))
+}
+
