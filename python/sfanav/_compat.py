@@ -51,7 +51,7 @@ MOVED: dict[str, dict[str, tuple[str, str]]] = {
         'UNITS': ('sfanav.data.schema', 'UNITS'),
         'VERSION': ('sfanav.data.schema', 'VERSION'),
         'read_image': ('sfanav.data.images', 'read_image'),
-        'write_dataset': ('sfanav.data.writer', 'write_dataset'),
+        'write_dataset': ('sfanav.data.dataset', 'write_dataset'),
         'write_image': ('sfanav.data.images', 'write_image'),
     },
     'sfanav.defaults': {
@@ -61,7 +61,7 @@ MOVED: dict[str, dict[str, tuple[str, str]]] = {
         'READOUT': ('sfanav.localization.recipe', 'READOUT'),
         'default_network': ('sfanav.localization.recipe', 'default_network'),
         'default_rows': ('sfanav.localization.recipe', 'default_rows'),
-        'train_default': ('sfanav.localization.recipe', 'train_default'),
+        'train_default': ('sfanav.localization.training', 'train_default'),
     },
     'sfanav.demo': {
         'DEMO_NETWORK': ('sfanav.app.demo', 'DEMO_NETWORK'),

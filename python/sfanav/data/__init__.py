@@ -15,7 +15,7 @@ network sees them.
 
 from __future__ import annotations
 
-from .dataset import Dataset
+from .dataset import Dataset, write_dataset
 from .image_rows import ImageRows, band_rows, horizon_band, row_normalize
 from .images import read_image, write_image
 from .preprocessing import Preprocessing, Preprocessor
@@ -31,6 +31,6 @@ from .schema import (
 )
 from .sources import ImageSource, load_run, open_images
 from .unwarp import Mirror, Unwarper, estimate_mirror
-from .writer import DatasetWriter, write_dataset
+from .writer import DatasetWriter
 
 __all__ = ["COLUMNS", "Dataset", "DatasetWriter", "FLOAT_COLUMNS", "FORMAT", "INSECT_ENTRIES", "INSECT_METADATA", "ImageRows", "ImageSource", "Mirror", "Preprocessing", "Preprocessor", "STR_COLUMNS", "UNITS", "Unwarper", "VERSION", "band_rows", "estimate_mirror", "horizon_band", "load_run", "open_images", "read_image", "row_normalize", "write_dataset", "write_image"]

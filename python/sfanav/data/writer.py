@@ -9,17 +9,13 @@ import json
 import math
 import os
 import shutil
-from collections.abc import Iterable, Sequence
+from collections.abc import Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
-from .._progress import progress_bar
 from .images import write_image
-
-if TYPE_CHECKING:
-    from .dataset import Dataset
 from .schema import COLUMNS, FORMAT, UNITS, VERSION, check_name, format_float
 
 
@@ -169,67 +165,3 @@ def _triple(v: Any, what: str, *, allow_nan: bool = False) -> tuple[float, float
     if not all(math.isfinite(e) or (allow_nan and math.isnan(e)) for e in (a, b, c)):
         raise ValueError(f"{what} must be finite, got {v!r}")
     return a, b, c
-
-
-def write_dataset(path: str | os.PathLike, images: Iterable[np.ndarray], poses: Any, *,
-                  timestamps: Any = None, odometry: Any = None, cameras: Any = None, conditions: Any = None,
-                  runs: Any = None, frames: Any = None, extra: dict[str, Any] | None = None,
-                  metadata: dict[str, Any] | None = None, overwrite: bool = False,
-                  progress: bool = False) -> "Dataset":
-    """Writes an sfanav dataset from arrays and returns it opened.
-
-    Parameters
-    ----------
-    images : iterable of uint8 (H, W[, 3]) arrays, N of them (read lazily)
-    poses : (N, 3) x m, y m, heading rad
-    timestamps : (N,) s, default 0, 1, 2, ...
-    odometry : (N, 3), optional
-    cameras, conditions, runs : (N,) names or one name; default ``center``,
-        ``default``, ``0``
-    frames : (N,) int, default 0 .. N-1
-    extra : dict of name to (N,) extra columns
-    """
-    P = np.asarray(poses, float)
-    if P.ndim != 2 or P.shape[1] != 3:
-        raise ValueError(f"poses must have shape (N, 3), got {P.shape}")
-    n = len(P)
-
-    def col(v: Any, default: Any, name: str) -> np.ndarray:
-        if v is None:
-            return np.full(n, default, dtype=object)
-        if isinstance(v, str):
-            return np.full(n, v, dtype=object)
-        a = np.asarray(v)
-        if a.shape[:1] != (n,):
-            raise ValueError(f"{name} must have {n} entries (one per pose), got shape {a.shape}")
-        return a
-
-    ts = col(timestamps, None, "timestamps") if timestamps is not None else np.arange(n, dtype=float)
-    O = None if odometry is None else np.asarray(odometry, float)
-    if O is not None and O.shape != (n, 3):
-        raise ValueError(f"odometry must have shape ({n}, 3), got {O.shape}")
-    cams = col(cameras, "center", "cameras")
-    conds = col(conditions, "default", "conditions")
-    rns = col(runs, "0", "runs")
-    frs = col(frames, None, "frames") if frames is not None else np.arange(n)
-    ext = {k: col(v, None, f"extra column {k!r}") for k, v in (extra or {}).items()}
-    it = iter(images)
-    with DatasetWriter(path, metadata, overwrite=overwrite, extra_columns=list(ext)) as w:
-        bar = progress_bar(progress, n, "writing")
-        for i in range(n):
-            try:
-                img = next(it)
-            except StopIteration:
-                raise ValueError(f"got {i} images for {n} poses") from None
-            w.add(img, frame=int(frs[i]), timestamp=float(ts[i]), pose=P[i],
-                  odometry=None if O is None else O[i], camera=str(cams[i]), condition=str(conds[i]),
-                  run=str(rns[i]), **{k: v[i] for k, v in ext.items()})
-            if bar is not None:
-                bar.update(1)
-        if bar is not None:
-            bar.close()
-        if next(it, None) is not None:
-            raise ValueError(f"got more images than the {n} poses")
-    from .dataset import Dataset  # the reader imports this module
-
-    return Dataset(path)

@@ -235,7 +235,8 @@ def _default_row(X_tr: np.ndarray, xy_tr: np.ndarray, X_te: np.ndarray, xy_te: n
     exactly as ``sfanav train`` does without a preset, measured as the
     other rows; and the same network and rows without rotation pooling
     (the pooling's ablation row)."""
-    from ..localization.recipe import default_network, train_default
+    from ..localization.recipe import default_network
+    from ..localization.training import train_default
 
     shape = X_tr.shape[1:] if X_tr.ndim == 4 else X_tr.shape[1:] + (1,)
     net = Network(tiny_config(shape[1], shape[0], shape[2], out=12)) if quick else default_network()

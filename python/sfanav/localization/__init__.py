@@ -63,11 +63,13 @@ from .recipe import (
     BAND,
     NETWORK_PRESET,
     READOUT,
+    Recipe,
     default_network,
     default_rows,
-    train_default,
+    pooling_for,
+    recipe_for,
 )
 from .report import write_report
-from .training import fit_localizer
+from .training import fit_localizer, train_default
 
-__all__ = ["AUTO_BLOCK", "AUTO_FOLDS", "AUTO_TOLERANCE", "Alignment", "BAND", "ErrorCurve", "Evaluation", "FourierSignature", "GPReadout", "KNNReadout", "KernelRidgeReadout", "Localizer", "NETWORK_PRESET", "PerfectMemory", "QuadraticRegression", "RANDOM_SPLITS", "READOUT", "ReadoutSelection", "RegressionResult", "TEST_RUN", "align", "auto_candidates", "benchmark", "block_folds", "default_candidates", "default_network", "default_rows", "error_vs_n", "euclidean_errors", "evaluate", "evaluate_random_splits", "evaluate_test_run", "evaluation_rows", "fit_localizer", "localization_metrics", "mae", "mae_percent", "make_readout", "med", "plot_error_vs_n", "plot_firing_maps", "plot_trajectory", "pooled_transform", "pooling_step", "readout_from_state", "readout_state", "select_auto_readout", "select_readout", "train_default", "write_report"]
+__all__ = ["AUTO_BLOCK", "AUTO_FOLDS", "AUTO_TOLERANCE", "Alignment", "BAND", "ErrorCurve", "Evaluation", "FourierSignature", "GPReadout", "KNNReadout", "KernelRidgeReadout", "Localizer", "NETWORK_PRESET", "PerfectMemory", "QuadraticRegression", "RANDOM_SPLITS", "READOUT", "Recipe", "ReadoutSelection", "RegressionResult", "TEST_RUN", "align", "auto_candidates", "benchmark", "block_folds", "default_candidates", "default_network", "default_rows", "error_vs_n", "euclidean_errors", "evaluate", "evaluate_random_splits", "evaluate_test_run", "evaluation_rows", "fit_localizer", "localization_metrics", "mae", "mae_percent", "make_readout", "med", "plot_error_vs_n", "plot_firing_maps", "plot_trajectory", "pooled_transform", "pooling_step", "readout_from_state", "pooling_for", "readout_state", "recipe_for", "select_auto_readout", "select_readout", "train_default", "write_report"]

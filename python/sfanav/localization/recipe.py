@@ -9,8 +9,9 @@ and rotation pooling.
   readout on the slowest outputs, and rotation pooling over 8 rotations.
 
 :func:`recipe_for` resolves a recipe from what the user named (a preset, a
-config file, explicit overrides); ``sfanav train``, :func:`train_default`
-and :class:`sfanav.Localizer` all ask it. Why these choices: docs/gardens.md."""
+config file, explicit overrides); ``sfanav train``,
+:func:`sfanav.localization.train_default` and :class:`sfanav.Localizer` all
+ask it. Why these choices: docs/gardens.md."""
 
 from __future__ import annotations
 
@@ -18,11 +19,9 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
-import numpy as np
-
 from .._checks import check_int
 from ..data.image_rows import ImageRows
-from ..sfa.network import Network, Rotation
+from ..sfa.network import Network
 
 NETWORK_PRESET = "sfanav-default"
 """The network preset of the sfanav default."""
@@ -131,22 +130,3 @@ def default_rows(camera_elevation: Sequence[float] = CAMERA_ELEVATION) -> ImageR
     equiangular rows, row 0 highest)."""
     lo, hi = (float(v) for v in camera_elevation)
     return ImageRows(band=BAND, camera_elevation=(lo, hi))
-
-
-def train_default(images: Any, xy: Any, *, camera_elevation: Sequence[float] = CAMERA_ELEVATION,
-                  network: Network | None = None, rotation: Rotation | None = None, progress: bool = False,
-                  info: dict[str, Any] | None = None) -> Any:
-    """Trains the sfanav default on a training run: ``images`` (N, 40, 350, 3)
-    uint8 or float in temporal order, ``xy`` (N, 2) metres. Returns a fitted
-    :class:`sfanav.Localizer` (network, rows and readout; ``save`` it as one
-    model file). ``network`` replaces the default network (e.g. for other
-    image sizes)."""
-    from .training import (
-        fit_localizer,  # training imports the localizer, which imports this module
-    )
-
-    recipe = recipe_for()
-    net = network if network is not None else default_network()
-    return fit_localizer(net, np.asarray(images), np.asarray(xy, float), rotation=rotation or Rotation(5, 1.0),
-                         readout=recipe.readout, rows=recipe.image_rows(camera_elevation), progress=progress,
-                         info={**recipe.info(), **(info or {})})

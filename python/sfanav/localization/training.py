@@ -6,6 +6,7 @@ that carries how it was made."""
 from __future__ import annotations
 
 import time
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -14,6 +15,7 @@ from .._checks import check_n_outputs
 from ..data.preprocessing import Preprocessing
 from ..sfa.network import Network, Rotation
 from .localizer import Localizer
+from .recipe import CAMERA_ELEVATION, default_network, recipe_for
 
 
 def fit_localizer(
@@ -66,3 +68,22 @@ def fit_localizer(
     if loc.selection_ is not None:
         loc.info["readout_rule"] = loc.selection_.rule
     return loc
+
+
+def train_default(images: Any, xy: Any, *, camera_elevation: Sequence[float] = CAMERA_ELEVATION,
+                  network: Network | None = None, rotation: Rotation | None = None, progress: bool = False,
+                  info: dict[str, Any] | None = None) -> Any:
+    """Trains the sfanav default on a training run: ``images`` (N, 40, 350, 3)
+    uint8 or float in temporal order, ``xy`` (N, 2) metres. Returns a fitted
+    :class:`sfanav.Localizer` (network, rows and readout; ``save`` it as one
+    model file). ``network`` replaces the default network (e.g. for other
+    image sizes)."""
+    from .training import (
+        fit_localizer,  # training imports the localizer, which imports this module
+    )
+
+    recipe = recipe_for()
+    net = network if network is not None else default_network()
+    return fit_localizer(net, np.asarray(images), np.asarray(xy, float), rotation=rotation or Rotation(5, 1.0),
+                         readout=recipe.readout, rows=recipe.image_rows(camera_elevation), progress=progress,
+                         info={**recipe.info(), **(info or {})})
