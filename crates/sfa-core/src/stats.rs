@@ -231,8 +231,8 @@ type Filled = std::result::Result<(usize, usize), (usize, usize)>;
 /// part converts its rows block by block (`fill`) and multiplies them into its
 /// own moments with a sequential SYRK; parts are summed in order, so the
 /// result is deterministic for a given thread count. (Splitting the long
-/// row dimension beats splitting the small `d x d` output: measured 1.2x on
-/// 200000 x 300, `cargo run --release --example perf_stats`.)
+/// row dimension beats splitting the small `d x d` output; measured in
+/// `docs/benchmarks.md`.)
 fn parallel_moments<F>(n: usize, d: usize, kind: Kind, mixed: bool, what: &'static str, fill: F) -> Result<Moments>
 where
     F: Fn(usize, usize, &mut [f64], &mut [f64], &mut [f64], &mut [f64]) -> Filled + Sync,
@@ -391,8 +391,7 @@ impl Accumulator {
     }
 
     /// Mixed precision: outer products of each cache-sized block of rows are
-    /// formed in f32 and summed into the f64 totals (about 1.8x faster,
-    /// `cargo run --release --example perf_f32 -p sfa-core -- 432`;
+    /// formed in f32 and summed into the f64 totals (faster: `docs/benchmarks.md`;
     /// relative error of the moments about 1e-6 instead of 1e-15). Rows are
     /// still centred in f64 first. Meant for image data, which carries far
     /// fewer significant digits.
