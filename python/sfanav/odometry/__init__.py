@@ -13,7 +13,7 @@
 
 from __future__ import annotations
 
-from .dead_reckoning import arc_factor, dead_reckon, increments, wrap_angle
+from .dead_reckoning import arc_factor, as_poses, dead_reckon, increments, wrap_angle
 from .ekf import GridSearchResult, OdometryEKF, ctrv_jacobians, ctrv_motion, grid_search
 from .lines import Lines, lines_from_labels, lines_from_odometry, segment_lines
 from .loop_closures import LoopClosures, find_loop_closures, interleave
@@ -22,4 +22,4 @@ from .metric_learning import MetricLearner
 from .plots import plot_fusion, plot_metric_lines
 from .tracker import MapTracker
 
-__all__ = ["DEFAULT_ODOMETRY_NOISE", "GridSearchResult", "Lines", "LoopClosures", "MapTracker", "MetricLearner", "OdometryEKF", "arc_factor", "ctrv_jacobians", "ctrv_motion", "dead_reckon", "find_loop_closures", "grid_search", "increments", "interleave", "lines_from_labels", "lines_from_odometry", "metric_cost", "odometry_variances", "plot_fusion", "plot_metric_lines", "segment_lines", "wrap_angle"]
+__all__ = ["DEFAULT_ODOMETRY_NOISE", "GridSearchResult", "Lines", "LoopClosures", "MapTracker", "MetricLearner", "OdometryEKF", "arc_factor", "as_poses", "ctrv_jacobians", "ctrv_motion", "dead_reckon", "find_loop_closures", "grid_search", "increments", "interleave", "lines_from_labels", "lines_from_odometry", "metric_cost", "odometry_variances", "plot_fusion", "plot_metric_lines", "segment_lines", "wrap_angle"]
