@@ -276,6 +276,10 @@ def _add_train(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--rotation-pooling", type=_pos_int, default=None, metavar="K",
                    help="average the network's outputs over K evenly spaced rotations of each panorama before "
                         "the readout (default: 8 with the auto readout, none with quadratic; 1 = none)")
+    p.add_argument("--supervision", choices=("auto", "ground-truth", "odometry"), default="auto",
+                   help="what the readout is fitted to: ground-truth x, y, or positions learned from the run's "
+                        "odometry along its straight lines (no ground truth: estimates in the odometry's frame); "
+                        "auto (default): ground truth if the run has it, else odometry")
     p.add_argument("--normalize", action="store_true",
                    help="normalize every image to zero mean and unit variance (thesis 5.2)")
     p.add_argument("--mirror", default=None, metavar="CX,CY,INNER,OUTER",
@@ -309,8 +313,9 @@ def _run_train(args: argparse.Namespace) -> int:
     from ..data.dataset import Dataset
     from ..data.preprocessing import Preprocessing, Preprocessor
     from ..data.sources import load_run, select_run
-    from ..localization.recipe import CAMERA_ELEVATION, recipe_for
+    from ..localization.recipe import CAMERA_ELEVATION, recipe_for, supervision_for
     from ..localization.training import fit_localizer
+    from ..odometry.self_supervision import fit_localizer_from_odometry
     from ..sfa.network import Rotation
 
     t0 = time.perf_counter()
@@ -340,15 +345,25 @@ def _run_train(args: argparse.Namespace) -> int:
          + f" as {prep.describe()} panoramas; network: {net!r}; rows: {rows.describe() if rows else 'all'}; "
          + f"readout: {recipe.readout}" + (" (the sfanav default)" if recipe.name == "sfanav default" else ""))
     preprocessor = Preprocessor(prep, mirror=args.mirror, log=_log)
+    odometry = train.odometry
+    supervision = supervision_for(args.supervision, has_ground_truth=bool(np.isfinite(train.poses[:, :2]).all()),
+                                  has_odometry=bool(np.isfinite(odometry).all()))
     images, xy = load_run(train, prep, preprocessor=preprocessor, progress=not args.no_progress)
-    if not np.isfinite(xy).all():
-        raise _UsageError(f"{args.dataset} lacks ground-truth x, y for some images: the regression needs them")
-    loc = fit_localizer(net, images, xy, rotation=Rotation(step=args.step, window=args.window),
-                        n_outputs=recipe.n_outputs, readout=recipe.readout, rows=rows, prep=prep,
-                        progress=not args.no_progress, rotation_pooling=recipe.rotation_pooling,
-                        info={"dataset": str(args.dataset), "run": run,
-                              "network": args.preset or (str(args.config) if args.config else "sfanav-default"),
-                              **recipe.info()})
+    fit_kw = dict(rotation=Rotation(step=args.step, window=args.window), n_outputs=recipe.n_outputs,
+                  readout=recipe.readout, rows=rows, prep=prep, progress=not args.no_progress,
+                  rotation_pooling=recipe.rotation_pooling,
+                  info={"dataset": str(args.dataset), "run": run,
+                        "network": args.preset or (str(args.config) if args.config else "sfanav-default"),
+                        **recipe.info()})
+    if supervision == "odometry":
+        _log("fitting the readout to positions learned from the run's odometry (no ground truth); estimates are "
+             "metres in the odometry's frame")
+        loc = fit_localizer_from_odometry(net, images, odometry, **fit_kw)
+        _log(f"metric map from {loc.info['lines']} straight lines ({loc.info['points on lines']} frames), "
+             f"rms to the odometry on the first {loc.info['rms to odometry on the first line (m)']:.3f} m")
+    else:
+        loc = fit_localizer(net, images, xy, **fit_kw)
+        loc.info["supervision"] = "ground-truth"
     if preprocessor.mirror_used is not None:
         loc.info["mirror"] = list(preprocessor.mirror_used)  # localize and evaluate reuse it
     loc.save(out)
@@ -356,7 +371,8 @@ def _run_train(args: argparse.Namespace) -> int:
     pool = f" on features pooled over {loc.rotation_pooling_} rotations" if loc.rotation_pooling_ > 1 else ""
     print(f"trained on {len(images)} images in {loc.info['fit_seconds']:.1f} s, readout {loc.describe_readout()}{pool} "
           f"in {loc.info['readout_seconds']:.1f} s (total {time.perf_counter() - t0:.1f} s); "
-          f"training-run fit: MED {m['med']:.3f} m, MAE x {m['mae_x_pct']:.2f} %, y {m['mae_y_pct']:.2f} %")
+          f"training-run fit" + (" to the learned positions" if supervision == "odometry" else "")
+          + f": MED {m['med']:.3f} m, MAE x {m['mae_x_pct']:.2f} %, y {m['mae_y_pct']:.2f} %")
     print(f"wrote {out}")
     return 0
 
@@ -430,7 +446,9 @@ def _run_localize(args: argparse.Namespace) -> int:
             w.writerow([int(fr), f"{x:.4f}", f"{y:.4f}"])
     tmp.replace(out)
     msg = f"wrote {len(xy)} positions to {out}"
-    if src.xy is not None and np.isfinite(src.xy).all():
+    if loc.info.get("supervision") == "odometry":
+        msg += " (metres in the training run's odometry frame)"
+    elif src.xy is not None and np.isfinite(src.xy).all():
         msg += f" (MED from the dataset's ground truth: {med(xy, src.xy):.3f} m)"
     print(msg)
     return 0
@@ -479,6 +497,10 @@ def _run_evaluate(args: argparse.Namespace) -> int:
     from ..localization.evaluation import evaluate, evaluation_rows, metrics_json
 
     loc = _load_localizer(args.model)
+    if loc.info.get("supervision") == "odometry":
+        raise _UsageError(f"{args.model} was trained without ground truth and reports in its training run's odometry "
+                          "frame; sfanav evaluate compares estimates with ground truth in the world frame and does "
+                          "not align frames yet")
     ds = Dataset(_existing_path(args.dataset, "dataset"))
     runs = set(ds.runs.tolist())
     run = args.run_name if args.run_name is not None else ("test" if "test" in runs else None)

@@ -12,8 +12,8 @@ The sfanav dataset is a directory::
 frame          integer frame id (the cameras of one robot pose share it)
 run            name of the run (e.g. ``train``, ``test``, ``lines``)
 timestamp      seconds
-x, y           ground-truth position of the camera that took the image (m)
-heading        ground-truth heading (rad, counter-clockwise from +x)
+x, y           ground-truth position of the camera that took the image (m); empty if unknown
+heading        ground-truth heading (rad, counter-clockwise from +x); empty if unknown
 odom_x, ...    wheel-odometry estimate of the same (m, m, rad); empty if unknown
 camera         camera name (``center``, ``left``, ``right``)
 condition      lighting or recording condition
@@ -532,11 +532,8 @@ def _read_sfanav(root: Path) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
     if int(meta.get("version", 0)) > VERSION:
         raise ValueError(f"dataset version {meta['version']} is newer than this sfanav reads ({VERSION}); upgrade sfanav")
     cols = _read_csv_columns(fpath, required=COLUMNS, floats=FLOAT_COLUMNS, ints=("frame",), what="frames table",
-                             nonempty=("timestamp", "x", "y", "heading"))
-    for name in ("x", "y", "heading"):
-        bad = np.nonzero(~np.isfinite(cols[name]))[0]
-        if len(bad):
-            raise ValueError(f"frames table {fpath} line {int(bad[0]) + 2}: ground truth {name!r} is missing")
+                             nonempty=("timestamp",))
+    # x, y, heading (ground truth) and the odometry may be empty: a robot's own runs have no ground truth
     # timestamps must not decrease within one run, camera and condition
     groups: dict[tuple[str, str, str], list[int]] = {}
     for i, key in enumerate(zip(cols["run"], cols["camera"], cols["condition"])):

@@ -37,6 +37,8 @@ THESIS_N_OUTPUTS = 8
 """Slow features the thesis's quadratic regression reads."""
 
 ROWS = ("band", "all")
+SUPERVISION = ("auto", "ground-truth", "odometry")
+"""What the readout is fitted to: ground-truth positions, or positions learned from the run's odometry."""
 
 
 @dataclass(frozen=True)
@@ -130,3 +132,26 @@ def default_rows(camera_elevation: Sequence[float] = CAMERA_ELEVATION) -> ImageR
     equiangular rows, row 0 highest)."""
     lo, hi = (float(v) for v in camera_elevation)
     return ImageRows(band=BAND, camera_elevation=(lo, hi))
+
+
+def supervision_for(requested: str | None, *, has_ground_truth: bool, has_odometry: bool) -> str:
+    """``"ground-truth"`` or ``"odometry"``: what a run's readout is fitted to.
+    ``"auto"`` (or None) takes ground truth where the run has it for every
+    frame, else its odometry. ValueError when the run lacks what is asked
+    for, naming the way out."""
+    requested = requested or "auto"
+    if requested not in SUPERVISION:
+        raise ValueError(f"supervision must be one of {SUPERVISION}, got {requested!r}")
+    if requested == "auto":
+        if has_ground_truth:
+            return "ground-truth"
+        if has_odometry:
+            return "odometry"
+        raise ValueError("the run has neither ground-truth x, y nor odometry for every frame: the readout needs one")
+    if requested == "ground-truth" and not has_ground_truth:
+        raise ValueError("the run lacks ground-truth x, y for some frames: train with supervision 'odometry' "
+                         "(positions learned from the run's odometry) instead")
+    if requested == "odometry" and not has_odometry:
+        raise ValueError("the run lacks odometry (odom_x, odom_y, odom_heading) for some frames: supervision "
+                         "'odometry' needs it for every frame")
+    return requested

@@ -6,7 +6,7 @@ that carries how it was made."""
 from __future__ import annotations
 
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
@@ -21,7 +21,7 @@ from .recipe import CAMERA_ELEVATION, default_network, recipe_for
 def fit_localizer(
     network: Network,
     images: np.ndarray,
-    xy: np.ndarray,
+    xy: np.ndarray | Callable[[np.ndarray], np.ndarray],
     *,
     rotation: Rotation | None = None,
     n_outputs: int | None = None,
@@ -34,7 +34,10 @@ def fit_localizer(
 ) -> Localizer:
     """Trains ``network`` on ``images`` (the training run, in temporal order)
     under simulated rotation and fits the readout of its slowest outputs to
-    ``xy`` (N, 2) metres.
+    ``xy`` (N, 2) metres: ground truth, or a function that learns the
+    positions from the trained network's features (N, m) -> (N, 2), as
+    :func:`sfanav.odometry.fit_localizer_from_odometry` passes (no ground
+    truth).
 
     ``readout``, ``n_outputs``: as :class:`Localizer` (default ``"auto"``:
     the sfanav default's GP, or kernel ridge / kNN by blocked CV, on this
@@ -56,7 +59,8 @@ def fit_localizer(
     check_n_outputs(n_outputs, network.n_outputs_)
     loc = Localizer(network, n_outputs=n_outputs, readout=readout, rows=rows, rotation_pooling=rotation_pooling)
     t1 = time.perf_counter()
-    loc.fit_features(loc.transform_rows(images), xy)
+    F = loc.transform_rows(images)
+    loc.fit_features(F, xy(F) if callable(xy) else xy)
     readout_s = time.perf_counter() - t1
     loc.info = dict(info or {})
     if prep is not None:

@@ -7,6 +7,8 @@
   :mod:`~sfanav.odometry.metric_cost`;
 * :class:`OdometryEKF`: fusion of position estimates with odometry (5.3.2);
 * :class:`MapTracker`: a robust rigid fit of odometry to recent estimates;
+* :func:`learn_positions`, :func:`fit_localizer_from_odometry`: training
+  without ground truth, on the positions the metric map learns;
 * :mod:`~sfanav.odometry.loop_closures`: places seen again;
 * plots of the learned lines and the fused track.
 """
@@ -20,6 +22,12 @@ from .loop_closures import LoopClosures, find_loop_closures, interleave
 from .metric_cost import DEFAULT_ODOMETRY_NOISE, metric_cost, odometry_variances
 from .metric_learning import MetricLearner
 from .plots import plot_fusion, plot_metric_lines
+from .self_supervision import (
+    LearnedPositions,
+    OdometryMapWarning,
+    fit_localizer_from_odometry,
+    learn_positions,
+)
 from .tracker import MapTracker
 
-__all__ = ["DEFAULT_ODOMETRY_NOISE", "GridSearchResult", "Lines", "LoopClosures", "MapTracker", "MetricLearner", "OdometryEKF", "arc_factor", "as_poses", "ctrv_jacobians", "ctrv_motion", "dead_reckon", "find_loop_closures", "grid_search", "increments", "interleave", "lines_from_labels", "lines_from_odometry", "metric_cost", "odometry_variances", "plot_fusion", "plot_metric_lines", "segment_lines", "wrap_angle"]
+__all__ = ["LearnedPositions", "OdometryMapWarning", "fit_localizer_from_odometry", "learn_positions", "DEFAULT_ODOMETRY_NOISE", "GridSearchResult", "Lines", "LoopClosures", "MapTracker", "MetricLearner", "OdometryEKF", "arc_factor", "as_poses", "ctrv_jacobians", "ctrv_motion", "dead_reckon", "find_loop_closures", "grid_search", "increments", "interleave", "lines_from_labels", "lines_from_odometry", "metric_cost", "odometry_variances", "plot_fusion", "plot_metric_lines", "segment_lines", "wrap_angle"]

@@ -1,0 +1,205 @@
+"""Positions without ground truth: the metric map of a training run learned
+from its own slow features and odometry (thesis 5.3.1), in the odometry's
+frame, as targets for a readout.
+
+:func:`learn_positions` splits the run's odometry into straight lines
+(:func:`~sfanav.odometry.segment_lines`), fits a :class:`MetricLearner`
+(the maximum-likelihood cost with the signed angle and transit terms when
+the lines carry them, the thesis's cost otherwise), maps every frame's
+features to a position and moves the map into the odometry frame by the
+rigid transform (no scale: odometry is in metres) that best fits the first
+line's samples to their odometry positions (where the odometry has not
+drifted yet). Nothing here reads ground truth.
+"""
+
+from __future__ import annotations
+
+import warnings
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from .._checks import as_matrix, check_int, check_same_length
+from ..localization.error_metrics import Alignment, align
+from ..localization.training import fit_localizer
+from .dead_reckoning import as_poses
+from .lines import Lines, segment_lines
+from .metric_learning import MetricLearner
+
+MIN_LINES = 3
+"""Fewest straight lines with which a run can fix a metric map."""
+
+
+class OdometryMapWarning(UserWarning):
+    """The run's odometry barely constrains the metric map (few lines, or
+    lines of nearly one direction): positions learned from it are unreliable."""
+
+
+@dataclass
+class LearnedPositions:
+    """The learned positions of a training run and how they were made.
+
+    Attributes
+    ----------
+    positions : ndarray (N, 2)
+        Every frame's position in metres, in the odometry frame (the frame of
+        the run's odometry, whose origin is its first pose's).
+    learner : MetricLearner
+        The fitted metric map (features -> positions before ``alignment``).
+    lines : Lines
+        The straight lines it was fitted on.
+    alignment : Alignment
+        The rigid transform from the learner's frame (mirrored first where the
+        learner's cost leaves the handedness open) to the odometry frame,
+        fitted on the first line.
+    warnings : list of str
+        What makes the map unreliable, if anything (also warned).
+    """
+
+    positions: np.ndarray
+    learner: MetricLearner
+    lines: Lines
+    alignment: Alignment
+    warnings: list[str] = field(default_factory=list)
+
+    def info(self) -> dict[str, Any]:
+        """A JSON-able summary for a model file's ``info``."""
+        return {
+            "supervision": "odometry",
+            "frame": "odometry (the training run's odometry frame)",
+            "lines": int(self.lines.n_lines),
+            "points on lines": int(self.lines.n_points),
+            "metric cost": float(self.learner.cost_),
+            "angle term": self.learner.angle_term_,
+            "transit term": bool(np.any(self.learner.transit_weights_)),
+            "rms to odometry on the first line (m)": float(self.alignment.rmse),
+            "warnings": list(self.warnings),
+        }
+
+
+def _direction_spread(lines: Lines, odometry: np.ndarray) -> float:
+    """How far the lines' directions are from all being parallel: 0 when
+    every line has one direction (up to sign), 1 for directions spread
+    evenly (the resultant length of the doubled angles)."""
+    angles = []
+    for k in range(lines.n_lines):
+        idx = np.flatnonzero(lines.labels == k)
+        d = odometry[idx[-1], :2] - odometry[idx[0], :2]
+        angles.append(np.arctan2(d[1], d[0]))
+    a = 2 * np.asarray(angles)
+    return float(1.0 - np.hypot(np.cos(a).mean(), np.sin(a).mean()))
+
+
+def learn_positions(features: Any, odometry: Any, *, n_outputs: int = 8, learner: MetricLearner | None = None,
+                    segmentation: Mapping[str, Any] | None = None, odometry_noise: Any = None,
+                    random_state: int | None = 0, progress: bool = False) -> LearnedPositions:
+    """Learns the positions of a training run's frames from its slow
+    features and odometry, without ground truth.
+
+    Parameters
+    ----------
+    features : array (N, m)
+        Slow features of the run's frames in temporal order (slowest first,
+        m >= ``n_outputs``), e.g. a :class:`~sfanav.Localizer`'s features.
+    odometry : array (N, 3)
+        The odometry poses of the same frames: x, y in metres, heading in
+        radians (finite).
+    n_outputs : int, default 8
+        Slowest features the metric map uses.
+    learner : MetricLearner, optional
+        Overrides the default learner (it is fitted here).
+    segmentation : mapping, optional
+        Keywords for :func:`~sfanav.odometry.segment_lines`.
+    odometry_noise : mapping or sfanav.sim.OdometryNoise, optional
+        The noise model of the default learner's weights.
+
+    Returns
+    -------
+    LearnedPositions
+
+    Raises
+    ------
+    ValueError
+        Non-finite or mismatched inputs, a run without motion, or fewer than
+        two straight lines. With fewer than :data:`MIN_LINES` lines or lines
+        of nearly one direction, an :class:`OdometryMapWarning` is issued and
+        recorded.
+    """
+    F = as_matrix(features, "features")
+    P = as_poses(odometry, "odometry")
+    check_same_length(F, P, "features", "odometry")
+    n_outputs = check_int(n_outputs, "n_outputs")
+    if F.shape[1] < n_outputs:
+        raise ValueError(f"n_outputs={n_outputs}, but the features have only {F.shape[1]} columns")
+    steps = np.hypot(*np.diff(P[:, :2], axis=0).T)
+    if not np.any(steps > 0):
+        raise ValueError("the odometry does not move: positions cannot be learned from it")
+    lines = segment_lines(P, **dict(segmentation or {}))
+    if lines.n_lines < 2:
+        raise ValueError(f"the odometry has {lines.n_lines} straight line segment(s); learning a metric map needs "
+                         "at least 2 (drive straight lanes in several directions)")
+    notes = []
+    if lines.n_lines < MIN_LINES:
+        notes.append(f"only {lines.n_lines} straight line segments: the metric map is barely constrained")
+    spread = _direction_spread(lines, P)
+    if spread < 0.05:
+        notes.append(f"the {lines.n_lines} straight lines are nearly parallel (direction spread {spread:.3f}): "
+                     "the metric map is not fixed across them")
+    for n in notes:
+        warnings.warn(n, OdometryMapWarning, stacklevel=2)
+    if learner is None:
+        has_transits = lines.transit_lengths is not None and lines.origins is not None
+        if has_transits:
+            learner = MetricLearner(n_outputs, angle_term="signed", angle_weight="noise", transit_weight="noise",
+                                    odometry_noise=odometry_noise, init="odometry", random_state=random_state)
+        else:
+            learner = MetricLearner(n_outputs, angle_term="cos", init="odometry", random_state=random_state)
+    learner.fit(F, lines, progress=progress)
+    raw = learner.transform(F)
+    # Handedness from all lines (the unsigned angle terms leave the mirror image open), then the frame from the
+    # first line alone: the odometry has not drifted yet there, so the map lands in the frame of its first pose.
+    on = lines.mask
+    if learner.angle_term_ != "signed":
+        whole = align(raw[on], P[on, :2], allow_reflection=True)
+        if np.linalg.det(whole.rotation) < 0:
+            raw = raw * np.array([1.0, -1.0])
+    first = lines.labels == 0
+    al = align(raw[first], P[first, :2])
+    return LearnedPositions(al.apply(raw), learner, lines, al, notes)
+
+
+def fit_localizer_from_odometry(network: Any, images: Any, odometry: Any, *, n_metric_outputs: int = 8,
+                                learner: MetricLearner | None = None, segmentation: Mapping[str, Any] | None = None,
+                                odometry_noise: Any = None, info: dict[str, Any] | None = None,
+                                **fit_kwargs: Any) -> Any:
+    """Trains a :class:`~sfanav.Localizer` on a run's images and odometry
+    alone: the network on the images (simulated rotation), the metric map on
+    the network's features and the odometry (:func:`learn_positions`), then
+    the readout on the learned positions. Its estimates are metres in the
+    training run's odometry frame.
+
+    ``images`` (N, H, W[, C]) and ``odometry`` (N, 3) are the frames of the
+    run in temporal order; ``fit_kwargs`` go to
+    :func:`sfanav.localization.fit_localizer` (rotation, readout, n_outputs,
+    rows, prep, progress, rotation_pooling). The localizer's ``info`` records
+    ``"supervision": "odometry"``, the frame and the map's lines;
+    ``learned_positions_`` holds the :class:`LearnedPositions`. Raises as
+    :func:`learn_positions`.
+    """
+    P = as_poses(odometry, "odometry")
+    if len(P) != len(images):
+        raise ValueError(f"images has {len(images)} frames but odometry has {len(P)} poses; they must match")
+    learned: list[LearnedPositions] = []
+
+    def positions(features: np.ndarray) -> np.ndarray:
+        learned.append(learn_positions(features, P, n_outputs=n_metric_outputs, learner=learner,
+                                       segmentation=segmentation, odometry_noise=odometry_noise,
+                                       progress=bool(fit_kwargs.get("progress", False))))
+        return learned[-1].positions
+
+    loc = fit_localizer(network, images, positions, info=info, **fit_kwargs)
+    loc.info.update(learned[-1].info())
+    loc.learned_positions_ = learned[-1]
+    return loc

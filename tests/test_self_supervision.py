@@ -1,0 +1,157 @@
+"""Training without ground truth: positions learned from a run's odometry
+(sfanav.odometry.self_supervision, sfanav train --supervision)."""
+
+import csv
+import shutil
+
+import numpy as np
+import pytest
+import sfanav
+from sfanav import sim
+from sfanav.app import cli
+from sfanav.experiments.synthetic_odometry import make_odometry_run
+from sfanav.localization import align, med
+from sfanav.localization.recipe import supervision_for
+from sfanav.odometry import OdometryMapWarning, learn_positions
+
+
+@pytest.fixture(scope="module")
+def run():
+    return make_odometry_run(n_legs=12, random_state=3)
+
+
+def test_learned_positions_match_the_ground_truth_up_to_a_rigid_motion(run):
+    lp = learn_positions(run["features"], run["odometry"])
+    assert lp.positions.shape == (len(run["xy"]), 2) and np.isfinite(lp.positions).all()
+    assert lp.lines.n_lines >= 5 and not lp.warnings
+    # evaluation only: a rigid transform (no scale) to the world
+    err = med(align(lp.positions, run["xy"]).apply(lp.positions), run["xy"])
+    assert err < 0.15, err
+    # the positions are in the frame of the odometry's first pose: on the first line, before the odometry
+    # drifts, the best rigid fit to it is the identity and they agree
+    first = np.flatnonzero(lp.lines.labels == 0)
+    again = align(lp.positions[first], run["odometry"][first, :2])
+    np.testing.assert_allclose(again.rotation, np.eye(2), atol=1e-9)
+    np.testing.assert_allclose(again.translation, 0, atol=1e-9)
+    assert med(lp.positions[first], run["odometry"][first, :2]) < 0.15
+    # better than the drifting odometry itself
+    assert err < med(align(run["odometry"][:, :2], run["xy"]).apply(run["odometry"][:, :2]), run["xy"])
+    info = lp.info()
+    assert info["supervision"] == "odometry" and info["lines"] == lp.lines.n_lines
+
+
+def test_learned_positions_do_not_depend_on_anything_but_features_and_odometry(run):
+    a = learn_positions(run["features"], run["odometry"]).positions
+    b = learn_positions(run["features"].copy(), run["odometry"].copy()).positions
+    np.testing.assert_array_equal(a, b)
+
+
+def test_bad_odometry_is_refused_with_a_clear_error(run):
+    F, P = run["features"], run["odometry"].copy()
+    bad = P.copy()
+    bad[5, 0] = np.nan
+    with pytest.raises(ValueError, match="odometry"):
+        learn_positions(F, bad)
+    with pytest.raises(ValueError, match="does not move"):
+        learn_positions(F, np.zeros_like(P))
+    with pytest.raises(ValueError, match="must match|same length|rows"):
+        learn_positions(F[:-3], P)
+    with pytest.raises(ValueError, match="only 8 columns"):
+        learn_positions(F, P, n_outputs=9)
+
+
+def test_a_run_of_one_straight_line_cannot_fix_the_map():
+    n = 200
+    P = np.c_[np.linspace(0, 5, n), np.zeros(n), np.zeros(n)]
+    F = np.random.default_rng(0).normal(size=(n, 8))
+    with pytest.raises(ValueError, match="straight line segment"):
+        learn_positions(F, P)
+
+
+def test_parallel_lines_warn_that_the_map_is_not_fixed():
+    # back and forth along x: every line has one direction
+    legs = []
+    for k in range(4):
+        x = np.linspace(0, 4, 80) if k % 2 == 0 else np.linspace(4, 0, 80)
+        th = 0.0 if k % 2 == 0 else np.pi
+        legs.append(np.c_[x, np.full(80, 0.5 * k), np.full(80, th)])
+        legs.append(np.c_[np.full(8, x[-1]), np.linspace(0.5 * k, 0.5 * k + 0.5, 8), np.linspace(th, th + np.pi, 8)])
+    P = np.concatenate(legs)
+    from sfanav.experiments.synthetic_odometry import synthetic_features
+
+    F = synthetic_features(P[:, :2], area=(4.0, 2.0), noise=0.01)
+    with pytest.warns(OdometryMapWarning, match="parallel"):
+        lp = learn_positions(F, P)
+    assert any("parallel" in w for w in lp.warnings)
+
+
+def test_supervision_policy():
+    assert supervision_for("auto", has_ground_truth=True, has_odometry=True) == "ground-truth"
+    assert supervision_for(None, has_ground_truth=False, has_odometry=True) == "odometry"
+    assert supervision_for("odometry", has_ground_truth=True, has_odometry=True) == "odometry"
+    with pytest.raises(ValueError, match="supervision 'odometry'"):
+        supervision_for("ground-truth", has_ground_truth=False, has_odometry=True)
+    with pytest.raises(ValueError, match="lacks odometry"):
+        supervision_for("odometry", has_ground_truth=True, has_odometry=False)
+    with pytest.raises(ValueError, match="neither"):
+        supervision_for("auto", has_ground_truth=False, has_odometry=False)
+    with pytest.raises(ValueError, match="one of"):
+        supervision_for("gps", has_ground_truth=True, has_odometry=True)
+
+
+def _without_ground_truth(src, dst):
+    shutil.copytree(src, dst)
+    rows = list(csv.reader(open(dst / "frames.csv", newline="")))
+    head = rows[0]
+    cols = [head.index(c) for c in ("x", "y", "heading")]
+    for r in rows[1:]:
+        for c in cols:
+            r[c] = ""
+    with open(dst / "frames.csv", "w", newline="") as f:
+        csv.writer(f).writerows(rows)
+
+
+def test_cli_trains_without_ground_truth_and_gets_the_same_model_as_with_it(tmp_path, capsys):
+    ds = sim.simulate("demo", tmp_path / "d", 0, camera=sim.PanoramicCamera(70, 8), progress=False)
+    _without_ground_truth(ds.root, tmp_path / "nogt")
+    assert not np.isfinite(sfanav.Dataset(tmp_path / "nogt").poses[:, :2]).any()
+    config = tmp_path / "net.json"
+    config.write_text('{"input": {"width": 70, "height": 8, "channels": 3}, "network": {"precision": "mixed"}, '
+                      '"layers": [{"rf": [7, 4], "stride": [3, 4], "out": 8}, {"rf": "full", "out": 10}]}')
+    common = ["--config", str(config), "--no-progress"]
+    a, b = tmp_path / "a.sfa", tmp_path / "b.sfa"
+    assert cli.main(["train", "--dataset", str(ds.root), "--supervision", "odometry", "--out", str(a), *common]) == 0
+    assert cli.main(["train", "--dataset", str(tmp_path / "nogt"), "--out", str(b), *common]) == 0  # auto: odometry
+    out = capsys.readouterr().out
+    assert "to the learned positions" in out
+    la, lb = sfanav.load(a), sfanav.load(b)
+    assert la.info["supervision"] == lb.info["supervision"] == "odometry"
+    assert "odometry" in la.info["frame"] and la.info["lines"] >= 3
+    test = ds.select(run="test")
+    from sfanav.data import Preprocessing, load_run
+
+    X, xy = load_run(test, Preprocessing.of_model(la), progress=False)
+    np.testing.assert_allclose(la.predict(X), lb.predict(X), rtol=0, atol=1e-9)
+    # ground truth is used here for evaluation only
+    X_tr, xy_tr = load_run(ds.select(run="train"), Preprocessing.of_model(la), progress=False)
+    al = align(la.predict(X_tr), xy_tr)
+    assert med(al.apply(la.predict(X)), xy) < 2.0
+    # localize says which frame; evaluate refuses to compare frames it cannot align
+    assert cli.main(["localize", str(a), str(ds.root), "--run", "test", "--out", str(tmp_path / "e.csv"),
+                     "--no-progress"]) == 0
+    assert "odometry frame" in capsys.readouterr().out
+    with pytest.raises(SystemExit) as e:
+        cli.main(["evaluate", str(a), str(ds.root), "--out", str(tmp_path / "rep"), "--no-progress"])
+    assert e.value.code == 2
+    assert "odometry frame" in capsys.readouterr().err
+
+
+def test_cli_ground_truth_supervision_needs_ground_truth(tmp_path, capsys):
+    ds = sim.simulate("demo", tmp_path / "d", 0, max_frames=30, camera=sim.PanoramicCamera(70, 8), progress=False)
+    _without_ground_truth(ds.root, tmp_path / "nogt")
+    with pytest.raises(SystemExit) as e:
+        cli.main(["train", "--dataset", str(tmp_path / "nogt"), "--supervision", "ground-truth",
+                  "--out", str(tmp_path / "m.sfa"), "--no-progress"])
+    assert e.value.code == 2
+    assert "supervision 'odometry'" in capsys.readouterr().err
+    assert not (tmp_path / "m.sfa").exists()
