@@ -2,6 +2,7 @@
 (sfanav.odometry.self_supervision, sfanav train --supervision)."""
 
 import csv
+import json
 import shutil
 
 import numpy as np
@@ -111,13 +112,41 @@ def _without_ground_truth(src, dst):
         csv.writer(f).writerows(rows)
 
 
-def test_cli_trains_without_ground_truth_and_gets_the_same_model_as_with_it(tmp_path, capsys):
-    ds = sim.simulate("demo", tmp_path / "d", 0, camera=sim.PanoramicCamera(70, 8), progress=False)
+TINY = {"input": {"width": 70, "height": 8, "channels": 3}, "network": {"precision": "mixed"},
+        "layers": [{"rf": [7, 4], "stride": [3, 4], "out": 8}, {"rf": "full", "out": 10}]}
+
+
+@pytest.fixture(scope="module")
+def demo(tmp_path_factory):
+    return sim.simulate("demo", tmp_path_factory.mktemp("demo") / "d", 0, camera=sim.PanoramicCamera(70, 8),
+                        progress=False)
+
+
+def test_experiment_rows_without_ground_truth(demo):
+    from sfanav.data import Preprocessing, load_run
+    from sfanav.experiments.localization import no_ground_truth_rows
+    from sfanav.localization import fit_localizer
+
+    prep = Preprocessing(70, 8, False)
+    X, xy = load_run(demo.select(run="train"), prep, progress=False)
+    Xt, xyt = load_run(demo.select(run="test"), prep, progress=False)
+    loc = fit_localizer(sfanav.Network(TINY), X, xy, progress=False)
+    sup = med(loc.predict(Xt), xyt)
+    rows, note = no_ground_truth_rows(loc, demo, (X, xy, Xt, xyt), suffix=" [tiny]", supervised_med=sup)
+    by = {r["metric"]: r["sfanav"] for r in rows}
+    assert set(by) >= {"MED (m) [tiny, no ground truth]", "MED ratio no ground truth / ground truth [tiny, no ground truth]"}
+    assert np.isfinite(by["MED (m) [tiny, no ground truth]"]) and by["straight lines of the odometry [tiny, no ground truth]"] >= 3
+    assert by["MED ratio no ground truth / ground truth [tiny, no ground truth]"] == pytest.approx(
+        by["MED (m) [tiny, no ground truth]"] / sup)
+    assert "odometry" in note and "rigid" in note
+
+
+def test_cli_trains_without_ground_truth_and_gets_the_same_model_as_with_it(tmp_path, capsys, demo):
+    ds = demo
     _without_ground_truth(ds.root, tmp_path / "nogt")
     assert not np.isfinite(sfanav.Dataset(tmp_path / "nogt").poses[:, :2]).any()
     config = tmp_path / "net.json"
-    config.write_text('{"input": {"width": 70, "height": 8, "channels": 3}, "network": {"precision": "mixed"}, '
-                      '"layers": [{"rf": [7, 4], "stride": [3, 4], "out": 8}, {"rf": "full", "out": 10}]}')
+    config.write_text(json.dumps(TINY))
     common = ["--config", str(config), "--no-progress"]
     a, b = tmp_path / "a.sfa", tmp_path / "b.sfa"
     assert cli.main(["train", "--dataset", str(ds.root), "--supervision", "odometry", "--out", str(a), *common]) == 0

@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import json
 import time
+import warnings
 from pathlib import Path
 from typing import Any
 
@@ -36,8 +37,11 @@ from .. import sim
 from ..data.dataset import Dataset
 from ..data.preprocessing import Preprocessing
 from ..data.sources import load_run
-from ..localization.evaluation import evaluate, evaluation_rows
+from ..localization.error_metrics import align, localization_metrics
+from ..localization.evaluation import coordinate_range, evaluate, evaluation_rows
+from ..localization.localizer import Localizer
 from ..localization.training import fit_localizer
+from ..odometry.self_supervision import OdometryMapWarning, learn_positions
 from ..sfa.network import Network, Rotation
 from . import ExperimentResult, register
 
@@ -137,10 +141,53 @@ def _run_localization(out: Path, ds: Dataset, net: Network, *, prefix: str, titl
                   title=title,
                   run_baselines=baselines, seed=seed, log=log, text=text, baseline_queries=baseline_queries)
     rows = evaluation_rows(ev, suffix=suffix, thesis=thesis)
-    info = {"n_train": len(X_tr), "n_test": len(X_te), "fit_s": fit_s, "prep": prep.describe(),
+    info = {"localizer": loc, "n_train": len(X_tr), "n_test": len(X_te), "fit_s": fit_s, "prep": prep.describe(),
             "network_s": loc.info["fit_seconds"], "readout_s": loc.info["readout_seconds"],
             "readout": loc.describe_readout(), "readout_rule": loc.info.get("readout_rule", "-")}
     return ev, rows, info, data
+
+
+def no_ground_truth_rows(loc: Any, ds: Dataset, data: tuple, *, suffix: str, supervised_med: float
+                         ) -> tuple[list[dict[str, Any]], str]:
+    """Rows of ``loc``'s network with its readout fitted without ground
+    truth: to the positions learned from the training run's odometry
+    (:func:`sfanav.odometry.learn_positions`), same images, same readout
+    rule. For evaluation only, the estimates are moved into the world frame
+    by the rigid transform (no scale) that best fits the training run's
+    estimates to its ground truth. Returns (rows, a sentence for the notes);
+    no rows when the run has no odometry."""
+    X_tr, xy_tr, X_te, xy_te = data
+    odo = ds.select(run="train").odometry
+    if not np.isfinite(odo).all():
+        return [], "The training run has no odometry: no ground-truth-free rows."
+    new = Localizer(loc.network, n_outputs=loc.n_outputs, readout=loc.readout, rows=loc.rows,
+                    rotation_pooling=loc.rotation_pooling)
+    F = new.features(X_tr)
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", OdometryMapWarning)  # recorded in lp.warnings, said in the notes
+            lp = learn_positions(F, odo)
+    except ValueError as exc:
+        return [], f"No ground-truth-free rows: the training run's odometry cannot fix a metric map ({exc})."
+    new.fit_features(F, lp.positions)
+    world = align(new.predict(X_tr), xy_tr)  # evaluation only
+    m = localization_metrics(world.apply(new.predict(X_te)), xy_te, coordinate_range=coordinate_range(xy_te))
+    tag = f" [{suffix.strip(' []')}, no ground truth]" if suffix else " [no ground truth]"
+    rows = [
+        {"metric": f"MED (m){tag}", "thesis": None, "sfanav": m["med"], "supervision": "odometry"},
+        {"metric": f"MAE x (%){tag}", "thesis": None, "sfanav": m["mae_x_pct"], "supervision": "odometry"},
+        {"metric": f"MAE y (%){tag}", "thesis": None, "sfanav": m["mae_y_pct"], "supervision": "odometry"},
+        {"metric": f"MED ratio no ground truth / ground truth{tag}", "thesis": None,
+         "sfanav": m["med"] / supervised_med if supervised_med > 0 else float("inf"), "supervision": "odometry"},
+        {"metric": f"straight lines of the odometry{tag}", "thesis": None, "sfanav": lp.lines.n_lines,
+         "supervision": "odometry"},
+    ]
+    note = (f"Rows '{tag.strip()}': the same network, its readout fitted to the positions learned from the "
+            f"training run's odometry alone ({lp.lines.n_lines} straight lines, metric learning, the frame of the "
+            "odometry's first pose); for evaluation only, the estimates are moved into the world frame by the rigid "
+            "transform (no scale) fitted between the training run's estimates and its ground truth."
+            + (f" Warnings: {'; '.join(lp.warnings)}." if lp.warnings else ""))
+    return rows, note
 
 
 def _plots(ev: Any) -> list[str]:
@@ -180,6 +227,9 @@ def exp_5_1_1(out: Path, *, quick: bool, seed: int, progress: bool) -> Experimen
                                              progress=progress, suffix=" [sfanav default]", baselines=False,
                                              data=data, readout="auto", rows=default_rows(elev))
     rows += [dict(r, configuration="sfanav default") for r in drows]
+    ngt_rows, ngt_note = no_ground_truth_rows(dinfo["localizer"], ds, data, suffix=" [sfanav default]",
+                                              supervised_med=dev.metrics["med"])
+    rows += [dict(r, configuration="sfanav default") for r in ngt_rows]
     rows.append({"metric": "training (s) [sfanav default]", "thesis": None, "sfanav": dinfo["network_s"],
                  "configuration": "sfanav default"})
     rows.append({"metric": "training (s)", "thesis": None, "sfanav": info["network_s"]})
@@ -200,7 +250,8 @@ def exp_5_1_1(out: Path, *, quick: bool, seed: int, progress: bool) -> Experimen
         "20 / 24 / 24 outputs in layers 1-3, 12 top outputs, mixed precision; horizon band of rows -10..+20 deg; "
         f"readout chosen by blocked CV on the training grid: {dinfo['readout']}, {dinfo['readout_rule']}); "
         f"training {dinfo['network_s']:.0f} s (thesis configuration {info['network_s']:.0f} s, double precision), "
-        f"readout selection {dinfo['readout_s']:.0f} s. Its random-split rows use the same readout."
+        f"readout selection {dinfo['readout_s']:.0f} s. Its random-split rows use the same readout.\n"
+        + ngt_note
     )
     return ExperimentResult("5.1.1", rows, _plots(ev) + _plots(dev), notes)
 

@@ -208,7 +208,7 @@ class Localizer:
         features are already averaged over rotations)."""
         net = self.trained_network()
         a = np.asarray(images)
-        one = a.ndim == (2 if net.input_shape[2] == 1 else 3)
+        one = is_single_image(a, net.input_shape[2])
         if self.rows is not None and not self.rows.identity:
             images = self.rows(a[None] if one else a)
             images = images[0] if one else images
