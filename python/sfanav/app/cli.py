@@ -315,6 +315,7 @@ def _run_train(args: argparse.Namespace) -> int:
     from ..data.sources import load_run, select_run
     from ..localization.recipe import CAMERA_ELEVATION, recipe_for, supervision_for
     from ..localization.training import fit_localizer
+    from ..odometry.fusion import noise_from_run
     from ..odometry.self_supervision import fit_localizer_from_odometry
     from ..sfa.network import Rotation
 
@@ -366,6 +367,13 @@ def _run_train(args: argparse.Namespace) -> int:
         loc.info["supervision"] = "ground-truth"
     if preprocessor.mirror_used is not None:
         loc.info["mirror"] = list(preprocessor.mirror_used)  # localize and evaluate reuse it
+    if np.isfinite(odometry).all():
+        try:
+            loc.info["ekf_noise"] = noise_from_run(odometry, loc.predict(images))
+            _log("EKF noise for localize --odometry, from the training run's estimates and odometry (likelihood of "
+                 "the innovations, no ground truth): " + ", ".join(f"{k} {v:g}" for k, v in loc.info["ekf_noise"].items()))
+        except ValueError as exc:
+            _log(f"no EKF noise stored (localize --odometry will not be available): {exc}")
     loc.save(out)
     m = loc.train_metrics_
     pool = f" on features pooled over {loc.rotation_pooling_} rotations" if loc.rotation_pooling_ > 1 else ""
@@ -400,6 +408,10 @@ def _add_localize(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                    help="mirror center and radii of omnidirectional images, pixels (default: estimated)")
     p.add_argument("--rotations", action="store_true",
                    help="average the estimates over all simulated rotations of each image (slower, smoother)")
+    p.add_argument("--odometry", action="store_true",
+                   help="fuse the estimates with the run's odometry (EKF, CTRV; a dataset with odom_x, odom_y, "
+                        "odom_heading): adds columns fused_x, fused_y, fused_heading; the noise comes from the "
+                        "model's training run, the start pose from the first estimates")
     p.add_argument("--batch-size", type=_pos_int, default=64, metavar="N", help="images per batch (default 64)")
     p.add_argument("--overwrite", action="store_true", help="replace an existing CSV")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -416,6 +428,7 @@ def _run_localize(args: argparse.Namespace) -> int:
     from ..data.preprocessing import Preprocessing, Preprocessor
     from ..data.sources import open_images
     from ..localization.error_metrics import med
+    from ..odometry.fusion import fuse
 
     loc = _load_localizer(args.model)
     if args.rotations and loc.rotation_pooling_ > 1:
@@ -423,6 +436,13 @@ def _run_localize(args: argparse.Namespace) -> int:
                           "(rotation pooling): --rotations applies to models without it")
     out = _new_file(args.out, args.overwrite, "CSV")
     src = open_images(args.input, run=args.run_name, camera=args.camera)
+    if args.odometry:
+        if src.odometry is None or not np.isfinite(src.odometry).all():
+            raise _UsageError(f"--odometry needs a dataset with odometry (odom_x, odom_y, odom_heading) for every "
+                              f"frame; {args.input} has none" + (" for some frames" if src.odometry is not None else ""))
+        if "ekf_noise" not in loc.info:
+            raise _UsageError(f"{args.model} holds no EKF noise (its training run had no odometry): retrain it on a "
+                              "run with odometry to use --odometry")
     prep = Preprocessing.of_model(loc)
     conform = Preprocessor(prep, mirror=_mirror_of(args, loc), log=_log)
     _log(f"localizing {src.description} with {args.model} ({prep.describe()} panoramas)")
@@ -438,18 +458,23 @@ def _run_localize(args: argparse.Namespace) -> int:
         raise _UsageError(f"{args.input} has no images (an empty or unreadable video?)")
     xy = np.concatenate(preds)
     frames = src.frames if src.frames is not None else np.arange(len(xy))
+    fused = None
+    if args.odometry:
+        fused = fuse(src.odometry, xy, loc.info["ekf_noise"])
     tmp = out.with_name(out.name + ".part")
     with open(tmp, "w", newline="") as f:
         w = csv.writer(f)
-        w.writerow(["frame", "x", "y"])
-        for fr, (x, y) in zip(frames, xy):
-            w.writerow([int(fr), f"{x:.4f}", f"{y:.4f}"])
+        w.writerow(["frame", "x", "y"] + (["fused_x", "fused_y", "fused_heading"] if fused is not None else []))
+        for i, (fr, (x, y)) in enumerate(zip(frames, xy)):
+            extra = [f"{v:.4f}" for v in fused[i]] if fused is not None else []
+            w.writerow([int(fr), f"{x:.4f}", f"{y:.4f}"] + extra)
     tmp.replace(out)
-    msg = f"wrote {len(xy)} positions to {out}"
+    msg = f"wrote {len(xy)} positions" + (" and the fused track" if fused is not None else "") + f" to {out}"
     if loc.info.get("supervision") == "odometry":
         msg += " (metres in the training run's odometry frame)"
     elif src.xy is not None and np.isfinite(src.xy).all():
-        msg += f" (MED from the dataset's ground truth: {med(xy, src.xy):.3f} m)"
+        msg += f" (MED from the dataset's ground truth: {med(xy, src.xy):.3f} m"
+        msg += f", fused {med(fused[:, :2], src.xy):.3f} m)" if fused is not None else ")"
     print(msg)
     return 0
 

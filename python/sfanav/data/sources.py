@@ -28,7 +28,9 @@ VIDEO_SUFFIXES = (".mp4", ".avi", ".mov", ".mkv", ".webm", ".m4v", ".mpg", ".mpe
 class ImageSource:
     """Images to localize: ``batches(batch_size)`` yields uint8 arrays in
     order; ``frames`` are their ids (dataset frame ids, else 0, 1, ...);
-    ``xy`` the ground truth (datasets only, else None); ``n`` the count if known."""
+    ``xy`` the ground truth (datasets only, else None; NaN where unknown);
+    ``odometry`` the odometry poses (N, 3) (datasets only, else None; NaN
+    where unknown); ``n`` the count if known."""
 
     kind: str
     description: str
@@ -36,6 +38,7 @@ class ImageSource:
     frames: np.ndarray | None
     xy: np.ndarray | None
     _batches: Callable[[int], Iterator[np.ndarray]]
+    odometry: np.ndarray | None = None
 
     def batches(self, batch_size: int = 64) -> Iterator[np.ndarray]:
         return self._batches(batch_size)
@@ -88,7 +91,7 @@ def open_images(path: str | os.PathLike, *, run: str | None = None, camera: str 
                 return ds.images(batch_size=bs, gray=gray)
 
             return ImageSource("dataset", f"dataset {p} ({len(ds)} images)", len(ds), ds.frames.copy(),
-                               ds.poses[:, :2].copy(), ds_batches)
+                               ds.poses[:, :2].copy(), ds_batches, ds.odometry.copy())
         if run is not None:
             raise ValueError(f"--run applies to datasets; {p} is an image folder")
         files = sorted(f for f in p.iterdir() if f.is_file() and f.suffix.lower() in IMAGE_SUFFIXES)

@@ -6,6 +6,8 @@
   learned from odometry alone (thesis 5.3.1), with its cost in
   :mod:`~sfanav.odometry.metric_cost`;
 * :class:`OdometryEKF`: fusion of position estimates with odometry (5.3.2);
+  :mod:`~sfanav.odometry.fusion`: its noise from the training run and the
+  start pose from the first estimates (no ground truth);
 * :class:`MapTracker`: a robust rigid fit of odometry to recent estimates;
 * :func:`learn_positions`, :func:`fit_localizer_from_odometry`: training
   without ground truth, on the positions the metric map learns;
@@ -17,6 +19,7 @@ from __future__ import annotations
 
 from .dead_reckoning import arc_factor, as_poses, dead_reckon, increments, wrap_angle
 from .ekf import GridSearchResult, OdometryEKF, ctrv_jacobians, ctrv_motion, grid_search
+from .fusion import fuse, noise_from_run, start_pose_from_estimates
 from .lines import Lines, lines_from_labels, lines_from_odometry, segment_lines
 from .loop_closures import LoopClosures, find_loop_closures, interleave
 from .metric_cost import DEFAULT_ODOMETRY_NOISE, metric_cost, odometry_variances
@@ -30,4 +33,4 @@ from .self_supervision import (
 )
 from .tracker import MapTracker
 
-__all__ = ["LearnedPositions", "OdometryMapWarning", "fit_localizer_from_odometry", "learn_positions", "DEFAULT_ODOMETRY_NOISE", "GridSearchResult", "Lines", "LoopClosures", "MapTracker", "MetricLearner", "OdometryEKF", "arc_factor", "as_poses", "ctrv_jacobians", "ctrv_motion", "dead_reckon", "find_loop_closures", "grid_search", "increments", "interleave", "lines_from_labels", "lines_from_odometry", "metric_cost", "odometry_variances", "plot_fusion", "plot_metric_lines", "segment_lines", "wrap_angle"]
+__all__ = ["fuse", "noise_from_run", "start_pose_from_estimates", "LearnedPositions", "OdometryMapWarning", "fit_localizer_from_odometry", "learn_positions", "DEFAULT_ODOMETRY_NOISE", "GridSearchResult", "Lines", "LoopClosures", "MapTracker", "MetricLearner", "OdometryEKF", "arc_factor", "as_poses", "ctrv_jacobians", "ctrv_motion", "dead_reckon", "find_loop_closures", "grid_search", "increments", "interleave", "lines_from_labels", "lines_from_odometry", "metric_cost", "odometry_variances", "plot_fusion", "plot_metric_lines", "segment_lines", "wrap_angle"]

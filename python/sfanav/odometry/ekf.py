@@ -53,6 +53,7 @@ from .._checks import (
     check_nonneg_float,
     check_same_length,
 )
+from .._progress import progress_bar
 from .dead_reckoning import arc_factor, as_poses, dead_reckon, increments, wrap_angle
 
 
@@ -396,14 +397,7 @@ def grid_search(
         raise ValueError("criterion='med' needs ground truth: pass xy_true, or use criterion='nll'")
     grid = list(itertools.product(_grid(distance_noise, "distance_noise"), _grid(heading_noise, "heading_noise"),
                                   _grid(measurement_noise, "measurement_noise")))
-    bar = None
-    if progress:
-        try:
-            from tqdm.auto import tqdm
-
-            bar = tqdm(total=len(grid), desc="EKF grid search", unit="run", leave=False)
-        except ImportError:  # pragma: no cover
-            bar = None
+    bar = progress_bar(progress, len(grid), "EKF grid search", unit="run")
     results = []
     best = None
     try:

@@ -705,7 +705,7 @@ class Renderer:
         """Float32 image (H, W, 4) of a ray grid, before the light's intensity
         and tint; channel 3 is padding (see :meth:`render`)."""
         gd = self._grid_data(grid)
-        H, W, h = grid.H, grid.W, grid.h
+        H, W = grid.H, grid.W
         phi = heading + grid.bearings
         ux, uy = np.cos(phi), np.sin(phi)
         out = np.empty((H, W, 4), np.float32)

@@ -1,0 +1,94 @@
+"""Fusing single-image estimates with odometry at run time, without ground
+truth: the EKF's noise chosen on the training run by the innovations'
+likelihood, and the start pose found from the first estimates.
+
+* :func:`noise_from_run`: the :class:`OdometryEKF` noise (odometry distance
+  and heading per step, measurement) that makes a run's own estimates and
+  odometry most likely (grid search, criterion ``"nll"``); computed at
+  training time, stored in the model file.
+* :func:`start_pose_from_estimates`: the start pose (x, y, heading) of a run
+  from the rigid fit of its first odometry positions to their estimates.
+* :func:`fuse`: the fused track of a run.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+
+from .._checks import check_int, check_same_length
+from ..localization.error_metrics import align
+from .dead_reckoning import as_poses, wrap_angle
+from .ekf import OdometryEKF, grid_search
+
+NOISE_KEYS = ("distance_noise", "heading_noise", "measurement_noise")
+START_FRAMES = 30
+"""Frames whose estimates fix a run's start pose."""
+
+
+def _estimates(estimates: Any, poses: np.ndarray) -> np.ndarray:
+    Z = np.asarray(estimates, dtype=float)
+    if Z.ndim != 2 or Z.shape[1] != 2:
+        raise ValueError(f"estimates must have shape (N, 2) (x, y in metres), got shape {Z.shape}")
+    check_same_length(poses, Z, "odometry", "estimates")
+    if np.isinf(Z).any():
+        raise ValueError("estimates contain infinity (use NaN rows for missing estimates)")
+    return Z
+
+
+def start_pose_from_estimates(odometry: Any, estimates: Any, *, n: int = START_FRAMES) -> np.ndarray:
+    """The pose (x m, y m, heading rad) of a run's first frame in the
+    estimates' frame: the rigid transform that best fits the first ``n``
+    odometry positions (with an estimate) to their estimates (refitted once
+    without the estimates far off the first fit), applied to the first
+    odometry pose. ValueError when those frames do not move (their direction
+    is then unknown)."""
+    P = as_poses(odometry, "odometry")
+    Z = _estimates(estimates, P)
+    n = check_int(n, "n", minimum=2)
+    ok = np.flatnonzero(np.isfinite(Z).all(axis=1))[:n]
+    if len(ok) < 2 or np.ptp(P[ok, :2], axis=0).max() < 1e-6:
+        raise ValueError(f"the first {n} frames with estimates do not move in the odometry: the start heading "
+                         "cannot be found from them")
+    al = align(P[ok, :2], Z[ok])
+    # one trimming round against outlying estimates: refit without those far above the median residual
+    res = np.hypot(*(al.apply(P[ok, :2]) - Z[ok]).T)
+    keep = ok[res <= 3.0 * max(np.median(res), 1e-9)]
+    if len(keep) >= 2 and len(keep) < len(ok) and np.ptp(P[keep, :2], axis=0).max() >= 1e-6:
+        al = align(P[keep, :2], Z[keep])
+    xy = al.apply(P[:1, :2])[0]
+    heading = float(wrap_angle(P[0, 2] + np.arctan2(al.rotation[1, 0], al.rotation[0, 0])))
+    return np.array([xy[0], xy[1], heading])
+
+
+def noise_from_run(odometry: Any, estimates: Any, *, start_pose: Any = None, progress: bool = False,
+                   **grid: Any) -> dict[str, float]:
+    """The EKF noise that makes a run's estimates and odometry most likely
+    (:func:`sfanav.odometry.grid_search` with ``criterion="nll"``; no ground
+    truth). ``start_pose`` defaults to :func:`start_pose_from_estimates`;
+    ``grid`` overrides the candidate standard deviations. Returns
+    ``{"distance_noise", "heading_noise", "measurement_noise"}``."""
+    P = as_poses(odometry, "odometry")
+    Z = _estimates(estimates, P)
+    s0 = start_pose_from_estimates(P, Z) if start_pose is None else start_pose
+    res = grid_search(P, Z, s0, criterion="nll", progress=progress, **grid)
+    return {k: float(res.best_params[k]) for k in NOISE_KEYS}
+
+
+def fuse(odometry: Any, estimates: Any, noise: Mapping[str, float], *, start_pose: Any = None,
+         gate_probability: float | None = 0.999) -> np.ndarray:
+    """The fused track (N, 3): x, y in the estimates' frame (metres) and
+    heading (radians), from a run's odometry (N, 3) and single-image
+    estimates (N, 2; NaN rows missing) with the EKF noise ``noise`` (as
+    :func:`noise_from_run` returns). ``start_pose`` defaults to
+    :func:`start_pose_from_estimates`; outlying estimates are gated."""
+    unknown = set(noise) - set(NOISE_KEYS)
+    if unknown or not set(NOISE_KEYS) <= set(noise):
+        raise ValueError(f"noise must give {', '.join(NOISE_KEYS)}, got {sorted(noise)}")
+    P = as_poses(odometry, "odometry")
+    Z = _estimates(estimates, P)
+    s0 = start_pose_from_estimates(P, Z) if start_pose is None else start_pose
+    ekf = OdometryEKF(**{k: float(noise[k]) for k in NOISE_KEYS}, gate_probability=gate_probability)
+    return ekf.run(P, Z, s0)
