@@ -26,6 +26,8 @@ from .ekf import OdometryEKF, grid_search
 NOISE_KEYS = ("distance_noise", "heading_noise", "measurement_noise")
 START_FRAMES = 30
 """Frames whose estimates fix a run's start pose."""
+MAX_FRAMES = 2000
+"""Frames of the training run the noise is chosen on (the grid search's cost grows with them)."""
 
 
 def _estimates(estimates: Any, poses: np.ndarray) -> np.ndarray:
@@ -63,15 +65,20 @@ def start_pose_from_estimates(odometry: Any, estimates: Any, *, n: int = START_F
     return np.array([xy[0], xy[1], heading])
 
 
-def noise_from_run(odometry: Any, estimates: Any, *, start_pose: Any = None, progress: bool = False,
-                   **grid: Any) -> dict[str, float]:
+def noise_from_run(odometry: Any, estimates: Any, *, start_pose: Any = None, max_frames: int | None = MAX_FRAMES,
+                   progress: bool = False, **grid: Any) -> dict[str, float]:
     """The EKF noise that makes a run's estimates and odometry most likely
     (:func:`sfanav.odometry.grid_search` with ``criterion="nll"``; no ground
-    truth). ``start_pose`` defaults to :func:`start_pose_from_estimates`;
-    ``grid`` overrides the candidate standard deviations. Returns
-    ``{"distance_noise", "heading_noise", "measurement_noise"}``."""
+    truth), on the run's first ``max_frames`` frames (None: all; the grid
+    runs the filter once per candidate). ``start_pose`` defaults to
+    :func:`start_pose_from_estimates`; ``grid`` overrides the candidate
+    standard deviations. Returns ``{"distance_noise", "heading_noise",
+    "measurement_noise"}``."""
     P = as_poses(odometry, "odometry")
     Z = _estimates(estimates, P)
+    if max_frames is not None:
+        m = check_int(max_frames, "max_frames", minimum=2)
+        P, Z = P[:m], Z[:m]
     s0 = start_pose_from_estimates(P, Z) if start_pose is None else start_pose
     res = grid_search(P, Z, s0, criterion="nll", progress=progress, **grid)
     return {k: float(res.best_params[k]) for k in NOISE_KEYS}
