@@ -522,14 +522,13 @@ def _run_evaluate(args: argparse.Namespace) -> int:
     from ..localization.evaluation import evaluate, evaluation_rows, metrics_json
 
     loc = _load_localizer(args.model)
-    if loc.info.get("supervision") == "odometry":
-        raise _UsageError(f"{args.model} was trained without ground truth and reports in its training run's odometry "
-                          "frame; sfanav evaluate compares estimates with ground truth in the world frame and does "
-                          "not align frames yet")
     ds = Dataset(_existing_path(args.dataset, "dataset"))
     runs = set(ds.runs.tolist())
     run = args.run_name if args.run_name is not None else ("test" if "test" in runs else None)
     train_run = args.train_run if args.train_run is not None else ("train" if "train" in runs and run != "train" else None)
+    if loc.info.get("supervision") == "odometry" and train_run is None:
+        raise _UsageError(f"{args.model} was trained without ground truth (it reports in its training run's odometry "
+                          "frame): evaluate needs a training run with ground truth (--train-run) to align the frames")
     prep = Preprocessing.of_model(loc)
     test = select_run(ds, run, args.camera)
     mirror = _mirror_of(args, loc)

@@ -19,7 +19,7 @@ import numpy as np
 from .._progress import Log, quiet_log
 from ..sfa.diagnostics import eta_values, orientation_angles, plot_eta
 from . import baselines
-from .error_metrics import localization_metrics
+from .error_metrics import align, localization_metrics
 from .localizer import Localizer
 from .plots import plot_firing_maps, plot_trajectory
 from .protocols import (
@@ -57,8 +57,13 @@ class Evaluation:
         :func:`sfanav.localization.benchmark` results (metrics, ``query_ms``,
         ``bytes_per_place``).
     predictions : ndarray (N, 2)
+        Test-run estimates, metres (in the world frame).
     plots : list of (caption, path)
     report : Path or None
+    frame_alignment : Alignment or None
+        For a localizer trained without ground truth: the rigid transform
+        (fitted on the training run, for evaluation only) that moved its
+        estimates from its odometry frame into the world frame.
     """
 
     metrics: dict[str, Any]
@@ -74,6 +79,7 @@ class Evaluation:
     report: Path | None = None
     model_bytes: int | None = None
     baseline_queries: int = 0
+    frame_alignment: Any = None
 
 
 def coordinate_range(xy: np.ndarray) -> np.ndarray:
@@ -138,10 +144,22 @@ def evaluate(
     F_test = loc.transform_rows(test_images)  # rotation pooled if the localizer pools
     sfa_ms = 1000.0 * (time.perf_counter() - t0) / len(test_images)
     pred = loc.predict_features(F_test)
+    frame = None
+    if loc.info.get("supervision") == "odometry":
+        # trained without ground truth: its frame is the training run's odometry; for evaluation only, move the
+        # estimates into the world frame by the rigid transform fitted on the training run
+        if train_images is None or train_xy is None:
+            raise ValueError("this localizer was trained without ground truth (it reports in its training run's "
+                             "odometry frame): evaluating it needs the training run with ground truth, to align "
+                             "the frames")
+        frame = align(loc.predict_features(loc.transform_rows(train_images)), np.asarray(train_xy, float))
+        pred = frame.apply(pred)
+        log(f"trained without ground truth: estimates moved into the world frame by the rigid transform fitted on "
+            f"the training run (rms {frame.rmse:.3f} m; evaluation only)")
     crange = coordinate_range(test_xy)
     m = localization_metrics(pred, test_xy, coordinate_range=crange)
     m["query_ms"] = sfa_ms
-    ev = Evaluation(metrics=m, predictions=pred)
+    ev = Evaluation(metrics=m, predictions=pred, frame_alignment=frame)
     ev.model_bytes = _model_bytes(loc)
     n_reg = loc.n_outputs_
     spec = loc.readout_spec_
@@ -359,6 +377,11 @@ def metrics_json(ev: Evaluation) -> dict[str, Any]:
         return {k: (v.item() if isinstance(v, (np.floating, np.integer)) else v) for k, v in d.items()}
 
     out: dict[str, Any] = {"test_run": clean(ev.metrics)}
+    if ev.frame_alignment is not None:
+        out["frame_alignment"] = {"kind": "rigid, fitted on the training run (evaluation only)",
+                                  "rotation": ev.frame_alignment.rotation.tolist(),
+                                  "translation": ev.frame_alignment.translation.tolist(),
+                                  "rms_m": float(ev.frame_alignment.rmse)}
     if ev.splits is not None:
         out["random_splits"] = clean(ev.splits.metrics)
     if ev.eta_p is not None:
