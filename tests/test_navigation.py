@@ -313,7 +313,7 @@ def tiny_world():
     """A 5 x 5 m garden with a short wall and a small network trained on 300
     frames of 60 x 8 gray panoramas."""
     from sfanav.sim import trajectories as T
-    from sfanav.sim.render import PanoramicCamera
+    from sfanav.sim.cameras import PanoramicCamera
     from sfanav.sim.robot import Simulator
 
     world = World.generate(5, area=(5.0, 5.0), n_objects=10, depth=5.0,

@@ -33,7 +33,7 @@ from sfanav import navigation as nav
 from sfanav.experiments import navigation as EN
 from sfanav.sfa import load
 from sfanav.sfa import Network, Rotation, spatial_pairs
-from sfanav.sim.render import PanoramicCamera
+from sfanav.sim.cameras import PanoramicCamera
 
 BAND = (-10.0, 20.0)
 

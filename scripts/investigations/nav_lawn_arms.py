@@ -31,7 +31,7 @@ from sfanav.localization import default_network, default_rows
 from sfanav.experiments import navigation as E
 from sfanav.sfa import load
 from sfanav.sfa import Network, Rotation
-from sfanav.sim.render import PanoramicCamera
+from sfanav.sim.cameras import PanoramicCamera
 from sfanav.sim.robot import Simulator
 
 

@@ -17,7 +17,7 @@ import numpy as np
 
 from sfanav.experiments import navigation as E
 from sfanav.sfa import load
-from sfanav.sim.render import PanoramicCamera
+from sfanav.sim.cameras import PanoramicCamera
 
 
 def main() -> None:

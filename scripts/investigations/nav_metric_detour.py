@@ -20,7 +20,7 @@ from pathlib import Path
 from sfanav import navigation as nav
 from sfanav.experiments import navigation as E
 from sfanav.sfa import load
-from sfanav.sim.render import PanoramicCamera
+from sfanav.sim.cameras import PanoramicCamera
 
 
 def main() -> None:

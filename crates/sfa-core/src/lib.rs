@@ -18,6 +18,7 @@
 
 pub mod error;
 mod fields;
+mod moments;
 pub mod expansion;
 pub mod network;
 pub mod node;

@@ -127,7 +127,7 @@ def scene(kind: str, seed: int = 0, *, quick: bool = False, lawn: str | None = N
     2026-11-24, see :meth:`sfanav.sim.World.generate`)."""
     from ..sim import presets as P
     from ..sim import trajectories as T
-    from ..sim.render import PanoramicCamera
+    from ..sim.cameras import PanoramicCamera
     from ..sim.robot import OdometryNoise, Robot
     from ..sim.world import World
 
@@ -296,7 +296,7 @@ def metric_localizer(sc: Scene, out: Path, seed: int, *, progress: bool = False)
     from ..localization.recipe import CAMERA_ELEVATION, default_network, default_rows
     from ..sfa.modelfile import load
     from ..sfa.network import Network, Rotation
-    from ..sim.render import PanoramicCamera
+    from ..sim.cameras import PanoramicCamera
 
     cam = sc.camera if sc.quick else PanoramicCamera(350, 40)
     cache = Path(out) / "cache" / _cache_name(sc, f"metric-{sc.name}", seed, "sfanav default + gp, pooled", cam.to_dict())

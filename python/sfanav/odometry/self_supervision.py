@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from .._checks import as_matrix, check_int, check_same_length
+from .._checks import as_matrix, check_int, check_n_outputs, check_same_length
 from ..localization.error_metrics import Alignment, align
 from ..localization.training import fit_localizer
 from .dead_reckoning import as_poses
@@ -130,9 +130,7 @@ def learn_positions(features: Any, odometry: Any, *, n_outputs: int = 8, learner
     F = as_matrix(features, "features")
     P = as_poses(odometry, "odometry")
     check_same_length(F, P, "features", "odometry")
-    n_outputs = check_int(n_outputs, "n_outputs")
-    if F.shape[1] < n_outputs:
-        raise ValueError(f"n_outputs={n_outputs}, but the features have only {F.shape[1]} columns")
+    n_outputs = check_n_outputs(check_int(n_outputs, "n_outputs"), F.shape[1], what="the features have", unit="columns")
     steps = np.hypot(*np.diff(P[:, :2], axis=0).T)
     if not np.any(steps > 0):
         raise ValueError("the odometry does not move: positions cannot be learned from it")

@@ -12,16 +12,15 @@
 """
 
 from . import presets, trajectories
-from .presets import PRESETS, simulate
-from .render import (
-    Lighting,
+from .cameras import (
     OmniCamera,
     PanoramicCamera,
-    Renderer,
     bearings,
     camera_from_dict,
     column_of_bearing,
 )
+from .presets import PRESETS, simulate
+from .render import Lighting, Renderer
 from .robot import (
     OdometryNoise,
     Robot,

@@ -17,7 +17,8 @@ from typing import Any, Callable
 import numpy as np
 
 from . import trajectories as T
-from .render import Lighting, OmniCamera, PanoramicCamera, Renderer
+from .cameras import OmniCamera, PanoramicCamera
+from .render import Lighting, Renderer
 from .robot import Robot
 from .world import World
 
