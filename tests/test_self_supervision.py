@@ -135,7 +135,10 @@ def test_experiment_rows_without_ground_truth(demo):
     rows, note = no_ground_truth_rows(loc, demo, (X, xy, Xt, xyt), suffix=" [tiny]", supervised_med=sup)
     by = {r["metric"]: r["sfanav"] for r in rows}
     assert set(by) >= {"MED (m) [tiny, no ground truth]", "MED ratio no ground truth / ground truth [tiny, no ground truth]"}
-    assert np.isfinite(by["MED (m) [tiny, no ground truth]"]) and by["straight lines of the odometry [tiny, no ground truth]"] >= 3
+    assert np.isfinite(by["MED (m) [tiny, no ground truth]"]) and by["loop closures kept [tiny, no ground truth]"] >= 10
+    # the thesis's metric learning beside the pose graph, same readout
+    assert np.isfinite(by["MED (m) [tiny, no ground truth, metric learning]"])
+    assert by["straight lines of the odometry [tiny, no ground truth, metric learning]"] >= 3
     assert by["MED ratio no ground truth / ground truth [tiny, no ground truth]"] == pytest.approx(
         by["MED (m) [tiny, no ground truth]"] / sup)
     assert "odometry" in note and "rigid" in note
@@ -156,6 +159,7 @@ def test_cli_trains_without_ground_truth_and_gets_the_same_model_as_with_it(tmp_
     la, lb = sfanav.load(a), sfanav.load(b)
     assert la.info["supervision"] == lb.info["supervision"] == "odometry"
     assert "odometry" in la.info["frame"] and la.info["lines"] >= 3
+    assert la.info["metric map"] == "pose-graph" and la.info["loop closures kept"] >= 10
     test = ds.select(run="test")
     from sfanav.data import Preprocessing, load_run
 

@@ -97,6 +97,13 @@ def check_nonneg_float(value: Any, name: str) -> float:
     return value
 
 
+def check_positive_float(value: Any, name: str) -> float:
+    value = check_nonneg_float(value, name)
+    if value <= 0:
+        raise ValueError(f"{name} must be > 0, got {value}")
+    return value
+
+
 def check_int(value: Any, name: str, *, minimum: int = 1) -> int:
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
         raise TypeError(f"{name} must be an integer, got {type(value).__name__}")

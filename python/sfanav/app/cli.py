@@ -278,8 +278,13 @@ def _add_train(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                         "the readout (default: 8 with the auto readout, none with quadratic; 1 = none)")
     p.add_argument("--supervision", choices=("auto", "ground-truth", "odometry"), default="auto",
                    help="what the readout is fitted to: ground-truth x, y, or positions learned from the run's "
-                        "odometry along its straight lines (no ground truth: estimates in the odometry's frame); "
+                        "images and odometry (no ground truth: estimates in the odometry's frame); "
                         "auto (default): ground truth if the run has it, else odometry")
+    p.add_argument("--metric-map", choices=("pose-graph", "metric-learning"), default="pose-graph",
+                   help="with odometry supervision, how positions are learned: pose-graph (default; the odometry's "
+                        "heading drift corrected by loop closures found by the slow features and the panoramas) "
+                        "or metric-learning (thesis 5.3.1: a map of the slow features fitted along the "
+                        "odometry's straight lines)")
     p.add_argument("--normalize", action="store_true",
                    help="normalize every image to zero mean and unit variance (thesis 5.2)")
     p.add_argument("--mirror", default=None, metavar="CX,CY,INNER,OUTER",
@@ -359,9 +364,13 @@ def _run_train(args: argparse.Namespace) -> int:
     if supervision == "odometry":
         _log("fitting the readout to positions learned from the run's odometry (no ground truth); estimates are "
              "metres in the odometry's frame")
-        loc = fit_localizer_from_odometry(net, images, odometry, **fit_kw)
-        _log(f"metric map from {loc.info['lines']} straight lines ({loc.info['points on lines']} frames), "
-             f"rms to the odometry on the first {loc.info['rms to odometry on the first line (m)']:.3f} m")
+        loc = fit_localizer_from_odometry(net, images, odometry, method=args.metric_map, **fit_kw)
+        if args.metric_map == "pose-graph":
+            _log(f"pose graph: {loc.info['loop closures kept']} of {loc.info['loop closures']} loop closures kept, "
+                 f"odometry heading drift {loc.info['odometry heading drift (deg per m)']:.3f} deg/m corrected")
+        else:
+            _log(f"metric map from {loc.info['lines']} straight lines ({loc.info['points on lines']} frames), "
+                 f"rms to the odometry on the first {loc.info['rms to odometry on the first line (m)']:.3f} m")
     else:
         loc = fit_localizer(net, images, xy, **fit_kw)
         loc.info["supervision"] = "ground-truth"

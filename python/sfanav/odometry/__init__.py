@@ -9,8 +9,12 @@
   :mod:`~sfanav.odometry.fusion`: its noise from the training run and the
   start pose from the first estimates (no ground truth);
 * :class:`MapTracker`: a robust rigid fit of odometry to recent estimates;
+* :func:`fit_pose_graph`: odometry whose heading drift is corrected by
+  loop closures (places found by the slow features, relative headings read
+  off the panoramas);
 * :func:`learn_positions`, :func:`fit_localizer_from_odometry`: training
-  without ground truth, on the positions the metric map learns;
+  without ground truth, on the positions the pose graph or the metric map
+  learns;
 * :mod:`~sfanav.odometry.loop_closures`: places seen again;
 * plots of the learned lines and the fused track.
 """
@@ -25,6 +29,7 @@ from .loop_closures import LoopClosures, find_loop_closures, interleave
 from .metric_cost import DEFAULT_ODOMETRY_NOISE, metric_cost, odometry_variances
 from .metric_learning import MetricLearner
 from .plots import plot_fusion, plot_metric_lines
+from .pose_graph import PlacePairs, PoseGraph, fit_pose_graph, place_pairs, relative_headings
 from .self_supervision import (
     LearnedPositions,
     OdometryMapWarning,
@@ -33,4 +38,4 @@ from .self_supervision import (
 )
 from .tracker import MapTracker
 
-__all__ = ["fuse", "noise_from_run", "start_pose_from_estimates", "LearnedPositions", "OdometryMapWarning", "fit_localizer_from_odometry", "learn_positions", "DEFAULT_ODOMETRY_NOISE", "GridSearchResult", "Lines", "LoopClosures", "MapTracker", "MetricLearner", "OdometryEKF", "arc_factor", "as_poses", "ctrv_jacobians", "ctrv_motion", "dead_reckon", "find_loop_closures", "grid_search", "increments", "interleave", "lines_from_labels", "lines_from_odometry", "metric_cost", "odometry_variances", "plot_fusion", "plot_metric_lines", "segment_lines", "wrap_angle"]
+__all__ = ["PlacePairs", "PoseGraph", "fit_pose_graph", "place_pairs", "relative_headings", "fuse", "noise_from_run", "start_pose_from_estimates", "LearnedPositions", "OdometryMapWarning", "fit_localizer_from_odometry", "learn_positions", "DEFAULT_ODOMETRY_NOISE", "GridSearchResult", "Lines", "LoopClosures", "MapTracker", "MetricLearner", "OdometryEKF", "arc_factor", "as_poses", "ctrv_jacobians", "ctrv_motion", "dead_reckon", "find_loop_closures", "grid_search", "increments", "interleave", "lines_from_labels", "lines_from_odometry", "metric_cost", "odometry_variances", "plot_fusion", "plot_metric_lines", "segment_lines", "wrap_angle"]

@@ -1,15 +1,23 @@
 """Positions without ground truth: the metric map of a training run learned
-from its own slow features and odometry (thesis 5.3.1), in the odometry's
-frame, as targets for a readout.
+from its own images, slow features and odometry, in the odometry's frame, as
+targets for a readout.
 
-:func:`learn_positions` splits the run's odometry into straight lines
-(:func:`~sfanav.odometry.segment_lines`), fits a :class:`MetricLearner`
-(the maximum-likelihood cost with the signed angle and transit terms when
-the lines carry them, the thesis's cost otherwise), maps every frame's
-features to a position and moves the map into the odometry frame by the
-rigid transform (no scale: odometry is in metres) that best fits the first
-line's samples to their odometry positions (where the odometry has not
-drifted yet). Nothing here reads ground truth.
+:func:`learn_positions` makes the map one of two ways:
+
+* ``"pose-graph"`` (the default when the panoramas are given):
+  :func:`~sfanav.odometry.fit_pose_graph` corrects the odometry's heading
+  drift with loop closures (places passed twice, found by the slow features,
+  their relative heading read off the panoramas) and integrates the
+  odometry's distances along the corrected headings;
+* ``"metric-learning"`` (thesis 5.3.1): the run's odometry split into
+  straight lines (:func:`~sfanav.odometry.segment_lines`), a
+  :class:`MetricLearner` (the maximum-likelihood cost with the signed angle
+  and transit terms when the lines carry them, the thesis's cost otherwise)
+  maps every frame's features to a position, moved into the odometry frame
+  by the rigid transform (no scale: odometry is in metres) that best fits
+  the first line's samples to their odometry positions.
+
+Nothing here reads ground truth.
 """
 
 from __future__ import annotations
@@ -27,14 +35,22 @@ from ..localization.training import fit_localizer
 from .dead_reckoning import as_poses
 from .lines import Lines, segment_lines
 from .metric_learning import MetricLearner
+from .pose_graph import PoseGraph, fit_pose_graph
 
 MIN_LINES = 3
-"""Fewest straight lines with which a run can fix a metric map."""
+"""Fewest straight lines with which a run can fix a metric map (metric learning)."""
+
+MIN_LOOP_CLOSURES = 10
+"""Fewest kept loop closures below which the pose graph warns."""
 
 
 class OdometryMapWarning(UserWarning):
     """The run's odometry barely constrains the metric map (few lines, or
     lines of nearly one direction): positions learned from it are unreliable."""
+
+
+METHODS = ("pose-graph", "metric-learning")
+"""The ways :func:`learn_positions` can make a metric map."""
 
 
 @dataclass
@@ -46,37 +62,49 @@ class LearnedPositions:
     positions : ndarray (N, 2)
         Every frame's position in metres, in the odometry frame (the frame of
         the run's odometry, whose origin is its first pose's).
-    learner : MetricLearner
-        The fitted metric map (features -> positions before ``alignment``).
+    method : str
+        ``"pose-graph"`` or ``"metric-learning"``.
     lines : Lines
-        The straight lines it was fitted on.
-    alignment : Alignment
+        The straight lines of the odometry (the metric learner's input;
+        reported for both methods).
+    graph : PoseGraph or None
+        The solved pose graph (method ``"pose-graph"``).
+    learner : MetricLearner or None
+        The fitted metric map, features -> positions before ``alignment``
+        (method ``"metric-learning"``).
+    alignment : Alignment or None
         The rigid transform from the learner's frame (mirrored first where the
         learner's cost leaves the handedness open) to the odometry frame,
-        fitted on the first line.
+        fitted on the first line (method ``"metric-learning"``).
     warnings : list of str
         What makes the map unreliable, if anything (also warned).
     """
 
     positions: np.ndarray
-    learner: MetricLearner
+    method: str
     lines: Lines
-    alignment: Alignment
+    graph: PoseGraph | None = None
+    learner: MetricLearner | None = None
+    alignment: Alignment | None = None
     warnings: list[str] = field(default_factory=list)
 
     def info(self) -> dict[str, Any]:
         """A JSON-able summary for a model file's ``info``."""
-        return {
+        out: dict[str, Any] = {
             "supervision": "odometry",
             "frame": "odometry (the training run's odometry frame)",
+            "metric map": self.method,
             "lines": int(self.lines.n_lines),
             "points on lines": int(self.lines.n_points),
-            "metric cost": float(self.learner.cost_),
-            "angle term": self.learner.angle_term_,
-            "transit term": bool(np.any(self.learner.transit_weights_)),
-            "rms to odometry on the first line (m)": float(self.alignment.rmse),
-            "warnings": list(self.warnings),
         }
+        if self.graph is not None:
+            out.update(self.graph.info())
+        if self.learner is not None and self.alignment is not None:
+            out.update({"metric cost": float(self.learner.cost_), "angle term": self.learner.angle_term_,
+                        "transit term": bool(np.any(self.learner.transit_weights_)),
+                        "rms to odometry on the first line (m)": float(self.alignment.rmse)})
+        out["warnings"] = list(self.warnings)
+        return out
 
 
 def _direction_spread(lines: Lines, odometry: np.ndarray) -> float:
@@ -92,11 +120,13 @@ def _direction_spread(lines: Lines, odometry: np.ndarray) -> float:
     return float(1.0 - np.hypot(np.cos(a).mean(), np.sin(a).mean()))
 
 
-def learn_positions(features: Any, odometry: Any, *, n_outputs: int = 8, learner: MetricLearner | None = None,
-                    segmentation: Mapping[str, Any] | None = None, odometry_noise: Any = None,
+def learn_positions(features: Any, odometry: Any, *, images: Any = None, method: str = "auto", n_outputs: int = 8,
+                    learner: MetricLearner | None = None, segmentation: Mapping[str, Any] | None = None,
+                    odometry_noise: Any = None, pose_graph: Mapping[str, Any] | None = None,
                     random_state: int | None = 0, progress: bool = False) -> LearnedPositions:
     """Learns the positions of a training run's frames from its slow
-    features and odometry, without ground truth.
+    features, odometry and (for the pose graph) panoramas, without ground
+    truth.
 
     Parameters
     ----------
@@ -106,14 +136,21 @@ def learn_positions(features: Any, odometry: Any, *, n_outputs: int = 8, learner
     odometry : array (N, 3)
         The odometry poses of the same frames: x, y in metres, heading in
         radians (finite).
+    images : array (N, H, W[, C]), optional
+        The run's 360-degree panoramas (the pose graph's compass).
+    method : {"auto", "pose-graph", "metric-learning"}, default "auto"
+        ``"auto"``: the pose graph when ``images`` are given, metric
+        learning otherwise.
     n_outputs : int, default 8
-        Slowest features the metric map uses.
+        Slowest features the map uses (place pairs or the metric map).
     learner : MetricLearner, optional
-        Overrides the default learner (it is fitted here).
+        Overrides the default metric learner (it is fitted here).
     segmentation : mapping, optional
         Keywords for :func:`~sfanav.odometry.segment_lines`.
     odometry_noise : mapping or sfanav.sim.OdometryNoise, optional
-        The noise model of the default learner's weights.
+        The odometry's random-walk noise model (weights of both methods).
+    pose_graph : mapping, optional
+        Keywords for :func:`~sfanav.odometry.fit_pose_graph`.
 
     Returns
     -------
@@ -122,23 +159,44 @@ def learn_positions(features: Any, odometry: Any, *, n_outputs: int = 8, learner
     Raises
     ------
     ValueError
-        Non-finite or mismatched inputs, a run without motion, or fewer than
-        two straight lines. With fewer than :data:`MIN_LINES` lines or lines
-        of nearly one direction, an :class:`OdometryMapWarning` is issued and
-        recorded.
+        Non-finite or mismatched inputs, a run without motion, an unknown
+        method, the pose graph without images, or (metric learning) fewer
+        than two straight lines. With fewer than :data:`MIN_LINES` lines or
+        lines of nearly one direction (metric learning), or few loop closures
+        (pose graph), an :class:`OdometryMapWarning` is issued and recorded.
+
+    Examples
+    --------
+    >>> lp = learn_positions(loc.features(images), odometry, images=images)  # doctest: +SKIP
+    >>> loc.fit_features(loc.features(images), lp.positions)  # doctest: +SKIP
     """
     F = as_matrix(features, "features")
     P = as_poses(odometry, "odometry")
     check_same_length(F, P, "features", "odometry")
     n_outputs = check_n_outputs(check_int(n_outputs, "n_outputs"), F.shape[1], what="the features have", unit="columns")
+    if method not in ("auto",) + METHODS:
+        raise ValueError(f"method must be 'auto', 'pose-graph' or 'metric-learning', got {method!r}")
+    if method == "auto":
+        method = "pose-graph" if images is not None else "metric-learning"
+    if method == "pose-graph" and images is None:
+        raise ValueError("method='pose-graph' needs the run's panoramas (images=...)")
     steps = np.hypot(*np.diff(P[:, :2], axis=0).T)
     if not np.any(steps > 0):
         raise ValueError("the odometry does not move: positions cannot be learned from it")
     lines = segment_lines(P, **dict(segmentation or {}))
+    notes = []
+    if method == "pose-graph":
+        graph = fit_pose_graph(images, F, P, odometry_noise=odometry_noise, n_outputs=n_outputs,
+                               **dict(pose_graph or {}))
+        if graph.n_inliers < MIN_LOOP_CLOSURES:
+            notes.append(f"only {graph.n_inliers} loop closures: the run barely passes a place twice, so the "
+                         "odometry's heading drift is not corrected")
+        for n in notes:
+            warnings.warn(n, OdometryMapWarning, stacklevel=2)
+        return LearnedPositions(graph.poses[:, :2].copy(), method, lines, graph=graph, warnings=notes)
     if lines.n_lines < 2:
         raise ValueError(f"the odometry has {lines.n_lines} straight line segment(s); learning a metric map needs "
                          "at least 2 (drive straight lanes in several directions)")
-    notes = []
     if lines.n_lines < MIN_LINES:
         notes.append(f"only {lines.n_lines} straight line segments: the metric map is barely constrained")
     spread = _direction_spread(lines, P)
@@ -165,17 +223,19 @@ def learn_positions(features: Any, odometry: Any, *, n_outputs: int = 8, learner
             raw = raw * np.array([1.0, -1.0])
     first = lines.labels == 0
     al = align(raw[first], P[first, :2])
-    return LearnedPositions(al.apply(raw), learner, lines, al, notes)
+    return LearnedPositions(al.apply(raw), method, lines, learner=learner, alignment=al, warnings=notes)
 
 
 def fit_localizer_from_odometry(network: Any, images: Any, odometry: Any, *, n_metric_outputs: int = 8,
+                                method: str = "auto", pose_graph: Mapping[str, Any] | None = None,
                                 learner: MetricLearner | None = None, segmentation: Mapping[str, Any] | None = None,
                                 odometry_noise: Any = None, info: dict[str, Any] | None = None,
                                 **fit_kwargs: Any) -> Any:
     """Trains a :class:`~sfanav.Localizer` on a run's images and odometry
     alone: the network on the images (simulated rotation), the metric map on
-    the network's features and the odometry (:func:`learn_positions`), then
-    the readout on the learned positions. Its estimates are metres in the
+    the network's features, the odometry and (the default pose graph) the
+    images (:func:`learn_positions`, ``method``), then the readout on the
+    learned positions. Its estimates are metres in the
     training run's odometry frame.
 
     ``images`` (N, H, W[, C]) and ``odometry`` (N, 3) are the frames of the
@@ -192,7 +252,8 @@ def fit_localizer_from_odometry(network: Any, images: Any, odometry: Any, *, n_m
     learned: list[LearnedPositions] = []
 
     def positions(features: np.ndarray) -> np.ndarray:
-        learned.append(learn_positions(features, P, n_outputs=n_metric_outputs, learner=learner,
+        learned.append(learn_positions(features, P, images=images, method=method, pose_graph=pose_graph,
+                                       n_outputs=n_metric_outputs, learner=learner,
                                        segmentation=segmentation, odometry_noise=odometry_noise,
                                        progress=bool(fit_kwargs.get("progress", False))))
         return learned[-1].positions

@@ -1,0 +1,148 @@
+"""The pose graph: odometry whose heading drift is corrected by loop closures
+(sfanav.odometry.pose_graph)."""
+
+import numpy as np
+import pytest
+from sfanav import sim
+from sfanav.localization import align, med
+from sfanav.odometry import fit_pose_graph, place_pairs, relative_headings
+from sfanav.odometry.dead_reckoning import wrap_angle
+from sfanav.sim.cameras import bearings
+
+
+def serpentine(n_lanes=8, per_lane=30, length=12.0, spacing=1.0):
+    """True poses of a serpentine: lanes along x, stepping in y (heading 0 / pi)."""
+    poses = []
+    for k in range(n_lanes):
+        x = np.linspace(0, length, per_lane)
+        if k % 2:
+            x = x[::-1]
+        th = 0.0 if k % 2 == 0 else np.pi
+        poses.append(np.c_[x, np.full(per_lane, k * spacing), np.full(per_lane, th)])
+        if k < n_lanes - 1:  # the turn: a half circle of diameter `spacing`
+            a = np.linspace(0, np.pi, 7)[1:-1]
+            cx = x[-1]
+            side = 1.0 if k % 2 == 0 else -1.0
+            poses.append(np.c_[cx + side * 0.5 * spacing * np.sin(a), k * spacing + 0.5 * spacing * (1 - np.cos(a)),
+                               th + a])
+    return np.concatenate(poses)
+
+
+def drifted_odometry(truth, drift):
+    """Odometry with a systematic heading drift of ``drift`` rad/m and nothing else."""
+    step = np.diff(truth[:, :2], axis=0)
+    d = np.hypot(*step.T)
+    s = np.concatenate([[0.0], np.cumsum(d)])
+    th = np.unwrap(truth[:, 2]) + drift * s
+    # the odometry integrates each true step turned by its believed heading error
+    turn = 0.5 * (th[1:] - np.unwrap(truth[:, 2])[1:] + th[:-1] - np.unwrap(truth[:, 2])[:-1])
+    c, sn = np.cos(turn), np.sin(turn)
+    moved = np.c_[c * step[:, 0] - sn * step[:, 1], sn * step[:, 0] + c * step[:, 1]]
+    xy = truth[0, :2] + np.concatenate([np.zeros((1, 2)), np.cumsum(moved, axis=0)])
+    return np.c_[xy, th]
+
+
+def rotating_panoramas(headings, width=180, height=4, seed=0):
+    """Panoramas of a scene at infinity (no parallax): column j shows the
+    world direction heading + bearing_j."""
+    rng = np.random.default_rng(seed)
+    k = np.arange(1, 9)
+    amp, phase = rng.normal(size=(height, 8)) / k, rng.uniform(0, 2 * np.pi, size=(height, 8))
+    world = headings[:, None] + bearings(width)[None, :]  # (N, W)
+    img = (amp[None, :, None, :] * np.cos(k * world[:, None, :, None] + phase[None, :, None, :])).sum(axis=3)
+    return (img * 40 + 128).astype(np.float32)
+
+
+@pytest.fixture(scope="module")
+def synthetic():
+    truth = serpentine()
+    odo = drifted_odometry(truth, drift=0.01)
+    images = rotating_panoramas(truth[:, 2])
+    features = truth[:, :2] / 3.0  # a position code, blind to heading
+    return truth, odo, images, features
+
+
+def test_relative_headings_of_rotated_panoramas_are_exact_to_a_fraction_of_a_column():
+    th = np.radians(np.array([0.0, 10.0, 47.3, -100.0, 179.0, 3.3]))
+    imgs = rotating_panoramas(th, width=360)
+    rel = relative_headings(imgs, np.arange(1, 6), np.zeros(5, int))
+    np.testing.assert_allclose(np.degrees(wrap_angle(rel - (th[1:] - th[0]))), 0, atol=0.15)
+    # RGB panoramas (N, H, W, C) and integer images work alike
+    rgb = np.repeat(imgs[..., None], 3, axis=3).astype(np.uint8)
+    rel8 = relative_headings(rgb, np.arange(1, 6), np.zeros(5, int))
+    np.testing.assert_allclose(np.degrees(wrap_angle(rel8 - rel)), 0, atol=0.3)
+
+
+def test_place_pairs_join_near_places_far_apart_in_driving(synthetic):
+    truth, odo, _, features = synthetic
+    pairs = place_pairs(features, odo, n_neighbors=2, min_travel=5.0)
+    assert len(pairs) > len(truth) // 2
+    assert np.all(pairs.current > pairs.past)
+    s = np.concatenate([[0], np.cumsum(np.hypot(*np.diff(odo[:, :2], axis=0).T))])
+    assert np.all(s[pairs.current] - s[pairs.past] >= 5.0)
+    gap = np.hypot(*(truth[pairs.current, :2] - truth[pairs.past, :2]).T)
+    assert np.median(gap) <= 1.01  # the neighbouring lane
+
+
+def test_a_drifting_odometry_with_an_exact_compass_is_recovered_exactly(synthetic):
+    truth, odo, images, features = synthetic
+    assert med(align(odo[:, :2], truth[:, :2]).apply(odo[:, :2]), truth[:, :2]) > 1.0  # the odometry is bent
+    g = fit_pose_graph(images, features, odo)
+    assert g.drift_rate == pytest.approx(0.01, abs=2e-4)
+    assert g.n_inliers == len(g.pairs) > 100
+    np.testing.assert_allclose(g.poses[0], odo[0], atol=1e-6)  # the odometry frame
+    np.testing.assert_allclose(np.degrees(wrap_angle(g.poses[:, 2] - truth[:, 2])), 0, atol=0.2)
+    np.testing.assert_allclose(g.poses[:, :2], truth[:, :2], atol=0.05)  # no alignment needed: same first pose
+    info = g.info()
+    assert info["loop closures"] == len(g.pairs) and info["odometry heading drift (deg per m)"] == pytest.approx(
+        np.degrees(0.01), rel=0.05)
+
+
+def test_wrong_loop_closures_are_down_weighted(synthetic):
+    truth, odo, images, features = synthetic
+    rng = np.random.default_rng(1)
+    liars = rng.choice(len(images), 15, replace=False)
+    bad = images.copy()
+    bad[liars] = rotating_panoramas(truth[liars, 2] + np.radians(40))  # their compass reads 40 degrees off
+    g = fit_pose_graph(bad, features, odo, compass_sigma_deg=1.0)
+    involved = np.isin(g.pairs.current, liars) ^ np.isin(g.pairs.past, liars)  # one liar: a wrong reading
+    assert involved.sum() > 15
+    assert np.all(g.weights[involved] < 0.1) and np.all(g.weights[~involved] > 0.5)
+    np.testing.assert_allclose(g.poses[:, :2], truth[:, :2], atol=0.1)
+
+
+def test_without_loop_closures_the_pose_graph_is_dead_reckoning():
+    t = serpentine(n_lanes=1, per_lane=40)
+    g = fit_pose_graph(rotating_panoramas(t[:, 2]), t[:, :2], t, min_travel=100.0)
+    assert len(g.pairs) == 0 and g.drift_rate == 0.0
+    np.testing.assert_allclose(g.poses, t, atol=1e-12)
+
+
+def test_the_compass_reads_the_simulator_s_panoramas(tmp_path):
+    ds = sim.simulate("demo", tmp_path / "d", 0, camera=sim.PanoramicCamera(120, 12), max_frames=300,
+                      progress=False)
+    tr = ds.select(run="train")
+    X, gt = tr.load_images(), tr.poses
+    # places by ground truth here (the test is of the compass alone)
+    pairs = place_pairs(gt[:, :2], tr.odometry, n_neighbors=1, min_travel=5.0, n_outputs=2)
+    close = np.hypot(*(gt[pairs.current, :2] - gt[pairs.past, :2]).T) < 0.5
+    assert close.sum() >= 10
+    rel = relative_headings(X, pairs.current[close], pairs.past[close])
+    err = np.degrees(wrap_angle(rel - (gt[pairs.current[close], 2] - gt[pairs.past[close], 2])))
+    assert np.median(np.abs(err)) < 3.0, err
+
+
+def test_bad_input_is_refused(synthetic):
+    truth, odo, images, features = synthetic
+    with pytest.raises(ValueError, match="must match"):
+        fit_pose_graph(images[:-1], features, odo)
+    with pytest.raises(ValueError, match="panoramas"):
+        fit_pose_graph(images[:, 0], features, odo)
+    with pytest.raises(ValueError, match="compass_sigma_deg"):
+        fit_pose_graph(images, features, odo, compass_sigma_deg=0.0)
+    with pytest.raises(TypeError, match="n_neighbors"):
+        place_pairs(features, odo, n_neighbors=1.5)
+    bad = odo.copy()
+    bad[3, 2] = np.inf
+    with pytest.raises(ValueError, match="odometry"):
+        fit_pose_graph(images, features, bad)
