@@ -191,12 +191,23 @@ def test_evaluate_writes_report_metrics_and_plots(tiny, tmp_path, capsys):
 def test_demo_quick(tmp_path, capsys):
     code, out, err = run(capsys, "demo", "--quick", "--out", tmp_path / "demo", "--no-progress")
     assert code == 0, err
-    for name in ("dataset", "model.sfa", "test-estimates.csv", "report.md", "demo.json", "firing_maps.png",
-                 "trajectory.png"):
+    for name in ("dataset", "model.sfa", "model-ground-truth.sfa", "test-estimates.csv", "report.md", "demo.json",
+                 "firing_maps.png", "trajectory.png"):
         assert (tmp_path / "demo" / name).exists(), name
-    assert "MAE x (%) (random splits)" in out and "1.83" in out and "wall time" in out
+    assert "MAE x (%) (random splits) [no ground truth]" in out and "1.83" in out and "wall time" in out
     d = json.loads((tmp_path / "demo" / "demo.json").read_text())
-    assert d["experiment"] == "demo" and {r["metric"] for r in d["rows"]} >= {"MED (m)", "max eta_phi (outputs 1-8)"}
+    metrics = {r["metric"] for r in d["rows"]}
+    assert metrics >= {"MED (m) [no ground truth]", "max eta_phi (outputs 1-8) [no ground truth]",
+                       "MED (m) [no ground truth, fused with odometry]", "MED (m) [ground truth]",
+                       "MED (m) [thesis configuration, ground truth]", "MED (m) perfect memory",
+                       "MED ratio no ground truth / ground truth"}
+    # the demo's main model was trained without ground truth, the reference one with it
+    import sfanav
+
+    assert sfanav.load(tmp_path / "demo" / "model.sfa").info["supervision"] == "odometry"
+    assert sfanav.load(tmp_path / "demo" / "model-ground-truth.sfa").info["supervision"] == "ground-truth"
+    head = (tmp_path / "demo" / "test-estimates.csv").read_text().splitlines()[0]
+    assert head == "frame,x,y,fused_x,fused_y,fused_heading"
     code, _, err = run(capsys, "demo", "--quick", "--out", tmp_path / "demo", "--no-progress")
     assert_one_line_error(code, err, "--overwrite")
 
@@ -208,12 +219,13 @@ def test_experiment_list_and_help(capsys):
         assert any(line.split()[0] == name for line in out.splitlines())
     code, out, _ = run(capsys, "--help")
     assert code == 0
-    for cmd in ("simulate", "train", "localize", "evaluate", "demo", "experiment"):
+    for cmd in ("simulate", "train", "localize", "evaluate", "navigate", "demo", "experiment"):
         assert cmd in out
     for cmd, words in {"train": ("--preset", "--config", "--dataset", "--step", "--window", "--precision"),
                        "localize": ("INPUT", "--mirror", "frame,x,y", "video"),
                        "evaluate": ("--train-run", "report.md", "baselines"),
-                       "demo": ("--out", "--seed", "5.1.1"),
+                       "demo": ("--out", "--seed", "5.1.1", "no ground truth"),
+                       "navigate": ("--start", "--target", "--target-image", "geodesic", "--start=-3,-3"),
                        "experiment": ("--list", "--quick", "JSON")}.items():
         code, out, _ = run(capsys, cmd, "--help")
         assert code == 0

@@ -58,6 +58,27 @@ def block_folds(n: int, n_folds: int = 5, block: int | None = None) -> list[tupl
     return [(idx[fold != k], idx[fold == k]) for k in range(n_folds)]
 
 
+def cross_val_predict(spec: dict[str, Any], features: Any, xy: Any, *, n_folds: int = 5,
+                      block: int | None = 20) -> np.ndarray:
+    """Held-out estimates (N, 2) of a training run: each frame's position
+    predicted by the readout ``spec`` (as :func:`make_readout`, e.g. a
+    fitted localizer's ``readout_spec_``) fitted on the other folds of
+    :func:`block_folds` (blocks of ``block`` consecutive frames). What a
+    test run inside the explored area would see, without the in-sample
+    optimism of the fitted readout's own training estimates; used to choose
+    the EKF noise on the training run.
+
+    Raises ValueError for mismatched inputs or too few frames for the folds.
+    """
+    F = as_matrix(features, "features")
+    Y = as_matrix(xy, "xy", n_cols=2)
+    check_same_length(F, Y, "features", "xy")
+    out = np.empty((len(F), 2))
+    for train, held in block_folds(len(F), n_folds, block):
+        out[held] = make_readout(spec).fit(F[train], Y[train]).predict(F[held])
+    return out
+
+
 # The sfanav default readout ("auto"): a Gaussian process with ARD length
 # scales (marginal likelihood) unless Gaussian kernel ridge or kNN, chosen by
 # blocked CV on the training run (AUTO_FOLDS folds of interleaved blocks of

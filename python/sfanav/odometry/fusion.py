@@ -4,7 +4,11 @@ likelihood, and the start pose found from the first estimates.
 
 * :func:`noise_from_run`: the :class:`OdometryEKF` noise (odometry distance
   and heading per step, measurement) that makes a run's own estimates and
-  odometry most likely (grid search, criterion ``"nll"``); computed at
+  odometry most likely (grid search, criterion ``"nll"``);
+  :func:`noise_for_localizer` applies it to a localizer's *held-out*
+  estimates of its training run (its fitted estimates there are in-sample,
+  and for a model trained without ground truth they were fitted to the
+  odometry itself: both make the filter overconfident); computed at
   training time, stored in the model file.
 * :func:`start_pose_from_estimates`: the start pose (x, y, heading) of a run
   from the rigid fit of its first odometry positions to their estimates.
@@ -20,6 +24,7 @@ import numpy as np
 
 from .._checks import check_int, check_same_length
 from ..localization.error_metrics import align
+from ..localization.readout_selection import cross_val_predict
 from .dead_reckoning import as_poses, wrap_angle
 from .ekf import OdometryEKF, grid_search
 
@@ -82,6 +87,22 @@ def noise_from_run(odometry: Any, estimates: Any, *, start_pose: Any = None, max
     s0 = start_pose_from_estimates(P, Z) if start_pose is None else start_pose
     res = grid_search(P, Z, s0, criterion="nll", progress=progress, **grid)
     return {k: float(res.best_params[k]) for k in NOISE_KEYS}
+
+
+def noise_for_localizer(localizer: Any, features: Any, targets: Any, odometry: Any, *, block: int = 20,
+                        n_folds: int = 5, **kwargs: Any) -> dict[str, float]:
+    """The EKF noise for a fitted localizer, chosen on its training run:
+    :func:`noise_from_run` on the odometry (N, 3) and the *held-out*
+    estimates of the run (:func:`sfanav.localization.cross_val_predict` of
+    ``block`` consecutive frames, fewer on short runs, of
+    the localizer's readout on ``features`` (N, m), its rotation-pooled
+    features of the run, and ``targets`` (N, 2), the positions its readout
+    was fitted to: ground truth, or the learned positions). ``kwargs`` go
+    to :func:`noise_from_run`. Raises ValueError as those."""
+    n = len(np.asarray(targets))
+    block = max(1, min(int(block), n // (2 * n_folds)))  # short runs: shorter blocks, each fold held out twice
+    held = cross_val_predict(localizer.readout_spec_, features, targets, n_folds=n_folds, block=block)
+    return noise_from_run(odometry, held, **kwargs)
 
 
 def fuse(odometry: Any, estimates: Any, noise: Mapping[str, float], *, start_pose: Any = None,
