@@ -230,11 +230,13 @@ def _cv_diagnostics(F_tr: np.ndarray, xy_tr: np.ndarray, F_te: np.ndarray, xy_te
 
 def _default_row(X_tr: np.ndarray, xy_tr: np.ndarray, X_te: np.ndarray, xy_te: np.ndarray, crange: np.ndarray,
                  elev: tuple[float, float], *, quick: bool, seed: int, n_repeats: int, log: Any,
-                 tag: str) -> tuple[dict[str, Any], dict[str, Any]]:
+                 tag: str, odometry: np.ndarray | None = None
+                 ) -> tuple[dict[str, Any], dict[str, Any], dict[str, Any] | None]:
     """The sfanav default, trained by :func:`sfanav.localization.train_default`
     exactly as ``sfanav train`` does without a preset, measured as the
-    other rows; and the same network and rows without rotation pooling
-    (the pooling's ablation row)."""
+    other rows; the same network and rows without rotation pooling (the
+    pooling's ablation row); and, given the training run's ``odometry``,
+    the same network with its readout fitted without ground truth."""
     from ..localization.recipe import default_network
     from ..localization.training import train_default
 
@@ -269,7 +271,44 @@ def _default_row(X_tr: np.ndarray, xy_tr: np.ndarray, X_te: np.ndarray, xy_te: n
                  "rotation pooling": 1}
     log(f"  {tag} sfanav default without rotation pooling: MAE {mp['mae_x_pct']:.2f} / {mp['mae_y_pct']:.2f} %, "
         f"MED {mp['med']:.3f} m ({plain.describe_readout()})")
-    return row, plain_row
+    free_row = None
+    if odometry is not None and np.isfinite(odometry).all():
+        free_row = _no_ground_truth_row(loc, F_tr, F_te, X_tr, xy_tr, xy_te, odometry, crange, m["med"])
+        log(f"  {tag} sfanav default, no ground truth: MAE {free_row['MAE x (%)']:.2f} / "
+            f"{free_row['MAE y (%)']:.2f} %, MED {free_row['MED (m)']:.3f} m (ratio "
+            f"{free_row['MED ratio no ground truth / ground truth']:.2f}; training positions "
+            f"{free_row['training positions median error (m)']:.3f} m from the truth)")
+    return row, plain_row, free_row
+
+
+def _no_ground_truth_row(loc: Any, F_tr: np.ndarray, F_te: np.ndarray, X_tr: np.ndarray, xy_tr: np.ndarray,
+                         xy_te: np.ndarray, odometry: np.ndarray, crange: np.ndarray,
+                         supervised_med: float) -> dict[str, Any]:
+    """The sfanav default's network with its readout fitted to the training
+    run's positions learned from its images and odometry (pose graph), no
+    ground truth; for evaluation only, the estimates are moved into the
+    world by the rigid fit of the training run's estimates to its truth."""
+    import warnings
+
+    from ..localization.error_metrics import align
+    from ..odometry.self_supervision import OdometryMapWarning, learn_positions
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", OdometryMapWarning)
+        lp = learn_positions(F_tr, odometry, images=X_tr)
+    free = Localizer(loc.network, n_outputs=loc.n_outputs, readout=loc.readout, rows=loc.rows,
+                     rotation_pooling=loc.rotation_pooling).fit_features(F_tr, lp.positions)
+    world = align(free.predict_features(F_tr), xy_tr)
+    m = localization_metrics(world.apply(free.predict_features(F_te)), xy_te, coordinate_range=crange)
+    target = align(lp.positions, xy_tr)
+    return {"MAE x (%)": m["mae_x_pct"], "MAE y (%)": m["mae_y_pct"], "MAE x (m)": m["mae_x"],
+            "MAE y (m)": m["mae_y"], "MED (m)": m["med"],
+            "MED ratio no ground truth / ground truth": m["med"] / supervised_med if supervised_med > 0 else None,
+            "training positions median error (m)": float(np.median(np.hypot(*(target.apply(lp.positions)
+                                                                              - xy_tr).T))),
+            "loop closures kept": lp.graph.n_inliers if lp.graph is not None else None,
+            "numbers per image": int(free.n_outputs_), "readout": free.describe_readout(),
+            "rotation pooling": int(free.rotation_pooling_), "warnings": "; ".join(lp.warnings) or "-"}
 
 
 def run_scene(out: Path, preset: str, seed: int, *, quick: bool, progress: bool, control: bool,
@@ -313,9 +352,12 @@ def run_scene(out: Path, preset: str, seed: int, *, quick: bool, progress: bool,
         log(f"{tag} seed {seed} {name}: MED {b['med']:.3f} m ({time.perf_counter() - t0:.0f} s)")
     if default_too:
         pre = "control: " if control else ""
-        res[pre + "sfanav default"], res[pre + "sfanav default without rotation pooling"] = _default_row(
+        d_row, p_row, f_row = _default_row(
             X_tr, xy_tr, X_te, xy_te, crange, elev, quick=quick, seed=seed, n_repeats=5 if quick else n_repeats,
-            log=log, tag=f"{tag} seed {seed}")
+            log=log, tag=f"{tag} seed {seed}", odometry=ds.select(run="train").odometry)
+        res[pre + "sfanav default"], res[pre + "sfanav default without rotation pooling"] = d_row, p_row
+        if f_row is not None:
+            res[pre + "sfanav default, no ground truth"] = f_row
     odo_tr = ds.select(run="train").odometry[:, :2]
     variants = [(rn, r, "", train_variants.get("")) for rn, r in row_variants.items()] if "" in train_variants else []
     variants += [("", ROW_VARIANTS[(opts or {}).get("rows", "")], tn, opts) for tn, opts in train_variants.items() if tn]
@@ -467,7 +509,8 @@ def _exp_gardens(out: Path, *, quick: bool, seed: int, progress: bool) -> Experi
     rows: list[dict[str, Any]] = []
     for cfg, m in avg.items():
         for k in METRICS + ("readout", "readout rule", "readout selection (s)", "query ms", "loop closures",
-                            "loop closures within 0.5 m (%)"):
+                            "loop closures within 0.5 m (%)", "MED ratio no ground truth / ground truth",
+                            "training positions median error (m)", "loop closures kept"):
             if k not in m or m[k] is None:
                 continue
             row = {"metric": f"{k} [{cfg}]", "thesis": None, "sfanav": m[k], "configuration": cfg,
