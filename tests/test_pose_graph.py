@@ -146,3 +146,24 @@ def test_bad_input_is_refused(synthetic):
     bad[3, 2] = np.inf
     with pytest.raises(ValueError, match="odometry"):
         fit_pose_graph(images, features, bad)
+
+
+def test_wheel_slip_and_random_heading_noise_are_absorbed(synthetic):
+    truth, _, images, features = synthetic
+    # frequent slips with large heading errors (their distance errors are not corrected: the map trusts
+    # the odometry's distances, so they stay small here)
+    noise = sim.OdometryNoise(distance_sigma=0.01, scale_error=0.0, heading_sigma=0.004, turn_sigma=0.01,
+                              heading_drift=0.01, slip_rate=0.1, slip_distance=0.02, slip_heading_sigma=0.05)
+    odo = sim.simulate_odometry(truth, noise, rng=4)
+    dead = med(align(odo[:, :2], truth[:, :2]).apply(odo[:, :2]), truth[:, :2])
+    g = fit_pose_graph(images, features, odo, odometry_noise=noise)
+    err = med(align(g.poses[:, :2], truth[:, :2]).apply(g.poses[:, :2]), truth[:, :2])
+    assert err < 0.3 and err < dead / 3, (err, dead)
+
+
+def test_a_run_with_gaps_keeps_its_map(synthetic):
+    truth, odo, images, features = synthetic
+    keep = np.ones(len(truth), bool)
+    keep[40:55] = keep[150:170] = False  # frames lost (the odometry keeps counting)
+    g = fit_pose_graph(images[keep], features[keep], odo[keep])
+    np.testing.assert_allclose(g.poses[:, :2], truth[keep, :2], atol=0.05)

@@ -190,3 +190,21 @@ def test_cli_ground_truth_supervision_needs_ground_truth(tmp_path, capsys):
     assert e.value.code == 2
     assert "supervision 'odometry'" in capsys.readouterr().err
     assert not (tmp_path / "m.sfa").exists()
+
+
+def test_timestamps_must_increase(run):
+    from sfanav.odometry.self_supervision import check_timestamps
+
+    n = len(run["odometry"])
+    t = np.arange(n, dtype=float) * 0.5
+    np.testing.assert_array_equal(check_timestamps(t, n), t)
+    back = t.copy()
+    back[7] = back[6]
+    with pytest.raises(ValueError, match="frame 7 at 3 s does not come after frame 6"):
+        learn_positions(run["features"], run["odometry"], timestamps=back)
+    bad = t.copy()
+    bad[3] = np.nan
+    with pytest.raises(ValueError, match="finite; frame 3"):
+        learn_positions(run["features"], run["odometry"], timestamps=bad)
+    with pytest.raises(ValueError, match="must match"):
+        check_timestamps(t[:-1], n)

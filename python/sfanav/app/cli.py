@@ -366,7 +366,9 @@ def _run_train(args: argparse.Namespace) -> int:
     if supervision == "odometry":
         _log("fitting the readout to positions learned from the run's odometry (no ground truth); estimates are "
              "metres in the odometry's frame")
-        loc = fit_localizer_from_odometry(net, images, odometry, method=args.metric_map, **fit_kw)
+        stamps = train.timestamps
+        loc = fit_localizer_from_odometry(net, images, odometry, method=args.metric_map,
+                                          timestamps=stamps if np.isfinite(stamps).all() else None, **fit_kw)
         if args.metric_map == "pose-graph":
             _log(f"pose graph: {loc.info['loop closures kept']} of {loc.info['loop closures']} loop closures kept, "
                  f"odometry heading drift {loc.info['odometry heading drift (deg per m)']:.3f} deg/m corrected")

@@ -306,13 +306,7 @@ def metric_localizer(sc: Scene, out: Path, seed: int, *, progress: bool = False)
             return loc, cam
     rows = None if sc.quick else default_rows(CAMERA_ELEVATION)
     poses = sc.trajectory.poses
-    it = poses
-    if progress:
-        from tqdm.auto import tqdm
-
-        it = tqdm(poses, desc=f"render {sc.name} (350x40)", unit="img", leave=False)
-    renderer = sc.simulator.renderer
-    imgs = np.stack([renderer.render(cam, p) for p in it])
+    imgs = training_images(sc, cam, progress=progress)
     net = Network(network_config(True)) if sc.quick else default_network()
     net.fit(imgs if rows is None else rows(imgs), rotation=Rotation(10 if sc.quick else 5), progress=progress)
     loc = Localizer(net, readout={"kind": "gp", "n_outputs": net.n_outputs_}, rows=rows).fit(imgs, poses[:, :2])
@@ -321,10 +315,78 @@ def metric_localizer(sc: Scene, out: Path, seed: int, *, progress: bool = False)
     return loc, cam
 
 
+def training_images(sc: Scene, cam: Any, *, progress: bool = False) -> np.ndarray:
+    """The scene's training run rendered with ``cam`` at the robot's centre."""
+    it = sc.trajectory.poses
+    if progress:
+        from tqdm.auto import tqdm
+
+        it = tqdm(it, desc=f"render {sc.name} ({cam.width}x{cam.height})", unit="img", leave=False)
+    renderer = sc.simulator.renderer
+    return np.stack([renderer.render(cam, p) for p in it])
+
+
+def exploration_odometry(sc: Scene, seed: int) -> np.ndarray:
+    """The odometry (N, 3) of the scene's training run: the scene robot's
+    noise model along the true poses (stream ``seed``), starting at the true
+    first pose."""
+    from ..sim.robot import simulate_odometry
+
+    return simulate_odometry(sc.trajectory.poses, sc.robot.noise, trial_rng(seed, 7, 9))
+
+
+def no_ground_truth_localizer(sc: Scene, out: Path, seed: int, loc: Any, cam: Any, *,
+                              progress: bool = False) -> tuple[Any, np.ndarray, dict[str, Any]]:
+    """The metric arms' localizer with its readout fitted without ground
+    truth: the same network (trained on images only), the training run's
+    positions learned from its images and simulated odometry
+    (:func:`exploration_odometry`) by the pose graph. Returns (localizer,
+    the learned positions (N, 2) for the geodesic field, a summary); cached
+    under ``out/cache``."""
+    import json
+    import os
+    import warnings
+
+    from ..localization.error_metrics import align
+    from ..localization.localizer import Localizer
+    from ..odometry.self_supervision import OdometryMapWarning, learn_positions
+    from ..sfa.modelfile import load
+
+    cache = Path(out) / "cache" / _cache_name(sc, f"metric-{sc.name}-no-ground-truth", seed, cam.to_dict())
+    side = cache.with_suffix(".positions.npy")
+    if cache.exists() and side.exists():
+        free = load(cache)
+        if isinstance(free, Localizer):
+            return free, np.load(side), dict(free.info.get("no ground truth", {}))
+    imgs = training_images(sc, cam, progress=progress)
+    odo = exploration_odometry(sc, seed)
+    F = loc.features(imgs)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", OdometryMapWarning)
+        lp = learn_positions(F, odo, images=imgs)
+    free = Localizer(loc.network, n_outputs=loc.n_outputs, readout=loc.readout, rows=loc.rows,
+                     rotation_pooling=loc.rotation_pooling).fit_features(F, lp.positions)
+    truth = sc.trajectory.poses[:, :2]  # evaluation only
+    summary = {"loop closures kept": lp.graph.n_inliers if lp.graph is not None else None,
+               "training positions median error (m)": float(np.median(np.hypot(*(
+                   align(lp.positions, truth).apply(lp.positions) - truth).T))),
+               "odometry median error (m)": float(np.median(np.hypot(*(
+                   align(odo[:, :2], truth).apply(odo[:, :2]) - truth).T))),
+               "warnings": "; ".join(lp.warnings) or "-"}
+    free.info.update(lp.info())
+    free.info["no ground truth"] = json.loads(json.dumps(summary))
+    cache.parent.mkdir(parents=True, exist_ok=True)
+    free.save(cache)
+    tmp = side.with_name(side.name + ".part.npy")
+    np.save(tmp, lp.positions)
+    os.replace(tmp, side)
+    return free, lp.positions, summary
+
+
 def metric_arms(sc: Scene, out: Path, seed: int, starts: np.ndarray, targets: np.ndarray,
                 optimal: np.ndarray | None, *, progress: bool = False,
-                localizer: tuple[Any, Any] | None = None,
-                field: Any = None) -> tuple[list[dict[str, Any]], list[str], list[str]]:
+                localizer: tuple[Any, Any] | None = None, field: Any = None,
+                no_ground_truth: tuple[Any, Any] | None = None) -> tuple[list[dict[str, Any]], list[str], list[str]]:
     """Navigation in the learned metric space on the same trials: the thesis
     rule (eta 1, gamma 0.5) on the distance between estimated positions and
     on the exploration run's geodesic distance, both divided by the run's
@@ -333,7 +395,10 @@ def metric_arms(sc: Scene, out: Path, seed: int, starts: np.ndarray, targets: np
     with odometry (:class:`MapTracker`), and :class:`MetricDescent` without
     and with the run's :class:`GeodesicField`. ``localizer``: (localizer, camera) from
     :func:`metric_localizer` if the caller has it; ``field``: the run's
-    GeodesicField if the caller built it. Returns (rows, plots, notes)."""
+    GeodesicField if the caller built it; ``no_ground_truth``: (localizer,
+    field) of :func:`no_ground_truth_localizer`, run as one more arm
+    (metric descent + its geodesic field, its own estimates). Returns
+    (rows, plots, notes)."""
     loc, cam = localizer if localizer is not None else metric_localizer(sc, out, seed, progress=progress)
     feats = nav.MetricFeatures(loc, sc.simulator.renderer, cam)
     run_xy = sc.trajectory.poses[:, :2]
@@ -351,7 +416,12 @@ def metric_arms(sc: Scene, out: Path, seed: int, starts: np.ndarray, targets: np
     rows: list[dict[str, Any]] = []
     plots: list[str] = []
     notes: list[str] = []
-    for name, d, cost, tracker in arms:
+    arms = [(name, d, cost, tracker, feats) for name, d, cost, tracker in arms]
+    if no_ground_truth is not None:
+        free, free_field = no_ground_truth
+        arms.append(("metric descent + geodesic field, no ground truth", nav.MetricDescent(field=free_field), None,
+                     None, nav.MetricFeatures(free, sc.simulator.renderer, cam)))
+    for name, d, cost, tracker, feats in arms:
         navi = nav.Navigator(sc.fresh_noise(), feats, d, n_outputs=2, success_radius=SUCCESS_RADIUS,
                              max_iterations=QUICK_ITERATIONS if sc.quick else MAX_ITERATIONS, cost=cost,
                              tracker=tracker)
@@ -501,8 +571,13 @@ def _run_71(kind: str, out: Path, *, quick: bool, seed: int, progress: bool) -> 
         rows += _summary_rows(label, s, None)
         notes_runs.append(f"{label}: {_reasons(s)}")
     # beyond the thesis: the same trials in the learned metric space (images -> slow features -> positions)
+    free, free_xy, free_info = no_ground_truth_localizer(sc, out, seed, loc, dcam, progress=progress)
     mrows, mplots, mnotes = metric_arms(sc, out, seed, starts, targets, optimal, progress=progress,
-                                        localizer=(loc, dcam), field=field)
+                                        localizer=(loc, dcam), field=field,
+                                        no_ground_truth=(free, nav.GeodesicField(free_xy)))
+    for k, v in free_info.items():
+        if isinstance(v, (int, float)) and v is not None:
+            rows.append({"metric": f"{k} (no ground truth)", "thesis": None, "sfanav": v})
     rows += mrows
     plots += mplots
     notes_runs += mnotes
@@ -560,6 +635,9 @@ def _run_71(kind: str, out: Path, *, quick: bool, seed: int, progress: bool) -> 
         f"{nav.run_spread(sc.trajectory.poses[:, :2]):.2f} m) for the thesis rule, which then runs with the thesis's eta and gamma on unit-variance 'ideal' "
         "x / y features; MetricDescent heads for the target through a rigid odometry-to-map fit, with the geodesic field over the "
         "training run's positions (ground truth here) when the run's path is > 1.2x the straight line. "
+        "Row '..., no ground truth': the same network with its readout fitted to the training run's positions "
+        "learned from its images and simulated odometry (pose graph), the geodesic field over those learned "
+        "positions, targets as images (their estimates); success measured in the world. "
         + "Outcomes: " + "; ".join(notes_runs) + "."
     )
     return ExperimentResult(f"7.1-{kind}", rows, plots, notes)

@@ -184,7 +184,8 @@ def _solve_headings(odometry: np.ndarray, pairs: PlacePairs, rel: np.ndarray, no
     e = np.arange(n - 1)
     dth = wrap_angle(np.diff(odometry[:, 2]))
     dd = np.hypot(*np.diff(odometry[:, :2], axis=0).T)
-    st = np.sqrt(noise["heading_sigma"] ** 2 * dd + noise["turn_sigma"] ** 2 * np.abs(dth) + 1e-10)
+    slip = noise.get("slip_rate", 0.0) * noise.get("slip_heading_sigma", 0.0) ** 2  # rad^2 per m (Poisson)
+    st = np.sqrt((noise["heading_sigma"] ** 2 + slip) * dd + noise["turn_sigma"] ** 2 * np.abs(dth) + 1e-10)
     theta = odometry[0, 2] + np.concatenate([[0.0], np.cumsum(dth)])
     i, j = pairs.current, pairs.past
     m = len(i)
@@ -225,6 +226,19 @@ def integrate(odometry: np.ndarray, headings: np.ndarray) -> np.ndarray:
     return P[0, :2] + np.concatenate([np.zeros((1, 2)), np.cumsum(step, axis=0)])
 
 
+SLIP_DEFAULTS = {"slip_rate": 0.01, "slip_heading_sigma": 0.02}
+"""Wheel slip assumed when the noise model gives none: events per metre and
+the heading error of one (the defaults of :class:`sfanav.sim.OdometryNoise`)."""
+
+
+def _heading_noise(odometry_noise: Any) -> dict[str, float]:
+    out = dict(noise_dict(odometry_noise))
+    raw = odometry_noise.to_dict() if hasattr(odometry_noise, "to_dict") else (odometry_noise or {})
+    for k, v in SLIP_DEFAULTS.items():
+        out[k] = check_nonneg_float(raw.get(k, v), f"odometry_noise[{k!r}]") if isinstance(raw, Mapping) else v
+    return out
+
+
 def fit_pose_graph(images: Any, features: Any, odometry: Any, *, odometry_noise: Any = None,
                    compass_sigma_deg: float = DEFAULT_COMPASS_SIGMA_DEG, n_neighbors: int = 3,
                    min_travel: float = 5.0, n_outputs: int = 8, iterations: int = 8,
@@ -241,9 +255,11 @@ def fit_pose_graph(images: Any, features: Any, odometry: Any, *, odometry_noise:
     odometry : array (N, 3)
         Odometry poses: x, y (m), heading (rad), finite.
     odometry_noise : mapping or sfanav.sim.OdometryNoise, optional
-        ``heading_sigma`` (rad/sqrt(m)) and ``turn_sigma`` (rad/sqrt(rad))
-        weight the odometry's heading changes; default
-        :data:`~sfanav.odometry.DEFAULT_ODOMETRY_NOISE`.
+        ``heading_sigma`` (rad/sqrt(m)), ``turn_sigma`` (rad/sqrt(rad)),
+        ``slip_rate`` (1/m) and ``slip_heading_sigma`` (rad) weight the
+        odometry's heading changes; defaults
+        :data:`~sfanav.odometry.DEFAULT_ODOMETRY_NOISE` and
+        :data:`SLIP_DEFAULTS`.
     compass_sigma_deg : float, default 5
         Standard deviation of a pair's relative heading, degrees.
     n_neighbors, min_travel, n_outputs
@@ -275,7 +291,7 @@ def fit_pose_graph(images: Any, features: Any, odometry: Any, *, odometry_noise:
     sigma = np.radians(check_positive_float(compass_sigma_deg, "compass_sigma_deg"))
     iterations = check_int(iterations, "iterations", minimum=1)
     robust = check_positive_float(robust, "robust")
-    noise = noise_dict(odometry_noise)
+    noise = _heading_noise(odometry_noise)
     pairs = place_pairs(F, P, n_neighbors=n_neighbors, min_travel=min_travel, n_outputs=n_outputs)
     if len(pairs) == 0:
         th = np.unwrap(P[:, 2])

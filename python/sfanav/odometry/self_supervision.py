@@ -120,10 +120,28 @@ def _direction_spread(lines: Lines, odometry: np.ndarray) -> float:
     return float(1.0 - np.hypot(np.cos(a).mean(), np.sin(a).mean()))
 
 
+def check_timestamps(timestamps: Any, n: int) -> np.ndarray:
+    """Finite, strictly increasing timestamps (seconds) of ``n`` frames in
+    temporal order, as float64; ValueError naming the first offending frame."""
+    t = np.asarray(timestamps, dtype=np.float64).ravel()
+    if len(t) != n:
+        raise ValueError(f"timestamps has {len(t)} entries but the run has {n} frames; they must match")
+    bad = np.flatnonzero(~np.isfinite(t))
+    if len(bad):
+        raise ValueError(f"timestamps must be finite; frame {bad[0]} has {t[bad[0]]}")
+    back = np.flatnonzero(np.diff(t) <= 0)
+    if len(back):
+        k = int(back[0])
+        raise ValueError(f"timestamps must increase (frames in temporal order): frame {k + 1} at {t[k + 1]:g} s "
+                         f"does not come after frame {k} at {t[k]:g} s")
+    return t
+
+
 def learn_positions(features: Any, odometry: Any, *, images: Any = None, method: str = "auto", n_outputs: int = 8,
                     learner: MetricLearner | None = None, segmentation: Mapping[str, Any] | None = None,
                     odometry_noise: Any = None, pose_graph: Mapping[str, Any] | None = None,
-                    random_state: int | None = 0, progress: bool = False) -> LearnedPositions:
+                    timestamps: Any = None, random_state: int | None = 0,
+                    progress: bool = False) -> LearnedPositions:
     """Learns the positions of a training run's frames from its slow
     features, odometry and (for the pose graph) panoramas, without ground
     truth.
@@ -151,6 +169,9 @@ def learn_positions(features: Any, odometry: Any, *, images: Any = None, method:
         The odometry's random-walk noise model (weights of both methods).
     pose_graph : mapping, optional
         Keywords for :func:`~sfanav.odometry.fit_pose_graph`.
+    timestamps : array (N,), optional
+        The frames' times (s), checked to increase (the frames must be in
+        temporal order).
 
     Returns
     -------
@@ -159,7 +180,8 @@ def learn_positions(features: Any, odometry: Any, *, images: Any = None, method:
     Raises
     ------
     ValueError
-        Non-finite or mismatched inputs, a run without motion, an unknown
+        Non-finite or mismatched inputs, timestamps that do not increase, a
+        run without motion, an unknown
         method, the pose graph without images, or (metric learning) fewer
         than two straight lines. With fewer than :data:`MIN_LINES` lines or
         lines of nearly one direction (metric learning), or few loop closures
@@ -174,6 +196,8 @@ def learn_positions(features: Any, odometry: Any, *, images: Any = None, method:
     P = as_poses(odometry, "odometry")
     check_same_length(F, P, "features", "odometry")
     n_outputs = check_n_outputs(check_int(n_outputs, "n_outputs"), F.shape[1], what="the features have", unit="columns")
+    if timestamps is not None:
+        check_timestamps(timestamps, len(P))
     if method not in ("auto",) + METHODS:
         raise ValueError(f"method must be 'auto', 'pose-graph' or 'metric-learning', got {method!r}")
     if method == "auto":
@@ -229,8 +253,8 @@ def learn_positions(features: Any, odometry: Any, *, images: Any = None, method:
 def fit_localizer_from_odometry(network: Any, images: Any, odometry: Any, *, n_metric_outputs: int = 8,
                                 method: str = "auto", pose_graph: Mapping[str, Any] | None = None,
                                 learner: MetricLearner | None = None, segmentation: Mapping[str, Any] | None = None,
-                                odometry_noise: Any = None, info: dict[str, Any] | None = None,
-                                **fit_kwargs: Any) -> Any:
+                                odometry_noise: Any = None, timestamps: Any = None,
+                                info: dict[str, Any] | None = None, **fit_kwargs: Any) -> Any:
     """Trains a :class:`~sfanav.Localizer` on a run's images and odometry
     alone: the network on the images (simulated rotation), the metric map on
     the network's features, the odometry and (the default pose graph) the
@@ -243,12 +267,16 @@ def fit_localizer_from_odometry(network: Any, images: Any, odometry: Any, *, n_m
     :func:`sfanav.localization.fit_localizer` (rotation, readout, n_outputs,
     rows, prep, progress, rotation_pooling). The localizer's ``info`` records
     ``"supervision": "odometry"``, the frame and the map's lines;
+    ``timestamps`` (N,), if given, are checked to increase before anything
+    is trained;
     ``learned_positions_`` holds the :class:`LearnedPositions`. Raises as
     :func:`learn_positions`.
     """
     P = as_poses(odometry, "odometry")
     if len(P) != len(images):
         raise ValueError(f"images has {len(images)} frames but odometry has {len(P)} poses; they must match")
+    if timestamps is not None:
+        check_timestamps(timestamps, len(P))  # before the network's training, not after it
     learned: list[LearnedPositions] = []
 
     def positions(features: np.ndarray) -> np.ndarray:
