@@ -577,7 +577,7 @@ def _run_71(kind: str, out: Path, *, quick: bool, seed: int, progress: bool) -> 
                                         no_ground_truth=(free, nav.GeodesicField(free_xy)))
     for k, v in free_info.items():
         if isinstance(v, (int, float)) and v is not None:
-            rows.append({"metric": f"{k} (no ground truth)", "thesis": None, "sfanav": v})
+            rows.append({"metric": f"{k} (no ground truth)", "thesis": None, "sfanav": float(v)})
     rows += mrows
     plots += mplots
     notes_runs += mnotes
