@@ -167,3 +167,24 @@ def test_a_run_with_gaps_keeps_its_map(synthetic):
     keep[40:55] = keep[150:170] = False  # frames lost (the odometry keeps counting)
     g = fit_pose_graph(images[keep], features[keep], odo[keep])
     np.testing.assert_allclose(g.poses[:, :2], truth[keep, :2], atol=0.05)
+
+
+def test_refinement_is_refused_when_the_readout_contradicts_the_odometry(synthetic):
+    from sfanav.odometry.pose_graph import PlacePairs, refine_positions
+
+    truth, odo, images, features = synthetic
+    g = fit_pose_graph(images, features, odo, refine=0)
+    noise = {"distance_sigma": 0.01, "heading_sigma": 0.004, "turn_sigma": 0.01}
+    kw = dict(noise=noise, rounds=2, offset_sigma=0.05, heading_sigma=np.radians(1.0))
+    pairs = PlacePairs(g.pairs.current, g.pairs.past, g.pairs.distance)
+    # features that know x only: the readout puts neighbouring lanes on top of each other
+    blind = np.c_[features[:, 0], np.zeros(len(features))]
+    P, kept, chi = refine_positions(blind, odo, g.poses[:, 2], g.poses[:, :2], pairs,
+                                    readout={"kind": "knn", "n_outputs": 2, "k": 5}, **kw)
+    assert kept == 0 and chi > 2.0
+    np.testing.assert_array_equal(P, g.poses[:, :2])
+    # a position code: the rounds are kept and agree with the odometry
+    P, kept, chi = refine_positions(features, odo, g.poses[:, 2], g.poses[:, :2], pairs,
+                                    readout={"kind": "gp", "n_outputs": 2}, **kw)
+    assert kept == 2 and chi <= 2.0
+    assert med(P, truth[:, :2]) < 0.05

@@ -17,7 +17,15 @@ difference of their headings. :func:`fit_pose_graph`
    an unknown systematic drift rate (rad/m) and the pairs' relative headings
    (robust Cauchy weights by iterative reweighting, so that a wrong pair
    does not bend the map),
-4. integrates the odometry's distances along the solved headings.
+4. integrates the odometry's distances along the solved headings,
+5. refines the positions (``refine`` rounds): a readout (a GP of the slow
+   features, by default) is fitted to the current positions, and the
+   positions solve one sparse linear least-squares problem: the odometry's
+   steps turned by the solved headings (distance random walk plus a lateral
+   error from the headings' uncertainty) and, for every loop-closure pair,
+   the offset between the two frames that the readout predicts (a smooth
+   function of the slow features averages all passes through a place, so
+   it corrects the drift of the odometry's distances between passes).
 
 The result is in the odometry frame: the first frame keeps its odometry
 pose. Nothing here reads ground truth.
@@ -34,8 +42,13 @@ import scipy.sparse as sp
 from scipy.sparse.linalg import spsolve
 
 from .._checks import as_matrix, check_int, check_nonneg_float, check_positive_float, check_same_length
+from ..localization.readouts import make_readout
 from .dead_reckoning import as_poses, wrap_angle
 from .metric_cost import noise_dict
+
+REFINE_READOUT = {"kind": "gp", "n_outputs": 12}
+"""The readout whose predicted offsets refine the positions (at most as many
+outputs as the features have)."""
 
 DEFAULT_COMPASS_SIGMA_DEG = 5.0
 """Standard deviation (degrees) assumed for a pair's relative heading: the
@@ -159,6 +172,11 @@ class PoseGraph:
         Each pair's measured relative heading (rad).
     weights : ndarray (M,)
         Each pair's final robust weight in [0, 1] (small: an outlier).
+    refined : int
+        Rounds of position refinement kept (see :func:`refine_positions`).
+    refine_chi : float
+        The last refinement round's odometry residual RMS (in standard
+        deviations; NaN without refinement): above 2 the round was refused.
     """
 
     poses: np.ndarray
@@ -166,6 +184,8 @@ class PoseGraph:
     pairs: PlacePairs
     relative_heading: np.ndarray
     weights: np.ndarray
+    refined: int = 0
+    refine_chi: float = float("nan")
 
     @property
     def n_inliers(self) -> int:
@@ -175,7 +195,10 @@ class PoseGraph:
     def info(self) -> dict[str, Any]:
         """A JSON-able summary."""
         return {"loop closures": len(self.pairs), "loop closures kept": self.n_inliers,
-                "odometry heading drift (deg per m)": float(np.degrees(self.drift_rate))}
+                "odometry heading drift (deg per m)": float(np.degrees(self.drift_rate)),
+                "refinement rounds kept": int(self.refined),
+                "refinement odometry residual (sd)": None if not np.isfinite(self.refine_chi)
+                else float(self.refine_chi)}
 
 
 def _solve_headings(odometry: np.ndarray, pairs: PlacePairs, rel: np.ndarray, noise: Mapping[str, float],
@@ -239,10 +262,68 @@ def _heading_noise(odometry_noise: Any) -> dict[str, float]:
     return out
 
 
+def refine_positions(features: np.ndarray, odometry: np.ndarray, headings: np.ndarray, positions: np.ndarray,
+                     pairs: PlacePairs, *, noise: Mapping[str, float], readout: Mapping[str, Any],
+                     rounds: int, offset_sigma: float, heading_sigma: float,
+                     max_chi: float = 2.0) -> tuple[np.ndarray, int, float]:
+    """Positions (N, 2) refined by ``rounds`` of: fit ``readout`` (a spec of
+    :func:`sfanav.localization.make_readout`) to the current positions, then
+    solve the positions from the odometry steps turned by ``headings``
+    (standard deviation ``distance_sigma * sqrt(d)`` along and
+    ``heading_sigma * d`` across each step of d metres) and the readout's
+    offsets of the loop-closure pairs (standard deviation ``offset_sigma``
+    m), the first frame fixed at its odometry position. A round is kept only
+    if the refined positions still agree with the odometry: the RMS of the
+    steps' residuals in units of their standard deviation at most
+    ``max_chi`` (a run whose places are seen from only one side, such as
+    parallel lanes, gives offsets the readout shrinks; they would squeeze
+    the map against the odometry). Returns (positions, rounds kept, the last
+    round's RMS)."""
+    P = np.asarray(positions, np.float64).copy()
+    n = len(P)
+    if rounds == 0 or len(pairs) == 0:
+        return P, 0, float("nan")
+    dxy = np.diff(odometry[:, :2], axis=0)
+    corr = headings - np.unwrap(odometry[:, 2])
+    turn = 0.5 * (corr[1:] + corr[:-1])
+    c, s = np.cos(turn), np.sin(turn)
+    step = np.c_[c * dxy[:, 0] - s * dxy[:, 1], s * dxy[:, 0] + c * dxy[:, 1]]
+    d = np.hypot(*dxy.T)
+    sd = np.sqrt(noise["distance_sigma"] ** 2 * d + (heading_sigma * d) ** 2 + 1e-8)
+    i, j = pairs.current, pairs.past
+    m, e = len(i), np.arange(n - 1)
+    anchor = 1e3
+    rows = np.concatenate([e, e, n - 1 + np.arange(m), n - 1 + np.arange(m), [n - 1 + m]])
+    cols = np.concatenate([e + 1, e, i, j, [0]])
+    vals = np.concatenate([1 / sd, -1 / sd, np.full(m, 1 / offset_sigma), np.full(m, -1 / offset_sigma), [anchor]])
+    A = sp.csr_matrix((vals, (rows, cols)), shape=(n + m, n)).tocsc()
+    normal = (A.T @ A).tocsc()
+    spec = dict(readout)
+    if spec.get("n_outputs") is not None:
+        spec["n_outputs"] = min(int(spec["n_outputs"]), features.shape[1])
+    accepted = 0
+    chi = float("nan")
+    for _ in range(rounds):
+        G = make_readout(spec).fit(features, P).predict(features)
+        new = np.empty_like(P)
+        for ax in range(2):
+            rhs = np.concatenate([step[:, ax] / sd, (G[i, ax] - G[j, ax]) / offset_sigma, [anchor * odometry[0, ax]]])
+            new[:, ax] = spsolve(normal, A.T @ rhs)
+        if not np.all(np.isfinite(new)):
+            raise ValueError("the pose graph's position system is singular")
+        chi = float(np.sqrt(np.mean(((np.diff(new, axis=0) - step) / sd[:, None]) ** 2)))
+        if chi > max_chi:  # the readout's offsets contradict the odometry: keep the positions of the last round
+            break
+        P = new
+        accepted += 1
+    return P, accepted, chi
+
+
 def fit_pose_graph(images: Any, features: Any, odometry: Any, *, odometry_noise: Any = None,
                    compass_sigma_deg: float = DEFAULT_COMPASS_SIGMA_DEG, n_neighbors: int = 3,
                    min_travel: float = 5.0, n_outputs: int = 8, iterations: int = 8,
-                   robust: float = 3.0) -> PoseGraph:
+                   robust: float = 3.0, refine: int = 2, refine_readout: Mapping[str, Any] | None = None,
+                   offset_sigma: float = 0.05, heading_sigma_deg: float = 1.0) -> PoseGraph:
     """Solves the pose graph of one run from its panoramas, slow features and
     odometry (see the module docstring).
 
@@ -269,6 +350,17 @@ def fit_pose_graph(images: Any, features: Any, odometry: Any, *, odometry_noise:
     robust : float, default 3
         Cauchy scale of the pairs' residuals, in units of
         ``compass_sigma_deg``.
+    refine : int, default 2
+        Rounds of position refinement by the readout's offsets (0: the
+        odometry's distances along the solved headings only).
+    refine_readout : mapping, optional
+        The readout spec of the refinement (default :data:`REFINE_READOUT`,
+        the sfanav default's GP).
+    offset_sigma : float, default 0.05
+        Standard deviation (m) of a pair's offset predicted by the readout.
+    heading_sigma_deg : float, default 1
+        Uncertainty of the solved headings (degrees): the lateral error of
+        an odometry step is this times its length.
 
     Returns
     -------
@@ -296,6 +388,13 @@ def fit_pose_graph(images: Any, features: Any, odometry: Any, *, odometry_noise:
     if len(pairs) == 0:
         th = np.unwrap(P[:, 2])
         return PoseGraph(np.c_[P[:, :2], th], 0.0, pairs, np.zeros(0), np.zeros(0))
+    rounds = check_int(refine, "refine", minimum=0)
+    offset_sigma = check_positive_float(offset_sigma, "offset_sigma")
+    heading_sigma = np.radians(check_positive_float(heading_sigma_deg, "heading_sigma_deg"))
     rel = relative_headings(R, pairs.current, pairs.past)
     theta, drift, w = _solve_headings(P, pairs, rel, noise, sigma, iterations, robust)
-    return PoseGraph(np.c_[integrate(P, theta), theta], drift, pairs, rel, w)
+    xy = integrate(P, theta)
+    kept = PlacePairs(pairs.current[w >= 0.5], pairs.past[w >= 0.5], pairs.distance[w >= 0.5])
+    xy, done, chi = refine_positions(F, P, theta, xy, kept, noise=noise, readout=refine_readout or REFINE_READOUT,
+                                     rounds=rounds, offset_sigma=offset_sigma, heading_sigma=heading_sigma)
+    return PoseGraph(np.c_[xy, theta], drift, pairs, rel, w, refined=done, refine_chi=chi)
