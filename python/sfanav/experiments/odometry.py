@@ -252,19 +252,19 @@ def _plot_sup_unsup(res: Any, xy_lines: np.ndarray, xy_test: np.ndarray, path: P
     return path
 
 
-def pose_graph_rows(out: Path, variant: str, seed: int, tr: dict[str, Any], te: dict[str, Any], n_out: int,
-                    supervised_med: float, *, quick: bool, progress: bool) -> list[dict[str, Any]]:
-    """Beyond the thesis: the training run's positions learned by the pose
-    graph (its images, slow features and odometry; no ground truth), the
-    same quadratic regression fitted to them on the whole run, its test MED
-    after a rigid fit on the training run (evaluation only) and the ratio to
-    the regression fitted on ground truth. No rows without odometry."""
+def pose_graph_map(out: Path, variant: str, seed: int, tr: dict[str, Any], n_out: int, *, quick: bool,
+                   progress: bool) -> tuple[Any, QuadraticRegression, Any] | None:
+    """The training run's positions learned by the pose graph (its images,
+    slow features and odometry; no ground truth) and the quadratic
+    regression fitted to them on the whole run; with, for evaluation only,
+    the rigid fit of its training estimates to the truth. None without
+    odometry. Returns (learned positions, regression, alignment)."""
     import warnings
 
     from ..odometry.self_supervision import OdometryMapWarning, learn_positions
 
     if not np.isfinite(tr["odometry"]).all():
-        return []
+        return None
     spec = SCENES[variant]
     camera = sim.PanoramicCamera(*QUICK_CAMERA, rgb=not spec["gray"]) if quick else None
     ds = simulated(out, spec["preset"], seed, quick=quick, camera=camera,
@@ -275,9 +275,20 @@ def pose_graph_rows(out: Path, variant: str, seed: int, tr: dict[str, Any], te: 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", OdometryMapWarning)
         lp = learn_positions(tr["features"], tr["odometry"], images=X, n_outputs=n_out)
-    truth = tr["poses"][:, :2]
     reg = QuadraticRegression(n_out).fit(tr["features"], lp.positions)
-    world = align(reg.predict(tr["features"]), truth)  # evaluation only
+    return lp, reg, align(reg.predict(tr["features"]), tr["poses"][:, :2])
+
+
+def pose_graph_rows(out: Path, variant: str, seed: int, tr: dict[str, Any], te: dict[str, Any], n_out: int,
+                    supervised_med: float, *, quick: bool, progress: bool) -> list[dict[str, Any]]:
+    """Beyond the thesis: rows of :func:`pose_graph_map`: its test MED after
+    the rigid fit on the training run (evaluation only) and the ratio to the
+    regression fitted on ground truth. No rows without odometry."""
+    got = pose_graph_map(out, variant, seed, tr, n_out, quick=quick, progress=progress)
+    if got is None:
+        return []
+    lp, reg, world = got
+    truth = tr["poses"][:, :2]
     test_med = med(world.apply(reg.predict(te["features"])), te["poses"][:, :2])
     return [
         {"metric": "pose graph (no ground truth): loop closures kept", "thesis": None,
@@ -288,6 +299,40 @@ def pose_graph_rows(out: Path, variant: str, seed: int, tr: dict[str, Any], te: 
          "sfanav": test_med},
         {"metric": "pose graph (no ground truth) / supervised whole-run test MED ratio", "thesis": None,
          "sfanav": test_med / supervised_med if supervised_med > 0 else float("inf")},
+    ]
+
+
+def fusion_rows(out: Path, seed: int, tr: dict[str, Any], te: dict[str, Any], n_out: int, *, quick: bool,
+                progress: bool) -> list[dict[str, Any]]:
+    """Beyond the thesis, the product's path on the 5.3.2 scene with nothing
+    but images and odometry: the pose graph's map and regression
+    (:func:`pose_graph_map`), the EKF noise chosen by the innovation
+    likelihood of the regression's held-out estimates of the training run
+    (blocked cross-validation) and its odometry, the test walk fused from
+    the start pose its first estimates give; errors after the rigid fit on
+    the training run (evaluation only)."""
+    from ..localization.readout_selection import cross_val_predict
+    from ..odometry.fusion import fuse, noise_from_run
+
+    got = pose_graph_map(out, "real", seed, tr, n_out, quick=quick, progress=progress)
+    if got is None:
+        return []
+    lp, reg, world = got
+    held = cross_val_predict({"kind": "quadratic", "n_outputs": n_out, "ridge": 0.0}, tr["features"], lp.positions,
+                             block=max(1, min(20, len(lp.positions) // 10)))
+    noise = noise_from_run(tr["odometry"], held)
+    Z = reg.predict(te["features"])
+    fused = fuse(te["odometry"], Z, noise)
+    xy = te["poses"][:, :2]
+    single, ekf = med(world.apply(Z), xy), med(world.apply(fused[:, :2]), xy)
+    tag = "sfanav path, no ground truth (pose graph, held-out noise)"
+    return [
+        {"metric": f"SFA MED ({tag}) (m)", "thesis": None, "sfanav": single},
+        {"metric": f"EKF MED ({tag}) (m)", "thesis": None, "sfanav": ekf},
+        {"metric": f"EKF improvement over SFA alone ({tag}) (%)", "thesis": None,
+         "sfanav": 100.0 * (single - ekf) / single if single > 0 else float("nan"), "target": 20.0},
+        {"metric": f"EKF noise ({tag})", "thesis": None,
+         "sfanav": ", ".join(f"{noise[k]:g}" for k in ("distance_noise", "heading_noise", "measurement_noise"))},
     ]
 
 
@@ -437,7 +482,8 @@ def exp_5_3_2(out: Path, *, quick: bool, seed: int, progress: bool) -> Experimen
         al_th = align(th.transform(tr["features"][on]), tr["poses"][on, :2], allow_reflection=True)
         res_th = experiment_5_3_2(al_th.apply(th.transform(te["features"])), te["odometry"], te["poses"], grid=grid,
                                   progress=False)
-    extra = [
+    extra = fusion_rows(out, seed, tr, te, QUICK_OUTPUTS if quick else N_OUTPUTS, quick=quick, progress=progress)
+    extra += [
         {"metric": "test MED supervised (m)", "thesis": THESIS["5.3.1-real"]["test MED supervised (m)"],
          "sfanav": r1.row("test MED supervised (m)")},
         {"metric": "test MED unsupervised (m)", "thesis": THESIS["5.3.1-real"]["test MED unsupervised (m)"],
@@ -480,7 +526,11 @@ def exp_5_3_2(out: Path, *, quick: bool, seed: int, progress: bool) -> Experimen
         f"{bp['distance_noise']:g}, {bp['heading_noise']:g}, {bp['measurement_noise']:g}). Beside it: the noise "
         "chosen without ground truth (innovation likelihood) and the noise tuned on the training run; and the same "
         "fusion with the map of the thesis's cost 5.5 at its minimum and with the map of the thesis's solver (momentum gradient descent, 1000 iterations; rows 'thesis "
-        "gradient descent map'). "
+        "gradient descent map'). Rows 'sfanav path, no ground truth': the product's path with nothing but "
+        "images and odometry: the pose graph's positions of the training run, the quadratic regression fitted to "
+        "them, the EKF noise chosen by the innovation likelihood of the regression's held-out estimates of the "
+        "training run (blocked cross-validation; in-sample estimates make the filter overconfident), the start "
+        "pose from the first estimates; errors after the rigid fit on the training run (evaluation only). "
         + ("A quick smoke run: tiny images and network, numbers not meaningful." if quick else
            f"Network: {info['network']}, trained in {info['fit_s']:.0f} s (reused from 5.3.1-real when cached).")
     )
