@@ -8,7 +8,6 @@ import shutil
 
 import numpy as np
 import pytest
-
 import sfanav
 from sfanav import sim
 from sfanav.app.cli import main
@@ -91,8 +90,9 @@ def test_cli_navigate_writes_the_mission(trained, tmp_path, capsys):
     d = json.loads((out / "navigation.json").read_text())
     assert d["supervision"] == "odometry" and d["geodesic field"] is True and d["stops"] <= 12
     assert d["map goal"] == [1.5, 1.5] and len(d["world goal"]) == 2
-    rows = list(csv.reader(open(out / "path.csv", newline="")))
-    assert rows[0] == ["stop", "x", "y"] and len(rows) - 1 == len(set(r[0] for r in rows[1:]))
+    with open(out / "path.csv", newline="") as f:
+        rows = list(csv.reader(f))
+    assert rows[0] == ["stop", "x", "y"] and len(rows) - 1 == len({r[0] for r in rows[1:]})
     assert [float(v) for v in rows[1][1:]] == [-2.0, -2.0]
     assert (out / "trajectory.png").stat().st_size > 1000
     assert ("reached the target" in stdout) == d["success"]

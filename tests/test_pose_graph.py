@@ -149,7 +149,7 @@ def test_bad_input_is_refused(synthetic):
 
 
 def test_wheel_slip_and_random_heading_noise_are_absorbed(synthetic):
-    truth, _, images, features = synthetic
+    truth, _, images, features = synthetic  # noqa: RUF059
     # frequent slips with large heading errors (their distance errors are not corrected: the map trusts
     # the odometry's distances, so they stay small here)
     noise = sim.OdometryNoise(distance_sigma=0.01, scale_error=0.0, heading_sigma=0.004, turn_sigma=0.01,
@@ -175,7 +175,7 @@ def test_refinement_is_refused_when_the_readout_contradicts_the_odometry(synthet
     truth, odo, images, features = synthetic
     g = fit_pose_graph(images, features, odo, refine=0)
     noise = {"distance_sigma": 0.01, "heading_sigma": 0.004, "turn_sigma": 0.01}
-    kw = dict(noise=noise, rounds=2, offset_sigma=0.05, heading_sigma=np.radians(1.0))
+    kw = {"noise": noise, "rounds": 2, "offset_sigma": 0.05, "heading_sigma": np.radians(1.0)}
     pairs = PlacePairs(g.pairs.current, g.pairs.past, g.pairs.distance)
     # features that know x only: the readout puts neighbouring lanes on top of each other
     blind = np.c_[features[:, 0], np.zeros(len(features))]

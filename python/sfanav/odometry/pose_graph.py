@@ -41,7 +41,13 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.linalg import spsolve
 
-from .._checks import as_matrix, check_int, check_nonneg_float, check_positive_float, check_same_length
+from .._checks import (
+    as_matrix,
+    check_int,
+    check_nonneg_float,
+    check_positive_float,
+    check_same_length,
+)
 from ..localization.readouts import make_readout
 from .dead_reckoning import as_poses, wrap_angle
 from .metric_cost import noise_dict
@@ -109,7 +115,7 @@ def place_pairs(features: Any, odometry: Any, *, n_neighbors: int = 3, min_trave
     if not cur or sum(len(c) for c in cur) == 0:
         return PlacePairs(np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0))
     c, p, d = np.concatenate(cur), np.concatenate(past), np.concatenate(dist)
-    key, first = np.unique(c * n + p, return_index=True)
+    _, first = np.unique(c * n + p, return_index=True)
     return PlacePairs(c[first].astype(np.int64), p[first].astype(np.int64), d[first])
 
 
