@@ -133,7 +133,7 @@ def test_the_compass_reads_the_simulator_s_panoramas(tmp_path):
 
 
 def test_bad_input_is_refused(synthetic):
-    truth, odo, images, features = synthetic
+    _, odo, images, features = synthetic
     with pytest.raises(ValueError, match="must match"):
         fit_pose_graph(images[:-1], features, odo)
     with pytest.raises(ValueError, match="panoramas"):
@@ -149,7 +149,7 @@ def test_bad_input_is_refused(synthetic):
 
 
 def test_wheel_slip_and_random_heading_noise_are_absorbed(synthetic):
-    truth, _, images, features = synthetic  # noqa: RUF059
+    truth, _, images, features = synthetic
     # frequent slips with large heading errors (their distance errors are not corrected: the map trusts
     # the odometry's distances, so they stay small here)
     noise = sim.OdometryNoise(distance_sigma=0.01, scale_error=0.0, heading_sigma=0.004, turn_sigma=0.01,
