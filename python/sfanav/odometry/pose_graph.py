@@ -255,9 +255,10 @@ def integrate(odometry: np.ndarray, headings: np.ndarray) -> np.ndarray:
     return P[0, :2] + np.concatenate([np.zeros((1, 2)), np.cumsum(step, axis=0)])
 
 
-SLIP_DEFAULTS = {"slip_rate": 0.01, "slip_heading_sigma": 0.02}
-"""Wheel slip assumed when the noise model gives none: events per metre and
-the heading error of one (the defaults of :class:`sfanav.sim.OdometryNoise`)."""
+SLIP_DEFAULTS = {"slip_rate": 0.01, "slip_distance": 0.05, "slip_heading_sigma": 0.02}
+"""Wheel slip assumed when the noise model gives none: events per metre, the
+mean extra distance (m) and the heading error (rad) of one (the defaults of
+:class:`sfanav.sim.OdometryNoise`)."""
 
 
 def _heading_noise(odometry_noise: Any) -> dict[str, float]:
@@ -280,8 +281,8 @@ def refine_positions(features: np.ndarray, odometry: np.ndarray, headings: np.nd
     offsets of the loop-closure pairs (standard deviation ``offset_sigma``
     m), the first frame fixed at its odometry position. A round is kept only
     if the refined positions still agree with the odometry: the RMS of the
-    steps' residuals in units of their standard deviation at most
-    ``max_chi`` (a run whose places are seen from only one side, such as
+    steps' residuals in units of their standard deviation (without the
+    largest 1 %, where slips are) at most ``max_chi`` (a run whose places are seen from only one side, such as
     parallel lanes, gives offsets the readout shrinks; they would squeeze
     the map against the odometry). Returns (positions, rounds kept, the last
     round's RMS)."""
@@ -295,7 +296,8 @@ def refine_positions(features: np.ndarray, odometry: np.ndarray, headings: np.nd
     c, s = np.cos(turn), np.sin(turn)
     step = np.c_[c * dxy[:, 0] - s * dxy[:, 1], s * dxy[:, 0] + c * dxy[:, 1]]
     d = np.hypot(*dxy.T)
-    sd = np.sqrt(noise["distance_sigma"] ** 2 * d + (heading_sigma * d) ** 2 + 1e-8)
+    slip = 2.0 * noise.get("slip_rate", 0.0) * noise.get("slip_distance", 0.0) ** 2  # m^2 per m (exponential)
+    sd = np.sqrt((noise["distance_sigma"] ** 2 + slip) * d + (heading_sigma * d) ** 2 + 1e-8)
     i, j = pairs.current, pairs.past
     m, e = len(i), np.arange(n - 1)
     anchor = 1e3
@@ -317,7 +319,8 @@ def refine_positions(features: np.ndarray, odometry: np.ndarray, headings: np.nd
             new[:, ax] = spsolve(normal, A.T @ rhs)
         if not np.all(np.isfinite(new)):
             raise ValueError("the pose graph's position system is singular")
-        chi = float(np.sqrt(np.mean(((np.diff(new, axis=0) - step) / sd[:, None]) ** 2)))
+        r2 = np.sort((((np.diff(new, axis=0) - step) / sd[:, None]) ** 2).sum(axis=1) / 2)
+        chi = float(np.sqrt(np.mean(r2[: max(1, int(np.ceil(0.99 * len(r2))))])))  # the rarest 1 %: slips
         if chi > max_chi:  # the readout's offsets contradict the odometry: keep the positions of the last round
             break
         P = new
@@ -344,7 +347,8 @@ def fit_pose_graph(images: Any, features: Any, odometry: Any, *, odometry_noise:
     odometry_noise : mapping or sfanav.sim.OdometryNoise, optional
         ``heading_sigma`` (rad/sqrt(m)), ``turn_sigma`` (rad/sqrt(rad)),
         ``slip_rate`` (1/m) and ``slip_heading_sigma`` (rad) weight the
-        odometry's heading changes; defaults
+        odometry's heading changes, ``distance_sigma`` (m/sqrt(m)) and
+        ``slip_distance`` (m) its steps in the refinement; defaults
         :data:`~sfanav.odometry.DEFAULT_ODOMETRY_NOISE` and
         :data:`SLIP_DEFAULTS`.
     compass_sigma_deg : float, default 5
