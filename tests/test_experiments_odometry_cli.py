@@ -23,12 +23,14 @@ ROWS_5_3_1 = ["lines", "points on lines", "iterations", "train MED supervised (m
               "thesis gradient descent: test MED unsupervised (m)",
               "target: unsupervised test MED within 1.3x of supervised",
               "pose graph (no ground truth): test MED, regression on the whole run (m)",
-              "pose graph (no ground truth) / supervised whole-run test MED ratio"]
+              "pose graph (no ground truth) / supervised whole-run test MED ratio",
+              "test MED perfect memory (m)", "test MED Fourier signature (m)"]
 ROWS_5_3_2 = ["SFA MED (m)", "odometry MED (m)", "EKF MED (m)", "EKF improvement over SFA alone (%)",
               "test MED supervised (m)", "test MED unsupervised (m)", "EKF MED, noise tuned on the training run (m)",
               "target: EKF at least 20 % better than SFA alone", "target: EKF better than odometry alone",
               "EKF MED (sfanav path, no ground truth (pose graph, held-out noise)) (m)",
-              "EKF improvement over SFA alone (sfanav path, no ground truth (pose graph, held-out noise)) (%)"]
+              "EKF improvement over SFA alone (sfanav path, no ground truth (pose graph, held-out noise)) (%)",
+              "test MED perfect memory (m)", "test MED Fourier signature (m)"]
 
 
 @pytest.fixture(scope="module")

@@ -302,6 +302,39 @@ def pose_graph_rows(out: Path, variant: str, seed: int, tr: dict[str, Any], te: 
     ]
 
 
+PEER_QUERIES = 400
+"""Test images the peer baselines answer (evenly spaced over the test run)."""
+
+
+def peer_rows(out: Path, variant: str, seed: int, *, quick: bool, progress: bool) -> list[dict[str, Any]]:
+    """The peer baselines beside the SFA figures: perfect memory (rotational
+    image difference function) and the Fourier signature, every training
+    view stored with its ground-truth position, on the raw panoramas of the
+    scene's training and test runs; at most :data:`PEER_QUERIES` test
+    images, evenly spaced."""
+    from ..localization import baselines
+
+    spec = SCENES[variant]
+    camera = sim.PanoramicCamera(*QUICK_CAMERA, rgb=not spec["gray"]) if quick else None
+    ds = simulated(out, spec["preset"], seed, quick=quick, camera=camera,
+                   max_frames=QUICK_FRAMES[variant] if quick else None, progress=progress)
+    md = ds.metadata["camera"]
+    prep = Preprocessing(int(md["width"]), int(md["height"]), bool(spec["gray"]), False)
+    log = progress_log(progress)
+    X_tr, xy_tr = load_run(ds.select(run="train"), prep, log=log)
+    te = ds.select(run="test")
+    q = np.unique(np.linspace(0, len(te) - 1, min(PEER_QUERIES, len(te))).round().astype(int))
+    X_te, xy_te = load_run(te.subset(q), prep, log=log)
+    rows: list[dict[str, Any]] = []
+    for name, model in (("perfect memory", baselines.PerfectMemory()),
+                        ("Fourier signature", baselines.FourierSignature(min(15, X_tr.shape[2] // 2 + 1)))):
+        b = baselines.benchmark(model.fit(X_tr, xy_tr), X_te, xy_te)
+        rows += [{"metric": f"test MED {name} (m)", "thesis": None, "sfanav": b["med"], "baseline": name},
+                 {"metric": f"query ms {name}", "thesis": None, "sfanav": b["query_ms"], "baseline": name}]
+    rows.append({"metric": "peer baselines: test queries", "thesis": None, "sfanav": int(len(q))})
+    return rows
+
+
 def fusion_rows(out: Path, seed: int, tr: dict[str, Any], te: dict[str, Any], n_out: int, *, quick: bool,
                 progress: bool) -> list[dict[str, Any]]:
     """Beyond the thesis, the product's path on the 5.3.2 scene with nothing
@@ -362,6 +395,7 @@ def _run_5_3_1(out: Path, variant: str, seed: int, *, quick: bool, progress: boo
     extra.append({"metric": "test MED supervised, fitted on the whole training run (m)", "thesis": None,
                   "sfanav": whole_med})
     extra += pose_graph_rows(out, variant, seed, tr, te, n_out, whole_med, quick=quick, progress=progress)
+    extra += peer_rows(out, variant, seed, quick=quick, progress=progress)
     plots: list[str] = []
     # the thesis's solver and iteration budget (fixed settings, not chosen on the test run)
     gd = _thesis_gd(run["features"], lines, variant, n_out, seed)
@@ -442,7 +476,9 @@ def _notes_5_3_1(variant: str, data: dict[str, Any], res: Any, seed: int, quick:
             "graph (no ground truth)' (beyond the thesis): the training run's positions learned from its images, "
             "slow features and odometry (odometry heading corrected by loop closures), the same quadratic "
             "regression fitted to them on the whole run, moved into the world by a rigid fit on the training run "
-            "for evaluation only; ratio to the regression fitted on the whole run's ground truth; see "
+            "for evaluation only; ratio to the regression fitted on the whole run's ground truth. Rows 'perfect "
+            f"memory' / 'Fourier signature': the peer baselines on the raw panoramas, every training view stored "
+            f"with its ground-truth position, at most {PEER_QUERIES} evenly spaced test images; see "
             "docs/odometry.md.")
 
 
@@ -483,6 +519,7 @@ def exp_5_3_2(out: Path, *, quick: bool, seed: int, progress: bool) -> Experimen
         res_th = experiment_5_3_2(al_th.apply(th.transform(te["features"])), te["odometry"], te["poses"], grid=grid,
                                   progress=False)
     extra = fusion_rows(out, seed, tr, te, QUICK_OUTPUTS if quick else N_OUTPUTS, quick=quick, progress=progress)
+    extra += peer_rows(out, "real", seed, quick=quick, progress=progress)
     extra += [
         {"metric": "test MED supervised (m)", "thesis": THESIS["5.3.1-real"]["test MED supervised (m)"],
          "sfanav": r1.row("test MED supervised (m)")},
@@ -530,7 +567,9 @@ def exp_5_3_2(out: Path, *, quick: bool, seed: int, progress: bool) -> Experimen
         "images and odometry: the pose graph's positions of the training run, the quadratic regression fitted to "
         "them, the EKF noise chosen by the innovation likelihood of the regression's held-out estimates of the "
         "training run (blocked cross-validation; in-sample estimates make the filter overconfident), the start "
-        "pose from the first estimates; errors after the rigid fit on the training run (evaluation only). "
+        "pose from the first estimates; errors after the rigid fit on the training run (evaluation only). Rows "
+        f"'perfect memory' / 'Fourier signature': the peer baselines (ground-truth positions stored), at most "
+        f"{PEER_QUERIES} evenly spaced test images. "
         + ("A quick smoke run: tiny images and network, numbers not meaningful." if quick else
            f"Network: {info['network']}, trained in {info['fit_s']:.0f} s (reused from 5.3.1-real when cached).")
     )
