@@ -389,8 +389,12 @@ def test_gardens_experiment_has_the_default_row(tmp_path):
 
     res, plots = run_scene(tmp_path, "realistic-garden", 0, quick=True, progress=False, control=True,
                            row_variants={}, train_variants={}, baselines_too=False, firing_maps=False)
-    assert list(res) == ["control: sfanav default", "control: sfanav default without rotation pooling"]
+    assert list(res) == ["control: sfanav default", "control: sfanav default without rotation pooling",
+                         "control: sfanav default, no ground truth"]
     assert plots == []
+    free = res["control: sfanav default, no ground truth"]  # the same network, readout on learned positions
+    assert free["MED (m)"] > 0 and free["MED ratio no ground truth / ground truth"] > 0
+    assert free["loop closures kept"] >= 0 and free["training positions median error (m)"] >= 0
     row = res["control: sfanav default"]
     assert row["rotation pooling"] == 8 and res["control: sfanav default without rotation pooling"]["rotation pooling"] == 1
     assert row["readout"].startswith(("kernel(", "knn(")) and row["numbers per image"] in (8, 12)
