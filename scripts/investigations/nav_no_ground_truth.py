@@ -1,8 +1,7 @@
 """Navigation without ground truth on the 7.1 scenes (issue 19): the metric
 arm "metric descent + geodesic field" with the localizer and field of ground
 truth beside the same arm trained without it (pose graph on the exploration
-run's images and simulated odometry; field over the localizer's own
-estimates of the run, as ``sfanav navigate`` builds it), on
+run's images and simulated odometry; field over the learned positions), on
 the experiments' 50 trials. Only these two arms run (the full experiments
 run all of them). Writes ``OUT/nav-no-ground-truth-<kind>.json``.
 

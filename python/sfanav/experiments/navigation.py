@@ -341,10 +341,8 @@ def no_ground_truth_localizer(sc: Scene, out: Path, seed: int, loc: Any, cam: An
     truth: the same network (trained on images only), the training run's
     positions learned from its images and simulated odometry
     (:func:`exploration_odometry`) by the pose graph. Returns (localizer,
-    its estimates (N, 2) of the training run, over which the geodesic field
-    is built, as ``sfanav navigate`` does: the field then lives where the
-    estimates the robot navigates by do; a summary); cached under
-    ``out/cache``."""
+    the learned positions (N, 2) for the geodesic field, a summary); cached
+    under ``out/cache``."""
     import json
     import os
     import warnings
@@ -355,7 +353,7 @@ def no_ground_truth_localizer(sc: Scene, out: Path, seed: int, loc: Any, cam: An
     from ..sfa.modelfile import load
 
     cache = Path(out) / "cache" / _cache_name(sc, f"metric-{sc.name}-no-ground-truth", seed, cam.to_dict(),
-                                              "pose graph, 2 refinement rounds", "field over the estimates")
+                                              "pose graph, 2 refinement rounds")
     side = cache.with_suffix(".positions.npy")
     if cache.exists() and side.exists():
         free = load(cache)
@@ -380,11 +378,10 @@ def no_ground_truth_localizer(sc: Scene, out: Path, seed: int, loc: Any, cam: An
     free.info["no ground truth"] = json.loads(json.dumps(summary))
     cache.parent.mkdir(parents=True, exist_ok=True)
     free.save(cache)
-    estimates = free.predict_features(F)
     tmp = side.with_name(side.name + ".part.npy")
-    np.save(tmp, estimates)
+    np.save(tmp, lp.positions)
     os.replace(tmp, side)
-    return free, estimates, summary
+    return free, lp.positions, summary
 
 
 def metric_arms(sc: Scene, out: Path, seed: int, starts: np.ndarray, targets: np.ndarray,
@@ -640,8 +637,8 @@ def _run_71(kind: str, out: Path, *, quick: bool, seed: int, progress: bool) -> 
         "x / y features; MetricDescent heads for the target through a rigid odometry-to-map fit, with the geodesic field over the "
         "training run's positions (ground truth here) when the run's path is > 1.2x the straight line. "
         "Row '..., no ground truth': the same network with its readout fitted to the training run's positions "
-        "learned from its images and simulated odometry (pose graph), the geodesic field over its own estimates "
-        "of the training run, targets as images (their estimates); success measured in the world. "
+        "learned from its images and simulated odometry (pose graph), the geodesic field over those learned "
+        "positions, targets as images (their estimates); success measured in the world. "
         + "Outcomes: " + "; ".join(notes_runs) + "."
     )
     return ExperimentResult(f"7.1-{kind}", rows, plots, notes)
