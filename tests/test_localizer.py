@@ -164,6 +164,15 @@ def test_save_load_round_trip(world, fitted, tmp_path):
     b2 = sfanav.load(tmp_path / "bare.sfa")
     assert b2.network is None and b2.ridge == 0.1
     np.testing.assert_array_equal(b2.predict_features(F), bare.predict_features(F))
+    # the positions the readout was fitted to travel with the model (the navigation field's run)
+    np.testing.assert_array_equal(b2.training_positions_, np.c_[F[:, 0], F[:, 1]])
+    assert back.training_positions_.shape == (len(fitted.training_positions_), 2)
+    np.testing.assert_array_equal(back.training_positions_, fitted.training_positions_)
+    # a file written before they were stored: loads, without them
+    kind, state, _ = sfanav.sfa.read_model(tmp_path / "bare.sfa")
+    state.pop("training_positions")
+    sfanav.sfa.save_model(tmp_path / "old.sfa", kind, state, version=1)
+    assert sfanav.load(tmp_path / "old.sfa").training_positions_ is None
 
 
 def test_eta_values_and_error_curve_of_the_trained_network(world):

@@ -68,6 +68,13 @@ def test_navigate_returns_a_consistent_mission(trained):
     s2 = navigate(loc, world, cam, (-2.0, -2.0), goal, exploration=explore, geodesic=False, max_iterations=5)
     assert s1.field is None
     np.testing.assert_array_equal(s1.result.path, s2.result.path)
+    # by default the field is built over the positions the readout was fitted to (stored in the model)
+    m2 = navigate(loc, world, cam, (-2.0, -2.0), goal, max_iterations=1, seed=1)
+    np.testing.assert_array_equal(m2.field.cells, navigate(loc, world, cam, (-2.0, -2.0), goal, max_iterations=1,
+                                                           exploration=loc.training_positions_).field.cells)
+    loc.training_positions_ = None  # as a model file written before they were stored
+    with pytest.raises(ValueError, match="exploration="):
+        navigate(loc, world, cam, (-2.0, -2.0), goal, max_iterations=1)
 
 
 def test_navigate_refuses_bad_starts_and_goals(trained):
@@ -87,6 +94,7 @@ def test_cli_navigate_writes_the_mission(trained, tmp_path, capsys):
                             "--target", "1.5,1.5", "--max-stops", "12", "--out", out, "--no-progress")
     assert code == 0, err
     assert "the training run's odometry frame" in err  # a model trained without ground truth
+    assert "the positions its readout was fitted to" in err  # the field over the stored learned positions
     d = json.loads((out / "navigation.json").read_text())
     assert d["supervision"] == "odometry" and d["geodesic field"] is True and d["stops"] <= 12
     assert d["map goal"] == [1.5, 1.5] and len(d["world goal"]) == 2

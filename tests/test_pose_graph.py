@@ -81,7 +81,9 @@ def test_place_pairs_join_near_places_far_apart_in_driving(synthetic):
     s = np.concatenate([[0], np.cumsum(np.hypot(*np.diff(odo[:, :2], axis=0).T))])
     assert np.all(s[pairs.current] - s[pairs.past] >= 5.0)
     gap = np.hypot(*(truth[pairs.current, :2] - truth[pairs.past, :2]).T)
-    assert np.median(gap) <= 1.01  # the neighbouring lane
+    # the neighbouring lane (1 m), at most one frame (0.41 m) along it: which of equally near frames
+    # a kNN search returns is its own choice; two lanes away would be 2 m
+    assert np.median(gap) <= np.hypot(1.0, 12 / 29) + 1e-9 and np.quantile(gap, 0.9) < 1.9
 
 
 def test_a_drifting_odometry_with_an_exact_compass_is_recovered_exactly(synthetic):

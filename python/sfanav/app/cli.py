@@ -588,8 +588,8 @@ def _add_navigate(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
         description=_wrap("Closed-loop navigation in the simulated world of DATASET (its world.json) with a "
                     "trained model: the robot's two cameras render the world, the model localizes every image "
                     "in its map, and the robot steers along the geodesic field of the exploration run (the "
-                    "model's own estimates of its training images, so a model trained without ground truth "
-                    "needs none) until it is within --success-radius of the target. The target is a position "
+                    "positions the model's readout was fitted to, stored in the model file: learned from "
+                    "odometry for a model trained without ground truth, so it needs none) until it is within --success-radius of the target. The target is a position "
                     "in the model's map (--target), or an image: a frame of the dataset (--target-frame) or an "
                     "image file (--target-image), where the robot goes where the model places it. Writes "
                     "navigation.json (success, stops, travelled and optimal length, efficiency), path.csv "
@@ -672,11 +672,15 @@ def _run_navigate(args: argparse.Namespace) -> int:
     explore = ds.select(run=run)
     conform = Preprocessor(prep, mirror=_mirror_of(argparse.Namespace(mirror=None), loc), log=_log)
     X, xy_true = load_run(explore, prep, preprocessor=conform, progress=not args.no_progress)
-    estimates = loc.predict(X)
+    stored = loc.training_positions_
+    if stored is not None and len(stored) == len(X):  # the run the model was trained on: its own map
+        exploration, field_from = stored, "the positions its readout was fitted to"
+    else:
+        exploration, field_from = loc.predict(X), "the model's estimates of its images"
     odometry_frame = loc.info.get("supervision") == "odometry"
     to_world = None
     if odometry_frame and np.isfinite(xy_true).all():
-        to_world = align(estimates, xy_true)  # evaluation only: where success is measured
+        to_world = align(exploration, xy_true)  # evaluation only: where success is measured
         _log("the model was trained without ground truth: its map is the training run's odometry frame; for "
              f"evaluation only, targets are moved into the world by the rigid fit on the training run "
              f"(rms {to_world.rmse:.3f} m)")
@@ -706,8 +710,8 @@ def _run_navigate(args: argparse.Namespace) -> int:
     heading = math.radians(args.start[2]) if len(args.start) == 3 else 0.0
     _log(f"navigating from ({start[0]:.2f}, {start[1]:.2f}) to {what}: map ({map_goal[0]:.2f}, {map_goal[1]:.2f}), "
          f"world ({world_goal[0]:.2f}, {world_goal[1]:.2f}); "
-         + ("straight at the target" if args.straight else f"along the geodesic field of run {run!r} ({len(X)} frames)"))
-    mission = navigate(loc, world, camera, start, map_goal, exploration=estimates, heading=heading,
+         + ("straight at the target" if args.straight else f"along the geodesic field of run {run!r} ({len(X)} frames, {field_from})"))
+    mission = navigate(loc, world, camera, start, map_goal, exploration=exploration, heading=heading,
                        world_goal=world_goal, robot=robot, geodesic=not args.straight,
                        success_radius=args.success_radius, max_iterations=args.max_stops, seed=args.seed)
     out.mkdir(parents=True, exist_ok=True)

@@ -135,6 +135,12 @@ class Localizer:
     train_metrics_ : dict
         :func:`sfanav.localization.localization_metrics` on the training data
         (optimistic; evaluate on a separate test run).
+    training_positions_ : ndarray (N, 2)
+        The positions (metres) the readout was fitted to, in the model's map:
+        ground truth, or the positions learned from odometry
+        (:func:`sfanav.odometry.learn_positions`). Saved in the model file;
+        :func:`sfanav.navigation.navigate` builds its geodesic field over
+        them. ``None`` for a model file written before they were stored.
     info : dict
         Free JSON metadata saved with the model (the ``sfanav`` command
         stores the image preprocessing and training settings here).
@@ -286,6 +292,7 @@ class Localizer:
         self.readout_spec_ = spec
         self.n_outputs_ = int(spec.get("n_outputs") or F.shape[1])
         self.n_features_in_ = F.shape[1]
+        self.training_positions_ = np.array(Y, dtype=np.float64)
         rng = np.ptp(Y, axis=0)  # a straight training run has no range across it: use the other axis's
         rng = np.where(rng > 0, rng, max(float(rng.max()), 1.0))
         self.train_metrics_ = localization_metrics(reg.predict(F), Y, coordinate_range=rng)
@@ -371,6 +378,7 @@ class Localizer:
             "n_features_in": int(self.n_features_in_),
             "train_metrics": dict(self.train_metrics_),
             "info": dict(self.info or {}),
+            **({} if self.training_positions_ is None else {"training_positions": self.training_positions_}),
         }
         # format version 2: a GP, kernel ridge or kNN readout (older readers cannot rebuild it)
         kind = self.readout_spec_["kind"]
@@ -404,6 +412,8 @@ class Localizer:
             loc.n_features_in_ = int(state["n_features_in"])
             loc.train_metrics_ = dict(state.get("train_metrics") or {})
             loc.info = dict(state.get("info") or {})
+            tp = state.get("training_positions")  # absent in files written before they were stored
+            loc.training_positions_ = None if tp is None else as_matrix(tp, "training_positions", n_cols=2)
         except (KeyError, TypeError) as exc:
             raise ValueError(f"invalid Localizer model state: {exc}") from None
         if net is not None and net.is_fitted_ and loc.n_features_in_ != net.n_outputs_:

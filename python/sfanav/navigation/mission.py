@@ -9,8 +9,10 @@ The map is the localizer's: metres in the frame it was trained in (the world
 for a model trained on ground truth, the training run's odometry frame for
 one trained without). The goal is a position in that map, or an image: the
 robot then goes where the localizer places that image. The geodesic field
-is built from the localizer's own estimates of its exploration run, so it
-lives in the same map and needs no ground truth.
+is built from the positions the localizer's readout was fitted to
+(``Localizer.training_positions_``: its exploration run in its own map, the
+positions learned from odometry for a model trained without ground truth),
+so it lives in the same map and needs no ground truth.
 """
 
 from __future__ import annotations
@@ -84,7 +86,7 @@ def image_goal(localizer: Any, image: Any) -> np.ndarray:
     return xy[0]
 
 
-def navigate(localizer: Any, world: Any, camera: Any, start: Any, goal: Any, *, exploration: Any,
+def navigate(localizer: Any, world: Any, camera: Any, start: Any, goal: Any, *, exploration: Any = None,
              heading: float = 0.0, world_goal: Any = None, robot: Any = None, geodesic: bool = True,
              success_radius: float = 0.5, max_iterations: int = 400, seed: int = 0) -> Mission:
     """Drives a simulated two-camera robot from ``start`` to ``goal`` with a
@@ -102,9 +104,11 @@ def navigate(localizer: Any, world: Any, camera: Any, start: Any, goal: Any, *, 
     goal : (x, y)
         Goal in the localizer's map (m): a position, or :func:`image_goal`
         of a target image.
-    exploration : array (N, 2)
-        The exploration run's positions in the map (e.g. the localizer's
-        estimates of its training images): the geodesic field's run.
+    exploration : array (N, 2), optional
+        The exploration run's positions in the map: the geodesic field's
+        run. Default ``localizer.training_positions_``; a localizer without
+        them (a model file written before they were stored) needs them
+        given, e.g. its estimates of its training images.
     heading : float
         Start heading (rad).
     world_goal : (x, y), optional
@@ -129,7 +133,7 @@ def navigate(localizer: Any, world: Any, camera: Any, start: Any, goal: Any, *, 
     ------
     ValueError
         A start or goal that is not two finite numbers, a start inside an
-        obstacle, a localizer that is not fitted.
+        obstacle, a localizer that is not fitted, no exploration positions.
     """
     from ..sim.robot import Robot, Simulator
 
@@ -141,6 +145,12 @@ def navigate(localizer: Any, world: Any, camera: Any, start: Any, goal: Any, *, 
     if not bool(world.free(np.array(s[0]), np.array(s[1]), r)):
         raise ValueError(f"start {tuple(float(v) for v in s)} is not free ground for the robot (an obstacle, or "
                          f"closer than {r:g} m to the border or an object)")
+    if exploration is None and geodesic:
+        exploration = getattr(localizer, "training_positions_", None)
+        if exploration is None:
+            raise ValueError("the localizer does not store the positions it was fitted to (a model file written "
+                             "before sfanav stored them): pass exploration=, e.g. its estimates of its training "
+                             "images, or geodesic=False")
     field = GeodesicField(np.asarray(exploration, float)) if geodesic else None
     sim = Simulator(world, camera, robot, seed=int(seed))
     feats = MetricFeatures(localizer, sim.renderer, camera)
