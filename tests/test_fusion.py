@@ -81,3 +81,28 @@ def test_cli_localize_with_odometry(tmp_path, capsys):
                   "--no-progress"])
     assert e.value.code == 2 and "needs a dataset with odometry" in capsys.readouterr().err
     assert not (tmp_path / "f.csv").exists()
+
+
+def _smooth_bias(run, sigma, seed, width=60):
+    """Estimates whose errors drift slowly along the run (what a readout's are), plus a little white noise."""
+    rng = np.random.default_rng(seed)
+    n = len(run["xy"])
+    w = rng.normal(size=(n + 2 * width, 2))
+    k = np.hanning(2 * width + 1)
+    b = np.c_[np.convolve(w[:, 0], k, "same"), np.convolve(w[:, 1], k, "same")][width : width + n]
+    return run["xy"] + sigma * b / b.std(axis=0) + 0.02 * rng.normal(size=(n, 2))
+
+
+def test_noise_against_a_reference_map_handles_errors_correlated_in_time():
+    train, test = make_odometry_run(random_state=1), make_odometry_run(random_state=2)
+    Ztr, Zte = _smooth_bias(train, 0.15, 0), _smooth_bias(test, 0.15, 1)
+    learned = train["xy"] + 0.03 * np.random.default_rng(2).normal(size=train["xy"].shape)  # a map, not the truth
+    by_map = noise_from_run(train["odometry"], Ztr, reference=learned)
+    by_nll = noise_from_run(train["odometry"], Ztr)
+    single = med(Zte, test["xy"])
+    fused_map = med(fuse(test["odometry"], Zte, by_map)[:, :2], test["xy"])
+    fused_nll = med(fuse(test["odometry"], Zte, by_nll)[:, :2], test["xy"])
+    assert by_map["measurement_noise"] > by_nll["measurement_noise"]  # the likelihood trusts a smooth bias
+    assert fused_map < 0.8 * single and fused_map < fused_nll, (single, fused_map, fused_nll)
+    with pytest.raises(ValueError, match="reference"):
+        noise_from_run(train["odometry"], Ztr, reference=learned[:-3])

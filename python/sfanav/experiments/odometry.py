@@ -339,9 +339,10 @@ def fusion_rows(out: Path, seed: int, tr: dict[str, Any], te: dict[str, Any], n_
                 progress: bool) -> list[dict[str, Any]]:
     """Beyond the thesis, the product's path on the 5.3.2 scene with nothing
     but images and odometry: the pose graph's map and regression
-    (:func:`pose_graph_map`), the EKF noise chosen by the innovation
-    likelihood of the regression's held-out estimates of the training run
-    (blocked cross-validation) and its odometry, the test walk fused from
+    (:func:`pose_graph_map`), the EKF noise whose fused track of the
+    training run (the regression's held-out estimates by blocked
+    cross-validation, and its odometry) is nearest the learned map, the
+    test walk fused from
     the start pose its first estimates give; errors after the rigid fit on
     the training run (evaluation only)."""
     from ..localization.readout_selection import cross_val_predict
@@ -353,7 +354,7 @@ def fusion_rows(out: Path, seed: int, tr: dict[str, Any], te: dict[str, Any], n_
     lp, reg, world = got
     held = cross_val_predict({"kind": "quadratic", "n_outputs": n_out, "ridge": 0.0}, tr["features"], lp.positions,
                              block=max(1, min(20, len(lp.positions) // 10)))
-    noise = noise_from_run(tr["odometry"], held)
+    noise = noise_from_run(tr["odometry"], held, reference=lp.positions)
     Z = reg.predict(te["features"])
     fused = fuse(te["odometry"], Z, noise)
     xy = te["poses"][:, :2]

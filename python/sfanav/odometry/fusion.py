@@ -3,13 +3,17 @@ truth: the EKF's noise chosen on the training run by the innovations'
 likelihood, and the start pose found from the first estimates.
 
 * :func:`noise_from_run`: the :class:`OdometryEKF` noise (odometry distance
-  and heading per step, measurement) that makes a run's own estimates and
-  odometry most likely (grid search, criterion ``"nll"``);
+  and heading per step, measurement) for a run's estimates and odometry:
+  the one whose fused track is nearest a reference track of the run
+  (grid search, criterion ``"med"``), or without one the one that makes
+  the estimates most likely (criterion ``"nll"``);
   :func:`noise_for_localizer` applies it to a localizer's *held-out*
   estimates of its training run (its fitted estimates there are in-sample,
   and for a model trained without ground truth they were fitted to the
-  odometry itself: both make the filter overconfident); computed at
-  training time, stored in the model file.
+  odometry itself: both make the filter overconfident), the reference
+  being the positions its readout was fitted to (for a model trained
+  without ground truth, the map learned from the run's images and
+  odometry); computed at training time, stored in the model file.
 * :func:`start_pose_from_estimates`: the start pose (x, y, heading) of a run
   from the rigid fit of its first odometry positions to their estimates.
 * :func:`fuse`: the fused track of a run.
@@ -22,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from .._checks import check_int, check_same_length
+from .._checks import as_matrix, check_int, check_same_length
 from ..localization.error_metrics import align
 from ..localization.readout_selection import cross_val_predict
 from .dead_reckoning import as_poses, wrap_angle
@@ -70,22 +74,34 @@ def start_pose_from_estimates(odometry: Any, estimates: Any, *, n: int = START_F
     return np.array([xy[0], xy[1], heading])
 
 
-def noise_from_run(odometry: Any, estimates: Any, *, start_pose: Any = None, max_frames: int | None = MAX_FRAMES,
-                   progress: bool = False, **grid: Any) -> dict[str, float]:
-    """The EKF noise that makes a run's estimates and odometry most likely
-    (:func:`sfanav.odometry.grid_search` with ``criterion="nll"``; no ground
-    truth), on the run's first ``max_frames`` frames (None: all; the grid
-    runs the filter once per candidate). ``start_pose`` defaults to
+def noise_from_run(odometry: Any, estimates: Any, *, reference: Any = None, start_pose: Any = None,
+                   max_frames: int | None = MAX_FRAMES, progress: bool = False, **grid: Any) -> dict[str, float]:
+    """The EKF noise for a run's odometry (N, 3) and estimates (N, 2), by
+    :func:`sfanav.odometry.grid_search` on the run's first ``max_frames``
+    frames (None: all; the grid runs the filter once per candidate).
+
+    With ``reference`` (N, 2), positions of the run in the estimates' frame
+    (metres; ground truth, or a map learned without it): the noise whose
+    fused track is nearest to them (criterion ``"med"``). Without: the noise
+    that makes the estimates most likely (``"nll"``), which trusts
+    estimates whose errors are correlated in time (a smooth bias along the
+    run) too much. ``start_pose`` defaults to
     :func:`start_pose_from_estimates`; ``grid`` overrides the candidate
     standard deviations. Returns ``{"distance_noise", "heading_noise",
-    "measurement_noise"}``."""
+    "measurement_noise"}``. Raises ValueError on mismatched or non-finite
+    input."""
     P = as_poses(odometry, "odometry")
     Z = _estimates(estimates, P)
+    T = None
+    if reference is not None:
+        T = as_matrix(reference, "reference", n_cols=2)
+        check_same_length(P, T, "odometry", "reference")
     if max_frames is not None:
         m = check_int(max_frames, "max_frames", minimum=2)
         P, Z = P[:m], Z[:m]
+        T = None if T is None else T[:m]
     s0 = start_pose_from_estimates(P, Z) if start_pose is None else start_pose
-    res = grid_search(P, Z, s0, criterion="nll", progress=progress, **grid)
+    res = grid_search(P, Z, s0, T, criterion="nll" if T is None else "med", progress=progress, **grid)
     return {k: float(res.best_params[k]) for k in NOISE_KEYS}
 
 
@@ -97,12 +113,13 @@ def noise_for_localizer(localizer: Any, features: Any, targets: Any, odometry: A
     ``block`` consecutive frames, fewer on short runs, of
     the localizer's readout on ``features`` (N, m), its rotation-pooled
     features of the run, and ``targets`` (N, 2), the positions its readout
-    was fitted to: ground truth, or the learned positions). ``kwargs`` go
-    to :func:`noise_from_run`. Raises ValueError as those."""
+    was fitted to: ground truth, or the learned positions), the noise whose
+    fused track of the run is nearest ``targets``. ``kwargs`` go to
+    :func:`noise_from_run`. Raises ValueError as those."""
     n = len(np.asarray(targets))
     block = max(1, min(int(block), n // (2 * n_folds)))  # short runs: shorter blocks, each fold held out twice
     held = cross_val_predict(localizer.readout_spec_, features, targets, n_folds=n_folds, block=block)
-    return noise_from_run(odometry, held, **kwargs)
+    return noise_from_run(odometry, held, reference=targets, **kwargs)
 
 
 def fuse(odometry: Any, estimates: Any, noise: Mapping[str, float], *, start_pose: Any = None,
