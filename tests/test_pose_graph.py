@@ -177,16 +177,23 @@ def test_refinement_is_refused_when_the_readout_contradicts_the_odometry(synthet
     truth, odo, images, features = synthetic
     g = fit_pose_graph(images, features, odo, refine=0)
     noise = {"distance_sigma": 0.01, "heading_sigma": 0.004, "turn_sigma": 0.01}
-    kw = {"noise": noise, "rounds": 2, "offset_sigma": 0.05, "heading_sigma": np.radians(1.0)}
+    kw = {"noise": noise, "rounds": 2, "heading_sigma": np.radians(1.0)}
     pairs = PlacePairs(g.pairs.current, g.pairs.past, g.pairs.distance)
+    before = med(g.poses[:, :2], truth[:, :2])
     # features that know x only: the readout puts neighbouring lanes on top of each other
     blind = np.c_[features[:, 0], np.zeros(len(features))]
-    P, kept, chi = refine_positions(blind, odo, g.poses[:, 2], g.poses[:, :2], pairs,
-                                    readout={"kind": "knn", "n_outputs": 2, "k": 5}, **kw)
-    assert kept == 0 and chi > 2.0
+    knn = {"kind": "knn", "n_outputs": 2, "k": 5}
+    P, kept, chi, sigma = refine_positions(blind, odo, g.poses[:, 2], g.poses[:, :2], pairs, readout=knn,
+                                           offset_sigma=0.05, **kw)
+    assert kept == 0 and chi > 2.0 and sigma == 0.05
     np.testing.assert_array_equal(P, g.poses[:, :2])
+    # with the offsets' spread estimated from their residuals the steps agree, but the map would shrink
+    P, kept, chi, sigma = refine_positions(blind, odo, g.poses[:, 2], g.poses[:, :2], pairs, readout=knn,
+                                           offset_sigma=None, **kw)
+    assert sigma > 0.05 and chi < 2.0 and kept == 0 and med(P, truth[:, :2]) <= before
     # a position code: the rounds are kept and agree with the odometry
-    P, kept, chi = refine_positions(features, odo, g.poses[:, 2], g.poses[:, :2], pairs,
-                                    readout={"kind": "gp", "n_outputs": 2}, **kw)
-    assert kept == 2 and chi <= 2.0
-    assert med(P, truth[:, :2]) < 0.05
+    for given in (0.05, None):
+        P, kept, chi, sigma = refine_positions(features, odo, g.poses[:, 2], g.poses[:, :2], pairs,
+                                               readout={"kind": "gp", "n_outputs": 2}, offset_sigma=given, **kw)
+        assert kept == 2 and chi <= 2.0 and np.isfinite(sigma)
+        assert med(P, truth[:, :2]) < 0.05

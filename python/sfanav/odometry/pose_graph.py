@@ -183,6 +183,9 @@ class PoseGraph:
     refine_chi : float
         The last refinement round's odometry residual RMS (in standard
         deviations; NaN without refinement): above 2 the round was refused.
+    offset_sigma : float
+        The last refinement round's standard deviation of the readout's
+        pair offsets (m; NaN without refinement).
     """
 
     poses: np.ndarray
@@ -192,6 +195,7 @@ class PoseGraph:
     weights: np.ndarray
     refined: int = 0
     refine_chi: float = float("nan")
+    offset_sigma: float = float("nan")
 
     @property
     def n_inliers(self) -> int:
@@ -204,7 +208,9 @@ class PoseGraph:
                 "odometry heading drift (deg per m)": float(np.degrees(self.drift_rate)),
                 "refinement rounds kept": int(self.refined),
                 "refinement odometry residual (sd)": None if not np.isfinite(self.refine_chi)
-                else float(self.refine_chi)}
+                else float(self.refine_chi),
+                "refinement offset sigma (m)": None if not np.isfinite(self.offset_sigma)
+                else float(self.offset_sigma)}
 
 
 def _solve_headings(odometry: np.ndarray, pairs: PlacePairs, rel: np.ndarray, noise: Mapping[str, float],
@@ -242,17 +248,22 @@ def _solve_headings(odometry: np.ndarray, pairs: PlacePairs, rel: np.ndarray, no
     return theta, b, w
 
 
-def integrate(odometry: np.ndarray, headings: np.ndarray) -> np.ndarray:
-    """Positions (N, 2) from the odometry's per-step displacements turned by
-    the correction ``headings - odometry heading`` (mid-step), from the
-    first frame's odometry position."""
+def turned_steps(odometry: np.ndarray, headings: np.ndarray) -> np.ndarray:
+    """The odometry's per-step displacements (N - 1, 2), metres, turned by
+    the heading correction ``headings - odometry heading`` (mid-step)."""
     P = np.asarray(odometry, np.float64)
     dxy = np.diff(P[:, :2], axis=0)
     corr = np.asarray(headings, np.float64) - np.unwrap(P[:, 2])
     turn = 0.5 * (corr[1:] + corr[:-1])
     c, s = np.cos(turn), np.sin(turn)
-    step = np.c_[c * dxy[:, 0] - s * dxy[:, 1], s * dxy[:, 0] + c * dxy[:, 1]]
-    return P[0, :2] + np.concatenate([np.zeros((1, 2)), np.cumsum(step, axis=0)])
+    return np.c_[c * dxy[:, 0] - s * dxy[:, 1], s * dxy[:, 0] + c * dxy[:, 1]]
+
+
+def integrate(odometry: np.ndarray, headings: np.ndarray) -> np.ndarray:
+    """Positions (N, 2) from :func:`turned_steps`, from the first frame's
+    odometry position."""
+    step = turned_steps(odometry, headings)
+    return np.asarray(odometry, np.float64)[0, :2] + np.concatenate([np.zeros((1, 2)), np.cumsum(step, axis=0)])
 
 
 SLIP_DEFAULTS = {"slip_rate": 0.01, "slip_distance": 0.05, "slip_heading_sigma": 0.02}
@@ -269,70 +280,100 @@ def _heading_noise(odometry_noise: Any) -> dict[str, float]:
     return out
 
 
-def refine_positions(features: np.ndarray, odometry: np.ndarray, headings: np.ndarray, positions: np.ndarray,
-                     pairs: PlacePairs, *, noise: Mapping[str, float], readout: Mapping[str, Any],
-                     rounds: int, offset_sigma: float, heading_sigma: float,
-                     max_chi: float = 2.0) -> tuple[np.ndarray, int, float]:
-    """Positions (N, 2) refined by ``rounds`` of: fit ``readout`` (a spec of
-    :func:`sfanav.localization.make_readout`) to the current positions, then
-    solve the positions from the odometry steps turned by ``headings``
-    (standard deviation ``distance_sigma * sqrt(d)`` along and
-    ``heading_sigma * d`` across each step of d metres) and the readout's
-    offsets of the loop-closure pairs (standard deviation ``offset_sigma``
-    m), the first frame fixed at its odometry position. A round is kept only
-    if the refined positions still agree with the odometry: the RMS of the
-    steps' residuals in units of their standard deviation (without the
-    largest 1 %, where slips are) at most ``max_chi`` (a run whose places are seen from only one side, such as
-    parallel lanes, gives offsets the readout shrinks; they would squeeze
-    the map against the odometry). Returns (positions, rounds kept, the last
-    round's RMS)."""
-    P = np.asarray(positions, np.float64).copy()
-    n = len(P)
-    if rounds == 0 or len(pairs) == 0:
-        return P, 0, float("nan")
-    dxy = np.diff(odometry[:, :2], axis=0)
-    corr = headings - np.unwrap(odometry[:, 2])
-    turn = 0.5 * (corr[1:] + corr[:-1])
-    c, s = np.cos(turn), np.sin(turn)
-    step = np.c_[c * dxy[:, 0] - s * dxy[:, 1], s * dxy[:, 0] + c * dxy[:, 1]]
-    d = np.hypot(*dxy.T)
-    slip = 2.0 * noise.get("slip_rate", 0.0) * noise.get("slip_distance", 0.0) ** 2  # m^2 per m (exponential)
-    sd = np.sqrt((noise["distance_sigma"] ** 2 + slip) * d + (heading_sigma * d) ** 2 + 1e-8)
-    i, j = pairs.current, pairs.past
-    m, e = len(i), np.arange(n - 1)
+def _solve_positions(step: np.ndarray, sd: np.ndarray, pairs: PlacePairs, offsets: np.ndarray, sigma: float,
+                     first: np.ndarray) -> np.ndarray:
+    """Positions (N, 2) from the steps (N - 1, 2) of standard deviation sd
+    and the pairs' offsets (M, 2) of standard deviation sigma, by sparse
+    least squares, the first frame held at ``first``."""
+    n, m = len(step) + 1, len(pairs)
+    i, j, e = pairs.current, pairs.past, np.arange(n - 1)
     anchor = 1e3
     rows = np.concatenate([e, e, n - 1 + np.arange(m), n - 1 + np.arange(m), [n - 1 + m]])
     cols = np.concatenate([e + 1, e, i, j, [0]])
-    vals = np.concatenate([1 / sd, -1 / sd, np.full(m, 1 / offset_sigma), np.full(m, -1 / offset_sigma), [anchor]])
+    vals = np.concatenate([1 / sd, -1 / sd, np.full(m, 1 / sigma), np.full(m, -1 / sigma), [anchor]])
     A = sp.csr_matrix((vals, (rows, cols)), shape=(n + m, n)).tocsc()
     normal = (A.T @ A).tocsc()
+    out = np.empty((n, 2))
+    for ax in range(2):
+        rhs = np.concatenate([step[:, ax] / sd, offsets[:, ax] / sigma, [anchor * first[ax]]])
+        out[:, ax] = spsolve(normal, A.T @ rhs)
+    if not np.all(np.isfinite(out)):
+        raise ValueError("the pose graph's position system is singular")
+    return out
+
+
+def _scale(new: np.ndarray, old: np.ndarray) -> float:
+    """The size of ``new`` relative to ``old`` (RMS distance from the centroid)."""
+    a, b = new - new.mean(axis=0), old - old.mean(axis=0)
+    return float(np.sqrt((a * a).sum() / max((b * b).sum(), 1e-300)))
+
+
+def refine_positions(features: np.ndarray, odometry: np.ndarray, headings: np.ndarray, positions: np.ndarray,
+                     pairs: PlacePairs, *, noise: Mapping[str, float], readout: Mapping[str, Any],
+                     rounds: int, offset_sigma: float | None, heading_sigma: float,
+                     max_chi: float = 2.0, max_scale_change: float = 0.02) -> tuple[np.ndarray, int, float, float]:
+    """Positions (N, 2) refined by ``rounds`` of: fit ``readout`` (a spec of
+    :func:`sfanav.localization.make_readout`) to the current positions, then
+    solve the positions from the odometry steps turned by ``headings``
+    (standard deviation ``distance_sigma * sqrt(d)`` along, with the slip
+    model, and ``heading_sigma * d`` across each step of d metres) and the
+    readout's offsets of the loop-closure pairs, the first frame fixed at
+    its odometry position.
+
+    The offsets' standard deviation ``offset_sigma`` (m; None: estimated)
+    is, when estimated, the RMS length of the pairs' offset residuals,
+    re-solved until it settles (it starts at 0.05 m): the readout's errors
+    are correlated along the run, so the per-axis residual would trust them
+    too much. A round is kept only if the refined positions still agree
+    with the odometry: the RMS of the steps' residuals in units of their
+    standard deviation (without the largest 1 %, where slips are) at most
+    ``max_chi``, and the map's size (RMS distance from its centroid) within
+    ``max_scale_change`` of the last round's (odometry fixes the scale; a
+    run whose places are seen from only one side, such as parallel lanes,
+    gives offsets the readout shrinks, and they would squeeze the map).
+    Returns (positions, rounds kept, the last round's step RMS, the offsets'
+    standard deviation of the last round)."""
+    P = np.asarray(positions, np.float64).copy()
+    if rounds == 0 or len(pairs) == 0:
+        return P, 0, float("nan"), float("nan")
+    step = turned_steps(odometry, headings)
+    d = np.hypot(*step.T)
+    slip = 2.0 * noise.get("slip_rate", 0.0) * noise.get("slip_distance", 0.0) ** 2  # m^2 per m (exponential)
+    sd = np.sqrt((noise["distance_sigma"] ** 2 + slip) * d + (heading_sigma * d) ** 2 + 1e-8)
+    i, j = pairs.current, pairs.past
     spec = dict(readout)
     if spec.get("n_outputs") is not None:
         spec["n_outputs"] = min(int(spec["n_outputs"]), features.shape[1])
     accepted = 0
-    chi = float("nan")
+    chi = sigma = float("nan")
     for _ in range(rounds):
         G = make_readout(spec).fit(features, P).predict(features)
-        new = np.empty_like(P)
-        for ax in range(2):
-            rhs = np.concatenate([step[:, ax] / sd, (G[i, ax] - G[j, ax]) / offset_sigma, [anchor * odometry[0, ax]]])
-            new[:, ax] = spsolve(normal, A.T @ rhs)
-        if not np.all(np.isfinite(new)):
-            raise ValueError("the pose graph's position system is singular")
+        off = G[i] - G[j]
+        sig = 0.05 if offset_sigma is None else float(offset_sigma)
+        for _it in range(8 if offset_sigma is None else 1):
+            new = _solve_positions(step, sd, pairs, off, sig, odometry[0, :2])
+            if offset_sigma is None:
+                est = max(float(np.sqrt(np.mean(((new[i] - new[j] - off) ** 2).sum(axis=1)))), 1e-3)
+                settled = abs(est - sig) <= 0.05 * sig
+                sig = est
+                if settled:
+                    new = _solve_positions(step, sd, pairs, off, sig, odometry[0, :2])
+                    break
         r2 = np.sort((((np.diff(new, axis=0) - step) / sd[:, None]) ** 2).sum(axis=1) / 2)
         chi = float(np.sqrt(np.mean(r2[: max(1, int(np.ceil(0.99 * len(r2))))])))  # the rarest 1 %: slips
-        if chi > max_chi:  # the readout's offsets contradict the odometry: keep the positions of the last round
-            break
+        sigma = sig
+        if chi > max_chi or abs(_scale(new, P) - 1.0) > max_scale_change:
+            break  # the readout's offsets contradict the odometry: keep the positions of the last round
         P = new
         accepted += 1
-    return P, accepted, chi
+    return P, accepted, chi, sigma
 
 
 def fit_pose_graph(images: Any, features: Any, odometry: Any, *, odometry_noise: Any = None,
                    compass_sigma_deg: float = DEFAULT_COMPASS_SIGMA_DEG, n_neighbors: int = 3,
                    min_travel: float = 5.0, n_outputs: int = 8, iterations: int = 8,
                    robust: float = 3.0, refine: int = 2, refine_readout: Mapping[str, Any] | None = None,
-                   offset_sigma: float = 0.05, heading_sigma_deg: float = 1.0) -> PoseGraph:
+                   offset_sigma: float | None = None, heading_sigma_deg: float = 1.0) -> PoseGraph:
     """Solves the pose graph of one run from its panoramas, slow features and
     odometry (see the module docstring).
 
@@ -366,8 +407,10 @@ def fit_pose_graph(images: Any, features: Any, odometry: Any, *, odometry_noise:
     refine_readout : mapping, optional
         The readout spec of the refinement (default :data:`REFINE_READOUT`,
         the sfanav default's GP).
-    offset_sigma : float, default 0.05
-        Standard deviation (m) of a pair's offset predicted by the readout.
+    offset_sigma : float, optional
+        Standard deviation (m) of a pair's offset predicted by the readout;
+        by default estimated from the pairs' residuals (see
+        :func:`refine_positions`).
     heading_sigma_deg : float, default 1
         Uncertainty of the solved headings (degrees): the lateral error of
         an odometry step is this times its length.
@@ -399,12 +442,13 @@ def fit_pose_graph(images: Any, features: Any, odometry: Any, *, odometry_noise:
         th = np.unwrap(P[:, 2])
         return PoseGraph(np.c_[P[:, :2], th], 0.0, pairs, np.zeros(0), np.zeros(0))
     rounds = check_int(refine, "refine", minimum=0)
-    offset_sigma = check_positive_float(offset_sigma, "offset_sigma")
+    offset_sigma = None if offset_sigma is None else check_positive_float(offset_sigma, "offset_sigma")
     heading_sigma = np.radians(check_positive_float(heading_sigma_deg, "heading_sigma_deg"))
     rel = relative_headings(R, pairs.current, pairs.past)
     theta, drift, w = _solve_headings(P, pairs, rel, noise, sigma, iterations, robust)
     xy = integrate(P, theta)
     kept = PlacePairs(pairs.current[w >= 0.5], pairs.past[w >= 0.5], pairs.distance[w >= 0.5])
-    xy, done, chi = refine_positions(F, P, theta, xy, kept, noise=noise, readout=refine_readout or REFINE_READOUT,
-                                     rounds=rounds, offset_sigma=offset_sigma, heading_sigma=heading_sigma)
-    return PoseGraph(np.c_[xy, theta], drift, pairs, rel, w, refined=done, refine_chi=chi)
+    xy, done, chi, osig = refine_positions(F, P, theta, xy, kept, noise=noise,
+                                           readout=refine_readout or REFINE_READOUT, rounds=rounds,
+                                           offset_sigma=offset_sigma, heading_sigma=heading_sigma)
+    return PoseGraph(np.c_[xy, theta], drift, pairs, rel, w, refined=done, refine_chi=chi, offset_sigma=osig)
