@@ -353,7 +353,7 @@ def no_ground_truth_localizer(sc: Scene, out: Path, seed: int, loc: Any, cam: An
     from ..sfa.modelfile import load
 
     cache = Path(out) / "cache" / _cache_name(sc, f"metric-{sc.name}-no-ground-truth", seed, cam.to_dict(),
-                                              "pose graph, 2 refinement rounds")
+                                              "pose graph, 2 refinement rounds, offset sigma estimated")
     side = cache.with_suffix(".positions.npy")
     if cache.exists() and side.exists():
         free = load(cache)

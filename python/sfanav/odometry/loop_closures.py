@@ -48,10 +48,15 @@ class LoopClosures:
         return len(self.current)
 
 
-def _rows(images: np.ndarray) -> np.ndarray:
-    a = np.asarray(images, dtype=np.float32)
+def panorama_rows(images: Any) -> np.ndarray:
+    """Panoramas (N, H, W) or (N, H, W, C) as rows (N, H * C, W) of columns
+    around the robot, in their own dtype (channels become rows). Raises
+    ValueError for any other shape."""
+    a = np.asarray(images)
     if a.ndim == 4:  # (N, H, W, C) -> (N, H * C, W)
         a = a.transpose(0, 1, 3, 2).reshape(a.shape[0], -1, a.shape[2])
+    if a.ndim != 3:
+        raise ValueError(f"images must be panoramas (N, H, W) or (N, H, W, C), got shape {a.shape}")
     return a
 
 
@@ -61,7 +66,7 @@ def find_loop_closures(images: Any, odometry: Any = None, *, min_gap: int = 40, 
     """Loop closures within one training run of panoramas (N, H, W[, C]) in
     temporal order; ``odometry`` (N, 2) metres, optional. See the module
     docstring."""
-    R = _rows(images)
+    R = panorama_rows(images).astype(np.float32, copy=False)
     n, _, W = R.shape
     spec = np.fft.rfft(R, axis=2)
     k = min(n_coefficients, spec.shape[2])

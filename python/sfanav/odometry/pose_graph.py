@@ -50,6 +50,7 @@ from .._checks import (
 )
 from ..localization.readouts import make_readout
 from .dead_reckoning import as_poses, wrap_angle
+from .loop_closures import panorama_rows
 from .metric_cost import noise_dict
 
 REFINE_READOUT = {"kind": "gp", "n_outputs": 12}
@@ -119,15 +120,6 @@ def place_pairs(features: Any, odometry: Any, *, n_neighbors: int = 3, min_trave
     return PlacePairs(c[first].astype(np.int64), p[first].astype(np.int64), d[first])
 
 
-def _panorama_rows(images: Any) -> np.ndarray:
-    a = np.asarray(images)
-    if a.ndim == 4:  # (N, H, W, C): channels become rows
-        a = a.transpose(0, 1, 3, 2).reshape(a.shape[0], -1, a.shape[2])
-    if a.ndim != 3:
-        raise ValueError(f"images must be panoramas (N, H, W) or (N, H, W, C), got shape {a.shape}")
-    return a
-
-
 def relative_headings(images: Any, current: Any, past: Any, *, chunk: int = 256) -> np.ndarray:
     """Heading of ``current`` minus heading of ``past`` (rad, in (-pi, pi]),
     for pairs of 360-degree panoramas, by the column shift that maximises
@@ -138,7 +130,7 @@ def relative_headings(images: Any, current: Any, past: Any, *, chunk: int = 256)
     decreasing with ``j`` (as :func:`sfanav.sim.bearings`), so a left turn
     shifts the scene to larger columns.
     """
-    R = _panorama_rows(images)
+    R = panorama_rows(images)
     cur = np.asarray(current, np.int64)
     pst = np.asarray(past, np.int64)
     W = R.shape[2]
@@ -430,7 +422,7 @@ def fit_pose_graph(images: Any, features: Any, odometry: Any, *, odometry_noise:
     P = as_poses(odometry, "odometry")
     F = as_matrix(features, "features")
     check_same_length(F, P, "features", "odometry")
-    R = _panorama_rows(images)
+    R = panorama_rows(images)
     if len(R) != len(P):
         raise ValueError(f"images has {len(R)} frames but odometry has {len(P)} poses; they must match")
     sigma = np.radians(check_positive_float(compass_sigma_deg, "compass_sigma_deg"))
