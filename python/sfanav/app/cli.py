@@ -382,11 +382,11 @@ def _run_train(args: argparse.Namespace) -> int:
         loc.info["mirror"] = list(preprocessor.mirror_used)  # localize and evaluate reuse it
     if np.isfinite(odometry).all():
         try:
-            targets = loc.learned_positions_.positions if supervision == "odometry" else xy
             feats = loc.features(images)
-            loc.info["ekf_noise"] = noise_for_localizer(loc, feats, targets, odometry)
+            loc.info["ekf_noise"] = noise_for_localizer(loc, feats, loc.training_positions_, odometry)
             _log("EKF noise for localize --odometry, from the training run's held-out estimates and odometry "
-                 "(likelihood of the innovations, no ground truth): "
+                 "(the fused track nearest the positions the readout was fitted to"
+                 + (", learned without ground truth" if supervision == "odometry" else "") + "): "
                  + ", ".join(f"{k} {v:g}" for k, v in loc.info["ekf_noise"].items()))
         except ValueError as exc:
             _log(f"no EKF noise stored (localize --odometry will not be available): {exc}")

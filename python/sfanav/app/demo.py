@@ -123,7 +123,7 @@ def run_demo(out: str | Path = "sfanav-demo", *, seed: int = 0, overwrite: bool 
     # EKF noise from the training run's held-out estimates (no ground truth), as sfanav train stores it
     t0 = time.perf_counter()
     F_train = loc.features(X_train)
-    loc.info["ekf_noise"] = noise_for_localizer(loc, F_train, loc.learned_positions_.positions, odo_train)
+    loc.info["ekf_noise"] = noise_for_localizer(loc, F_train, loc.training_positions_, odo_train)
     loc.save(out / "model.sfa")
     timings["ekf noise"] = time.perf_counter() - t0
 
@@ -182,7 +182,8 @@ def run_demo(out: str | Path = "sfanav-demo", *, seed: int = 0, overwrite: bool 
         f"{loc.describe_readout()} fitted to them. Its estimates are in the training run's odometry frame; for "
         "evaluation only they are moved into the world frame by the rigid transform (no scale) fitted on the "
         "training run. 'fused with odometry': the CTRV EKF over the test walk's odometry, noise chosen on the "
-        "training run by the likelihood of the innovations of its held-out estimates (blocked cross-validation of the readout; no ground truth).\n"
+        "training run: the noise whose fused track of its held-out estimates (blocked cross-validation of the "
+        "readout) is nearest the learned positions (no ground truth).\n"
         "Reference rows: '[ground truth]' the same network with the readout fitted to ground truth; '[thesis "
         f"configuration, ground truth]' the {'tiny' if quick else 'Table 5.1'} network with the thesis's quadratic "
         "regression on 8 outputs. Perfect memory and the Fourier signature store the training run's ground-truth "
