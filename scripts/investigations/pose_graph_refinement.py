@@ -18,7 +18,6 @@ import time
 from pathlib import Path
 
 import numpy as np
-
 from sfanav.localization.error_metrics import align
 from sfanav.odometry import fit_pose_graph
 
