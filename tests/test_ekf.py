@@ -101,3 +101,23 @@ def test_bad_inputs(run):
     with pytest.raises(ValueError, match="unknown parameter"):
         ekf.set_params(q=1)
     assert "OdometryEKF" in repr(sfanav.OdometryEKF())
+
+
+def test_turn_noise_widens_the_heading_variance_in_turns_only():
+    from sfanav.odometry import OdometryEKF
+
+    n = 40
+    th = np.r_[np.zeros(n // 2), np.linspace(0, np.pi, n // 2)]  # straight, then a half turn
+    xy = np.cumsum(np.c_[np.cos(th), np.sin(th)] * 0.1, axis=0)
+    odo = np.c_[xy, th]
+    Z = np.full((n, 2), np.nan)  # no measurements: the prediction alone
+    plain = OdometryEKF(0.01, 0.01, 0.2)
+    plain.run(odo, Z, odo[0])
+    turned = OdometryEKF(0.01, 0.01, 0.2, turn_noise=0.1)
+    turned.run(odo, Z, odo[0])
+    v0, v1 = plain.covariances_[:, 2, 2], turned.covariances_[:, 2, 2]
+    np.testing.assert_allclose(v1[: n // 2], v0[: n // 2])  # no turn, no extra noise
+    extra = v1[-1] - v0[-1]
+    np.testing.assert_allclose(extra, 0.1**2 * np.pi, rtol=1e-6)  # turn_noise^2 * |total turn|
+    with pytest.raises(ValueError, match="turn_noise"):
+        OdometryEKF(turn_noise=-1.0).run(odo, Z, odo[0])

@@ -21,7 +21,7 @@ def _estimates(run, sigma, seed):
 def test_noise_from_one_run_fuses_another_better_than_its_estimates():
     train, test = make_odometry_run(random_state=1), make_odometry_run(random_state=2)
     noise = noise_from_run(train["odometry"], _estimates(train, 0.2, 0))
-    assert set(noise) == {"distance_noise", "heading_noise", "measurement_noise"}
+    assert set(noise) == {"distance_noise", "heading_noise", "measurement_noise", "turn_noise"}
     Z = _estimates(test, 0.2, 1)
     poses = fuse(test["odometry"], Z, noise)
     assert poses.shape == (len(Z), 3) and np.isfinite(poses).all()
@@ -97,8 +97,9 @@ def test_noise_against_a_reference_map_handles_errors_correlated_in_time():
     train, test = make_odometry_run(random_state=1), make_odometry_run(random_state=2)
     Ztr, Zte = _smooth_bias(train, 0.15, 0), _smooth_bias(test, 0.15, 1)
     learned = train["xy"] + 0.03 * np.random.default_rng(2).normal(size=train["xy"].shape)  # a map, not the truth
-    by_map = noise_from_run(train["odometry"], Ztr, reference=learned)
-    by_nll = noise_from_run(train["odometry"], Ztr)
+    # this run's odometry errs per step, not per turn: the thesis's process model (turn_noise 0)
+    by_map = noise_from_run(train["odometry"], Ztr, reference=learned, turn_noise=0.0)
+    by_nll = noise_from_run(train["odometry"], Ztr, turn_noise=0.0)
     single = med(Zte, test["xy"])
     fused_map = med(fuse(test["odometry"], Zte, by_map)[:, :2], test["xy"])
     fused_nll = med(fuse(test["odometry"], Zte, by_nll)[:, :2], test["xy"])

@@ -366,7 +366,7 @@ def fusion_rows(out: Path, seed: int, tr: dict[str, Any], te: dict[str, Any], n_
         {"metric": f"EKF improvement over SFA alone ({tag}) (%)", "thesis": None,
          "sfanav": 100.0 * (single - ekf) / single if single > 0 else float("nan"), "target": 20.0},
         {"metric": f"EKF noise ({tag})", "thesis": None,
-         "sfanav": ", ".join(f"{noise[k]:g}" for k in ("distance_noise", "heading_noise", "measurement_noise"))},
+         "sfanav": ", ".join(f"{noise[k]:g}" for k in ("distance_noise", "heading_noise", "measurement_noise", "turn_noise"))},
     ]
 
 

@@ -128,6 +128,11 @@ class OdometryEKF:
         Standard deviation of the odometry heading change of one step, radians.
     measurement_noise : float, default 0.2
         Standard deviation of each coordinate of an SFA estimate, metres.
+    turn_noise : float, default 0
+        Extra heading noise proportional to the turn: a step that turns by
+        dtheta radians adds ``turn_noise**2 * |dtheta|`` to the heading
+        variance (rad per sqrt(rad); wheel odometry errs most in turns).
+        0: the thesis's model (per-step noise only).
     initial_std : (float, float), default (0.01, 0.01)
         Standard deviation of the start position (metres, each axis) and
         heading (radians): the start pose is known (thesis).
@@ -164,6 +169,7 @@ class OdometryEKF:
         heading_noise: float = 0.01,
         measurement_noise: float = 0.2,
         *,
+        turn_noise: float = 0.0,
         initial_std: tuple[float, float] = (0.01, 0.01),
         process_floor: float = 1e-9,
         gate_probability: float | None = None,
@@ -172,12 +178,13 @@ class OdometryEKF:
         self.distance_noise = distance_noise
         self.heading_noise = heading_noise
         self.measurement_noise = measurement_noise
+        self.turn_noise = turn_noise
         self.initial_std = initial_std
         self.process_floor = process_floor
         self.gate_probability = gate_probability
         self.max_consecutive_gated = max_consecutive_gated
 
-    _PARAMS = ("distance_noise", "heading_noise", "measurement_noise", "initial_std", "process_floor",
+    _PARAMS = ("distance_noise", "heading_noise", "measurement_noise", "turn_noise", "initial_std", "process_floor",
                "gate_probability", "max_consecutive_gated")
 
     def get_params(self, deep: bool = True) -> dict[str, Any]:
@@ -193,13 +200,15 @@ class OdometryEKF:
     def __repr__(self) -> str:
         return (
             f"OdometryEKF(distance_noise={self.distance_noise!r}, heading_noise={self.heading_noise!r}, "
-            f"measurement_noise={self.measurement_noise!r}, gate_probability={self.gate_probability!r})"
+            f"measurement_noise={self.measurement_noise!r}, turn_noise={self.turn_noise!r}, "
+            f"gate_probability={self.gate_probability!r})"
         )
 
     def _check(self) -> tuple[float, float, float, np.ndarray, float, float | None, int]:
         sd = check_nonneg_float(self.distance_noise, "distance_noise")
         sh = check_nonneg_float(self.heading_noise, "heading_noise")
         sr = check_nonneg_float(self.measurement_noise, "measurement_noise")
+        self._turn = check_nonneg_float(self.turn_noise, "turn_noise")
         if sr == 0:
             raise ValueError("measurement_noise must be > 0 (metres)")
         init = as_real_array(self.initial_std, "initial_std").astype(np.float64).ravel()
@@ -278,7 +287,8 @@ class OdometryEKF:
                 x = ekf.x[:, 0]
                 F, V = ctrv_jacobians(x, u)
                 ekf.F = F
-                ekf.Q = V @ M @ V.T + floor * np.eye(3)
+                Mk = M if self._turn == 0 else np.diag([sd**2, sh**2 + self._turn**2 * abs(u[1])])
+                ekf.Q = V @ Mk @ V.T + floor * np.eye(3)
                 ekf.predict(u=u)  # x = ctrv_motion(x, u), P = F P F^T + Q
             z = Z[k]
             if np.isnan(z).any():

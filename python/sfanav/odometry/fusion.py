@@ -26,13 +26,17 @@ from typing import Any
 
 import numpy as np
 
-from .._checks import as_matrix, check_int, check_same_length
+from .._checks import as_matrix, check_int, check_nonneg_float, check_same_length
 from ..localization.error_metrics import align
 from ..localization.readout_selection import cross_val_predict
 from .dead_reckoning import as_poses, wrap_angle
 from .ekf import OdometryEKF, grid_search
 
 NOISE_KEYS = ("distance_noise", "heading_noise", "measurement_noise")
+TURN_NOISE = 0.1
+"""The EKF's heading noise per sqrt(radian) of turn in fusion without ground
+truth (:class:`OdometryEKF` ``turn_noise``): fixed, not chosen on the
+training run, whose map shares its odometry and so favours trusting it."""
 START_FRAMES = 30
 """Frames whose estimates fix a run's start pose."""
 MAX_FRAMES = 2000
@@ -75,7 +79,8 @@ def start_pose_from_estimates(odometry: Any, estimates: Any, *, n: int = START_F
 
 
 def noise_from_run(odometry: Any, estimates: Any, *, reference: Any = None, start_pose: Any = None,
-                   max_frames: int | None = MAX_FRAMES, progress: bool = False, **grid: Any) -> dict[str, float]:
+                   max_frames: int | None = MAX_FRAMES, turn_noise: float = TURN_NOISE, progress: bool = False,
+                   **grid: Any) -> dict[str, float]:
     """The EKF noise for a run's odometry (N, 3) and estimates (N, 2), by
     :func:`sfanav.odometry.grid_search` on the run's first ``max_frames``
     frames (None: all; the grid runs the filter once per candidate).
@@ -87,9 +92,10 @@ def noise_from_run(odometry: Any, estimates: Any, *, reference: Any = None, star
     estimates whose errors are correlated in time (a smooth bias along the
     run) too much. ``start_pose`` defaults to
     :func:`start_pose_from_estimates`; ``grid`` overrides the candidate
-    standard deviations. Returns ``{"distance_noise", "heading_noise",
-    "measurement_noise"}``. Raises ValueError on mismatched or non-finite
-    input."""
+    standard deviations; every candidate runs with ``turn_noise`` (rad per
+    sqrt(rad) of turn, default :data:`TURN_NOISE`). Returns
+    ``{"distance_noise", "heading_noise", "measurement_noise",
+    "turn_noise"}``. Raises ValueError on mismatched or non-finite input."""
     P = as_poses(odometry, "odometry")
     Z = _estimates(estimates, P)
     T = None
@@ -101,8 +107,10 @@ def noise_from_run(odometry: Any, estimates: Any, *, reference: Any = None, star
         P, Z = P[:m], Z[:m]
         T = None if T is None else T[:m]
     s0 = start_pose_from_estimates(P, Z) if start_pose is None else start_pose
-    res = grid_search(P, Z, s0, T, criterion="nll" if T is None else "med", progress=progress, **grid)
-    return {k: float(res.best_params[k]) for k in NOISE_KEYS}
+    turn = check_nonneg_float(turn_noise, "turn_noise")
+    res = grid_search(P, Z, s0, T, criterion="nll" if T is None else "med", progress=progress,
+                      ekf_params={"turn_noise": turn}, **grid)
+    return {**{k: float(res.best_params[k]) for k in NOISE_KEYS}, "turn_noise": turn}
 
 
 def noise_for_localizer(localizer: Any, features: Any, targets: Any, odometry: Any, *, block: int = 20,
@@ -129,11 +137,12 @@ def fuse(odometry: Any, estimates: Any, noise: Mapping[str, float], *, start_pos
     estimates (N, 2; NaN rows missing) with the EKF noise ``noise`` (as
     :func:`noise_from_run` returns). ``start_pose`` defaults to
     :func:`start_pose_from_estimates`; outlying estimates are gated."""
-    unknown = set(noise) - set(NOISE_KEYS)
+    unknown = set(noise) - set(NOISE_KEYS) - {"turn_noise"}
     if unknown or not set(NOISE_KEYS) <= set(noise):
-        raise ValueError(f"noise must give {', '.join(NOISE_KEYS)}, got {sorted(noise)}")
+        raise ValueError(f"noise must give {', '.join(NOISE_KEYS)} (and optionally turn_noise), got {sorted(noise)}")
     P = as_poses(odometry, "odometry")
     Z = _estimates(estimates, P)
     s0 = start_pose_from_estimates(P, Z) if start_pose is None else start_pose
-    ekf = OdometryEKF(**{k: float(noise[k]) for k in NOISE_KEYS}, gate_probability=gate_probability)
+    ekf = OdometryEKF(**{k: float(noise[k]) for k in NOISE_KEYS}, turn_noise=float(noise.get("turn_noise", 0.0)),
+                      gate_probability=gate_probability)
     return ekf.run(P, Z, s0)
