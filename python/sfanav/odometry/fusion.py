@@ -39,6 +39,9 @@ truth (:class:`OdometryEKF` ``turn_noise``): fixed, not chosen on the
 training run, whose map shares its odometry and so favours trusting it."""
 START_FRAMES = 30
 """Frames whose estimates fix a run's start pose."""
+GATE_PROBABILITY = 0.999
+"""Mahalanobis gate of the fused estimates (:class:`OdometryEKF`
+``gate_probability``), the same when the noise is chosen and when it is used."""
 MAX_FRAMES = 2000
 """Frames of the training run the noise is chosen on (the grid search's cost grows with them)."""
 
@@ -109,7 +112,7 @@ def noise_from_run(odometry: Any, estimates: Any, *, reference: Any = None, star
     s0 = start_pose_from_estimates(P, Z) if start_pose is None else start_pose
     turn = check_nonneg_float(turn_noise, "turn_noise")
     res = grid_search(P, Z, s0, T, criterion="nll" if T is None else "med", progress=progress,
-                      ekf_params={"turn_noise": turn}, **grid)
+                      ekf_params={"turn_noise": turn, "gate_probability": GATE_PROBABILITY}, **grid)
     return {**{k: float(res.best_params[k]) for k in NOISE_KEYS}, "turn_noise": turn}
 
 
@@ -131,7 +134,7 @@ def noise_for_localizer(localizer: Any, features: Any, targets: Any, odometry: A
 
 
 def fuse(odometry: Any, estimates: Any, noise: Mapping[str, float], *, start_pose: Any = None,
-         gate_probability: float | None = 0.999) -> np.ndarray:
+         gate_probability: float | None = GATE_PROBABILITY) -> np.ndarray:
     """The fused track (N, 3): x, y in the estimates' frame (metres) and
     heading (radians), from a run's odometry (N, 3) and single-image
     estimates (N, 2; NaN rows missing) with the EKF noise ``noise`` (as
