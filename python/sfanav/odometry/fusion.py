@@ -13,7 +13,10 @@ likelihood, and the start pose found from the first estimates.
   odometry itself: both make the filter overconfident), the reference
   being the positions its readout was fitted to (for a model trained
   without ground truth, the map learned from the run's images and
-  odometry); computed at training time, stored in the model file.
+  odometry); computed at training time, stored in the model file. The
+  filter has a fixed turn noise (:data:`TURN_NOISE`) and the same
+  Mahalanobis gate (:data:`GATE_PROBABILITY`) when the noise is chosen and
+  when it is used.
 * :func:`start_pose_from_estimates`: the start pose (x, y, heading) of a run
   from the rigid fit of its first odometry positions to their estimates.
 * :func:`fuse`: the fused track of a run.
