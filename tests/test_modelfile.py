@@ -122,6 +122,20 @@ def test_newer_version_is_refused(tmp_path):
         sfanav.load(tmp_path / "x.sfa")
 
 
+@pytest.mark.parametrize("version, message", [(0, "version 0 does not exist"), (-3, "version -3 does not exist"),
+                                              (True, "an integer"), ("2", "an integer"), (None, "an integer")])
+def test_impossible_versions_are_refused(tmp_path, version, message):
+    p = tmp_path / "m.sfa"
+    sfanav.SFA(2).save(p)
+
+    def edit(m):
+        m["version"] = version
+
+    _rewrite(p, tmp_path / "x.sfa", edit_manifest=edit)
+    with pytest.raises(ValueError, match=message):
+        sfanav.load(tmp_path / "x.sfa")
+
+
 def test_not_a_model_file(tmp_path):
     p = tmp_path / "x.sfa"
     p.write_text("hello")

@@ -82,6 +82,37 @@ def test_bad_configs_name_the_layer(tmp_path):
         sfanav.Network(bad)
 
 
+@pytest.mark.parametrize("edit, message", [
+    (lambda c: c.__setitem__("netwrok", {}), r"unknown sections or keys \['netwrok'\]"),
+    (lambda c: c["input"].__setitem__("width", 48.9), r"\[input\] width must be an integer, got 48.9"),
+    (lambda c: c["input"].__setitem__("channels", True), r"channels must be an integer"),
+    (lambda c: c["input"].__setitem__("colour", 3), r"unknown \[input\] keys"),
+    (lambda c: c.setdefault("network", {}).__setitem__("weight_sharing", "false"), "true or false"),
+    (lambda c: c.setdefault("network", {}).__setitem__("max_expanded", 0), "max_expanded must be at least 1"),
+    (lambda c: c["layers"][0].__setitem__("out", 4.5), "layer 1: out must be an integer"),
+    (lambda c: c["layers"][1].__setitem__("degree", "2"), "layer 2: degree must be an integer"),
+    (lambda c: c["layers"][0].__setitem__("reduce_to", -3), "layer 1: reduce_to must be at least 1"),
+])
+def test_config_values_that_used_to_be_coerced_are_refused(edit, message):
+    cfg = tiny_config()
+    edit(cfg)
+    with pytest.raises(ValueError, match=message):
+        sfanav.sfa.resolve_config(cfg)
+
+
+def test_the_default_reduction_is_found_without_a_long_loop():
+    from math import comb
+
+    # a huge input and expansion budget: bisection, not 1e9 steps
+    cfg = {"input": {"width": 10**6, "height": 10**6, "channels": 1}, "network": {"max_expanded": 10**18},
+           "layers": [{"rf": "full", "out": 8}]}
+    k = sfanav.sfa.resolve_config(cfg)["layers"][0]["reduce_to"]
+    assert comb(k + 2, 2) - 1 <= 10**18 < comb(k + 3, 2) - 1
+    # the thesis's budget: k = 23 (299 expanded dims) for a 300-dim input
+    cfg = {"input": {"width": 10, "height": 10, "channels": 3}, "layers": [{"rf": "full", "out": 8}]}
+    assert sfanav.sfa.resolve_config(cfg)["layers"][0]["reduce_to"] == 23
+
+
 def test_config_file_round_trip(tmp_path):
     p = tmp_path / "net.toml"
     p.write_text(sfanav.Network.preset_path("thesis-5.3").read_text())

@@ -153,8 +153,10 @@ def read_model(path: str | os.PathLike) -> tuple[str, dict[str, Any], dict[str, 
             if not isinstance(manifest, dict) or manifest.get("format") != FORMAT:
                 raise ValueError(f"{bad}: unknown format {manifest.get('format')!r}")
             version = manifest.get("version")
-            if not isinstance(version, int):
-                raise ValueError(f"{bad}: missing format version")
+            if isinstance(version, bool) or not isinstance(version, int):
+                raise ValueError(f"{bad}: missing format version (an integer), got {version!r}")
+            if version < 1:
+                raise ValueError(f"{bad}: format version {version} does not exist (versions start at 1)")
             if version > VERSION:
                 raise ValueError(
                     f"{path} uses model format version {version}, but this sfanav reads "

@@ -196,10 +196,30 @@ def _pair(v: Any, what: str) -> tuple[int, int]:
 
 
 def _default_reduce(in_dim: int, degree: int, max_expanded: int) -> int:
-    k = 1
-    while k < in_dim and comb(k + 1 + degree, degree) - 1 <= max_expanded:
-        k += 1
-    return k
+    """The largest k <= in_dim whose polynomial expansion of degree
+    ``degree`` has at most ``max_expanded`` dimensions (at least 1), by
+    bisection (the expansion's size grows with k)."""
+    lo, hi = 1, max(1, in_dim)
+    while lo < hi:
+        mid = (lo + hi + 1) // 2
+        if comb(mid + degree, degree) - 1 <= max_expanded:
+            lo = mid
+        else:
+            hi = mid - 1
+    return lo
+
+
+def _config_int(value: Any, what: str, minimum: int = 1) -> int:
+    """A config value that must be an integer (not a bool, not a fraction)."""
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+        raise ValueError(f"network config: {what} must be an integer, got {value!r}")
+    if value < minimum:
+        raise ValueError(f"network config: {what} must be at least {minimum}, got {value}")
+    return int(value)
+
+
+CONFIG_SECTIONS = ("name", "description", "input", "network", "layers")
+"""The top-level keys a network config may have."""
 
 
 def resolve_config(config: dict[str, Any]) -> dict[str, Any]:
@@ -210,16 +230,28 @@ def resolve_config(config: dict[str, Any]) -> dict[str, Any]:
     layer and the problem."""
     if not isinstance(config, dict):
         raise TypeError(f"a network config must be a dict, got {type(config).__name__}")
-    try:
-        inp = config["input"]
-        w, h, c = int(inp["width"]), int(inp["height"]), int(inp.get("channels", 1))
-    except (KeyError, TypeError, ValueError) as exc:
-        raise ValueError(f"network config: [input] needs width, height (and channels): {exc}") from None
-    net = dict(config.get("network", {}))
+    unknown = set(config) - set(CONFIG_SECTIONS)
+    if unknown:
+        raise ValueError(f"network config: unknown sections or keys {sorted(map(str, unknown))}; "
+                         f"a config has {', '.join(CONFIG_SECTIONS)}")
+    inp = config.get("input")
+    if not isinstance(inp, dict) or "width" not in inp or "height" not in inp:
+        raise ValueError("network config: [input] needs width, height (and channels)")
+    unknown = set(inp) - {"width", "height", "channels"}
+    if unknown:
+        raise ValueError(f"network config: unknown [input] keys {sorted(map(str, unknown))}")
+    w, h = _config_int(inp["width"], "[input] width"), _config_int(inp["height"], "[input] height")
+    c = _config_int(inp.get("channels", 1), "[input] channels")
+    net = config.get("network", {})
+    if not isinstance(net, dict):
+        raise ValueError(f"network config: [network] must be a table, got {type(net).__name__}")
     unknown = set(net) - {"weight_sharing", "max_expanded", "tol", "precision"}
     if unknown:
-        raise ValueError(f"network config: unknown [network] keys {sorted(unknown)}")
-    max_expanded = int(net.get("max_expanded", 300))
+        raise ValueError(f"network config: unknown [network] keys {sorted(map(str, unknown))}")
+    sharing = net.get("weight_sharing", True)
+    if not isinstance(sharing, (bool, np.bool_)):
+        raise ValueError(f"network config: weight_sharing must be true or false, got {sharing!r}")
+    max_expanded = _config_int(net.get("max_expanded", 300), "[network] max_expanded")
     precision = net.get("precision", "double")
     if precision not in ("double", "mixed"):
         raise ValueError(f"network config: precision must be 'double' or 'mixed', got {precision!r}")
@@ -237,14 +269,16 @@ def resolve_config(config: dict[str, Any]) -> dict[str, Any]:
             raise ValueError(f"{name}: unknown keys {sorted(unknown)}")
         rf = (mw, mh) if layer.get("rf") == "full" else _pair(layer.get("rf"), f"{name}: rf")
         stride = _pair(layer.get("stride", [1, 1]), f"{name}: stride")
-        degree = int(layer.get("degree", 2))
+        degree = _config_int(layer.get("degree", 2), f"{name}: degree")
         if "out" not in layer:
             raise ValueError(f"{name}: missing 'out' (the node's output dim)")
-        out = int(layer["out"])
+        out = _config_int(layer["out"], f"{name}: out")
         in_dim = rf[0] * rf[1] * mc
         reduce_to = layer.get("reduce_to")
         if reduce_to is None:
             reduce_to = _default_reduce(in_dim, degree, max_expanded)
+        else:
+            reduce_to = _config_int(reduce_to, f"{name}: reduce_to")
         spec_layers.append(
             {"rf": rf, "stride": stride, "n_out": out, "reduce_to": int(reduce_to), "degree": degree}
         )
@@ -256,7 +290,7 @@ def resolve_config(config: dict[str, Any]) -> dict[str, Any]:
         "width": w,
         "channels": c,
         "layers": spec_layers,
-        "weight_sharing": bool(net.get("weight_sharing", True)),
+        "weight_sharing": bool(sharing),
         "tol": float(net.get("tol", _core.DEFAULT_TOL)),
         "mixed_precision": precision == "mixed",
     }
