@@ -249,3 +249,28 @@ def test_insect_navigation_database(tmp_path):
     (route / "database_entries.csv").write_text("X [mm], Y [mm], Filename\n0, 0, a.png\n")
     with pytest.raises(ValueError, match="lacks column.*Heading \\[degrees\\]"):
         Dataset(route)
+
+
+def test_an_interrupted_writer_leaves_no_dataset(tmp_path):
+    from sfanav.data import DatasetWriter
+
+    out = tmp_path / "partial"
+    img = np.zeros((4, 8, 3), np.uint8)
+    with pytest.raises(KeyboardInterrupt):
+        with DatasetWriter(out) as w:
+            w.add(img, frame=0, timestamp=0.0, pose=(0, 0, 0))
+            raise KeyboardInterrupt  # as Ctrl-C in the middle of sfanav simulate
+    assert (out / "frames.csv").exists() and not (out / "metadata.json").exists()
+    with pytest.raises(FileNotFoundError, match="no metadata.json"):
+        sfanav.data.Dataset(out)
+
+
+def test_a_frames_table_that_disagrees_with_the_metadata_is_refused(tmp_path):
+    from sfanav.data import write_dataset
+
+    out = tmp_path / "d"
+    write_dataset(out, [np.zeros((4, 8, 3), np.uint8)] * 3, np.zeros((3, 3)))
+    lines = (out / "frames.csv").read_text().splitlines(keepends=True)
+    (out / "frames.csv").write_text("".join(lines[:-1]))  # one row lost, as after a kill
+    with pytest.raises(ValueError, match="incomplete or altered: metadata.json says 3 images, frames.csv has 2"):
+        sfanav.data.Dataset(out)

@@ -550,6 +550,11 @@ def _read_sfanav(root: Path) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
     for i, rel in enumerate(cols["image"]):
         if not rel:
             raise ValueError(f"frames table {fpath} line {i + 2}: empty image path")
+    expected = meta.get("n_images")
+    if expected is not None and (isinstance(expected, bool) or not isinstance(expected, int)
+                                 or expected != len(cols["image"])):
+        raise ValueError(f"dataset {root} is incomplete or altered: {mpath.name} says {expected!r} images, "
+                         f"{fpath.name} has {len(cols['image'])} rows")
     for k in cols:
         if k not in COLUMNS:
             cols[k] = _infer(cols[k])

@@ -1,6 +1,9 @@
 """Writing sfanav datasets: :class:`DatasetWriter` streams images and their
 rows, :func:`write_dataset` writes a whole run at once. A dataset is complete
-only once its ``metadata.json`` exists, which is written last."""
+only once its ``metadata.json`` exists, which is written last (atomically,
+with the number of images the reader checks); a writer left by an exception
+(an interrupted ``sfanav simulate``, say) writes none, so the folder is not
+taken for a dataset."""
 
 from __future__ import annotations
 
@@ -130,13 +133,24 @@ class DatasetWriter:
         self._file.close()
         meta = {"format": FORMAT, "version": VERSION, "units": UNITS, "n_images": self.count,
                 "image_shapes": self._shapes, **self.metadata}
-        (self.path / "metadata.json").write_text(json.dumps(meta, indent=1, default=_json_default))
+        tmp = self.path / "metadata.json.part"
+        tmp.write_text(json.dumps(meta, indent=1, default=_json_default))
+        os.replace(tmp, self.path / "metadata.json")
+
+    def abort(self) -> None:
+        """Stops writing without completing the dataset: ``frames.csv`` is
+        closed and no ``metadata.json`` is written, so readers refuse it."""
+        if not self._file.closed:
+            self._file.close()
 
     def __enter__(self) -> "DatasetWriter":
         return self
 
-    def __exit__(self, *exc: Any) -> None:
-        self.close()
+    def __exit__(self, exc_type: Any, *exc: Any) -> None:
+        if exc_type is None:
+            self.close()
+        else:  # an error or an interrupt: the dataset is incomplete
+            self.abort()
 
 
 def _json_default(o: Any) -> Any:
