@@ -450,3 +450,17 @@ def test_mixed_precision_network_is_as_good_as_double(world):
     assert eta_phi[:2].mean() < 0.15, eta_phi
     assert not sfanav.Network.from_preset("thesis-5.2").config_["mixed_precision"]
     assert sfanav.Network.from_preset("thesis-5.2", precision="mixed").config_["mixed_precision"]
+
+
+@pytest.mark.parametrize("step", [0, -2, 2.5, True, "5"])
+def test_transform_refuses_a_rotation_step_that_is_not_a_positive_integer(step):
+    cfg = tiny_config()
+    net = sfanav.Network(cfg)
+    rng = np.random.default_rng(0)
+    imgs = rng.integers(0, 255, (30, cfg["input"]["height"], cfg["input"]["width"]), dtype=np.uint8)
+    if cfg["input"].get("channels", 1) == 3:
+        imgs = np.repeat(imgs[..., None], 3, axis=3)
+    net.fit(imgs, rotation=sfanav.Rotation(step=8), progress=False)
+    with pytest.raises(ValueError, match="step must be a positive whole number"):
+        net.transform(imgs[:2], rotations=True, step=step)
+    assert net.transform(imgs[:2], rotations=True, step=np.int64(8)).shape[1] == -(-cfg["input"]["width"] // 8)

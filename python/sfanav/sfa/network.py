@@ -702,6 +702,7 @@ class Network:
         under every simulated rotation by ``step`` px (default: the training
         step), K = ceil(W / step). Images wider than the network's input are
         seen through the window at rotation 0 (their first columns).
+        ValueError for a ``step`` that is not a positive integer.
         """
         self._check_trained()
         a = np.asarray(images)
@@ -712,7 +713,9 @@ class Network:
         a = as_image_batch(a)
         self._check_images(a, None)
         if rotations:
-            s = step or getattr(self, "_step", 5)
+            s = getattr(self, "_step", 5) if step is None else step
+            if isinstance(s, (bool, np.bool_)) or not isinstance(s, (int, np.integer)) or s < 1:
+                raise ValueError(f"step must be a positive whole number of pixels, got {step!r}")
             out = self._net.transform_rotations(a, int(s))
         else:
             v = self.input_shape[1]
