@@ -671,11 +671,12 @@ def _run_navigate(args: argparse.Namespace) -> int:
                           "pass --run")
     explore = ds.select(run=run)
     conform = Preprocessor(prep, mirror=_mirror_of(argparse.Namespace(mirror=None), loc), log=_log)
-    X, xy_true = load_run(explore, prep, preprocessor=conform, progress=not args.no_progress)
     stored = loc.training_positions_
-    if stored is not None and len(stored) == len(X):  # the run the model was trained on: its own map
-        exploration, field_from = stored, "the positions its readout was fitted to"
+    if stored is not None and len(stored) == len(explore):  # the run the model was trained on: its own map
+        exploration, xy_true = stored, explore.poses[:, :2]  # no need to read its images
+        field_from = "the positions its readout was fitted to"
     else:
+        X, xy_true = load_run(explore, prep, preprocessor=conform, progress=not args.no_progress)
         exploration, field_from = loc.predict(X), "the model's estimates of its images"
     odometry_frame = loc.info.get("supervision") == "odometry"
     to_world = None
@@ -710,7 +711,7 @@ def _run_navigate(args: argparse.Namespace) -> int:
     heading = math.radians(args.start[2]) if len(args.start) == 3 else 0.0
     _log(f"navigating from ({start[0]:.2f}, {start[1]:.2f}) to {what}: map ({map_goal[0]:.2f}, {map_goal[1]:.2f}), "
          f"world ({world_goal[0]:.2f}, {world_goal[1]:.2f}); "
-         + ("straight at the target" if args.straight else f"along the geodesic field of run {run!r} ({len(X)} frames, {field_from})"))
+         + ("straight at the target" if args.straight else f"along the geodesic field of run {run!r} ({len(exploration)} frames, {field_from})"))
     mission = navigate(loc, world, camera, start, map_goal, exploration=exploration, heading=heading,
                        world_goal=world_goal, robot=robot, geodesic=not args.straight,
                        success_radius=args.success_radius, max_iterations=args.max_stops, seed=args.seed)

@@ -204,11 +204,11 @@ class OdometryEKF:
             f"gate_probability={self.gate_probability!r})"
         )
 
-    def _check(self) -> tuple[float, float, float, np.ndarray, float, float | None, int]:
+    def _check(self) -> tuple[float, float, float, float, np.ndarray, float, float | None, int]:
         sd = check_nonneg_float(self.distance_noise, "distance_noise")
         sh = check_nonneg_float(self.heading_noise, "heading_noise")
         sr = check_nonneg_float(self.measurement_noise, "measurement_noise")
-        self._turn = check_nonneg_float(self.turn_noise, "turn_noise")
+        st = check_nonneg_float(self.turn_noise, "turn_noise")
         if sr == 0:
             raise ValueError("measurement_noise must be > 0 (metres)")
         init = as_real_array(self.initial_std, "initial_std").astype(np.float64).ravel()
@@ -224,7 +224,7 @@ class OdometryEKF:
             gate = _chi2_2dof(gp)
         mcg = check_int(self.max_consecutive_gated, "max_consecutive_gated", minimum=0)
         P0 = np.diag([init[0] ** 2, init[0] ** 2, init[1] ** 2]) + floor * np.eye(3)
-        return sd, sh, sr, P0, floor, gate, mcg
+        return sd, sh, sr, st, P0, floor, gate, mcg
 
     def run(self, odometry: Any, measurements: Any, start_pose: Any) -> np.ndarray:
         """Filters one run.
@@ -257,7 +257,7 @@ class OdometryEKF:
         if s0.shape != (3,):
             raise ValueError(f"start_pose must be (x [m], y [m], heading [rad]), got shape {s0.shape}")
         check_finite(s0, "start_pose")
-        sd, sh, sr, P0, floor, gate, mcg = self._check()
+        sd, sh, sr, st, P0, floor, gate, mcg = self._check()
         U = increments(P) if len(P) > 1 else np.zeros((0, 2))
         M = np.diag([sd**2, sh**2])
         R = sr**2 * np.eye(2)
@@ -287,7 +287,7 @@ class OdometryEKF:
                 x = ekf.x[:, 0]
                 F, V = ctrv_jacobians(x, u)
                 ekf.F = F
-                Mk = M if self._turn == 0 else np.diag([sd**2, sh**2 + self._turn**2 * abs(u[1])])
+                Mk = M if st == 0 else np.diag([sd**2, sh**2 + st**2 * abs(u[1])])
                 ekf.Q = V @ Mk @ V.T + floor * np.eye(3)
                 ekf.predict(u=u)  # x = ctrv_motion(x, u), P = F P F^T + Q
             z = Z[k]

@@ -342,15 +342,14 @@ def refine_positions(features: np.ndarray, odometry: np.ndarray, headings: np.nd
         G = make_readout(spec).fit(features, P).predict(features)
         off = G[i] - G[j]
         sig = 0.05 if offset_sigma is None else float(offset_sigma)
-        for _it in range(8 if offset_sigma is None else 1):
+        new = _solve_positions(step, sd, pairs, off, sig, odometry[0, :2])
+        for _ in range(8 if offset_sigma is None else 0):  # estimated: re-solve until the spread settles
+            est = max(float(np.sqrt(np.mean(((new[i] - new[j] - off) ** 2).sum(axis=1)))), 1e-3)
+            settled = abs(est - sig) <= 0.05 * sig
+            sig = est
             new = _solve_positions(step, sd, pairs, off, sig, odometry[0, :2])
-            if offset_sigma is None:
-                est = max(float(np.sqrt(np.mean(((new[i] - new[j] - off) ** 2).sum(axis=1)))), 1e-3)
-                settled = abs(est - sig) <= 0.05 * sig
-                sig = est
-                if settled:
-                    new = _solve_positions(step, sd, pairs, off, sig, odometry[0, :2])
-                    break
+            if settled:
+                break
         r2 = np.sort((((np.diff(new, axis=0) - step) / sd[:, None]) ** 2).sum(axis=1) / 2)
         chi = float(np.sqrt(np.mean(r2[: max(1, int(np.ceil(0.99 * len(r2))))])))  # the rarest 1 %: slips
         sigma = sig
