@@ -21,7 +21,8 @@ from __future__ import annotations
 from typing import Any
 
 from . import _compat, data, localization, navigation, odometry, sfa, sim
-from ._core import __version__, get_num_threads, set_num_threads
+from ._core import __version__
+from ._resources import get_memory_limit, get_num_threads, set_memory_limit, set_num_threads
 from .data import Dataset, DatasetWriter, Unwarper, estimate_mirror, write_dataset
 from .localization import Localizer, QuadraticRegression
 from .navigation import (
@@ -69,11 +70,13 @@ __all__ = [
     "estimate_mirror",
     "expand",
     "expanded_dim",
+    "get_memory_limit",
     "get_num_threads",
     "load",
     "localization",
     "navigation",
     "odometry",
+    "set_memory_limit",
     "set_num_threads",
     "sfa",
     "sim",

@@ -43,6 +43,13 @@ pub enum SfaError {
     /// A caller's callback (an image source, a progress report) failed;
     /// the caller holds the reason.
     Interrupted(String),
+    /// A request needs more memory than the limit ([`crate::memory`]);
+    /// `bytes` is None when the size does not even fit a `usize`.
+    TooLarge {
+        what: String,
+        bytes: Option<usize>,
+        limit: usize,
+    },
 }
 
 impl fmt::Display for SfaError {
@@ -75,6 +82,15 @@ impl fmt::Display for SfaError {
             SfaError::InvalidState(m) => write!(f, "invalid model state: {m}"),
             SfaError::Numerical(m) => write!(f, "numerical failure: {m}"),
             SfaError::Interrupted(m) => write!(f, "interrupted: {m}"),
+            SfaError::TooLarge { what, bytes, limit } => {
+                let need = bytes.map_or_else(|| "over 18 EB".to_string(), crate::memory::human);
+                write!(
+                    f,
+                    "{what} needs {need} of memory; the limit is {} \
+                     (physical memory or the address-space limit; see sfanav.set_memory_limit)",
+                    crate::memory::human(*limit)
+                )
+            }
         }
     }
 }

@@ -36,7 +36,8 @@ fn binomial(n: usize, k: usize) -> Option<usize> {
 /// `C(dim + degree, degree) - 1`.
 pub fn expanded_dim(dim: usize, degree: usize) -> Result<usize> {
     check_degree(degree)?;
-    binomial(dim + degree, degree)
+    dim.checked_add(degree)
+        .and_then(|n| binomial(n, degree))
         .map(|c| c - 1)
         .ok_or_else(|| SfaError::InvalidArgument(format!(
             "expansion of {dim} features to degree {degree} has too many terms"
@@ -169,7 +170,11 @@ impl Expansion {
         x.check_finite("input")?;
         let n = x.nrows();
         let od = self.out_dim;
-        let mut out = vec![T::from_f64(0.0); n * od];
+        let mut out = crate::memory::filled(
+            n.checked_mul(od).unwrap_or(usize::MAX),
+            T::from_f64(0.0),
+            || format!("the expansion of {n} rows to {od} terms"),
+        )?;
         let rows_per_task = ((1 << 14) / od).max(1);
         out.par_chunks_mut(od * rows_per_task)
             .enumerate()

@@ -20,6 +20,7 @@ pub mod error;
 mod fields;
 mod moments;
 pub mod expansion;
+pub mod memory;
 pub mod network;
 pub mod node;
 mod periodic;

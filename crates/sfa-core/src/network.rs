@@ -131,6 +131,33 @@ fn default_reduce(in_dim: usize, degree: usize) -> Result<usize> {
 }
 
 impl NetworkSpec {
+    /// Bytes the network needs to exist and to transform one image (its
+    /// nodes, the image as f64, every layer's patches and output field),
+    /// None if the figure overflows.
+    pub fn model_bytes(&self, geom: &[LayerGeometry]) -> Option<usize> {
+        use crate::memory::{bytes_of, total};
+        let node = std::mem::size_of::<SfaNode>();
+        let mut parts = vec![bytes_of(8, &[self.height, self.width, self.channels])];
+        for g in geom {
+            let nodes = if self.weight_sharing { 1 } else { g.n_positions() };
+            parts.push(bytes_of(node, &[nodes]));
+            parts.push(bytes_of(8, &[g.n_positions(), g.in_dim]));
+            parts.push(bytes_of(8, &[g.n_positions(), g.n_out]));
+        }
+        total(&parts)
+    }
+
+    /// Bytes of the statistics that training layer `l` of `geom` holds at
+    /// once (both stages of every node trained on it), None on overflow.
+    pub fn training_bytes(&self, geom: &[LayerGeometry], l: usize) -> Option<usize> {
+        use crate::memory::{bytes_of, total};
+        let g = &geom[l];
+        let ed = expanded_dim(g.reduce_to, g.degree).ok()?;
+        let nodes = if self.weight_sharing { 1 } else { g.n_positions() };
+        let per_node = total(&[bytes_of(16, &[g.in_dim, g.in_dim]), bytes_of(16, &[ed, ed])])?;
+        per_node.checked_mul(nodes)
+    }
+
     /// Checks the spec and resolves every layer's geometry; errors name the
     /// layer (1-based) and the reason.
     pub fn geometry(&self) -> Result<Vec<LayerGeometry>> {
@@ -171,7 +198,12 @@ impl NetworkSpec {
                 return bad(format!("{name}: degree must be 1, 2 or 3, got {}", l.degree));
             }
             let (n_w, n_h) = ((w - rw) / sw + 1, (h - rh) / sh + 1);
-            let in_dim = rw * rh * c;
+            let Some(in_dim) = rw.checked_mul(rh).and_then(|v| v.checked_mul(c)) else {
+                return bad(format!("{name}: a {rw}x{rh} RF of {c} channels has too many values"));
+            };
+            if n_w.checked_mul(n_h).is_none() {
+                return bad(format!("{name}: a {n_w}x{n_h} grid has too many positions"));
+            }
             let k = match l.reduce_to {
                 Some(0) => return bad(format!("{name}: reduce_to must be at least 1")),
                 Some(k) if k > in_dim => {
@@ -233,6 +265,22 @@ impl Network {
     /// the spec is inconsistent.
     pub fn new(spec: NetworkSpec) -> Result<Self> {
         let geom = spec.geometry()?;
+        crate::memory::check(
+            || {
+                let n: usize = geom
+                    .iter()
+                    .map(|g| if spec.weight_sharing { 1 } else { g.n_positions() })
+                    .fold(0, usize::saturating_add);
+                format!(
+                    "a network on {}x{}x{} images with {n} node{}",
+                    spec.width,
+                    spec.height,
+                    spec.channels,
+                    if n == 1 { "" } else { "s" }
+                )
+            },
+            spec.model_bytes(&geom),
+        )?;
         let nodes = geom
             .iter()
             .map(|g| {
@@ -382,13 +430,32 @@ impl Network {
             if st.len() != net.nodes[l].len() {
                 return Err(SfaError::InvalidState(format!("layer {} has {} nodes, expected {}", l + 1, st.len(), net.nodes[l].len())));
             }
+            let g = &net.geom[l];
+            let want = NodeConfig {
+                n_components: g.n_out,
+                degree: g.degree,
+                reduce_to: Some(g.reduce_to),
+                tol: net.spec.tol,
+                mixed_precision: net.spec.mixed_precision,
+            };
+            // The configurations and widths first: nothing of a node is
+            // rebuilt before its state fits the layer.
+            for s in st {
+                if s.config != want || (s.n_features != 0 && s.n_features != g.in_dim) {
+                    return Err(SfaError::InvalidState(format!(
+                        "layer {} node disagrees with the spec (config {:?}, {} inputs; the layer has {:?}, {} inputs)",
+                        l + 1,
+                        s.config,
+                        s.n_features,
+                        want,
+                        g.in_dim
+                    )));
+                }
+            }
             let nodes = st.iter().map(SfaNode::from_state).collect::<Result<Vec<_>>>()?;
             for n in &nodes {
-                if n.config().n_components != net.geom[l].n_out
-                    || n.n_features().is_some_and(|d| d != net.geom[l].in_dim)
-                    || (l < trained && !n.is_solved())
-                {
-                    return Err(SfaError::InvalidState(format!("layer {} node disagrees with the spec", l + 1)));
+                if l < trained && !n.is_solved() {
+                    return Err(SfaError::InvalidState(format!("layer {} is marked trained but a node is not solved", l + 1)));
                 }
             }
             net.nodes[l] = nodes;

@@ -129,25 +129,23 @@ struct Stage {
 }
 
 impl Stage {
+    /// A stage in training (with empty statistics).
     fn new(input_dim: usize, degree: usize, n_out: usize, mixed: bool) -> Result<Self> {
+        let mut stage = Stage::plan(input_dim, degree, n_out)?;
+        let mut a = Accumulator::new(stage.expanded_dim())?;
+        a.set_mixed_precision(mixed);
+        stage.acc = Some(a);
+        Ok(stage)
+    }
+
+    /// A stage with neither statistics nor a solution (for restoring).
+    fn plan(input_dim: usize, degree: usize, n_out: usize) -> Result<Self> {
         let expansion = if degree > 1 {
             Some(Expansion::new(input_dim, degree)?)
         } else {
             None
         };
-        let ed = expanded_dim(input_dim, degree)?;
-        Ok(Stage {
-            degree,
-            n_out,
-            input_dim,
-            expansion,
-            acc: Some({
-                let mut a = Accumulator::new(ed)?;
-                a.set_mixed_precision(mixed);
-                a
-            }),
-            solution: None,
-        })
+        Ok(Stage { degree, n_out, input_dim, expansion, acc: None, solution: None })
     }
 
     fn expanded_dim(&self) -> usize {
@@ -292,6 +290,10 @@ impl SfaNode {
             }
             None => {
                 let ed = expanded_dim(d, c.degree)?;
+                crate::memory::check(
+                    || format!("SFA on the degree-{} expansion of {d} features ({ed} terms)", c.degree),
+                    crate::memory::bytes_of(16, &[ed, ed]),
+                )?;
                 if c.n_components > ed {
                     return Err(SfaError::InvalidArgument(format!(
                         "n_components ({}) exceeds the dimension of the {}input ({ed})",
@@ -743,15 +745,32 @@ impl SfaNode {
             if ss.degree != want_degree || ss.n_out != want_out || ss.input_dim != input_dim {
                 return bad(format!("stage {i} does not match the node's configuration"));
             }
-            let mut stage = Stage::new(input_dim, ss.degree, ss.n_out, st.config.mixed_precision)?;
-            let ed = stage.expanded_dim();
-            stage.acc = match &ss.stats {
-                Some(a) => {
-                    if a.dim != ed {
-                        return bad(format!("stage {i} statistics have dimension {}, expected {ed}", a.dim));
-                    }
-                    Some(Accumulator::from_state(a)?)
+            // Everything is checked against the stored arrays before anything
+            // is allocated: the sizes below are bounded by data that exists.
+            let ed = expanded_dim(input_dim, ss.degree)
+                .map_err(|_| SfaError::InvalidState(format!("stage {i}: input dimension {input_dim} is too large")))?;
+            if ss.stats.is_none() && ss.solution.is_none() {
+                return bad(format!("stage {i} has neither statistics nor a solution"));
+            }
+            if let Some(a) = &ss.stats {
+                if a.dim != ed {
+                    return bad(format!("stage {i} statistics have dimension {}, expected {ed}", a.dim));
                 }
+                if a.mixed != st.config.mixed_precision {
+                    return bad(format!("stage {i} statistics disagree with the node's precision"));
+                }
+            }
+            if let Some(sol) = &ss.solution {
+                if sol.mean.len() != ed {
+                    return bad(format!(
+                        "stage {i} solution has a mean of {} values for an input of dimension {ed}",
+                        sol.mean.len()
+                    ));
+                }
+            }
+            let mut stage = Stage::plan(input_dim, ss.degree, ss.n_out)?;
+            stage.acc = match &ss.stats {
+                Some(a) => Some(Accumulator::from_state(a)?),
                 None => None,
             };
             if let Some(sol) = &ss.solution {
@@ -759,19 +778,17 @@ impl SfaNode {
                     && sol.n_out >= 1
                     && sol.n_out <= ss.n_out
                     && (!last || sol.n_out == ss.n_out)
-                    && sol.projection.len() == ed * sol.n_out
+                    && ed.checked_mul(sol.n_out) == Some(sol.projection.len())
                     && sol.delta.len() == sol.n_out
-                    && sol.rank + sol.dropped.len() == ed
-                    && sol.mean.iter().chain(&sol.projection).chain(&sol.delta).all(|v| v.is_finite());
+                    && sol.rank.checked_add(sol.dropped.len()) == Some(ed)
+                    && sol.n_out <= sol.rank
+                    && sol.mean.iter().chain(&sol.projection).chain(&sol.delta).chain(&sol.dropped).all(|v| v.is_finite());
                 if !ok {
                     return bad(format!("stage {i} solution has inconsistent shapes or values"));
                 }
                 input_dim = sol.n_out;
             } else if i + 1 < st.stages.len() {
                 return bad(format!("stage {i} is not solved but a later stage exists"));
-            }
-            if stage.acc.is_none() && ss.solution.is_none() {
-                return bad(format!("stage {i} has neither statistics nor a solution"));
             }
             stage.solution = ss.solution.clone();
             node.stages.push(stage);

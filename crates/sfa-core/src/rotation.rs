@@ -113,6 +113,10 @@ pub fn transform_rotations<P: Pixel>(net: &Network, rot: Rotation, images: &[P],
     check_images(images, n, size, 0)?;
     let kv = rot.n_views();
     let m = net.n_outputs();
+    crate::memory::check(
+        || format!("the features of {n} images under {kv} rotations"),
+        crate::memory::bytes_of(8, &[n, kv, m]),
+    )?;
     let top = net.n_layers() - 1;
     let per: Vec<Result<Vec<f64>>> = images
         .par_chunks(size)

@@ -75,6 +75,12 @@ fn solve_impl(a: MatRef<'_, f64>, b: MatRef<'_, f64>, n: usize, tol: f64, strict
             b.ncols()
         )));
     }
+    // The whitening, the reduced problem and the eigen workspaces: about
+    // six d x d matrices at once.
+    crate::memory::check(
+        || format!("the eigenproblem of {d} dimensions"),
+        crate::memory::bytes_of(48, &[d, d]),
+    )?;
     if !(tol.is_finite() && tol >= 0.0 && tol < 1.0) {
         return Err(SfaError::InvalidArgument(format!(
             "tol must be in [0, 1), got {tol}"

@@ -82,17 +82,20 @@ impl Accumulator {
                 "statistics need at least one feature".into(),
             ));
         }
+        let what = || format!("statistics of {dim} features (two {dim} x {dim} matrices)");
+        crate::memory::check(what, crate::memory::bytes_of(16, &[dim, dim]))?;
+        let matrix = || crate::memory::zeros(dim, dim, what);
         Ok(Accumulator {
             dim,
             shift: None,
             n_samples: 0,
             weight_sum: 0.0,
             sum: vec![0.0; dim],
-            sxx: Mat::zeros(dim, dim),
+            sxx: matrix()?,
             n_pairs: 0,
             pair_weight_sum: 0.0,
             sum_d: vec![0.0; dim],
-            sdd: Mat::zeros(dim, dim),
+            sdd: matrix()?,
             first: None,
             last: None,
             mixed: false,
@@ -619,7 +622,7 @@ impl Accumulator {
         let w = self.weight_sum;
         let d = self.dim;
         let mu: Vec<f64> = self.sum.iter().map(|v| v / w).collect();
-        let mut c = Mat::zeros(d, d);
+        let mut c = crate::memory::zeros(d, d, || format!("a covariance matrix of {d} features"))?;
         for i in 0..d {
             for j in 0..=i {
                 let v = self.sxx[(i, j)] / w - mu[i] * mu[j];
@@ -641,7 +644,7 @@ impl Accumulator {
         }
         let w = self.pair_weight_sum;
         let d = self.dim;
-        let mut c = Mat::zeros(d, d);
+        let mut c = crate::memory::zeros(d, d, || format!("a derivative covariance matrix of {d} features"))?;
         for i in 0..d {
             for j in 0..=i {
                 let v = self.sdd[(i, j)] / w;
@@ -702,11 +705,14 @@ impl Accumulator {
         if d == 0 {
             return bad("dimension is 0".into());
         }
+        let Some(dd) = d.checked_mul(d) else {
+            return bad(format!("dimension {d} is too large"));
+        };
         for (name, len, want) in [
             ("sum", s.sum.len(), d),
             ("sum_d", s.sum_d.len(), d),
-            ("sxx", s.sxx.len(), d * d),
-            ("sdd", s.sdd.len(), d * d),
+            ("sxx", s.sxx.len(), dd),
+            ("sdd", s.sdd.len(), dd),
         ] {
             if len != want {
                 return bad(format!("{name} has {len} values, expected {want}"));
@@ -730,18 +736,26 @@ impl Accumulator {
             // (A reference point without samples is fine: `with_reference`.)
             return bad("sample count and reference point disagree".into());
         }
-        let mat = |v: &Vec<f64>| Mat::from_fn(d, d, |i, j| v[i * d + j]);
+        let mat = |v: &Vec<f64>| -> Result<Mat<f64>> {
+            let mut m = crate::memory::zeros(d, d, || format!("statistics of {d} features"))?;
+            for j in 0..d {
+                for i in 0..d {
+                    m[(i, j)] = v[i * d + j];
+                }
+            }
+            Ok(m)
+        };
         Ok(Accumulator {
             dim: d,
             shift: (!s.shift.is_empty()).then(|| s.shift.clone()),
             n_samples: s.n_samples,
             weight_sum: s.weight_sum,
             sum: s.sum.clone(),
-            sxx: mat(&s.sxx),
+            sxx: mat(&s.sxx)?,
             n_pairs: s.n_pairs,
             pair_weight_sum: s.pair_weight_sum,
             sum_d: s.sum_d.clone(),
-            sdd: mat(&s.sdd),
+            sdd: mat(&s.sdd)?,
             first: (!s.first.is_empty()).then(|| s.first.clone()),
             last: (!s.last.is_empty()).then(|| s.last.clone()),
             mixed: s.mixed,

@@ -56,6 +56,14 @@ impl LayerTrainer {
                 layer
             )));
         }
+        crate::memory::check(
+            || {
+                let g = &net.geometry()[layer];
+                let nodes = if net.spec().weight_sharing { 1 } else { g.n_positions() };
+                format!("training layer {} ({nodes} node(s) of {} inputs)", layer + 1, g.in_dim)
+            },
+            net.spec().training_bytes(net.geometry(), layer),
+        )?;
         let path = if net.spec().weight_sharing { path } else { TrainingPath::Naive };
         Ok(LayerTrainer {
             layer,

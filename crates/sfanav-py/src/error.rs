@@ -15,13 +15,23 @@ pub(crate) fn to_py(e: SfaError) -> PyErr {
 /// turns a Rust panic into a Python RuntimeError instead of letting it cross.
 pub(crate) fn run<R: Send>(py: Python<'_>, f: impl FnOnce() -> sfa_core::Result<R> + Send) -> PyResult<R> {
     let pool = current_pool();
-    let out = py.detach(move || {
-        catch_unwind(AssertUnwindSafe(|| match pool {
+    py.detach(move || {
+        contain(|| match pool {
             Some(p) => p.install(f),
             None => f(),
-        }))
-    });
-    match out {
+        })
+    })
+}
+
+/// Runs a quick core call with the GIL held (constructors, state
+/// restoring, merges), with the same error mapping and panic containment
+/// as [`run`].
+pub(crate) fn guard<R>(f: impl FnOnce() -> sfa_core::Result<R>) -> PyResult<R> {
+    contain(f)
+}
+
+fn contain<R>(f: impl FnOnce() -> sfa_core::Result<R>) -> PyResult<R> {
+    match catch_unwind(AssertUnwindSafe(f)) {
         Ok(r) => r.map_err(to_py),
         Err(p) => {
             let msg = p

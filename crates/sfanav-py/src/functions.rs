@@ -2,7 +2,7 @@
 //! eigenproblem.
 
 use crate::arrays::{arr2, mat_to_py, out2, vec1, view_of, Arr};
-use crate::error::{run, to_py};
+use crate::error::{guard, run};
 use pyo3::prelude::*;
 
 /// expand(x, degree) -> ndarray: all monomials of degree 1..=degree.
@@ -12,7 +12,7 @@ pub(crate) fn expand<'py>(py: Python<'py>, x: &Bound<'py, PyAny>, degree: usize)
     match &a {
         Arr::F64(a) => {
             let v = view_of(a);
-            let e = sfa_core::Expansion::new(v.ncols(), degree).map_err(to_py)?;
+            let e = guard(|| sfa_core::Expansion::new(v.ncols(), degree))?;
             let od = e.out_dim();
             let n = v.nrows();
             let out = run(py, || e.expand(v))?;
@@ -20,7 +20,7 @@ pub(crate) fn expand<'py>(py: Python<'py>, x: &Bound<'py, PyAny>, degree: usize)
         }
         Arr::F32(a) => {
             let v = view_of(a);
-            let e = sfa_core::Expansion::new(v.ncols(), degree).map_err(to_py)?;
+            let e = guard(|| sfa_core::Expansion::new(v.ncols(), degree))?;
             let od = e.out_dim();
             let n = v.nrows();
             let out = run(py, || e.expand(v))?;
@@ -32,7 +32,7 @@ pub(crate) fn expand<'py>(py: Python<'py>, x: &Bound<'py, PyAny>, degree: usize)
 /// expanded_dim(n_features, degree) -> int: C(n + d, d) - 1.
 #[pyfunction]
 pub(crate) fn expanded_dim(n_features: usize, degree: usize) -> PyResult<usize> {
-    sfa_core::expanded_dim(n_features, degree).map_err(to_py)
+    guard(|| sfa_core::expanded_dim(n_features, degree))
 }
 
 /// solve_generalized(a, b, n, tol) -> (values, vectors, rank, dropped)
@@ -53,3 +53,33 @@ pub(crate) fn solve_generalized<'py>(
     Ok((vec1(py, g.values), mat_to_py(py, g.vectors)?, g.rank, vec1(py, g.dropped)))
 }
 
+
+/// set_memory_limit(bytes): the limit (bytes) that the core checks its
+/// large requests against; 0 restores the automatic limit.
+#[pyfunction]
+pub(crate) fn set_memory_limit(bytes: usize) {
+    sfa_core::memory::set_limit(bytes);
+}
+
+/// get_memory_limit() -> int: the limit the core checks against now
+/// (bytes).
+#[pyfunction]
+pub(crate) fn get_memory_limit() -> usize {
+    sfa_core::memory::limit()
+}
+
+/// _test_panic(pooled): panics inside the core's error wrapper, with the
+/// GIL released in the worker pool (`pooled`) or held; for the tests that
+/// check a panic becomes a RuntimeError instead of crossing into Python.
+#[pyfunction]
+pub(crate) fn _test_panic(py: Python<'_>, pooled: bool) -> PyResult<()> {
+    if pooled {
+        run(py, || -> sfa_core::Result<()> {
+            use rayon::prelude::*;
+            (0..4).into_par_iter().for_each(|i| if i == 3 { panic!("test panic in a worker") });
+            Ok(())
+        })
+    } else {
+        guard(|| -> sfa_core::Result<()> { panic!("test panic") })
+    }
+}

@@ -25,6 +25,9 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(functions::expand, m)?)?;
     m.add_function(wrap_pyfunction!(functions::expanded_dim, m)?)?;
     m.add_function(wrap_pyfunction!(functions::solve_generalized, m)?)?;
+    m.add_function(wrap_pyfunction!(functions::set_memory_limit, m)?)?;
+    m.add_function(wrap_pyfunction!(functions::get_memory_limit, m)?)?;
+    m.add_function(wrap_pyfunction!(functions::_test_panic, m)?)?;
     m.add_function(wrap_pyfunction!(threads::set_num_threads, m)?)?;
     m.add_function(wrap_pyfunction!(threads::get_num_threads, m)?)?;
     m.add_class::<statistics::PyStatistics>()?;

@@ -3,7 +3,7 @@
 //! Python iterables.
 
 use crate::arrays::{out2, vec1, Images};
-use crate::error::{run, to_py, Raised};
+use crate::error::{guard, run, Raised};
 use crate::state::{get, get_bool_or, node_state_from_dict, node_state_to_dict};
 use numpy::IntoPyArray;
 use pyo3::exceptions::{PyRuntimeError, PyValueError};
@@ -150,7 +150,8 @@ pub(crate) struct PyNetwork {
 impl PyNetwork {
     #[new]
     fn new(spec: &Bound<'_, PyDict>) -> PyResult<Self> {
-        Ok(PyNetwork { inner: Network::new(spec_from_dict(spec)?).map_err(to_py)? })
+        let spec = spec_from_dict(spec)?;
+        Ok(PyNetwork { inner: guard(|| Network::new(spec))? })
     }
 
     fn geometry<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyList>> {
@@ -187,7 +188,7 @@ impl PyNetwork {
     #[getter]
     fn delta_values<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
         let top = self.inner.n_layers() - 1;
-        Ok(vec1(py, self.inner.nodes(top)[0].delta_values().map_err(to_py)?.to_vec()))
+        Ok(vec1(py, guard(|| self.inner.nodes(top)[0].delta_values().map(<[f64]>::to_vec))?))
     }
 
     /// transform(images) -> (N, n_outputs): images (N, H, W[, C]) of the
@@ -335,7 +336,7 @@ impl PyNetwork {
             }
             all.push(v);
         }
-        Ok(PyNetwork { inner: Network::from_states(spec, &all, trained).map_err(to_py)? })
+        Ok(PyNetwork { inner: guard(|| Network::from_states(spec, &all, trained))? })
     }
 
     fn copy(&self) -> Self {

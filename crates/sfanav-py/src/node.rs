@@ -1,7 +1,7 @@
 //! `_core.SfaNode`: the SFA node.
 
 use crate::arrays::{arr2, out2, vec1, view_of, Arr};
-use crate::error::{run, to_py};
+use crate::error::{guard, run};
 use crate::state::{node_state_from_dict, node_state_to_dict};
 use crate::statistics::PyStatistics;
 use pyo3::prelude::*;
@@ -20,7 +20,7 @@ impl PySfaNode {
     #[new]
     #[pyo3(signature = (n_components, degree=1, reduce_to=None, tol=sfa_core::DEFAULT_TOL, mixed_precision=false))]
     fn new(n_components: usize, degree: usize, reduce_to: Option<usize>, tol: f64, mixed_precision: bool) -> PyResult<Self> {
-        let inner = SfaNode::new(NodeConfig { n_components, degree, reduce_to, tol, mixed_precision }).map_err(to_py)?;
+        let inner = guard(|| SfaNode::new(NodeConfig { n_components, degree, reduce_to, tol, mixed_precision }))?;
         Ok(PySfaNode { inner })
     }
 
@@ -58,7 +58,7 @@ impl PySfaNode {
 
     #[getter]
     fn delta_values<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
-        Ok(vec1(py, self.inner.delta_values().map_err(to_py)?.to_vec()))
+        Ok(vec1(py, guard(|| self.inner.delta_values().map(<[f64]>::to_vec))?))
     }
 
     #[getter]
@@ -86,7 +86,7 @@ impl PySfaNode {
     #[staticmethod]
     fn from_state(state: &Bound<'_, PyDict>) -> PyResult<Self> {
         let s = node_state_from_dict(state)?;
-        Ok(PySfaNode { inner: SfaNode::from_state(&s).map_err(to_py)? })
+        Ok(PySfaNode { inner: guard(|| SfaNode::from_state(&s))? })
     }
 
     fn copy(&self) -> Self {

@@ -15,11 +15,25 @@ where
     for<'a> <T as FromPyObject<'a, 'py>>::Error: Into<PyErr>,
 {
     match d.get_item(key)? {
-        Some(v) => v.extract::<T>().map_err(|e| {
-            let e: PyErr = e.into();
-            PyValueError::new_err(format!("invalid model state: field '{key}': {e}"))
+        Some(v) => v.extract::<T>().map_err(|_| {
+            let got = v.repr().map_or_else(|_| "?".to_string(), |r| r.to_string());
+            let got: String = if got.chars().count() > 60 { got.chars().take(60).chain("...".chars()).collect() } else { got };
+            PyValueError::new_err(format!("invalid model state: field '{key}' must be {}, got {got}", expected::<T>()))
         }),
         None => Err(PyValueError::new_err(format!("invalid model state: missing field '{key}'"))),
+    }
+}
+
+/// What a field of Rust type `T` must be, in Python's words.
+fn expected<T>() -> &'static str {
+    let name = std::any::type_name::<T>();
+    match name {
+        "usize" | "u64" | "u32" => "a non-negative integer",
+        "f64" => "a number",
+        "bool" => "a bool",
+        _ if name.contains("Option<usize>") => "a non-negative integer or None",
+        _ if name.contains("(usize, usize)") => "a pair of non-negative integers",
+        _ => "of another type",
     }
 }
 

@@ -1,7 +1,7 @@
 //! `_core.Statistics`: streaming SFA statistics.
 
 use crate::arrays::{arr2, mat_to_py, opt_weights, vec1, view_of, Arr};
-use crate::error::{run, to_py};
+use crate::error::{guard, run};
 use crate::state::{acc_state_from_dict, acc_state_to_dict};
 use numpy::PyReadonlyArray1;
 use pyo3::exceptions::PyTypeError;
@@ -20,7 +20,7 @@ pub(crate) struct PyStatistics {
 impl PyStatistics {
     #[new]
     fn new(dim: usize) -> PyResult<Self> {
-        Ok(PyStatistics { inner: Accumulator::new(dim).map_err(to_py)? })
+        Ok(PyStatistics { inner: guard(|| Accumulator::new(dim))? })
     }
 
     #[pyo3(signature = (x, new_sequence=false))]
@@ -58,11 +58,13 @@ impl PyStatistics {
     }
 
     fn merge(&mut self, other: &PyStatistics) -> PyResult<()> {
-        self.inner.merge(&other.inner).map_err(to_py)
+        let (a, b) = (&mut self.inner, &other.inner);
+        guard(|| a.merge(b))
     }
 
     fn merge_continuing(&mut self, other: &PyStatistics) -> PyResult<()> {
-        self.inner.merge_continuing(&other.inner).map_err(to_py)
+        let (a, b) = (&mut self.inner, &other.inner);
+        guard(|| a.merge_continuing(b))
     }
 
     fn copy(&self) -> Self {
@@ -70,19 +72,19 @@ impl PyStatistics {
     }
 
     fn mean<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
-        Ok(vec1(py, self.inner.mean().map_err(to_py)?))
+        Ok(vec1(py, guard(|| self.inner.mean())?))
     }
 
     fn covariance<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
-        mat_to_py(py, self.inner.covariance().map_err(to_py)?)
+        mat_to_py(py, guard(|| self.inner.covariance())?)
     }
 
     fn derivative_covariance<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
-        mat_to_py(py, self.inner.derivative_covariance().map_err(to_py)?)
+        mat_to_py(py, guard(|| self.inner.derivative_covariance())?)
     }
 
     fn derivative_mean<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
-        Ok(vec1(py, self.inner.derivative_mean().map_err(to_py)?))
+        Ok(vec1(py, guard(|| self.inner.derivative_mean())?))
     }
 
     #[getter]
@@ -103,7 +105,7 @@ impl PyStatistics {
     #[staticmethod]
     fn from_state(state: &Bound<'_, PyDict>) -> PyResult<Self> {
         let s = acc_state_from_dict(state)?;
-        Ok(PyStatistics { inner: Accumulator::from_state(&s).map_err(to_py)? })
+        Ok(PyStatistics { inner: guard(|| Accumulator::from_state(&s))? })
     }
 
     fn __repr__(&self) -> String {

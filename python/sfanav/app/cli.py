@@ -24,6 +24,7 @@ the traceback). Results go to stdout, progress and notes to stderr.
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import sys
 from collections.abc import Callable, Sequence
@@ -193,14 +194,21 @@ def _mirror_of(args: argparse.Namespace, loc: "Any") -> "Any":
 
 
 def _fraction(text: str) -> float:
+    """A fraction in (0, 1] ("0.6") or a percentage with its sign ("60%")."""
+    t = text.strip()
+    percent = t.endswith("%")
     try:
-        v = float(text)
+        v = float(t[:-1] if percent else t)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
-    if v > 1.0:
-        v /= 100.0  # "50" means 50 %
-    if not 0.0 < v <= 1.0:
-        raise argparse.ArgumentTypeError(f"expected a fraction in (0, 1] or a percentage, got {text!r}")
+        raise argparse.ArgumentTypeError(f"expected a fraction such as 0.6 or a percentage such as 60%, got {text!r}") from None
+    if percent:
+        v /= 100.0
+    elif v > 1.0:
+        raise argparse.ArgumentTypeError(
+            f"{text!r} is more than the whole panorama: give a fraction in (0, 1] such as 0.6, "
+            f"or a percentage with its sign such as {t}%")
+    if not (math.isfinite(v) and 0.0 < v <= 1.0):
+        raise argparse.ArgumentTypeError(f"expected a fraction in (0, 1] or a percentage in (0%, 100%], got {text!r}")
     return v
 
 
@@ -261,7 +269,7 @@ def _add_train(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--step", type=_pos_int, default=5, metavar="PX",
                    help="simulated rotation step in pixels (default 5, the thesis's)")
     p.add_argument("--window", type=_fraction, default=1.0, metavar="FRACTION",
-                   help="window of the simulated rotation, fraction of the panorama or percent (default 1.0); "
+                   help="window of the simulated rotation: a fraction of the panorama (0.6) or a percentage (60%%; default 1.0); "
                         "the network's input width must equal window x panorama width")
     p.add_argument("--precision", choices=("double", "mixed"), default=None,
                    help="statistics precision (default: the config's; mixed is faster, docs/benchmarks.md)")

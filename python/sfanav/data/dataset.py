@@ -473,8 +473,13 @@ def _read_csv_columns(path: Path, *, required: Sequence[str], floats: Sequence[s
     nonempty = required if nonempty is None else nonempty
     if not path.exists():
         raise FileNotFoundError(f"no {what} at {path}")
-    with open(path, newline="") as f:
-        rows = list(csv.reader(f))
+    try:
+        with open(path, newline="", encoding="utf-8") as f:
+            rows = list(csv.reader(f))
+    except UnicodeDecodeError as exc:
+        raise ValueError(f"{what} {path} is not UTF-8 text ({exc.reason} at byte {exc.start})") from None
+    except csv.Error as exc:
+        raise ValueError(f"{what} {path} is not a CSV table ({exc})") from None
     if not rows:
         raise ValueError(f"{what} {path} is empty")
     header = [h.strip() for h in rows[0]]
@@ -524,13 +529,20 @@ def _read_sfanav(root: Path) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
     if not fpath.exists():
         raise FileNotFoundError(f"dataset {root} has no frames.csv")
     try:
-        meta = json.loads(mpath.read_text())
+        meta = json.loads(mpath.read_text(encoding="utf-8"))
+    except UnicodeDecodeError as exc:
+        raise ValueError(f"{mpath} is not UTF-8 text ({exc.reason} at byte {exc.start})") from None
+    except RecursionError:
+        raise ValueError(f"{mpath} nests too deeply to be dataset metadata") from None
     except json.JSONDecodeError as exc:
         raise ValueError(f"{mpath} is not valid JSON: {exc}") from None
     if not isinstance(meta, dict) or meta.get("format") != FORMAT:
         raise ValueError(f"{mpath} is not sfanav dataset metadata (format {meta.get('format') if isinstance(meta, dict) else None!r})")
-    if int(meta.get("version", 0)) > VERSION:
-        raise ValueError(f"dataset version {meta['version']} is newer than this sfanav reads ({VERSION}); upgrade sfanav")
+    version = meta.get("version", 0)
+    if isinstance(version, bool) or not isinstance(version, int) or version < 1:
+        raise ValueError(f"{mpath}: version must be a positive integer, got {version!r}")
+    if version > VERSION:
+        raise ValueError(f"dataset version {version} is newer than this sfanav reads ({VERSION}); upgrade sfanav")
     cols = _read_csv_columns(fpath, required=COLUMNS, floats=FLOAT_COLUMNS, ints=("frame",), what="frames table",
                              nonempty=("timestamp",))
     # x, y, heading (ground truth) and the odometry may be empty: a robot's own runs have no ground truth
@@ -547,9 +559,22 @@ def _read_sfanav(root: Path) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
                 f"frames table {fpath} line {i + 2}: timestamp {float(cols['timestamp'][i])!r} is earlier than the "
                 f"previous image of run {run!r}, camera {cam!r}, condition {cond!r}; timestamps must be sorted"
             )
+    seen: dict[tuple[int, str], int] = {}
+    for i, (frame, cam) in enumerate(zip(cols["frame"], cols["camera"])):
+        if frame < 0:
+            raise ValueError(f"frames table {fpath} line {i + 2}: frame {int(frame)} is negative")
+        first = seen.setdefault((int(frame), cam), i)
+        if first != i:
+            raise ValueError(f"frames table {fpath} line {i + 2}: frame {int(frame)} of camera {cam!r} "
+                             f"repeats line {first + 2}")
     for i, rel in enumerate(cols["image"]):
         if not rel:
             raise ValueError(f"frames table {fpath} line {i + 2}: empty image path")
+        p = root / rel
+        if os.path.isabs(rel) or os.path.normpath(rel).split(os.sep)[0] == os.pardir:
+            raise ValueError(f"frames table {fpath} line {i + 2}: image path {rel!r} lies outside the dataset")
+        if not p.is_file():
+            raise FileNotFoundError(f"dataset {root} is incomplete: {rel} (frames table line {i + 2}) does not exist")
     expected = meta.get("n_images")
     if expected is not None and (isinstance(expected, bool) or not isinstance(expected, int)
                                  or expected != len(cols["image"])):

@@ -20,6 +20,9 @@ if TYPE_CHECKING:  # annotations only: data/ sits below the network and the loca
     from ..sfa.network import Network
 
 
+MAX_SIDE = 32767  # px: OpenCV's remap and resize maps are indexed by 16-bit integers
+
+
 @dataclass(frozen=True)
 class Preprocessing:
     """The images a trained network expects.
@@ -42,6 +45,17 @@ class Preprocessing:
     gray: bool
     normalize: bool = False
 
+    def __post_init__(self) -> None:
+        for name in ("width", "height"):
+            v = getattr(self, name)
+            if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, np.integer)):
+                raise TypeError(f"panorama {name} must be an integer, got {v!r}")
+            if not 1 <= v <= MAX_SIDE:
+                raise ValueError(f"panorama {name} must be 1..{MAX_SIDE} px, got {v}")
+        for name in ("gray", "normalize"):
+            if not isinstance(getattr(self, name), (bool, np.bool_)):
+                raise TypeError(f"{name} must be a bool, got {getattr(self, name)!r}")
+
     @classmethod
     def for_network(cls, network: Network, *, window: float = 1.0, normalize: bool = False) -> "Preprocessing":
         """The input of ``network`` when trained with a ``window`` (fraction of
@@ -58,7 +72,7 @@ class Preprocessing:
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> "Preprocessing":
         try:
-            return cls(int(d["width"]), int(d["height"]), bool(d["gray"]), bool(d.get("normalize", False)))
+            return cls(d["width"], d["height"], d["gray"], d.get("normalize", False))
         except (KeyError, TypeError, ValueError) as exc:
             raise ValueError(f"invalid preprocessing record {d!r}: {exc}") from None
 

@@ -421,6 +421,15 @@ class Localizer:
                 f"invalid Localizer model state: the regression expects {loc.n_features_in_} features, "
                 f"the network has {net.n_outputs_} outputs"
             )
+        # One probe prediction: the readout's arrays must fit each other and
+        # the feature count, and give one finite position per image.
+        try:
+            probe = loc.predict_features(np.zeros((1, loc.n_features_in_)))
+        except ValueError as exc:
+            raise ValueError(f"invalid Localizer model state: the readout does not fit its features ({exc})") from None
+        if probe.shape != (1, 2) or not np.isfinite(probe).all():
+            raise ValueError(f"invalid Localizer model state: the readout gives {probe.shape[1:]} values per image "
+                             "where one finite (x, y) position is due")
         return loc
 
 

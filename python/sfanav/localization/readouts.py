@@ -47,6 +47,15 @@ class _Standardised:
         self.scale_ = np.where(sd > 0, sd, 1.0)
         return (X - self.mean_) / self.scale_
 
+    def _check_scale(self) -> None:
+        n = self.n_outputs
+        if self.mean_.ndim != 1 or (n is not None and self.mean_.shape != (n,)):
+            raise ValueError(f"invalid {type(self).__name__} state: a feature mean of shape {self.mean_.shape} "
+                             f"for n_outputs={n}")
+        if self.scale_.shape != self.mean_.shape or not np.all(self.scale_ > 0):
+            raise ValueError(f"invalid {type(self).__name__} state: feature scales must be positive and "
+                             "match the feature mean")
+
     def _scaled(self, F: Any) -> np.ndarray:
         if not hasattr(self, "mean_"):
             raise NotFittedError(f"this {type(self).__name__} is not fitted; call fit first")
@@ -90,6 +99,7 @@ class _KernelMachine(_Standardised):
         if (self.X_.ndim != 2 or self.dual_.ndim != 2 or len(self.X_) != len(self.dual_)
                 or self.mean_.shape != (self.X_.shape[1],) or self.y_mean_.shape != (self.dual_.shape[1],)):
             raise ValueError(f"invalid {type(self).__name__} state: inconsistent array shapes")
+        self._check_scale()
 
 
 class KNNReadout(_Standardised):
@@ -147,8 +157,10 @@ class KNNReadout(_Standardised):
         r = cls(**state["params"])
         r.mean_, r.scale_ = np.asarray(state["mean"], float), np.asarray(state["scale"], float)
         r.X_, r.y_ = np.asarray(state["X"], float), np.asarray(state["y"], float)
-        if r.X_.ndim != 2 or r.y_.ndim != 2 or len(r.X_) != len(r.y_) or r.mean_.shape != (r.X_.shape[1],):
+        if (r.X_.ndim != 2 or r.y_.ndim != 2 or len(r.X_) != len(r.y_) or len(r.X_) == 0
+                or r.mean_.shape != (r.X_.shape[1],)):
             raise ValueError("invalid KNNReadout state: inconsistent array shapes")
+        r._check_scale()
         return r
 
 

@@ -12,8 +12,14 @@ A model file is a ZIP archive (stored, uncompressed) with
 ``digest`` is the SHA-256 of the canonical JSON of the manifest without the
 digest itself; with the per-array SHA-256 it makes any truncation or
 alteration an error on load (ValueError naming the problem). A file written
-by a newer format version is refused with a message saying so. See
-``docs/model-format.md``.
+by a newer format version is refused with a message saying so.
+
+Reading is bounded: every entry must be stored uncompressed (so no entry can
+expand beyond the file's own size), arrays must hold exactly the bytes their
+header declares and only finite numbers, and the JSON tree may nest at most
+:data:`MAX_DEPTH` levels. Any malformed file, including one whose checksums
+were recomputed after an edit, ends in a ValueError naming the file and the
+problem. See ``docs/model-format.md`` and ``docs/security.md``.
 """
 
 from __future__ import annotations
@@ -33,6 +39,8 @@ FORMAT = "sfanav-model"
 
 
 VERSION = 4  # the newest version this sfanav reads and writes (see docs/model-format.md)
+
+MAX_DEPTH = 64  # deepest nesting of the manifest's JSON tree
 
 
 _LOADERS: dict[str, Callable[[dict[str, Any]], Any]] = {}
@@ -103,6 +111,8 @@ def save_model(path: str | os.PathLike, kind: str, state: dict[str, Any], *, ver
         arr = np.ascontiguousarray(arr)
         if arr.dtype.kind not in "biuf":
             raise TypeError(f"array {name} has unsupported dtype {arr.dtype}")
+        if arr.dtype.kind == "f" and not np.isfinite(arr).all():
+            raise ValueError(f"cannot store array {name}: it holds NaN or infinity")
         buf = io.BytesIO()
         np.save(buf, arr, allow_pickle=False)
         blob = buf.getvalue()
@@ -136,6 +146,64 @@ def save_model(path: str | os.PathLike, kind: str, state: dict[str, Any], *, ver
     return path
 
 
+def _depth_ok(tree: Any, limit: int) -> bool:
+    """Whether ``tree`` nests at most ``limit`` levels (iteratively)."""
+    stack = [(tree, 1)]
+    while stack:
+        node, depth = stack.pop()
+        if depth > limit:
+            return False
+        if isinstance(node, dict):
+            stack.extend((v, depth + 1) for v in node.values())
+        elif isinstance(node, list):
+            stack.extend((v, depth + 1) for v in node)
+    return True
+
+
+def _check_entries(zf: zipfile.ZipFile, size: int, bad: str) -> None:
+    """Refuses compressed, oversized or encrypted entries before any is read."""
+    for info in zf.infolist():
+        if info.compress_type != zipfile.ZIP_STORED:
+            raise ValueError(f"{bad}: entry {info.filename!r} is compressed (method {info.compress_type}); "
+                             "sfanav writes model files uncompressed")
+        if info.flag_bits & 0x1:
+            raise ValueError(f"{bad}: entry {info.filename!r} is encrypted")
+        if info.file_size > size or info.compress_size > size:
+            raise ValueError(f"{bad}: entry {info.filename!r} claims {info.file_size} bytes, "
+                             f"more than the file's {size}")
+
+
+def _load_array(blob: bytes, name: str, info: Any, bad: str) -> np.ndarray:
+    """One ``.npy`` blob, its header checked against the manifest and its
+    length before anything is allocated."""
+    from numpy.lib import format as npy
+
+    if not isinstance(info, dict):
+        raise ValueError(f"{bad}: the manifest entry of array {name!r} is not an object")
+    fh = io.BytesIO(blob)
+    try:
+        major, _ = npy.read_magic(fh)
+        read_header = npy.read_array_header_1_0 if major == 1 else npy.read_array_header_2_0
+        shape, fortran, dtype = read_header(fh, max_header_size=10_000)
+    except (ValueError, SyntaxError, TypeError, RecursionError, MemoryError) as exc:
+        raise ValueError(f"{bad}: array {name!r} has a malformed header ({exc})") from None
+    if dtype.kind not in "biuf" or dtype.hasobject:
+        raise ValueError(f"{bad}: array {name!r} has unsupported dtype {dtype}")
+    if dtype.str != info.get("dtype") or list(shape) != info.get("shape"):
+        raise ValueError(f"{bad}: array {name!r} has the wrong dtype or shape")
+    count = 1
+    for n in shape:
+        count *= int(n)
+    if count * dtype.itemsize != len(blob) - fh.tell():
+        raise ValueError(f"{bad}: array {name!r} holds {len(blob) - fh.tell()} bytes of data, "
+                         f"its header declares {count * dtype.itemsize}")
+    arr = np.frombuffer(blob, dtype=dtype, count=count, offset=fh.tell())
+    arr = arr.reshape(shape, order="F" if fortran else "C").copy()
+    if dtype.kind == "f" and not np.isfinite(arr).all():
+        raise ValueError(f"{bad}: array {name!r} holds NaN or infinity")
+    return arr
+
+
 def read_model(path: str | os.PathLike) -> tuple[str, dict[str, Any], dict[str, Any]]:
     """Reads and verifies a model file; returns ``(kind, state, manifest)``."""
     path = Path(path)
@@ -145,13 +213,24 @@ def read_model(path: str | os.PathLike) -> tuple[str, dict[str, Any], dict[str, 
         raise IsADirectoryError(f"{path} is a directory, not a model file")
     bad = f"{path} is not a valid sfanav model file"
     try:
+        size = path.stat().st_size
         with zipfile.ZipFile(path, "r") as zf:
+            _check_entries(zf, size, bad)
             try:
-                manifest = json.loads(zf.read("manifest.json"))
+                text = zf.read("manifest.json")
             except KeyError:
                 raise ValueError(f"{bad}: it has no manifest.json") from None
+            try:
+                manifest = json.loads(text)
+            except RecursionError:
+                raise ValueError(f"{bad}: the manifest nests too deeply") from None
+            except UnicodeDecodeError as exc:
+                raise ValueError(f"{bad}: the manifest is not UTF-8 text ({exc})") from None
             if not isinstance(manifest, dict) or manifest.get("format") != FORMAT:
-                raise ValueError(f"{bad}: unknown format {manifest.get('format')!r}")
+                got = manifest.get("format") if isinstance(manifest, dict) else type(manifest).__name__
+                raise ValueError(f"{bad}: unknown format {got!r}")
+            if not _depth_ok(manifest, MAX_DEPTH):
+                raise ValueError(f"{bad}: the manifest nests more than {MAX_DEPTH} levels deep")
             version = manifest.get("version")
             if isinstance(version, bool) or not isinstance(version, int):
                 raise ValueError(f"{bad}: missing format version (an integer), got {version!r}")
@@ -165,22 +244,22 @@ def read_model(path: str | os.PathLike) -> tuple[str, dict[str, Any], dict[str, 
             digest = manifest.pop("digest", None)
             if digest != hashlib.sha256(_canonical(manifest)).hexdigest():
                 raise ValueError(f"{bad}: the manifest was altered (checksum mismatch)")
+            if not isinstance(manifest.get("arrays"), dict) or not isinstance(manifest.get("kind"), str):
+                raise ValueError(f"{bad}: malformed manifest (no 'arrays' table or 'kind')")
             arrays: dict[str, np.ndarray] = {}
             for name, info in manifest["arrays"].items():
                 try:
                     blob = zf.read(f"arrays/{name}.npy")
                 except KeyError:
                     raise ValueError(f"{bad}: array {name!r} is missing") from None
-                if hashlib.sha256(blob).hexdigest() != info["sha256"]:
+                if not isinstance(info, dict) or hashlib.sha256(blob).hexdigest() != info.get("sha256"):
                     raise ValueError(f"{bad}: array {name!r} was altered (checksum mismatch)")
-                arr = np.load(io.BytesIO(blob), allow_pickle=False)
-                if arr.dtype.str != info["dtype"] or list(arr.shape) != info["shape"]:
-                    raise ValueError(f"{bad}: array {name!r} has the wrong dtype or shape")
-                arrays[name] = arr
+                arrays[name] = _load_array(blob, name, info, bad)
     except zipfile.BadZipFile as exc:
         raise ValueError(f"{bad} (truncated or corrupted: {exc})") from None
-    except (KeyError, TypeError, AttributeError, json.JSONDecodeError) as exc:
-        raise ValueError(f"{bad}: malformed manifest ({exc})") from None
+    except (KeyError, TypeError, AttributeError, json.JSONDecodeError, NotImplementedError, OverflowError,
+            RecursionError) as exc:
+        raise ValueError(f"{bad}: malformed manifest ({type(exc).__name__}: {exc})") from None
     except (zipfile.LargeZipFile, EOFError, OSError) as exc:
         if isinstance(exc, (FileNotFoundError, IsADirectoryError, PermissionError)):
             raise
@@ -199,4 +278,9 @@ def load(path: str | os.PathLike) -> Any:
     loader = _LOADERS.get(kind)
     if loader is None:
         raise ValueError(f"{path} holds a model of unknown kind {kind!r}")
-    return loader(state)
+    try:
+        return loader(state)
+    except (ValueError, TypeError, KeyError, IndexError, AttributeError, OverflowError, RecursionError,
+            RuntimeError, MemoryError) as exc:
+        msg = str(exc) if isinstance(exc, ValueError) else f"{type(exc).__name__}: {exc}"
+        raise ValueError(f"{path} is not a valid sfanav {kind} model: {msg}") from None

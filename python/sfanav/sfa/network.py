@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 
 from .. import _core
-from .._checks import NotFittedError, as_image_batch, is_single_image
+from .._checks import NotFittedError, as_image_batch, check_int, check_positive_float, is_single_image
 from .modelfile import register_loader, save_model
 
 if sys.version_info >= (3, 11):
@@ -746,13 +746,15 @@ class Network:
             obj = cls(state["config"])
             if _spec_to_json(obj.config_) != state["spec"]:
                 raise ValueError("invalid Network model state: config and spec disagree")
-            obj._net = _core.Network.from_states(obj.config_, state["nodes"], int(state["trained"]))
+            trained = check_int(state["trained"], "trained", minimum=0)
+            obj._net = _core.Network.from_states(obj.config_, state["nodes"], trained)
+            if state.get("step") is not None:
+                obj._step = check_int(state["step"], "step")
+                obj._period = check_int(state["period"], "period")
+                obj.transition_weight_ = check_positive_float(state.get("transition_weight") or 1.0,
+                                                              "transition_weight")
         except (KeyError, TypeError) as exc:
             raise ValueError(f"invalid Network model state: {exc}") from None
-        if state.get("step") is not None:
-            obj._step = int(state["step"])
-            obj._period = int(state["period"])
-            obj.transition_weight_ = float(state.get("transition_weight") or 1.0)
         return obj
 
 
