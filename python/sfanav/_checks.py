@@ -180,7 +180,9 @@ def check_n_outputs(n: Any, available: int | None, *, what: str = "the network h
 def is_single_image(a: np.ndarray, channels: int) -> bool:
     """Whether ``a`` is one image, not a batch, for a model of ``channels``
     channels: (H, W) when gray, (H, W, C) when colour."""
-    return a.ndim == (2 if channels == 1 else 3)
+    if channels == 1:
+        return a.ndim == 2
+    return a.ndim == 3 and a.shape[-1] == channels  # (N, H, W) is a batch of gray images
 
 
 def as_image_batch(a: Any, name: str = "images") -> np.ndarray:

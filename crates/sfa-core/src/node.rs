@@ -152,6 +152,22 @@ impl Stage {
         self.expansion.as_ref().map_or(self.input_dim, |e| e.out_dim())
     }
 
+    /// The stage's expansion of `n` finite input rows (borrowed when the
+    /// stage does not expand); fails when a product overflows to infinity.
+    fn expand_rows<'a>(&self, input: &'a [f64], n: usize) -> Result<std::borrow::Cow<'a, [f64]>> {
+        let Some(ex) = &self.expansion else {
+            return Ok(std::borrow::Cow::Borrowed(input));
+        };
+        let mut out = crate::memory::filled(n.saturating_mul(ex.out_dim()), 0.0, || {
+            format!("the expansion of {n} rows to {} terms", ex.out_dim())
+        })?;
+        ex.expand_block(input, &mut out);
+        if out.iter().any(|v| !v.is_finite()) {
+            return Err(overflow(self.degree, input));
+        }
+        Ok(std::borrow::Cow::Owned(out))
+    }
+
     /// Sequential forward pass of `n` rows (row-major, `input_dim` wide).
     fn apply(&self, input: &[f64], n: usize) -> Vec<f64> {
         let sol = self.solution.as_ref().expect("stage solved");
@@ -214,6 +230,16 @@ impl Stage {
         });
         Ok(())
     }
+}
+
+/// The error for finite input whose degree-`degree` expansion (or
+/// projection) overflows to infinity.
+fn overflow(degree: usize, input: &[f64]) -> SfaError {
+    let big = input.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    SfaError::InvalidArgument(format!(
+        "the input is finite but too large: its degree-{degree} expansion overflows to infinity \
+         (largest magnitude {big:e}); scale the input down"
+    ))
 }
 
 /// An SFA node. See the module documentation.
@@ -360,17 +386,8 @@ impl SfaNode {
             let stage = &self.stages[s];
             let nb = end - start;
             let ed = stage.expanded_dim();
-            let expanded;
-            let data: &[f64] = match &stage.expansion {
-                Some(ex) => {
-                    let mut out = vec![0.0; nb * ed];
-                    ex.expand_block(&input, &mut out);
-                    expanded = out;
-                    &expanded
-                }
-                None => &input,
-            };
-            let v = View::from_slice(data, nb, ed)?;
+            let data = stage.expand_rows(&input, nb)?;
+            let v = View::from_slice(&data, nb, ed)?;
             let first = start == 0 && new_sequence;
             self.stages[s].acc.as_mut().expect("acc").update(v, first)?;
             start = end;
@@ -497,17 +514,8 @@ impl SfaNode {
     ) -> Result<()> {
         let stage = &mut self.stages[s];
         let ed = stage.expanded_dim();
-        let expanded;
-        let data: &[f64] = match &stage.expansion {
-            Some(ex) => {
-                let mut out = vec![0.0; n * ed];
-                ex.expand_block(input, &mut out);
-                expanded = out;
-                &expanded
-            }
-            None => input,
-        };
-        let v = View::from_slice(data, n, ed)?;
+        let data = stage.expand_rows(input, n)?;
+        let v = View::from_slice(&data, n, ed)?;
         stage.acc.as_mut().expect("acc").add_graph(v, sample_weights, edges, edge_weights)
     }
 
@@ -661,7 +669,15 @@ impl SfaNode {
         let m = sol.n_out;
         let y = self.forward_block(x, 0, self.stages.len())?;
         debug_assert_eq!(y.len(), x.nrows() * m);
-        Ok(y.into_iter().map(T::from_f64).collect())
+        let y: Vec<T> = y.into_iter().map(T::from_f64).collect();
+        if y.iter().any(|v| !v.to_f64().is_finite()) {
+            return Err(SfaError::InvalidArgument(
+                "the input is finite but too large: the node's outputs overflow to infinity \
+                 (in the expansion or in the output precision); scale the input down"
+                    .into(),
+            ));
+        }
+        Ok(y)
     }
 
     /// Delta values of the outputs (ascending).

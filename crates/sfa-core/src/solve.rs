@@ -95,7 +95,9 @@ fn solve_impl(a: MatRef<'_, f64>, b: MatRef<'_, f64>, n: usize, tol: f64, strict
         for j in 0..d {
             for i in 0..d {
                 if !m[(i, j)].is_finite() {
-                    return Err(SfaError::Numerical(format!("the {name} is not finite")));
+                    return Err(SfaError::Numerical(format!(
+                        "the {name} is not finite: the statistics overflowed (the input or its expansion is too large; scale it down)"
+                    )));
                 }
             }
         }

@@ -606,7 +606,13 @@ impl Accumulator {
     }
 
     fn require_samples(&self, needed: usize) -> Result<()> {
-        if (self.n_samples as usize) < needed || self.weight_sum <= 0.0 {
+        if self.n_samples > 0 && self.weight_sum <= 0.0 {
+            return Err(SfaError::InvalidArgument(format!(
+                "the weights of all {} training samples are 0: at least one sample needs a positive weight",
+                self.n_samples
+            )));
+        }
+        if (self.n_samples as usize) < needed {
             return Err(SfaError::TooFewSamples {
                 what: "number of training samples",
                 needed,

@@ -16,9 +16,12 @@ Subcommands:
 * ``sfanav experiment NAME`` / ``--list``: rerun a thesis experiment.
 
 Errors in the input (unknown preset, bad size, an existing output directory,
-a missing dataset, a bad network config, ...) end with a one-line message on
-stderr and exit status 2, never a traceback (set ``SFANAV_DEBUG=1`` to see
-the traceback). Results go to stdout, progress and notes to stderr.
+a missing dataset, a bad network config or model file, a request beyond the
+machine's memory, ...) end with a one-line message on stderr and exit status
+2, never a traceback (set ``SFANAV_DEBUG=1`` to see the traceback); any other
+failure is one line with status 1. SIGINT and SIGTERM stop a command with
+status 130 and 143, leaving no output that a later command takes for complete.
+Results go to stdout, progress and notes to stderr.
 """
 
 from __future__ import annotations
@@ -35,6 +38,7 @@ if TYPE_CHECKING:
 
 
 EXIT_USAGE = 2
+MAX_IMAGE_SIDE = 32767  # px, OpenCV's limit for remapped and resized images
 
 
 # subcommand name -> function that adds its parser (with a ``run`` default)
@@ -67,6 +71,8 @@ def _size(text: str) -> tuple[int, int]:
         raise argparse.ArgumentTypeError(f"size must be WIDTHxHEIGHT (e.g. 600x60) or one number, got {text!r}") from None
     if w < 1 or h < 1:
         raise argparse.ArgumentTypeError(f"size must be positive, got {text!r}")
+    if max(w, h) > MAX_IMAGE_SIDE:
+        raise argparse.ArgumentTypeError(f"size {text!r} is beyond {MAX_IMAGE_SIDE} px a side")
     return w, h
 
 
@@ -874,20 +880,60 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+# Failures that bad input causes (a file, a size, a config, a model): one line
+# and EXIT_USAGE. RuntimeError covers the core's internal-error report and
+# RecursionError; MemoryError a request the allocator refused.
+_INPUT_ERRORS = (_UsageError, ValueError, TypeError, OSError, ImportError, KeyError, NotImplementedError,
+                 ArithmeticError, AttributeError, IndexError, RuntimeError, MemoryError, EOFError)
+EXIT_INTERNAL = 1
+
+
+class _Terminated(BaseException):
+    """SIGTERM, raised in the main thread so that writers clean up."""
+
+
+def _on_sigterm(signum: int, frame: Any) -> None:
+    raise _Terminated()
+
+
+def _one_line(exc: BaseException) -> str:
+    msg = str(exc.args[0]) if isinstance(exc, KeyError) and exc.args else str(exc)
+    if isinstance(exc, MemoryError):
+        msg = f"out of memory{': ' + msg if msg else ''}"
+    return " ".join(msg.split()) or type(exc).__name__
+
+
+def _is_cv2_error(exc: BaseException) -> bool:
+    return type(exc).__module__.startswith("cv2") and type(exc).__name__ == "error"
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``sfanav`` command; returns the exit status."""
     parser = build_parser()
     args = parser.parse_args(argv)
+    import signal
+    import threading
+
+    if threading.current_thread() is threading.main_thread():
+        previous = signal.signal(signal.SIGTERM, _on_sigterm)
+    else:  # pragma: no cover - main() called from a worker thread
+        previous = None
     try:
         return int(args.run(args) or 0)
-    except (_UsageError, ValueError, TypeError, OSError, ImportError, KeyError) as exc:
+    except Exception as exc:
         if os.environ.get("SFANAV_DEBUG") and not isinstance(exc, _UsageError):
             raise  # the traceback, for bug reports
-        msg = str(exc.args[0]) if isinstance(exc, KeyError) and exc.args else str(exc)
-        msg = " ".join(msg.split()) or type(exc).__name__
-        parser.exit(EXIT_USAGE, f"sfanav {args.command}: error: {msg}\n")
+        if isinstance(exc, _INPUT_ERRORS) or _is_cv2_error(exc):
+            parser.exit(EXIT_USAGE, f"sfanav {args.command}: error: {_one_line(exc)}\n")
+        parser.exit(EXIT_INTERNAL, f"sfanav {args.command}: internal error ({type(exc).__name__}): {_one_line(exc)} "
+                                   "(rerun with SFANAV_DEBUG=1 for the traceback, and please report it)\n")
     except KeyboardInterrupt:
         parser.exit(130, "interrupted\n")
+    except _Terminated:
+        parser.exit(143, "terminated\n")
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
     return 0  # pragma: no cover
 
 

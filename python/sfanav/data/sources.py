@@ -13,6 +13,7 @@ from typing import Any
 
 import numpy as np
 
+from .._checks import check_int
 from .._progress import Log, progress_bar, stderr_log
 from .dataset import Dataset
 from .images import read_image
@@ -41,7 +42,7 @@ class ImageSource:
     odometry: np.ndarray | None = None
 
     def batches(self, batch_size: int = 64) -> Iterator[np.ndarray]:
-        return self._batches(batch_size)
+        return self._batches(check_int(batch_size, "batch_size"))
 
 
 def _is_dataset_dir(p: Path) -> bool:

@@ -13,6 +13,7 @@ import copy
 import json
 import os
 import sys
+import warnings
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from importlib import resources
@@ -23,7 +24,14 @@ from typing import Any
 import numpy as np
 
 from .. import _core
-from .._checks import NotFittedError, as_image_batch, check_int, check_positive_float, is_single_image
+from .._checks import (
+    NotFittedError,
+    as_image_batch,
+    check_int,
+    check_nonneg_float,
+    check_positive_float,
+    is_single_image,
+)
 from .modelfile import register_loader, save_model
 
 if sys.version_info >= (3, 11):
@@ -36,6 +44,8 @@ from .._progress import progress_bar
 
 PRESETS = ("thesis-5.1", "thesis-5.2", "thesis-5.3", "sfanav-default")
 
+
+MAX_CONFIG_BYTES = 1_000_000  # a network config file is small text
 
 DEFAULT_CACHE_LIMIT = 1e9  # bytes of cached lower-layer fields under cache="auto"
 
@@ -169,13 +179,24 @@ def read_config_file(path: str | os.PathLike) -> dict[str, Any]:
     path = Path(path)
     if not path.exists():
         raise FileNotFoundError(f"no network config at {path}")
-    text = path.read_text()
+    if path.is_dir():
+        raise IsADirectoryError(f"network config {path} is a directory")
+    if path.stat().st_size > MAX_CONFIG_BYTES:
+        raise ValueError(f"network config {path} is {path.stat().st_size} bytes; a config is at most "
+                         f"{MAX_CONFIG_BYTES} bytes of TOML or JSON")
     try:
-        if path.suffix.lower() == ".json":
-            return json.loads(text)
-        return tomllib.loads(text)
+        text = path.read_text(encoding="utf-8")
+    except UnicodeDecodeError as exc:
+        raise ValueError(f"network config {path} is not UTF-8 text ({exc.reason} at byte {exc.start})") from None
+    try:
+        cfg = json.loads(text) if path.suffix.lower() == ".json" else tomllib.loads(text)
     except (json.JSONDecodeError, tomllib.TOMLDecodeError) as exc:
         raise ValueError(f"cannot parse network config {path}: {exc}") from None
+    except RecursionError:
+        raise ValueError(f"cannot parse network config {path}: it nests too deeply") from None
+    if not isinstance(cfg, dict):
+        raise ValueError(f"network config {path} must be a table (a JSON object), got {type(cfg).__name__}")
+    return cfg
 
 
 def preset_config(name: str) -> dict[str, Any]:
@@ -597,7 +618,10 @@ class Network:
             positions anyway). Each pair costs about one image's share of
             the derivative statistics.
 
-        Returns ``self``. Raises ValueError / TypeError for images of the
+        Returns ``self``; ``input_scale_`` keeps the largest pixel value of
+        the first training batch, and :meth:`transform` warns when images
+        come on a scale 50 times larger or smaller (0..255 against 0..1).
+        Raises ValueError / TypeError for images of the
         wrong shape, size or dtype, a window that does not match the
         network, or bad pairs; an exception raised while ``images`` is read
         comes out unchanged. The training loop runs in the Rust core
@@ -627,7 +651,7 @@ class Network:
             shifted = bool(np.any(pairs[3]))
             if shifted and (period0 % rotation.step or np.any(pairs[3] % rotation.step)):
                 cache = False  # cached fields are of the unrolled images
-        batches = _batches_of(images, batch_size)
+        batches = _batches_of(images, check_int(batch_size, "batch_size"))
         h, v, c = self.input_shape
         first = next(iter(batches()), None)
         if first is None:
@@ -677,9 +701,23 @@ class Network:
         self._net = net
         self._period = period
         self._step = rotation.step
+        self.input_scale_ = _pixel_scale(first)
         self.transition_weight_ = transition_weight
         self.n_pairs_ = 0 if pairs is None else len(pairs[0])
         return self
+
+    def _check_scale(self, a: np.ndarray) -> None:
+        """Warns when the pixel values are on another scale than in training
+        (0..255 against 0..1, say): the features would change silently."""
+        train = getattr(self, "input_scale_", None)
+        if not train or a.size == 0:
+            return
+        now = _pixel_scale(a)
+        if now > 0 and max(now / train, train / now) > SCALE_WARNING_RATIO:
+            warnings.warn(
+                f"these images hold values up to {now:.3g}, but the network was trained on values up to "
+                f"{train:.3g} ({a.dtype} now): scale them as in training, or the features are not comparable",
+                UserWarning, stacklevel=3)
 
     def _check_images(self, a: np.ndarray, period: int | None, training: bool = False) -> None:
         h, v, c = self.input_shape
@@ -712,6 +750,7 @@ class Network:
             a = a[None]
         a = as_image_batch(a)
         self._check_images(a, None)
+        self._check_scale(a)
         if rotations:
             s = getattr(self, "_step", 5) if step is None else step
             if isinstance(s, (bool, np.bool_)) or not isinstance(s, (int, np.integer)) or s < 1:
@@ -736,6 +775,7 @@ class Network:
             "step": getattr(self, "_step", None),
             "period": getattr(self, "_period", None),
             "transition_weight": getattr(self, "transition_weight_", None),
+            "input_scale": getattr(self, "input_scale_", None),
             "nodes": self._net.node_states(include_statistics),
         }
         save_model(path, "Network", state)
@@ -753,9 +793,19 @@ class Network:
                 obj._period = check_int(state["period"], "period")
                 obj.transition_weight_ = check_positive_float(state.get("transition_weight") or 1.0,
                                                               "transition_weight")
+            if state.get("input_scale") is not None:  # absent in files written before it was stored
+                obj.input_scale_ = check_nonneg_float(state["input_scale"], "input_scale")
         except (KeyError, TypeError) as exc:
             raise ValueError(f"invalid Network model state: {exc}") from None
         return obj
+
+
+SCALE_WARNING_RATIO = 50.0  # pixel scales this far apart (255 against 1) draw a warning
+
+
+def _pixel_scale(a: np.ndarray) -> float:
+    """The largest absolute pixel value of a batch."""
+    return float(np.abs(a).max()) if a.size else 0.0
 
 
 def _spec_to_json(spec: dict[str, Any]) -> dict[str, Any]:
