@@ -464,3 +464,16 @@ def test_transform_refuses_a_rotation_step_that_is_not_a_positive_integer(step):
     with pytest.raises(ValueError, match="step must be a positive whole number"):
         net.transform(imgs[:2], rotations=True, step=step)
     assert net.transform(imgs[:2], rotations=True, step=np.int64(8)).shape[1] == -(-cfg["input"]["width"] // 8)
+
+
+def test_training_does_not_depend_on_the_thread_count():
+    imgs = np.random.default_rng(3).random((40, 8, 48)).cumsum(0)
+    ref = sfanav.Network(tiny_config()).fit(imgs, sfanav.Rotation(step=4), progress=False)
+    try:
+        for n in (1, 3):
+            sfanav.set_num_threads(n)
+            net = sfanav.Network(tiny_config()).fit(imgs, sfanav.Rotation(step=4), progress=False)
+            np.testing.assert_array_equal(net.transform(imgs), ref.transform(imgs))
+            np.testing.assert_array_equal(net.transform(imgs, rotations=True), ref.transform(imgs, rotations=True))
+    finally:
+        sfanav.set_num_threads(0)

@@ -160,18 +160,24 @@ pub(crate) fn add_lower(dst: &mut Mat<f64>, src: &Mat<f64>) {
 /// rows and pair rows written, or the first non-finite element `(row, col)`.
 type Filled = std::result::Result<(usize, usize), (usize, usize)>;
 
-/// Splits rows `0..n` into at most one contiguous part per worker thread; each
-/// part converts its rows block by block (`fill`) and multiplies them into its
-/// own moments with a sequential SYRK; parts are summed in order, so the
-/// result is deterministic for a given thread count. (Splitting the long
-/// row dimension beats splitting the small `d x d` output; measured in
-/// `docs/benchmarks.md`.)
+/// Most contiguous parts [`parallel_moments`] splits its rows into (and so
+/// the most threads it keeps busy). The split depends on the data's shape
+/// only, never on the thread count, so results are bit-identical whatever
+/// `set_num_threads` says.
+pub(crate) const MAX_PARTS: usize = 16;
+
+/// Splits rows `0..n` into at most [`MAX_PARTS`] contiguous parts of at
+/// least [`min_rows_per_part`] rows; each part converts its rows block by
+/// block (`fill`) and multiplies them into its own moments with a
+/// sequential SYRK; parts are summed in order. The partition and the order
+/// of the sums depend on `n` and `d` only, so the result is the same for
+/// every thread count. (Splitting the long row dimension beats splitting
+/// the small `d x d` output; measured in `docs/benchmarks.md`.)
 pub(crate) fn parallel_moments<F>(n: usize, d: usize, kind: Kind, mixed: bool, what: &'static str, fill: F) -> Result<Moments>
 where
     F: Fn(usize, usize, &mut [f64], &mut [f64], &mut [f64], &mut [f64]) -> Filled + Sync,
 {
-    let threads = rayon::current_num_threads().max(1);
-    let parts = threads.min(n.div_ceil(min_rows_per_part(d))).max(1);
+    let parts = MAX_PARTS.min(n.div_ceil(min_rows_per_part(d))).max(1);
     let per = n.div_ceil(parts);
     let br = block_rows(d);
     let results: Vec<std::result::Result<Moments, (usize, usize)>> = (0..parts)

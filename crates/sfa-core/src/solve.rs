@@ -43,6 +43,17 @@ impl GeneralizedEigen {
     }
 }
 
+/// Parts faer splits the solve's eigendecompositions and products into.
+/// faer reads a process-wide setting whose default follows the thread count
+/// of the pool it runs in, and its blocking, and so its rounding, follows
+/// that; a fixed count makes the solve's result the same for every
+/// `set_num_threads` (this crate is faer's only user in the process).
+pub const SOLVE_PARTS: usize = 4;
+
+fn fixed_parallelism() {
+    faer::set_global_parallelism(faer::Par::rayon(SOLVE_PARTS));
+}
+
 fn eigh(m: MatRef<'_, f64>, what: &str) -> Result<(Vec<f64>, Mat<f64>)> {
     let e = m
         .self_adjoint_eigen(Side::Lower)
@@ -65,6 +76,7 @@ pub fn solve_up_to(a: MatRef<'_, f64>, b: MatRef<'_, f64>, n: usize, tol: f64) -
 }
 
 fn solve_impl(a: MatRef<'_, f64>, b: MatRef<'_, f64>, n: usize, tol: f64, strict: bool) -> Result<GeneralizedEigen> {
+    fixed_parallelism();
     let d = b.nrows();
     if b.ncols() != d || a.nrows() != d || a.ncols() != d {
         return Err(SfaError::InvalidArgument(format!(
