@@ -16,7 +16,6 @@ import zipfile
 
 import numpy as np
 import pytest
-
 import sfanav
 from conftest import correlated
 from modeltools import edit_model, read_parts, set_array, strip_statistics, write_parts
@@ -39,7 +38,7 @@ def run_limited(body: str, timeout: float = 120) -> str:
             else:
                 print(name, "returned")
     """) + textwrap.dedent(body)
-    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=timeout)
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=timeout, check=False)
     assert r.returncode == 0, f"exit {r.returncode}\nstdout:\n{r.stdout}\nstderr:\n{r.stderr[-2000:]}"
     return r.stdout
 
@@ -278,10 +277,43 @@ def test_network_node_config_is_cross_checked(tmp_path, localizer_file):
 
 def test_readout_arrays_are_cross_checked(tmp_path, localizer_file):
     m, _ = read_parts(localizer_file)
-    coef = [n for n in m["arrays"] if n.startswith("readout/state/coef")][0]
+    coef = next(n for n in m["arrays"] if n.startswith("readout/state/coef"))
 
     def wrong_shape(m, blobs):
         set_array(m, blobs, coef, np.zeros((9, 3)))
 
     with pytest.raises(ValueError, match="QuadraticRegression state|one finite"):
         sfanav.load(edit_model(localizer_file, tmp_path / "e.sfa", wrong_shape))
+
+
+# ------------------------------------------------- regressions found by the fuzzers
+def test_manifest_without_state_is_refused(tmp_path, sfa_file):
+    def edit(m, blobs):
+        del m["state"]
+
+    with pytest.raises(ValueError, match="no 'arrays' table, 'kind' or 'state'"):
+        sfanav.load(edit_model(sfa_file, tmp_path / "e.sfa", edit))
+
+
+def test_a_model_file_cannot_name_a_config_file_to_read(tmp_path, localizer_file, monkeypatch):
+    (tmp_path / "other.toml").write_text("[input]\nwidth = 1\n")
+    monkeypatch.chdir(tmp_path)
+
+    def edit(m, blobs):
+        m["state"]["network"]["config"] = "other.toml"
+
+    with pytest.raises(ValueError, match="the config must be a table, got str"):
+        sfanav.load(edit_model(localizer_file, tmp_path / "e.sfa", edit))
+
+
+@pytest.mark.parametrize("edit,message", [
+    (lambda c: c["layers"][0].update(degree=2**31 - 1), "degree must be 1, 2 or 3"),
+    (lambda c: c.update(name=True), "name must be a string"),
+    (lambda c: c.setdefault("network", {}).update(tol=[1]), "tol must be a number"),
+])
+def test_config_values_found_by_the_fuzzer(edit, message):
+    cfg = {"input": {"width": 24, "height": 4, "channels": 1},
+           "layers": [{"rf": [6, 4], "stride": [6, 4], "out": 4}, {"rf": "full", "out": 3}]}
+    edit(cfg)
+    with pytest.raises(ValueError, match=message):
+        sfanav.Network(cfg)

@@ -746,7 +746,7 @@ impl SfaNode {
         if st.stages.is_empty() || st.stages.len() > n_stages {
             return bad(format!("{} stages for a node of {n_stages}", st.stages.len()));
         }
-        if st.training_stage + 1 != st.stages.len() {
+        if st.training_stage.checked_add(1) != Some(st.stages.len()) {
             return bad("training stage index disagrees with the stage count".into());
         }
         let mut input_dim = st.n_features;

@@ -244,8 +244,9 @@ def read_model(path: str | os.PathLike) -> tuple[str, dict[str, Any], dict[str, 
             digest = manifest.pop("digest", None)
             if digest != hashlib.sha256(_canonical(manifest)).hexdigest():
                 raise ValueError(f"{bad}: the manifest was altered (checksum mismatch)")
-            if not isinstance(manifest.get("arrays"), dict) or not isinstance(manifest.get("kind"), str):
-                raise ValueError(f"{bad}: malformed manifest (no 'arrays' table or 'kind')")
+            if (not isinstance(manifest.get("arrays"), dict) or not isinstance(manifest.get("kind"), str)
+                    or "state" not in manifest):
+                raise ValueError(f"{bad}: malformed manifest (no 'arrays' table, 'kind' or 'state')")
             arrays: dict[str, np.ndarray] = {}
             for name, info in manifest["arrays"].items():
                 try:
@@ -255,6 +256,7 @@ def read_model(path: str | os.PathLike) -> tuple[str, dict[str, Any], dict[str, 
                 if not isinstance(info, dict) or hashlib.sha256(blob).hexdigest() != info.get("sha256"):
                     raise ValueError(f"{bad}: array {name!r} was altered (checksum mismatch)")
                 arrays[name] = _load_array(blob, name, info, bad)
+            state = _join(manifest["state"], arrays)
     except zipfile.BadZipFile as exc:
         raise ValueError(f"{bad} (truncated or corrupted: {exc})") from None
     except (KeyError, TypeError, AttributeError, json.JSONDecodeError, NotImplementedError, OverflowError,
@@ -264,7 +266,6 @@ def read_model(path: str | os.PathLike) -> tuple[str, dict[str, Any], dict[str, 
         if isinstance(exc, (FileNotFoundError, IsADirectoryError, PermissionError)):
             raise
         raise ValueError(f"{bad} (truncated or corrupted: {exc})") from None
-    state = _join(manifest["state"], arrays)
     return manifest["kind"], state, manifest
 
 

@@ -216,6 +216,9 @@ def _pair(v: Any, what: str) -> tuple[int, int]:
     raise ValueError(f"{what} must be [width, height] (two integers), got {v!r}")
 
 
+MAX_LAYER_DEGREE = 3  # the network's nodes expand to degree 1, 2 or 3
+
+
 def _default_reduce(in_dim: int, degree: int, max_expanded: int) -> int:
     """The largest k <= in_dim whose polynomial expansion of degree
     ``degree`` has at most ``max_expanded`` dimensions (at least 1), by
@@ -255,6 +258,9 @@ def resolve_config(config: dict[str, Any]) -> dict[str, Any]:
     if unknown:
         raise ValueError(f"network config: unknown sections or keys {sorted(map(str, unknown))}; "
                          f"a config has {', '.join(CONFIG_SECTIONS)}")
+    for key in ("name", "description"):
+        if key in config and not isinstance(config[key], str):
+            raise ValueError(f"network config: {key} must be a string, got {config[key]!r}")
     inp = config.get("input")
     if not isinstance(inp, dict) or "width" not in inp or "height" not in inp:
         raise ValueError("network config: [input] needs width, height (and channels)")
@@ -273,6 +279,10 @@ def resolve_config(config: dict[str, Any]) -> dict[str, Any]:
     if not isinstance(sharing, (bool, np.bool_)):
         raise ValueError(f"network config: weight_sharing must be true or false, got {sharing!r}")
     max_expanded = _config_int(net.get("max_expanded", 300), "[network] max_expanded")
+    tol = net.get("tol", _core.DEFAULT_TOL)
+    if isinstance(tol, bool) or not isinstance(tol, (int, float)) or not 0 <= tol < 1:
+        raise ValueError(f"network config: tol must be a number in [0, 1), got {tol!r}")
+    tol = float(tol)
     precision = net.get("precision", "double")
     if precision not in ("double", "mixed"):
         raise ValueError(f"network config: precision must be 'double' or 'mixed', got {precision!r}")
@@ -291,6 +301,8 @@ def resolve_config(config: dict[str, Any]) -> dict[str, Any]:
         rf = (mw, mh) if layer.get("rf") == "full" else _pair(layer.get("rf"), f"{name}: rf")
         stride = _pair(layer.get("stride", [1, 1]), f"{name}: stride")
         degree = _config_int(layer.get("degree", 2), f"{name}: degree")
+        if degree > MAX_LAYER_DEGREE:
+            raise ValueError(f"{name}: degree must be 1, 2 or 3, got {degree}")
         if "out" not in layer:
             raise ValueError(f"{name}: missing 'out' (the node's output dim)")
         out = _config_int(layer["out"], f"{name}: out")
@@ -312,7 +324,7 @@ def resolve_config(config: dict[str, Any]) -> dict[str, Any]:
         "channels": c,
         "layers": spec_layers,
         "weight_sharing": bool(sharing),
-        "tol": float(net.get("tol", _core.DEFAULT_TOL)),
+        "tol": tol,
         "mixed_precision": precision == "mixed",
     }
 
@@ -783,6 +795,10 @@ class Network:
     @classmethod
     def from_state(cls, state: dict[str, Any]) -> "Network":
         try:
+            if not isinstance(state["config"], dict):
+                # never a path or a preset name: a model file must not make sfanav read other files
+                raise ValueError(f"invalid Network model state: the config must be a table, "
+                                 f"got {type(state['config']).__name__}")
             obj = cls(state["config"])
             if _spec_to_json(obj.config_) != state["spec"]:
                 raise ValueError("invalid Network model state: config and spec disagree")
