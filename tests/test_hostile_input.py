@@ -317,3 +317,60 @@ def test_config_values_found_by_the_fuzzer(edit, message):
     edit(cfg)
     with pytest.raises(ValueError, match=message):
         sfanav.Network(cfg)
+
+
+# --------------------------------------------------------------- clear messages
+def test_finite_input_that_overflows_is_named():
+    X = correlated(200, 3) * 1e120
+    with pytest.raises(ValueError, match="finite but too large: its degree-3 expansion overflows"):
+        sfanav.SFA(2, degree=3).fit(X)
+    m = sfanav.SFA(2, degree=2).fit(correlated(200, 3))
+    with pytest.raises(ValueError, match="finite but too large"):
+        m.transform(X * 1e100)
+    with pytest.raises(ValueError, match="statistics overflowed"):
+        sfanav.SFA(2).fit(X * 1e180)
+
+
+def test_zero_weights_batch_size_and_channel_messages():
+    with pytest.raises(ValueError, match="weights of all 500 training samples are 0"):
+        sfanav.Statistics(3).add_samples(np.random.default_rng(0).random((500, 3)), np.zeros(500)).covariance()
+    net, imgs = tiny_network()
+    with pytest.raises(ValueError, match="batch_size must be at least 1, got 0"):
+        sfanav.Network(net.config).fit(imgs, sfanav.Rotation(step=6), progress=False, batch_size=0)
+    rgb = {**net.config, "input": {**net.config["input"], "channels": 3}}
+    rgb_net = sfanav.Network(rgb).fit(np.repeat(imgs[..., None], 3, axis=3), sfanav.Rotation(step=6),
+                                      progress=False)
+    with pytest.raises(ValueError, match="with 1 channel.*takes 4 px high images with 3 channel"):
+        rgb_net.transform(imgs)  # a batch of gray images, not one RGB image of 30 x 4 x 24
+
+
+def test_another_pixel_scale_than_in_training_warns(tmp_path):
+    rng = np.random.default_rng(4)
+    imgs = (rng.random((30, 4, 24)).cumsum(0) % 1 * 255).astype(np.uint8)
+    cfg = {"input": {"width": 24, "height": 4, "channels": 1},
+           "layers": [{"rf": [6, 4], "stride": [6, 4], "out": 4}, {"rf": "full", "out": 3}]}
+    net = sfanav.Network(cfg).fit(imgs, sfanav.Rotation(step=6), progress=False)
+    assert net.input_scale_ > 200
+    with pytest.warns(UserWarning, match="trained on values up to"):
+        net.transform(imgs / 255.0)
+    net.save(tmp_path / "n.sfa")
+    back = sfanav.load(tmp_path / "n.sfa")
+    assert back.input_scale_ == net.input_scale_
+    with pytest.warns(UserWarning, match="trained on values up to"):
+        back.transform(imgs.astype(np.float32) / 255)
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        back.transform(imgs)  # the training scale: no warning
+
+
+def test_negative_and_fractional_config_values_name_the_key():
+    cfg = {"input": {"width": 24, "height": 4, "channels": 1},
+           "layers": [{"rf": [6, 4], "stride": [6, 4], "out": -4}, {"rf": "full", "out": 3}]}
+    with pytest.raises(ValueError, match="layer 1: out"):
+        sfanav.Network(cfg)
+    cfg["layers"][0]["out"] = 4
+    cfg["input"]["width"] = 24.5
+    with pytest.raises(ValueError, match="width"):
+        sfanav.Network(cfg)
