@@ -321,3 +321,38 @@ def test_gardens_experiment_quick_runs_every_configuration(tmp_path):
             assert f"MAE x (%) [{variant}]" in metrics, variant
     saved = json.loads((tmp_path / "gardens.json").read_text())
     assert saved["experiment"] == "gardens" and len(saved["rows"]) == len(res.rows)
+
+
+def test_suite_gardens_have_their_runs_and_test_points_between_the_lanes():
+    from sfanav.sim import presets
+
+    assert len(presets.SUITE_GARDENS) >= 10
+    p = presets.get("suite-inner")
+    w = sim.World.generate(0, **p.world)
+    runs = {r.name: r.trajectory(w, np.random.default_rng(1)) for r in p.runs(np.random.default_rng(0))}
+    assert set(runs) == {"train-grid", "train-cross", "test-grid", "test-walk"}
+    assert len(runs["train-cross"].poses) > 1.8 * len(runs["train-grid"].poses)
+    g = runs["test-grid"].poses
+    assert w.free(g[:, 0], g[:, 1], 0.3).all()
+    # lanes run at -4.5, -3.5, ... (0.5 m margin, 1 m apart): the test points lie between and beyond them
+    lane_offset = np.abs(((g[:, 1] + 4.5) % 1.0) - 0.5)
+    assert np.median(lane_offset) < 0.45 and g[:, 1].min() < -4.5
+
+
+def test_gardens_suite_quick_reports_ratios_and_a_plot(tmp_path):
+    from sfanav.experiments import gardens_suite, run
+
+    res = run("gardens-suite", tmp_path, quick=True, progress=False)
+    rows = {r["metric"]: r["sfanav"] for r in res.rows}
+    for m in gardens_suite.RATIO_METRICS:
+        worst = rows[f"worst ratio default / best peer, {m}"]
+        per = [v for k, v in rows.items() if k.startswith(f"ratio default / best peer, {m} [")]
+        assert len(per) == 2 * 2 * 2 and worst == max(per) and np.isfinite(per).all()
+    # a ratio is the default's metric over the better peer's
+    g, case = "inner", "train-grid / test-walk"
+    d = rows[f"MED (m) [{g}: train-grid / test-walk: sfanav default]"]
+    best = min(rows[f"MED (m) [{g}: train-grid / test-walk: {p}]"] for p in gardens_suite.PEERS)
+    assert rows[f"ratio default / best peer, MED (m) [{g}: {case}]"] == pytest.approx(d / best)
+    assert rows["bytes per place [inner: train-grid / test-walk: perfect memory]"] > 0
+    assert (tmp_path / "gardens-suite-ratios.png").stat().st_size > 1000
+    assert "| inner | train-grid / test-grid |" in (tmp_path / "gardens-suite.md").read_text()

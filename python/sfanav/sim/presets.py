@@ -299,6 +299,80 @@ _add(Preset(
 ))
 
 
+# The gardens suite (docs/gardens.md, `sfanav experiment gardens-suite`): clearly different
+# layouts, each with two training runs (a serpentine grid along x; the same with crossing lanes
+# along y) and two test runs (a grid of points between and beyond the training lanes, at random
+# headings; a random walk). 350x40 RGB panoramas.
+SUITE_DENSE_TREES = {"tree": 0.45, "conifer": 0.3, "bush": 0.2, "rock": 0.05}
+
+
+def _suite_test_grid(w: World, r: np.random.Generator, spacing: float) -> T.Trajectory:
+    """Points on a grid offset from the training lanes (between them and
+    beyond the outermost ones), clear of obstacles, at random headings."""
+    ax, ay = w.area
+    g = T.grid_points(w.area, max(2, int(round(ax / spacing)) + 1), max(2, int(round(ay / spacing)) + 1),
+                      margin=0.4)
+    keep = w.free(g.poses[:, 0], g.poses[:, 1], 0.3)
+    pts = g.poses[keep].copy()
+    pts[:, 2] = r.uniform(-np.pi, np.pi, len(pts))
+    return T.Trajectory(pts, np.arange(len(pts), dtype=float))
+
+
+def _suite_runs(spacing: float = 1.0, light: Lighting | None = None,
+                walk: int = 300) -> Callable[[np.random.Generator], list[RunSpec]]:
+    cond: dict[str, Lighting | LightFn] = {"default": light or Lighting()}
+
+    def runs(rng: np.random.Generator) -> list[RunSpec]:
+        def lanes(crossings: bool) -> Callable[[World, np.random.Generator], T.Trajectory]:
+            return lambda w, r: T.detour(T.grid(w.area, spacing=spacing, step=0.25, turn="arc", margin=0.5,
+                                                crossings=crossings), w)
+
+        return [RunSpec("train-grid", lanes(False), cond), RunSpec("train-cross", lanes(True), cond),
+                RunSpec("test-grid", lambda w, r: _suite_test_grid(w, r, spacing), cond),
+                RunSpec("test-walk", lambda w, r: T.random_walk(w.area, walk, 0.2, margin=0.45, rng=r, world=w),
+                        cond)]
+
+    return runs
+
+
+SUITE_GARDENS: dict[str, tuple[str, dict[str, Any], Callable[[np.random.Generator], list[RunSpec]]]] = {
+    "inner": ("10x10 m lawn with objects inside (trees, bushes, poles, a shed) and ground patches",
+              _garden((10.0, 10.0), 30, depth=10.0, inner=GARDEN_INNER, patches=GARDEN_PATCHES), _suite_runs()),
+    "inner-uniform": ("the inner layout on a uniform lawn, no ground patches",
+                      _garden((10.0, 10.0), 30, depth=10.0, inner=GARDEN_INNER, lawn="uniform"), _suite_runs()),
+    "control": ("thesis-like control: nothing inside the 10x10 m area, patchy lawn",
+                _garden((10.0, 10.0), 30, depth=10.0), _suite_runs()),
+    "control-uniform": ("thesis-like control on a uniform lawn (the thesis's Blender garden)",
+                        _garden((10.0, 10.0), 30, depth=10.0, lawn="uniform"), _suite_runs()),
+    "dense-trees": ("60 trees, conifers and bushes close around the area (0.2 m margin, 4 m deep)",
+                    _garden((10.0, 10.0), 60, margin=0.2, depth=4.0, weights=SUITE_DENSE_TREES), _suite_runs()),
+    "open-lawn": ("an open lawn: 8 objects, 6-26 m beyond the area, uniform lawn",
+                  _garden((10.0, 10.0), 8, margin=6.0, depth=20.0, lawn="uniform"), _suite_runs()),
+    "textured-ground": ("strong ground texture: 2 patios, 3 paths, 8 flower beds on a patchy lawn",
+                        _garden((10.0, 10.0), 30, depth=10.0, patches={"patio": 2, "path": 3, "bed": 8}),
+                        _suite_runs()),
+    "dusk": ("the inner layout at dusk: overcast sky, dim orange light from a low sun",
+             _garden((10.0, 10.0), 30, depth=10.0, inner=GARDEN_INNER, patches=GARDEN_PATCHES, cloud_cover=0.95),
+             _suite_runs(light=Lighting(intensity=0.55, tint=(1.0, 0.82, 0.66), sun_elevation_deg=8.0))),
+    "low-sun": ("the control layout under a clear sky and a low sun: long shadows",
+                _garden((10.0, 10.0), 30, depth=10.0, cloud_cover=0.05),
+                _suite_runs(light=Lighting(intensity=1.2, sun_azimuth_deg=30.0, sun_elevation_deg=12.0))),
+    "large-inner": ("a 16x16 m lawn with objects inside, lanes 1.5 m apart",
+                    _garden((16.0, 16.0), 40, depth=12.0, inner={"tree": 5, "bush": 6, "pole": 5, "shed": 1},
+                            patches=GARDEN_PATCHES), _suite_runs(spacing=1.5, walk=400)),
+    "small-dense": ("a 6x6 m yard with bushes and poles inside, 40 objects close around",
+                    _garden((6.0, 6.0), 40, margin=0.4, depth=5.0, inner={"bush": 3, "pole": 2},
+                            patches={"bed": 2}), _suite_runs(spacing=0.75, walk=200)),
+    "inner-sparse": ("a few objects inside (2 trees, 2 poles), 20 objects around, patchy lawn",
+                     _garden((10.0, 10.0), 20, depth=14.0, inner={"tree": 2, "pole": 2}), _suite_runs()),
+}
+
+for _name, (_desc, _world, _runs) in SUITE_GARDENS.items():
+    _add(Preset(f"suite-{_name}", "- (docs/gardens.md, gardens suite)", f"{_desc}; grid and crossing training "
+                "runs, a test grid between and beyond the lanes and a test walk; 350x40 RGB panoramas",
+                _world, lambda: PanoramicCamera(350, 40), _runs))
+
+
 def describe() -> str:
     """One line per preset: name, thesis section, description."""
     width = max(len(n) for n in PRESETS)
