@@ -169,8 +169,8 @@ def plot_ratios(table: dict[str, dict[str, dict[str, float]]], path: Path) -> Pa
 
 
 def _markdown(results: dict[str, dict[str, Any]], table: dict[str, dict[str, dict[str, float]]]) -> str:
-    lines = ["| garden | training / test | sfanav default MAE x / y %, MED, p95 | thesis config | perfect memory | "
-             "Fourier signature | ratio default / best peer (MAE x, MAE y, MED, p95) |",
+    lines = [("| garden | training / test | sfanav default MAE x / y %, MED, p95 | thesis config | perfect memory | "
+              "Fourier signature | ratio default / best peer (MAE x, MAE y, MED, p95) |"),
              "|---|---|---|---|---|---|---|"]
     for g, res in results.items():
         for tr, r in res.items():
