@@ -18,8 +18,8 @@ Subcommands:
 Errors in the input (unknown preset, bad size, an existing output directory,
 a missing dataset, a bad network config or model file, a request beyond the
 machine's memory, ...) end with a one-line message on stderr and exit status
-2, never a traceback (set ``SFANAV_DEBUG=1`` to see the traceback); any other
-failure is one line with status 1. SIGINT and SIGTERM stop a command with
+2, never a traceback (set ``SFANAV_DEBUG=1`` to see the traceback); an exception
+of another kind is a bug and shows its traceback. SIGINT and SIGTERM stop a command with
 status 130 and 143, leaving no output that a later command takes for complete.
 Results go to stdout, progress and notes to stderr.
 """
@@ -885,7 +885,6 @@ def build_parser() -> argparse.ArgumentParser:
 # RecursionError; MemoryError a request the allocator refused.
 _INPUT_ERRORS = (_UsageError, ValueError, TypeError, OSError, ImportError, KeyError, NotImplementedError,
                  ArithmeticError, AttributeError, IndexError, RuntimeError, MemoryError, EOFError)
-EXIT_INTERNAL = 1
 
 
 class _Terminated(BaseException):
@@ -921,12 +920,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         return int(args.run(args) or 0)
     except Exception as exc:
+        # anything else is a bug: its traceback is the report
+        if not (isinstance(exc, _INPUT_ERRORS) or _is_cv2_error(exc)):
+            raise
         if os.environ.get("SFANAV_DEBUG") and not isinstance(exc, _UsageError):
             raise  # the traceback, for bug reports
-        if isinstance(exc, _INPUT_ERRORS) or _is_cv2_error(exc):
-            parser.exit(EXIT_USAGE, f"sfanav {args.command}: error: {_one_line(exc)}\n")
-        parser.exit(EXIT_INTERNAL, f"sfanav {args.command}: internal error ({type(exc).__name__}): {_one_line(exc)} "
-                                   "(rerun with SFANAV_DEBUG=1 for the traceback, and please report it)\n")
+        parser.exit(EXIT_USAGE, f"sfanav {args.command}: error: {_one_line(exc)}\n")
     except KeyboardInterrupt:
         parser.exit(130, "interrupted\n")
     except _Terminated:
