@@ -356,3 +356,7 @@ def test_gardens_suite_quick_reports_ratios_and_a_plot(tmp_path):
     assert rows["bytes per place [inner: train-grid / test-walk: perfect memory]"] > 0
     assert (tmp_path / "gardens-suite-ratios.png").stat().st_size > 1000
     assert "| inner | train-grid / test-grid |" in (tmp_path / "gardens-suite.md").read_text()
+    pts = np.load(tmp_path / "gardens-suite-points.npz", allow_pickle=False)
+    err = pts["inner|train-grid|test-walk|sfanav default error (m)"]
+    assert err.mean() == pytest.approx(d)
+    assert len(pts["inner|train-grid|test-walk|distance to training (m)"]) == len(err)

@@ -58,9 +58,15 @@ def gardens() -> list[str]:
     return list(sim.presets.SUITE_GARDENS)
 
 
-def _metrics(pred: np.ndarray, xy: np.ndarray, crange: np.ndarray) -> dict[str, float]:
+FAR = 0.35  # m: test points farther than this from every training position must be generalized to
+
+
+def _metrics(pred: np.ndarray, xy: np.ndarray, crange: np.ndarray, far: np.ndarray) -> dict[str, float]:
     m = localization_metrics(pred, xy, coordinate_range=crange, percentiles=(50, 95))
-    return {"MAE x (%)": m["mae_x_pct"], "MAE y (%)": m["mae_y_pct"], "MED (m)": m["med"], "p95 (m)": m["p95"]}
+    err = np.hypot(*(pred - xy).T)
+    return {"MAE x (%)": m["mae_x_pct"], "MAE y (%)": m["mae_y_pct"], "MED (m)": m["med"], "p95 (m)": m["p95"],
+            "MED far from training (m)": float(err[far].mean()) if far.any() else float("nan"),
+            "MED near training (m)": float(err[~far].mean()) if (~far).any() else float("nan")}
 
 
 def _bytes_per_place(loc: Localizer, n_train: int) -> float:
@@ -77,9 +83,14 @@ def _timed_predict(model: Any, X: np.ndarray) -> tuple[np.ndarray, float]:
     return pred, 1000.0 * (time.perf_counter() - t0) / len(X)
 
 
-def run_garden(out: Path, name: str, seed: int, *, quick: bool, progress: bool) -> dict[str, Any]:
+def run_garden(out: Path, name: str, seed: int, *, quick: bool, progress: bool,
+               points: dict[str, np.ndarray] | None = None) -> dict[str, Any]:
     """One garden: {train run: {method: {test run: metrics + bytes/place, query ms}}}
-    plus the training times."""
+    plus the training times. ``points`` (if given) receives per test point
+    the error of every method and the point's distances to the training
+    run and to the area's border, keyed ``garden|train|test|what``."""
+    from scipy.spatial import cKDTree
+
     log = progress_log(progress)
     preset = f"suite-{name}"
     if quick:
@@ -114,13 +125,23 @@ def run_garden(out: Path, name: str, seed: int, *, quick: bool, progress: bool) 
         models["perfect memory"] = baselines.PerfectMemory().fit(X_tr, xy_tr)
         k = baselines.FourierSignature().n_coefficients
         models["Fourier signature"] = baselines.FourierSignature(min(k, X_tr.shape[2] // 2 + 1)).fit(X_tr, xy_tr)
+        tree = cKDTree(xy_tr)
+        half = np.asarray(sim.presets.get(preset).world["area"], float) / 2
+        for t, (_, xy_te) in tests.items():
+            dist = tree.query(xy_te)[0]
+            if points is not None:
+                points[f"{name}|{tr}|{t}|distance to training (m)"] = dist
+                points[f"{name}|{tr}|{t}|distance to border (m)"] = np.min(half - np.abs(xy_te), axis=1)
         for method, model in models.items():
             bpp = (_bytes_per_place(model, len(X_tr)) if isinstance(model, Localizer)
                    else float(getattr(model, "bytes_per_place_", 0) or 0))
             for t, (X_te, xy_te) in tests.items():
                 pred, ms = _timed_predict(model, X_te)
-                per[method][t] = {**_metrics(pred, xy_te, coordinate_range(xy_te)), "bytes per place": bpp,
-                                  "query ms": ms}
+                far = tree.query(xy_te)[0] > FAR
+                per[method][t] = {**_metrics(pred, xy_te, coordinate_range(xy_te), far), "bytes per place": bpp,
+                                  "query ms": ms, "share far from training": float(far.mean())}
+                if points is not None:
+                    points[f"{name}|{tr}|{t}|{method} error (m)"] = np.hypot(*(pred - xy_te).T)
         res[tr] = {"methods": per, "training (s)": {"sfanav default": t_default, "thesis config": t_thesis},
                    "n_train": len(X_tr), "n_test": {t: len(v[1]) for t, v in tests.items()}}
         d, pm, fs = (per[m]["test-walk"]["MED (m)"] for m in ("sfanav default", "perfect memory", "Fourier signature"))
@@ -197,7 +218,10 @@ def exp_gardens_suite(out: Path, *, quick: bool, seed: int, progress: bool) -> E
 def _exp_suite(out: Path, *, quick: bool, seed: int, progress: bool) -> ExperimentResult:
     t_all = time.perf_counter()
     names = gardens()[:2] if quick else gardens()
-    results = {g: run_garden(out, g, seed + i, quick=quick, progress=progress) for i, g in enumerate(names)}
+    points: dict[str, np.ndarray] = {}
+    results = {g: run_garden(out, g, seed + i, quick=quick, progress=progress, points=points)
+               for i, g in enumerate(names)}
+    np.savez_compressed(out / "gardens-suite-points.npz", **points)
     table = {g: ratios(r) for g, r in results.items()}
     rows: list[dict[str, Any]] = []
     for g, res in results.items():
