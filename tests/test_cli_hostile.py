@@ -16,7 +16,8 @@ from pathlib import Path
 import pytest
 from modeltools import edit_model
 from sfanav import sim
-from sfanav.app.cli import _fraction, main
+from sfanav.app.arguments import fraction as _fraction
+from sfanav.app.cli import main
 from test_cli import TINY_TOML, assert_one_line_error, run
 
 

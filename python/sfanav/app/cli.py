@@ -27,18 +27,19 @@ Results go to stdout, progress and notes to stderr.
 from __future__ import annotations
 
 import argparse
-import math
 import os
 import sys
 from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, Any
+
+from . import arguments as arg
+from .failures import Terminated, UsageError, is_input_error, on_sigterm, one_line
 
 if TYPE_CHECKING:
     from pathlib import Path
 
 
 EXIT_USAGE = 2
-MAX_IMAGE_SIDE = 32767  # px, OpenCV's limit for remapped and resized images
 
 
 # subcommand name -> function that adds its parser (with a ``run`` default)
@@ -57,42 +58,6 @@ def command(name: str) -> Callable:
     return deco
 
 
-class _UsageError(Exception):
-    pass
-
-
-def _size(text: str) -> tuple[int, int]:
-    try:
-        if "x" in text.lower():
-            w, h = (int(v) for v in text.lower().split("x"))
-        else:
-            w = h = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"size must be WIDTHxHEIGHT (e.g. 600x60) or one number, got {text!r}") from None
-    if w < 1 or h < 1:
-        raise argparse.ArgumentTypeError(f"size must be positive, got {text!r}")
-    if max(w, h) > MAX_IMAGE_SIDE:
-        raise argparse.ArgumentTypeError(f"size {text!r} is beyond {MAX_IMAGE_SIDE} px a side")
-    return w, h
-
-
-def _nonneg_int(text: str) -> int:
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
-    if v < 0:
-        raise argparse.ArgumentTypeError(f"expected an integer >= 0, got {text!r}")
-    return v
-
-
-def _pos_int(text: str) -> int:
-    v = _nonneg_int(text)
-    if v < 1:
-        raise argparse.ArgumentTypeError(f"expected an integer >= 1, got {text!r}")
-    return v
-
-
 @command("simulate")
 def _add_simulate(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     from ..sim import presets
@@ -107,12 +72,12 @@ def _add_simulate(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     )
     p.add_argument("--preset", required=True, metavar="NAME", help="scene preset (listed below)")
     p.add_argument("--out", required=True, metavar="DIR", help="output directory (new or empty)")
-    p.add_argument("--seed", type=_nonneg_int, default=0, help="seed of world, trajectories and noise (default 0)")
-    p.add_argument("--max-frames", type=_pos_int, default=None, metavar="N",
+    p.add_argument("--seed", type=arg.nonneg_int, default=0, help="seed of world, trajectories and noise (default 0)")
+    p.add_argument("--max-frames", type=arg.pos_int, default=None, metavar="N",
                    help="keep only the first N frames of every run (quick looks)")
     p.add_argument("--camera", choices=("panorama", "omni"), default=None,
                    help="replace the preset's camera by a panoramic or an omnidirectional one")
-    p.add_argument("--size", type=_size, default=None, metavar="WxH",
+    p.add_argument("--size", type=arg.size, default=None, metavar="WxH",
                    help="image size (panorama WIDTHxHEIGHT, omni SIZE); default the preset's")
     p.add_argument("--gray", action="store_true", help="gray images instead of RGB")
     p.add_argument("--overwrite", action="store_true", help="replace an existing dataset in --out")
@@ -125,7 +90,7 @@ def _run_simulate(args: argparse.Namespace) -> int:
     from ..sim import OmniCamera, PanoramicCamera, presets
 
     if args.preset not in presets.PRESETS:
-        raise _UsageError(f"unknown preset {args.preset!r}; available: {', '.join(presets.PRESETS)}")
+        raise UsageError(f"unknown preset {args.preset!r}; available: {', '.join(presets.PRESETS)}")
     p = presets.get(args.preset)
     camera = None
     if args.camera or args.size or args.gray:
@@ -134,7 +99,7 @@ def _run_simulate(args: argparse.Namespace) -> int:
         if kind == "omni":
             size = args.size[0] if args.size else (base.size if isinstance(base, OmniCamera) else 500)
             if args.size and args.size[0] != args.size[1]:
-                raise _UsageError(f"an omni image is square: give --size N or NxN, got {args.size[0]}x{args.size[1]}")
+                raise UsageError(f"an omni image is square: give --size N or NxN, got {args.size[0]}x{args.size[1]}")
             camera = OmniCamera(size, rgb=not args.gray)
         else:
             if args.size:
@@ -161,7 +126,7 @@ def _existing_path(text: str, what: str) -> "Path":
 
     p = Path(text)
     if not p.exists():
-        raise _UsageError(f"{what} {text} does not exist")
+        raise UsageError(f"{what} {text} does not exist")
     return p
 
 
@@ -170,9 +135,9 @@ def _new_file(text: str, overwrite: bool, what: str = "output") -> "Path":
 
     p = Path(text)
     if p.exists() and not overwrite:
-        raise _UsageError(f"{what} {p} exists; pass --overwrite to replace it")
+        raise UsageError(f"{what} {p} exists; pass --overwrite to replace it")
     if p.exists() and p.is_dir():
-        raise _UsageError(f"{what} {p} is a directory")
+        raise UsageError(f"{what} {p} is a directory")
     p.parent.mkdir(parents=True, exist_ok=True)
     return p
 
@@ -183,9 +148,9 @@ def _load_localizer(path: str) -> "Any":
 
     model = load(_existing_path(path, "model file"))
     if not isinstance(model, Localizer):
-        raise _UsageError(f"{path} holds a {type(model).__name__}, not a localizer (make one with sfanav train)")
+        raise UsageError(f"{path} holds a {type(model).__name__}, not a localizer (make one with sfanav train)")
     if model.network is None:
-        raise _UsageError(f"{path} is a features-only localizer (no network): it cannot read images")
+        raise UsageError(f"{path} is a features-only localizer (no network): it cannot read images")
     return model
 
 
@@ -199,23 +164,6 @@ def _mirror_of(args: argparse.Namespace, loc: "Any") -> "Any":
     return m
 
 
-def _fraction(text: str) -> float:
-    """A fraction in (0, 1] ("0.6") or a percentage with its sign ("60%")."""
-    t = text.strip()
-    percent = t.endswith("%")
-    try:
-        v = float(t[:-1] if percent else t)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a fraction such as 0.6 or a percentage such as 60%, got {text!r}") from None
-    if percent:
-        v /= 100.0
-    elif v > 1.0:
-        raise argparse.ArgumentTypeError(
-            f"{text!r} is more than the whole panorama: give a fraction in (0, 1] such as 0.6, "
-            f"or a percentage with its sign such as {t}%")
-    if not (math.isfinite(v) and 0.0 < v <= 1.0):
-        raise argparse.ArgumentTypeError(f"expected a fraction in (0, 1] or a percentage in (0%, 100%], got {text!r}")
-    return v
 
 
 def _wrap(text: str) -> str:
@@ -272,14 +220,14 @@ def _add_train(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--run", dest="run_name", default=None, metavar="RUN",
                    help="run to train on (default: 'train' if the dataset has one, else all images)")
     p.add_argument("--camera", default=None, metavar="NAME", help="camera to use if the dataset has several")
-    p.add_argument("--step", type=_pos_int, default=5, metavar="PX",
+    p.add_argument("--step", type=arg.pos_int, default=5, metavar="PX",
                    help="simulated rotation step in pixels (default 5, the thesis's)")
-    p.add_argument("--window", type=_fraction, default=1.0, metavar="FRACTION",
+    p.add_argument("--window", type=arg.fraction, default=1.0, metavar="FRACTION",
                    help="window of the simulated rotation: a fraction of the panorama (0.6) or a percentage (60%%; default 1.0); "
                         "the network's input width must equal window x panorama width")
     p.add_argument("--precision", choices=("double", "mixed"), default=None,
                    help="statistics precision (default: the config's; mixed is faster, docs/benchmarks.md)")
-    p.add_argument("--n-outputs", type=_pos_int, default=None, metavar="N",
+    p.add_argument("--n-outputs", type=arg.pos_int, default=None, metavar="N",
                    help="slowest outputs read out (default: 8 with the quadratic readout, the thesis's; "
                         "8 or 12 by cross-validation with auto)")
     p.add_argument("--readout", choices=("auto", "quadratic"), default=None,
@@ -289,7 +237,7 @@ def _add_train(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--rows", choices=("all", "band"), default=None,
                    help="image rows: band = elevation -10..+20 deg only (default for the sfanav default "
                         "network), all = every row (default with --preset thesis-* or --config)")
-    p.add_argument("--rotation-pooling", type=_pos_int, default=None, metavar="K",
+    p.add_argument("--rotation-pooling", type=arg.pos_int, default=None, metavar="K",
                    help="average the network's outputs over K evenly spaced rotations of each panorama before "
                         "the readout (default: 8 with the auto readout, none with quadratic; 1 = none)")
     p.add_argument("--supervision", choices=("auto", "ground-truth", "odometry"), default="auto",
@@ -320,7 +268,7 @@ def _network_from_args(args: argparse.Namespace) -> "Any":
     config = read_config_file(_existing_path(args.config, "network config"))
     if args.precision:
         if not isinstance(config, dict):
-            raise _UsageError(f"{args.config}: not a network config")
+            raise UsageError(f"{args.config}: not a network config")
         config.setdefault("network", {})["precision"] = args.precision
     return Network(config)
 
@@ -361,7 +309,7 @@ def _run_train(args: argparse.Namespace) -> int:
         try:
             rows = recipe.image_rows(elev)
         except ValueError as exc:
-            raise _UsageError(f"horizon band: {exc}") from None
+            raise UsageError(f"horizon band: {exc}") from None
     prep = Preprocessing.for_network(net, window=args.window, normalize=args.normalize)
     _log(f"training on {len(train)} images of {args.dataset}" + (f" (run {run})" if run else "")
          + f" as {prep.describe()} panoramas; network: {net!r}; rows: {rows.describe() if rows else 'all'}; "
@@ -442,7 +390,7 @@ def _add_localize(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                    help="fuse the estimates with the run's odometry (EKF, CTRV; a dataset with odom_x, odom_y, "
                         "odom_heading): adds columns fused_x, fused_y, fused_heading; the noise comes from the "
                         "model's training run, the start pose from the first estimates")
-    p.add_argument("--batch-size", type=_pos_int, default=64, metavar="N", help="images per batch (default 64)")
+    p.add_argument("--batch-size", type=arg.pos_int, default=64, metavar="N", help="images per batch (default 64)")
     p.add_argument("--overwrite", action="store_true", help="replace an existing CSV")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(run=_run_localize)
@@ -462,16 +410,16 @@ def _run_localize(args: argparse.Namespace) -> int:
 
     loc = _load_localizer(args.model)
     if args.rotations and loc.rotation_pooling_ > 1:
-        raise _UsageError(f"{args.model} averages its features over {loc.rotation_pooling_} rotations already "
+        raise UsageError(f"{args.model} averages its features over {loc.rotation_pooling_} rotations already "
                           "(rotation pooling): --rotations applies to models without it")
     out = _new_file(args.out, args.overwrite, "CSV")
     src = open_images(args.input, run=args.run_name, camera=args.camera)
     if args.odometry:
         if src.odometry is None or not np.isfinite(src.odometry).all():
-            raise _UsageError(f"--odometry needs a dataset with odometry (odom_x, odom_y, odom_heading) for every "
+            raise UsageError(f"--odometry needs a dataset with odometry (odom_x, odom_y, odom_heading) for every "
                               f"frame; {args.input} has none" + (" for some frames" if src.odometry is not None else ""))
         if "ekf_noise" not in loc.info:
-            raise _UsageError(f"{args.model} holds no EKF noise (its training run had no odometry): retrain it on a "
+            raise UsageError(f"{args.model} holds no EKF noise (its training run had no odometry): retrain it on a "
                               "run with odometry to use --odometry")
     prep = Preprocessing.of_model(loc)
     conform = Preprocessor(prep, mirror=_mirror_of(args, loc), log=_log)
@@ -485,7 +433,7 @@ def _run_localize(args: argparse.Namespace) -> int:
     if bar is not None:
         bar.close()
     if not preds:
-        raise _UsageError(f"{args.input} has no images (an empty or unreadable video?)")
+        raise UsageError(f"{args.input} has no images (an empty or unreadable video?)")
     xy = np.concatenate(preds)
     frames = src.frames if src.frames is not None else np.arange(len(xy))
     fused = None
@@ -557,14 +505,14 @@ def _run_evaluate(args: argparse.Namespace) -> int:
     run = args.run_name if args.run_name is not None else ("test" if "test" in runs else None)
     train_run = args.train_run if args.train_run is not None else ("train" if "train" in runs and run != "train" else None)
     if loc.info.get("supervision") == "odometry" and train_run is None:
-        raise _UsageError(f"{args.model} was trained without ground truth (it reports in its training run's odometry "
+        raise UsageError(f"{args.model} was trained without ground truth (it reports in its training run's odometry "
                           "frame): evaluate needs a training run with ground truth (--train-run) to align the frames")
     prep = Preprocessing.of_model(loc)
     test = select_run(ds, run, args.camera)
     mirror = _mirror_of(args, loc)
     images, xy = load_run(test, prep, mirror=mirror, log=_log, progress=not args.no_progress)
     if not np.isfinite(xy).all():
-        raise _UsageError(f"{args.dataset} lacks ground-truth x, y: evaluation needs them")
+        raise UsageError(f"{args.dataset} lacks ground-truth x, y: evaluation needs them")
     tr_images = tr_xy = None
     if train_run is not None:
         tr = select_run(ds, train_run, args.camera)
@@ -617,7 +565,7 @@ def _add_navigate(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                    help="start position in the world (m) and heading (degrees, default 0)")
     goal = p.add_mutually_exclusive_group(required=True)
     goal.add_argument("--target", type=_xy_arg, metavar="X,Y", help="target position in the model's map (m)")
-    goal.add_argument("--target-frame", type=_nonneg_int, metavar="FRAME",
+    goal.add_argument("--target-frame", type=arg.nonneg_int, metavar="FRAME",
                       help="target image: this frame id of DATASET")
     goal.add_argument("--target-image", metavar="FILE", help="target image: a panorama file")
     p.add_argument("--out", required=True, metavar="DIR", help="output directory")
@@ -625,9 +573,9 @@ def _add_navigate(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                    help="the exploration run of DATASET (default: the model's training run, else 'train')")
     p.add_argument("--straight", action="store_true",
                    help="head straight for the target instead of along the exploration run's geodesic field")
-    p.add_argument("--max-stops", type=_pos_int, default=400, metavar="N", help="stops before giving up (400)")
+    p.add_argument("--max-stops", type=arg.pos_int, default=400, metavar="N", help="stops before giving up (400)")
     p.add_argument("--success-radius", type=float, default=0.5, metavar="M", help="success radius, m (0.5)")
-    p.add_argument("--seed", type=_nonneg_int, default=0, help="odometry noise seed (default 0)")
+    p.add_argument("--seed", type=arg.nonneg_int, default=0, help="odometry noise seed (default 0)")
     p.add_argument("--overwrite", action="store_true", help="replace the outputs of an earlier navigation in --out")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(run=_run_navigate)
@@ -647,31 +595,31 @@ def _run_navigate(args: argparse.Namespace) -> int:
     from ..data.preprocessing import Preprocessing, Preprocessor
     from ..data.sources import load_run
     from ..localization.error_metrics import align
+    from ..localization.recipe import CAMERA_ELEVATION
     from ..navigation.mission import image_goal, navigate
     from ..navigation.plots import plot_trajectories
-    from ..localization.recipe import CAMERA_ELEVATION
     from ..sim.cameras import PanoramicCamera
     from ..sim.robot import OdometryNoise, Robot
     from ..sim.world import World
 
     if not (math.isfinite(args.success_radius) and args.success_radius > 0):
-        raise _UsageError(f"--success-radius must be a positive number of metres, got {args.success_radius}")
+        raise UsageError(f"--success-radius must be a positive number of metres, got {args.success_radius}")
     loc = _load_localizer(args.model)
     ds = Dataset(_existing_path(args.dataset, "dataset"))
     md = ds.metadata if isinstance(ds.metadata, dict) else {}
     if not md.get("world"):
-        raise _UsageError(f"{args.dataset} has no simulated world (world.json): navigate drives the simulator's "
+        raise UsageError(f"{args.dataset} has no simulated world (world.json): navigate drives the simulator's "
                           "robot (make one with sfanav simulate)")
     out = Path(args.out)
     names = ("navigation.json", "path.csv", "trajectory.png")
     if out.exists() and not out.is_dir():
-        raise _UsageError(f"--out {out} exists and is not a directory")
+        raise UsageError(f"--out {out} exists and is not a directory")
     if any((out / n).exists() for n in names) and not args.overwrite:
-        raise _UsageError(f"{out} holds an earlier navigation; pass --overwrite or choose another --out")
+        raise UsageError(f"{out} holds an earlier navigation; pass --overwrite or choose another --out")
     world = World.load(ds.root / md["world"])
     prep = Preprocessing.of_model(loc)
     if prep.normalize:
-        raise _UsageError(f"{args.model} normalizes its images (--normalize): navigate renders raw panoramas; "
+        raise UsageError(f"{args.model} normalizes its images (--normalize): navigate renders raw panoramas; "
                           "train without --normalize")
     cam = md.get("camera") or {}
     camera = PanoramicCamera(prep.width, prep.height,
@@ -681,7 +629,7 @@ def _run_navigate(args: argparse.Namespace) -> int:
     robot = Robot.two_cameras(noise=OdometryNoise(**noise))
     run = args.run_name or loc.info.get("run") or "train"
     if run not in set(ds.runs.tolist()):
-        raise _UsageError(f"{args.dataset} has no run {run!r} (runs: {', '.join(sorted(set(ds.runs.tolist())))}); "
+        raise UsageError(f"{args.dataset} has no run {run!r} (runs: {', '.join(sorted(set(ds.runs.tolist())))}); "
                           "pass --run")
     explore = ds.select(run=run)
     conform = Preprocessor(prep, mirror=_mirror_of(argparse.Namespace(mirror=None), loc), log=_log)
@@ -702,13 +650,13 @@ def _run_navigate(args: argparse.Namespace) -> int:
     world_goal = None
     if args.target is not None:
         if len(args.target) != 2:
-            raise _UsageError("--target is X,Y (no heading)")
+            raise UsageError("--target is X,Y (no heading)")
         map_goal = np.array(args.target, float)
         what = f"position ({map_goal[0]:.2f}, {map_goal[1]:.2f}) of the map"
     elif args.target_frame is not None:
         hit = np.flatnonzero(ds.frames == args.target_frame)
         if len(hit) == 0:
-            raise _UsageError(f"{args.dataset} has no frame {args.target_frame}")
+            raise UsageError(f"{args.dataset} has no frame {args.target_frame}")
         sub = ds.subset(hit[:1])
         Xg, xyg = load_run(sub, prep, preprocessor=conform, progress=False)
         map_goal = image_goal(loc, Xg[0])
@@ -778,7 +726,7 @@ def _add_demo(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("--out", default="sfanav-demo", metavar="DIR", help="output directory (default sfanav-demo)")
-    p.add_argument("--seed", type=_nonneg_int, default=0, help="seed of the garden and the runs (default 0)")
+    p.add_argument("--seed", type=arg.nonneg_int, default=0, help="seed of the garden and the runs (default 0)")
     p.add_argument("--overwrite", action="store_true", help="replace the outputs of an earlier demo in --out")
     p.add_argument("--quick", action="store_true",
                    help="a seconds-long smoke run (tiny images, few frames, a small network); not meaningful")
@@ -821,7 +769,7 @@ def _add_experiment(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                    help="output directory (default sfanav-results/NAME); writes NAME.json and plots")
     p.add_argument("--quick", action="store_true",
                    help="a seconds-long smoke run (tiny images and grids, few frames); numbers not meaningful")
-    p.add_argument("--seed", type=_nonneg_int, default=0, help="seed of scenes and runs (default 0)")
+    p.add_argument("--seed", type=arg.nonneg_int, default=0, help="seed of scenes and runs (default 0)")
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
     p.set_defaults(run=_run_experiment)
     return p
@@ -835,18 +783,18 @@ def _run_experiment(args: argparse.Namespace) -> int:
 
     if args.list:
         if args.name:
-            raise _UsageError("give either NAME or --list")
+            raise UsageError("give either NAME or --list")
         names = experiments.names()
         width = max((len(n) for n in names), default=0)
         for n in names:
             print(f"{n:<{width}}  {experiments.get(n).title}")
         return 0
     if not args.name:
-        raise _UsageError("give an experiment NAME (sfanav experiment --list shows them)")
+        raise UsageError("give an experiment NAME (sfanav experiment --list shows them)")
     exp = experiments.get(args.name)  # ValueError with the known names
     out = Path(args.out) if args.out else Path("sfanav-results") / args.name
     if out.exists() and not out.is_dir():
-        raise _UsageError(f"--out {out} is a file")
+        raise UsageError(f"--out {out} is a file")
     _log(f"experiment {exp.name}: {exp.title}" + (" (quick smoke run)" if args.quick else ""))
     t0 = time.perf_counter()
     result = experiments.run(exp.name, out, quick=args.quick, seed=args.seed, progress=not args.no_progress)
@@ -880,32 +828,6 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-# Failures that bad input causes (a file, a size, a config, a model): one line
-# and EXIT_USAGE. RuntimeError covers the core's internal-error report and
-# RecursionError; MemoryError a request the allocator refused.
-_INPUT_ERRORS = (_UsageError, ValueError, TypeError, OSError, ImportError, KeyError, NotImplementedError,
-                 ArithmeticError, AttributeError, IndexError, RuntimeError, MemoryError, EOFError)
-
-
-class _Terminated(BaseException):
-    """SIGTERM, raised in the main thread so that writers clean up."""
-
-
-def _on_sigterm(signum: int, frame: Any) -> None:
-    raise _Terminated()
-
-
-def _one_line(exc: BaseException) -> str:
-    msg = str(exc.args[0]) if isinstance(exc, KeyError) and exc.args else str(exc)
-    if isinstance(exc, MemoryError):
-        msg = f"out of memory{': ' + msg if msg else ''}"
-    return " ".join(msg.split()) or type(exc).__name__
-
-
-def _is_cv2_error(exc: BaseException) -> bool:
-    return type(exc).__module__.startswith("cv2") and type(exc).__name__ == "error"
-
-
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``sfanav`` command; returns the exit status."""
     parser = build_parser()
@@ -914,21 +836,21 @@ def main(argv: Sequence[str] | None = None) -> int:
     import threading
 
     if threading.current_thread() is threading.main_thread():
-        previous = signal.signal(signal.SIGTERM, _on_sigterm)
+        previous = signal.signal(signal.SIGTERM, on_sigterm)
     else:  # pragma: no cover - main() called from a worker thread
         previous = None
     try:
         return int(args.run(args) or 0)
     except Exception as exc:
         # anything else is a bug: its traceback is the report
-        if not (isinstance(exc, _INPUT_ERRORS) or _is_cv2_error(exc)):
+        if not is_input_error(exc):
             raise
-        if os.environ.get("SFANAV_DEBUG") and not isinstance(exc, _UsageError):
+        if os.environ.get("SFANAV_DEBUG") and not isinstance(exc, UsageError):
             raise  # the traceback, for bug reports
-        parser.exit(EXIT_USAGE, f"sfanav {args.command}: error: {_one_line(exc)}\n")
+        parser.exit(EXIT_USAGE, f"sfanav {args.command}: error: {one_line(exc)}\n")
     except KeyboardInterrupt:
         parser.exit(130, "interrupted\n")
-    except _Terminated:
+    except Terminated:
         parser.exit(143, "terminated\n")
     finally:
         if previous is not None:

@@ -485,10 +485,10 @@ def ablation_markdown(avg: dict[str, dict[str, Any]], seeds: list[int]) -> str:
 @register("gardens", "realistic gardens (objects inside the area, ground patches) vs the thesis-like "
           "control; ablation of readouts and image rows, peer baselines, 3 seeds")
 def exp_gardens(out: Path, *, quick: bool, seed: int, progress: bool) -> ExperimentResult:
-    from threadpoolctl import threadpool_limits
+    from .._threads import one_blas_thread
 
     # one BLAS thread: the readouts' many small solves thrash when threads outnumber free cores
-    with threadpool_limits(limits=1, user_api="blas"):
+    with one_blas_thread():
         return _exp_gardens(out, quick=quick, seed=seed, progress=progress)
 
 

@@ -34,6 +34,7 @@ from typing import Any
 import numpy as np
 
 from .. import sim
+from .._threads import one_blas_thread
 from ..data.preprocessing import Preprocessing
 from ..data.sources import load_run
 from ..localization import baselines
@@ -91,6 +92,9 @@ def run_garden(out: Path, name: str, seed: int, *, quick: bool, progress: bool,
     run and to the area's border, keyed ``garden|train|test|what``."""
     from scipy.spatial import cKDTree
 
+    from ..localization.recipe import default_network
+    from ..localization.training import train_default
+
     log = progress_log(progress)
     preset = f"suite-{name}"
     if quick:
@@ -108,9 +112,6 @@ def run_garden(out: Path, name: str, seed: int, *, quick: bool, progress: bool,
         per: dict[str, dict[str, Any]] = {m: {} for m in METHODS}
         models: dict[str, Any] = {}
         t0 = time.perf_counter()
-        from ..localization.recipe import default_network
-        from ..localization.training import train_default
-
         shape = X_tr.shape[1:]
         net = Network(tiny_config(shape[1], shape[0], shape[2], out=12)) if quick else default_network()
         models["sfanav default"] = train_default(X_tr, xy_tr, camera_elevation=elev, network=net)
@@ -127,8 +128,9 @@ def run_garden(out: Path, name: str, seed: int, *, quick: bool, progress: bool,
         models["Fourier signature"] = baselines.FourierSignature(min(k, X_tr.shape[2] // 2 + 1)).fit(X_tr, xy_tr)
         tree = cKDTree(xy_tr)
         half = np.asarray(sim.presets.get(preset).world["area"], float) / 2
+        dists = {t: tree.query(xy_te)[0] for t, (_, xy_te) in tests.items()}
         for t, (_, xy_te) in tests.items():
-            dist = tree.query(xy_te)[0]
+            dist = dists[t]
             if points is not None:
                 points[f"{name}|{tr}|{t}|distance to training (m)"] = dist
                 points[f"{name}|{tr}|{t}|distance to border (m)"] = np.min(half - np.abs(xy_te), axis=1)
@@ -137,7 +139,7 @@ def run_garden(out: Path, name: str, seed: int, *, quick: bool, progress: bool,
                    else float(getattr(model, "bytes_per_place_", 0) or 0))
             for t, (X_te, xy_te) in tests.items():
                 pred, ms = _timed_predict(model, X_te)
-                far = tree.query(xy_te)[0] > FAR
+                far = dists[t] > FAR
                 per[method][t] = {**_metrics(pred, xy_te, coordinate_range(xy_te), far), "bytes per place": bpp,
                                   "query ms": ms, "share far from training": float(far.mean())}
                 if points is not None:
@@ -209,9 +211,7 @@ def _markdown(results: dict[str, dict[str, Any]], table: dict[str, dict[str, dic
 @register("gardens-suite", "sfanav default vs. peers in 12 different gardens (grid and crossing runs, test grid "
                            "and walk)")
 def exp_gardens_suite(out: Path, *, quick: bool, seed: int, progress: bool) -> ExperimentResult:
-    from threadpoolctl import threadpool_limits
-
-    with threadpool_limits(limits=1, user_api="blas"):
+    with one_blas_thread():  # the readouts' many small solves thrash with more threads
         return _exp_suite(out, quick=quick, seed=seed, progress=progress)
 
 

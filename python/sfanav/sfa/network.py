@@ -821,7 +821,7 @@ SCALE_WARNING_RATIO = 50.0  # pixel scales this far apart (255 against 1) draw a
 
 def _pixel_scale(a: np.ndarray) -> float:
     """The largest absolute pixel value of a batch."""
-    return float(np.abs(a).max()) if a.size else 0.0
+    return float(max(a.max(), -float(a.min()))) if a.size else 0.0  # no |a| copy of the batch
 
 
 def _spec_to_json(spec: dict[str, Any]) -> dict[str, Any]:

@@ -1,0 +1,61 @@
+"""Value types of the ``sfanav`` command's arguments: each turns the text
+of one argument into its value or raises ``argparse.ArgumentTypeError``
+with a one-line reason."""
+
+from __future__ import annotations
+
+import argparse
+import math
+
+MAX_IMAGE_SIDE = 32767  # px, OpenCV's limit for remapped and resized images
+
+
+def size(text: str) -> tuple[int, int]:
+    try:
+        if "x" in text.lower():
+            w, h = (int(v) for v in text.lower().split("x"))
+        else:
+            w = h = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"size must be WIDTHxHEIGHT (e.g. 600x60) or one number, got {text!r}") from None
+    if w < 1 or h < 1:
+        raise argparse.ArgumentTypeError(f"size must be positive, got {text!r}")
+    if max(w, h) > MAX_IMAGE_SIDE:
+        raise argparse.ArgumentTypeError(f"size {text!r} is beyond {MAX_IMAGE_SIDE} px a side")
+    return w, h
+
+
+def nonneg_int(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+    if v < 0:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 0, got {text!r}")
+    return v
+
+
+def pos_int(text: str) -> int:
+    v = nonneg_int(text)
+    if v < 1:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 1, got {text!r}")
+    return v
+
+
+def fraction(text: str) -> float:
+    """A fraction in (0, 1] ("0.6") or a percentage with its sign ("60%")."""
+    t = text.strip()
+    percent = t.endswith("%")
+    try:
+        v = float(t[:-1] if percent else t)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a fraction such as 0.6 or a percentage such as 60%, got {text!r}") from None
+    if percent:
+        v /= 100.0
+    elif v > 1.0:
+        raise argparse.ArgumentTypeError(
+            f"{text!r} is more than the whole panorama: give a fraction in (0, 1] such as 0.6, "
+            f"or a percentage with its sign such as {t}%")
+    if not (math.isfinite(v) and 0.0 < v <= 1.0):
+        raise argparse.ArgumentTypeError(f"expected a fraction in (0, 1] or a percentage in (0%, 100%], got {text!r}")
+    return v
