@@ -313,7 +313,8 @@ def _run_train(args: argparse.Namespace) -> int:
     prep = Preprocessing.for_network(net, window=args.window, normalize=args.normalize)
     _log(f"training on {len(train)} images of {args.dataset}" + (f" (run {run})" if run else "")
          + f" as {prep.describe()} panoramas; network: {net!r}; rows: {rows.describe() if rows else 'all'}; "
-         + f"readout: {recipe.readout}" + (" (the sfanav default)" if recipe.name == "sfanav default" else ""))
+         + f"readout: {recipe.readout}" + (f" with the {recipe.signature} signature" if recipe.signature else "")
+         + (" (the sfanav default)" if recipe.name == "sfanav default" else ""))
     preprocessor = Preprocessor(prep, mirror=args.mirror, log=_log)
     odometry = train.odometry
     supervision = supervision_for(args.supervision, has_ground_truth=bool(np.isfinite(train.poses[:, :2]).all()),
@@ -321,7 +322,7 @@ def _run_train(args: argparse.Namespace) -> int:
     images, xy = load_run(train, prep, preprocessor=preprocessor, progress=not args.no_progress)
     fit_kw = dict(rotation=Rotation(step=args.step, window=args.window), n_outputs=recipe.n_outputs,
                   readout=recipe.readout, rows=rows, prep=prep, progress=not args.no_progress,
-                  rotation_pooling=recipe.rotation_pooling,
+                  rotation_pooling=recipe.rotation_pooling, signature=recipe.signature,
                   info={"dataset": str(args.dataset), "run": run,
                         "network": args.preset or (str(args.config) if args.config else "sfanav-default"),
                         **recipe.info()})
@@ -344,7 +345,8 @@ def _run_train(args: argparse.Namespace) -> int:
         loc.info["mirror"] = list(preprocessor.mirror_used)  # localize and evaluate reuse it
     if np.isfinite(odometry).all():
         try:
-            feats = loc.features(images)
+            feats = loc.readout_features(loc.features(images),
+                                         loc.signatures(images) if loc.n_signature_ else None)
             loc.info["ekf_noise"] = noise_for_localizer(loc, feats, loc.training_positions_, odometry)
             _log("EKF noise for localize --odometry, from the training run's held-out estimates and odometry "
                  "(the fused track nearest the positions the readout was fitted to"

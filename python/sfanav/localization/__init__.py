@@ -17,7 +17,7 @@
 
 from __future__ import annotations
 
-from .baselines import FourierSignature, PerfectMemory, benchmark
+from .baselines import FourierSignature, PerfectMemory, benchmark, fourier_signature
 from .error_metrics import (
     Alignment,
     align,
@@ -64,6 +64,7 @@ from .recipe import (
     BAND,
     NETWORK_PRESET,
     READOUT,
+    SIGNATURE,
     Recipe,
     default_network,
     default_rows,
@@ -71,6 +72,7 @@ from .recipe import (
     recipe_for,
 )
 from .report import write_report
+from .signature_readout import SignatureGPReadout
 from .training import fit_localizer, train_default
 
-__all__ = ["cross_val_predict", "AUTO_BLOCK", "AUTO_FOLDS", "AUTO_TOLERANCE", "Alignment", "BAND", "ErrorCurve", "Evaluation", "FourierSignature", "GPReadout", "KNNReadout", "KernelRidgeReadout", "Localizer", "NETWORK_PRESET", "PerfectMemory", "QuadraticRegression", "RANDOM_SPLITS", "READOUT", "Recipe", "ReadoutSelection", "RegressionResult", "TEST_RUN", "align", "auto_candidates", "benchmark", "block_folds", "default_candidates", "default_network", "default_rows", "error_vs_n", "euclidean_errors", "evaluate", "evaluate_random_splits", "evaluate_test_run", "evaluation_rows", "fit_localizer", "localization_metrics", "mae", "mae_percent", "make_readout", "med", "plot_error_vs_n", "plot_firing_maps", "plot_trajectory", "pooled_transform", "pooling_step", "readout_from_state", "pooling_for", "readout_state", "recipe_for", "select_auto_readout", "select_readout", "train_default", "write_report"]
+__all__ = ["cross_val_predict", "AUTO_BLOCK", "AUTO_FOLDS", "AUTO_TOLERANCE", "Alignment", "BAND", "ErrorCurve", "Evaluation", "FourierSignature", "GPReadout", "KNNReadout", "KernelRidgeReadout", "Localizer", "NETWORK_PRESET", "PerfectMemory", "QuadraticRegression", "RANDOM_SPLITS", "READOUT", "Recipe", "ReadoutSelection", "SignatureGPReadout", "fourier_signature", "SIGNATURE", "RegressionResult", "TEST_RUN", "align", "auto_candidates", "benchmark", "block_folds", "default_candidates", "default_network", "default_rows", "error_vs_n", "euclidean_errors", "evaluate", "evaluate_random_splits", "evaluate_test_run", "evaluation_rows", "fit_localizer", "localization_metrics", "mae", "mae_percent", "make_readout", "med", "plot_error_vs_n", "plot_firing_maps", "plot_trajectory", "pooled_transform", "pooling_step", "readout_from_state", "pooling_for", "readout_state", "recipe_for", "select_auto_readout", "select_readout", "train_default", "write_report"]

@@ -44,6 +44,25 @@ def _as_rows(images: Any, name: str, normalize: bool) -> np.ndarray:
     return out
 
 
+def fourier_signature(images: Any, n_coefficients: int = 15) -> np.ndarray:
+    """The Fourier signature of panoramas (N, H, W[, C]): per image row and
+    channel the magnitudes of the first ``n_coefficients`` DFT coefficients
+    along the azimuth (DC included), flattened to (N, H * C *
+    n_coefficients) float32. A rotation of the panorama only changes the
+    phases, so the signature does not depend on the heading.
+
+    Raises ValueError for more coefficients than ``W // 2 + 1``.
+
+    >>> fourier_signature(np.zeros((2, 4, 16)), 3).shape
+    (2, 12)
+    """
+    k = check_int(n_coefficients, "n_coefficients")
+    rows = _as_rows(images, "images", False)
+    if k > rows.shape[2] // 2 + 1:
+        raise ValueError(f"n_coefficients={k}, but {rows.shape[2]}-px wide panoramas have only {rows.shape[2] // 2 + 1}")
+    return np.abs(np.fft.rfft(rows, axis=2)[:, :, :k]).astype(np.float32).reshape(len(rows), -1)
+
+
 class _Memory:
     """Shared fit/validation of the view-based baselines."""
 

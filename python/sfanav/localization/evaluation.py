@@ -143,7 +143,8 @@ def evaluate(
     t0 = time.perf_counter()
     F_test = loc.transform_rows(test_images)  # rotation pooled if the localizer pools
     sfa_ms = 1000.0 * (time.perf_counter() - t0) / len(test_images)
-    pred = loc.predict_features(F_test)
+    G_test = loc.signatures(raw_test) if loc.n_signature_ else None
+    pred = loc.predict_features(F_test, signatures=G_test)
     frame = None
     if loc.info.get("supervision") == "odometry":
         # trained without ground truth: its frame is the training run's odometry; for evaluation only, move the
@@ -152,7 +153,8 @@ def evaluate(
             raise ValueError("this localizer was trained without ground truth (it reports in its training run's "
                              "odometry frame): evaluating it needs the training run with ground truth, to align "
                              "the frames")
-        frame = align(loc.predict_features(loc.transform_rows(train_images)), np.asarray(train_xy, float))
+        frame = align(loc.predict_features(loc.transform_rows(train_images), signatures=(
+            loc.signatures(raw_train) if loc.n_signature_ else None)), np.asarray(train_xy, float))
         pred = frame.apply(pred)
         log(f"trained without ground truth: estimates moved into the world frame by the rigid transform fitted on "
             f"the training run (rms {frame.rmse:.3f} m; evaluation only)")
@@ -172,7 +174,8 @@ def evaluate(
                                                               ridge=float(spec.get("ridge", 0.0)),
                                                               n_repeats=n_repeats, random_state=seed)
             else:
-                ev.splits = random_splits_readout(spec, F_test, test_xy, n_repeats=n_repeats, seed=seed)
+                ev.splits = random_splits_readout(spec, loc.readout_features(F_test, G_test), test_xy,
+                                                  n_repeats=n_repeats, seed=seed)
         except ValueError as exc:  # too few samples for the expansion
             log(f"random splits skipped: {exc}")
     ns = range(2, n_out + 1)

@@ -36,8 +36,9 @@ from ..sfa.network import Network
 from .error_metrics import euclidean_errors, localization_metrics
 from .quadratic import QuadraticRegression
 from .readout_selection import select_auto_readout
+from .baselines import fourier_signature
 from .readouts import make_readout, readout_from_state, readout_state
-from .recipe import pooling_for
+from .recipe import SIGNATURE_COEFFICIENTS, SIGNATURES, pooling_for
 
 READOUTS = ("auto", "quadratic")
 
@@ -116,6 +117,16 @@ class Localizer:
         ``"auto"``: K = 8 (the sfanav default; docs/gardens.md) unless
         ``readout="quadratic"`` (the thesis's configuration: no pooling);
         None or 1: no pooling.
+    signature : {"fourier"} or None, default None
+        An appearance signature read beside the slow features: ``"fourier"``,
+        the rotation-invariant Fourier signature of the panorama as it is
+        given (every row and channel, :data:`SIGNATURE_COEFFICIENTS`
+        coefficients; :func:`sfanav.localization.fourier_signature`). The
+        readout is then :class:`sfanav.localization.SignatureGPReadout`
+        (``readout="auto"``: the slow features with the signature, or the
+        signature alone, by marginal likelihood). The sfanav default sets it
+        (:func:`sfanav.localization.recipe_for`); it stores the signature of
+        every training place (docs/gardens.md).
 
     Attributes
     ----------
@@ -130,6 +141,8 @@ class Localizer:
         the rule that decided); not saved in the model file.
     rotation_pooling_ : int
         Rotations averaged per image (1: none).
+    n_signature_ : int
+        Values of the appearance signature the readout reads (0: none).
     n_features_in_ : int
         Feature columns seen in fit.
     train_metrics_ : dict
@@ -155,7 +168,7 @@ class Localizer:
 
     def __init__(self, network: Network | None, n_outputs: int | None = None, ridge: float = 0.0, degree: int = 2,
                  readout: str | dict[str, Any] = "auto", rows: ImageRows | None = None,
-                 rotation_pooling: int | str | None = "auto") -> None:
+                 rotation_pooling: int | str | None = "auto", signature: str | None = None) -> None:
         if network is not None and not isinstance(network, Network):
             raise TypeError(f"network must be a sfanav.Network or None, got {type(network).__name__}")
         if rows is not None and not isinstance(rows, ImageRows):
@@ -167,11 +180,13 @@ class Localizer:
         self.readout = readout
         self.rows = rows
         self.rotation_pooling = rotation_pooling
+        self.signature = signature
         self.info: dict[str, Any] = {}
 
     def get_params(self, deep: bool = True) -> dict[str, Any]:
         return {"network": self.network, "n_outputs": self.n_outputs, "ridge": self.ridge, "degree": self.degree,
-                "readout": self.readout, "rows": self.rows, "rotation_pooling": self.rotation_pooling}
+                "readout": self.readout, "rows": self.rows, "rotation_pooling": self.rotation_pooling,
+                "signature": self.signature}
 
     def __repr__(self) -> str:
         net = "None" if self.network is None else repr(self.network)
@@ -179,6 +194,7 @@ class Localizer:
         ro = self.readout if isinstance(self.readout, str) else "spec"
         rows = "" if self.rows is None or self.rows.identity else f", rows={self.rows.describe()!r}"
         pool = "" if self.rotation_pooling == "auto" else f", rotation_pooling={self.rotation_pooling!r}"
+        pool += "" if self.signature is None else f", signature={self.signature!r}"
         return (f"<sfanav.Localizer readout={ro!r}, n_outputs={self.n_outputs}{rows}{pool}, {state}, "
                 f"network={net}>")
 
@@ -234,6 +250,46 @@ class Localizer:
             )
         return pooled_transform(net, images, k)
 
+    def signatures(self, images: Any) -> np.ndarray:
+        """The appearance signatures the readout reads beside the slow
+        features, of images (N, H, W[, C]) as given (before ``rows``):
+        (N, q) float32, or (q,) for one image. ValueError if this localizer
+        reads none (``signature=None``)."""
+        kind = self._check_signature()
+        if kind is None:
+            raise ValueError("this Localizer reads no appearance signature (signature=None)")
+        net = self.trained_network() if self.network is not None else None
+        a = np.asarray(images)
+        one = net is not None and is_single_image(a, net.input_shape[2])
+        G = fourier_signature(a[None] if one else a, SIGNATURE_COEFFICIENTS)
+        return G[0] if one else G
+
+    def readout_features(self, features: Any, signatures: Any = None) -> np.ndarray:
+        """What the fitted readout regresses on: the slow features (N, m),
+        with the signatures (N, q) appended when it reads them."""
+        self._check_fitted()
+        F = as_matrix(features, "features")
+        if F.shape[1] != self.n_features_in_:
+            raise ValueError(f"features have {F.shape[1]} columns, but this Localizer was fitted with {self.n_features_in_}")
+        if not self.n_signature_:
+            if signatures is not None:
+                raise ValueError("this Localizer reads no appearance signature; pass signatures=None")
+            return F
+        if signatures is None:
+            raise ValueError(f"this Localizer reads an appearance signature of {self.n_signature_} values beside the "
+                             "slow features: pass signatures=localizer.signatures(images)")
+        G = as_matrix(signatures, "signatures")
+        check_same_length(F, G, "features", "signatures")
+        if G.shape[1] != self.n_signature_:
+            raise ValueError(f"signatures have {G.shape[1]} values, but this Localizer was fitted with "
+                             f"{self.n_signature_}")
+        return np.hstack([F, G])
+
+    def _check_signature(self) -> str | None:
+        if self.signature is not None and self.signature not in SIGNATURES:
+            raise ValueError(f"signature must be one of {SIGNATURES} or None, got {self.signature!r}")
+        return self.signature
+
     def _pooling(self) -> int:
         """The rotations averaged per image: the fitted value, else the
         parameter resolved."""
@@ -264,38 +320,61 @@ class Localizer:
         F = self.features(images)
         if F.ndim == 1:
             F = F[None]
-        return self.fit_features(F, Y)
+        G = self.signatures(images) if self._check_signature() else None
+        return self.fit_features(F, Y, signatures=None if G is None else G.reshape(len(F), -1))
 
-    def fit_features(self, features: Any, xy: Any) -> "Localizer":
+    def fit_features(self, features: Any, xy: Any, *, signatures: Any = None) -> "Localizer":
         """Fits on precomputed features (N, m >= n_outputs), slowest first,
         and positions (N, 2) in metres: what :meth:`features` returns (rotation
-        pooled as ``rotation_pooling`` says). Returns ``self``."""
+        pooled as ``rotation_pooling`` says); with ``signature`` set also the
+        images' :meth:`signatures` (N, q). Returns ``self``."""
         n, ridge, degree = self._check_params()
         self.rotation_pooling_ = self._resolve_pooling()
         F = as_matrix(features, "features")
         Y = as_matrix(xy, "xy", n_cols=2)
         check_same_length(F, Y, "features", "xy")
         check_n_outputs(n, F.shape[1], what="the features have", unit="columns")
+        kind = self._check_signature()
+        if kind is not None and signatures is None:
+            raise ValueError(f"this Localizer reads a {kind} signature beside the slow features: pass "
+                             "signatures=localizer.signatures(images)")
+        if kind is None and signatures is not None:
+            raise ValueError("signatures given, but this Localizer reads none (signature=None)")
+        G = None
+        if kind is not None:
+            G = as_matrix(signatures, "signatures")
+            check_same_length(F, G, "features", "signatures")
+            if isinstance(self.readout, str) and self.readout == "quadratic":
+                raise ValueError("the quadratic readout reads no appearance signature: use readout='auto' or "
+                                 "signature=None")
+        q = 0 if G is None else G.shape[1]
+        X = F if G is None else np.hstack([F, G])
         self.selection_ = None
         if isinstance(self.readout, dict):
             spec = dict(self.readout)
             if n is not None:
                 spec["n_outputs"] = n
-            reg = make_readout(spec).fit(F, Y)
+            if q:
+                if spec.get("kind") != "gp-signature":
+                    raise ValueError(f"a readout of kind {spec.get('kind')!r} reads no appearance signature: use "
+                                     "{'kind': 'gp-signature'} or signature=None")
+                spec["n_signature"] = q
+            reg = make_readout(spec).fit(X, Y)
         elif self.readout == "quadratic":
             spec = {"kind": "quadratic", "n_outputs": 8 if n is None else n, "ridge": float(ridge), "degree": degree}
             reg = QuadraticRegression(spec["n_outputs"], ridge, degree).fit(F, Y)
         else:
-            sel = select_auto_readout(F, Y, n_outputs=n)
+            sel = select_auto_readout(X, Y, n_outputs=n, n_signature=q)
             spec, reg, self.selection_ = sel.spec, sel.readout, sel
         self.regression_ = reg
         self.readout_spec_ = spec
-        self.n_outputs_ = int(spec.get("n_outputs") or F.shape[1])
+        self.n_outputs_ = int(spec["n_outputs"]) if spec.get("n_outputs") is not None else F.shape[1]
         self.n_features_in_ = F.shape[1]
+        self.n_signature_ = q
         self.training_positions_ = np.array(Y, dtype=np.float64)
         rng = np.ptp(Y, axis=0)  # a straight training run has no range across it: use the other axis's
         rng = np.where(rng > 0, rng, max(float(rng.max()), 1.0))
-        self.train_metrics_ = localization_metrics(reg.predict(F), Y, coordinate_range=rng)
+        self.train_metrics_ = localization_metrics(reg.predict(X), Y, coordinate_range=rng)
         return self
 
     # ------------------------------------------------------------ inference
@@ -313,12 +392,15 @@ class Localizer:
         self._check_fitted()
         a = np.asarray(images)
         single = is_single_image(a, self.trained_network().input_shape[2])
-        out = self.predict_features(self.features(a[None] if single else a, rotations=rotations))
+        batch = a[None] if single else a
+        G = self.signatures(batch) if self.n_signature_ else None
+        out = self.predict_features(self.features(batch, rotations=rotations), signatures=G)
         return out[0] if single else out
 
-    def predict_features(self, features: Any) -> np.ndarray:
+    def predict_features(self, features: Any, *, signatures: Any = None) -> np.ndarray:
         """Positions (N, 2) in metres from precomputed features: (N, m), or
-        (N, K, m) under K rotations, whose K estimates are averaged."""
+        (N, K, m) under K rotations, whose K estimates are averaged; with the
+        images' :meth:`signatures` (N, q) if the localizer reads them."""
         reg = self._check_fitted()
         a = as_real_array(features, "features")
         if a.ndim == 3:
@@ -326,13 +408,9 @@ class Localizer:
             N, K, m = a.shape
             if m != self.n_features_in_:
                 raise ValueError(f"features have {m} columns, but this Localizer was fitted with {self.n_features_in_}")
-            return reg.predict(a.reshape(N * K, m)).reshape(N, K, -1).mean(axis=1)
-        F = as_matrix(a, "features")
-        if F.shape[1] != self.n_features_in_:
-            raise ValueError(
-                f"features have {F.shape[1]} columns, but this Localizer was fitted with {self.n_features_in_}"
-            )
-        return reg.predict(F)
+            G = None if signatures is None else np.repeat(as_matrix(signatures, "signatures"), K, axis=0)
+            return reg.predict(self.readout_features(a.reshape(N * K, m), G)).reshape(N, K, -1).mean(axis=1)
+        return reg.predict(self.readout_features(a, signatures))
 
     def score(self, images: Any, xy: Any, *, rotations: bool = False) -> float:
         """Mean Euclidean distance (MED, metres) of the estimates for images
@@ -376,6 +454,8 @@ class Localizer:
             # the thesis's readout also as version 1 had it, so older sfanav reads such files
             **({"regression": reg.get_state()} if self.readout_spec_["kind"] == "quadratic" else {}),
             "n_features_in": int(self.n_features_in_),
+            **({"signature": {"kind": self.signature, "n_coefficients": SIGNATURE_COEFFICIENTS,
+                              "n_values": int(self.n_signature_)}} if self.n_signature_ else {}),
             "train_metrics": dict(self.train_metrics_),
             "info": dict(self.info or {}),
             **({} if self.training_positions_ is None else {"training_positions": self.training_positions_}),
@@ -387,6 +467,9 @@ class Localizer:
         # format version 4: rotation-pooled features (older readers would silently skip the pooling)
         if self.rotation_pooling_ > 1:
             version = 4
+        # format version 5: an appearance signature beside the slow features
+        if self.n_signature_:
+            version = 5
         return save_model(path, "Localizer", state, version=version)
 
     @classmethod
@@ -396,7 +479,13 @@ class Localizer:
             rows = state.get("rows")
             params = dict(state["params"])
             params.setdefault("rotation_pooling", None)  # files before format 4: no pooling
-            loc = cls(net, rows=None if rows is None else ImageRows.from_dict(rows), **params)
+            sig = state.get("signature")  # files before format 5: none
+            loc = cls(net, rows=None if rows is None else ImageRows.from_dict(rows), **params,
+                      signature=None if sig is None else sig["kind"])
+            loc.n_signature_ = 0 if sig is None else check_int(sig["n_values"], "signature n_values")
+            if sig is not None and (loc._check_signature() is None
+                                    or int(sig["n_coefficients"]) != SIGNATURE_COEFFICIENTS):
+                raise ValueError(f"unsupported signature {sig!r}")
             loc.rotation_pooling_ = check_int(state.get("rotation_pooling", 1), "rotation_pooling")
             loc.readout = state.get("readout_param", "quadratic")
             if "readout" in state:  # model format 2 and later: any readout
@@ -424,7 +513,8 @@ class Localizer:
         # One probe prediction: the readout's arrays must fit each other and
         # the feature count, and give one finite position per image.
         try:
-            probe = loc.predict_features(np.zeros((1, loc.n_features_in_)))
+            probe = loc.predict_features(np.zeros((1, loc.n_features_in_)), signatures=(
+                np.zeros((1, loc.n_signature_)) if loc.n_signature_ else None))
         except ValueError as exc:
             raise ValueError(f"invalid Localizer model state: the readout does not fit its features ({exc})") from None
         if probe.shape != (1, 2) or not np.isfinite(probe).all():

@@ -14,6 +14,7 @@ import numpy as np
 
 from .._checks import as_matrix, check_same_length
 from .readouts import GPReadout, describe_spec, make_readout
+from .signature_readout import SignatureGPReadout
 
 
 def default_candidates(kinds: Sequence[str] = ("quadratic", "knn", "kernel"),
@@ -174,8 +175,13 @@ def _scores(cands: list[dict[str, Any]], F: np.ndarray, Y: np.ndarray, n_folds: 
 def select_auto_readout(features: Any, xy: Any, *, n_outputs: int | Sequence[int] | None = None,
                         n_folds: int = AUTO_FOLDS, block: int | None = AUTO_BLOCK,
                         tolerance: float = AUTO_TOLERANCE,
-                        max_cv_samples: int | None = AUTO_MAX_CV_SAMPLES, gp: bool = True) -> ReadoutSelection:
+                        max_cv_samples: int | None = AUTO_MAX_CV_SAMPLES, gp: bool = True,
+                        n_signature: int = 0) -> ReadoutSelection:
     """The sfanav default readout (``"auto"``), chosen on the training run only.
+
+    With ``n_signature > 0`` the last ``n_signature`` columns of ``features``
+    are an appearance signature (the sfanav default's Fourier signature) and
+    :func:`select_signature_readout` decides instead. Without:
 
     1. A Gaussian-process readout (:class:`GPReadout`) on the most slowest
        outputs offered (12, or ``max(n_outputs)``), its ARD hyperparameters
@@ -200,6 +206,8 @@ def select_auto_readout(features: Any, xy: Any, *, n_outputs: int | Sequence[int
     F = as_matrix(features, "features")
     Y = as_matrix(xy, "xy")
     check_same_length(F, Y, "features", "xy")
+    if n_signature:
+        return select_signature_readout(F, Y, n_signature, n_outputs=n_outputs)
     if not 0.0 <= float(tolerance) < 1.0:
         raise ValueError(f"tolerance must be in [0, 1), got {tolerance}")
     if n_outputs is None:
@@ -255,3 +263,49 @@ def _cv_scores(cands: list[dict[str, Any]], folds: list[tuple[np.ndarray, np.nda
                 errs.append(np.inf)
         scores[i] = float(np.mean(errs))
     return scores
+
+
+def select_signature_readout(features: Any, xy: Any, n_signature: int, *,
+                             n_outputs: int | Sequence[int] | None = None) -> ReadoutSelection:
+    """The default readout of slow features plus an appearance signature.
+
+    ``features`` (N, m + n_signature): the slow features, slowest first, then
+    the signature. Two :class:`SignatureGPReadout` models are fitted by
+    maximum marginal likelihood: the slow features (12, or ``max(n_outputs)``,
+    at most m) together with the signature, and the signature alone. They
+    are nested (the first has one length scale per slow feature more), so
+    the combination is taken unless its log marginal likelihood exceeds the
+    signature's by less than the Bayesian information criterion's price of
+    those length scales, ``0.5 * m' * ln(n)`` (n: the samples the
+    hyperparameters were fitted on). The choice needs no cross-validation.
+    Returns a :class:`ReadoutSelection` whose ``rule`` says why."""
+    F = as_matrix(features, "features")
+    Y = as_matrix(xy, "xy")
+    check_same_length(F, Y, "features", "xy")
+    q = int(n_signature)
+    m = F.shape[1] - q
+    if q < 1 or m < 0:
+        raise ValueError(f"n_signature must be in [1, {F.shape[1]}], got {n_signature}")
+    if n_outputs is None:
+        n = min(12, m)
+    else:
+        n = int(n_outputs) if np.isscalar(n_outputs) else max(int(v) for v in n_outputs)  # type: ignore[arg-type]
+        if not 0 <= n <= m:
+            raise ValueError(f"n_outputs {n} out of range: the features have {m} slow-feature columns")
+    alone = SignatureGPReadout(0, q).fit(F, Y)
+    spec_alone = {"kind": "gp-signature", "n_outputs": 0, "n_signature": q}
+    if n == 0:
+        return ReadoutSelection(spec_alone, alone, rule="the signature alone (no slow features offered)")
+    both = SignatureGPReadout(n, q).fit(F, Y)
+    n_fit = min(len(F), both.max_fit)
+    price = 0.5 * n * np.log(n_fit)
+    gain = both.log_marginal_likelihood_ - alone.log_marginal_likelihood_
+    cands = [{"kind": "gp-signature", "n_outputs": n, "n_signature": q}, spec_alone]
+    scores = np.array([-both.log_marginal_likelihood_, -alone.log_marginal_likelihood_])
+    if gain > price:
+        return ReadoutSelection(cands[0], both, cands, scores,
+                                rule=(f"slow features and signature: log marginal likelihood {gain:.1f} above the "
+                                      f"signature alone's, more than the BIC price {price:.1f} of {n} length scales"))
+    return ReadoutSelection(spec_alone, alone, cands, scores,
+                            rule=(f"the signature alone: {n} slow features raise the log marginal likelihood by "
+                                  f"{gain:.1f}, not more than their BIC price {price:.1f}"))

@@ -22,6 +22,7 @@ import numpy as np
 
 from .._checks import NotFittedError, as_matrix, check_same_length
 from .quadratic import QuadraticRegression
+from .signature_readout import SignatureGPReadout
 
 try:  # loaded here, before any threadpool_limits: a BLAS library loaded inside one escapes the limit
     from scipy.linalg import cho_factor, cho_solve
@@ -229,7 +230,7 @@ def readout_from_state(state: dict[str, Any]) -> Any:
     try:
         kind = state["spec"]["kind"]
         cls = {"quadratic": QuadraticRegression, "knn": KNNReadout, "kernel": KernelRidgeReadout,
-               "gp": GPReadout}[kind]
+               "gp": GPReadout, "gp-signature": SignatureGPReadout}[kind]
         return cls.from_state(state["state"])
     except (KeyError, TypeError) as exc:
         raise ValueError(f"invalid readout state: {exc}") from None
@@ -239,7 +240,10 @@ def make_readout(spec: dict[str, Any]) -> Any:
     """A readout from a spec: ``{"kind": "quadratic", "n_outputs", "ridge"}``,
     ``{"kind": "knn", "n_outputs", "k", "weights"}`` or ``{"kind": "kernel",
     "n_outputs", "gamma", "alpha"}`` or ``{"kind": "gp", "n_outputs"}`` (plus
-    ``length_scale`` and ``noise`` to fix its hyperparameters)."""
+    ``length_scale`` and ``noise`` to fix its hyperparameters) or
+    ``{"kind": "gp-signature", "n_outputs", "n_signature"}`` (slow features
+    and an appearance signature,
+    :class:`sfanav.localization.SignatureGPReadout`)."""
     s = dict(spec)
     kind = s.pop("kind", None)
     if kind == "quadratic":
@@ -250,10 +254,13 @@ def make_readout(spec: dict[str, Any]) -> Any:
         return KernelRidgeReadout(**s)
     if kind == "gp":
         return GPReadout(**s)
-    raise ValueError(f"unknown readout kind {kind!r}; use 'quadratic', 'knn', 'kernel' or 'gp'")
+    if kind == "gp-signature":
+        return SignatureGPReadout(**s)
+    raise ValueError(f"unknown readout kind {kind!r}; use 'quadratic', 'knn', 'kernel', 'gp' or 'gp-signature'")
 
 
-_KEY_ORDER = ("n_outputs", "k", "weights", "gamma", "alpha", "ridge", "degree", "noise", "length_scale",
+
+_KEY_ORDER = ("n_outputs", "n_signature", "k", "weights", "gamma", "alpha", "ridge", "degree", "noise", "length_scale",
               "max_train")
 
 

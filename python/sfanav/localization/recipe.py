@@ -5,8 +5,9 @@ and rotation pooling.
 * **thesis** (a ``thesis-*`` preset): all image rows, a quadratic regression
   of the 8 slowest outputs, no rotation pooling;
 * **sfanav default** (the ``sfanav-default`` preset): the horizon band
-  (elevation -10 .. +20 degrees, :func:`default_rows`), the ``"auto"``
-  readout on the slowest outputs, and rotation pooling over 8 rotations.
+  (elevation -10 .. +20 degrees, :func:`default_rows`), rotation pooling
+  over 8 rotations, and the ``"auto"`` readout of the slowest outputs
+  together with the panorama's Fourier signature (:data:`SIGNATURE`).
 
 :func:`recipe_for` resolves a recipe from what the user named (a preset, a
 config file, explicit overrides); ``sfanav train``,
@@ -33,6 +34,12 @@ CAMERA_ELEVATION = (-30.0, 20.0)
 """Elevation range (degrees) of the simulator's and the thesis's panoramas, assumed when a dataset does not say."""
 ROTATION_POOLING = 8
 """Rotations the features are averaged over under ``rotation_pooling="auto"`` with a non-quadratic readout."""
+SIGNATURE = "fourier"
+"""The appearance signature the sfanav default reads beside the slow features."""
+SIGNATURES = ("fourier",)
+"""The appearance signatures a :class:`sfanav.Localizer` can read."""
+SIGNATURE_COEFFICIENTS = 15
+"""Fourier coefficients per image row and channel of the ``"fourier"`` signature (as the Fourier-signature peer)."""
 THESIS_N_OUTPUTS = 8
 """Slow features the thesis's quadratic regression reads."""
 
@@ -56,6 +63,8 @@ class Recipe:
         Slow features the readout reads (None: the readout's choice).
     rotation_pooling : "auto", int or None
         As :class:`sfanav.Localizer` takes it; :func:`pooling_for` resolves it.
+    signature : "fourier" or None
+        The appearance signature read beside the slow features.
     """
 
     name: str
@@ -63,6 +72,7 @@ class Recipe:
     rows: str
     n_outputs: int | None
     rotation_pooling: Any = "auto"
+    signature: str | None = None
 
     def image_rows(self, camera_elevation: Sequence[float] | None = None) -> ImageRows | None:
         """The :class:`ImageRows` step for panoramas whose rows span
@@ -78,14 +88,17 @@ class Recipe:
 
 
 def recipe_for(preset: str | None = None, *, config: bool = False, readout: Any = None, rows: str | None = None,
-               n_outputs: int | None = None, rotation_pooling: Any = None) -> Recipe:
+               n_outputs: int | None = None, rotation_pooling: Any = None, signature: Any = "auto") -> Recipe:
     """The recipe for a network chosen by ``preset`` (a name) or by a config
     file (``config=True``), with the user's explicit choices on top (None:
     the recipe decides). A ``thesis-*`` preset gets the thesis's recipe (all
     rows, quadratic regression of 8 outputs, no pooling); the sfanav default
     (no preset and no config, or the ``sfanav-default`` preset) the horizon
     band, the ``"auto"`` readout and pooling; a config file the ``"auto"``
-    readout on all rows."""
+    readout on all rows. ``signature``: ``"auto"`` reads the Fourier
+    signature beside the slow features with the ``"auto"`` readout of the
+    sfanav default (:data:`SIGNATURE`), none otherwise; None or
+    ``"fourier"`` as given."""
     if rows is not None and rows not in ROWS:
         raise ValueError(f"rows must be one of {ROWS}, got {rows!r}")
     if n_outputs is not None:
@@ -96,13 +109,17 @@ def recipe_for(preset: str | None = None, *, config: bool = False, readout: Any 
     rows = rows or ("band" if default else "all")
     if n_outputs is None and readout == "quadratic":
         n_outputs = THESIS_N_OUTPUTS
-    if default and readout == READOUT and rows == "band":
+    if isinstance(signature, str) and signature == "auto":
+        signature = SIGNATURE if default and readout == READOUT else None
+    elif signature is not None and signature not in SIGNATURES:
+        raise ValueError(f"signature must be 'auto', one of {SIGNATURES} or None, got {signature!r}")
+    if default and readout == READOUT and rows == "band" and signature == SIGNATURE:
         name = "sfanav default"
     elif thesis and readout == "quadratic" and rows == "all":
         name = "thesis"
     else:
         name = "custom"
-    return Recipe(name, readout, rows, n_outputs, "auto" if rotation_pooling is None else rotation_pooling)
+    return Recipe(name, readout, rows, n_outputs, "auto" if rotation_pooling is None else rotation_pooling, signature)
 
 
 def pooling_for(readout: Any, rotation_pooling: Any, *, has_network: bool = True) -> int:

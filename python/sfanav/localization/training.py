@@ -31,6 +31,7 @@ def fit_localizer(
     progress: bool = True,
     info: dict[str, Any] | None = None,
     rotation_pooling: int | str | None = "auto",
+    signature: str | None = None,
 ) -> Localizer:
     """Trains ``network`` on ``images`` (the training run, in temporal order)
     under simulated rotation and fits the readout of its slowest outputs to
@@ -45,10 +46,13 @@ def fit_localizer(
     :class:`sfanav.data.ImageRows` applied to the images before the
     network, in training and (stored in the localizer) at every query.
     ``rotation_pooling``: as :class:`Localizer` (``"auto"``: 8 rotations
-    unless the readout is the thesis's quadratic one). The
+    unless the readout is the thesis's quadratic one). ``signature``: as
+    :class:`Localizer` (``"fourier"``: the readout also reads the Fourier
+    signature of the images as given, before ``rows``). The
     returned localizer's ``info`` records preprocessing, rotation, training
     time (seconds: network) and readout selection time."""
     rotation = rotation or Rotation()
+    raw = images
     if rows is not None and not rows.identity:
         images = rows(images)
     else:
@@ -57,10 +61,12 @@ def fit_localizer(
     network.fit(images, rotation, progress=progress)
     fit_s = time.perf_counter() - t0
     check_n_outputs(n_outputs, network.n_outputs_)
-    loc = Localizer(network, n_outputs=n_outputs, readout=readout, rows=rows, rotation_pooling=rotation_pooling)
+    loc = Localizer(network, n_outputs=n_outputs, readout=readout, rows=rows, rotation_pooling=rotation_pooling,
+                    signature=signature)
     t1 = time.perf_counter()
     F = loc.transform_rows(images)
-    loc.fit_features(F, xy(F) if callable(xy) else xy)
+    G = loc.signatures(raw) if signature is not None else None
+    loc.fit_features(F, xy(F) if callable(xy) else xy, signatures=G)
     readout_s = time.perf_counter() - t1
     loc.info = dict(info or {})
     if prep is not None:
@@ -90,4 +96,5 @@ def train_default(images: Any, xy: Any, *, camera_elevation: Sequence[float] = C
     net = network if network is not None else default_network()
     return fit_localizer(net, np.asarray(images), np.asarray(xy, float), rotation=rotation or Rotation(5, 1.0),
                          readout=recipe.readout, rows=recipe.image_rows(camera_elevation), progress=progress,
+                         signature=recipe.signature,
                          info={**recipe.info(), **(info or {})})

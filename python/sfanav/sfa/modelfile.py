@@ -38,7 +38,7 @@ import numpy as np
 FORMAT = "sfanav-model"
 
 
-VERSION = 4  # the newest version this sfanav reads and writes (see docs/model-format.md)
+VERSION = 5  # the newest version this sfanav reads and writes (see docs/model-format.md)
 
 MAX_DEPTH = 64  # deepest nesting of the manifest's JSON tree
 

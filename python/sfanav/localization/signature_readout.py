@@ -1,0 +1,230 @@
+"""A Gaussian-process readout that reads the slow features and an appearance
+signature of the same image together.
+
+:class:`SignatureGPReadout` regresses position on two blocks of one feature
+row: the slowest outputs of the network (the first ``n_outputs`` columns)
+and an appearance signature (the last ``n_signature`` columns, e.g. the
+rotation-invariant Fourier signature of the panorama,
+:class:`sfanav.localization.FourierSignature`). Its kernel is the product
+
+    k(a, b) = exp(-sum_i (s_a,i - s_b,i)^2 / (2 l_i^2)) * exp(-|g_a - g_b|_1 / l_g)
+
+of an ARD squared-exponential kernel on the standardised slow features
+``s`` and a Laplacian kernel on the L1 distance between signatures ``g``
+(relative to the median distance between training signatures). A product
+of positive-definite kernels is positive definite, and it contains both
+parts: a slow feature whose length scale grows to its bound drops out, and
+so does the signature when ``l_g`` does. All hyperparameters (the length
+scales, ``l_g`` and the noise-to-signal ratio) maximise the log marginal
+likelihood of the training run with the signal variance profiled out
+(Rasmussen and Williams 2006, ch. 5), by L-BFGS-B with analytic gradients.
+Why a product of these two kernels: docs/gardens.md (gardens suite).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from .._checks import NotFittedError, as_matrix, check_int, check_same_length
+
+try:  # loaded before any threadpool limit (see readouts.py)
+    from scipy.linalg import cho_factor, cho_solve
+    from scipy.optimize import minimize
+    from scipy.spatial.distance import cdist
+except ImportError:  # pragma: no cover - scipy is a dependency
+    cho_factor = cho_solve = minimize = cdist = None
+
+_LOG_BOUNDS = {"length": (np.log(1e-2), np.log(1e3)), "signature": (np.log(1e-3), np.log(1e4)),
+               "noise": (np.log(1e-8), np.log(1.0))}
+
+
+def _even(n: int, m: int) -> np.ndarray:
+    return np.unique(np.linspace(0, n - 1, min(n, m)).round().astype(int))
+
+
+class SignatureGPReadout:
+    """GP regression of position on slow features and an appearance signature
+    (product kernel, type-II maximum likelihood).
+
+    Parameters
+    ----------
+    n_outputs : int
+        Slow features read: the first ``n_outputs`` columns of the features
+        (0: the signature alone).
+    n_signature : int
+        Length of the signature: the last ``n_signature`` columns.
+    max_fit : int, default 800
+        Evenly spaced training samples the hyperparameters are fitted on
+        (each step of the optimiser is cubic in their number).
+    max_train : int, default 3000
+        Evenly spaced training samples the posterior mean uses.
+
+    Fitted attributes: ``length_scale_`` (n_outputs,), ``signature_scale_``
+    (``l_g``, in units of ``distance_unit_``, the median L1 distance between
+    training signatures), ``noise_`` (noise / signal variance),
+    ``log_marginal_likelihood_``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> rng = np.random.default_rng(0)
+    >>> xy = rng.uniform(-1, 1, (200, 2))
+    >>> F = np.hstack([xy + 0.01 * rng.normal(size=(200, 2)), np.abs(xy) + 1])  # 2 slow, 2 signature
+    >>> r = SignatureGPReadout(n_outputs=2, n_signature=2).fit(F, xy)
+    >>> bool(np.abs(r.predict(F[:5]) - xy[:5]).max() < 0.1)
+    True
+    """
+
+    def __init__(self, n_outputs: int = 12, n_signature: int = 1, max_fit: int = 800, max_train: int = 3000) -> None:
+        self.n_outputs = check_int(n_outputs, "n_outputs", minimum=0)
+        self.n_signature = check_int(n_signature, "n_signature", minimum=1)
+        self.max_fit = check_int(max_fit, "max_fit", minimum=3)
+        self.max_train = check_int(max_train, "max_train", minimum=3)
+
+    def __repr__(self) -> str:
+        return f"SignatureGPReadout(n_outputs={self.n_outputs}, n_signature={self.n_signature})"
+
+    # ------------------------------------------------------------ blocks
+    def _split(self, features: Any, name: str = "features") -> tuple[np.ndarray, np.ndarray]:
+        X = as_matrix(features, name)
+        need = self.n_outputs + self.n_signature
+        if X.shape[1] < need:
+            raise ValueError(f"{name} have {X.shape[1]} columns; this readout reads {self.n_outputs} slow features "
+                             f"and a signature of {self.n_signature} values ({need} columns)")
+        return X[:, : self.n_outputs], X[:, X.shape[1] - self.n_signature :]
+
+    @staticmethod
+    def _sq_dists(A: np.ndarray, B: np.ndarray) -> np.ndarray:
+        if A.shape[1] == 0:
+            return np.zeros((len(A), len(B)))
+        d2 = (A**2).sum(axis=1)[:, None] + (B**2).sum(axis=1)[None, :] - 2.0 * A @ B.T
+        return np.maximum(d2, 0.0)
+
+    def _l1(self, A: np.ndarray, B: np.ndarray, chunk: int = 256) -> np.ndarray:
+        out = np.empty((len(A), len(B)))
+        for s in range(0, len(A), chunk):
+            out[s : s + chunk] = cdist(A[s : s + chunk], B, "cityblock")
+        return out
+
+    # ------------------------------------------------------------ likelihood
+    def _neg_lml(self, theta: np.ndarray, S: np.ndarray, Dg: np.ndarray, Y: np.ndarray) -> tuple[float, np.ndarray]:
+        """Negative profiled log marginal likelihood and its gradient in
+        ``theta = [log l_1..l_m, log l_g, log noise]``."""
+        m = S.shape[1]
+        ls, lg, tau = np.exp(theta[:m]), np.exp(theta[m]), np.exp(theta[m + 1])
+        Z = S / ls
+        K = np.exp(-0.5 * self._sq_dists(Z, Z) - Dg / lg)
+        A = K.copy()
+        A[np.diag_indices_from(A)] += tau
+        n, d = Y.shape
+        try:
+            c = cho_factor(A, lower=True, check_finite=False)
+        except np.linalg.LinAlgError:
+            return 1e25, np.zeros_like(theta)
+        alpha = cho_solve(c, Y, check_finite=False)
+        fit = float((Y * alpha).sum())
+        if not fit > 0:
+            return 1e25, np.zeros_like(theta)
+        lml = -0.5 * n * d * np.log(fit / (n * d)) - d * float(np.log(np.diag(c[0])).sum())
+        W = cho_solve(c, np.eye(n), check_finite=False)
+        M = (0.5 * n * d / fit) * (alpha @ alpha.T) - 0.5 * d * W  # dL/dA
+        MK = M * K
+        grad = np.empty_like(theta)
+        for i in range(m):
+            grad[i] = float((MK * (Z[:, i : i + 1] - Z[:, i][None, :]) ** 2).sum())
+        grad[m] = float((MK * Dg).sum()) / lg
+        grad[m + 1] = tau * float(np.trace(M))
+        return -lml, -grad
+
+    def _learn(self, S: np.ndarray, Dg: np.ndarray, Y: np.ndarray) -> tuple[np.ndarray, float, float, float]:
+        m = S.shape[1]
+        bounds = [_LOG_BOUNDS["length"]] * m + [_LOG_BOUNDS["signature"], _LOG_BOUNDS["noise"]]
+        best = None
+        # two starts: the slow features in charge (short l_i, long l_g) and the signature in charge
+        for l0, g0 in ((1.0, 10.0), (10.0, 1.0)):
+            theta0 = np.r_[np.full(m, np.log(l0 * max(1.0, np.sqrt(m / 4)))), np.log(g0), np.log(1e-3)]
+            res = minimize(self._neg_lml, theta0, args=(S, Dg, Y), jac=True, method="L-BFGS-B", bounds=bounds,
+                           options={"maxiter": 200})
+            if best is None or res.fun < best.fun:
+                best = res
+        th = best.x
+        return np.exp(th[:m]), float(np.exp(th[m])), float(np.exp(th[m + 1])), float(-best.fun)
+
+    # ------------------------------------------------------------ fit / predict
+    def fit(self, features: Any, xy: Any) -> "SignatureGPReadout":
+        """Fits on features (N, >= n_outputs + n_signature) and positions (N, 2)."""
+        S, G = self._split(features)
+        Y = as_matrix(xy, "xy")
+        check_same_length(S, Y, "features", "xy")
+        if len(S) < 3:
+            raise ValueError(f"a GP readout needs at least 3 training samples, got {len(S)}")
+        self.mean_ = S.mean(axis=0)
+        sd = S.std(axis=0)
+        self.scale_ = np.where(sd > 0, sd, 1.0)
+        Ss = (S - self.mean_) / self.scale_
+        G = G.astype(np.float64)
+        fit_idx = _even(len(S), self.max_fit)
+        sub = G[_even(len(G), 300)]
+        dg = self._l1(sub, sub)[np.triu_indices(len(sub), 1)]
+        unit = float(np.median(dg)) if dg.size else 0.0
+        self.distance_unit_ = unit if unit > 0 else 1.0
+        y_mean, y_sd = Y.mean(axis=0), Y.std(axis=0)
+        y_sd = np.where(y_sd > 0, y_sd, 1.0)
+        Yf = (Y[fit_idx] - y_mean) / y_sd
+        Dg = self._l1(G[fit_idx], G[fit_idx]) / self.distance_unit_
+        ls, lg, tau, lml = self._learn(Ss[fit_idx], Dg, Yf)
+        self.length_scale_, self.signature_scale_, self.noise_, self.log_marginal_likelihood_ = ls, lg, tau, lml
+        keep = _even(len(S), self.max_train)
+        self.X_, self.G_ = Ss[keep] / ls, G[keep].astype(np.float32)
+        K = np.exp(-0.5 * self._sq_dists(self.X_, self.X_) - self._l1(G[keep], G[keep]) / (self.distance_unit_ * lg))
+        K[np.diag_indices_from(K)] += max(tau, 1e-10)
+        self.y_mean_ = Y[keep].mean(axis=0)
+        self.dual_ = cho_solve(cho_factor(K, overwrite_a=True, check_finite=False), Y[keep] - self.y_mean_,
+                               check_finite=False)
+        return self
+
+    def predict(self, features: Any, chunk: int = 1024) -> np.ndarray:
+        """Positions (N, 2) of features (N, >= n_outputs + n_signature)."""
+        if not hasattr(self, "dual_"):
+            raise NotFittedError("this SignatureGPReadout is not fitted; call fit first")
+        S, G = self._split(features)
+        Q = (S - self.mean_) / self.scale_ / self.length_scale_
+        Gt = self.G_.astype(np.float64)
+        out = np.empty((len(Q), self.dual_.shape[1]))
+        for s in range(0, len(Q), chunk):
+            K = np.exp(-0.5 * self._sq_dists(Q[s : s + chunk], self.X_)
+                       - self._l1(G[s : s + chunk].astype(np.float64), Gt) / (self.distance_unit_ * self.signature_scale_))
+            out[s : s + chunk] = K @ self.dual_ + self.y_mean_
+        return out
+
+    # ------------------------------------------------------------ state
+    def get_state(self) -> dict[str, Any]:
+        if not hasattr(self, "dual_"):
+            raise NotFittedError("this SignatureGPReadout is not fitted; call fit first")
+        return {"params": {"n_outputs": self.n_outputs, "n_signature": self.n_signature, "max_fit": self.max_fit,
+                           "max_train": self.max_train},
+                "mean": self.mean_, "scale": self.scale_, "X": self.X_, "G": self.G_, "dual": self.dual_,
+                "y_mean": self.y_mean_, "length_scale": self.length_scale_,
+                "signature_scale": float(self.signature_scale_), "distance_unit": float(self.distance_unit_),
+                "noise": float(self.noise_)}
+
+    @classmethod
+    def from_state(cls, state: dict[str, Any]) -> "SignatureGPReadout":
+        r = cls(**state["params"])
+        r.mean_, r.scale_ = np.asarray(state["mean"], float), np.asarray(state["scale"], float)
+        r.X_, r.G_ = np.asarray(state["X"], float), np.asarray(state["G"], np.float32)
+        r.dual_, r.y_mean_ = np.asarray(state["dual"], float), np.asarray(state["y_mean"], float)
+        r.length_scale_ = np.asarray(state["length_scale"], float)
+        r.signature_scale_, r.distance_unit_ = float(state["signature_scale"]), float(state["distance_unit"])
+        r.noise_, r.log_marginal_likelihood_ = float(state["noise"]), None
+        m, q = r.n_outputs, r.n_signature
+        if (r.X_.shape[1:] != (m,) or r.G_.shape != (len(r.X_), q) or r.dual_.ndim != 2
+                or len(r.dual_) != len(r.X_) or r.mean_.shape != (m,) or r.scale_.shape != (m,)
+                or r.length_scale_.shape != (m,) or r.y_mean_.shape != (r.dual_.shape[1],)):
+            raise ValueError("invalid SignatureGPReadout state: inconsistent array shapes")
+        if not (np.all(r.scale_ > 0) and np.all(r.length_scale_ > 0) and r.signature_scale_ > 0
+                and r.distance_unit_ > 0 and r.noise_ >= 0):
+            raise ValueError("invalid SignatureGPReadout state: scales must be positive")
+        return r
