@@ -17,6 +17,9 @@ random walk). For every garden, training run and test run it measures
   regression of the 8 slowest outputs),
 * the peers: **perfect memory** (rotational image difference) and the
   **Fourier signature**'s nearest neighbour, on the raw panoramas,
+* the default's two parts on the default's own network: **slow features
+  only** (the GP readout of the pooled slow features, the default before
+  it read the signature) and **signature only** (the signature's GP),
 
 as MAE per axis (% of the test run's range), MED and the 95th percentile of
 the error (m), with the bytes each stores per training place and its query
@@ -41,6 +44,7 @@ from ..localization import baselines
 from ..localization.error_metrics import localization_metrics
 from ..localization.evaluation import coordinate_range
 from ..localization.localizer import Localizer
+from ..localization.signature_readout import SignatureGPReadout
 from ..sfa.network import Network, Rotation
 from . import ExperimentResult, register
 from .localization import progress_log, simulated, tiny_config
@@ -48,6 +52,9 @@ from .localization import progress_log, simulated, tiny_config
 TRAIN_RUNS = ("train-grid", "train-cross")
 TEST_RUNS = ("test-grid", "test-walk")
 METHODS = ("sfanav default", "thesis config", "perfect memory", "Fourier signature")
+ABLATIONS = ("slow features only", "signature only")
+"""The default's two parts on its own network: the slow features' GP readout (the default before the
+signature), and the signature's GP alone."""
 PEERS = ("perfect memory", "Fourier signature")
 RATIO_METRICS = ("MAE x (%)", "MAE y (%)", "MED (m)", "p95 (m)")
 TARGET_WORST, TARGET_MEDIAN = 0.9, 0.7  # ratio default / best peer (issue: worst case and median)
@@ -76,6 +83,17 @@ def _bytes_per_place(loc: Localizer, n_train: int) -> float:
     state = loc.regression_.get_state()
     total = sum(v.nbytes for v in state.values() if isinstance(v, np.ndarray) and v.ndim >= 1 and len(v) == n_train)
     return total / n_train
+
+
+class _SignatureOnly:
+    """The signature's GP readout as a localizer of images."""
+
+    def __init__(self, readout: SignatureGPReadout, loc: Localizer) -> None:
+        self.readout, self.loc = readout, loc
+        self.bytes_per_place_ = float(readout.G_[0].nbytes + readout.dual_[0].nbytes)
+
+    def predict(self, images: np.ndarray) -> np.ndarray:
+        return self.readout.predict(self.loc.signatures(images))
 
 
 def _timed_predict(model: Any, X: np.ndarray) -> tuple[np.ndarray, float]:
@@ -109,13 +127,18 @@ def run_garden(out: Path, name: str, seed: int, *, quick: bool, progress: bool,
     res: dict[str, Any] = {}
     for tr in TRAIN_RUNS:
         X_tr, xy_tr = load_run(ds.select(run=tr), prep)
-        per: dict[str, dict[str, Any]] = {m: {} for m in METHODS}
+        per: dict[str, dict[str, Any]] = {m: {} for m in METHODS + ABLATIONS}
         models: dict[str, Any] = {}
         t0 = time.perf_counter()
         shape = X_tr.shape[1:]
         net = Network(tiny_config(shape[1], shape[0], shape[2], out=12)) if quick else default_network()
-        models["sfanav default"] = train_default(X_tr, xy_tr, camera_elevation=elev, network=net)
+        loc = models["sfanav default"] = train_default(X_tr, xy_tr, camera_elevation=elev, network=net)
         t_default = time.perf_counter() - t0
+        F_tr, G_tr = loc.features(X_tr), loc.signatures(X_tr)
+        slow = Localizer(loc.network, rows=loc.rows).fit_features(F_tr, xy_tr)
+        sig = SignatureGPReadout(0, G_tr.shape[1]).fit(G_tr, xy_tr)
+        models["slow features only"] = slow
+        models["signature only"] = _SignatureOnly(sig, loc)
         t0 = time.perf_counter()
         tnet = (Network(tiny_config(shape[1], shape[0], shape[2], out=8)) if quick
                 else Network.from_preset("thesis-5.1", precision="mixed"))
@@ -193,13 +216,13 @@ def plot_ratios(table: dict[str, dict[str, dict[str, float]]], path: Path) -> Pa
 
 def _markdown(results: dict[str, dict[str, Any]], table: dict[str, dict[str, dict[str, float]]]) -> str:
     lines = [("| garden | training / test | sfanav default MAE x / y %, MED, p95 | thesis config | perfect memory | "
-              "Fourier signature | ratio default / best peer (MAE x, MAE y, MED, p95) |"),
-             "|---|---|---|---|---|---|---|"]
+              "Fourier signature | slow features only | signature only | ratio default / best peer (MAE x, MAE y, MED, p95) |"),
+             "|---|---|---|---|---|---|---|---|---|"]
     for g, res in results.items():
         for tr, r in res.items():
             for te in TEST_RUNS:
                 cells = []
-                for meth in METHODS:
+                for meth in METHODS + ABLATIONS:
                     v = r["methods"][meth][te]
                     cells.append(f"{v['MAE x (%)']:.2f} / {v['MAE y (%)']:.2f}, {v['MED (m)']:.3f}, {v['p95 (m)']:.2f}")
                 rt = table[g][f"{tr} / {te}"]
@@ -226,7 +249,7 @@ def _exp_suite(out: Path, *, quick: bool, seed: int, progress: bool) -> Experime
     rows: list[dict[str, Any]] = []
     for g, res in results.items():
         for tr, r in res.items():
-            for meth in METHODS:
+            for meth in METHODS + ABLATIONS:
                 for te in TEST_RUNS:
                     for k, v in r["methods"][meth][te].items():
                         rows.append({"metric": f"{k} [{g}: {tr} / {te}: {meth}]", "thesis": None, "sfanav": v,
