@@ -354,13 +354,13 @@ def test_cli_default_train_localize_round_trip(tmp_path, capsys):
     model = tmp_path / "m.sfa"
     assert cli.main(["train", "--dataset", str(ds.root), "--out", str(model), "--no-progress"]) == 0
     out = capsys.readouterr().out
-    assert "readout gp(" in out or "readout kernel(" in out or "readout knn(" in out
+    assert "readout gp-signature(" in out  # the slow features with the Fourier signature
     assert "on features pooled over 8 rotations" in out
     loc = sfanav.load(model)
     assert loc.readout == "auto" and loc.rows.band == (-10.0, 20.0) and loc.info["configuration"] == "sfanav default"
     kind, state, manifest = read_model(model)
-    assert manifest["version"] == 4 and loc.rotation_pooling_ == 8  # rotation-pooled features: format 4
-    assert state["readout"]["spec"]["kind"] in ("gp", "kernel", "knn")
+    assert manifest["version"] == 5 and loc.rotation_pooling_ == 8  # a signature beside pooled features: format 5
+    assert state["readout"]["spec"]["kind"] == "gp-signature" and loc.n_signature_ == 40 * 3 * 15
     assert cli.main(["localize", str(model), str(ds.root), "--run", "test", "--out", str(tmp_path / "p.csv"),
                      "--no-progress"]) == 0
     assert len((tmp_path / "p.csv").read_text().splitlines()) == 31
@@ -397,8 +397,6 @@ def test_gardens_experiment_has_the_default_row(tmp_path):
     assert free["loop closures kept"] >= 0 and free["training positions median error (m)"] >= 0
     row = res["control: sfanav default"]
     assert row["rotation pooling"] == 8 and res["control: sfanav default without rotation pooling"]["rotation pooling"] == 1
-    assert row["readout"].startswith(("kernel(", "knn(")) and row["numbers per image"] in (8, 12)
-    assert "blocked CV (blocks of" in row["readout rule"] and row["MAE x (%)"] > 0
-    diag = row["cv diagnostics"]
-    assert set(diag) == {f"cv {s} {k}" for s in ("5 contiguous", "10 contiguous", "10 blocks of 10")
-                         for k in ("kernel", "knn")}
+    # the slow features (or none) with the Fourier signature of the 8-row RGB panoramas (8 x 3 rows x 15)
+    assert row["readout"].startswith("gp-signature(") and row["numbers per image"] in (360, 372)
+    assert "BIC" in row["readout rule"] and row["MAE x (%)"] > 0 and "cv diagnostics" not in row

@@ -244,36 +244,40 @@ def _default_row(X_tr: np.ndarray, xy_tr: np.ndarray, X_te: np.ndarray, xy_te: n
     net = Network(tiny_config(shape[1], shape[0], shape[2], out=12)) if quick else default_network()
     loc = train_default(X_tr, xy_tr, camera_elevation=elev, network=net)
     F_tr, F_te = loc.features(X_tr), loc.features(X_te)
-    m = localization_metrics(loc.predict_features(F_te), xy_te, coordinate_range=crange)
+    G_tr, G_te = (loc.signatures(X_tr), loc.signatures(X_te)) if loc.n_signature_ else (None, None)
+    m = localization_metrics(loc.predict_features(F_te, signatures=G_te), xy_te, coordinate_range=crange)
     spec = loc.readout_spec_
-    rs = random_splits_errors(spec, F_te, xy_te, crange, n_repeats=n_repeats, seed=seed)
+    rs = random_splits_errors(spec, loc.readout_features(F_te, G_te), xy_te, crange, n_repeats=n_repeats, seed=seed)
     X_rows = X_tr if loc.rows is None else loc.rows(X_tr)
     R = loc.network.transform(X_rows, rotations=True)  # the network's outputs, before rotation pooling
     _, eta_phi = eta_values(R[:, :, :8])
     # ablation: the same network and rows without rotation pooling (readout chosen as for the default)
-    plain = Localizer(loc.network, readout="auto", rows=loc.rows, rotation_pooling=None).fit(X_tr, xy_tr)
+    plain = Localizer(loc.network, readout="auto", rows=loc.rows, rotation_pooling=None,
+                      signature=loc.signature).fit(X_tr, xy_tr)
     mp = localization_metrics(plain.predict(X_te), xy_te, coordinate_range=crange)
     row = {"MAE x (%)": m["mae_x_pct"], "MAE y (%)": m["mae_y_pct"], "MAE x (m)": m["mae_x"], "MAE y (m)": m["mae_y"],
            "MED (m)": m["med"], "MAE x (%) (random splits)": rs["mae_x_pct"],
            "MAE y (%) (random splits)": rs["mae_y_pct"], ETA: float(eta_phi.max()),
            "training (s)": float(loc.info["fit_seconds"]), "readout selection (s)": float(loc.info["readout_seconds"]),
-           "numbers per image": int(loc.n_outputs_), "readout": describe_spec(spec),
+           "numbers per image": int(loc.n_outputs_) + int(loc.n_signature_), "readout": describe_spec(spec),
            "rotation pooling": int(loc.rotation_pooling_),
            "readout rule": loc.selection_.rule if loc.selection_ is not None else "-"}
-    if loc.selection_ is not None:
+    if loc.selection_ is not None and not loc.n_signature_:  # the signature readout is chosen without CV
         row["cv diagnostics"] = _cv_diagnostics(F_tr, xy_tr, F_te, xy_te, crange, loc.selection_)
     log(f"  {tag} sfanav default: MAE {m['mae_x_pct']:.2f} / {m['mae_y_pct']:.2f} %, MED {m['med']:.3f} m "
         f"({describe_spec(spec)}, {loc.rotation_pooling_} rotations pooled; network {loc.info['fit_seconds']:.0f} s, "
         f"readout {loc.info['readout_seconds']:.0f} s)")
     plain_row = {"MAE x (%)": mp["mae_x_pct"], "MAE y (%)": mp["mae_y_pct"], "MAE x (m)": mp["mae_x"],
                  "MAE y (m)": mp["mae_y"], "MED (m)": mp["med"], ETA: float(eta_phi.max()),
-                 "numbers per image": int(plain.n_outputs_), "readout": plain.describe_readout(),
+                 "numbers per image": int(plain.n_outputs_) + int(plain.n_signature_),
+                 "readout": plain.describe_readout(),
                  "rotation pooling": 1}
     log(f"  {tag} sfanav default without rotation pooling: MAE {mp['mae_x_pct']:.2f} / {mp['mae_y_pct']:.2f} %, "
         f"MED {mp['med']:.3f} m ({plain.describe_readout()})")
     free_row = None
     if odometry is not None and np.isfinite(odometry).all():
-        free_row = _no_ground_truth_row(loc, F_tr, F_te, X_tr, xy_tr, xy_te, odometry, crange, m["med"])
+        free_row = _no_ground_truth_row(loc, F_tr, F_te, X_tr, xy_tr, xy_te, odometry, crange, m["med"],
+                                        G_tr=G_tr, G_te=G_te)
         log(f"  {tag} sfanav default, no ground truth: MAE {free_row['MAE x (%)']:.2f} / "
             f"{free_row['MAE y (%)']:.2f} %, MED {free_row['MED (m)']:.3f} m (ratio "
             f"{free_row['MED ratio no ground truth / ground truth']:.2f}; training positions "
@@ -283,7 +287,8 @@ def _default_row(X_tr: np.ndarray, xy_tr: np.ndarray, X_te: np.ndarray, xy_te: n
 
 def _no_ground_truth_row(loc: Any, F_tr: np.ndarray, F_te: np.ndarray, X_tr: np.ndarray, xy_tr: np.ndarray,
                          xy_te: np.ndarray, odometry: np.ndarray, crange: np.ndarray,
-                         supervised_med: float) -> dict[str, Any]:
+                         supervised_med: float, *, G_tr: np.ndarray | None = None,
+                         G_te: np.ndarray | None = None) -> dict[str, Any]:
     """The sfanav default's network with its readout fitted to the training
     run's positions learned from its images and odometry (pose graph), no
     ground truth; for evaluation only, the estimates are moved into the
@@ -297,9 +302,10 @@ def _no_ground_truth_row(loc: Any, F_tr: np.ndarray, F_te: np.ndarray, X_tr: np.
         warnings.simplefilter("ignore", OdometryMapWarning)
         lp = learn_positions(F_tr, odometry, images=X_tr)
     free = Localizer(loc.network, n_outputs=loc.n_outputs, readout=loc.readout, rows=loc.rows,
-                     rotation_pooling=loc.rotation_pooling).fit_features(F_tr, lp.positions)
-    world = align(free.predict_features(F_tr), xy_tr)
-    m = localization_metrics(world.apply(free.predict_features(F_te)), xy_te, coordinate_range=crange)
+                     rotation_pooling=loc.rotation_pooling, signature=loc.signature).fit_features(
+        F_tr, lp.positions, signatures=G_tr)
+    world = align(free.predict_features(F_tr, signatures=G_tr), xy_tr)
+    m = localization_metrics(world.apply(free.predict_features(F_te, signatures=G_te)), xy_te, coordinate_range=crange)
     target = align(lp.positions, xy_tr)
     return {"MAE x (%)": m["mae_x_pct"], "MAE y (%)": m["mae_y_pct"], "MAE x (m)": m["mae_x"],
             "MAE y (m)": m["mae_y"], "MED (m)": m["med"],

@@ -121,7 +121,8 @@ class Localizer:
         An appearance signature read beside the slow features: ``"fourier"``,
         the rotation-invariant Fourier signature of the panorama as it is
         given (every row and channel, :data:`SIGNATURE_COEFFICIENTS`
-        coefficients; :func:`sfanav.localization.fourier_signature`). The
+        coefficients, fewer on panoramas under 28 px wide;
+        :func:`sfanav.localization.fourier_signature`). The
         readout is then :class:`sfanav.localization.SignatureGPReadout`
         (``readout="auto"``: the slow features with the signature, or the
         signature alone, by marginal likelihood). The sfanav default sets it
@@ -261,7 +262,9 @@ class Localizer:
         net = self.trained_network() if self.network is not None else None
         a = np.asarray(images)
         one = net is not None and is_single_image(a, net.input_shape[2])
-        G = fourier_signature(a[None] if one else a, SIGNATURE_COEFFICIENTS)
+        batch = a[None] if one else a
+        width = batch.shape[2] if batch.ndim >= 3 else 0
+        G = fourier_signature(batch, max(1, min(SIGNATURE_COEFFICIENTS, width // 2 + 1)))
         return G[0] if one else G
 
     def readout_features(self, features: Any, signatures: Any = None) -> np.ndarray:

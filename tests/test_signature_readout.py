@@ -1,0 +1,164 @@
+"""The readout of slow features with an appearance signature (the sfanav
+default's): its likelihood's gradient, the choice between the combination
+and the signature alone, state round trips, the Localizer that carries it,
+and bad input."""
+
+import numpy as np
+import pytest
+from scipy.optimize import approx_fprime
+
+import sfanav
+from sfanav.localization import (
+    FourierSignature,
+    Localizer,
+    SignatureGPReadout,
+    fourier_signature,
+    make_readout,
+    readout_from_state,
+    readout_state,
+    select_auto_readout,
+)
+from sfanav.sfa.modelfile import read_model
+
+
+def _place_data(n, rng, slow_noise, sig_noise):
+    """Positions in a 4 x 4 m square; slow features = a smooth code of the
+    position plus noise; a 20-value 'signature' = another smooth code plus
+    noise."""
+    xy = rng.uniform(-2, 2, (n, 2))
+    slow = np.column_stack([xy[:, 0], xy[:, 1], np.sin(xy[:, 0]), np.cos(xy[:, 1])])
+    slow = slow + slow_noise * rng.normal(size=slow.shape)
+    centres = rng.uniform(-3, 3, (20, 2))
+    sig = 1.0 / (1.0 + np.hypot(*(xy[:, None, :] - centres[None]).transpose(2, 0, 1)))
+    sig = sig + sig_noise * rng.normal(size=sig.shape)
+    return xy, slow, sig
+
+
+def test_likelihood_gradient_matches_finite_differences():
+    rng = np.random.default_rng(1)
+    S, G, Y = rng.normal(size=(30, 3)), rng.uniform(size=(30, 6)), rng.normal(size=(30, 2))
+    r = SignatureGPReadout(3, 6)
+    Dg = r._l1(G, G)
+    for theta in (np.array([0.1, -0.2, 0.3, 0.5, np.log(1e-2)]), np.array([1.0, 0.5, -0.5, -1.0, np.log(1e-3)])):
+        value, grad = r._neg_lml(theta, S, Dg, Y)
+        num = approx_fprime(theta, lambda t: r._neg_lml(t, S, Dg, Y)[0], 1e-6)
+        np.testing.assert_allclose(grad, num, rtol=1e-4, atol=1e-4)
+
+
+def test_it_interpolates_a_smooth_map_and_beats_the_signature_nearest_neighbour():
+    rng = np.random.default_rng(0)
+    xy, slow, sig = _place_data(300, rng, 0.02, 0.0)
+    xt, st, gt = _place_data(100, np.random.default_rng(5), 0.02, 0.0)
+    # the same landmarks in both runs
+    xy2, slow2, sig2 = _place_data(400, np.random.default_rng(0), 0.02, 0.0)
+    xy, slow, sig, xt, st, gt = xy2[:300], slow2[:300], sig2[:300], xy2[300:], slow2[300:], sig2[300:]
+    r = SignatureGPReadout(4, 20).fit(np.hstack([slow, sig]), xy)
+    err = np.hypot(*(r.predict(np.hstack([st, gt])) - xt).T).mean()
+    nn = xy[np.argmin(np.abs(gt[:, None] - sig[None]).sum(axis=2), axis=1)]
+    err_nn = np.hypot(*(nn - xt).T).mean()
+    assert err < 0.05 and err < 0.5 * err_nn
+    assert r.length_scale_.shape == (4,) and r.signature_scale_ > 0 and r.noise_ > 0
+
+
+@pytest.mark.parametrize("informative", ["slow", "signature"])
+def test_the_choice_keeps_the_slow_features_only_where_they_code_position(informative):
+    data = _place_data(400, np.random.default_rng(2), 0.01 if informative == "slow" else 3.0,
+                       0.03 if informative == "slow" else 0.0)
+    xy, slow, sig = data
+    if informative == "signature":  # slow features that are pure noise
+        slow = np.random.default_rng(3).normal(size=slow.shape)
+    sel = select_auto_readout(np.hstack([slow, sig]), xy, n_signature=20)
+    assert sel.spec["kind"] == "gp-signature" and sel.spec["n_signature"] == 20
+    assert sel.spec["n_outputs"] == (4 if informative == "slow" else 0), sel.rule
+    assert "BIC" in sel.rule
+
+
+def test_state_round_trip_and_corrupt_state():
+    xy, slow, sig = _place_data(80, np.random.default_rng(4), 0.02, 0.0)
+    X = np.hstack([slow, sig])
+    r = make_readout({"kind": "gp-signature", "n_outputs": 4, "n_signature": 20}).fit(X, xy)
+    state = readout_state({"kind": "gp-signature", "n_outputs": 4, "n_signature": 20}, r)
+    back = readout_from_state(state)
+    np.testing.assert_allclose(back.predict(X[:7]), r.predict(X[:7]), rtol=1e-6, atol=1e-9)
+    bad = dict(state["state"], G=state["state"]["G"][:, :5])
+    with pytest.raises(ValueError, match="inconsistent"):
+        SignatureGPReadout.from_state(bad)
+    with pytest.raises(ValueError, match="positive"):
+        SignatureGPReadout.from_state(dict(state["state"], signature_scale=-1.0))
+
+
+def test_bad_input_is_refused():
+    xy, slow, sig = _place_data(20, np.random.default_rng(6), 0.02, 0.0)
+    with pytest.raises(ValueError, match="24 columns"):
+        SignatureGPReadout(12, 20).fit(np.hstack([slow, sig]), xy)
+    with pytest.raises(ValueError, match="same|length|rows"):
+        SignatureGPReadout(4, 20).fit(np.hstack([slow, sig]), xy[:10])
+    with pytest.raises(ValueError, match="at least 1"):
+        SignatureGPReadout(4, 0)
+    with pytest.raises(TypeError):
+        SignatureGPReadout(4.5, 3)
+    with pytest.raises(sfanav.NotFittedError):
+        SignatureGPReadout(4, 20).predict(np.hstack([slow, sig]))
+    with pytest.raises(ValueError, match="n_signature"):
+        select_auto_readout(slow, xy, n_signature=99)
+
+
+def test_fourier_signature_is_rotation_invariant_and_matches_the_peer():
+    rng = np.random.default_rng(7)
+    imgs = rng.integers(0, 255, (3, 6, 40, 3)).astype(np.uint8)
+    g = fourier_signature(imgs, 15)
+    assert g.shape == (3, 6 * 3 * 15) and g.dtype == np.float32
+    np.testing.assert_allclose(fourier_signature(np.roll(imgs, 13, axis=2), 15), g, rtol=1e-4, atol=1e-2)
+    peer = FourierSignature(15).fit(imgs, np.zeros((3, 2)))
+    np.testing.assert_allclose(peer.transform(imgs).reshape(3, -1), g, rtol=1e-6)
+    with pytest.raises(ValueError, match="n_coefficients"):
+        fourier_signature(imgs, 30)
+
+
+def _tiny_localizer(signature):
+    net = sfanav.Network({"input": {"width": 24, "height": 4, "channels": 1},
+                          "layers": [{"rf": [6, 4], "stride": [3, 4], "out": 6, "degree": 2},
+                                     {"rf": "full", "out": 4, "degree": 2}]})
+    rng = np.random.default_rng(8)
+    t = np.linspace(0, 6, 60)
+    xy = np.column_stack([np.cos(t), np.sin(2 * t)])
+    cols = np.arange(24)
+    imgs = np.stack([np.sin(cols[None, :] * 0.3 + x) * np.ones((4, 1)) + 0.5 * y * np.cos(cols[None, :] * 0.6)
+                     + 0.01 * rng.normal(size=(4, 24)) for x, y in xy]).astype(np.float64)
+    net.fit(imgs, sfanav.Rotation(step=3, window=1.0), progress=False)
+    return Localizer(net, signature=signature, rotation_pooling=None), imgs, xy
+
+
+def test_localizer_with_a_signature_saves_loads_and_checks_its_input(tmp_path):
+    loc, imgs, xy = _tiny_localizer("fourier")
+    loc.fit(imgs, xy)
+    assert loc.n_signature_ == 4 * 1 * 13  # rows x channels x coefficients (13 on 24-px panoramas)
+    assert loc.describe_readout().startswith("gp-signature(")
+    path = loc.save(tmp_path / "m.sfa")
+    kind, state, manifest = read_model(path)
+    assert manifest["version"] == 5 and state["signature"]["kind"] == "fourier"
+    back = sfanav.load(path)
+    np.testing.assert_allclose(back.predict(imgs[:5]), loc.predict(imgs[:5]), rtol=1e-6, atol=1e-9)
+    F = loc.features(imgs)
+    with pytest.raises(ValueError, match="signatures=localizer.signatures"):
+        loc.predict_features(F)
+    with pytest.raises(ValueError, match="signatures have"):
+        loc.predict_features(F, signatures=loc.signatures(imgs)[:, :5])
+    with pytest.raises(ValueError, match="signatures=localizer.signatures"):
+        Localizer(loc.network, signature="fourier").fit_features(F, xy)
+    with pytest.raises(ValueError, match="quadratic"):
+        Localizer(loc.network, signature="fourier", readout="quadratic").fit(imgs, xy)
+    with pytest.raises(ValueError, match="signature must be"):
+        Localizer(loc.network, signature="colour").fit(imgs, xy)
+    with pytest.raises(ValueError, match="reads none"):
+        Localizer(loc.network, rotation_pooling=None).fit_features(F, xy, signatures=loc.signatures(imgs))
+
+
+def test_a_localizer_without_a_signature_is_unchanged(tmp_path):
+    loc, imgs, xy = _tiny_localizer(None)
+    loc.fit(imgs, xy)
+    assert loc.n_signature_ == 0 and not loc.describe_readout().startswith("gp-signature")
+    _, state, manifest = read_model(loc.save(tmp_path / "m.sfa"))
+    assert "signature" not in state and manifest["version"] < 5
+    with pytest.raises(ValueError, match="reads no appearance signature"):
+        loc.signatures(imgs)
