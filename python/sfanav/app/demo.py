@@ -78,7 +78,7 @@ def run_demo(out: str | Path = "sfanav-demo", *, seed: int = 0, overwrite: bool 
     from ..localization.error_metrics import align, localization_metrics
     from ..localization.evaluation import coordinate_range
     from ..localization.localizer import Localizer
-    from ..localization.recipe import default_network, default_rows
+    from ..localization.recipe import SIGNATURE, default_network, default_rows
     from ..odometry.fusion import fuse, noise_for_localizer
     from ..odometry.self_supervision import fit_localizer_from_odometry
 
@@ -114,7 +114,7 @@ def run_demo(out: str | Path = "sfanav-demo", *, seed: int = 0, overwrite: bool 
     odo_train, odo_test = train.odometry, test.odometry
     rotation = Rotation(step=5)
     loc = fit_localizer_from_odometry(net, X_train, odo_train, rotation=rotation, rows=rows_sel, prep=prep,
-                                      progress=progress,
+                                      progress=progress, signature=SIGNATURE,
                                       info={"dataset": str(out / "dataset"), "run": "train",
                                             "network": "tiny" if quick else DEMO_NETWORK})
     timings["train"] = time.perf_counter() - t0
@@ -122,8 +122,9 @@ def run_demo(out: str | Path = "sfanav-demo", *, seed: int = 0, overwrite: bool 
         f"{loc.info['fit_seconds']:.1f} s; pose graph: {loc.info['loop closures kept']} loop closures)")
     # EKF noise from the training run's held-out estimates (no ground truth), as sfanav train stores it
     t0 = time.perf_counter()
-    F_train = loc.features(X_train)
-    loc.info["ekf_noise"] = noise_for_localizer(loc, F_train, loc.training_positions_, odo_train)
+    F_train, G_train = loc.features(X_train), loc.signatures(X_train)
+    loc.info["ekf_noise"] = noise_for_localizer(loc, loc.readout_features(F_train, G_train), loc.training_positions_,
+                                                odo_train)
     loc.save(out / "model.sfa")
     timings["ekf noise"] = time.perf_counter() - t0
 
@@ -154,7 +155,8 @@ def run_demo(out: str | Path = "sfanav-demo", *, seed: int = 0, overwrite: bool 
     # 5. reference rows: the same network on ground truth; the thesis's configuration
     t0 = time.perf_counter()
     sup = Localizer(loc.network, n_outputs=loc.n_outputs, readout=loc.readout, rows=loc.rows,
-                    rotation_pooling=loc.rotation_pooling).fit_features(F_train, xy_train)
+                    rotation_pooling=loc.rotation_pooling, signature=loc.signature).fit_features(
+        F_train, xy_train, signatures=G_train)
     sup.info.update({k: v for k, v in loc.info.items() if k in ("dataset", "run", "network", "prep", "rotation",
                                                                  "fit_seconds")})
     sup.info["supervision"] = "ground-truth"
