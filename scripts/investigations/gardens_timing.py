@@ -2,7 +2,7 @@
 configuration, back to back on the same training run (issue 7's budget:
 at most 2x the thesis configuration).
 
-    PYTHONPATH=python python3 scripts/investigations/gardens_timing.py DATASET_DIR [--repeats 2] [--only "thesis config" "sfanav default"]
+    PYTHONPATH=python python3 scripts/investigations/gardens_timing.py DATASET_DIR [--run train] [--repeats 2] [--only "thesis config" "sfanav default"]
 
 "sfanav default" is the whole default training (sfanav.localization.train_default:
 horizon band, the sfanav-default network, the "auto" readout's
@@ -28,9 +28,10 @@ def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("dataset")
     ap.add_argument("--repeats", type=int, default=2)
+    ap.add_argument("--run", default="train", help="the dataset's training run (suite gardens: train-grid, train-cross)")
     ap.add_argument("--only", nargs="*", default=None, help="configurations to time (default: all)")
     a = ap.parse_args()
-    ds = Dataset(a.dataset).select(run="train")
+    ds = Dataset(a.dataset).select(run=a.run)
     cam = ds.metadata["camera"]
     X, xy = load_run(ds, Preprocessing(int(cam["width"]), int(cam["height"]), False, False), log=lambda m: None)
     elev = tuple(cam.get("elevation_deg", (-30.0, 20.0)))
