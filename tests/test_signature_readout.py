@@ -162,3 +162,35 @@ def test_a_localizer_without_a_signature_is_unchanged(tmp_path):
     assert "signature" not in state and manifest["version"] < 5
     with pytest.raises(ValueError, match="reads no appearance signature"):
         loc.signatures(imgs)
+
+
+def test_the_recipe_reads_the_signature_with_the_default_only():
+    from sfanav.localization import recipe_for
+
+    assert recipe_for().signature == "fourier" and recipe_for().name == "sfanav default"
+    assert recipe_for("thesis-5.1").signature is None
+    assert recipe_for(config=True).signature is None
+    assert recipe_for(readout="quadratic").signature is None
+    off = recipe_for(signature=None)
+    assert off.signature is None and off.name == "custom"
+    with pytest.raises(ValueError, match="signature must be"):
+        recipe_for(signature="colour")
+
+
+def test_cli_train_without_a_signature_and_a_refused_combination(tmp_path, capsys):
+    from sfanav import sim
+    from sfanav.app import cli
+
+    ds = sim.simulate("realistic-garden", tmp_path / "d", 0, max_frames=30, camera=sim.PanoramicCamera(70, 8),
+                      progress=False)
+    model = tmp_path / "m.sfa"
+    assert cli.main(["train", "--dataset", str(ds.root), "--out", str(model), "--no-progress",
+                     "--signature", "none"]) == 0
+    assert "readout gp-signature(" not in capsys.readouterr().out
+    loc = sfanav.load(model)
+    assert loc.n_signature_ == 0 and loc.signature is None
+    with pytest.raises(SystemExit) as exc:
+        cli.main(["train", "--dataset", str(ds.root), "--out", str(tmp_path / "q.sfa"), "--no-progress",
+                  "--signature", "fourier", "--readout", "quadratic"])
+    assert exc.value.code == 2 and "--signature fourier needs the auto readout" in capsys.readouterr().err
+    assert not (tmp_path / "q.sfa").exists()

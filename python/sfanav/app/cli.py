@@ -231,9 +231,14 @@ def _add_train(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                    help="slowest outputs read out (default: 8 with the quadratic readout, the thesis's; "
                         "8 or 12 by cross-validation with auto)")
     p.add_argument("--readout", choices=("auto", "quadratic"), default=None,
-                   help="auto: a Gaussian process (ARD, marginal likelihood), or kernel ridge / kNN if >10%% better by blocked "
-                        "cross-validation on the training run "
-                        "(default); quadratic: the thesis's regression (default with thesis presets)")
+                   help="auto: a Gaussian process (ARD, marginal likelihood) on the slow features with the panorama's "
+                        "Fourier signature (the sfanav default; see --signature), or without a signature a GP, kernel "
+                        "ridge or kNN by blocked cross-validation on the training run; quadratic: the thesis's "
+                        "regression (default with thesis presets)")
+    p.add_argument("--signature", choices=("fourier", "none"), default=None,
+                   help="appearance signature read beside the slow features by the auto readout: fourier = the "
+                        "rotation-invariant Fourier signature of each panorama (default for the sfanav default; "
+                        "stores it for every training place, 7 KB for 350x40 RGB), none = the slow features alone")
     p.add_argument("--rows", choices=("all", "band"), default=None,
                    help="image rows: band = elevation -10..+20 deg only (default for the sfanav default "
                         "network), all = every row (default with --preset thesis-* or --config)")
@@ -297,8 +302,11 @@ def _run_train(args: argparse.Namespace) -> int:
     train = select_run(ds, run, args.camera)
     net = _network_from_args(args)
     check_n_outputs(args.n_outputs, net.n_outputs_, name="--n-outputs")
+    if args.signature == "fourier" and args.readout == "quadratic":
+        raise UsageError("--signature fourier needs the auto readout; the quadratic readout reads slow features only")
     recipe = recipe_for(args.preset, config=args.config is not None, readout=args.readout, rows=args.rows,
-                        n_outputs=args.n_outputs, rotation_pooling=args.rotation_pooling)
+                        n_outputs=args.n_outputs, rotation_pooling=args.rotation_pooling,
+                        signature={None: "auto", "none": None}.get(args.signature, args.signature))
     rows = None
     if recipe.rows == "band":
         elev = (ds.metadata.get("camera") or {}).get("elevation_deg") if isinstance(ds.metadata, dict) else None
