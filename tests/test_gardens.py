@@ -360,3 +360,11 @@ def test_gardens_suite_quick_reports_ratios_and_a_plot(tmp_path):
     err = pts["inner|train-grid|test-walk|sfanav default error (m)"]
     assert err.mean() == pytest.approx(d)
     assert len(pts["inner|train-grid|test-walk|distance to training (m)"]) == len(err)
+    # the default's two parts on its own network are measured beside it
+    for part in gardens_suite.ABLATIONS:
+        assert rows[f"MED (m) [{g}: train-grid / test-walk: {part}]"] > 0
+        assert len(pts[f"inner|train-grid|test-walk|{part} error (m)"]) == len(err)
+    # the default stores the signature per place (as the Fourier peer) plus its slow features and dual coefficients
+    assert (rows["bytes per place [inner: train-grid / test-walk: sfanav default]"]
+            >= rows["bytes per place [inner: train-grid / test-walk: signature only]"] > 0)
+    assert "query ms per image" in (tmp_path / "gardens-suite.md").read_text()

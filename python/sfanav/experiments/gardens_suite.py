@@ -229,6 +229,15 @@ def _markdown(results: dict[str, dict[str, Any]], table: dict[str, dict[str, dic
                 rt = table[g][f"{tr} / {te}"]
                 lines.append(f"| {g} | {tr} / {te} | " + " | ".join(cells) + " | "
                              + ", ".join(f"{rt[m]:.2f}" for m in RATIO_METRICS) + " |")
+    lines += ["", "| garden | training | bytes per place: " + " / ".join(METHODS) + " | query ms per image (test walk): "
+              + " / ".join(METHODS) + " | training s: sfanav default / thesis config |", "|---|---|---|---|---|"]
+    for g, res in results.items():
+        for tr, r in res.items():
+            walk = {m: r["methods"][m]["test-walk"] for m in METHODS}
+            t = r["training (s)"]
+            lines.append(f"| {g} | {tr} | " + " / ".join(f"{walk[m]['bytes per place']:.0f}" for m in METHODS) + " | "
+                         + " / ".join(f"{walk[m]['query ms']:.1f}" for m in METHODS)
+                         + f" | {t['sfanav default']:.1f} / {t['thesis config']:.1f} |")
     return "\n".join(lines)
 
 
