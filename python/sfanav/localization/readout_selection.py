@@ -292,11 +292,11 @@ def select_signature_readout(features: Any, xy: Any, n_signature: int, *,
         n = int(n_outputs) if np.isscalar(n_outputs) else max(int(v) for v in n_outputs)  # type: ignore[arg-type]
         if not 0 <= n <= m:
             raise ValueError(f"n_outputs {n} out of range: the features have {m} slow-feature columns")
-    alone = SignatureGPReadout(0, q).fit(F, Y)
     spec_alone = {"kind": "gp-signature", "n_outputs": 0, "n_signature": q}
     if n == 0:
-        return ReadoutSelection(spec_alone, alone, rule="the signature alone (no slow features offered)")
-    both = SignatureGPReadout(n, q).fit(F, Y)
+        return ReadoutSelection(spec_alone, SignatureGPReadout(0, q).fit(F, Y),
+                                rule="the signature alone (no slow features offered)")
+    both, alone = SignatureGPReadout.fit_nested(F, Y, n, q)
     n_fit = min(len(F), both.max_fit)
     price = 0.5 * n * np.log(n_fit)
     gain = both.log_marginal_likelihood_ - alone.log_marginal_likelihood_

@@ -158,23 +158,41 @@ class SignatureGPReadout:
     def fit(self, features: Any, xy: Any) -> "SignatureGPReadout":
         """Fits on features (N, >= n_outputs + n_signature) and positions (N, 2)."""
         S, G = self._split(features)
-        Y = as_matrix(xy, "xy")
-        check_same_length(S, Y, "features", "xy")
-        if len(S) < 3:
-            raise ValueError(f"a GP readout needs at least 3 training samples, got {len(S)}")
+        return self._fit_prepared(S, self._distances(G, as_matrix(xy, "xy")))
+
+    @classmethod
+    def fit_nested(cls, features: Any, xy: Any, n_outputs: int, n_signature: int,
+                   **params: Any) -> tuple["SignatureGPReadout", "SignatureGPReadout"]:
+        """Fits the combination (``n_outputs`` slow features with the
+        signature) and the signature alone on the same features, computing
+        the signatures' distances once: ``(combination, signature alone)``."""
+        both, alone = cls(n_outputs, n_signature, **params), cls(0, n_signature, **params)
+        S, G = both._split(features)
+        prepared = both._distances(G, as_matrix(xy, "xy"))
+        return both._fit_prepared(S, prepared), alone._fit_prepared(S[:, :0], prepared)
+
+    def _distances(self, G: np.ndarray, Y: np.ndarray) -> dict[str, Any]:
+        """The training samples kept, the L1 distances between their
+        signatures and the distance unit: what every fit on ``G`` shares."""
+        check_same_length(G, Y, "features", "xy")
+        if len(G) < 3:
+            raise ValueError(f"a GP readout needs at least 3 training samples, got {len(G)}")
+        G = G.astype(np.float64)
+        keep = _even(len(G), self.max_train)
+        sub = G[_even(len(G), 300)]
+        dg = self._l1(sub, sub)[np.triu_indices(len(sub), 1)]
+        unit = float(np.median(dg)) if dg.size else 0.0
+        return {"G": G, "Y": Y, "keep": keep, "D": self._l1(G[keep], G[keep]), "unit": unit if unit > 0 else 1.0}
+
+    def _fit_prepared(self, S: np.ndarray, prep: dict[str, Any]) -> "SignatureGPReadout":
+        G, Y, keep, D = prep["G"], prep["Y"], prep["keep"], prep["D"]
+        self.distance_unit_ = prep["unit"]
         self.mean_ = S.mean(axis=0)
         sd = S.std(axis=0)
         self.scale_ = np.where(sd > 0, sd, 1.0)
         Ss = (S - self.mean_) / self.scale_
-        G = G.astype(np.float64)
-        keep = _even(len(S), self.max_train)
-        D = self._l1(G[keep], G[keep])  # every L1 distance the fit needs, computed once
         fit_pos = _even(len(keep), self.max_fit)  # positions within keep
         fit_idx = keep[fit_pos]
-        sub = G[_even(len(G), 300)]
-        dg = self._l1(sub, sub)[np.triu_indices(len(sub), 1)]
-        unit = float(np.median(dg)) if dg.size else 0.0
-        self.distance_unit_ = unit if unit > 0 else 1.0
         y_mean, y_sd = Y.mean(axis=0), Y.std(axis=0)
         y_sd = np.where(y_sd > 0, y_sd, 1.0)
         Yf = (Y[fit_idx] - y_mean) / y_sd
