@@ -313,7 +313,7 @@ def _no_ground_truth_row(loc: Any, F_tr: np.ndarray, F_te: np.ndarray, X_tr: np.
             "training positions median error (m)": float(np.median(np.hypot(*(target.apply(lp.positions)
                                                                               - xy_tr).T))),
             "loop closures kept": lp.graph.n_inliers if lp.graph is not None else None,
-            "numbers per image": int(free.n_outputs_), "readout": free.describe_readout(),
+            "numbers per image": int(free.n_outputs_) + int(free.n_signature_), "readout": free.describe_readout(),
             "rotation pooling": int(free.rotation_pooling_), "warnings": "; ".join(lp.warnings) or "-"}
 
 
