@@ -18,7 +18,7 @@ so does the signature when ``l_g`` does. All hyperparameters (the length
 scales, ``l_g`` and the noise-to-signal ratio) maximise the log marginal
 likelihood of the training run with the signal variance profiled out
 (Rasmussen and Williams 2006, ch. 5), by L-BFGS-B with analytic gradients.
-Why a product of these two kernels: docs/gardens.md (gardens suite).
+Why a product of these two kernels, and what it measured: docs/gardens-suite.md.
 """
 
 from __future__ import annotations
@@ -147,7 +147,7 @@ class SignatureGPReadout:
         m = S.shape[1]
         bounds = [_LOG_BOUNDS["length"]] * m + [_LOG_BOUNDS["signature"], _LOG_BOUNDS["noise"]]
         # one start: slow features at a few standard deviations, the signature's scale of the order of
-        # 100 median distances and little noise, where the optima on the gardens suite lie (docs/gardens.md)
+        # 100 median distances and little noise, where the optima on the gardens suite lie (docs/gardens-suite.md)
         theta0 = np.r_[np.full(m, np.log(3.0 * max(1.0, np.sqrt(m / 4)))), np.log(100.0), np.log(1e-4)]
         best = minimize(self._neg_lml, theta0, args=(S, Dg, Y), jac=True, method="L-BFGS-B", bounds=bounds,
                         options={"maxiter": 200})
