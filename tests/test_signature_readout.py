@@ -194,3 +194,15 @@ def test_cli_train_without_a_signature_and_a_refused_combination(tmp_path, capsy
                   "--signature", "fourier", "--readout", "quadratic"])
     assert exc.value.code == 2 and "--signature fourier needs the auto readout" in capsys.readouterr().err
     assert not (tmp_path / "q.sfa").exists()
+
+
+@pytest.mark.parametrize("factor", [1e-3, 7.0, 255.0])
+def test_the_signature_scale_does_not_matter(factor):
+    """Distances are measured in units of the median training distance: a
+    signature in other units (e.g. images in [0, 1] instead of [0, 255])
+    gives the same fit."""
+    xy, slow, sig = _place_data(120, np.random.default_rng(9), 0.02, 0.0)
+    a = SignatureGPReadout(4, 20).fit(np.hstack([slow, sig]), xy)
+    b = SignatureGPReadout(4, 20).fit(np.hstack([slow, factor * sig]), xy)
+    np.testing.assert_allclose(b.predict(np.hstack([slow[:9], factor * sig[:9]])), a.predict(np.hstack([slow[:9], sig[:9]])),
+                               atol=1e-3)
