@@ -138,7 +138,7 @@ MOVED: dict[str, dict[str, tuple[str, str]]] = {
         'PRESETS': ('sfanav.sfa.network', 'PRESETS'),
         'Rotation': ('sfanav.sfa.network', 'Rotation'),
         'resolve_config': ('sfanav.sfa.network', 'resolve_config'),
-        'spatial_pairs': ('sfanav.sfa.network', 'spatial_pairs'),
+        'spatial_pairs': ('sfanav.sfa.pairs', 'spatial_pairs'),
     },
     'sfanav.readout': {
         'AUTO_BLOCK': ('sfanav.localization.readout_selection', 'AUTO_BLOCK'),

@@ -116,6 +116,7 @@ class Network:
         pair_layers: Sequence[int] | None = None,
         gather: Callable[[list[int]], ImageArray] | None = None,
         pair_chunk: int = 16,
+        closures: tuple[Sequence[int], Sequence[float], ImageArray] | None = None,
         total: int | None = None,
         progress: Callable[[str, int, int, int, int, int, int | None, bool], object] | None = None,
     ) -> list[tuple[int, bool, int]]: ...

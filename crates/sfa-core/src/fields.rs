@@ -35,6 +35,13 @@ pub(crate) struct ImageGraph {
     pub(crate) first: Vec<usize>,
     /// Per series: row of the last view.
     pub(crate) last: Vec<usize>,
+    /// Per series, a second first row (the interleaved sequence of a loop
+    /// closure starts with the partner's view; [`interleaved_graph`]):
+    /// the pair from the previous image's last view goes to `first` with
+    /// weight factor `1 - alt_weight` and to `alt_first` with `alt_weight`.
+    /// Empty for a plain image.
+    pub(crate) alt_first: Vec<usize>,
+    pub(crate) alt_weight: f64,
     /// Statistics formed without rows (first layer, lag products; see
     /// `periodic.rs`); the rows are then only the first and last
     /// views, as weight-0 pair ends.
@@ -259,6 +266,8 @@ pub(crate) fn fast_graph(
                 edge_weights: Vec::new(),
                 first,
                 last,
+                alt_first: Vec::new(),
+                alt_weight: 0.0,
                 moments: Some(moments),
             };
             return Ok((graph, computed));
@@ -294,7 +303,22 @@ pub(crate) fn fast_graph(
             last.push(r * no + idx[last_offset(j)]);
         }
     }
-    Ok((ImageGraph { rows, lead, n, width, from_stage, weights, edges, edge_weights, first, last, moments: None }, computed))
+    let graph = ImageGraph {
+        rows,
+        lead,
+        n,
+        width,
+        from_stage,
+        weights,
+        edges,
+        edge_weights,
+        first,
+        last,
+        alt_first: Vec::new(),
+        alt_weight: 0.0,
+        moments: None,
+    };
+    Ok((graph, computed))
 }
 
 /// Checks spatial pairs `(a, b, w)` against `n` images.
@@ -363,6 +387,76 @@ pub(crate) fn naive_graph<P: Pixel>(net: &Network, rot: &Rotation, image: &[P], 
         edge_weights: vec![1.0; ne],
         first: (0..np).collect(),
         last: (0..np).map(|p| (kv - 1) * np + p).collect(),
+        alt_first: Vec::new(),
+        alt_weight: 0.0,
+        moments: None,
+    })
+}
+
+/// The training graph of a loop closure (thesis 6.2.1): the current image's
+/// simulated rotation interleaved with its aligned partner's, `A'_0, C_0,
+/// A'_1, C_1, ...`, mixed with the plain rotation of the current image by
+/// the closure's weight `w` in `[0, 1]`:
+///
+/// * samples: every view of `C` (weight 1) and of `A'` (weight `w`);
+/// * pairs: `A'_k - C_k` (weight `w`), `C_k - A'_{k+1}` (weight `w`), and the
+///   plain rotation pairs `C_k - C_{k+1}` (weight `1 - w`);
+/// * the series starts at `A'_0` (weight `w`) and at `C_0` (`1 - w`) and ends
+///   at `C_{K-1}`.
+///
+/// `w = 1` is the thesis's interleaved sequence, `w = 0` the plain image.
+/// Both graphs must come from the same path (fast or naive) and layer, so
+/// that rows correspond: the rotation successor of row `u` of `C` is read
+/// off `gc`'s edges, and row `u` of `ga` is the same view (offset) of `A'`.
+pub(crate) fn interleaved_graph(gc: ImageGraph, ga: ImageGraph, w: f64) -> Result<ImageGraph> {
+    if gc.moments.is_some() || ga.moments.is_some() {
+        return Err(SfaError::InvalidArgument("interleaved graphs need rows for every view (no lag products)".into()));
+    }
+    if (gc.n, gc.width, gc.from_stage, gc.lead) != (ga.n, ga.width, ga.from_stage, ga.lead) {
+        return Err(SfaError::InvalidArgument("a loop closure's two graphs differ in shape".into()));
+    }
+    if !(w.is_finite() && (0.0..=1.0).contains(&w)) {
+        return Err(SfaError::InvalidArgument(format!("a loop closure's weight must be in [0, 1], got {w}")));
+    }
+    let (n, d) = (gc.n, gc.width);
+    let mut rows = gc.rows;
+    rows.extend_from_slice(&ga.rows[ga.lead * d..]);
+    let mut weights = gc.weights.clone();
+    weights.extend(ga.weights.iter().map(|m| w * m));
+    let mut edges = Vec::with_capacity(2 * gc.edges.len() + n);
+    let mut edge_weights = Vec::with_capacity(2 * gc.edges.len() + n);
+    for (&[u, v], &m) in gc.edges.iter().zip(&gc.edge_weights) {
+        if w < 1.0 {
+            edges.push([u, v]);
+            edge_weights.push((1.0 - w) * m);
+        }
+        if w > 0.0 {
+            edges.push([u, n + v]);
+            edge_weights.push(w * m);
+        }
+    }
+    if w > 0.0 {
+        for (u, &m) in gc.weights.iter().enumerate() {
+            if m > 0.0 {
+                edges.push([n + u, u]);
+                edge_weights.push(w * m);
+            }
+        }
+    }
+    let alt_first = gc.first.iter().map(|&f| n + f).collect();
+    Ok(ImageGraph {
+        rows,
+        lead: gc.lead,
+        n: 2 * n,
+        width: d,
+        from_stage: gc.from_stage,
+        weights,
+        edges,
+        edge_weights,
+        first: gc.first,
+        last: gc.last,
+        alt_first,
+        alt_weight: w,
         moments: None,
     })
 }

@@ -12,10 +12,12 @@
 //! * [`network`]: the hierarchical receptive-field network;
 //! * [`rotation`], [`trainer`], [`training`]: training under simulated
 //!   rotation, one layer at a time ([`LayerTrainer`]) and the whole loop
-//!   ([`fit`]) over images of any [`Pixel`] type from a [`BatchSource`].
+//!   ([`fit`]) over images of any [`Pixel`] type from a [`BatchSource`];
+//! * [`closures`]: loop closures for feedback training ([`LoopClosures`]).
 //!
 //! Nothing here depends on Python; the `sfanav-py` crate binds it.
 
+pub mod closures;
 pub mod error;
 mod fields;
 mod moments;
@@ -32,6 +34,7 @@ pub mod trainer;
 pub mod training;
 pub mod view;
 
+pub use closures::LoopClosures;
 pub use error::{Result, SfaError};
 pub use expansion::{expand, expanded_dim, Expansion};
 pub use node::{beta_values, NodeConfig, NodeState, SfaNode, SolutionState, StageState};

@@ -3,12 +3,16 @@
 //! layer.
 
 use crate::error::{Result, SfaError};
-use crate::fields::{check_pairs, cum_strides, fast_graph, layer_field, naive_graph, offset_set, Field, ImageGraph};
+use crate::closures::LoopClosures;
+use crate::fields::{
+    check_pairs, cum_strides, fast_graph, interleaved_graph, layer_field, naive_graph, offset_set, Field, ImageGraph,
+};
 use crate::network::{check_images, Network};
 use crate::pixel::Pixel;
 use crate::rotation::{Rotation, TrainingPath};
 use crate::view::View;
 use rayon::prelude::*;
+use std::sync::Arc;
 
 
 /// Trains one layer of a network, pass by pass, on images streamed in
@@ -40,6 +44,13 @@ pub struct LayerTrainer {
     /// view of one image -> first view of the next), relative to the
     /// pairs between consecutive views within an image (weight 1).
     transition_weight: f64,
+    /// Loop closures: images whose simulated rotation is interleaved with
+    /// an aligned partner's ([`set_loop_closures`](Self::set_loop_closures)).
+    closures: Option<Arc<LoopClosures>>,
+    /// Fields of the partners, aligned with `cache` (None for images
+    /// without a closure).
+    partner_cache: Option<Vec<Option<Field>>>,
+    partner_building: Vec<Option<Field>>,
 }
 
 impl LayerTrainer {
@@ -79,6 +90,9 @@ impl LayerTrainer {
             lag_products: true,
             lag_images: 0,
             transition_weight: 1.0,
+            closures: None,
+            partner_cache: None,
+            partner_building: Vec::new(),
         })
     }
 
@@ -115,6 +129,28 @@ impl LayerTrainer {
         Ok(())
     }
 
+    /// Sets the loop closures of the training run (thesis 6.2.1): every
+    /// image with a closure is trained on its simulated rotation
+    /// interleaved with its aligned partner's, mixed with the plain
+    /// rotation by the closure's weight (see [`LoopClosures`]). Image
+    /// indices count the images in the order they are fed. The partners'
+    /// fields join the cache. Inherited by [`next_layer`](Self::next_layer);
+    /// set before the first pass.
+    pub fn set_loop_closures(&mut self, net: &Network, closures: Option<Arc<LoopClosures>>) -> Result<()> {
+        if let Some(c) = &closures {
+            let (h, _, ch) = net.input_shape();
+            let size = h * self.rot.period * ch;
+            if !c.is_empty() && c.image_size() != size {
+                return Err(SfaError::ShapeMismatch { what: "values per loop-closure partner image", expected: size, got: c.image_size() });
+            }
+        }
+        if self.pass > 0 || self.images_seen > 0 {
+            return Err(SfaError::InvalidArgument("set loop closures before the first pass".into()));
+        }
+        self.closures = closures.filter(|c| !c.is_empty());
+        Ok(())
+    }
+
     /// The weight of the pairs between consecutive images (default 1).
     pub fn transition_weight(&self) -> f64 {
         self.transition_weight
@@ -138,7 +174,8 @@ impl LayerTrainer {
 
     /// Bytes held by the cache.
     pub fn cache_bytes(&self) -> usize {
-        self.cache.iter().flatten().chain(&self.building).map(Field::bytes).sum()
+        let partners = self.partner_cache.iter().flatten().chain(&self.partner_building).flatten();
+        self.cache.iter().flatten().chain(&self.building).chain(partners).map(Field::bytes).sum()
     }
 
     /// After the last pass: the trainer of the next layer, inheriting the
@@ -151,6 +188,7 @@ impl LayerTrainer {
         let mut next = LayerTrainer::new(net, self.layer + 1, self.rot, self.path)?;
         next.caching = self.caching;
         next.transition_weight = self.transition_weight;
+        next.closures = self.closures.clone();
         let mixed = net.spec().mixed_precision;
         if let (true, Some(cache)) = (self.caching, self.cache) {
             let (layer, rot) = (self.layer, self.rot);
@@ -159,6 +197,16 @@ impl LayerTrainer {
                 .map(|f| Ok(layer_field(net, &rot, layer, &[], Some(&f))?.compact(mixed)))
                 .collect();
             next.cache = Some(advanced.into_iter().collect::<Result<Vec<_>>>()?);
+            if let Some(partners) = self.partner_cache {
+                let advanced: Vec<Result<Option<Field>>> = partners
+                    .into_par_iter()
+                    .map(|f| match f {
+                        Some(f) => Ok(Some(layer_field(net, &rot, layer, &[], Some(&f))?.compact(mixed))),
+                        None => Ok(None),
+                    })
+                    .collect();
+                next.partner_cache = Some(advanced.into_iter().collect::<Result<Vec<_>>>()?);
+            }
         }
         Ok(next)
     }
@@ -169,16 +217,35 @@ impl LayerTrainer {
             .cache
             .take()
             .ok_or_else(|| SfaError::InvalidArgument("this trainer has no cached fields".into()))?;
+        let partners = self.partner_cache.take();
+        let closures = self.closures.clone();
         let (layer, rot) = (self.layer, self.rot);
         let chunk = 16;
         let mut result = Ok(());
-        for part in cache.chunks(chunk) {
-            let graphs: Vec<Result<(ImageGraph, Option<Field>)>> = {
+        for (c, part) in cache.chunks(chunk).enumerate() {
+            let graphs: Vec<Result<ImageGraph>> = {
                 let net_ref: &Network = net;
-                part.par_iter().map(|f| fast_graph(net_ref, &rot, &[], layer, Some(f), None)).collect()
+                let (partners, closures) = (partners.as_ref(), closures.as_deref());
+                part.par_iter()
+                    .enumerate()
+                    .map(|(b, f)| {
+                        let i = c * chunk + b;
+                        let plain = fast_graph(net_ref, &rot, &[], layer, Some(f), None)?.0;
+                        match closures.and_then(|cl| cl.partner(i)) {
+                            None => Ok(plain),
+                            Some((_, w)) => {
+                                let fa = partners.and_then(|p| p.get(i)).and_then(Option::as_ref).ok_or_else(|| {
+                                    SfaError::InvalidArgument(format!("the partner of image {i} is not in the cache"))
+                                })?;
+                                let ga = fast_graph(net_ref, &rot, &[], layer, Some(fa), None)?.0;
+                                interleaved_graph(plain, ga, w)
+                            }
+                        }
+                    })
+                    .collect()
             };
             for g in graphs {
-                match g.and_then(|(gr, _)| self.feed_shared(net, gr)) {
+                match g.and_then(|gr| self.feed_shared(net, gr)) {
                     Ok(()) => self.images_seen += 1,
                     Err(e) => {
                         result = Err(e);
@@ -191,6 +258,7 @@ impl LayerTrainer {
             }
         }
         self.cache = Some(cache);
+        self.partner_cache = partners;
         result
     }
 
@@ -230,24 +298,46 @@ impl LayerTrainer {
             mean.iter_mut().for_each(|m| *m /= (size / c) as f64);
             self.reference = Some(mean);
         }
-        let graphs: Vec<Result<(ImageGraph, Option<Field>)>> = {
+        type Fed = (ImageGraph, Option<Field>, Option<Field>);
+        let base = self.images_seen;
+        let graphs: Vec<Result<Fed>> = {
             let net_ref: &Network = net;
             let reference = self.reference.as_deref();
+            let closures = self.closures.as_deref();
             images
                 .par_chunks(size)
-                .map(|img| match path {
-                    TrainingPath::Fast => fast_graph(net_ref, &rot, &P::image_f64(img), layer, None, reference),
-                    TrainingPath::Naive => Ok((naive_graph(net_ref, &rot, img, layer)?, None)),
+                .enumerate()
+                .map(|(b, img)| -> Result<Fed> {
+                    match (path, closures.and_then(|c| c.partner(base + b))) {
+                        (TrainingPath::Fast, None) => {
+                            let (g, f) = fast_graph(net_ref, &rot, &P::image_f64(img), layer, None, reference)?;
+                            Ok((g, f, None))
+                        }
+                        (TrainingPath::Naive, None) => Ok((naive_graph(net_ref, &rot, img, layer)?, None, None)),
+                        (TrainingPath::Fast, Some((a, w))) => {
+                            // every view as a row (no lag products), for both images
+                            let (gc, fc) = fast_graph(net_ref, &rot, &P::image_f64(img), layer, None, None)?;
+                            let (ga, fa) = fast_graph(net_ref, &rot, a, layer, None, None)?;
+                            Ok((interleaved_graph(gc, ga, w)?, fc, fa))
+                        }
+                        (TrainingPath::Naive, Some((a, w))) => {
+                            let (gc, ga) = (naive_graph(net_ref, &rot, img, layer)?, naive_graph(net_ref, &rot, a, layer)?);
+                            Ok((interleaved_graph(gc, ga, w)?, None, None))
+                        }
+                    }
                 })
                 .collect()
         };
         let d = net.geometry()[layer].in_dim;
         let mixed = net.spec().mixed_precision;
         for gr in graphs {
-            let (gr, field) = gr?;
+            let (gr, field, partner) = gr?;
             if self.caching {
                 if let Some(f) = field {
                     self.building.push(f.compact(mixed));
+                    if self.closures.is_some() {
+                        self.partner_building.push(partner.map(|f| f.compact(mixed)));
+                    }
                 }
             }
             if net.spec().weight_sharing {
@@ -273,9 +363,18 @@ impl LayerTrainer {
                 rows[..ns * d].copy_from_slice(&tail);
                 let mut w = vec![0.0; ns];
                 w.extend_from_slice(&gr.weights);
-                let mut e: Vec<[usize; 2]> = (0..ns).map(|i| [i, ns + gr.first[i]]).collect();
+                let tw = self.transition_weight;
+                let (mut e, mut ew): (Vec<[usize; 2]>, Vec<f64>) = if gr.alt_first.is_empty() {
+                    ((0..ns).map(|i| [i, ns + gr.first[i]]).collect(), vec![tw; ns])
+                } else {
+                    // a loop closure's series starts at its partner's first view and at its own
+                    let (wa, wc) = (gr.alt_weight, 1.0 - gr.alt_weight);
+                    (0..ns)
+                        .flat_map(|i| [([i, ns + gr.first[i]], tw * wc), ([i, ns + gr.alt_first[i]], tw * wa)])
+                        .filter(|&(_, w)| w > 0.0)
+                        .unzip()
+                };
                 e.extend(gr.edges.iter().map(|[a, b]| [a + ns, b + ns]));
-                let mut ew = vec![self.transition_weight; ns];
                 ew.extend_from_slice(&gr.edge_weights);
                 (0, ns + gr.n, w, e, ew)
             }
@@ -302,14 +401,16 @@ impl LayerTrainer {
     }
 
     fn feed_individual(&mut self, net: &mut Network, gr: ImageGraph, d: usize) -> Result<()> {
-        // Naive graph: rows are (view, position); each position's rows form
-        // one series continuing across images.
+        // Naive graph: rows are (view, position), row u belongs to position
+        // u % np; each position's rows form one series continuing across
+        // images.
         let np = gr.first.len();
         let kv = gr.n / np;
         let first_image = self.images_seen == 0;
         let tw = self.transition_weight;
         let nodes = net.nodes_mut(self.layer);
-        if tw == 1.0 {
+        // (with loop closures every image takes the graph path, which keeps the tail)
+        if tw == 1.0 && self.closures.is_none() {
             return nodes.par_iter_mut().enumerate().try_for_each(|(p, node)| {
                 let mut x = vec![0.0; kv * d];
                 for k in 0..kv {
@@ -319,11 +420,19 @@ impl LayerTrainer {
                 node.partial_fit(View::from_slice(&x, kv, d)?, first_image)
             });
         }
-        // Weighted transition: each node's series as a graph, with the
-        // previous image's last view as a weight-0 leading row.
+        // Weighted transition or a loop closure: each node's series as a
+        // graph, with the previous image's last view as a weight-0 leading
+        // row.
         let tail = self.tail.take();
-        let r = nodes.par_iter_mut().enumerate().try_for_each(|(p, node)| {
-            let lead = usize::from(tail.is_some());
+        let lead = usize::from(tail.is_some());
+        let mut by_node: Vec<(Vec<[usize; 2]>, Vec<f64>)> = vec![(Vec::new(), Vec::new()); np];
+        for (&[a, b], &w) in gr.edges.iter().zip(&gr.edge_weights) {
+            debug_assert_eq!(a % np, b % np);
+            let (e, ew) = &mut by_node[a % np];
+            e.push([lead + a / np, lead + b / np]);
+            ew.push(w);
+        }
+        let r = nodes.par_iter_mut().zip(by_node).enumerate().try_for_each(|(p, (node, (mut edges, mut ew)))| {
             let mut x = vec![0.0; (lead + kv) * d];
             if let Some(t) = &tail {
                 x[..d].copy_from_slice(&t[p * d..(p + 1) * d]);
@@ -332,18 +441,24 @@ impl LayerTrainer {
                 let src = (gr.lead + k * np + p) * d;
                 x[(lead + k) * d..(lead + k + 1) * d].copy_from_slice(&gr.rows[src..src + d]);
             }
-            let mut w = vec![1.0; lead + kv];
-            let mut ew = vec![1.0; lead + kv - 1];
+            let mut w = vec![0.0; lead];
+            w.extend((0..kv).map(|k| gr.weights[k * np + p]));
             if lead == 1 {
-                w[0] = 0.0;
-                ew[0] = tw;
+                let wc = if gr.alt_first.is_empty() { 1.0 } else { 1.0 - gr.alt_weight };
+                if tw * wc > 0.0 {
+                    edges.push([0, 1 + gr.first[p] / np]);
+                    ew.push(tw * wc);
+                }
+                if !gr.alt_first.is_empty() && tw * gr.alt_weight > 0.0 {
+                    edges.push([0, 1 + gr.alt_first[p] / np]);
+                    ew.push(tw * gr.alt_weight);
+                }
             }
-            let edges: Vec<[usize; 2]> = (0..lead + kv - 1).map(|i| [i, i + 1]).collect();
             node.partial_fit_graph(View::from_slice(&x, lead + kv, d)?, Some(&w), &edges, Some(&ew))
         });
         let mut next = vec![0.0; np * d];
         for p in 0..np {
-            let src = (gr.lead + (kv - 1) * np + p) * d;
+            let src = (gr.lead + gr.last[p]) * d;
             next[p * d..(p + 1) * d].copy_from_slice(&gr.rows[src..src + d]);
         }
         self.tail = Some(next);
@@ -620,6 +735,9 @@ impl LayerTrainer {
         }
         if !self.building.is_empty() {
             self.cache = Some(std::mem::take(&mut self.building));
+            if self.closures.is_some() {
+                self.partner_cache = Some(std::mem::take(&mut self.partner_building));
+            }
         }
         self.images_seen = 0;
         if last {

@@ -13,8 +13,10 @@
 //! the pairs' images from the source in chunks, cached passes read them
 //! from the cache.
 
+use crate::closures::LoopClosures;
 use crate::error::{Result, SfaError};
 use crate::fields::field_bytes;
+use std::sync::Arc;
 use crate::network::Network;
 use crate::pixel::{Batch, Pixel};
 use crate::rotation::{Rotation, TrainingPath};
@@ -133,6 +135,9 @@ pub struct FitOptions {
     /// Whether the first layer may form its linear statistics from lag
     /// products ([`LayerTrainer::set_lag_products`]).
     pub lag_products: bool,
+    /// Loop closures for feedback training, in every layer
+    /// ([`LayerTrainer::set_loop_closures`]).
+    pub loop_closures: Option<Arc<LoopClosures>>,
 }
 
 impl FitOptions {
@@ -146,6 +151,7 @@ impl FitOptions {
             transition_weight: 1.0,
             pairs: None,
             lag_products: true,
+            loop_closures: None,
         }
     }
 }
@@ -227,15 +233,20 @@ pub fn fit<S: BatchSource + ?Sized>(
             return Err(SfaError::InvalidArgument("spatial pairs: one shift per pair".into()));
         }
     }
+    if let (Some(lc), Some(n)) = (&opts.loop_closures, source.len_hint()) {
+        check_closures(lc, n)?;
+    }
     let rot = opts.rotation;
     let mut tr = LayerTrainer::new(net, start, rot, opts.path)?;
     tr.set_transition_weight(opts.transition_weight)?;
+    tr.set_loop_closures(net, opts.loop_closures.clone())?;
     tr.set_lag_products(opts.lag_products);
     let mut report = FitReport::default();
     for layer in start..n_layers {
         if layer > start {
             report.lag_product_images += tr.lag_product_images();
-            let bytes = field_bytes(net, &rot, layer - 1) * report.n_images;
+            let partners = opts.loop_closures.as_ref().map_or(0, |c| c.len());
+            let bytes = field_bytes(net, &rot, layer - 1) * (report.n_images + partners);
             let kept = match opts.cache {
                 CachePolicy::Always => true,
                 CachePolicy::Never => false,
@@ -276,6 +287,9 @@ pub fn fit<S: BatchSource + ?Sized>(
                 }
                 if layer == start && pass == 0 {
                     report.n_images = seen;
+                    if let Some(lc) = &opts.loop_closures {
+                        check_closures(lc, seen)?;
+                    }
                 }
             }
             tr.end_pass(net)?;
@@ -283,6 +297,16 @@ pub fn fit<S: BatchSource + ?Sized>(
     }
     report.lag_product_images += tr.lag_product_images();
     Ok(report)
+}
+
+/// Loop closures must name images among the `n` of the run.
+fn check_closures(lc: &LoopClosures, n: usize) -> Result<()> {
+    match lc.max_current() {
+        Some(m) if m >= n => Err(SfaError::InvalidArgument(format!(
+            "a loop closure names image {m}, but the training run has {n} images"
+        ))),
+        _ => Ok(()),
+    }
 }
 
 /// Feeds spatial pairs in chunks of at most `2 * chunk` distinct images

@@ -587,3 +587,67 @@ fn fit_progress_cache_plan_and_errors() {
     let mut done = plain.clone();
     assert!(fit_with(&mut done, &imgs, n, &opts).unwrap_err().to_string().contains("already trained"));
 }
+
+/// Loop-closure feedback: the fast path (cached and streamed) equals the
+/// naive per-view path, with weights, and closures change the result.
+#[test]
+fn loop_closures_fast_equals_naive() {
+    use sfa_core::LoopClosures;
+    use std::sync::Arc;
+    let (w, n, c) = (24, 30, 3);
+    let imgs = images(n, 6, w, c, 11);
+    let size = 6 * w * c;
+    // partners: image p rolled right by s columns (np.roll convention)
+    let closures = [(2usize, 20usize, 5usize, 1.0), (4, 25, 0, 0.6), (9, 17, 13, 0.3)];
+    let mut partners = Vec::new();
+    for &(p, _, s, _) in &closures {
+        let img = &imgs[p * size..(p + 1) * size];
+        for y in 0..6 {
+            for x in 0..w {
+                let col = (x + w - s) % w;
+                partners.extend_from_slice(&img[(y * w + col) * c..(y * w + col + 1) * c]);
+            }
+        }
+    }
+    let lc = LoopClosures::new(
+        closures.iter().map(|x| x.1).collect(),
+        closures.iter().map(|x| x.3).collect(),
+        partners,
+    )
+    .unwrap();
+    for (v, stride, step) in [(24, 2, 3), (16, 3, 5), (24, 4, 4)] {
+        let rot = Rotation { step, period: w };
+        let base = Network::new(spec(v, c, stride, true)).unwrap();
+        let run = |path, cache, lc: Option<Arc<LoopClosures>>| {
+            let mut net = base.clone();
+            let mut opts = options(rot, path, cache, 1.0);
+            opts.loop_closures = lc;
+            fit_with(&mut net, &imgs, n, &opts).unwrap();
+            net
+        };
+        let lc = Some(Arc::new(lc.clone()));
+        let naive = run(TrainingPath::Naive, false, lc.clone());
+        let plain = run(TrainingPath::Fast, true, None);
+        for cache in [true, false] {
+            let fast = run(TrainingPath::Fast, cache, lc.clone());
+            for l in 0..2 {
+                let (a, b) = (naive.nodes(l)[0].state(true), fast.nodes(l)[0].state(true));
+                for (sa, sb) in a.stages.iter().zip(&b.stages) {
+                    let (pa, pb) = (sa.solution.as_ref().unwrap(), sb.solution.as_ref().unwrap());
+                    let e = max_rel(&pa.delta, &pb.delta);
+                    assert!(e < 1e-9, "v={v} stride={stride} step={step} cache={cache} layer {l}: delta differs by {e}");
+                }
+            }
+        }
+        let (a, b) = (naive.nodes(1)[0].state(false), plain.nodes(1)[0].state(false));
+        let (da, db) = (&a.stages[1].solution.as_ref().unwrap().delta, &b.stages[1].solution.as_ref().unwrap().delta);
+        assert!(max_rel(da, db) > 1e-4, "closures must change the result");
+    }
+    // a closure naming an image beyond the run is an error, not a panic
+    let bad = LoopClosures::new(vec![n + 3], vec![1.0], vec![0.0; size]).unwrap();
+    let mut net = Network::new(spec(24, c, 2, true)).unwrap();
+    let mut opts = options(Rotation { step: 3, period: w }, TrainingPath::Fast, true, 1.0);
+    opts.loop_closures = Some(Arc::new(bad));
+    let err = fit_with(&mut net, &imgs, n, &opts).unwrap_err();
+    assert!(matches!(err, SfaError::InvalidArgument(_)), "{err:?}");
+}

@@ -10,9 +10,10 @@ use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
 use sfa_core::{
-    fit, transform_rotations, with_pixels, Batch, BatchSource, CachePolicy, FitOptions, LayerSpec, Network, NetworkSpec,
-    Progress, ProgressEvent, Rotation, SpatialPairs, TrainingPath,
+    fit, transform_rotations, with_pixels, Batch, BatchSource, CachePolicy, FitOptions, LayerSpec, LoopClosures, Network,
+    NetworkSpec, Pixel, Progress, ProgressEvent, Rotation, SpatialPairs, TrainingPath,
 };
+use std::sync::Arc;
 
 /// Borrows an image batch and checks its height and channel count against
 /// the network's input (the width is the panorama period, free).
@@ -26,6 +27,30 @@ fn network_images<'py>(obj: &Bound<'py, PyAny>, net: &Network, what: &str) -> Py
         )));
     }
     Ok(images)
+}
+
+/// Loop closures as Python passes them: the current images' indices, the
+/// closures' weights and the aligned partner images `(M, H, W[, C])`, one
+/// per closure (converted to f64 here, after a memory check).
+fn loop_closures(net: &Network, period: usize, current: Vec<usize>, weights: Vec<f64>,
+                 partners: &Bound<'_, PyAny>) -> PyResult<LoopClosures> {
+    let images = network_images(partners, net, "loop-closure partner images")?;
+    let [m, _, w, _] = images.shape;
+    if m != current.len() {
+        return Err(PyValueError::new_err(format!(
+            "{} loop closures but {m} partner images", current.len()
+        )));
+    }
+    if w != period {
+        return Err(PyValueError::new_err(format!(
+            "loop-closure partner images are {w} px wide, the training panoramas {period}"
+        )));
+    }
+    let bytes = images.shape.iter().product::<usize>().checked_mul(8);
+    guard(|| sfa_core::memory::check(|| format!("{m} loop-closure partner images"), bytes))?;
+    let data = images.data();
+    let values: Vec<f64> = with_pixels!(data.pixels(), px => px.iter().map(|v| v.to_f64()).collect());
+    guard(|| LoopClosures::new(current, weights, values))
 }
 
 /// Spatial pairs as Python passes them: (a, b, weights, shifts or None).
@@ -237,7 +262,8 @@ impl PyNetwork {
     /// callback comes out of fit unchanged. Returns [(layer (1-based),
     /// kept, bytes)] for every layer above the first.
     #[pyo3(signature = (batches, step, period, *, fast=true, cache=None, cache_limit=1e9, transition_weight=1.0,
-                        pairs=None, pair_layers=None, gather=None, pair_chunk=16, total=None, progress=None))]
+                        pairs=None, pair_layers=None, gather=None, pair_chunk=16, closures=None, total=None,
+                        progress=None))]
     #[allow(clippy::too_many_arguments)]
     fn fit(
         &mut self,
@@ -253,6 +279,7 @@ impl PyNetwork {
         pair_layers: Option<Vec<usize>>,
         gather: Option<Py<PyAny>>,
         pair_chunk: usize,
+        closures: Option<(Vec<usize>, Vec<f64>, Bound<'_, PyAny>)>,
         total: Option<usize>,
         progress: Option<Py<PyAny>>,
     ) -> PyResult<Vec<(usize, bool, usize)>> {
@@ -279,6 +306,9 @@ impl PyNetwork {
                 return Err(PyValueError::new_err("spatial pairs need gather(ids)"));
             }
             opts.pairs = Some(SpatialPairs { pairs: zip_pairs(a, b, w)?, shifts, layers, chunk: pair_chunk });
+        }
+        if let Some((current, weights, partners)) = closures {
+            opts.loop_closures = Some(Arc::new(loop_closures(&self.inner, period, current, weights, &partners)?));
         }
         let (h, _, c) = self.inner.input_shape();
         let mut source = PySource { batches, gather, total, shape: (h, period, c), raised: Raised::default() };

@@ -67,7 +67,8 @@ from ..localization.readout_selection import (
 from ..localization.readouts import describe_spec, make_readout
 from ..localization.recipe import ROTATION_POOLING
 from ..sfa.diagnostics import eta_values, orientation_angles
-from ..sfa.network import Network, Rotation, spatial_pairs
+from ..sfa.network import Network, Rotation
+from ..sfa.pairs import spatial_pairs
 from . import ExperimentResult, register
 from .localization import progress_log, simulated, tiny_config
 

@@ -6,7 +6,8 @@ receptive-field network trained under simulated rotation (3.3-3.4, 5.1):
 * :class:`SFA` (one node, scikit-learn style), :class:`Statistics` (the
   mergeable covariance / derivative-covariance accumulator), :func:`expand`;
 * :class:`Network` with its presets (``sfanav/sfa/presets/*.toml``) and
-  :class:`Rotation`; :func:`spatial_pairs` for graph-based training;
+  :class:`Rotation`; :func:`spatial_pairs` for graph-based training (:mod:`~sfanav.sfa.pairs`);
+  loop-closure feedback (:mod:`~sfanav.sfa.feedback`, ``Network.fit(loop_closures=...)``);
 * :mod:`~sfanav.sfa.diagnostics`: delta and eta values of the outputs;
 * :mod:`~sfanav.sfa.modelfile`: versioned, checksummed, pickle-free model
   files and :func:`load`.
@@ -30,8 +31,8 @@ from .network import (
     Network,
     Rotation,
     resolve_config,
-    spatial_pairs,
 )
+from .pairs import spatial_pairs
 from .node import SFA, NotFittedError, Statistics, beta_values, expand, expanded_dim
 
 __all__ = ["DEFAULT_CACHE_LIMIT", "EtaValues", "FORMAT", "Network", "NotFittedError", "PRESETS", "Rotation", "SFA", "Statistics", "VERSION", "beta_values", "delta_values", "eta_values", "expand", "expanded_dim", "load", "orientation_angles", "plot_eta", "read_model", "register_loader", "resolve_config", "save_model", "spatial_pairs"]
