@@ -254,6 +254,15 @@ def _add_train(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                         "heading drift corrected by loop closures found by the slow features and the panoramas) "
                         "or metric-learning (thesis 5.3.1: a map of the slow features fitted along the "
                         "odometry's straight lines)")
+    p.add_argument("--loop-closures", choices=("gt", "bow", "fourier"), default=None,
+                   help="loop-closure feedback (thesis 6.2.1): places the run visits again, found from ground truth "
+                        "(gt), a bag of visual words (bow) or the Fourier signature (fourier; both with the "
+                        "odometry as a gate when the run has it), are trained with the earlier image interleaved "
+                        "in the current one's simulated rotation, so the network learns to ignore what changed "
+                        "between the visits (light, weather). Default: none")
+    p.add_argument("--closure-weights", choices=("uniform", "score"), default="uniform",
+                   help="with --loop-closures: weight every closure 1 (uniform, the thesis) or by the detector's "
+                        "match confidence (score)")
     p.add_argument("--normalize", action="store_true",
                    help="normalize every image to zero mean and unit variance (thesis 5.2)")
     p.add_argument("--mirror", default=None, metavar="CX,CY,INNER,OUTER",
@@ -328,7 +337,9 @@ def _run_train(args: argparse.Namespace) -> int:
     supervision = supervision_for(args.supervision, has_ground_truth=bool(np.isfinite(train.poses[:, :2]).all()),
                                   has_odometry=bool(np.isfinite(odometry).all()))
     images, xy = load_run(train, prep, preprocessor=preprocessor, progress=not args.no_progress)
-    fit_kw = dict(rotation=Rotation(step=args.step, window=args.window), n_outputs=recipe.n_outputs,
+    closures = _training_closures(args, images, xy, odometry, has_ground_truth=supervision == "ground-truth")
+    fit_kw = dict(loop_closures=closures, closure_weights="score" if closures is not None
+                  and args.closure_weights == "score" else None,rotation=Rotation(step=args.step, window=args.window), n_outputs=recipe.n_outputs,
                   readout=recipe.readout, rows=rows, prep=prep, progress=not args.no_progress,
                   rotation_pooling=recipe.rotation_pooling, signature=recipe.signature,
                   info={"dataset": str(args.dataset), "run": run,
@@ -371,6 +382,30 @@ def _run_train(args: argparse.Namespace) -> int:
           + f": MED {m['med']:.3f} m, MAE x {m['mae_x_pct']:.2f} %, y {m['mae_y_pct']:.2f} %")
     print(f"wrote {out}")
     return 0
+
+
+def _training_closures(args: argparse.Namespace, images: "Any", xy: "Any", odometry: "Any", *,
+                       has_ground_truth: bool) -> "Any":
+    """The loop closures ``sfanav train --loop-closures`` asks for, or None."""
+    import numpy as np
+
+    from ..loopclosure import make_detector
+
+    if args.loop_closures is None:
+        if args.closure_weights != "uniform":
+            raise UsageError("--closure-weights needs --loop-closures")
+        return None
+    if args.loop_closures == "gt":
+        if not has_ground_truth:
+            raise UsageError("--loop-closures gt needs ground-truth positions, and this run is trained without them; "
+                             "use bow or fourier")
+        lc = make_detector("gt").detect(images, positions=xy)
+    else:
+        odo = odometry if np.isfinite(odometry).all() else None
+        lc = make_detector(args.loop_closures).detect(images, odometry=odo)
+    _log(f"loop closures ({args.loop_closures}): {len(lc)} images trained with their earlier visit interleaved"
+         + (", weighted by match confidence" if args.closure_weights == "score" else ""))
+    return lc if len(lc) else None
 
 
 @command("localize")

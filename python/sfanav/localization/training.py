@@ -32,6 +32,8 @@ def fit_localizer(
     info: dict[str, Any] | None = None,
     rotation_pooling: int | str | None = "auto",
     signature: str | None = None,
+    loop_closures: Any = None,
+    closure_weights: Any = None,
 ) -> Localizer:
     """Trains ``network`` on ``images`` (the training run, in temporal order)
     under simulated rotation and fits the readout of its slowest outputs to
@@ -48,7 +50,10 @@ def fit_localizer(
     ``rotation_pooling``: as :class:`Localizer` (``"auto"``: 8 rotations
     unless the readout is the thesis's quadratic one). ``signature``: as
     :class:`Localizer` (``"fourier"``: the readout also reads the Fourier
-    signature of the images as given, before ``rows``). The
+    signature of the images as given, before ``rows``).
+    ``loop_closures``, ``closure_weights``: loop-closure feedback in the
+    network's training, as :meth:`sfanav.Network.fit` (indices into
+    ``images``; closures found with :mod:`sfanav.loopclosure`). The
     returned localizer's ``info`` records preprocessing, rotation, training
     time (seconds: network) and readout selection time."""
     rotation = rotation or Rotation()
@@ -58,7 +63,7 @@ def fit_localizer(
     else:
         rows = None
     t0 = time.perf_counter()
-    network.fit(images, rotation, progress=progress)
+    network.fit(images, rotation, progress=progress, loop_closures=loop_closures, closure_weights=closure_weights)
     fit_s = time.perf_counter() - t0
     check_n_outputs(n_outputs, network.n_outputs_)
     loc = Localizer(network, n_outputs=n_outputs, readout=readout, rows=rows, rotation_pooling=rotation_pooling,
@@ -74,6 +79,7 @@ def fit_localizer(
     loc.info.update({"rotation": {"step": rotation.step, "window": rotation.window},
                      "n_train_images": int(len(images)), "fit_seconds": round(fit_s, 2),
                      "readout_seconds": round(readout_s, 2), "readout": loc.describe_readout(),
+                     "loop_closures": int(getattr(network, "n_loop_closures_", 0)),
                      "rotation_pooling": int(loc.rotation_pooling_)})
     if loc.selection_ is not None:
         loc.info["readout_rule"] = loc.selection_.rule
@@ -82,12 +88,13 @@ def fit_localizer(
 
 def train_default(images: Any, xy: Any, *, camera_elevation: Sequence[float] = CAMERA_ELEVATION,
                   network: Network | None = None, rotation: Rotation | None = None, progress: bool = False,
-                  info: dict[str, Any] | None = None) -> Any:
+                  info: dict[str, Any] | None = None, loop_closures: Any = None, closure_weights: Any = None) -> Any:
     """Trains the sfanav default on a training run: ``images`` (N, 40, 350, 3)
     uint8 or float in temporal order, ``xy`` (N, 2) metres. Returns a fitted
     :class:`sfanav.Localizer` (network, rows and readout; ``save`` it as one
     model file). ``network`` replaces the default network (e.g. for other
-    image sizes)."""
+    image sizes). ``loop_closures``, ``closure_weights``: feedback training,
+    as :meth:`sfanav.Network.fit`."""
     from .training import (
         fit_localizer,  # training imports the localizer, which imports this module
     )
@@ -96,5 +103,5 @@ def train_default(images: Any, xy: Any, *, camera_elevation: Sequence[float] = C
     net = network if network is not None else default_network()
     return fit_localizer(net, np.asarray(images), np.asarray(xy, float), rotation=rotation or Rotation(5, 1.0),
                          readout=recipe.readout, rows=recipe.image_rows(camera_elevation), progress=progress,
-                         signature=recipe.signature,
+                         signature=recipe.signature, loop_closures=loop_closures, closure_weights=closure_weights,
                          info={**recipe.info(), **(info or {})})

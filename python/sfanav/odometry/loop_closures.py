@@ -21,86 +21,33 @@ bag of words; here they come from the images and (optionally) odometry:
 4. the earlier image is aligned to the current orientation by the column
    shift that maximises the circular cross-correlation of the two.
 
-:func:`interleave` builds the training sequence: each image, followed by
-its aligned loop-closure partner if it has one.
+:func:`interleave` builds a plain training sequence: each image, followed
+by its aligned loop-closure partner if it has one. The thesis's feedback
+(the partner woven into the simulated rotation) is
+``Network.fit(..., loop_closures=...)``; the detectors live in
+:mod:`sfanav.loopclosure`.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
+from ..loopclosure.closures import LoopClosures, panorama_rows
+from ..loopclosure.detectors import FourierDetector
 
-@dataclass
-class LoopClosures:
-    """Accepted loop closures: ``current[i]`` (index in the run) is paired
-    with the earlier ``past[i]``, which ``np.roll(image, shift[i], axis=1)``
-    aligns to it; ``distance[i]`` is their signature distance."""
-
-    current: np.ndarray
-    past: np.ndarray
-    shift: np.ndarray
-    distance: np.ndarray
-
-    def __len__(self) -> int:
-        return len(self.current)
-
-
-def panorama_rows(images: Any) -> np.ndarray:
-    """Panoramas (N, H, W) or (N, H, W, C) as rows (N, H * C, W) of columns
-    around the robot, in their own dtype (channels become rows). Raises
-    ValueError for any other shape."""
-    a = np.asarray(images)
-    if a.ndim == 4:  # (N, H, W, C) -> (N, H * C, W)
-        a = a.transpose(0, 1, 3, 2).reshape(a.shape[0], -1, a.shape[2])
-    if a.ndim != 3:
-        raise ValueError(f"images must be panoramas (N, H, W) or (N, H, W, C), got shape {a.shape}")
-    return a
+__all__ = ["LoopClosures", "find_loop_closures", "interleave", "panorama_rows"]
 
 
 def find_loop_closures(images: Any, odometry: Any = None, *, min_gap: int = 40, max_odometry_distance: float = 3.0,
-                       accept: float = 1.0, neighbor_lag: int = 2, n_coefficients: int = 15,
-                       chunk: int = 256) -> LoopClosures:
+                       accept: float = 1.0, neighbor_lag: int = 2, n_coefficients: int = 15) -> LoopClosures:
     """Loop closures within one training run of panoramas (N, H, W[, C]) in
-    temporal order; ``odometry`` (N, 2) metres, optional. See the module
-    docstring."""
-    R = panorama_rows(images).astype(np.float32, copy=False)
-    n, _, W = R.shape
-    spec = np.fft.rfft(R, axis=2)
-    k = min(n_coefficients, spec.shape[2])
-    sig = np.abs(spec[:, :, :k]).reshape(n, -1).astype(np.float32)
-    sig /= max(float(np.median(np.abs(sig))), 1e-12)
-    # each image's distance to its temporal neighbours: how alike "the same place" looks
-    lag = max(1, int(neighbor_lag))
-    nb = np.full(n, np.inf)
-    for d in (-lag, lag):
-        i = np.arange(max(0, -d), min(n, n - d))
-        nb[i] = np.minimum(nb[i], np.abs(sig[i] - sig[i + d]).sum(axis=1))
-    odo = None if odometry is None else np.asarray(odometry, float)[:, :2]
-    cur, past, dist = [], [], []
-    for s in range(0, n, chunk):
-        q = np.arange(s, min(n, s + chunk))
-        D = np.abs(sig[q][:, None, :] - sig[None, :, :]).sum(axis=2)  # L1, (m, n)
-        allowed = np.arange(n)[None, :] <= (q[:, None] - int(min_gap))
-        if odo is not None:
-            allowed &= np.hypot(*(odo[q][:, None, :] - odo[None, :, :]).transpose(2, 0, 1)) <= max_odometry_distance
-        D = np.where(allowed, D, np.inf)
-        j = np.argmin(D, axis=1)
-        dj = D[np.arange(len(q)), j]
-        ok = np.isfinite(dj) & (dj <= accept * nb[q])
-        cur.append(q[ok])
-        past.append(j[ok])
-        dist.append(dj[ok])
-    cur_a, past_a = np.concatenate(cur).astype(np.int64), np.concatenate(past).astype(np.int64)
-    # alignment: the shift of the past image that best matches the current one
-    shifts = np.empty(len(cur_a), np.int64)
-    for t in range(0, len(cur_a), chunk):
-        a, b = spec[cur_a[t : t + chunk]], spec[past_a[t : t + chunk]]
-        corr = np.fft.irfft((a * np.conj(b)).sum(axis=1), n=W, axis=1)  # sum_w a[w] b[w - d]
-        shifts[t : t + chunk] = np.argmax(corr, axis=1)
-    return LoopClosures(cur_a, past_a, shifts, np.concatenate(dist))
+    temporal order; ``odometry`` (N, 2) metres, optional: the accepted
+    matches of :class:`sfanav.loopclosure.FourierDetector` (see the module
+    docstring)."""
+    return FourierDetector(min_gap=min_gap, max_odometry_distance=max_odometry_distance, accept=accept,
+                           neighbor_lag=neighbor_lag, n_coefficients=n_coefficients).detect(images, odometry=odometry)
 
 
 def interleave(images: Any, closures: LoopClosures) -> np.ndarray:

@@ -50,7 +50,7 @@ from .._checks import (
 )
 from ..localization.readouts import make_readout
 from .dead_reckoning import as_poses, wrap_angle
-from .loop_closures import panorama_rows
+from ..loopclosure.closures import panorama_rows
 from .metric_cost import noise_dict
 
 REFINE_READOUT = {"kind": "gp", "n_outputs": 12}

@@ -1,0 +1,38 @@
+"""Places seen again: loop closures of a training run, and the training
+order of several recordings of one route (thesis 6.2).
+
+* :class:`LoopClosures` (``closures``): matched (past, current) frames with
+  the column shift that aligns the past panorama, a score and a distance;
+  :func:`align`;
+* detectors behind one interface (``detectors``, ``bow``):
+  :class:`GroundTruthDetector`, :class:`FourierDetector`,
+  :class:`BagOfWordsDetector`, :func:`make_detector`;
+* :func:`closure_precision_recall` (``evaluation``): precision, recall and
+  average precision against ground truth;
+* :func:`plot_closures` (``plots``): closures on the trajectory;
+* ``conditions``: position correspondences between recordings and the
+  place-major order of long-term training.
+
+Closures feed :meth:`sfanav.Network.fit` (``loop_closures=...``), which
+interleaves each earlier image in the current one's simulated rotation.
+
+>>> import numpy as np
+>>> xy = np.c_[np.r_[np.arange(10.0), np.arange(10.0)[::-1]], np.zeros(20)]
+>>> lc = GroundTruthDetector(max_distance=0.1, min_gap=5).detect(np.zeros((20, 4, 16)), positions=xy)
+>>> lc.current.tolist()[:3], lc.past.tolist()[:3]
+([10, 11, 12], [9, 8, 7])
+"""
+
+from __future__ import annotations
+
+from .bow import BagOfWordsDetector
+from .closures import LoopClosures, align, panorama_rows
+from .conditions import arc_fraction, correspondences, place_major_order
+from .detectors import FourierDetector, GroundTruthDetector, LoopClosureDetector, fourier_signatures, make_detector, suppress
+from .evaluation import ClosureQuality, closure_precision_recall
+from .plots import plot_closures, plot_precision_recall
+
+__all__ = ["BagOfWordsDetector", "ClosureQuality", "FourierDetector", "GroundTruthDetector", "LoopClosureDetector",
+           "LoopClosures", "align", "arc_fraction", "closure_precision_recall", "correspondences",
+           "fourier_signatures", "make_detector", "panorama_rows", "place_major_order", "plot_closures",
+           "plot_precision_recall", "suppress"]
