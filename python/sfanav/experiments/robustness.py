@@ -87,7 +87,7 @@ def _detect(kind: str, X: np.ndarray, xy: np.ndarray, odo: np.ndarray, quick: bo
     """Loop closures of the training run: ground truth (positions), or from
     the images with an odometry gate."""
     if kind == "gt":
-        far = {"max_distance": 0.6, "min_gap": 20} if quick else {"max_distance": GT_DISTANCE, "min_gap": GT_GAP}
+        far = {"max_distance": 1.7, "min_gap": 20} if quick else {"max_distance": GT_DISTANCE, "min_gap": GT_GAP}
         return make_detector("gt", **far).detect(X, positions=xy)
     return make_detector(kind).detect(X, odometry=odo)
 
