@@ -285,3 +285,22 @@ def test_error_paths(tiny, tmp_path, capsys):
     code, _, err = run(capsys, "train", "--dataset", data, "--config", tiny["config"], "--out", tmp_path / "m.sfa",
                        "--window", "0")
     assert_one_line_error(code, err, "--window")
+
+
+def test_train_with_loop_closures(tiny, tmp_path, capsys):
+    code, out, err = run(capsys, "train", "--dataset", tiny["root"] / "data", "--config", tiny["config"],
+                         "--out", tmp_path / "lc.sfa", "--loop-closures", "gt", "--closure-weights", "score",
+                         "--no-progress")
+    assert code == 0, err
+    assert "loop closures (gt):" in err  # the 40-frame run has no place seen again 50 frames later
+    assert sfanav.load(tmp_path / "lc.sfa").info["loop_closures"] == 0
+    code, _, err = run(capsys, "train", "--dataset", tiny["root"] / "data", "--config", tiny["config"],
+                       "--out", tmp_path / "w.sfa", "--closure-weights", "score", "--no-progress")
+    assert_one_line_error(code, err, "--closure-weights needs --loop-closures")
+    code, _, err = run(capsys, "train", "--dataset", tiny["root"] / "data", "--config", tiny["config"],
+                       "--out", tmp_path / "o.sfa", "--loop-closures", "gt", "--supervision", "odometry",
+                       "--no-progress")
+    assert_one_line_error(code, err, "--loop-closures gt needs ground-truth positions")
+    code, _, err = run(capsys, "train", "--dataset", tiny["root"] / "data", "--config", tiny["config"],
+                       "--out", tmp_path / "s.sfa", "--loop-closures", "surf", "--no-progress")
+    assert code == 2 and "invalid choice" in err

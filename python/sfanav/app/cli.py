@@ -256,8 +256,8 @@ def _add_train(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                         "odometry's straight lines)")
     p.add_argument("--loop-closures", choices=("gt", "bow", "fourier"), default=None,
                    help="loop-closure feedback (thesis 6.2.1): places the run visits again, found from ground truth "
-                        "(gt), a bag of visual words (bow) or the Fourier signature (fourier; both with the "
-                        "odometry as a gate when the run has it), are trained with the earlier image interleaved "
+                        "(gt), a bag of visual words (bow; robust to light) or the Fourier signature (fourier; fast, "
+                        "but not robust to light), are trained with the earlier image interleaved "
                         "in the current one's simulated rotation, so the network learns to ignore what changed "
                         "between the visits (light, weather). Default: none")
     p.add_argument("--closure-weights", choices=("uniform", "score"), default="uniform",
@@ -328,16 +328,21 @@ def _run_train(args: argparse.Namespace) -> int:
         except ValueError as exc:
             raise UsageError(f"horizon band: {exc}") from None
     prep = Preprocessing.for_network(net, window=args.window, normalize=args.normalize)
+    odometry = train.odometry
+    supervision = supervision_for(args.supervision, has_ground_truth=bool(np.isfinite(train.poses[:, :2]).all()),
+                                  has_odometry=bool(np.isfinite(odometry).all()))
+    if args.loop_closures is None and args.closure_weights != "uniform":
+        raise UsageError("--closure-weights needs --loop-closures")
+    if args.loop_closures == "gt" and supervision != "ground-truth":
+        raise UsageError("--loop-closures gt needs ground-truth positions, and this run is trained without them; "
+                         "use bow or fourier")
     _log(f"training on {len(train)} images of {args.dataset}" + (f" (run {run})" if run else "")
          + f" as {prep.describe()} panoramas; network: {net!r}; rows: {rows.describe() if rows else 'all'}; "
          + f"readout: {recipe.readout}" + (f" with the {recipe.signature} signature" if recipe.signature else "")
          + (" (the sfanav default)" if recipe.name == "sfanav default" else ""))
     preprocessor = Preprocessor(prep, mirror=args.mirror, log=_log)
-    odometry = train.odometry
-    supervision = supervision_for(args.supervision, has_ground_truth=bool(np.isfinite(train.poses[:, :2]).all()),
-                                  has_odometry=bool(np.isfinite(odometry).all()))
     images, xy = load_run(train, prep, preprocessor=preprocessor, progress=not args.no_progress)
-    closures = _training_closures(args, images, xy, odometry, has_ground_truth=supervision == "ground-truth")
+    closures = _training_closures(args, images, xy)
     fit_kw = dict(loop_closures=closures, closure_weights="score" if closures is not None
                   and args.closure_weights == "score" else None,rotation=Rotation(step=args.step, window=args.window), n_outputs=recipe.n_outputs,
                   readout=recipe.readout, rows=rows, prep=prep, progress=not args.no_progress,
@@ -384,25 +389,17 @@ def _run_train(args: argparse.Namespace) -> int:
     return 0
 
 
-def _training_closures(args: argparse.Namespace, images: "Any", xy: "Any", odometry: "Any", *,
-                       has_ground_truth: bool) -> "Any":
-    """The loop closures ``sfanav train --loop-closures`` asks for, or None."""
-    import numpy as np
-
+def _training_closures(args: argparse.Namespace, images: "Any", xy: "Any") -> "Any":
+    """The loop closures ``sfanav train --loop-closures`` asks for (checked
+    against the supervision before), or None."""
     from ..loopclosure import make_detector
 
     if args.loop_closures is None:
-        if args.closure_weights != "uniform":
-            raise UsageError("--closure-weights needs --loop-closures")
         return None
     if args.loop_closures == "gt":
-        if not has_ground_truth:
-            raise UsageError("--loop-closures gt needs ground-truth positions, and this run is trained without them; "
-                             "use bow or fourier")
         lc = make_detector("gt").detect(images, positions=xy)
-    else:
-        odo = odometry if np.isfinite(odometry).all() else None
-        lc = make_detector(args.loop_closures).detect(images, odometry=odo)
+    else:  # from the images alone (a fixed odometry gate would shut out later passes: dead reckoning drifts)
+        lc = make_detector(args.loop_closures).detect(images)
     _log(f"loop closures ({args.loop_closures}): {len(lc)} images trained with their earlier visit interleaved"
          + (", weighted by match confidence" if args.closure_weights == "score" else ""))
     return lc if len(lc) else None

@@ -7,8 +7,11 @@ the place in a small open garden. A vocabulary of ``n_words`` words is
 learned by k-means (scikit-learn's ``MiniBatchKMeans``) on a sample of the
 descriptors; each image becomes a tf-idf weighted, L2-normalised word
 histogram, and a frame's loop closure is the earlier frame of most similar
-histogram (cosine), accepted like the Fourier detector's matches: at most
-``accept`` times as far (1 - cosine) as the frame's temporal neighbours.
+histogram (cosine). The ``verify`` most similar earlier frames are then
+re-ranked by the distance of the aligned, illumination-normalised
+panoramas (each image shifted and scaled to zero mean and unit variance,
+compared at its best column shift), and the nearest is accepted when it is
+at most ``accept`` times as far as the frame's temporal neighbours.
 Panoramas are padded circularly by half a keypoint so that descriptors
 wrap around the seam.
 """
@@ -20,7 +23,7 @@ from typing import Any
 import numpy as np
 
 from .._checks import as_images, check_int, check_nonneg_float, check_positive_float
-from .detectors import LoopClosureDetector, nearest_earlier
+from .detectors import LoopClosureDetector
 
 
 def _gray_uint8(images: np.ndarray) -> np.ndarray:
@@ -47,9 +50,19 @@ class BagOfWordsDetector(LoopClosureDetector):
         Diameter of the fixed-scale SIFT keypoints, pixels.
     grid_step : int, default 8
         Keypoint spacing, pixels (rows and columns).
+    rows : (float, float), default (0.0, 1.0)
+        The band of image rows described, as fractions of the height from
+        the top (e.g. ``(0.0, 0.5)``: the upper half, leaving out the lawn
+        near the robot, which looks alike everywhere).
     max_descriptors : int, default 200000
         Descriptors sampled to learn the vocabulary.
-    min_gap, max_odometry_distance, accept, neighbor_lag, suppress
+    verify : int, default 20
+        Candidates re-ranked by the aligned image distance (1: the
+        histograms alone decide).
+    accept : float, default 0.5
+        A match is accepted when its aligned image distance is at most
+        ``accept`` times the frame's distance to its temporal neighbours.
+    min_gap, max_odometry_distance, neighbor_lag, suppress
         As :class:`~sfanav.loopclosure.FourierDetector`.
     seed : int
         Seed of the sampling and of k-means.
@@ -59,12 +72,15 @@ class BagOfWordsDetector(LoopClosureDetector):
     """
 
     def __init__(self, n_words: int = 1500, keypoint_size: float = 12.0, grid_step: int = 8,
-                 max_descriptors: int = 200_000, min_gap: int = 40, max_odometry_distance: float = 3.0,
-                 accept: float = 1.0, neighbor_lag: int = 2, suppress: int = 0, seed: int = 0) -> None:
+                 rows: tuple[float, float] = (0.0, 1.0), max_descriptors: int = 200_000, verify: int = 20,
+                 min_gap: int = 40, max_odometry_distance: float = 3.0, accept: float = 0.5, neighbor_lag: int = 2,
+                 suppress: int = 0, seed: int = 0) -> None:
         self.n_words = n_words
         self.keypoint_size = keypoint_size
         self.grid_step = grid_step
+        self.rows = rows
         self.max_descriptors = max_descriptors
+        self.verify = verify
         self.min_gap = min_gap
         self.max_odometry_distance = max_odometry_distance
         self.accept = accept
@@ -81,9 +97,17 @@ class BagOfWordsDetector(LoopClosureDetector):
         step = check_int(self.grid_step, "grid_step")
         pad = int(np.ceil(size / 2))
         h, w = G.shape[1:3]
-        if h < 2 * pad + 1:
-            raise ValueError(f"images of {h} rows are too low for keypoints of {size:g} px; lower keypoint_size")
-        kps = [cv2.KeyPoint(float(x), float(y), size) for y in range(pad, h - pad, step)
+        try:
+            lo, hi = (float(v) for v in self.rows)
+        except (TypeError, ValueError):
+            raise ValueError(f"rows must be two fractions (top, bottom) of the image height, got {self.rows!r}") from None
+        if not 0.0 <= lo < hi <= 1.0:
+            raise ValueError(f"rows must satisfy 0 <= top < bottom <= 1, got {self.rows!r}")
+        y0, y1 = max(pad, int(round(lo * h))), min(h - pad, int(round(hi * h)))
+        if y1 <= y0:
+            raise ValueError(f"rows {self.rows!r} of {h}-px images leave no room for keypoints of {size:g} px; "
+                             "widen rows or lower keypoint_size")
+        kps = [cv2.KeyPoint(float(x), float(y), size) for y in range(y0, y1, step)
                for x in range(pad, pad + w, step)]
         sift = cv2.SIFT_create()
         out = []
@@ -141,7 +165,51 @@ class BagOfWordsDetector(LoopClosureDetector):
         accept = check_nonneg_float(self.accept, "accept")
         max_odo = check_positive_float(self.max_odometry_distance, "max_odometry_distance")
         lag = check_int(self.neighbor_lag, "neighbor_lag")
+        k = check_int(self.verify, "verify")
         check_int(self.suppress, "suppress", minimum=0)
         self.fit(X)
         H = self._normalise(self._train_counts)
-        return nearest_earlier(H, lambda A, B: np.maximum(1.0 - A @ B.T, 0.0), self, odo, max_odo, lag, accept)
+        P = _normalised_panoramas(X)
+        n = len(X)
+        nb = np.full(n, np.inf)
+        for d in (-lag, lag):
+            for i in range(max(0, -d), min(n, n - d)):
+                nb[i] = min(nb[i], _aligned_distance(P[i], P[i + d : i + d + 1])[0])
+        cur, past, dist = [], [], []
+        for s in range(self.min_gap, n, 256):
+            q = np.arange(s, min(n, s + 256))
+            sims = np.where(self._gate(n, q, odo, max_odo), H[q] @ H.T, -np.inf)
+            top = np.argsort(-sims, axis=1)[:, :k]
+            for row, i in enumerate(q):
+                cand = top[row][np.isfinite(sims[row, top[row]])]
+                if not len(cand):
+                    continue
+                dj = _aligned_distance(P[i], P[cand])
+                b = int(np.argmin(dj))
+                cur.append(i)
+                past.append(int(cand[b]))
+                dist.append(float(dj[b]))
+        if not cur:
+            z = np.zeros(0, np.int64)
+            return z, z, np.zeros(0), np.zeros(0), np.zeros(0, bool)
+        c, p, d = np.array(cur, np.int64), np.array(past, np.int64), np.array(dist)
+        ratio = d / np.maximum(nb[c], 1e-12)
+        return c, p, d, 1.0 / (1.0 + ratio), ratio <= accept
+
+
+def _normalised_panoramas(images: np.ndarray) -> np.ndarray:
+    """Gray panoramas (N, H, W) float32, each at zero mean and unit variance."""
+    G = _gray_uint8(images).astype(np.float32)
+    G -= G.mean(axis=(1, 2), keepdims=True)
+    G /= np.maximum(G.std(axis=(1, 2), keepdims=True), 1e-6)
+    return G
+
+
+def _aligned_distance(a: np.ndarray, B: np.ndarray) -> np.ndarray:
+    """Mean squared difference of panorama ``a`` (H, W) and each of ``B``
+    (K, H, W) at the column shift that fits best."""
+    W = a.shape[1]
+    fa = np.fft.rfft(a, axis=1)
+    fb = np.fft.rfft(B, axis=2)
+    corr = np.fft.irfft((fa[None] * np.conj(fb)).sum(axis=1), n=W, axis=1).max(axis=1)
+    return ((a**2).sum() + (B**2).sum(axis=(1, 2)) - 2.0 * corr) / a.size
