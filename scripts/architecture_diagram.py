@@ -17,10 +17,11 @@ from collections import Counter
 from pathlib import Path
 
 PKG = Path(__file__).resolve().parents[1] / "python" / "sfanav"
-STAGES = ["data", "sim", "sfa", "localization", "odometry", "navigation", "experiments", "app"]
+STAGES = ["data", "sim", "loopclosure", "sfa", "localization", "odometry", "navigation", "experiments", "app"]
 LABEL = {
     "data": "data<br/>images, datasets, unwarping",
     "sim": "sim<br/>simulated garden",
+    "loopclosure": "loopclosure<br/>places seen again, long-term order",
     "sfa": "sfa<br/>SFA node, network -> slow features",
     "localization": "localization<br/>slow features -> position",
     "odometry": "odometry<br/>metric map, EKF, loop closures",

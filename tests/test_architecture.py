@@ -146,7 +146,7 @@ def test_no_module_reaches_into_another_modules_private_attributes():
     assert not bad, "\n".join(bad)
 
 
-@pytest.mark.parametrize("stage", ["data", "sfa", "localization", "odometry", "navigation", "sim"])
+@pytest.mark.parametrize("stage", ["data", "sfa", "localization", "odometry", "navigation", "sim", "loopclosure"])
 def test_each_stage_imports_on_its_own(stage):
     code = f"import sfanav.{stage}"
     subprocess.run([sys.executable, "-c", code], check=True)

@@ -23,7 +23,7 @@ for name, det in (("ground truth", GroundTruthDetector(max_distance=0.1, min_gap
                   ("Fourier signature", FourierDetector(min_gap=50)), ("bag of words", BagOfWordsDetector(min_gap=50))):
     t0 = time.perf_counter()
     cand = det.candidates(X, positions=xy)
-    acc = cand.select(det._accepted)
+    acc = cand.select(det.accepted_)
     qc, qa = closure_precision_recall(cand, xy), closure_precision_recall(acc, xy)
     print(f"| {name} | {qc.average_precision:.2f} | {qa.n} | {qa.mean_distance:.3f} | {qa.precision:.2f} | "
           f"{qa.recall:.2f} | {time.perf_counter() - t0:.0f} s |", flush=True)

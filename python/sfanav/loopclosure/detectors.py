@@ -29,9 +29,11 @@ from .closures import LoopClosures, align, panorama_rows
 
 
 class LoopClosureDetector:
-    """Base of the detectors: subclasses implement :meth:`_best` (for every
-    frame, the best allowed earlier frame, its dissimilarity and score)
-    and :meth:`_accept` (which of those are closures)."""
+    """Base of the detectors: subclasses implement ``_best`` (for every
+    frame, the best allowed earlier frame, its dissimilarity, score and
+    whether it is accepted). After :meth:`candidates` or :meth:`detect`,
+    ``accepted_`` (bool, one per candidate) says which candidates the
+    detector accepts."""
 
     min_gap: int
     suppress: int
@@ -49,7 +51,7 @@ class LoopClosureDetector:
             if a is not None and len(a) != n:
                 raise ValueError(f"{name} has {len(a)} rows for {n} images; they must match")
         cur, past, dist, score, ok = self._best(X, pos, odo)
-        self._accepted = ok
+        self.accepted_ = ok
         shift = align(X, past, cur) if len(cur) else np.zeros(0, np.int64)
         return LoopClosures(past, cur, shift, score, dist)
 
@@ -58,7 +60,7 @@ class LoopClosureDetector:
         arguments); with ``suppress > 0`` only the best-scoring closure
         within ``suppress`` frames of each other is kept."""
         cand = self.candidates(images, positions=positions, odometry=odometry)
-        lc = cand.select(self._accepted)
+        lc = cand.select(self.accepted_)
         return suppress(lc, self.suppress) if self.suppress else lc
 
     def _gate(self, n: int, q: np.ndarray, odo: np.ndarray | None, max_odo: float) -> np.ndarray:
