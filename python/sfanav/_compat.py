@@ -101,11 +101,6 @@ MOVED: dict[str, dict[str, tuple[str, str]]] = {
         'pooled_transform': ('sfanav.localization.localizer', 'pooled_transform'),
         'pooling_step': ('sfanav.localization.localizer', 'pooling_step'),
     },
-    'sfanav.loopclosure': {
-        'LoopClosures': ('sfanav.odometry.loop_closures', 'LoopClosures'),
-        'find_loop_closures': ('sfanav.odometry.loop_closures', 'find_loop_closures'),
-        'interleave': ('sfanav.odometry.loop_closures', 'interleave'),
-    },
     'sfanav.metric': {
         'ANGLE_TERMS': ('sfanav.odometry.metric_cost', 'ANGLE_TERMS'),
         'DEFAULT_ODOMETRY_NOISE': ('sfanav.odometry.metric_cost', 'DEFAULT_ODOMETRY_NOISE'),

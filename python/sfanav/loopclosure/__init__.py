@@ -26,13 +26,21 @@ interleaves each earlier image in the current one's simulated rotation.
 from __future__ import annotations
 
 from .bow import BagOfWordsDetector
-from .closures import LoopClosures, align, panorama_rows
+from .closures import LoopClosures, align, interleave, panorama_rows
 from .conditions import arc_fraction, correspondences, place_major_order
-from .detectors import FourierDetector, GroundTruthDetector, LoopClosureDetector, fourier_signatures, make_detector, suppress
+from .detectors import (
+    FourierDetector,
+    GroundTruthDetector,
+    LoopClosureDetector,
+    find_loop_closures,
+    fourier_signatures,
+    make_detector,
+    suppress,
+)
 from .evaluation import ClosureQuality, closure_precision_recall
 from .plots import plot_closures, plot_precision_recall
 
 __all__ = ["BagOfWordsDetector", "ClosureQuality", "FourierDetector", "GroundTruthDetector", "LoopClosureDetector",
            "LoopClosures", "align", "arc_fraction", "closure_precision_recall", "correspondences",
-           "fourier_signatures", "make_detector", "panorama_rows", "place_major_order", "plot_closures",
+           "find_loop_closures", "fourier_signatures", "interleave", "make_detector", "panorama_rows", "place_major_order", "plot_closures",
            "plot_precision_recall", "suppress"]

@@ -124,3 +124,22 @@ def align(images: Any, past: Any, current: Any, *, chunk: int = 256) -> np.ndarr
         corr = np.fft.irfft((a * np.conj(b)).sum(axis=1), n=W, axis=1)  # sum_w cur[w] past[w - d]
         out[s : s + chunk] = np.argmax(corr, axis=1)
     return out
+
+
+def interleave(images: Any, closures: LoopClosures) -> np.ndarray:
+    """A plain training sequence with loop closures appended: every image,
+    then (if it has one) its earlier partner rolled into its orientation.
+    (The thesis's feedback weaves the partner into the simulated rotation
+    instead: ``Network.fit(..., loop_closures=...)``.)"""
+    a = np.asarray(images)
+    partner = {int(c): (int(p), int(s)) for c, p, s in zip(closures.current, closures.past, closures.shift)}
+    out = np.empty((len(a) + len(partner),) + a.shape[1:], a.dtype)
+    k = 0
+    for i in range(len(a)):
+        out[k] = a[i]
+        k += 1
+        if i in partner:
+            p, s = partner[i]
+            out[k] = np.roll(a[p], s, axis=1)
+            k += 1
+    return out

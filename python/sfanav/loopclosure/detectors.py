@@ -209,6 +209,15 @@ def nearest_earlier(feats: np.ndarray, matrix: Any, det: LoopClosureDetector, od
     return c, p, d, 1.0 / (1.0 + ratio), ratio <= accept
 
 
+def find_loop_closures(images: Any, odometry: Any = None, *, min_gap: int = 40, max_odometry_distance: float = 3.0,
+                       accept: float = 1.0, neighbor_lag: int = 2, n_coefficients: int = 15) -> LoopClosures:
+    """The accepted closures of :class:`FourierDetector` with these
+    parameters, on panoramas (N, H, W[, C]) in temporal order, gated by
+    ``odometry`` (N, 2) metres when given."""
+    return FourierDetector(min_gap=min_gap, max_odometry_distance=max_odometry_distance, accept=accept,
+                           neighbor_lag=neighbor_lag, n_coefficients=n_coefficients).detect(images, odometry=odometry)
+
+
 def make_detector(kind: str, **params: Any) -> LoopClosureDetector:
     """The detector named ``kind``: ``"gt"`` (:class:`GroundTruthDetector`),
     ``"bow"`` (:class:`~sfanav.loopclosure.bow.BagOfWordsDetector`) or

@@ -30,38 +30,7 @@ by its aligned loop-closure partner if it has one. The thesis's feedback
 
 from __future__ import annotations
 
-from typing import Any
-
-import numpy as np
-
-from ..loopclosure.closures import LoopClosures, panorama_rows
-from ..loopclosure.detectors import FourierDetector
+from ..loopclosure.closures import LoopClosures, interleave, panorama_rows
+from ..loopclosure.detectors import find_loop_closures
 
 __all__ = ["LoopClosures", "find_loop_closures", "interleave", "panorama_rows"]
-
-
-def find_loop_closures(images: Any, odometry: Any = None, *, min_gap: int = 40, max_odometry_distance: float = 3.0,
-                       accept: float = 1.0, neighbor_lag: int = 2, n_coefficients: int = 15) -> LoopClosures:
-    """Loop closures within one training run of panoramas (N, H, W[, C]) in
-    temporal order; ``odometry`` (N, 2) metres, optional: the accepted
-    matches of :class:`sfanav.loopclosure.FourierDetector` (see the module
-    docstring)."""
-    return FourierDetector(min_gap=min_gap, max_odometry_distance=max_odometry_distance, accept=accept,
-                           neighbor_lag=neighbor_lag, n_coefficients=n_coefficients).detect(images, odometry=odometry)
-
-
-def interleave(images: Any, closures: LoopClosures) -> np.ndarray:
-    """The training sequence with loop-closure feedback: every image, then
-    (if it has one) its earlier partner rolled into its orientation."""
-    a = np.asarray(images)
-    partner = {int(c): (int(p), int(s)) for c, p, s in zip(closures.current, closures.past, closures.shift)}
-    out = np.empty((len(a) + len(partner),) + a.shape[1:], a.dtype)
-    k = 0
-    for i in range(len(a)):
-        out[k] = a[i]
-        k += 1
-        if i in partner:
-            p, s = partner[i]
-            out[k] = np.roll(a[p], s, axis=1)
-            k += 1
-    return out
