@@ -173,20 +173,20 @@ def run_621(out: Path, variant: str, *, quick: bool, seed: int, progress: bool,
                 p = plot_closures(xy_tr, lc, path=out / f"{name}-closures-{kind}.png",
                                   title=f"{name}: {len(lc)} loop closures ({kind})")
                 plots.append(str(p))
-        if config == CONFIGS[0]:
-            # the peers on the same training images, the thesis's figures for both models
+        if config == CONFIGS[0]:  # the peers on the same training images
             for peer, model in (("perfect memory", baselines.PerfectMemory()),
                                 ("Fourier signature", baselines.FourierSignature())):
                 model.fit(X_tr, xy_tr)
                 m = localization_metrics(model.predict(X_te), xy_te, coordinate_range=coordinate_range(xy_te))
                 rows.append({"metric": f"MED (m) {peer}", "thesis": None, "sfanav": m["med"]})
-            for label, loc in fits.items():
-                slug = label.replace(" ", "-")
-                F = loc.features(X_te)
-                plots.append(str(plot_firing_maps(F, xy_te, out / f"{name}-firing-{slug}.png", which=(0, 1, 2, 3),
-                                                  title=f"{name}, {label}: slow features 1-4 on the test walk")))
-                plots.append(str(plot_trajectory(xy_te, loc.predict(X_te), out / f"{name}-trajectory-{slug}.png",
-                                                 title=f"{name}, {label}: MED {_med(loc, X_te, xy_te)['med']:.2f} m")))
+        for label, loc in fits.items():  # the thesis's figures (firing maps, trajectories) for every model
+            slug = (label + ("" if config == CONFIGS[0] else " default")).replace(" ", "-")
+            F = loc.features(X_te)
+            plots.append(str(plot_firing_maps(F, xy_te, out / f"{name}-firing-{slug}.png", which=(0, 1, 2, 3),
+                                              title=f"{name} [{config}], {label}: slow features 1-4, test walk")))
+            plots.append(str(plot_trajectory(xy_te, loc.predict(X_te), out / f"{name}-trajectory-{slug}.png",
+                                             title=f"{name} [{config}], {label}: MED "
+                                                   f"{_med(loc, X_te, xy_te)['med']:.2f} m")))
         details[config] = fits
     notes.append(
         f"Scene: sim preset thesis-6.2.1-{variant} (seed {seed}), omnidirectional 500x500 images unwarped to "
