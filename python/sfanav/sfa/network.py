@@ -68,6 +68,17 @@ class Rotation:
             raise ValueError(f"Rotation.window must be in (0, 1], got {self.window!r}")
 
 
+def _image_array(images: Any, what: str) -> np.ndarray:
+    """Training images that ``what`` indexes: an array, or an ``.npy`` path
+    (memory-mapped). TypeError for anything else (an iterable is read once
+    per pass and cannot be indexed)."""
+    if isinstance(images, (str, os.PathLike)):
+        images = np.load(Path(images), mmap_mode="r", allow_pickle=False)
+    if not isinstance(images, np.ndarray):
+        raise TypeError(f"{what} need the images as an array (N, H, W[, C]) or an .npy path")
+    return images
+
+
 def _check_transition_weight(w: Any) -> float:
     if isinstance(w, bool) or not isinstance(w, (int, float, np.integer, np.floating)):
         raise TypeError(f"transition_weight must be a number, got {type(w).__name__}")
@@ -563,18 +574,12 @@ class Network:
         if loop_closures is None and closure_weights is not None:
             raise ValueError("closure_weights needs loop_closures")
         if loop_closures is not None:
-            if isinstance(images, (str, os.PathLike)):
-                images = np.load(Path(images), mmap_mode="r", allow_pickle=False)
-            if not isinstance(images, np.ndarray):
-                raise TypeError("loop_closures need the images as an array (N, H, W[, C]) or an .npy path")
+            images = _image_array(images, "loop_closures")
             closures = closure_partners(images, loop_closures, closure_weights)
         if not isinstance(rotation, Rotation):
             raise TypeError("rotation must be a sfanav.Rotation")
         if pairs is not None:
-            if isinstance(images, (str, os.PathLike)):
-                images = np.load(Path(images), mmap_mode="r", allow_pickle=False)
-            if not isinstance(images, np.ndarray):
-                raise TypeError("pairs need the images as an array (N, H, W[, C]) or an .npy path")
+            images = _image_array(images, "pairs")
             pairs = check_pairs(pairs, len(images))
             n_layers = len(self.config_["layers"])
             if pair_layers is None:
