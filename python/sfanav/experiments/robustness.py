@@ -226,13 +226,17 @@ THESIS_622_NINE = 0.35
 
 
 def run_622(out: Path, *, quick: bool, seed: int, progress: bool, permutations: int = 10,
-            configs: tuple[str, ...] = CONFIGS, max_sets: int = 9) -> ExperimentResult:
+            configs: tuple[str, ...] = CONFIGS, max_sets: int = 9, by: str = "position") -> ExperimentResult:
     """Train on 1..``max_sets`` recordings in different light, place-major
     (every recording's image of a place, then the next place), and measure
     on the next unseen recording; ``permutations`` random orders of the 10
-    recordings. Perfect memory with the views of all training recordings is
-    the peer."""
-    from ..loopclosure.conditions import correspondences, place_major_order
+    recordings. Correspondences ``by`` ground-truth ``"position"`` or by the
+    odometry's ``"arc"`` fraction of the loop (no ground truth). Perfect
+    memory with the views of all training recordings is the peer."""
+    from ..loopclosure.conditions import arc_fraction, correspondences, place_major_order
+
+    if by not in ("position", "arc"):
+        raise ValueError(f'by must be "position" or "arc", got {by!r}')
 
     log = progress_log(progress)
     preset = "thesis-6.2.2-conditions"
@@ -247,12 +251,13 @@ def run_622(out: Path, *, quick: bool, seed: int, progress: bool, permutations: 
     n_sets = min(max_sets, len(conds) - 1)
     for config in configs:
         make_net, prep, kw = _config(config, quick)
-        sets = []
+        sets, keys = [], []
         for c in conds:
-            X, xy = load_run(ds.select(condition=c), prep, log=log)
+            rec = ds.select(condition=c)
+            X, xy = load_run(rec, prep, log=log)
             sets.append((X, xy))
-        ref_xy = sets[0][1]
-        places = [correspondences(ref_xy, xy) for _, xy in sets]  # ground truth correspondences
+            keys.append(xy if by == "position" else arc_fraction(rec.odometry))
+        places = [correspondences(keys[0], k) for k in keys]
         rows_step = None if config == "thesis config" or quick else recipe_for().image_rows(
             tuple(ds.metadata["camera"].get("elevation_deg", (-30.0, 20.0))))
         med = np.full((permutations, n_sets), np.nan)
@@ -289,7 +294,8 @@ def run_622(out: Path, *, quick: bool, seed: int, progress: bool, permutations: 
     path = _plot_sets(curves, out / "6.2.2-error-vs-sets.png")
     notes = (f"Scene: sim preset {preset} (seed {seed}): {len(conds)} recordings of one {len(sets[0][1])}-frame loop "
              "in different light (intensity, sun direction, red tint). Training: 1..9 recordings in place-major "
-             "order (ground-truth correspondences to the first recording's frames), readout fitted on the same "
+             f"order (correspondences to the first recording's frames by {'ground-truth position' if by == 'position' else "
+             "'the odometry arc fraction of the loop'}), readout fitted on the same "
              f"images; test: the next recording of the permutation; {permutations} random permutations "
              "(thesis: 10). Fig. 6.18a beside: 9 sets 0.35 m.")
     return ExperimentResult("6.2.2", rows, [str(path)], notes,
