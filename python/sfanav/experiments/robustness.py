@@ -292,10 +292,10 @@ def run_622(out: Path, *, quick: bool, seed: int, progress: bool, permutations: 
         rows.append({"metric": f"MED (m), {n_sets} training sets [perfect memory, all conditions' views]",
                      "thesis": None, "sfanav": float(pm_mean[-1])})
     path = _plot_sets(curves, out / "6.2.2-error-vs-sets.png")
+    key_name = "ground-truth position" if by == "position" else "the odometry's arc fraction of the loop"
     notes = (f"Scene: sim preset {preset} (seed {seed}): {len(conds)} recordings of one {len(sets[0][1])}-frame loop "
              "in different light (intensity, sun direction, red tint). Training: 1..9 recordings in place-major "
-             f"order (correspondences to the first recording's frames by {'ground-truth position' if by == 'position' else "
-             "'the odometry arc fraction of the loop'}), readout fitted on the same "
+             f"order (correspondences to the first recording's frames by {key_name}), readout fitted on the same "
              f"images; test: the next recording of the permutation; {permutations} random permutations "
              "(thesis: 10). Fig. 6.18a beside: 9 sets 0.35 m.")
     return ExperimentResult("6.2.2", rows, [str(path)], notes,
