@@ -1,0 +1,43 @@
+"""The robustness experiments of thesis 6.2 as quick smoke runs: each
+produces its rows (thesis values beside), its JSON and plots."""
+
+import json
+import math
+
+from sfanav import experiments
+
+
+def _rows(result, out):
+    d = json.loads((out / f"{result.experiment}.json").read_text())
+    assert d["experiment"] == result.experiment and len(d["rows"]) == len(result.rows)
+    names = [r["metric"] for r in result.rows]
+    assert len(names) == len(set(names)), "metric names must be unique"
+    for r in result.rows:
+        if isinstance(r["sfanav"], float):
+            assert math.isfinite(r["sfanav"]) or r["metric"].startswith("closures' mean"), r
+    for p in result.plots:
+        assert __import__("pathlib").Path(p).exists(), p
+    return {r["metric"]: r for r in result.rows}
+
+
+def test_registered():
+    assert {"6.2.1-static", "6.2.1-light", "6.2.1-dynamic", "6.2.1-bow", "6.2.2"} <= set(experiments.names())
+
+
+def test_621_light_quick(tmp_path):
+    res = experiments.run("6.2.1-light", tmp_path, quick=True, progress=False)
+    rows = _rows(res, tmp_path)
+    assert rows["MED (m) standard [thesis config]"]["thesis"] == 2.4
+    assert rows["MED (m) feedback gt [thesis config]"]["thesis"] == 0.46
+    assert rows["loop closures (gt)"]["sfanav"] > 0  # the quick run's closures are far apart, but there
+    assert "MED (m) perfect memory" in rows and "MED (m) feedback gt [sfanav default]" in rows
+
+
+def test_621_bow_and_622_quick(tmp_path):
+    rows = _rows(experiments.run("6.2.1-bow", tmp_path, quick=True, progress=False), tmp_path)
+    assert rows["average precision at 0.1 m, all candidates (bow)"]["thesis"] == 0.52
+    assert "MED (m) feedback bow weighted [thesis config]" in rows
+    res = experiments.run("6.2.2", tmp_path, quick=True, progress=False)
+    rows = _rows(res, tmp_path)
+    assert "MED (m), 1 training set [thesis config]" in rows
+    assert len(res.details["curves"]["thesis config"][0]) == 3
