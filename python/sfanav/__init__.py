@@ -4,6 +4,7 @@ hierarchical Slow Feature Analysis.
 The package follows the pipeline, one subpackage per stage::
 
     data          images, datasets, unwarping, preprocessing
+    loopclosure   places seen again: loop-closure detectors, long-term training order
     sfa           SFA nodes and the receptive-field network -> slow features
     localization  slow features -> metric position (readouts, evaluation)
     odometry      metric learning from odometry, EKF fusion, loop closures
@@ -20,11 +21,12 @@ from __future__ import annotations
 
 from typing import Any
 
-from . import _compat, data, localization, navigation, odometry, sfa, sim
+from . import _compat, data, localization, loopclosure, navigation, odometry, sfa, sim
 from ._core import __version__
 from ._resources import get_memory_limit, get_num_threads, set_memory_limit, set_num_threads
 from .data import Dataset, DatasetWriter, Unwarper, estimate_mirror, write_dataset
 from .localization import Localizer, QuadraticRegression
+from .loopclosure import BagOfWordsDetector, FourierDetector, GroundTruthDetector, LoopClosures, make_detector
 from .navigation import (
     Navigator,
     PlaneGradient,
@@ -48,6 +50,10 @@ from .sfa import (
 
 __all__ = [
     "SFA",
+    "BagOfWordsDetector",
+    "FourierDetector",
+    "GroundTruthDetector",
+    "LoopClosures",
     "Dataset",
     "DatasetWriter",
     "Localizer",
@@ -73,6 +79,7 @@ __all__ = [
     "get_memory_limit",
     "get_num_threads",
     "load",
+    "make_detector",
     "localization",
     "navigation",
     "odometry",
