@@ -73,7 +73,8 @@ def _config(name: str, quick: bool) -> tuple[Any, Preprocessing, dict[str, Any]]
         return ((lambda: Network.from_preset("thesis-5.2", precision="mixed")), Preprocessing(600, 60, False),
                 {"n_outputs": 8, "readout": dict(THESIS_SPEC), "rotation_pooling": None})
     recipe = recipe_for()
-    return (default_network, Preprocessing(350, 40, False),
+    # "sfanav default, normalised": each panorama at zero mean and unit variance (thesis 5.2's preprocessing)
+    return (default_network, Preprocessing(350, 40, False, name.endswith("normalised")),
             {"readout": recipe.readout, "signature": recipe.signature})
 
 
