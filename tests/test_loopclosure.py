@@ -199,3 +199,13 @@ def test_detected_closures_train_the_network():
     assert net.n_loop_closures_ == len(lc)
     plain = sfanav.Network(cfg).fit(imgs, rot, progress=False)
     assert not np.allclose(net.delta_values_, plain.delta_values_, rtol=1e-3)
+
+
+def test_normalised_fourier_signatures_survive_a_light_ramp():
+    imgs, xy, _ = _loop_run()
+    dim = imgs * np.linspace(0.4, 1.4, len(imgs))[:, None, None]
+    plain = closure_precision_recall(FourierDetector(min_gap=20).detect(dim), xy, max_distance=0.06, min_gap=20)
+    norm = closure_precision_recall(FourierDetector(min_gap=20, normalize=True).detect(dim), xy, max_distance=0.06,
+                                    min_gap=20)
+    assert norm.recall > plain.recall + 0.3, (plain, norm)
+    assert norm.precision >= 0.8, norm

@@ -26,6 +26,14 @@ from .._checks import as_images, check_int, check_nonneg_float, check_positive_f
 from .detectors import LoopClosureDetector
 
 
+def _one_thread():
+    """One thread for scikit-learn's k-means (OpenMP and BLAS): on small
+    batches two threads on two shared cores are many times slower."""
+    from threadpoolctl import threadpool_limits
+
+    return threadpool_limits(limits=1)
+
+
 def _gray_uint8(images: np.ndarray) -> np.ndarray:
     X = images
     if X.ndim == 4:
@@ -129,8 +137,9 @@ class BagOfWordsDetector(LoopClosureDetector):
         rng = np.random.default_rng(self.seed)
         m = check_int(self.max_descriptors, "max_descriptors", minimum=k)
         sample = allD[rng.choice(len(allD), min(m, len(allD)), replace=False)]
-        km = MiniBatchKMeans(n_clusters=k, random_state=self.seed, n_init=1, batch_size=4096,
-                             max_no_improvement=20).fit(sample)
+        with _one_thread():
+            km = MiniBatchKMeans(n_clusters=k, random_state=self.seed, n_init=1, batch_size=4096,
+                                 max_no_improvement=20).fit(sample)
         self.vocabulary_ = km.cluster_centers_.astype(np.float32)
         self._kmeans = km
         counts = self._counts(D)
@@ -144,7 +153,8 @@ class BagOfWordsDetector(LoopClosureDetector):
         out = np.zeros((len(D), k))
         sizes = [len(d) for d in D]
         allD = np.concatenate(D)
-        words = np.concatenate([self._kmeans.predict(allD[s : s + 65536]) for s in range(0, len(allD), 65536)])
+        with _one_thread():
+            words = np.concatenate([self._kmeans.predict(allD[s : s + 65536]) for s in range(0, len(allD), 65536)])
         owner = np.repeat(np.arange(len(D)), sizes)
         np.add.at(out, (owner, words), 1.0)
         return out

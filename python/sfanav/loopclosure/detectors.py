@@ -130,15 +130,18 @@ class GroundTruthDetector(LoopClosureDetector):
         return c, p, d, 1.0 / (1.0 + d / max_d), d <= max_d
 
 
-def fourier_signatures(images: Any, n_coefficients: int = 15) -> np.ndarray:
+def fourier_signatures(images: Any, n_coefficients: int = 15, normalize: bool = False) -> np.ndarray:
     """Rotation-invariant signatures (N, rows x k) float32: the magnitudes of
     the first ``k`` azimuthal DFT coefficients of every image row (and
     channel), scaled by their median magnitude over the batch (Menegatti et
-    al. 2004)."""
+    al. 2004); with ``normalize`` each signature divided by its own sum
+    (a global change of brightness then leaves it unchanged)."""
     R = panorama_rows(as_images(images)).astype(np.float32, copy=False)
     spec = np.fft.rfft(R, axis=2)
     k = min(check_int(n_coefficients, "n_coefficients"), spec.shape[2])
     sig = np.abs(spec[:, :, :k]).reshape(len(R), -1).astype(np.float32)
+    if normalize:
+        sig = sig / np.maximum(sig.sum(axis=1, keepdims=True), 1e-12) * sig.shape[1]
     return sig / max(float(np.median(np.abs(sig))), 1e-12)
 
 
@@ -149,16 +152,18 @@ class FourierDetector(LoopClosureDetector):
     (L1), accepted when that distance is at most ``accept`` times the
     frame's distance to its temporal neighbours ``neighbor_lag`` frames
     away (a match must look about as alike as a nearby frame). Score
-    ``1 / (1 + r)``, ``r`` that ratio."""
+    ``1 / (1 + r)``, ``r`` that ratio. ``normalize``: signatures divided by
+    their own sum, robust to a change of light between the passes."""
 
     def __init__(self, min_gap: int = 40, max_odometry_distance: float = 3.0, accept: float = 1.0,
-                 neighbor_lag: int = 2, n_coefficients: int = 15, suppress: int = 0) -> None:
+                 neighbor_lag: int = 2, n_coefficients: int = 15, suppress: int = 0, normalize: bool = False) -> None:
         self.min_gap = min_gap
         self.max_odometry_distance = max_odometry_distance
         self.accept = accept
         self.neighbor_lag = neighbor_lag
         self.n_coefficients = n_coefficients
         self.suppress = suppress
+        self.normalize = normalize
 
     def _best(self, X, pos, odo):
         self.min_gap = check_int(self.min_gap, "min_gap", minimum=1)
@@ -166,7 +171,7 @@ class FourierDetector(LoopClosureDetector):
         max_odo = check_positive_float(self.max_odometry_distance, "max_odometry_distance")
         lag = check_int(self.neighbor_lag, "neighbor_lag")
         check_int(self.suppress, "suppress", minimum=0)
-        sig = fourier_signatures(X, self.n_coefficients)
+        sig = fourier_signatures(X, self.n_coefficients, bool(self.normalize))
         return nearest_earlier(sig.astype(np.float64), l1_matrix, self, odo, max_odo, lag, accept)
 
 
