@@ -54,9 +54,10 @@ class BagOfWordsDetector(LoopClosureDetector):
     ----------
     n_words : int, default 1500
         Vocabulary size (the thesis's).
-    keypoint_size : float, default 12
-        Diameter of the fixed-scale SIFT keypoints, pixels.
-    grid_step : int, default 8
+    keypoint_size : float, default 4
+        Size of the fixed-scale SIFT keypoints, pixels (OpenCV's descriptor
+        spans about six times this: 24-px windows).
+    grid_step : int, default 4
         Keypoint spacing, pixels (rows and columns).
     rows : (float, float), default (0.0, 1.0)
         The band of image rows described, as fractions of the height from
@@ -79,7 +80,7 @@ class BagOfWordsDetector(LoopClosureDetector):
     ``vocabulary_`` (n_words, 128), ``idf_`` (n_words,).
     """
 
-    def __init__(self, n_words: int = 1500, keypoint_size: float = 12.0, grid_step: int = 8,
+    def __init__(self, n_words: int = 1500, keypoint_size: float = 4.0, grid_step: int = 4,
                  rows: tuple[float, float] = (0.0, 1.0), max_descriptors: int = 200_000, verify: int = 20,
                  min_gap: int = 40, max_odometry_distance: float = 3.0, accept: float = 0.5, neighbor_lag: int = 2,
                  suppress: int = 0, seed: int = 0) -> None:
