@@ -342,9 +342,17 @@ def _run_train(args: argparse.Namespace) -> int:
          + (" (the sfanav default)" if recipe.name == "sfanav default" else ""))
     preprocessor = Preprocessor(prep, mirror=args.mirror, log=_log)
     images, xy = load_run(train, prep, preprocessor=preprocessor, progress=not args.no_progress)
-    closures = _training_closures(args, images, xy)
-    fit_kw = dict(loop_closures=closures, closure_weights="score" if closures is not None
-                  and args.closure_weights == "score" else None,rotation=Rotation(step=args.step, window=args.window), n_outputs=recipe.n_outputs,
+    closures = None
+    if args.loop_closures is not None:  # image detectors without an odometry gate: dead reckoning drifts
+        from ..loopclosure import make_detector
+
+        gt = xy if args.loop_closures == "gt" else None
+        closures = make_detector(args.loop_closures).detect(images, positions=gt)
+        _log(f"loop closures ({args.loop_closures}): {len(closures)} images trained with their earlier visit "
+             "interleaved" + (", weighted by match confidence" if args.closure_weights == "score" else ""))
+    weights = "score" if closures is not None and args.closure_weights == "score" else None
+    fit_kw = dict(loop_closures=closures, closure_weights=weights, rotation=Rotation(step=args.step, window=args.window),
+                  n_outputs=recipe.n_outputs,
                   readout=recipe.readout, rows=rows, prep=prep, progress=not args.no_progress,
                   rotation_pooling=recipe.rotation_pooling, signature=recipe.signature,
                   info={"dataset": str(args.dataset), "run": run,
@@ -387,22 +395,6 @@ def _run_train(args: argparse.Namespace) -> int:
           + f": MED {m['med']:.3f} m, MAE x {m['mae_x_pct']:.2f} %, y {m['mae_y_pct']:.2f} %")
     print(f"wrote {out}")
     return 0
-
-
-def _training_closures(args: argparse.Namespace, images: "Any", xy: "Any") -> "Any":
-    """The loop closures ``sfanav train --loop-closures`` asks for (checked
-    against the supervision before), or None."""
-    from ..loopclosure import make_detector
-
-    if args.loop_closures is None:
-        return None
-    if args.loop_closures == "gt":
-        lc = make_detector("gt").detect(images, positions=xy)
-    else:  # from the images alone (a fixed odometry gate would shut out later passes: dead reckoning drifts)
-        lc = make_detector(args.loop_closures).detect(images)
-    _log(f"loop closures ({args.loop_closures}): {len(lc)} images trained with their earlier visit interleaved"
-         + (", weighted by match confidence" if args.closure_weights == "score" else ""))
-    return lc if len(lc) else None
 
 
 @command("localize")
