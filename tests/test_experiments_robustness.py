@@ -41,3 +41,5 @@ def test_621_bow_and_622_quick(tmp_path):
     rows = _rows(res, tmp_path)
     assert "MED (m), 1 training set [thesis config]" in rows
     assert len(res.details["curves"]["thesis config"][0]) == 3
+    assert any("6.2.2-trajectory-thesis-config" in p for p in res.plots)  # Fig. 6.18b
+    assert "without simulated rotation" in res.notes

@@ -53,6 +53,8 @@ GT_DISTANCE = 0.1
 GT_GAP = 50
 THESIS_SPEC = {"kind": "quadratic", "n_outputs": 8, "ridge": 0.0}
 CONFIGS = ("thesis config", "sfanav default")
+#: 6.2.1 also runs the default on illumination-normalised panoramas (each at zero mean, unit variance)
+CONFIGS_621 = CONFIGS + ("sfanav default, normalised",)
 
 
 def _dataset(out: Path, variant: str, seed: int, quick: bool, progress: bool) -> Any:
@@ -102,9 +104,14 @@ def _detect(kind: str, X: np.ndarray, xy: np.ndarray, quick: bool = False) -> tu
 
 
 def _train(make_net: Any, X: np.ndarray, xy: np.ndarray, kw: dict[str, Any], rows: Any,
-           closures: Any = None, weights: Any = None) -> tuple[Any, float]:
+           closures: Any = None, weights: Any = None, rotate: bool = True) -> tuple[Any, float]:
+    """Fits a localizer under simulated rotation (5 px, whole panorama), or
+    with ``rotate=False`` on the images as they come (one view each, no
+    rotation invariance: the long-term model of 6.2.2)."""
     t0 = time.perf_counter()
-    loc = fit_localizer(make_net(), X, xy, rotation=Rotation(5, 1.0), rows=rows, progress=False,
+    rotation = Rotation(5, 1.0) if rotate else Rotation(X.shape[2], 1.0)
+    kw = kw if rotate else {**kw, "rotation_pooling": None}
+    loc = fit_localizer(make_net(), X, xy, rotation=rotation, rows=rows, progress=False,
                         loop_closures=closures, closure_weights=weights, **kw)
     return loc, time.perf_counter() - t0
 
@@ -128,7 +135,7 @@ def run_621(out: Path, variant: str, *, quick: bool, seed: int, progress: bool,
     notes: list[str] = []
     found: dict[str, LoopClosures] = {}  # detected on the first configuration's images, realigned for the next
     candidates: dict[str, LoopClosures] = {}
-    for config in CONFIGS:
+    for config in (CONFIGS if quick else CONFIGS_621):  # quick: the tiny network in every configuration
         make_net, prep, kw = _config(config, quick)
         X_tr, xy_tr, X_te, xy_te = _images(ds, prep, log)
         rows_step = None if config == "thesis config" or quick else recipe_for().image_rows(
@@ -149,7 +156,7 @@ def run_621(out: Path, variant: str, *, quick: bool, seed: int, progress: bool,
             if len(lc):
                 lc = LoopClosures(lc.past, lc.current, align(X_tr, lc.past, lc.current), lc.score, lc.distance)
             pr = closure_precision_recall(lc, xy_tr, max_distance=GT_DISTANCE, min_gap=GT_GAP)
-            variants = [("", None)] + ([(" weighted", "score")] if weighted and kind != "gt" else [])
+            variants = [("", None)] + ([(" weighted", "score")] if weighted and kind == "bow" else [])
             for suffix, weights in variants:
                 fb, t_fb = _train(make_net, X_tr, xy_tr, kw, rows_step, closures=lc, weights=weights)
                 m_fb = _med(fb, X_te, xy_te)
@@ -189,7 +196,8 @@ def run_621(out: Path, variant: str, *, quick: bool, seed: int, progress: bool,
                 m = localization_metrics(model.predict(X_te), xy_te, coordinate_range=coordinate_range(xy_te))
                 rows.append({"metric": f"MED (m) {peer}", "thesis": None, "sfanav": m["med"]})
         for label, loc in fits.items():  # the thesis's figures (firing maps, trajectories) for every model
-            slug = (label + ("" if config == CONFIGS[0] else " default")).replace(" ", "-")
+            slug = (label + {CONFIGS_621[1]: " default", CONFIGS_621[2]: " normalised"}.get(config, "")
+                    ).replace(" ", "-")
             F = loc.features(X_te)
             plots.append(str(plot_firing_maps(F, xy_te, out / f"{name}-firing-{slug}.png", which=(0, 1, 2, 3),
                                               title=f"{name} [{config}], {label}: slow features 1-4, test walk")))
@@ -235,20 +243,23 @@ THESIS_622_NINE = 0.35
 
 
 def run_622(out: Path, *, quick: bool, seed: int, progress: bool, permutations: int = 10,
-            configs: tuple[str, ...] = CONFIGS, max_sets: int = 9, by: str = "position") -> ExperimentResult:
+            configs: tuple[str, ...] = CONFIGS, max_sets: int = 9, by: str = "position", rotate: bool = False,
+            preset: str = "thesis-6.2.2-conditions") -> ExperimentResult:
     """Train on 1..``max_sets`` recordings in different light, place-major
     (every recording's image of a place, then the next place), and measure
     on the next unseen recording; ``permutations`` random orders of the 10
     recordings. Correspondences ``by`` ground-truth ``"position"`` or by the
     odometry's ``"arc"`` fraction of the loop (no ground truth). Perfect
-    memory with the views of all training recordings is the peer."""
+    memory with the views of all training recordings is the peer.
+    ``rotate``: train under simulated rotation (default False: the thesis's
+    long-term model sees the loop's images as they come, so its features
+    may code the heading, which the route fixes at every place)."""
     from ..loopclosure.conditions import arc_fraction, correspondences, place_major_order
 
     if by not in ("position", "arc"):
         raise ValueError(f'by must be "position" or "arc", got {by!r}')
 
     log = progress_log(progress)
-    preset = "thesis-6.2.2-conditions"
     if quick:
         ds = simulated(out, preset, seed, quick=True, camera=sim.PanoramicCamera(60, 8), progress=progress)
     else:
@@ -257,6 +268,7 @@ def run_622(out: Path, *, quick: bool, seed: int, progress: bool, permutations: 
     rng = np.random.default_rng(seed)
     curves: dict[str, np.ndarray] = {}
     rows: list[dict[str, Any]] = []
+    plots: list[str] = []
     n_sets = min(max_sets, len(conds) - 1)
     for config in configs:
         make_net, prep, kw = _config(config, quick)
@@ -278,16 +290,24 @@ def run_622(out: Path, *, quick: bool, seed: int, progress: bool, permutations: 
                 order = place_major_order([places[s] for s in train])
                 X = np.concatenate([sets[s][0] for s in train])[order]
                 xy = np.concatenate([sets[s][1] for s in train])[order]
-                loc, t = _train(make_net, X, xy, kw, rows_step)
+                loc, t = _train(make_net, X, xy, kw, rows_step, rotate=rotate)
                 X_te, xy_te = sets[test]
                 med[p, k - 1] = _med(loc, X_te, xy_te)["med"]
-                if config == CONFIGS[0]:
+                if config == configs[0]:
                     peer = baselines.PerfectMemory().fit(X, xy)
                     pm[p, k - 1] = localization_metrics(peer.predict(X_te), xy_te)["med"]
                 log(f"6.2.2 {config} permutation {p} {k} sets: MED {med[p, k - 1]:.3f} m ({t:.0f} s)"
-                    + (f", perfect memory {pm[p, k - 1]:.3f} m" if config == CONFIGS[0] else ""))
+                    + (f", perfect memory {pm[p, k - 1]:.3f} m" if config == configs[0] else ""))
+                if p == 0 and k == n_sets:  # Fig. 6.18b: the trajectory on the unseen set, and the firing maps
+                    slug = config.replace(",", "").replace(" ", "-")
+                    plots.append(str(plot_trajectory(xy_te, loc.predict(X_te), out / f"6.2.2-trajectory-{slug}.png",
+                                                     title=f"6.2.2 [{config}], {k} training sets: MED "
+                                                           f"{med[p, k - 1]:.2f} m on the next set")))
+                    plots.append(str(plot_firing_maps(loc.features(X_te), xy_te, out / f"6.2.2-firing-{slug}.png",
+                                                      which=(0, 1, 2, 3), title=f"6.2.2 [{config}], {k} sets: slow "
+                                                      "features 1-4 on the next set")))
         curves[config] = med
-        if config == CONFIGS[0]:
+        if config == configs[0]:
             curves["perfect memory"] = pm
         mean = np.nanmean(med, axis=0)
         for k in (1, n_sets):
@@ -304,10 +324,13 @@ def run_622(out: Path, *, quick: bool, seed: int, progress: bool, permutations: 
     key_name = "ground-truth position" if by == "position" else "the odometry's arc fraction of the loop"
     notes = (f"Scene: sim preset {preset} (seed {seed}): {len(conds)} recordings of one {len(sets[0][1])}-frame loop "
              "in different light (intensity, sun direction, red tint). Training: 1..9 recordings in place-major "
-             f"order (correspondences to the first recording's frames by {key_name}), readout fitted on the same "
-             f"images; test: the next recording of the permutation; {permutations} random permutations "
+             f"order (correspondences to the first recording's frames by {key_name}), "
+             + ("under simulated rotation (5 px)" if rotate else "the images as they come, without simulated rotation "
+                "(as the thesis: its model codes the route's fixed heading)")
+             + f", readout fitted on the same images; test: the next recording of the permutation; {permutations} "
+             "random permutations "
              "(thesis: 10). Fig. 6.18a beside: 9 sets 0.35 m.")
-    return ExperimentResult("6.2.2", rows, [str(path)], notes,
+    return ExperimentResult("6.2.2", rows, [str(path)] + plots, notes,
                             details={"curves": {k: v.tolist() for k, v in curves.items()}})
 
 
