@@ -18,7 +18,8 @@ import numpy as np
 
 from . import trajectories as T
 from .cameras import OmniCamera, PanoramicCamera
-from .render import Lighting, Renderer
+from .conditions import Lighting
+from .render import Renderer
 from .robot import Robot
 from .world import World
 
