@@ -3,7 +3,8 @@
 * :class:`World` (``world.py``): seeded garden generation (thesis 4.1), JSON.
 * :class:`Renderer` (``render.py``), :class:`PanoramicCamera`,
   :class:`OmniCamera` (``cameras.py``): the ray caster.
-* :class:`Lighting` (``conditions.py``): recording conditions.
+* :class:`Lighting`, :class:`Season` (``conditions.py``): recording
+  conditions, light and season.
 * :class:`Robot`, :class:`OdometryNoise`, :func:`simulate_odometry`,
   :class:`Simulator` (``robot.py``): kinematics, camera mounts, odometry,
   closed-loop stepping.
@@ -20,7 +21,7 @@ from .cameras import (
     camera_from_dict,
     column_of_bearing,
 )
-from .conditions import Lighting
+from .conditions import SEASONS, Lighting, Season
 from .presets import PRESETS, simulate
 from .render import Renderer
 from .robot import (
@@ -42,6 +43,8 @@ __all__ = [
     "DynamicCylinder",
     "Texture",
     "Lighting",
+    "Season",
+    "SEASONS",
     "PanoramicCamera",
     "OmniCamera",
     "Renderer",

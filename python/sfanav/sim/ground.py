@@ -80,12 +80,15 @@ def lawn_map(ground: GroundSpec, outer_radius: float) -> LawnMap:
     return LawnMap(col.astype(np.float32), lawn, float(g.resolution), float(origin))
 
 
-def shadow_map(prims: Sequence[Primitive], sun: np.ndarray, n: int, res: float, origin: float) -> np.ndarray:
+def shadow_map(prims: Sequence[Primitive], sun: np.ndarray, n: int, res: float, origin: float,
+               weights: Sequence[float] | None = None) -> np.ndarray:
     """Fraction of direct sun the primitives block, (n, n) float32 in
     [0, 1], on a map grid of ``n`` cells of ``res`` metres from ``origin``
     (see the module docstring), softened over about 0.25 m.
 
     ``sun`` is the unit vector towards the sun (x, y, z), z > 0.
+    ``weights`` (one per primitive, in [0, 1], default 1) scale each
+    primitive's shadow: a thinned crown lets part of the sun through.
     """
     import cv2
 
@@ -95,7 +98,10 @@ def shadow_map(prims: Sequence[Primitive], sun: np.ndarray, n: int, res: float, 
     horiz = np.hypot(s[0], s[1])
     cot = horiz / s[2]
     sx, sy = (s[0] / horiz, s[1] / horiz) if horiz > 1e-9 else (1.0, 0.0)
-    for p in prims:
+    for i, p in enumerate(prims):
+        wt = 1.0 if weights is None else float(weights[i])
+        if wt <= 0:
+            continue
         rb = p.bound_radius
         top = max(p.z1, 0.0)
         reach = top * cot
@@ -113,7 +119,10 @@ def shadow_map(prims: Sequence[Primitive], sun: np.ndarray, n: int, res: float, 
         X, Y = np.meshgrid(gx, gy)
         # ray from the ground point towards the sun, horizontal direction (sx, sy), rise tan(el)
         d = hit_distance(p, X - p.x, Y - p.y, sx, sy, s[2] / horiz if horiz > 1e-9 else 1e9)
-        shadow[j0:j1, i0:i1] = np.maximum(shadow[j0:j1, i0:i1], np.isfinite(d).astype(np.float32))
+        hit = np.isfinite(d).astype(np.float32)
+        if wt != 1.0:
+            hit *= np.float32(wt)
+        shadow[j0:j1, i0:i1] = np.maximum(shadow[j0:j1, i0:i1], hit)
     k = max(3, int(0.25 / res) | 1)
     return cv2.GaussianBlur(shadow, (k, k), 0)
 

@@ -37,7 +37,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from .cameras import Camera, OmniCamera, PanoramicCamera, RayGrid, column_of_bearing
-from .conditions import Lighting
+from .conditions import DECIDUOUS_KINDS, Lighting, Season
 from .ground import lawn_map, shadow_map
 from .textures import Pyramid, fractal_noise, make_texture, photo
 from .world import Primitive, World
@@ -149,7 +149,15 @@ class Renderer:
 
     Building a renderer synthesises the textures and the ground and sky maps
     (about a second for a garden); each lighting condition's sun direction
-    adds a shadow map (cached). Rendering is then pure NumPy.
+    adds a shadow map (cached), each season its recoloured lawn and sky
+    (cached). Rendering is then pure NumPy.
+
+    A lighting's :class:`~sfanav.sim.conditions.Season` multiplies the
+    lawn's colour map (not the painted patches), the sky and the horizon
+    colour, and the colour of deciduous foliage (leaf-textured parts of
+    ``DECIDUOUS_KINDS`` objects, and the distant tree line); crowns of
+    trees and bushes are thinned by its ``leaf_cover`` (see
+    :meth:`Season.leafy`), and so are their shadows.
 
     Parameters
     ----------
@@ -166,10 +174,23 @@ class Renderer:
         self.pyramids = {name: Pyramid(make_texture(spec), spec.tile) for name, spec in world.textures.items()}
         self._atlas = _Atlas(self.pyramids)
         self._static = _Prims([p for o in world.objects for p in o.parts], self._atlas)
+        self._foliage, self._crowns = self._vegetation()
         self._build_ground()
         self._build_sky()
         self._ground_cache: dict[tuple, np.ndarray] = {}
+        self._sky_cache: dict[Season, np.ndarray] = {}
         self._grid_cache: dict[int, dict[str, Any]] = {}
+
+    def _vegetation(self) -> tuple[np.ndarray, np.ndarray]:
+        """Per static primitive (in ``self._static`` order): deciduous foliage
+        (seasonal colour), and of those the crowns (ellipsoids of trees and
+        bushes: seasonal leaf cover)."""
+        kind = {id(p): o.kind for o in self.world.objects for p in o.parts}
+        tex = self.world.textures
+        foliage = np.array([kind[id(p)] in DECIDUOUS_KINDS and tex[p.texture].kind == "leaves"
+                            for p in self._static.list], bool)
+        crowns = foliage & np.array([p.shape == "ellipsoid" for p in self._static.list], bool)
+        return foliage, crowns
 
     # ------------------------------------------------------------ ground
 
@@ -190,6 +211,7 @@ class Renderer:
         self._gmap_res = lawn.resolution
         self._gmap_origin = lawn.origin
         self._gmap = lawn.colour  # (n, n, 3), row = y index, col = x index
+        self._lawn = lawn.lawn[..., None]  # (n, n, 1): share of lawn, the part a season recolours
 
     def ground_colour_map(self) -> tuple[np.ndarray, float, float]:
         """The lawn's colour map before light and texture: ``(map, resolution,
@@ -203,12 +225,20 @@ class Renderer:
         n = self._gmap_n
         if not light.shadows:
             return np.zeros((n, n), np.float32)
-        return shadow_map(self._static.list, light.sun, n, self._gmap_res, self._gmap_origin)
+        weights = None
+        if light.season is not None and light.season.leaf_cover < 1:
+            weights = np.where(self._crowns, light.season.leaf_cover, 1.0)
+        return shadow_map(self._static.list, light.sun, n, self._gmap_res, self._gmap_origin, weights)
 
     def _lit_ground(self, light: Lighting) -> np.ndarray:
-        key = (light.sun_azimuth_deg, light.sun_elevation_deg, light.ambient, light.shadows)
+        season = light.season
+        key = (light.sun_azimuth_deg, light.sun_elevation_deg, light.ambient, light.shadows,
+               None if season is None else (season.ground, season.leaf_cover))
         lit = self._ground_cache.get(key)
         if lit is None:
+            gmap = self._gmap
+            if season is not None:
+                gmap = gmap * (1 + self._lawn * (np.asarray(season.ground, np.float32) - 1))
             s = light.sun
             direct = (1 - light.ambient) * max(s[2], 0.0) / np.sin(np.radians(50.0))
             shade = light.ambient + direct * (1.0 - self._shadow_map(light))
@@ -216,8 +246,8 @@ class Renderer:
             # periodic map would repeat the shadows of the objects
             nn = self._gmap_n * self._gmap_n
             lit = np.ones((2 * nn, 4), np.float32)
-            lit[:nn, :3] = (self._gmap * shade[..., None]).reshape(-1, 3)
-            lit[nn:, :3] = (self._gmap * (light.ambient + direct)).reshape(-1, 3)
+            lit[:nn, :3] = (gmap * shade[..., None]).reshape(-1, 3)
+            lit[nn:, :3] = (gmap * (light.ambient + direct)).reshape(-1, 3)
             lit = lit.view("V16").ravel()
             if len(self._ground_cache) > 32:
                 self._ground_cache.clear()
@@ -250,11 +280,35 @@ class Renderer:
         tex = 1.0 + 0.25 * fractal_noise((n_el, n_az), rng, beta=1.2)
         tree = (np.asarray(sk.treeline, np.float32)[None, None, :] * tex[..., None]).astype(np.float32)
         below = el[:, None] < prof[None, :]
+        self._sky_open, self._treeline, self._below_treeline = sky, tree, below[..., None]
         sky = np.where(below[..., None], tree, sky)
         self._sky = sky.astype(np.float32)
         self._sky_el = el
         self._horizon_rgb = np.asarray(sk.horizon, np.float32)
         self._horizon_rgba = np.append(self._horizon_rgb, np.float32(1.0))
+
+    def _seasonal_sky(self, season: Season | None) -> np.ndarray:
+        """The sky map (n_el, n_az, 3) in a season: open sky times the sky
+        multiplier; the tree line times the foliage multiplier, letting
+        ``(1 - leaf_cover) / 2`` of the sky through."""
+        if season is None:
+            return self._sky
+        sky = self._sky_cache.get(season)
+        if sky is None:
+            open_sky = self._sky_open * np.asarray(season.sky, np.float32)
+            keep = np.float32(0.5 + 0.5 * season.leaf_cover)
+            tree = keep * (self._treeline * np.asarray(season.foliage, np.float32)) + (1 - keep) * open_sky
+            sky = np.where(self._below_treeline, tree, open_sky).astype(np.float32)
+            if len(self._sky_cache) > 8:
+                self._sky_cache.clear()
+            self._sky_cache[season] = sky
+        return sky
+
+    def _horizon(self, season: Season | None) -> np.ndarray:
+        """The RGBA colour far surfaces fade to."""
+        if season is None:
+            return self._horizon_rgba
+        return np.append(self._horizon_rgb * np.asarray(season.sky, np.float32), np.float32(1.0))
 
     # ------------------------------------------------------------ per-grid data
 
@@ -269,10 +323,8 @@ class Renderer:
         gd["sky_rows"] = slice(int(sky_rows[0]), int(sky_rows[-1]) + 1) if len(sky_rows) else slice(0, 0)
         gd["gnd_rows"] = slice(int(gnd_rows[0]), int(gnd_rows[-1]) + 1) if len(gnd_rows) else slice(0, 0)
         if len(sky_rows):
-            k = np.clip(np.searchsorted(self._sky_el, grid.elev[sky_rows]), 0, len(self._sky_el) - 1)
-            panel = np.ones((len(k), self._sky_n_az, 4), np.float32)
-            panel[..., :3] = self._sky[k]
-            gd["sky_panel"] = panel.view("V16")[..., 0]  # (Hs, n_az) of 16-byte RGBA texels
+            gd["sky_k"] = np.clip(np.searchsorted(self._sky_el, grid.elev[sky_rows]), 0, len(self._sky_el) - 1)
+            gd["sky_panels"] = {}
         if len(gnd_rows):
             t = grid.tan[gnd_rows]
             d = grid.h / -t  # horizontal distance of the ground hit, per row
@@ -303,6 +355,20 @@ class Renderer:
             self._grid_cache.clear()
         self._grid_cache[key] = gd
         return gd
+
+    def _sky_panel(self, gd: dict[str, Any], season: Season | None) -> np.ndarray:
+        """The sky rows of a grid in a season: (Hs, n_az) of 16-byte RGBA texels."""
+        panels = gd["sky_panels"]
+        panel = panels.get(season)
+        if panel is None:
+            k = gd["sky_k"]
+            rgba = np.ones((len(k), self._sky_n_az, 4), np.float32)
+            rgba[..., :3] = self._seasonal_sky(season)[k]
+            panel = rgba.view("V16")[..., 0]
+            if len(panels) > 8:
+                panels.clear()
+            panels[season] = panel
+        return panel
 
     # ------------------------------------------------------------ rendering
 
@@ -347,7 +413,8 @@ class Renderer:
         sr = gd["sky_rows"]
         if sr.stop > sr.start:
             k = (np.mod(phi, 2 * np.pi) * (self._sky_n_az / (2 * np.pi))).astype(np.int64) % self._sky_n_az
-            out[sr] = np.take(gd["sky_panel"], k, axis=1).view(np.float32).reshape(sr.stop - sr.start, W, 4)
+            out[sr] = np.take(self._sky_panel(gd, light.season), k, axis=1).view(np.float32).reshape(
+                sr.stop - sr.start, W, 4)
         # ground
         gr = gd["gnd_rows"]
         if gr.stop > gr.start:
@@ -363,7 +430,7 @@ class Renderer:
                 np.floor((Y - o) / res).astype(np.int64) & (n - 1)) * n + gd["gnd_map_off"]
             col = self._lit_ground(light)[gi].view(np.float32).reshape(gi.shape + (4,)) * det[..., None]
             fog = gd["gnd_fog"]
-            col += fog * (self._horizon_rgba - col)
+            col += fog * (self._horizon(light.season) - col)
             out[gr] = col
         # objects
         P = self._static
@@ -382,6 +449,10 @@ class Renderer:
             return
         W, h = grid.W, grid.h
         atlas = self._atlas
+        season = light.season
+        if season is not None:  # the dynamic primitives (after the static ones) are no plants
+            pad = np.zeros(n - len(self._foliage), bool)
+            foliage, crowns = np.concatenate([self._foliage, pad]), np.concatenate([self._crowns, pad])
         # --- per primitive: screen block
         qx, qy = P.x - cx, P.y - cy
         rho2 = qx * qx + qy * qy
@@ -485,6 +556,12 @@ class Renderer:
                 if len(m):
                     rgba, _ = self._surface(P, m, pid, d, face, t, vx, vy, qx, qy, h, level, bounds)
                     d[m[rgba[:, 3] < 0.5]] = np.inf
+            # thinned crowns let the ray through where the season has no leaf
+            if season is not None and season.leaf_cover < 1:
+                m = np.nonzero(crowns[pid] & np.isfinite(d))[0]
+                if len(m):
+                    dm = d[m]
+                    d[m[~season.leafy(cx + dm * vx[m], cy + dm * vy[m], h + dm * t[m])]] = np.inf
             # depth test: nearest hit per pixel
             cand = np.nonzero(d < base[pix])[0]
             if not len(cand):
@@ -493,13 +570,15 @@ class Renderer:
             np.minimum.at(buf, pix[cand], d[cand])
             win = cand[d[cand] <= buf[pix[cand]]]
             rgba, nrm = self._surface(P, win, pid, d, face, t, vx, vy, qx, qy, h, level, bounds)
+            if season is not None:
+                rgba[foliage[pid[win]], :3] *= np.asarray(season.foliage, np.float32)
             sun = light.sun
             norm = np.sqrt((nrm * nrm).sum(axis=1))
             lam = np.maximum((nrm @ sun) / np.maximum(norm, 1e-12), 0.0)
             shade = (light.ambient + (1 - light.ambient) / np.sin(np.radians(50.0)) * lam).astype(np.float32)
             rgba *= shade[:, None]
             fog = (1.0 - np.exp(-rho[pid[win]] / FOG_DISTANCE)).astype(np.float32)[:, None]
-            rgba += fog * (self._horizon_rgba - rgba)
+            rgba += fog * (self._horizon(season) - rgba)
         out.reshape(-1, 4)[pix[win]] = rgba
         base[pix[win]] = d[win]
 
