@@ -151,3 +151,32 @@ def test_winter_shadows_of_crowns_are_weaker(renderer):
     winter = renderer._shadow_map(Lighting(sun_elevation_deg=30, season=Season.winter()))
     assert winter.max() > 0.9  # trunks still cast full shadows
     assert winter.sum() < 0.75 * summer.sum()
+
+# ------------------------------------------------------------------ the seasons preset, pose jitter
+
+
+def test_jitter_is_smooth_bounded_and_seeded():
+    loop = sim.trajectories.border_loop((15.0, 15.0), 279, rng=0)
+    drives = [sim.trajectories.jitter(loop, 0.05, 2.0, rng=s) for s in range(4)]
+    for dr in drives:
+        off = np.hypot(*(dr.poses[:, :2] - loop.poses[:, :2]).T)
+        dth = np.degrees(np.abs(sim.wrap_angle(dr.poses[:, 2] - loop.poses[:, 2])))
+        assert off.max() == pytest.approx(0.05) and dth.max() == pytest.approx(2.0)
+        assert np.abs(np.diff(off)).max() < 0.015  # smooth along the loop: no jumps between frames
+        np.testing.assert_array_equal(dr.times, loop.times)
+    gaps = [np.hypot(*(a.poses[:, :2] - b.poses[:, :2]).T) for i, a in enumerate(drives) for b in drives[i + 1:]]
+    assert all(0.02 < g.max() <= 0.1 + 1e-9 for g in gaps) and max(g.mean() for g in gaps) < 0.06
+    np.testing.assert_array_equal(sim.trajectories.jitter(loop, rng=3).poses, drives[3].poses)
+    np.testing.assert_allclose(sim.trajectories.jitter(loop, 0.0, 0.0, rng=3).poses, loop.poses, atol=1e-12)
+    with pytest.raises(ValueError, match="jitter lateral must be a finite number >= 0, got -0.1"):
+        sim.trajectories.jitter(loop, -0.1)
+    with pytest.raises(ValueError, match="jitter length"):
+        sim.trajectories.jitter(loop, length=0)
+
+
+def test_jitter_is_off_by_default():
+    with pytest.raises(ValueError, match="jitter must be \\(lateral m, heading deg\\)"):
+        sim.presets.RunSpec("x", lambda w, r: None, jitter=(0.05,))
+    assert sim.presets.RunSpec("x", lambda w, r: None).jitter is None
+    jittered = {n for n, p in sim.PRESETS.items() if any(r.jitter for r in p.runs(np.random.default_rng(0)))}
+    assert jittered == {"thesis-6.2.2-conditions"}

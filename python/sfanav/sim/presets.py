@@ -33,11 +33,31 @@ class RunSpec:
     ``trajectory(world, rng)`` builds the trajectory; ``conditions`` maps a
     condition name to a Lighting, or to a function of the run's progress
     (0 .. 1) for light that changes during the run. With several conditions
-    the same trajectory is driven once per condition."""
+    the same trajectory is driven once per condition.
+
+    ``jitter = (lateral m, heading deg)`` makes every condition's drive
+    deviate from the trajectory by its own smooth random sideways offset and
+    heading error of at most these (:func:`~sfanav.sim.trajectories.jitter`,
+    drawn from the preset seed's jitter stream); the dataset's poses and
+    odometry are those of the jittered drive. None (default): every
+    condition drives the exact trajectory.
+    """
 
     name: str
     trajectory: Callable[[World, np.random.Generator], T.Trajectory]
     conditions: dict[str, Lighting | LightFn] = field(default_factory=lambda: {"default": Lighting()})
+    jitter: tuple[float, float] | None = None
+
+    def __post_init__(self) -> None:
+        if self.jitter is not None:
+            try:
+                lat, head = (float(v) for v in self.jitter)
+            except (TypeError, ValueError):
+                lat = head = float("nan")
+            if not (np.isfinite(lat) and np.isfinite(head) and lat >= 0 and head >= 0):
+                raise ValueError(f"run {self.name!r}: jitter must be (lateral m, heading deg), two numbers >= 0, "
+                                 f"got {self.jitter!r}")
+            self.jitter = (lat, head)
 
 
 @dataclass
@@ -73,6 +93,11 @@ def _random_conditions(rng: np.random.Generator, n: int) -> dict[str, Lighting]:
                                 sun_azimuth_deg=float(np.degrees(np.arctan2(ly, 10.0))),
                                 sun_elevation_deg=float(rng.uniform(25, 60)))
     return out
+
+
+#: a border-wire mower's deviation from one drive of its loop to the next:
+#: (largest sideways offset m, largest heading error deg)
+LOOP_JITTER = (0.05, 2.0)
 
 
 PRESETS: dict[str, Preset] = {}
@@ -213,10 +238,12 @@ _add(Preset(
 _add(Preset(
     "thesis-6.2.2-conditions", "6.2.2",
     "15x15 m garden, a border-wire loop of 279 frames driven under 10 random lighting conditions "
-    "(intensity, sun direction, red tint), 600x60 RGB panoramas",
+    "(intensity, sun direction, red tint), each drive off the loop by its own smooth <= 5 cm and <= 2 deg; "
+    "600x60 RGB panoramas",
     _garden((15.0, 15.0), 30),
     lambda: PanoramicCamera(600, 60),
-    lambda rng: [RunSpec("loop", lambda w, r: T.border_loop(w.area, 279, rng=r), _random_conditions(rng, 10))],
+    lambda rng: [RunSpec("loop", lambda w, r: T.border_loop(w.area, 279, rng=r), _random_conditions(rng, 10),
+                         jitter=LOOP_JITTER)],
 ))
 
 
@@ -394,6 +421,12 @@ def random_streams(seed: int) -> list[np.random.Generator]:
     return [np.random.default_rng(s) for s in np.random.SeedSequence(int(seed)).spawn(4)]
 
 
+def _jitter_stream(seed: int) -> np.random.Generator:
+    """The random stream of a preset seed's pose jitter: the seed's fifth
+    child sequence, independent of the four of :func:`random_streams`."""
+    return np.random.default_rng(np.random.SeedSequence(int(seed), spawn_key=(4,)))
+
+
 def preset_world(preset: str, seed: int = 0) -> World:
     """The world that ``simulate(preset, ..., seed)`` uses (without the
     dynamic object, whose period depends on the run)."""
@@ -413,8 +446,8 @@ def simulate(preset: str, out: str | os.PathLike, seed: int = 0, *, max_frames: 
     out : path
         Directory of the dataset (must not exist or be empty, unless ``overwrite``).
     seed : int
-        Seeds the world, the trajectories, the lighting conditions and the
-        odometry noise: same seed, same dataset.
+        Seeds the world, the trajectories, the lighting conditions, the
+        odometry noise and the pose jitter: same seed, same dataset.
     max_frames : int, optional
         Keep only the first frames of every run (quick looks, tests).
     camera : PanoramicCamera or OmniCamera, optional
@@ -438,12 +471,9 @@ def simulate(preset: str, out: str | os.PathLike, seed: int = 0, *, max_frames: 
     cam = camera or p.camera()
     robot = p.robot()
     runs = p.runs(s_runs)
-    trajs = []
-    for r in runs:
-        tr = r.trajectory(world, s_traj)
-        if max_frames is not None:
-            tr = tr[: int(max_frames)]
-        trajs.append(tr)
+    full = [r.trajectory(world, s_traj) for r in runs]  # jitter draws over the whole run, then it is cut
+    trajs = [tr if max_frames is None else tr[: int(max_frames)] for tr in full]
+    s_jit = _jitter_stream(seed)
     if p.dynamic:
         world.add_dynamic({"period": float(max(trajs[0].times[-1], 1e-3)), "radius": 0.6, "height": 2.5},
                           seed=int(s_world.integers(2**31)))
@@ -469,12 +499,15 @@ def simulate(preset: str, out: str | os.PathLike, seed: int = 0, *, max_frames: 
         bar = tqdm(total=total, desc=f"simulate {p.name}", unit="img")
     frame = 0
     with DatasetWriter(out, meta, overwrite=overwrite, extra_columns=extra_cols) as w:
-        for r, tr in zip(runs, trajs):
-            info = {"frames": len(tr), "conditions": {}}
+        for r, tr, whole in zip(runs, trajs, full):
+            info: dict[str, Any] = {"frames": len(tr), "conditions": {}}
+            if r.jitter is not None:
+                info["jitter"] = {"lateral_m": r.jitter[0], "heading_deg": r.jitter[1]}
             for cond, light in r.conditions.items():
                 info["conditions"][cond] = light.to_dict() if isinstance(light, Lighting) else {
                     "changing": True, "start": light(0.0).to_dict(), "end": light(1.0).to_dict()}
-                frame = _record(w, renderer, robot, cam, tr, run=r.name, condition=cond, lighting=light,
+                drive = tr if r.jitter is None else T.jitter(whole, *r.jitter, rng=s_jit)[: len(tr)]
+                frame = _record(w, renderer, robot, cam, drive, run=r.name, condition=cond, lighting=light,
                                 frame0=frame, rng=s_odo, bar=bar)
             meta["runs"][r.name] = info
         w.metadata.update(meta)
