@@ -155,6 +155,54 @@ def test_winter_shadows_of_crowns_are_weaker(renderer):
 # ------------------------------------------------------------------ the seasons preset, pose jitter
 
 
+@pytest.fixture(scope="module")
+def seasons_ds(tmp_path_factory):
+    return sim.simulate("thesis-6.2.2-seasons", tmp_path_factory.mktemp("seasons") / "ds", seed=1, max_frames=3,
+                        camera=CAM, progress=False)
+
+
+def test_seasons_preset_records_a_year(seasons_ds):
+    ds = seasons_ds
+    conds = sorted(set(ds.conditions), key=lambda c: int(c[1:].split("-")[0]))
+    assert len(ds) == 30 and ds.image(0).shape == (8, 60, 3)
+    assert [c.split("-")[1] for c in conds] == ["spring"] * 3 + ["summer"] * 2 + ["autumn"] * 3 + ["winter"] * 2
+    loop = ds.metadata["runs"]["loop"]
+    assert loop["jitter"] == {"lateral_m": 0.05, "heading_deg": 2.0}
+    for c in conds:
+        light = Lighting.from_dict(loop["conditions"][c])
+        assert light.season == SEASONS[c.split("-")[1]]
+        lo, hi = light.season.sun_elevation_deg
+        assert lo <= light.sun_elevation_deg <= hi
+    # the same garden as thesis-6.2.2-conditions
+    assert ds.metadata["description"].startswith("the 15x15 m garden and 279-frame border-wire loop")
+    assert sim.presets.preset_world("thesis-6.2.2-seasons", 1).to_dict() == \
+        sim.presets.preset_world("thesis-6.2.2-conditions", 1).to_dict()
+    # winter's lawn is less green than summer's
+    g = {s: greenness(np.stack([ds.image(i) for i in np.nonzero(np.char.endswith(ds.conditions.astype(str), s))[0]])
+                      [:, 5:]) for s in ("summer", "winter")}
+    assert g["winter"] < g["summer"]
+
+
+def test_each_recording_drives_its_own_jittered_loop(seasons_ds):
+    ds = seasons_ds
+    conds = sorted(set(ds.conditions))
+    P = {c: ds.select(condition=c).poses for c in conds}
+    # reproducible from the seed: the loop of the trajectory stream, jittered from the jitter stream in order
+    _, _, s_traj, _ = sim.presets.random_streams(1)
+    world = sim.presets.preset_world("thesis-6.2.2-seasons", 1)
+    loop = sim.trajectories.border_loop(world.area, 279, rng=s_traj)
+    s_jit = sim.presets._jitter_stream(1)
+    for c in ds.metadata["runs"]["loop"]["conditions"]:
+        drive = sim.trajectories.jitter(loop, 0.05, 2.0, rng=s_jit)
+        np.testing.assert_allclose(P[c], drive.poses[:3], atol=1e-9)
+        off = np.hypot(*(P[c][:, :2] - loop.poses[:3, :2]).T)
+        assert off.max() <= 0.05 + 1e-9
+        # odometry follows the jittered drive (dead reckoning starts at its first pose)
+        np.testing.assert_allclose(ds.select(condition=c).odometry[0], P[c][0], atol=1e-9)
+    d = [np.hypot(*(P[a][:, :2] - P[b][:, :2]).T).max() for i, a in enumerate(conds) for b in conds[i + 1:]]
+    assert 0.01 < max(d) <= 0.1 + 1e-9
+
+
 def test_jitter_is_smooth_bounded_and_seeded():
     loop = sim.trajectories.border_loop((15.0, 15.0), 279, rng=0)
     drives = [sim.trajectories.jitter(loop, 0.05, 2.0, rng=s) for s in range(4)]
@@ -179,4 +227,4 @@ def test_jitter_is_off_by_default():
         sim.presets.RunSpec("x", lambda w, r: None, jitter=(0.05,))
     assert sim.presets.RunSpec("x", lambda w, r: None).jitter is None
     jittered = {n for n, p in sim.PRESETS.items() if any(r.jitter for r in p.runs(np.random.default_rng(0)))}
-    assert jittered == {"thesis-6.2.2-conditions"}
+    assert jittered == {"thesis-6.2.2-conditions", "thesis-6.2.2-seasons"}

@@ -12,13 +12,13 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any, Callable, Sequence
 
 import numpy as np
 
 from . import trajectories as T
 from .cameras import OmniCamera, PanoramicCamera
-from .conditions import Lighting
+from .conditions import SEASONS, Lighting, Season
 from .render import Renderer
 from .robot import Robot
 from .world import World
@@ -80,19 +80,34 @@ def _ramp(lo: float, hi: float) -> LightFn:
     return lambda s: Lighting(intensity=lo + (hi - lo) * s)
 
 
-def _random_conditions(rng: np.random.Generator, n: int) -> dict[str, Lighting]:
+def _random_conditions(rng: np.random.Generator, n: int,
+                       seasons: Sequence[Season] | None = None) -> dict[str, Lighting]:
     """Thesis 6.2.2: lamp energy in [3, 8], its y in [-10, 10], red channel in
     [0.5, 1]; here intensity = energy / 5, the sun azimuth towards a lamp at
-    (10, y), red tint as drawn."""
+    (10, y), red tint as drawn, sun elevation in [25, 60] degrees. With
+    ``seasons`` (one per condition) condition ``i`` is in ``seasons[i]``,
+    named ``c{i}-{season}``, its sun elevation drawn in the season's range."""
     out = {}
     for i in range(n):
+        season = seasons[i] if seasons is not None else None
         energy = rng.uniform(3, 8)
         ly = rng.uniform(-10, 10)
         red = rng.uniform(0.5, 1.0)
-        out[f"c{i}"] = Lighting(intensity=float(energy / 5), tint=(float(red), 1.0, 1.0),
-                                sun_azimuth_deg=float(np.degrees(np.arctan2(ly, 10.0))),
-                                sun_elevation_deg=float(rng.uniform(25, 60)))
+        lo, hi = season.sun_elevation_deg if season is not None else (25, 60)
+        name = f"c{i}" if season is None else f"c{i}-{season.name}"
+        out[name] = Lighting(intensity=float(energy / 5), tint=(float(red), 1.0, 1.0),
+                             sun_azimuth_deg=float(np.degrees(np.arctan2(ly, 10.0))),
+                             sun_elevation_deg=float(rng.uniform(lo, hi)), season=season)
     return out
+
+
+def _year_of_conditions(rng: np.random.Generator, n: int) -> dict[str, Lighting]:
+    """``n`` recordings spread evenly over a year from the start of spring,
+    recording ``i`` at ``i / n`` of the year in the season of that quarter
+    (10: 3 spring, 2 summer, 3 autumn, 2 winter), with random light as
+    :func:`_random_conditions`."""
+    order = list(SEASONS.values())
+    return _random_conditions(rng, n, [order[(4 * i) // n] for i in range(n)])
 
 
 #: a border-wire mower's deviation from one drive of its loop to the next:
@@ -243,6 +258,20 @@ _add(Preset(
     _garden((15.0, 15.0), 30),
     lambda: PanoramicCamera(600, 60),
     lambda rng: [RunSpec("loop", lambda w, r: T.border_loop(w.area, 279, rng=r), _random_conditions(rng, 10),
+                         jitter=LOOP_JITTER)],
+))
+
+
+_add(Preset(
+    "thesis-6.2.2-seasons", "6.2.2",
+    "the 15x15 m garden and 279-frame border-wire loop of thesis-6.2.2-conditions, driven 10 times spread over a "
+    "year from spring (c0-spring .. c9-winter: 3 spring, 2 summer, 3 autumn, 2 winter): seasonal lawn, foliage "
+    "and sky colours, thinning crowns, the sun as high as in the season, random light as in "
+    "thesis-6.2.2-conditions; each drive off the loop by its own smooth <= 5 cm and <= 2 deg; "
+    "600x60 RGB panoramas",
+    _garden((15.0, 15.0), 30),
+    lambda: PanoramicCamera(600, 60),
+    lambda rng: [RunSpec("loop", lambda w, r: T.border_loop(w.area, 279, rng=r), _year_of_conditions(rng, 10),
                          jitter=LOOP_JITTER)],
 ))
 
