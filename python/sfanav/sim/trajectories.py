@@ -652,7 +652,7 @@ def jitter(traj: Trajectory, lateral: float = 0.05, heading_deg: float = 2.0, *,
     out = P.copy()
     out[:, 0] -= off * np.sin(P[:, 2])
     out[:, 1] += off * np.cos(P[:, 2])
-    out[:, 2] = wrap_angle(P[:, 2] + dth)
+    out[:, 2] = P[:, 2] + dth  # the input's heading convention (wrapped or continuous) is kept
     return Trajectory(out, traj.times.copy(), {k: v.copy() for k, v in traj.extra.items()})
 
 
