@@ -5,7 +5,14 @@
 * docs/images/sim-panorama.png: 600x60 RGB panorama (the network's input),
 * docs/images/sim-panorama-wide.png: the same view at 1800x240 for reading,
 * docs/images/sim-omni.png: 500x500 omnidirectional (mirror) image,
-* docs/images/sim-omni-unwarped.png: that omni image unwarped to 600x55.
+* docs/images/sim-omni-unwarped.png: that omni image unwarped to 600x55;
+
+and from the garden of ``thesis-6.2.2-seasons`` (seed 0), at the start of
+its border-wire loop:
+
+* docs/images/sim-seasons.png: 1200x100 panoramas in spring, summer,
+  autumn and winter (top to bottom), each under a sun in the middle of the
+  season's typical elevations.
 
 Usage: PYTHONPATH=python python3 scripts/sim_examples.py [OUT_DIR]
 """
@@ -14,6 +21,7 @@ import sys
 from pathlib import Path
 
 import cv2
+import numpy as np
 
 from sfanav import sim
 
@@ -35,6 +43,15 @@ def main() -> None:
     img = ren.render(omni, pose)
     save(out / "sim-omni.png", img)
     save(out / "sim-omni-unwarped.png", omni.unwarp(img, 600, 55))
+
+    world = sim.presets.preset_world("thesis-6.2.2-seasons", seed=0)
+    ren = sim.Renderer(world)
+    start = sim.trajectories.border_loop(world.area, 279, rng=0).poses[0]
+    cam = sim.PanoramicCamera(1200, 100, (-30, 30))
+    rows = [ren.render(cam, start, lighting=sim.Lighting(sun_elevation_deg=float(np.mean(s.sun_elevation_deg)),
+                                                          season=s))
+            for s in sim.SEASONS.values()]
+    save(out / "sim-seasons.png", np.concatenate(rows))
 
 
 if __name__ == "__main__":

@@ -55,7 +55,9 @@ def test_two_cameras_conditions_and_omni(tmp_path):
                       camera=sim.PanoramicCamera(60, 8))
     assert len(ds) == 20 and len(set(ds.conditions)) == 10
     assert len(set(ds.frames)) == 20  # every condition's drive has its own frames
-    np.testing.assert_allclose(ds.select(condition="c0").poses, ds.select(condition="c5").poses)
+    # every condition drives the loop again, a few centimetres off (the jitter)
+    gap = np.hypot(*(ds.select(condition="c0").poses[:, :2] - ds.select(condition="c5").poses[:, :2]).T)
+    assert 0 < gap.max() <= 0.1 + 1e-9
     ds = sim.simulate("thesis-7.1-obstacle", tmp_path / "two", seed=1, max_frames=2, progress=False,
                       camera=sim.OmniCamera(40))
     assert set(ds.cameras) == {"left", "right"} and ds.image(0).shape == (40, 40, 3)

@@ -1,8 +1,10 @@
 """The built-in garden simulator: pure NumPy, nothing to download.
 
 * :class:`World` (``world.py``): seeded garden generation (thesis 4.1), JSON.
-* :class:`Renderer`, :class:`PanoramicCamera`, :class:`OmniCamera`,
-  :class:`Lighting` (``render.py``): the ray caster.
+* :class:`Renderer` (``render.py``), :class:`PanoramicCamera`,
+  :class:`OmniCamera` (``cameras.py``): the ray caster.
+* :class:`Lighting`, :class:`Season` (``conditions.py``): recording
+  conditions, light and season.
 * :class:`Robot`, :class:`OdometryNoise`, :func:`simulate_odometry`,
   :class:`Simulator` (``robot.py``): kinematics, camera mounts, odometry,
   closed-loop stepping.
@@ -19,8 +21,9 @@ from .cameras import (
     camera_from_dict,
     column_of_bearing,
 )
+from .conditions import SEASONS, Lighting, Season
 from .presets import PRESETS, simulate
-from .render import Lighting, Renderer
+from .render import Renderer
 from .robot import (
     OdometryNoise,
     Robot,
@@ -40,6 +43,8 @@ __all__ = [
     "DynamicCylinder",
     "Texture",
     "Lighting",
+    "Season",
+    "SEASONS",
     "PanoramicCamera",
     "OmniCamera",
     "Renderer",

@@ -12,13 +12,14 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any, Callable, Sequence
 
 import numpy as np
 
 from . import trajectories as T
 from .cameras import OmniCamera, PanoramicCamera
-from .render import Lighting, Renderer
+from .conditions import SEASONS, Lighting, Season
+from .render import Renderer
 from .robot import Robot
 from .world import World
 
@@ -32,11 +33,31 @@ class RunSpec:
     ``trajectory(world, rng)`` builds the trajectory; ``conditions`` maps a
     condition name to a Lighting, or to a function of the run's progress
     (0 .. 1) for light that changes during the run. With several conditions
-    the same trajectory is driven once per condition."""
+    the same trajectory is driven once per condition.
+
+    ``jitter = (lateral m, heading deg)`` makes every condition's drive
+    deviate from the trajectory by its own smooth random sideways offset and
+    heading error of at most these (:func:`~sfanav.sim.trajectories.jitter`,
+    drawn from the preset seed's jitter stream); the dataset's poses and
+    odometry are those of the jittered drive. None (default): every
+    condition drives the exact trajectory.
+    """
 
     name: str
     trajectory: Callable[[World, np.random.Generator], T.Trajectory]
     conditions: dict[str, Lighting | LightFn] = field(default_factory=lambda: {"default": Lighting()})
+    jitter: tuple[float, float] | None = None
+
+    def __post_init__(self) -> None:
+        if self.jitter is not None:
+            try:
+                lat, head = (float(v) for v in self.jitter)
+            except (TypeError, ValueError):
+                lat = head = float("nan")
+            if not (np.isfinite(lat) and np.isfinite(head) and lat >= 0 and head >= 0):
+                raise ValueError(f"run {self.name!r}: jitter must be (lateral m, heading deg), two numbers >= 0, "
+                                 f"got {self.jitter!r}")
+            self.jitter = (lat, head)
 
 
 @dataclass
@@ -59,19 +80,39 @@ def _ramp(lo: float, hi: float) -> LightFn:
     return lambda s: Lighting(intensity=lo + (hi - lo) * s)
 
 
-def _random_conditions(rng: np.random.Generator, n: int) -> dict[str, Lighting]:
+def _random_conditions(rng: np.random.Generator, n: int,
+                       seasons: Sequence[Season] | None = None) -> dict[str, Lighting]:
     """Thesis 6.2.2: lamp energy in [3, 8], its y in [-10, 10], red channel in
     [0.5, 1]; here intensity = energy / 5, the sun azimuth towards a lamp at
-    (10, y), red tint as drawn."""
+    (10, y), red tint as drawn, sun elevation in [25, 60] degrees. With
+    ``seasons`` (one per condition) condition ``i`` is in ``seasons[i]``,
+    named ``c{i}-{season}``, its sun elevation drawn in the season's range."""
     out = {}
     for i in range(n):
+        season = seasons[i] if seasons is not None else None
         energy = rng.uniform(3, 8)
         ly = rng.uniform(-10, 10)
         red = rng.uniform(0.5, 1.0)
-        out[f"c{i}"] = Lighting(intensity=float(energy / 5), tint=(float(red), 1.0, 1.0),
-                                sun_azimuth_deg=float(np.degrees(np.arctan2(ly, 10.0))),
-                                sun_elevation_deg=float(rng.uniform(25, 60)))
+        lo, hi = season.sun_elevation_deg if season is not None else (25, 60)
+        name = f"c{i}" if season is None else f"c{i}-{season.name}"
+        out[name] = Lighting(intensity=float(energy / 5), tint=(float(red), 1.0, 1.0),
+                             sun_azimuth_deg=float(np.degrees(np.arctan2(ly, 10.0))),
+                             sun_elevation_deg=float(rng.uniform(lo, hi)), season=season)
     return out
+
+
+def _year_of_conditions(rng: np.random.Generator, n: int) -> dict[str, Lighting]:
+    """``n`` recordings spread evenly over a year from the start of spring,
+    recording ``i`` at ``i / n`` of the year in the season of that quarter
+    (10: 3 spring, 2 summer, 3 autumn, 2 winter), with random light as
+    :func:`_random_conditions`."""
+    order = list(SEASONS.values())
+    return _random_conditions(rng, n, [order[(4 * i) // n] for i in range(n)])
+
+
+#: a border-wire mower's deviation from one drive of its loop to the next:
+#: (largest sideways offset m, largest heading error deg)
+LOOP_JITTER = (0.05, 2.0)
 
 
 PRESETS: dict[str, Preset] = {}
@@ -212,10 +253,26 @@ _add(Preset(
 _add(Preset(
     "thesis-6.2.2-conditions", "6.2.2",
     "15x15 m garden, a border-wire loop of 279 frames driven under 10 random lighting conditions "
-    "(intensity, sun direction, red tint), 600x60 RGB panoramas",
+    "(intensity, sun direction, red tint), each drive off the loop by its own smooth <= 5 cm and <= 2 deg; "
+    "600x60 RGB panoramas",
     _garden((15.0, 15.0), 30),
     lambda: PanoramicCamera(600, 60),
-    lambda rng: [RunSpec("loop", lambda w, r: T.border_loop(w.area, 279, rng=r), _random_conditions(rng, 10))],
+    lambda rng: [RunSpec("loop", lambda w, r: T.border_loop(w.area, 279, rng=r), _random_conditions(rng, 10),
+                         jitter=LOOP_JITTER)],
+))
+
+
+_add(Preset(
+    "thesis-6.2.2-seasons", "6.2.2",
+    "the 15x15 m garden and 279-frame border-wire loop of thesis-6.2.2-conditions, driven 10 times spread over a "
+    "year from spring (c0-spring .. c9-winter: 3 spring, 2 summer, 3 autumn, 2 winter): seasonal lawn, foliage "
+    "and sky colours, thinning crowns, the sun as high as in the season, random light as in "
+    "thesis-6.2.2-conditions; each drive off the loop by its own smooth <= 5 cm and <= 2 deg; "
+    "600x60 RGB panoramas",
+    _garden((15.0, 15.0), 30),
+    lambda: PanoramicCamera(600, 60),
+    lambda rng: [RunSpec("loop", lambda w, r: T.border_loop(w.area, 279, rng=r), _year_of_conditions(rng, 10),
+                         jitter=LOOP_JITTER)],
 ))
 
 
@@ -393,6 +450,12 @@ def random_streams(seed: int) -> list[np.random.Generator]:
     return [np.random.default_rng(s) for s in np.random.SeedSequence(int(seed)).spawn(4)]
 
 
+def _jitter_stream(seed: int) -> np.random.Generator:
+    """The random stream of a preset seed's pose jitter: the seed's fifth
+    child sequence, independent of the four of :func:`random_streams`."""
+    return np.random.default_rng(np.random.SeedSequence(int(seed), spawn_key=(4,)))
+
+
 def preset_world(preset: str, seed: int = 0) -> World:
     """The world that ``simulate(preset, ..., seed)`` uses (without the
     dynamic object, whose period depends on the run)."""
@@ -412,8 +475,8 @@ def simulate(preset: str, out: str | os.PathLike, seed: int = 0, *, max_frames: 
     out : path
         Directory of the dataset (must not exist or be empty, unless ``overwrite``).
     seed : int
-        Seeds the world, the trajectories, the lighting conditions and the
-        odometry noise: same seed, same dataset.
+        Seeds the world, the trajectories, the lighting conditions, the
+        odometry noise and the pose jitter: same seed, same dataset.
     max_frames : int, optional
         Keep only the first frames of every run (quick looks, tests).
     camera : PanoramicCamera or OmniCamera, optional
@@ -437,12 +500,9 @@ def simulate(preset: str, out: str | os.PathLike, seed: int = 0, *, max_frames: 
     cam = camera or p.camera()
     robot = p.robot()
     runs = p.runs(s_runs)
-    trajs = []
-    for r in runs:
-        tr = r.trajectory(world, s_traj)
-        if max_frames is not None:
-            tr = tr[: int(max_frames)]
-        trajs.append(tr)
+    full = [r.trajectory(world, s_traj) for r in runs]  # jitter draws over the whole run, then it is cut
+    trajs = [tr if max_frames is None else tr[: int(max_frames)] for tr in full]
+    s_jit = _jitter_stream(seed)
     if p.dynamic:
         world.add_dynamic({"period": float(max(trajs[0].times[-1], 1e-3)), "radius": 0.6, "height": 2.5},
                           seed=int(s_world.integers(2**31)))
@@ -468,12 +528,15 @@ def simulate(preset: str, out: str | os.PathLike, seed: int = 0, *, max_frames: 
         bar = tqdm(total=total, desc=f"simulate {p.name}", unit="img")
     frame = 0
     with DatasetWriter(out, meta, overwrite=overwrite, extra_columns=extra_cols) as w:
-        for r, tr in zip(runs, trajs):
-            info = {"frames": len(tr), "conditions": {}}
+        for r, tr, whole in zip(runs, trajs, full):
+            info: dict[str, Any] = {"frames": len(tr), "conditions": {}}
+            if r.jitter is not None:
+                info["jitter"] = {"lateral_m": r.jitter[0], "heading_deg": r.jitter[1]}
             for cond, light in r.conditions.items():
                 info["conditions"][cond] = light.to_dict() if isinstance(light, Lighting) else {
                     "changing": True, "start": light(0.0).to_dict(), "end": light(1.0).to_dict()}
-                frame = _record(w, renderer, robot, cam, tr, run=r.name, condition=cond, lighting=light,
+                drive = tr if r.jitter is None else T.jitter(whole, *r.jitter, rng=s_jit)[: len(tr)]
+                frame = _record(w, renderer, robot, cam, drive, run=r.name, condition=cond, lighting=light,
                                 frame0=frame, rng=s_odo, bar=bar)
             meta["runs"][r.name] = info
         w.metadata.update(meta)

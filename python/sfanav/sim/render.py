@@ -9,7 +9,8 @@ above the ground:
 * sky and distant tree line above the horizon (at infinity: no parallax);
 * the ground below it, hit at horizontal distance ``h / tan(-elevation)``,
   textured by a photographic lawn detail times a large-scale colour map,
-  mip-mapped by distance, with the shadows of the objects;
+  mip-mapped by distance, with the shadows of the objects (both maps from
+  :mod:`sfanav.sim.ground`);
 * every object primitive (vertical cylinder, oriented box, ellipsoid),
   intersected exactly within its screen bounding block; the nearest hit wins
   (occlusion), so views change with position by true parallax.
@@ -31,12 +32,13 @@ axis=1)``).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from typing import Any, Sequence
 
 import numpy as np
 
 from .cameras import Camera, OmniCamera, PanoramicCamera, RayGrid, column_of_bearing
+from .conditions import DECIDUOUS_KINDS, Lighting, Season
+from .ground import lawn_map, shadow_map
 from .textures import Pyramid, fractal_noise, make_texture, photo
 from .world import Primitive, World
 
@@ -44,66 +46,6 @@ _LUMA = np.array([0.299, 0.587, 0.114], np.float32)
 
 
 FOG_DISTANCE = 250.0  # m; aerial perspective: far surfaces fade to the horizon colour
-
-
-@dataclass(frozen=True)
-class Lighting:
-    """A lighting condition.
-
-    Attributes
-    ----------
-    intensity : float
-        Overall light (1: a bright overcast-to-sunny day); scales every pixel.
-    tint : (R, G, B)
-        Colour of the light, multiplies the channels (e.g. red 0.5..1 as in
-        thesis 6.2.2).
-    sun_azimuth_deg, sun_elevation_deg : float
-        Sun direction in degrees (azimuth counter-clockwise from +x). Sides of
-        objects facing the sun are brighter; objects cast shadows on the ground.
-    ambient : float
-        Share of sky light that reaches every surface, in [0, 1].
-    shadows : bool
-        Ground shadows of the static objects.
-    """
-
-    intensity: float = 1.0
-    tint: tuple[float, float, float] = (1.0, 1.0, 1.0)
-    sun_azimuth_deg: float = 135.0
-    sun_elevation_deg: float = 40.0
-    ambient: float = 0.6
-    shadows: bool = True
-
-    def __post_init__(self) -> None:
-        if not (np.isfinite(self.intensity) and self.intensity >= 0):
-            raise ValueError(f"light intensity must be finite and >= 0, got {self.intensity}")
-        tint = tuple(float(t) for t in self.tint)
-        if len(tint) != 3 or min(tint) < 0:
-            raise ValueError(f"light tint must be three non-negative numbers, got {self.tint!r}")
-        object.__setattr__(self, "tint", tint)
-        if not 0 < self.sun_elevation_deg <= 90:
-            raise ValueError(f"sun_elevation_deg must be in (0, 90], got {self.sun_elevation_deg}")
-        if not 0 <= self.ambient <= 1:
-            raise ValueError(f"ambient must be in [0, 1], got {self.ambient}")
-
-    @property
-    def sun(self) -> np.ndarray:
-        """Unit vector towards the sun (x, y, z)."""
-        az, el = np.radians(self.sun_azimuth_deg), np.radians(self.sun_elevation_deg)
-        return np.array([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)])
-
-    @property
-    def rgb(self) -> np.ndarray:
-        return (self.intensity * np.asarray(self.tint)).astype(np.float32)
-
-    def to_dict(self) -> dict[str, Any]:
-        return {
-            "intensity": self.intensity,
-            "tint": list(self.tint),
-            "sun_azimuth_deg": self.sun_azimuth_deg,
-            "sun_elevation_deg": self.sun_elevation_deg,
-            "ambient": self.ambient,
-            "shadows": self.shadows,
-        }
 
 
 SHAPE_CODE = {"ellipsoid": 0, "box": 1, "cylinder": 2}
@@ -207,7 +149,15 @@ class Renderer:
 
     Building a renderer synthesises the textures and the ground and sky maps
     (about a second for a garden); each lighting condition's sun direction
-    adds a shadow map (cached). Rendering is then pure NumPy.
+    adds a shadow map (cached), each season its recoloured lawn and sky
+    (cached). Rendering is then pure NumPy.
+
+    A lighting's :class:`~sfanav.sim.conditions.Season` multiplies the
+    lawn's colour map (not the painted patches), the sky and the horizon
+    colour, and the colour of deciduous foliage (leaf-textured parts of
+    ``DECIDUOUS_KINDS`` objects, and the distant tree line); crowns of
+    trees and bushes are thinned by its ``leaf_cover`` (see
+    :meth:`Season.leafy`), and so are their shadows.
 
     Parameters
     ----------
@@ -224,16 +174,28 @@ class Renderer:
         self.pyramids = {name: Pyramid(make_texture(spec), spec.tile) for name, spec in world.textures.items()}
         self._atlas = _Atlas(self.pyramids)
         self._static = _Prims([p for o in world.objects for p in o.parts], self._atlas)
+        self._foliage, self._crowns = self._vegetation()
         self._build_ground()
         self._build_sky()
         self._ground_cache: dict[tuple, np.ndarray] = {}
+        self._sky_cache: dict[Season, np.ndarray] = {}
         self._grid_cache: dict[int, dict[str, Any]] = {}
+
+    def _vegetation(self) -> tuple[np.ndarray, np.ndarray]:
+        """Per static primitive (in ``self._static`` order): deciduous foliage
+        (seasonal colour), and of those the crowns (ellipsoids of trees and
+        bushes: seasonal leaf cover)."""
+        kind = {id(p): o.kind for o in self.world.objects for p in o.parts}
+        tex = self.world.textures
+        foliage = np.array([kind[id(p)] in DECIDUOUS_KINDS and tex[p.texture].kind == "leaves"
+                            for p in self._static.list], bool)
+        crowns = foliage & np.array([p.shape == "ellipsoid" for p in self._static.list], bool)
+        return foliage, crowns
 
     # ------------------------------------------------------------ ground
 
     def _build_ground(self) -> None:
         g = self.world.ground
-        rng = np.random.default_rng(g.seed)
         det = photo(g.detail) if g.detail in ("grass", "gravel", "brick") else None
         if det is None:  # pragma: no cover - GroundSpec.detail is a photo name
             raise ValueError(f"ground detail must be a photographic texture, got {g.detail!r}")
@@ -244,23 +206,12 @@ class Renderer:
         sizes = np.array([s[0] for s in self._detail.shapes])
         self._det_off = np.concatenate([[0], np.cumsum(sizes**2)[:-1]]).astype(np.int64)
         self._det_n = sizes.astype(np.int64)
-        # colour map: power-of-two cells covering the world, periodic beyond
-        extent = 2 * (self.world.outer_radius + 4.0)
-        n = int(2 ** np.ceil(np.log2(extent / g.resolution)))
-        self._gmap_n = n
-        self._gmap_res = g.resolution
-        self._gmap_origin = -n * g.resolution / 2
-        big = fractal_noise((n, n), rng, beta=3.0, fmin=2.0)
-        mid = fractal_noise((n, n), rng, beta=2.2, fmin=8.0)
-        mix = np.clip(0.5 + 0.35 * big + 0.15 * mid, 0, 1)[..., None]
-        col = mix * np.asarray(g.green, np.float32) + (1 - mix) * np.asarray(g.green2, np.float32)
-        patches = fractal_noise((n, n), rng, beta=3.0, fmin=3.0)
-        thr = np.quantile(patches, 1 - g.dry_fraction) if g.dry_fraction > 0 else np.inf
-        dry = np.clip((patches - thr) / 0.3, 0, 1)[..., None]
-        col = (1 - dry) * col + dry * np.asarray(g.dry, np.float32)
-        if g.patches:
-            _paint_patches(col, g.patches, self._gmap_origin, g.resolution)
-        self._gmap = col.astype(np.float32)  # (n, n, 3), row = y index, col = x index
+        lawn = lawn_map(g, self.world.outer_radius)
+        self._gmap_n = lawn.n
+        self._gmap_res = lawn.resolution
+        self._gmap_origin = lawn.origin
+        self._gmap = lawn.colour  # (n, n, 3), row = y index, col = x index
+        self._lawn = lawn.lawn[..., None]  # (n, n, 1): share of lawn, the part a season recolours
 
     def ground_colour_map(self) -> tuple[np.ndarray, float, float]:
         """The lawn's colour map before light and texture: ``(map, resolution,
@@ -271,42 +222,23 @@ class Renderer:
 
     def _shadow_map(self, light: Lighting) -> np.ndarray:
         """Fraction of direct sun blocked, (n, n) in [0, 1], on the ground map grid."""
-        import cv2
-
-        n, res, o = self._gmap_n, self._gmap_res, self._gmap_origin
-        shadow = np.zeros((n, n), np.float32)
+        n = self._gmap_n
         if not light.shadows:
-            return shadow
-        s = light.sun
-        horiz = np.hypot(s[0], s[1])
-        cot = horiz / s[2]
-        sx, sy = (s[0] / horiz, s[1] / horiz) if horiz > 1e-9 else (1.0, 0.0)
-        P = self._static
-        for i, p in enumerate(P.list):
-            top = max(P.z1[i], 0.0)
-            reach = top * cot
-            # bounding box of the shadow: footprint swept away from the sun
-            xs = [p.x - P.rb[i], p.x + P.rb[i], p.x - P.rb[i] - sx * reach, p.x + P.rb[i] - sx * reach]
-            ys = [p.y - P.rb[i], p.y + P.rb[i], p.y - P.rb[i] - sy * reach, p.y + P.rb[i] - sy * reach]
-            i0, i1 = int((min(xs) - o) / res) - 1, int((max(xs) - o) / res) + 2
-            j0, j1 = int((min(ys) - o) / res) - 1, int((max(ys) - o) / res) + 2
-            i0, j0 = max(i0, 0), max(j0, 0)
-            i1, j1 = min(i1, n), min(j1, n)
-            if i1 <= i0 or j1 <= j0:
-                continue
-            gx = o + (np.arange(i0, i1) + 0.5) * res
-            gy = o + (np.arange(j0, j1) + 0.5) * res
-            X, Y = np.meshgrid(gx, gy)
-            # ray from the ground point towards the sun, horizontal direction (sx, sy), rise tan(el)
-            d = _hit_distance(p, X - p.x, Y - p.y, sx, sy, s[2] / horiz if horiz > 1e-9 else 1e9)
-            shadow[j0:j1, i0:i1] = np.maximum(shadow[j0:j1, i0:i1], np.isfinite(d).astype(np.float32))
-        k = max(3, int(0.25 / res) | 1)
-        return cv2.GaussianBlur(shadow, (k, k), 0)
+            return np.zeros((n, n), np.float32)
+        weights = None
+        if light.season is not None and light.season.leaf_cover < 1:
+            weights = np.where(self._crowns, light.season.leaf_cover, 1.0)
+        return shadow_map(self._static.list, light.sun, n, self._gmap_res, self._gmap_origin, weights)
 
     def _lit_ground(self, light: Lighting) -> np.ndarray:
-        key = (light.sun_azimuth_deg, light.sun_elevation_deg, light.ambient, light.shadows)
+        season = light.season
+        key = (light.sun_azimuth_deg, light.sun_elevation_deg, light.ambient, light.shadows,
+               None if season is None else (season.ground, season.leaf_cover))
         lit = self._ground_cache.get(key)
         if lit is None:
+            gmap = self._gmap
+            if season is not None:
+                gmap = gmap * (1 + self._lawn * (np.asarray(season.ground, np.float32) - 1))
             s = light.sun
             direct = (1 - light.ambient) * max(s[2], 0.0) / np.sin(np.radians(50.0))
             shade = light.ambient + direct * (1.0 - self._shadow_map(light))
@@ -314,8 +246,8 @@ class Renderer:
             # periodic map would repeat the shadows of the objects
             nn = self._gmap_n * self._gmap_n
             lit = np.ones((2 * nn, 4), np.float32)
-            lit[:nn, :3] = (self._gmap * shade[..., None]).reshape(-1, 3)
-            lit[nn:, :3] = (self._gmap * (light.ambient + direct)).reshape(-1, 3)
+            lit[:nn, :3] = (gmap * shade[..., None]).reshape(-1, 3)
+            lit[nn:, :3] = (gmap * (light.ambient + direct)).reshape(-1, 3)
             lit = lit.view("V16").ravel()
             if len(self._ground_cache) > 32:
                 self._ground_cache.clear()
@@ -348,11 +280,35 @@ class Renderer:
         tex = 1.0 + 0.25 * fractal_noise((n_el, n_az), rng, beta=1.2)
         tree = (np.asarray(sk.treeline, np.float32)[None, None, :] * tex[..., None]).astype(np.float32)
         below = el[:, None] < prof[None, :]
+        self._sky_open, self._treeline, self._below_treeline = sky, tree, below[..., None]
         sky = np.where(below[..., None], tree, sky)
         self._sky = sky.astype(np.float32)
         self._sky_el = el
         self._horizon_rgb = np.asarray(sk.horizon, np.float32)
         self._horizon_rgba = np.append(self._horizon_rgb, np.float32(1.0))
+
+    def _seasonal_sky(self, season: Season | None) -> np.ndarray:
+        """The sky map (n_el, n_az, 3) in a season: open sky times the sky
+        multiplier; the tree line times the foliage multiplier, letting
+        ``(1 - leaf_cover) / 2`` of the sky through."""
+        if season is None:
+            return self._sky
+        sky = self._sky_cache.get(season)
+        if sky is None:
+            open_sky = self._sky_open * np.asarray(season.sky, np.float32)
+            keep = np.float32(0.5 + 0.5 * season.leaf_cover)
+            tree = keep * (self._treeline * np.asarray(season.foliage, np.float32)) + (1 - keep) * open_sky
+            sky = np.where(self._below_treeline, tree, open_sky).astype(np.float32)
+            if len(self._sky_cache) > 8:
+                self._sky_cache.clear()
+            self._sky_cache[season] = sky
+        return sky
+
+    def _horizon(self, season: Season | None) -> np.ndarray:
+        """The RGBA colour far surfaces fade to."""
+        if season is None:
+            return self._horizon_rgba
+        return np.append(self._horizon_rgb * np.asarray(season.sky, np.float32), np.float32(1.0))
 
     # ------------------------------------------------------------ per-grid data
 
@@ -367,10 +323,8 @@ class Renderer:
         gd["sky_rows"] = slice(int(sky_rows[0]), int(sky_rows[-1]) + 1) if len(sky_rows) else slice(0, 0)
         gd["gnd_rows"] = slice(int(gnd_rows[0]), int(gnd_rows[-1]) + 1) if len(gnd_rows) else slice(0, 0)
         if len(sky_rows):
-            k = np.clip(np.searchsorted(self._sky_el, grid.elev[sky_rows]), 0, len(self._sky_el) - 1)
-            panel = np.ones((len(k), self._sky_n_az, 4), np.float32)
-            panel[..., :3] = self._sky[k]
-            gd["sky_panel"] = panel.view("V16")[..., 0]  # (Hs, n_az) of 16-byte RGBA texels
+            gd["sky_k"] = np.clip(np.searchsorted(self._sky_el, grid.elev[sky_rows]), 0, len(self._sky_el) - 1)
+            gd["sky_panels"] = {}
         if len(gnd_rows):
             t = grid.tan[gnd_rows]
             d = grid.h / -t  # horizontal distance of the ground hit, per row
@@ -401,6 +355,20 @@ class Renderer:
             self._grid_cache.clear()
         self._grid_cache[key] = gd
         return gd
+
+    def _sky_panel(self, gd: dict[str, Any], season: Season | None) -> np.ndarray:
+        """The sky rows of a grid in a season: (Hs, n_az) of 16-byte RGBA texels."""
+        panels = gd["sky_panels"]
+        panel = panels.get(season)
+        if panel is None:
+            k = gd["sky_k"]
+            rgba = np.ones((len(k), self._sky_n_az, 4), np.float32)
+            rgba[..., :3] = self._seasonal_sky(season)[k]
+            panel = rgba.view("V16")[..., 0]
+            if len(panels) > 8:
+                panels.clear()
+            panels[season] = panel
+        return panel
 
     # ------------------------------------------------------------ rendering
 
@@ -445,7 +413,8 @@ class Renderer:
         sr = gd["sky_rows"]
         if sr.stop > sr.start:
             k = (np.mod(phi, 2 * np.pi) * (self._sky_n_az / (2 * np.pi))).astype(np.int64) % self._sky_n_az
-            out[sr] = np.take(gd["sky_panel"], k, axis=1).view(np.float32).reshape(sr.stop - sr.start, W, 4)
+            out[sr] = np.take(self._sky_panel(gd, light.season), k, axis=1).view(np.float32).reshape(
+                sr.stop - sr.start, W, 4)
         # ground
         gr = gd["gnd_rows"]
         if gr.stop > gr.start:
@@ -461,7 +430,7 @@ class Renderer:
                 np.floor((Y - o) / res).astype(np.int64) & (n - 1)) * n + gd["gnd_map_off"]
             col = self._lit_ground(light)[gi].view(np.float32).reshape(gi.shape + (4,)) * det[..., None]
             fog = gd["gnd_fog"]
-            col += fog * (self._horizon_rgba - col)
+            col += fog * (self._horizon(light.season) - col)
             out[gr] = col
         # objects
         P = self._static
@@ -480,6 +449,10 @@ class Renderer:
             return
         W, h = grid.W, grid.h
         atlas = self._atlas
+        season = light.season
+        if season is not None:  # the dynamic primitives (after the static ones) are no plants
+            pad = np.zeros(n - len(self._foliage), bool)
+            foliage, crowns = np.concatenate([self._foliage, pad]), np.concatenate([self._crowns, pad])
         # --- per primitive: screen block
         qx, qy = P.x - cx, P.y - cy
         rho2 = qx * qx + qy * qy
@@ -583,6 +556,12 @@ class Renderer:
                 if len(m):
                     rgba, _ = self._surface(P, m, pid, d, face, t, vx, vy, qx, qy, h, level, bounds)
                     d[m[rgba[:, 3] < 0.5]] = np.inf
+            # thinned crowns let the ray through where the season has no leaf
+            if season is not None and season.leaf_cover < 1:
+                m = np.nonzero(crowns[pid] & np.isfinite(d))[0]
+                if len(m):
+                    dm = d[m]
+                    d[m[~season.leafy(cx + dm * vx[m], cy + dm * vy[m], h + dm * t[m])]] = np.inf
             # depth test: nearest hit per pixel
             cand = np.nonzero(d < base[pix])[0]
             if not len(cand):
@@ -591,13 +570,15 @@ class Renderer:
             np.minimum.at(buf, pix[cand], d[cand])
             win = cand[d[cand] <= buf[pix[cand]]]
             rgba, nrm = self._surface(P, win, pid, d, face, t, vx, vy, qx, qy, h, level, bounds)
+            if season is not None:
+                rgba[foliage[pid[win]], :3] *= np.asarray(season.foliage, np.float32)
             sun = light.sun
             norm = np.sqrt((nrm * nrm).sum(axis=1))
             lam = np.maximum((nrm @ sun) / np.maximum(norm, 1e-12), 0.0)
             shade = (light.ambient + (1 - light.ambient) / np.sin(np.radians(50.0)) * lam).astype(np.float32)
             rgba *= shade[:, None]
             fog = (1.0 - np.exp(-rho[pid[win]] / FOG_DISTANCE)).astype(np.float32)[:, None]
-            rgba += fog * (self._horizon_rgba - rgba)
+            rgba += fog * (self._horizon(season) - rgba)
         out.reshape(-1, 4)[pix[win]] = rgba
         base[pix[win]] = d[win]
 
@@ -671,45 +652,6 @@ class Renderer:
         return rgba, nrm
 
 
-def _hit_distance(p: Primitive, ox: np.ndarray, oy: np.ndarray, dx: float, dy: float, rise: float) -> np.ndarray:
-    """Horizontal distance at which rays from ground points (ox, oy relative
-    to the primitive centre, z = 0) going in horizontal direction (dx, dy)
-    with slope ``rise`` (dz per horizontal metre) first meet the primitive;
-    inf where they miss. Used for shadow maps."""
-    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        if p.shape == "ellipsoid":
-            r, rz = p.radius, 0.5 * (p.z1 - p.z0)
-            zc = 0.5 * (p.z0 + p.z1)
-            # (ox + d dx)^2/r^2 + (oy + d dy)^2/r^2 + (d rise - zc)^2/rz^2 = 1
-            A = 1.0 / r**2 + rise**2 / rz**2
-            B = 2 * (ox * dx + oy * dy) / r**2 - 2 * rise * zc / rz**2
-            C = (ox**2 + oy**2) / r**2 + zc**2 / rz**2 - 1
-            disc = B * B - 4 * A * C
-            d = (-B - np.sqrt(disc)) / (2 * A)
-            d2 = (-B + np.sqrt(disc)) / (2 * A)
-            return np.where((disc >= 0) & (d2 > 0), np.maximum(d, 0), np.inf)
-        if p.shape == "cylinder":
-            a = -(ox * dx + oy * dy)
-            disc = p.radius**2 - (ox**2 + oy**2 - a * a)
-            s = np.sqrt(disc)
-            din, dout = a - s, a + s
-            valid = (disc > 0) & (dout > 0)
-        else:
-            c, sn = np.cos(p.yaw), np.sin(p.yaw)
-            lx, ly = c * ox + sn * oy, -sn * ox + c * oy
-            vx, vy = c * dx + sn * dy, -sn * dx + c * dy
-            L2, W2 = p.length / 2, p.width / 2
-            tx1, tx2 = (-L2 - lx) / vx, (L2 - lx) / vx
-            ty1, ty2 = (-W2 - ly) / vy, (W2 - ly) / vy
-            din = np.maximum(np.minimum(tx1, tx2), np.minimum(ty1, ty2))
-            dout = np.minimum(np.maximum(tx1, tx2), np.maximum(ty1, ty2))
-            valid = (din < dout) & (dout > 0)
-        din = np.maximum(din, 0)
-        # heights of the ray over [din, dout]: [din*rise, dout*rise]; hit if it overlaps [z0, z1]
-        hit = valid & (din * rise <= p.z1) & (dout * rise >= p.z0)
-        return np.where(hit, din, np.inf)
-
-
 def _pose3(pose: Sequence[float]) -> tuple[float, float, float]:
     try:
         x, y, th = (float(v) for v in pose)
@@ -729,74 +671,3 @@ def _to_uint8(img: np.ndarray, rgb: bool, light: np.ndarray) -> np.ndarray:
         out = img[..., :3] @ (_LUMA * gain)
     out += 0.5
     return np.clip(out, 0, 255, out=out).astype(np.uint8)
-
-
-def _paint_patches(col: np.ndarray, patches: Sequence[dict[str, Any]], origin: float, res: float) -> None:
-    """Paints ground patches (patio, gravel path, flower bed; see
-    :class:`~sfanav.sim.world.GroundSpec`) into the lawn's colour map
-    ``col`` (n, n, 3; row = y, column = x) in place."""
-    n = col.shape[0]
-    for pt in patches:
-        kind = pt["kind"]
-        rng = np.random.default_rng(int(pt.get("seed", 0)))
-        if kind == "path":
-            P = np.asarray(pt["points"], float)
-            half = float(pt["width"]) / 2
-            lo, hi = P.min(axis=0) - half - 0.5, P.max(axis=0) + half + 0.5
-        elif kind == "patio":
-            r = 0.5 * float(np.hypot(pt["length"], pt["width"]))
-            lo, hi = np.array([pt["x"] - r, pt["y"] - r]), np.array([pt["x"] + r, pt["y"] + r])
-        elif kind == "bed":
-            r = max(float(pt["rx"]), float(pt["ry"])) + 0.2
-            lo, hi = np.array([pt["x"] - r, pt["y"] - r]), np.array([pt["x"] + r, pt["y"] + r])
-        else:
-            raise ValueError(f"unknown ground patch kind {kind!r}")
-        i0, j0 = (np.floor((lo - origin) / res).astype(int)).clip(0, n)
-        i1, j1 = (np.ceil((hi - origin) / res).astype(int) + 1).clip(0, n)
-        if i1 <= i0 or j1 <= j0:
-            continue
-        gx = origin + (np.arange(i0, i1) + 0.5) * res
-        gy = origin + (np.arange(j0, j1) + 0.5) * res
-        X, Y = np.meshgrid(gx, gy)
-        block = col[j0:j1, i0:i1]
-        shape = X.shape
-        if kind == "patio":
-            c, s_ = np.cos(pt["yaw"]), np.sin(pt["yaw"])
-            lx, ly = c * (X - pt["x"]) + s_ * (Y - pt["y"]), -s_ * (X - pt["x"]) + c * (Y - pt["y"])
-            inside = (np.abs(lx) <= pt["length"] / 2) & (np.abs(ly) <= pt["width"] / 2)
-            tile = float(pt["tile"])
-            tu, tv = np.floor((lx + pt["length"] / 2) / tile), np.floor((ly + pt["width"] / 2) / tile)
-            base = np.asarray(rng.choice([(0.62, 0.60, 0.56), (0.70, 0.64, 0.55), (0.55, 0.55, 0.57)]), np.float32)
-            # per-slab brightness, joints one map cell wide
-            shade = 0.85 + 0.3 * ((np.sin(tu * 12.9898 + tv * 78.233 + rng.uniform(0, 100)) * 43758.5453) % 1.0)
-            fu, fv = (lx + pt["length"] / 2) % tile, (ly + pt["width"] / 2) % tile
-            joint = (fu < res) | (fv < res)
-            paint = base[None, None, :] * shade[..., None] * np.where(joint, 0.45, 1.0)[..., None]
-            alpha = inside.astype(np.float32)
-        elif kind == "path":
-            # distance to the polyline
-            d = np.full(shape, np.inf)
-            for a, b in zip(P[:-1], P[1:]):
-                ab = b - a
-                t = np.clip(((X - a[0]) * ab[0] + (Y - a[1]) * ab[1]) / max(ab @ ab, 1e-12), 0, 1)
-                d = np.minimum(d, np.hypot(X - a[0] - t * ab[0], Y - a[1] - t * ab[1]))
-            half = float(pt["width"]) / 2
-            alpha = np.clip((half - d) / (1.5 * res) + 0.5, 0, 1).astype(np.float32)
-            base = np.asarray((0.66, 0.62, 0.54), np.float32)
-            grain = 0.8 + 0.4 * rng.random(shape)
-            paint = base[None, None, :] * grain[..., None]
-        else:  # bed
-            c, s_ = np.cos(pt["yaw"]), np.sin(pt["yaw"])
-            lx, ly = c * (X - pt["x"]) + s_ * (Y - pt["y"]), -s_ * (X - pt["x"]) + c * (Y - pt["y"])
-            q = (lx / pt["rx"]) ** 2 + (ly / pt["ry"]) ** 2
-            alpha = (q <= 1.0).astype(np.float32)
-            soil = np.asarray((0.28, 0.20, 0.13), np.float32)
-            paint = np.broadcast_to(soil, shape + (3,)) * (0.8 + 0.4 * rng.random(shape))[..., None]
-            u = rng.random(shape)
-            leaf = u < 0.35
-            paint = np.where(leaf[..., None], np.asarray((0.16, 0.34, 0.10), np.float32), paint)
-            palette = np.asarray([(0.85, 0.15, 0.15), (0.95, 0.85, 0.20), (0.60, 0.30, 0.75), (0.95, 0.95, 0.92),
-                                  (0.95, 0.50, 0.15)], np.float32)
-            flowers = palette[rng.integers(0, len(palette), shape)]
-            paint = np.where((u > 0.72)[..., None], flowers, paint)
-        block[:] = block * (1 - alpha[..., None]) + paint.astype(np.float32) * alpha[..., None]

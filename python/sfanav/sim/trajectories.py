@@ -20,6 +20,8 @@ a ``world`` also keep clear of its obstacles.
 * :func:`random_walk`: a smooth random test walk.
 * :func:`detour`: a trajectory (e.g. a grid) led around a world's obstacles
   (the realistic gardens, with objects inside the area).
+* :func:`jitter`: a trajectory as a robot driving it again deviates from
+  it (a border-wire mower's few centimetres and degrees).
 """
 
 from __future__ import annotations
@@ -592,3 +594,77 @@ def _line(a: np.ndarray, b: np.ndarray, step: float) -> np.ndarray:
     if k <= 1:
         return np.empty((0, 2))
     return a + (b - a) * np.linspace(0, 1, k + 1)[1:-1, None]
+
+
+def jitter(traj: Trajectory, lateral: float = 0.05, heading_deg: float = 2.0, *, length: float = 2.0,
+           rng: np.random.Generator | int | None = None) -> Trajectory:
+    """The trajectory as a robot driving it again would: every pose moved
+    sideways by a smooth random offset and turned by a smooth random heading
+    error, independently drawn.
+
+    Both are Gaussian-smoothed white noise along the path length with a
+    correlation length of about ``length`` metres, scaled so that their
+    largest magnitude over the run is exactly ``lateral`` metres and
+    ``heading_deg`` degrees. Sideways is the pose's left (heading + 90 deg).
+    Times and extra columns are kept; poses stay where they are when the
+    path has no length (offsets are then constant).
+
+    Parameters
+    ----------
+    traj : Trajectory
+    lateral : float
+        Largest sideways offset (m), >= 0.
+    heading_deg : float
+        Largest heading error (degrees), >= 0.
+    length : float
+        Correlation length along the path (m), > 0.
+    rng : numpy Generator or int seed
+
+    Returns
+    -------
+    Trajectory of the same length.
+
+    Raises
+    ------
+    ValueError
+        A negative or non-finite ``lateral`` or ``heading_deg``, a
+        non-positive ``length``.
+
+    Examples
+    --------
+    >>> loop = border_loop((15, 15), 279, rng=0)
+    >>> again = jitter(loop, 0.05, 2.0, rng=1)
+    >>> bool(np.hypot(*(again.poses[:, :2] - loop.poses[:, :2]).T).max() <= 0.05 + 1e-12)
+    True
+    """
+    for name, v in (("lateral", lateral), ("heading_deg", heading_deg)):
+        if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) or not (
+                np.isfinite(v) and v >= 0):
+            raise ValueError(f"jitter {name} must be a finite number >= 0, got {v!r}")
+    length = _positive(length, "jitter length")
+    rng = np.random.default_rng(rng)
+    P = traj.poses
+    if not len(P):
+        return traj[:]
+    s = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(P[:, :2], axis=0).T))])
+    off = float(lateral) * _smooth_noise(s, length, rng)
+    dth = np.radians(float(heading_deg)) * _smooth_noise(s, length, rng)
+    out = P.copy()
+    out[:, 0] -= off * np.sin(P[:, 2])
+    out[:, 1] += off * np.cos(P[:, 2])
+    out[:, 2] = P[:, 2] + dth  # the input's heading convention (wrapped or continuous) is kept
+    return Trajectory(out, traj.times.copy(), {k: v.copy() for k, v in traj.extra.items()})
+
+
+def _smooth_noise(s: np.ndarray, length: float, rng: np.random.Generator) -> np.ndarray:
+    """Smooth random values at path positions ``s`` (m, non-decreasing from
+    0): white noise on knots every ``length / 4`` m, smoothed by a Gaussian
+    of ``length`` m, interpolated; scaled to a largest magnitude of 1."""
+    knot = length / 4
+    pad = 12  # three standard deviations of the kernel, in knots
+    m = int(np.ceil(s[-1] / knot)) + 2
+    kernel = np.exp(-0.5 * (np.arange(-pad, pad + 1) / 4.0) ** 2)
+    smooth = np.convolve(rng.standard_normal(m + 2 * pad), kernel, mode="valid")
+    v = np.interp(s / knot, np.arange(m), smooth)
+    peak = float(np.abs(v).max())
+    return v / peak if peak > 0 else v
