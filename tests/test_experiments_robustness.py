@@ -21,7 +21,8 @@ def _rows(result, out):
 
 
 def test_registered():
-    assert {"6.2.1-static", "6.2.1-light", "6.2.1-dynamic", "6.2.1-bow", "6.2.2"} <= set(experiments.names())
+    assert {"6.2.1-static", "6.2.1-light", "6.2.1-dynamic", "6.2.1-bow", "6.2.2", "6.2.2-seasons"} <= set(
+        experiments.names())
 
 
 def test_621_light_quick(tmp_path):
@@ -43,3 +44,12 @@ def test_621_bow_and_622_quick(tmp_path):
     assert len(res.details["curves"]["thesis config"][0]) == 3
     assert any("6.2.2-trajectory-thesis-config" in p for p in res.plots)  # Fig. 6.18b
     assert "without simulated rotation" in res.notes
+
+
+def test_622_seasons_quick(tmp_path):
+    res = experiments.run("6.2.2-seasons", tmp_path, quick=True, progress=False)
+    rows = _rows(res, tmp_path)
+    assert rows["MED (m), 1 training set [thesis config]"]["thesis"] == 6.13  # the real recordings (Fig. 6.20a)
+    assert "over a year" in res.notes
+    # the recordings deviate from each other by a few cm: perfect memory is no longer exact
+    assert 0.0 < rows["MED (m), 3 training sets [perfect memory, all conditions' views]"]["sfanav"] < 1.0
