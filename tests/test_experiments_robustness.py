@@ -53,3 +53,16 @@ def test_622_seasons_quick(tmp_path):
     assert "over a year" in res.notes
     # the recordings deviate from each other by a few cm: perfect memory is no longer exact
     assert 0.0 < rows["MED (m), 3 training sets [perfect memory, all conditions' views]"]["sfanav"] < 1.0
+
+
+def test_621_configs_checked(tmp_path):
+    import pytest
+
+    from sfanav.experiments.robustness import run_621, run_622
+
+    with pytest.raises(ValueError, match="configs must be"):
+        run_621(tmp_path, "light", quick=True, seed=0, progress=False, configs=("no such config",))
+    with pytest.raises(ValueError, match="configs must be"):
+        run_621(tmp_path, "light", quick=True, seed=0, progress=False, configs=())
+    with pytest.raises(ValueError, match="by must be"):
+        run_622(tmp_path, quick=True, seed=0, progress=False, by="heading")

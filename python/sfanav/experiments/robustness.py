@@ -121,10 +121,17 @@ def _med(loc: Any, X: np.ndarray, xy: np.ndarray) -> dict[str, float]:
 
 
 def run_621(out: Path, variant: str, *, quick: bool, seed: int, progress: bool,
-            detectors: tuple[str, ...] = ("gt",), weighted: bool = False) -> ExperimentResult:
+            detectors: tuple[str, ...] = ("gt",), weighted: bool = False,
+            configs: tuple[str, ...] = CONFIGS_621) -> ExperimentResult:
     """One 6.2.1 experiment: standard against feedback training with the
-    closures of ``detectors`` (the first is the main one), in both
-    configurations, beside the peers."""
+    closures of ``detectors`` (the first is the main one), in each of
+    ``configs`` (``CONFIGS_621``; quick mode: the tiny network in the first
+    two), beside the peers. The closures' statistics and the peers come with
+    the first configuration; the thesis's figures stand beside the thesis
+    configuration."""
+    unknown = sorted(set(configs) - set(CONFIGS_621))
+    if unknown or not configs:
+        raise ValueError(f"configs must be a non-empty subset of {CONFIGS_621}, got {configs!r}")
     log = progress_log(progress)
     ds = _dataset(out, variant, seed, quick, progress)
     name = f"6.2.1-{variant}" if detectors == ("gt",) else "6.2.1-bow"
@@ -135,7 +142,8 @@ def run_621(out: Path, variant: str, *, quick: bool, seed: int, progress: bool,
     notes: list[str] = []
     found: dict[str, LoopClosures] = {}  # detected on the first configuration's images, realigned for the next
     candidates: dict[str, LoopClosures] = {}
-    for config in (CONFIGS if quick else CONFIGS_621):  # quick: the tiny network in every configuration
+    configs = (tuple(c for c in configs if c in CONFIGS) or CONFIGS[:1]) if quick else configs
+    for config in configs:  # quick: the tiny network in every configuration
         make_net, prep, kw = _config(config, quick)
         X_tr, xy_tr, X_te, xy_te = _images(ds, prep, log)
         rows_step = None if config == "thesis config" or quick else recipe_for().image_rows(
@@ -144,7 +152,7 @@ def run_621(out: Path, variant: str, *, quick: bool, seed: int, progress: bool,
         std, t_std = _train(make_net, X_tr, xy_tr, kw, rows_step)
         m_std = _med(std, X_te, xy_te)
         log(f"{name} {config}: standard MED {m_std['med']:.3f} m ({t_std:.0f} s)")
-        rows.append({"metric": f"MED (m) standard{tag}", "thesis": thesis.get("standard") if config == CONFIGS[0]
+        rows.append({"metric": f"MED (m) standard{tag}", "thesis": thesis.get("standard") if config == "thesis config"
                      else None, "sfanav": m_std["med"], "configuration": config})
         fits = {"standard": std}
         for kind in detectors:
@@ -164,14 +172,14 @@ def run_621(out: Path, variant: str, *, quick: bool, seed: int, progress: bool,
                 fits[label] = fb
                 log(f"{name} {config}: {label} ({len(lc)} closures) MED {m_fb['med']:.3f} m ({t_fb:.0f} s)")
                 want = None
-                if config == CONFIGS[0]:
+                if config == "thesis config":
                     want = thesis.get("feedback") if kind == "gt" else (THESIS_BOW["feedback"] if kind == "bow"
                                                                          and not suffix else None)
                 rows.append({"metric": f"MED (m) {label}{tag}", "thesis": want, "sfanav": m_fb["med"],
                              "configuration": config})
                 rows.append({"metric": f"training time feedback / standard, {label}{tag}", "thesis": None,
                              "sfanav": t_fb / t_std, "configuration": config})
-            if config == CONFIGS[0]:
+            if config == configs[0]:
                 rows += [
                     {"metric": f"loop closures ({kind})", "thesis": (THESIS_BOW["gt closures"] if kind == "gt" else
                                                                    THESIS_BOW["matches"] if kind == "bow" else None),
@@ -189,7 +197,7 @@ def run_621(out: Path, variant: str, *, quick: bool, seed: int, progress: bool,
                 p = plot_closures(xy_tr, lc, path=out / f"{name}-closures-{kind}.png",
                                   title=f"{name}: {len(lc)} loop closures ({kind})")
                 plots.append(str(p))
-        if config == CONFIGS[0]:  # the peers on the same training images
+        if config == configs[0]:  # the peers on the same training images
             for peer, model in (("perfect memory", baselines.PerfectMemory()),
                                 ("Fourier signature", baselines.FourierSignature())):
                 model.fit(X_tr, xy_tr)
