@@ -42,6 +42,9 @@ def test_621_bow_and_622_quick(tmp_path):
     rows = _rows(res, tmp_path)
     assert "MED (m), 1 training set [thesis config]" in rows
     assert len(res.details["curves"]["thesis config"][0]) == 3
+    held = res.details["curves"]["thesis config, last recording held out"][0]
+    assert len(held) == 3 and all(v > 0 for v in held)  # a second curve: every k on the same unseen recording
+    assert "MED (m), 3 training sets [thesis config, last recording held out]" in rows
     assert any("6.2.2-trajectory-thesis-config" in p for p in res.plots)  # Fig. 6.18b
     assert "without simulated rotation" in res.notes
 
