@@ -2,7 +2,7 @@
 """Experiment 6.2.2's result from runs split over processes (the full run trains 10 permutations x 9 set counts
 in both configurations one after the other: over an hour on 2 cores). Reads error curves from
 `scripts/investigations/long_term.py` JSON files and/or the per-fit lines of `sfanav experiment 6.2.2` logs
-("6.2.2 CONFIG permutation P K sets: MED M m (...), perfect memory Q m"), and writes OUT/NAME.json in the
+("6.2.2 CONFIG permutation P K sets: MED M m (...), on the held-out last recording H m, perfect memory Q m"), and writes OUT/NAME.json in the
 experiment's format with the error-vs-sets plot. The permutations and fits are the same as in one process
 (seeded), so the rows are those `sfanav experiment 6.2.2` prints.
 
@@ -33,15 +33,16 @@ name = "6.2.2" if a.preset == "thesis-6.2.2-conditions" else "6.2.2-seasons"
 curves: dict[str, np.ndarray] = {}
 notes = ""
 line = re.compile(r"^6\.2\.2(?:-seasons)? (.+?) permutation (\d+) (\d+) sets: MED ([0-9.e+-]+) m \([^)]*\)"
-                  r"(?:, perfect memory ([0-9.e+-]+) m)?")
+                  r"(?:, on the held-out last recording ([0-9.e+-]+) m)?(?:, perfect memory ([0-9.e+-]+) m)?")
+HELD = ", last recording held out"
 for log in a.logs:
     for text in log.read_text().replace("\r", "\n").splitlines():
         m = line.match(text)
         if not m:
             continue
         config, p, k = m.group(1), int(m.group(2)), int(m.group(3))
-        for key, val in ((config, m.group(4)), ("perfect memory", m.group(5))):
-            if val is None or key not in a.configs + ["perfect memory"]:
+        for key, val in ((config, m.group(4)), (config + HELD, m.group(5)), ("perfect memory", m.group(6))):
+            if val is None or key.removesuffix(HELD) not in a.configs + ["perfect memory"]:
                 continue
             if key == "perfect memory" and config != a.configs[0]:
                 continue
@@ -50,12 +51,13 @@ for path in a.json:
     d = json.loads(path.read_text())
     notes = d.get("notes", notes)
     for key, c in d["curves"].items():
-        if key in a.configs or (key == "perfect memory" and "perfect memory" not in curves):
+        if key.removesuffix(HELD) in a.configs or (key == "perfect memory" and "perfect memory" not in curves):
             curves[key] = np.asarray(c, dtype=np.float64)
 missing = {k: int(np.isnan(v).sum()) for k, v in curves.items() if np.isnan(v).any()}
 if missing:
     print(f"missing fits (NaN, left out of the means): {missing}")
-order = [c for c in a.configs if c in curves] + ["perfect memory"] * ("perfect memory" in curves)
+order = ([k for c in a.configs for k in (c, c + HELD) if k in curves]
+         + ["perfect memory"] * ("perfect memory" in curves))
 curves = {k: curves[k] for k in order}
 rows = curve_rows(curves, a.preset)
 plot = plot_curves(curves, a.out / f"{name}-error-vs-sets.png", name, THESIS_622[a.preset].get(9))
