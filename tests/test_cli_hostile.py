@@ -105,8 +105,9 @@ def test_absurd_sizes_and_windows(tiny, tmp_path, capsys):
 def test_an_interrupted_simulate_leaves_no_dataset(tmp_path, sig, status):
     out = tmp_path / "ds"
     env = dict(os.environ, PYTHONUNBUFFERED="1")
+    # 600x60: slow enough (seconds) that the run cannot finish between the poll and the signal on an idle machine
     proc = subprocess.Popen([sys.executable, "-m", "sfanav", "simulate", "--preset", "demo", "--out", str(out),
-                             "--size", "120x16"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env)
+                             "--size", "600x60"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env)
     deadline = time.monotonic() + 120
     while time.monotonic() < deadline and proc.poll() is None:
         if (out / "images").exists() and len(list((out / "images").iterdir())) >= 5:
