@@ -105,11 +105,10 @@ def test_absurd_sizes_and_windows(tiny, tmp_path, capsys):
 def test_an_interrupted_simulate_leaves_no_dataset(tmp_path, sig, status):
     out = tmp_path / "ds"
     env = dict(os.environ, PYTHONUNBUFFERED="1")
-    # 600x60: slow enough (seconds) that the run cannot finish between the poll and the signal on an idle machine.
     # SIGINT back to its default in the child: a test run started in the background (`cmd &` in a script) ignores
     # SIGINT, and Python keeps an inherited ignore (no KeyboardInterrupt), as a user's background job would
     proc = subprocess.Popen([sys.executable, "-m", "sfanav", "simulate", "--preset", "demo", "--out", str(out),
-                             "--size", "600x60"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env,
+                             "--size", "120x16"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env,
                             preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     deadline = time.monotonic() + 120
     while time.monotonic() < deadline and proc.poll() is None:

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from sfanav.experiments import ExperimentResult
-from sfanav.experiments.robustness import THESIS_622, curve_rows, plot_curves
+from sfanav.experiments.robustness import HELD_OUT as HELD, THESIS_622, curve_rows, plot_curves
 
 ap = argparse.ArgumentParser()
 ap.add_argument("out", type=Path)
@@ -34,7 +34,6 @@ curves: dict[str, np.ndarray] = {}
 notes = ""
 line = re.compile(r"^6\.2\.2(?:-seasons)? (.+?) permutation (\d+) (\d+) sets: MED ([0-9.e+-]+) m \([^)]*\)"
                   r"(?:, on the held-out last recording ([0-9.e+-]+) m)?(?:, perfect memory ([0-9.e+-]+) m)?")
-HELD = ", last recording held out"
 for log in a.logs:
     for text in log.read_text().replace("\r", "\n").splitlines():
         m = line.match(text)
