@@ -36,7 +36,7 @@ MOVED: dict[str, dict[str, tuple[str, str]]] = {
     'sfanav.cli': {
         'EXIT_USAGE': ('sfanav.app.cli', 'EXIT_USAGE'),
         'build_parser': ('sfanav.app.cli', 'build_parser'),
-        'command': ('sfanav.app.cli', 'command'),
+        'command': ('sfanav.app.registry', 'command'),
         'main': ('sfanav.app.cli', 'main'),
     },
     'sfanav.dataset': {

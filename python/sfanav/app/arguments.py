@@ -59,3 +59,14 @@ def fraction(text: str) -> float:
     if not (math.isfinite(v) and 0.0 < v <= 1.0):
         raise argparse.ArgumentTypeError(f"expected a fraction in (0, 1] or a percentage in (0%, 100%], got {text!r}")
     return v
+
+
+def xy(text: str) -> tuple[float, ...]:
+    """A position "X,Y" (metres) or a pose "X,Y,HEADING_DEG"."""
+    try:
+        v = tuple(float(t) for t in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected X,Y (metres, comma-separated), got {text!r}") from None
+    if len(v) not in (2, 3) or not all(abs(t) < float("inf") for t in v):
+        raise argparse.ArgumentTypeError(f"expected X,Y or X,Y,HEADING_DEG (finite numbers), got {text!r}")
+    return v

@@ -1,0 +1,179 @@
+"""``sfanav localize`` and ``sfanav evaluate``: a trained model on new images, and its report on a run with ground truth."""
+
+from __future__ import annotations
+
+import argparse
+
+from .. import arguments as arg
+from ..common import existing_path, fmt, load_localizer, log, mirror_of, new_file, table, wrap
+from ..failures import UsageError
+from ..registry import command
+
+
+@command("localize")
+def _add_localize(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    p = sub.add_parser(
+        "localize",
+        help="estimate x, y for every image of a dataset, an image folder or a video",
+        description=wrap("Localize every image of INPUT with a trained model: a dataset directory, a folder of "
+                    "images (png, jpg, ...; sorted by name) or a video file. Writes a CSV with columns "
+                    "frame,x,y (frame: the dataset's frame id, else the image's index; x, y in metres). "
+                    "Images are converted as the model was trained: panoramas of another size are resized, "
+                    "omnidirectional (mirror) images unwarped with --mirror or an estimated mirror, and "
+                    "a message says which."),
+        epilog="example:\n  sfanav localize garden.sfa garden --run test --out test.csv",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument("model", metavar="MODEL", help="model file from sfanav train")
+    p.add_argument("input", metavar="INPUT", help="dataset directory, image folder or video file")
+    p.add_argument("--out", required=True, metavar="CSV", help="CSV file to write (frame,x,y)")
+    p.add_argument("--run", dest="run_name", default=None, metavar="RUN", help="only this run of a dataset (default: all images)")
+    p.add_argument("--camera", default=None, metavar="NAME", help="camera of a multi-camera dataset")
+    p.add_argument("--mirror", default=None, metavar="CX,CY,INNER,OUTER",
+                   help="mirror center and radii of omnidirectional images, pixels (default: estimated)")
+    p.add_argument("--rotations", action="store_true",
+                   help="average the estimates over all simulated rotations of each image (slower, smoother)")
+    p.add_argument("--odometry", action="store_true",
+                   help="fuse the estimates with the run's odometry (EKF, CTRV; a dataset with odom_x, odom_y, "
+                        "odom_heading): adds columns fused_x, fused_y, fused_heading; the noise comes from the "
+                        "model's training run, the start pose from the first estimates")
+    p.add_argument("--batch-size", type=arg.pos_int, default=64, metavar="N", help="images per batch (default 64)")
+    p.add_argument("--overwrite", action="store_true", help="replace an existing CSV")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.set_defaults(run=_run_localize)
+    return p
+
+
+def _run_localize(args: argparse.Namespace) -> int:
+    import csv
+
+    import numpy as np
+
+    from ..._progress import progress_bar
+    from ...data.preprocessing import Preprocessing, Preprocessor
+    from ...data.sources import open_images
+    from ...localization.error_metrics import med
+    from ...odometry.fusion import fuse
+
+    loc = load_localizer(args.model)
+    if args.rotations and loc.rotation_pooling_ > 1:
+        raise UsageError(f"{args.model} averages its features over {loc.rotation_pooling_} rotations already "
+                          "(rotation pooling): --rotations applies to models without it")
+    out = new_file(args.out, args.overwrite, "CSV")
+    src = open_images(args.input, run=args.run_name, camera=args.camera)
+    if args.odometry:
+        if src.odometry is None or not np.isfinite(src.odometry).all():
+            raise UsageError(f"--odometry needs a dataset with odometry (odom_x, odom_y, odom_heading) for every "
+                              f"frame; {args.input} has none" + (" for some frames" if src.odometry is not None else ""))
+        if "ekf_noise" not in loc.info:
+            raise UsageError(f"{args.model} holds no EKF noise (its training run had no odometry): retrain it on a "
+                              "run with odometry to use --odometry")
+    prep = Preprocessing.of_model(loc)
+    conform = Preprocessor(prep, mirror=mirror_of(args, loc), log=log)
+    log(f"localizing {src.description} with {args.model} ({prep.describe()} panoramas)")
+    bar = progress_bar(not args.no_progress, src.n, "localize")
+    preds = []
+    for batch in src.batches(args.batch_size):
+        preds.append(loc.predict(conform(batch), rotations=args.rotations))
+        if bar is not None:
+            bar.update(len(batch))
+    if bar is not None:
+        bar.close()
+    if not preds:
+        raise UsageError(f"{args.input} has no images (an empty or unreadable video?)")
+    xy = np.concatenate(preds)
+    frames = src.frames if src.frames is not None else np.arange(len(xy))
+    fused = None
+    if args.odometry:
+        fused = fuse(src.odometry, xy, loc.info["ekf_noise"])
+    tmp = out.with_name(out.name + ".part")
+    with open(tmp, "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(["frame", "x", "y"] + (["fused_x", "fused_y", "fused_heading"] if fused is not None else []))
+        for i, (fr, (x, y)) in enumerate(zip(frames, xy)):
+            extra = [f"{v:.4f}" for v in fused[i]] if fused is not None else []
+            w.writerow([int(fr), f"{x:.4f}", f"{y:.4f}"] + extra)
+    tmp.replace(out)
+    msg = f"wrote {len(xy)} positions" + (" and the fused track" if fused is not None else "") + f" to {out}"
+    if loc.info.get("supervision") == "odometry":
+        msg += " (metres in the training run's odometry frame)"
+    elif src.xy is not None and np.isfinite(src.xy).all():
+        msg += f" (MED from the dataset's ground truth: {med(xy, src.xy):.3f} m"
+        msg += f", fused {med(fused[:, :2], src.xy):.3f} m)" if fused is not None else ")"
+    print(msg)
+    return 0
+
+
+@command("evaluate")
+def _add_evaluate(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    p = sub.add_parser(
+        "evaluate",
+        help="metrics, baselines, plots and a report of a model on a dataset with ground truth",
+        description=wrap("Evaluate a trained model on a run of a dataset with ground truth: MAE per axis (m and % "
+                    "of the coordinate range), MED, percentiles (regression fitted on the training run: the "
+                    "honest protocol) and the thesis 5.1.1 protocol (random 50/50 splits of the evaluated "
+                    "run, 100 repeats; optimistic on a continuous walk); eta_p / eta_phi of the outputs; "
+                    "error vs number of outputs; the baselines perfect memory (RIDF) and Fourier signature "
+                    "fitted on the training run (error, bytes per place, query time). Writes report.md, "
+                    "metrics.json and PNG plots (firing maps, trajectory, error vs n, eta) under --out."),
+        epilog="example:\n  sfanav evaluate garden.sfa garden --out garden-report",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument("model", metavar="MODEL", help="model file from sfanav train")
+    p.add_argument("dataset", metavar="DATASET", help="dataset directory with ground-truth positions")
+    p.add_argument("--out", required=True, metavar="DIR", help="directory for report.md, metrics.json and plots")
+    p.add_argument("--run", dest="run_name", default=None, metavar="RUN",
+                   help="run to evaluate (default: 'test' if the dataset has one, else all images)")
+    p.add_argument("--train-run", default=None, metavar="RUN",
+                   help="training run for eta, the error curve and the baselines (default: 'train' if present)")
+    p.add_argument("--camera", default=None, metavar="NAME", help="camera of a multi-camera dataset")
+    p.add_argument("--mirror", default=None, metavar="CX,CY,INNER,OUTER",
+                   help="mirror of omnidirectional images, pixels (default: estimated)")
+    p.add_argument("--no-baselines", action="store_true", help="skip perfect memory and the Fourier signature")
+    p.add_argument("--no-progress", action="store_true", help="no progress bars")
+    p.set_defaults(run=_run_evaluate)
+    return p
+
+
+def _run_evaluate(args: argparse.Namespace) -> int:
+    import json
+    from pathlib import Path
+
+    import numpy as np
+
+    from ...data.dataset import Dataset
+    from ...data.preprocessing import Preprocessing
+    from ...data.sources import load_run, select_run
+    from ...localization.evaluation import evaluate, evaluation_rows, metrics_json
+
+    loc = load_localizer(args.model)
+    ds = Dataset(existing_path(args.dataset, "dataset"))
+    runs = set(ds.runs.tolist())
+    run = args.run_name if args.run_name is not None else ("test" if "test" in runs else None)
+    train_run = args.train_run if args.train_run is not None else ("train" if "train" in runs and run != "train" else None)
+    if loc.info.get("supervision") == "odometry" and train_run is None:
+        raise UsageError(f"{args.model} was trained without ground truth (it reports in its training run's odometry "
+                          "frame): evaluate needs a training run with ground truth (--train-run) to align the frames")
+    prep = Preprocessing.of_model(loc)
+    test = select_run(ds, run, args.camera)
+    mirror = mirror_of(args, loc)
+    images, xy = load_run(test, prep, mirror=mirror, log=log, progress=not args.no_progress)
+    if not np.isfinite(xy).all():
+        raise UsageError(f"{args.dataset} lacks ground-truth x, y: evaluation needs them")
+    tr_images = tr_xy = None
+    if train_run is not None:
+        tr = select_run(ds, train_run, args.camera)
+        tr_images, tr_xy = load_run(tr, prep, mirror=mirror, log=log, progress=not args.no_progress)
+    out = Path(args.out)
+    log(f"evaluating {args.model} on {len(images)} images" + (f" (run {run})" if run else "")
+         + (f", training run {train_run}" if train_run else ""))
+    ev = evaluate(loc, images, xy, train_images=tr_images, train_xy=tr_xy, out=out,
+                  title=f"sfanav evaluation: {Path(args.model).name} on {args.dataset}",
+                  run_baselines=not args.no_baselines, log=log,
+                  text=[f"Model `{args.model}`, dataset `{args.dataset}`, evaluated run: {run or 'all images'}, "
+                        f"training run: {train_run or 'none'}."])
+    (out / "metrics.json").write_text(json.dumps(metrics_json(ev), indent=2) + "\n")
+    rows = evaluation_rows(ev)
+    print(table([("metric", "sfanav")] + [(r["metric"], fmt(r["sfanav"])) for r in rows]))
+    print(f"wrote {ev.report}, {out / 'metrics.json'} and {len(ev.plots)} plots")
+    return 0

@@ -1,0 +1,221 @@
+"""``sfanav train``: a localizer (network, readout, preprocessing) from one run of a dataset."""
+
+from __future__ import annotations
+
+import argparse
+from typing import Any
+
+from .. import arguments as arg
+from ..common import existing_path, log, new_file, wrap
+from ..failures import UsageError
+from ..registry import command
+
+
+@command("train")
+def _add_train(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    p = sub.add_parser(
+        "train",
+        help="train a localizer (network + regression to metres) on a dataset",
+        description=wrap("Train an SFA network under simulated rotation on one run of a dataset (images in temporal "
+                    "order), then the readout from its slowest outputs to the ground-truth x, y (metres). "
+                    "Without --preset or --config: the sfanav default (network sfanav-default: Table 5.1 with "
+                    "wider layers and 12 outputs, 350x40 RGB; image rows of elevation -10..+20 deg; readout "
+                    "a Gaussian process with learned relevance per output, or kernel ridge / kNN if clearly better "
+                    "by blocked cross-validation on the training run). With a thesis "
+                    "preset: the thesis's configuration (all rows, quadratic regression of 8 outputs). Writes "
+                    "one model file (network, readout and the image preprocessing) for sfanav localize / "
+                    "evaluate. Images of another size are resized, omnidirectional images unwarped (with "
+                    "--mirror or an estimated mirror)."),
+        epilog="network presets: thesis-5.1 (350x40 RGB), thesis-5.2 (600x60 RGB), thesis-5.3 (409x40 gray) "
+               "(thesis tables), sfanav-default (350x40 RGB). A config file is TOML or JSON in the presets' "
+               "format (sfanav.Network.preset_path('thesis-5.1') shows one).\n\n"
+               "example:\n  sfanav simulate --preset demo --out garden\n"
+               "  sfanav train --dataset garden --out garden.sfa                       # the sfanav default\n"
+               "  sfanav train --dataset garden --preset thesis-5.2 --precision mixed --out thesis.sfa",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    net = p.add_mutually_exclusive_group(required=False)
+    net.add_argument("--preset", metavar="NAME",
+                     help="network preset: thesis-5.1, thesis-5.2 or thesis-5.3 (the thesis's configuration: all "
+                          "rows, quadratic regression of 8 outputs), or sfanav-default (the default)")
+    net.add_argument("--config", metavar="FILE", help="network config file (TOML or JSON)")
+    p.add_argument("--dataset", required=True, metavar="DIR", help="dataset directory (sfanav format)")
+    p.add_argument("--out", required=True, metavar="MODEL", help="model file to write (e.g. garden.sfa)")
+    p.add_argument("--run", dest="run_name", default=None, metavar="RUN",
+                   help="run to train on (default: 'train' if the dataset has one, else all images)")
+    p.add_argument("--camera", default=None, metavar="NAME", help="camera to use if the dataset has several")
+    p.add_argument("--step", type=arg.pos_int, default=5, metavar="PX",
+                   help="simulated rotation step in pixels (default 5, the thesis's)")
+    p.add_argument("--window", type=arg.fraction, default=1.0, metavar="FRACTION",
+                   help="window of the simulated rotation: a fraction of the panorama (0.6) or a percentage (60%%; default 1.0); "
+                        "the network's input width must equal window x panorama width")
+    p.add_argument("--precision", choices=("double", "mixed"), default=None,
+                   help="statistics precision (default: the config's; mixed is faster, docs/benchmarks.md)")
+    p.add_argument("--n-outputs", type=arg.pos_int, default=None, metavar="N",
+                   help="slowest outputs read out (default: 8 with the quadratic readout, the thesis's; "
+                        "8 or 12 by cross-validation with auto)")
+    p.add_argument("--readout", choices=("auto", "quadratic"), default=None,
+                   help="auto: a Gaussian process (ARD, marginal likelihood) on the slow features with the panorama's "
+                        "Fourier signature (the sfanav default; see --signature), or without a signature a GP, kernel "
+                        "ridge or kNN by blocked cross-validation on the training run; quadratic: the thesis's "
+                        "regression (default with thesis presets)")
+    p.add_argument("--signature", choices=("fourier", "none"), default=None,
+                   help="appearance signature read beside the slow features by the auto readout: fourier = the "
+                        "rotation-invariant Fourier signature of each panorama (default for the sfanav default; "
+                        "stores it for every training place, 7 KB for 350x40 RGB), none = the slow features alone")
+    p.add_argument("--rows", choices=("all", "band"), default=None,
+                   help="image rows: band = elevation -10..+20 deg only (default for the sfanav default "
+                        "network), all = every row (default with --preset thesis-* or --config)")
+    p.add_argument("--rotation-pooling", type=arg.pos_int, default=None, metavar="K",
+                   help="average the network's outputs over K evenly spaced rotations of each panorama before "
+                        "the readout (default: 8 with the auto readout, none with quadratic; 1 = none)")
+    p.add_argument("--supervision", choices=("auto", "ground-truth", "odometry"), default="auto",
+                   help="what the readout is fitted to: ground-truth x, y, or positions learned from the run's "
+                        "images and odometry (no ground truth: estimates in the odometry's frame); "
+                        "auto (default): ground truth if the run has it, else odometry")
+    p.add_argument("--metric-map", choices=("pose-graph", "metric-learning"), default="pose-graph",
+                   help="with odometry supervision, how positions are learned: pose-graph (default; the odometry's "
+                        "heading drift corrected by loop closures found by the slow features and the panoramas) "
+                        "or metric-learning (thesis 5.3.1: a map of the slow features fitted along the "
+                        "odometry's straight lines)")
+    p.add_argument("--loop-closures", choices=("gt", "bow", "fourier"), default=None,
+                   help="loop-closure feedback (thesis 6.2.1): places the run visits again, found from ground truth "
+                        "(gt), a bag of visual words (bow; robust to light) or the Fourier signature (fourier; fast, "
+                        "but not robust to light), are trained with the earlier image interleaved "
+                        "in the current one's simulated rotation, so the network learns to ignore what changed "
+                        "between the visits (light, weather). Default: none")
+    p.add_argument("--closure-weights", choices=("uniform", "score"), default="uniform",
+                   help="with --loop-closures: weight every closure 1 (uniform, the thesis) or by the detector's "
+                        "match confidence (score)")
+    p.add_argument("--normalize", action="store_true",
+                   help="normalize every image to zero mean and unit variance (thesis 5.2)")
+    p.add_argument("--mirror", default=None, metavar="CX,CY,INNER,OUTER",
+                   help="mirror of omnidirectional images, pixels (default: estimated)")
+    p.add_argument("--overwrite", action="store_true", help="replace an existing model file")
+    p.add_argument("--no-progress", action="store_true", help="no progress bars")
+    p.set_defaults(run=_run_train)
+    return p
+
+
+def _network_from_args(args: argparse.Namespace) -> "Any":
+    from ...sfa.network import Network, read_config_file
+
+    if args.preset is not None or args.config is None:
+        over = {"precision": args.precision} if args.precision else {}
+        return Network.from_preset(args.preset or "sfanav-default", **over)
+    config = read_config_file(existing_path(args.config, "network config"))
+    if args.precision:
+        if not isinstance(config, dict):
+            raise UsageError(f"{args.config}: not a network config")
+        config.setdefault("network", {})["precision"] = args.precision
+    return Network(config)
+
+
+def _run_train(args: argparse.Namespace) -> int:
+    import time
+
+    import numpy as np
+
+    from ..._checks import check_n_outputs
+    from ...data.dataset import Dataset
+    from ...data.preprocessing import Preprocessing, Preprocessor
+    from ...data.sources import load_run, select_run
+    from ...localization.recipe import CAMERA_ELEVATION, recipe_for, supervision_for
+    from ...localization.training import fit_localizer
+    from ...odometry.fusion import noise_for_localizer
+    from ...odometry.self_supervision import fit_localizer_from_odometry
+    from ...sfa.network import Rotation
+
+    t0 = time.perf_counter()
+    out = new_file(args.out, args.overwrite, "model file")
+    ds = Dataset(existing_path(args.dataset, "dataset"))
+    run = args.run_name
+    if run is None and "train" in set(ds.runs.tolist()):
+        run = "train"
+    train = select_run(ds, run, args.camera)
+    net = _network_from_args(args)
+    check_n_outputs(args.n_outputs, net.n_outputs_, name="--n-outputs")
+    if args.signature == "fourier" and args.readout == "quadratic":
+        raise UsageError("--signature fourier needs the auto readout; the quadratic readout reads slow features only")
+    recipe = recipe_for(args.preset, config=args.config is not None, readout=args.readout, rows=args.rows,
+                        n_outputs=args.n_outputs, rotation_pooling=args.rotation_pooling,
+                        signature={None: "auto", "none": None}.get(args.signature, args.signature))
+    rows = None
+    if recipe.rows == "band":
+        elev = (ds.metadata.get("camera") or {}).get("elevation_deg") if isinstance(ds.metadata, dict) else None
+        if elev is None:
+            elev = CAMERA_ELEVATION
+            log(f"the dataset does not say its rows' elevations: assuming {elev[0]:g}..{elev[1]:g} deg "
+                 "(the simulator's) for the horizon band; --rows all uses every row")
+        try:
+            rows = recipe.image_rows(elev)
+        except ValueError as exc:
+            raise UsageError(f"horizon band: {exc}") from None
+    prep = Preprocessing.for_network(net, window=args.window, normalize=args.normalize)
+    odometry = train.odometry
+    supervision = supervision_for(args.supervision, has_ground_truth=bool(np.isfinite(train.poses[:, :2]).all()),
+                                  has_odometry=bool(np.isfinite(odometry).all()))
+    if args.loop_closures is None and args.closure_weights != "uniform":
+        raise UsageError("--closure-weights needs --loop-closures")
+    if args.loop_closures == "gt" and supervision != "ground-truth":
+        raise UsageError("--loop-closures gt needs ground-truth positions, and this run is trained without them; "
+                         "use bow or fourier")
+    log(f"training on {len(train)} images of {args.dataset}" + (f" (run {run})" if run else "")
+         + f" as {prep.describe()} panoramas; network: {net!r}; rows: {rows.describe() if rows else 'all'}; "
+         + f"readout: {recipe.readout}" + (f" with the {recipe.signature} signature" if recipe.signature else "")
+         + (" (the sfanav default)" if recipe.name == "sfanav default" else ""))
+    preprocessor = Preprocessor(prep, mirror=args.mirror, log=log)
+    images, xy = load_run(train, prep, preprocessor=preprocessor, progress=not args.no_progress)
+    closures = None
+    if args.loop_closures is not None:  # image detectors without an odometry gate: dead reckoning drifts
+        from ...loopclosure import make_detector
+
+        gt = xy if args.loop_closures == "gt" else None
+        closures = make_detector(args.loop_closures).detect(images, positions=gt)
+        log(f"loop closures ({args.loop_closures}): {len(closures)} images trained with their earlier visit "
+             "interleaved" + (", weighted by match confidence" if args.closure_weights == "score" else ""))
+    weights = "score" if closures is not None and args.closure_weights == "score" else None
+    fit_kw = dict(loop_closures=closures, closure_weights=weights, rotation=Rotation(step=args.step, window=args.window),
+                  n_outputs=recipe.n_outputs,
+                  readout=recipe.readout, rows=rows, prep=prep, progress=not args.no_progress,
+                  rotation_pooling=recipe.rotation_pooling, signature=recipe.signature,
+                  info={"dataset": str(args.dataset), "run": run,
+                        "network": args.preset or (str(args.config) if args.config else "sfanav-default"),
+                        **recipe.info()})
+    if supervision == "odometry":
+        log("fitting the readout to positions learned from the run's odometry (no ground truth); estimates are "
+             "metres in the odometry's frame")
+        stamps = train.timestamps
+        loc = fit_localizer_from_odometry(net, images, odometry, method=args.metric_map,
+                                          timestamps=stamps if np.isfinite(stamps).all() else None, **fit_kw)
+        if args.metric_map == "pose-graph":
+            log(f"pose graph: {loc.info['loop closures kept']} of {loc.info['loop closures']} loop closures kept, "
+                 f"odometry heading drift {loc.info['odometry heading drift (deg per m)']:.3f} deg/m corrected")
+        else:
+            log(f"metric map from {loc.info['lines']} straight lines ({loc.info['points on lines']} frames), "
+                 f"rms to the odometry on the first {loc.info['rms to odometry on the first line (m)']:.3f} m")
+    else:
+        loc = fit_localizer(net, images, xy, **fit_kw)
+        loc.info["supervision"] = "ground-truth"
+    if preprocessor.mirror_used is not None:
+        loc.info["mirror"] = list(preprocessor.mirror_used)  # localize and evaluate reuse it
+    if np.isfinite(odometry).all():
+        try:
+            feats = loc.readout_features(loc.features(images),
+                                         loc.signatures(images) if loc.n_signature_ else None)
+            loc.info["ekf_noise"] = noise_for_localizer(loc, feats, loc.training_positions_, odometry)
+            log("EKF noise for localize --odometry, from the training run's held-out estimates and odometry "
+                 "(the fused track nearest the positions the readout was fitted to"
+                 + (", learned without ground truth" if supervision == "odometry" else "") + "): "
+                 + ", ".join(f"{k} {v:g}" for k, v in loc.info["ekf_noise"].items()))
+        except ValueError as exc:
+            log(f"no EKF noise stored (localize --odometry will not be available): {exc}")
+    loc.save(out)
+    m = loc.train_metrics_
+    pool = f" on features pooled over {loc.rotation_pooling_} rotations" if loc.rotation_pooling_ > 1 else ""
+    print(f"trained on {len(images)} images in {loc.info['fit_seconds']:.1f} s, readout {loc.describe_readout()}{pool} "
+          f"in {loc.info['readout_seconds']:.1f} s (total {time.perf_counter() - t0:.1f} s); "
+          f"training-run fit" + (" to the learned positions" if supervision == "odometry" else "")
+          + f": MED {m['med']:.3f} m, MAE x {m['mae_x_pct']:.2f} %, y {m['mae_y_pct']:.2f} %")
+    print(f"wrote {out}")
+    return 0
