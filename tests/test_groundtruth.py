@@ -261,6 +261,34 @@ def test_poses_from_a_given_camera_pose_are_accurate_and_gaps_are_nan(scene):
     assert np.nanmax(np.abs(track.z)) < 0.02 and np.nanmax(track.tilt) < np.radians(1)
 
 
+def test_edge_refined_corners_beat_opencv_subpix(scene):
+    truth, frames = scene
+    from markerscene import robot_to_ground
+
+    from sfanav.groundtruth import MarkerDetector
+
+    errors = {}
+    for refinement in ("edges", "subpix"):
+        det, errs = MarkerDetector(refinement=refinement), []
+        for k in range(8):
+            if k in HIDDEN:
+                continue
+            found = det.detect(frames[k][1], CAM)
+            R, t = robot_to_ground(*truth[k])
+            for mid, corners in zip(found.ids, found.corners):
+                X = BOARD.marker_corners(mid) @ R.T + t
+                uv = cv2.projectPoints(X, CAMERA.rvec, CAMERA.tvec, CAM.K, CAM.dist)[0].reshape(-1, 2)
+                errs.extend(np.linalg.norm(corners - uv, axis=1))
+        errors[refinement] = float(np.median(errs))
+        track = estimate_poses(frames, CAM, BOARD, camera_pose=CAMERA, planar=False, detector=det)
+        errors[refinement + " 6-DoF"] = float(np.median(_errors(track, truth)[0]))
+    print(f"\nmedian corner error: edges {errors['edges']:.3f} px, OpenCV subpix {errors['subpix']:.3f} px; "
+          f"median 6-DoF position error: edges {errors['edges 6-DoF'] * 1000:.2f} mm, "
+          f"OpenCV subpix {errors['subpix 6-DoF'] * 1000:.2f} mm")
+    assert errors["edges"] < 0.1 and errors["edges"] < errors["subpix"] / 3
+    assert errors["edges 6-DoF"] < errors["subpix 6-DoF"]
+
+
 def test_free_6dof_poses(scene):
     truth, frames = scene
     track = estimate_poses(frames, CAM, BOARD, camera_pose=CAMERA, planar=False)
