@@ -10,6 +10,7 @@ The package follows the pipeline, one subpackage per stage::
     odometry      metric learning from odometry, EKF fusion, loop closures
     navigation    cost, gradient and descents along slow features
     sim           the built-in simulated garden
+    groundtruth   ground truth for real recordings: markers filmed by a calibrated camera
 
 with the ``sfanav`` command line and the demo on top (``sfanav.app``) and the
 thesis's experiments beside them (``sfanav.experiments``); neither is
@@ -21,7 +22,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from . import _compat, data, localization, loopclosure, navigation, odometry, sfa, sim
+from . import _compat, data, groundtruth, localization, loopclosure, navigation, odometry, sfa, sim
 from ._core import __version__
 from ._resources import get_memory_limit, get_num_threads, set_memory_limit, set_num_threads
 from .data import Dataset, DatasetWriter, Unwarper, estimate_mirror, write_dataset
@@ -78,6 +79,7 @@ __all__ = [
     "expanded_dim",
     "get_memory_limit",
     "get_num_threads",
+    "groundtruth",
     "load",
     "make_detector",
     "localization",
