@@ -79,7 +79,7 @@ def main() -> None:
         if here is None:
             continue
         if path.name != "__init__.py" and here in modules:
-            modules[here].append(path.stem)
+            modules[here].append("/".join(mod.split(".")[2:]) or path.stem)  # a subfolder's modules as folder/module
         for target in imports(path):
             there = stage(target)
             if there in STAGES and there != here:
@@ -87,7 +87,7 @@ def main() -> None:
     print("```mermaid")
     print("flowchart LR")
     for s in STAGES:
-        mods = ", ".join(modules[s]) if s not in ("experiments", "app") else ", ".join(modules[s])
+        mods = ", ".join(sorted(modules[s]))
         print(f'  {s}["{LABEL[s]}<br/><small>{mods}</small>"]')
     for (a, b), n in sorted(edges.items(), key=lambda e: (STAGES.index(e[0][0]), STAGES.index(e[0][1]))):
         print(f"  {a} -->{'|' + str(n) + '|' if args.counts else ''} {b}")

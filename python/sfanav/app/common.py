@@ -84,3 +84,7 @@ def table(rows: "list[tuple[str, str]]") -> str:
 def fmt(v: "Any") -> str:
     """A table cell: "-" for None, four significant digits for a float."""
     if v is None:
+        return "-"
+    if isinstance(v, float):
+        return f"{v:.4g}"
+    return str(v)

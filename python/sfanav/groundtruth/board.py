@@ -31,7 +31,7 @@ from typing import Any
 import numpy as np
 
 from .._checks import check_positive_float
-from .files import write_text_atomic
+from .._files import write_text_atomic
 
 FORMAT = "sfanav-marker-board"
 VERSION = 1

@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 
 from .board import MarkerBoard
-from .files import write_text_atomic
+from .._files import write_text_atomic
 from .intrinsics import CameraIntrinsics
 from .markers import MarkerDetector, solve_board_pose
 

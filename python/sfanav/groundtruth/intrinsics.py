@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from .files import write_text_atomic
+from .._files import write_text_atomic
 
 DISTORTION_LENGTHS = (0, 4, 5, 8, 12, 14)
 FORMAT = "sfanav-camera-intrinsics"

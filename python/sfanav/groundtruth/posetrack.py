@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from .files import write_text_atomic
+from .._files import write_text_atomic
 
 COLUMNS = ("timestamp", "x", "y", "heading")
 DIAGNOSTICS = ("z", "tilt", "n_markers", "reprojection_error")

@@ -1,6 +1,6 @@
-"""Atomic file writes for the ground-truth outputs: a temporary file in the
-same directory, then :func:`os.replace`, so an interrupted run never leaves a
-file that looks complete."""
+"""Atomic file writes: a temporary file in the same directory, then
+:func:`os.replace`, so an interrupted run never leaves a file that looks
+complete."""
 
 from __future__ import annotations
 
