@@ -147,10 +147,10 @@ def test_board_file_errors(tmp_path):
 # ---------------------------------------------------------------- intrinsics
 
 
+@pytest.mark.parametrize("dist", [[0.1, -0.2, 0.001, 0.002, 0.05], []])
 @pytest.mark.parametrize("name", ["cam.yaml", "cam.xml", "cam.json"])
-def test_intrinsics_round_trip(tmp_path, name):
-    cam = CameraIntrinsics(np.array([[1402.5, 0, 955.2], [0, 1399.0, 540.7], [0, 0, 1]]),
-                           [0.1, -0.2, 0.001, 0.002, 0.05], (1920, 1080))
+def test_intrinsics_round_trip(tmp_path, name, dist):
+    cam = CameraIntrinsics(np.array([[1402.5, 0, 955.2], [0, 1399.0, 540.7], [0, 0, 1]]), dist, (1920, 1080))
     cam.to_file(tmp_path / name)
     assert CameraIntrinsics.from_file(tmp_path / name) == cam
 

@@ -192,7 +192,8 @@ class CameraIntrinsics:
             fs.write("image_width", self.image_size[0])
             fs.write("image_height", self.image_size[1])
             fs.write("camera_matrix", self.K)
-            fs.write("distortion_coefficients", self.dist.reshape(1, -1) if len(self.dist) else np.zeros((1, 0)))
+            if len(self.dist):  # no distortion: no field (OpenCV cannot store an empty matrix)
+                fs.write("distortion_coefficients", self.dist.reshape(1, -1))
             text = fs.releaseAndGetString()
         else:
             raise ValueError(f"intrinsics file {p} must end in .yaml, .yml, .xml or .json")

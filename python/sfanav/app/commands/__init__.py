@@ -8,4 +8,5 @@ from . import simulate  # noqa: F401
 from . import train  # noqa: F401
 from . import localize  # noqa: F401
 from . import navigate  # noqa: F401
+from . import groundtruth  # noqa: F401
 from . import experiment  # noqa: F401
