@@ -1,20 +1,43 @@
 #!/usr/bin/env bash
-# The whole test suite: installs sfanav (and the test extras) from this
-# checkout, then runs the Rust core's tests, the Python tests and a bounded
-# fuzzing run of the model loader and the config parser.
+# The whole test suite: builds sfanav's wheel from this checkout and installs
+# it with the test extras, then runs the Rust core's tests, the Python tests,
+# the wheel in a fresh virtual environment without a Rust toolchain, and a
+# bounded fuzzing run of the model loader and the config parser.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 export PATH="$HOME/.cargo/bin:$PATH"
 PY="${PYTHON:-python3}"
+WORK="$(mktemp -d)"
+trap 'rm -rf "$WORK"' EXIT
 
-echo "== installing sfanav with test extras (builds the Rust extension)"
-"$PY" -m pip install --quiet --disable-pip-version-check ".[test]"
+echo "== building the wheel and the sdist (scripts/build_wheel.sh)"
+./scripts/build_wheel.sh "$WORK/dist"
+WHEEL="$(ls "$WORK"/dist/sfanav-*-abi3-*x86_64*.whl)"
+
+echo "== installing the wheel with test extras"
+"$PY" -m pip install --quiet --disable-pip-version-check "${WHEEL}[test]"
+"$PY" -m pip install --quiet --disable-pip-version-check --force-reinstall --no-deps "$WHEEL"
 
 echo "== cargo test (sfa-core)"
 cargo test --quiet
 
 echo "== pytest"
 (cd tests && "$PY" -m pytest -q -p no:cacheprovider)
+
+echo "== the wheel in a fresh venv, no Rust toolchain on PATH: sfanav demo --quick"
+"$PY" -m venv "$WORK/venv"
+(
+    export PATH="$WORK/venv/bin:/usr/local/bin:/usr/bin:/bin"
+    unset PYTHONPATH
+    if command -v cargo >/dev/null || command -v rustc >/dev/null; then
+        echo "a Rust toolchain is on PATH; the no-Rust install check would prove nothing" >&2
+        exit 1
+    fi
+    "$WORK/venv/bin/python" -m pip install --quiet --disable-pip-version-check "$WHEEL"
+    cd "$WORK" && "$WORK/venv/bin/sfanav" demo --quick --no-progress --out "$WORK/demo" >/dev/null
+    test -s "$WORK/demo/demo.json"
+    echo "ok: $(basename "$WHEEL") ($(du -k "$WHEEL" | cut -f1) KB) installed and ran without Rust"
+)
 
 echo "== fuzz: model loader and network config parser (60 s each, tests/fuzz)"
 "$PY" tests/fuzz/run.py --seconds 60
