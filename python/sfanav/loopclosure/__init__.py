@@ -34,13 +34,13 @@ from .detectors import (
     LoopClosureDetector,
     find_loop_closures,
     fourier_signatures,
-    make_detector,
     suppress,
 )
 from .evaluation import ClosureQuality, closure_precision_recall
+from .factory import DETECTORS, make_detector
 from .plots import plot_closures, plot_precision_recall
 
-__all__ = ["BagOfWordsDetector", "ClosureQuality", "FourierDetector", "GroundTruthDetector", "LoopClosureDetector",
+__all__ = ["BagOfWordsDetector", "ClosureQuality", "DETECTORS", "FourierDetector", "GroundTruthDetector", "LoopClosureDetector",
            "LoopClosures", "align", "arc_fraction", "closure_precision_recall", "correspondences",
            "find_loop_closures", "fourier_signatures", "interleave", "make_detector", "panorama_rows", "place_major_order", "plot_closures",
            "plot_precision_recall", "suppress"]

@@ -12,7 +12,9 @@ one per stretch of ``suppress`` frames), both returning
 * :class:`FourierDetector`: the rotation-invariant Fourier signature of
   each panorama, nearest earlier one by L1 distance, accepted when it is at
   most as far as the frame's own temporal neighbours;
-* :class:`~sfanav.loopclosure.bow.BagOfWordsDetector`: visual words.
+* :class:`~sfanav.loopclosure.bow.BagOfWordsDetector`: visual words
+  (its own module; :func:`~sfanav.loopclosure.factory.make_detector` names
+  all three).
 
 Image-based detectors take an optional odometry gate (earlier frames within
 ``max_odometry_distance`` metres by dead reckoning).
@@ -221,15 +223,3 @@ def find_loop_closures(images: Any, odometry: Any = None, *, min_gap: int = 40, 
     ``odometry`` (N, 2) metres when given."""
     return FourierDetector(min_gap=min_gap, max_odometry_distance=max_odometry_distance, accept=accept,
                            neighbor_lag=neighbor_lag, n_coefficients=n_coefficients).detect(images, odometry=odometry)
-
-
-def make_detector(kind: str, **params: Any) -> LoopClosureDetector:
-    """The detector named ``kind``: ``"gt"`` (:class:`GroundTruthDetector`),
-    ``"bow"`` (:class:`~sfanav.loopclosure.bow.BagOfWordsDetector`) or
-    ``"fourier"`` (:class:`FourierDetector`), with ``params``."""
-    from .bow import BagOfWordsDetector
-
-    kinds = {"gt": GroundTruthDetector, "bow": BagOfWordsDetector, "fourier": FourierDetector}
-    if kind not in kinds:
-        raise ValueError(f"unknown loop-closure detector {kind!r}; choose one of {sorted(kinds)}")
-    return kinds[kind](**params)
