@@ -91,18 +91,24 @@ def _canonical(obj: Any) -> bytes:
     return json.dumps(obj, sort_keys=True, separators=(",", ":"), allow_nan=False).encode()
 
 
-def save_model(path: str | os.PathLike, kind: str, state: dict[str, Any], *, version: int = 1) -> Path:
-    """Writes ``state`` (a tree of dicts, lists, scalars and arrays) as a
-    model file of ``kind``. The write is atomic (temporary file + rename).
-    ``version``: the format version the state needs (1 unless it uses
-    something older readers cannot rebuild; at most :data:`VERSION`)."""
+def dumps(kind: str, state: dict[str, Any], *, version: int = 1) -> bytes:
+    """``state`` (a tree of dicts, lists, scalars and arrays) as the bytes
+    of a model file of ``kind``: what :func:`save_model` writes and
+    :func:`loads` reads (and what ``to_bytes`` of the models returns, for
+    shipping them between processes without pickle).
+
+    Raises
+    ------
+    ValueError
+        For a ``version`` outside 1 .. :data:`VERSION` or an array with NaN
+        or infinity.
+    TypeError
+        For an array of another dtype than bool, integer or float.
+    """
     if not 1 <= int(version) <= VERSION:
         raise ValueError(f"version must be 1 .. {VERSION}, got {version}")
     from .._core import __version__
 
-    path = Path(path)
-    if path.is_dir():
-        raise IsADirectoryError(f"{path} is a directory, not a model file path")
     arrays: dict[str, np.ndarray] = {}
     tree = _split(state, arrays, "")
     blobs: dict[str, bytes] = {}
@@ -131,13 +137,29 @@ def save_model(path: str | os.PathLike, kind: str, state: dict[str, Any], *, ver
         "arrays": meta,
     }
     manifest["digest"] = hashlib.sha256(_canonical(manifest)).hexdigest()
+    out = io.BytesIO()
+    with zipfile.ZipFile(out, "w", zipfile.ZIP_STORED) as zf:
+        zf.writestr("manifest.json", json.dumps(manifest, indent=1, sort_keys=True))
+        for name, blob in blobs.items():
+            zf.writestr(f"arrays/{name}.npy", blob)
+    return out.getvalue()
+
+
+def save_model(path: str | os.PathLike, kind: str, state: dict[str, Any], *, version: int = 1) -> Path:
+    """Writes ``state`` (a tree of dicts, lists, scalars and arrays) as a
+    model file of ``kind`` (:func:`dumps`). The write is atomic (temporary
+    file + rename). ``version``: the format version the state needs (1
+    unless it uses something older readers cannot rebuild; at most
+    :data:`VERSION`)."""
+    path = Path(path)
+    if path.is_dir():
+        raise IsADirectoryError(f"{path} is a directory, not a model file path")
+    data = dumps(kind, state, version=version)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=".sfanav-", dir=path.parent)
     try:
-        with os.fdopen(fd, "wb") as fh, zipfile.ZipFile(fh, "w", zipfile.ZIP_STORED) as zf:
-            zf.writestr("manifest.json", json.dumps(manifest, indent=1, sort_keys=True))
-            for name, blob in blobs.items():
-                zf.writestr(f"arrays/{name}.npy", blob)
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(data)
         os.replace(tmp, path)
     except BaseException:
         if os.path.exists(tmp):
@@ -211,10 +233,37 @@ def read_model(path: str | os.PathLike) -> tuple[str, dict[str, Any], dict[str, 
         raise FileNotFoundError(f"no model file at {path}")
     if path.is_dir():
         raise IsADirectoryError(f"{path} is a directory, not a model file")
-    bad = f"{path} is not a valid sfanav model file"
     try:
         size = path.stat().st_size
-        with zipfile.ZipFile(path, "r") as zf:
+    except OSError as exc:
+        raise ValueError(f"{path} is not a valid sfanav model file ({exc})") from None
+    return _read(path, size, str(path))
+
+
+def loads(data: bytes) -> tuple[str, dict[str, Any], dict[str, Any]]:
+    """Reads and verifies the bytes of a model file (:func:`dumps`), with the
+    same checks as :func:`read_model`; returns ``(kind, state, manifest)``.
+
+    Raises
+    ------
+    TypeError
+        If ``data`` is not bytes.
+    ValueError
+        If the bytes are not a valid, unaltered sfanav model of a supported
+        version.
+    """
+    if not isinstance(data, (bytes, bytearray, memoryview)):
+        raise TypeError(f"expected the bytes of an sfanav model, got {type(data).__name__}")
+    data = bytes(data)
+    return _read(io.BytesIO(data), len(data), "the bytes")
+
+
+def _read(source: Any, size: int, label: str) -> tuple[str, dict[str, Any], dict[str, Any]]:
+    """The checks and the reading of a model file or its bytes."""
+    path = label
+    bad = f"{label} {'are' if label == 'the bytes' else 'is'} not a valid sfanav model file"
+    try:
+        with zipfile.ZipFile(source, "r") as zf:
             _check_entries(zf, size, bad)
             try:
                 text = zf.read("manifest.json")
@@ -238,7 +287,7 @@ def read_model(path: str | os.PathLike) -> tuple[str, dict[str, Any], dict[str, 
                 raise ValueError(f"{bad}: format version {version} does not exist (versions start at 1)")
             if version > VERSION:
                 raise ValueError(
-                    f"{path} uses model format version {version}, but this sfanav reads "
+                    f"{path} {'use' if path == 'the bytes' else 'uses'} model format version {version}, but this sfanav reads "
                     f"versions up to {VERSION}: upgrade sfanav"
                 )
             digest = manifest.pop("digest", None)
@@ -285,3 +334,19 @@ def load(path: str | os.PathLike) -> Any:
             RuntimeError, MemoryError) as exc:
         msg = str(exc) if isinstance(exc, ValueError) else f"{type(exc).__name__}: {exc}"
         raise ValueError(f"{path} is not a valid sfanav {kind} model: {msg}") from None
+
+
+def state_from_bytes(data: bytes, kind: str) -> dict[str, Any]:
+    """The state in the bytes of a model of ``kind`` (:func:`loads`).
+
+    Raises
+    ------
+    TypeError
+        If ``data`` is not bytes.
+    ValueError
+        If the bytes are not a valid sfanav model, or hold another kind.
+    """
+    got, state, _ = loads(data)
+    if got != kind:
+        raise ValueError(f"the bytes hold a {got} model, not a {kind}")
+    return state

@@ -33,7 +33,7 @@ from .._checks import (
     is_single_image,
 )
 from .feedback import closure_partners
-from .modelfile import register_loader, save_model
+from .modelfile import dumps, register_loader, save_model, state_from_bytes
 from .pairs import check_pairs
 
 if sys.version_info >= (3, 11):
@@ -712,7 +712,33 @@ class Network:
     # ------------------------------------------------------------ persistence
     def save(self, path: str | os.PathLike, *, include_statistics: bool = False) -> None:
         """Saves the network (config and trained nodes; pickle-free)."""
-        state = {
+        save_model(path, "Network", self._state(include_statistics))
+
+    def to_bytes(self, *, include_statistics: bool = False) -> bytes:
+        """The network as the bytes of its model file (config, trained
+        nodes and, with ``include_statistics``, their training statistics;
+        checksummed, no pickle): for shipping it between processes.
+
+        Examples
+        --------
+        >>> net = Network.from_preset("thesis-5.1")
+        >>> Network.from_bytes(net.to_bytes()).input_shape
+        (40, 350, 3)
+        """
+        return dumps("Network", self._state(include_statistics))
+
+    @classmethod
+    def from_bytes(cls, data: bytes) -> "Network":
+        """A network from :meth:`to_bytes`. Raises ValueError for bytes that
+        are not an unaltered network, TypeError for another type."""
+        return cls.from_state(state_from_bytes(data, "Network"))
+
+    def __reduce__(self) -> tuple[Any, tuple[bytes]]:
+        # pickle (e.g. Dask shipping a fitted network to workers) goes through the checked bytes
+        return (Network.from_bytes, (self.to_bytes(include_statistics=True),))
+
+    def _state(self, include_statistics: bool) -> dict[str, Any]:
+        return {
             "config": self.config,
             "spec": _spec_to_json(self.config_),
             "trained": self._net.n_trained,
@@ -722,7 +748,6 @@ class Network:
             "input_scale": getattr(self, "input_scale_", None),
             "nodes": self._net.node_states(include_statistics),
         }
-        save_model(path, "Network", state)
 
     @classmethod
     def from_state(cls, state: dict[str, Any]) -> "Network":

@@ -20,7 +20,7 @@ import numpy as np
 
 from .. import _core
 from .._checks import NotFittedError, as_float_2d, check_positive_int
-from .modelfile import register_loader, save_model
+from .modelfile import dumps, register_loader, save_model, state_from_bytes
 
 
 def beta_values(delta: np.ndarray) -> np.ndarray:
@@ -281,17 +281,32 @@ class SFA:
         return Statistics._wrap(st)
 
     # ------------------------------------------------------------ persistence
+    def _state(self, include_statistics: bool) -> dict[str, Any]:
+        return {
+            "params": {k: v for k, v in self.get_params().items()},
+            "node": None if self._node is None else self._node.get_state(include_statistics),
+        }
+
     def save(self, path: str | os.PathLike, *, include_statistics: bool = True) -> None:
         """Saves the model to ``path`` (see :mod:`sfanav.sfa.modelfile`; no pickle).
 
         With ``include_statistics`` (default) the training statistics are
         stored too, so :meth:`partial_fit` can continue after loading.
         """
-        state = {
-            "params": {k: v for k, v in self.get_params().items()},
-            "node": None if self._node is None else self._node.get_state(include_statistics),
-        }
-        save_model(path, "SFA", state)
+        save_model(path, "SFA", self._state(include_statistics))
+
+    def to_bytes(self, *, include_statistics: bool = True) -> bytes:
+        """The model as the bytes of its model file (no pickle)."""
+        return dumps("SFA", self._state(include_statistics))
+
+    @classmethod
+    def from_bytes(cls, data: bytes) -> "SFA":
+        """A model from :meth:`to_bytes`. Raises ValueError for bytes that are
+        not an unaltered SFA model, TypeError for another type."""
+        return cls.from_state(state_from_bytes(data, "SFA"))
+
+    def __reduce__(self) -> tuple[Any, tuple[bytes]]:
+        return (SFA.from_bytes, (self.to_bytes(),))
 
     @classmethod
     def from_state(cls, state: dict[str, Any]) -> "SFA":
@@ -418,6 +433,29 @@ class Statistics:
     @classmethod
     def from_state(cls, state: dict[str, Any]) -> "Statistics":
         return cls._wrap(_core.Statistics.from_state(state))
+
+    def to_bytes(self) -> bytes:
+        """The statistics as the bytes of an sfanav model (checksummed, no
+        pickle): for shipping accumulators between processes, e.g. to merge
+        the partial statistics of several workers.
+
+        Examples
+        --------
+        >>> a = Statistics(3).update(np.random.default_rng(0).normal(size=(50, 3)))
+        >>> Statistics.from_bytes(a.to_bytes()).n_samples
+        50
+        """
+        return dumps("Statistics", self.get_state())
+
+    @classmethod
+    def from_bytes(cls, data: bytes) -> "Statistics":
+        """Statistics from :meth:`to_bytes`. Raises ValueError for bytes that
+        are not unaltered statistics, TypeError for another type."""
+        return cls.from_state(state_from_bytes(data, "Statistics"))
+
+    def __reduce__(self) -> tuple[Any, tuple[bytes]]:
+        # pickle (e.g. Dask shipping an accumulator) goes through the checked bytes
+        return (Statistics.from_bytes, (self.to_bytes(),))
 
 
 def _weights(w: Any, n: int) -> np.ndarray:
