@@ -10,3 +10,4 @@ from . import localize  # noqa: F401
 from . import navigate  # noqa: F401
 from . import groundtruth  # noqa: F401
 from . import experiment  # noqa: F401
+from . import features  # noqa: F401
