@@ -17,9 +17,10 @@ from collections import Counter
 from pathlib import Path
 
 PKG = Path(__file__).resolve().parents[1] / "python" / "sfanav"
-STAGES = ["data", "groundtruth", "sim", "loopclosure", "sfa", "localization", "odometry", "navigation", "experiments", "app"]
+STAGES = ["data", "features", "groundtruth", "sim", "loopclosure", "sfa", "localization", "odometry", "navigation", "experiments", "app"]
 LABEL = {
     "data": "data<br/>images, datasets, unwarping",
+    "features": "features<br/>local features over the seasons, robustness prediction",
     "groundtruth": "groundtruth<br/>marker ground truth, camera calibration",
     "sim": "sim<br/>simulated garden",
     "loopclosure": "loopclosure<br/>places seen again, long-term order",

@@ -16,8 +16,8 @@ PKG = Path(sfanav.__file__).parent
 # before it, never one after it. The private helpers (_checks, _progress,
 # _plotting, _threads, _core, _compat) come first; the package root
 # re-exports the stages; app and experiments sit on top.
-ORDER = ["_private", "data", "groundtruth", "sim", "loopclosure", "sfa", "localization", "odometry", "navigation", "_root", "experiments", "app"]
-LIBRARY = {"_private", "data", "groundtruth", "sim", "loopclosure", "sfa", "localization", "odometry", "navigation", "_root"}
+ORDER = ["_private", "data", "features", "groundtruth", "sim", "loopclosure", "sfa", "localization", "odometry", "navigation", "_root", "experiments", "app"]
+LIBRARY = {"_private", "data", "features", "groundtruth", "sim", "loopclosure", "sfa", "localization", "odometry", "navigation", "_root"}
 
 
 def _module_name(path: Path) -> str:

@@ -21,7 +21,7 @@ from .cameras import (
     camera_from_dict,
     column_of_bearing,
 )
-from .conditions import SEASONS, Lighting, Season
+from .conditions import SEASONS, Lighting, Season, season_of_year
 from .presets import PRESETS, simulate
 from .render import Renderer
 from .robot import (
@@ -45,6 +45,7 @@ __all__ = [
     "Lighting",
     "Season",
     "SEASONS",
+    "season_of_year",
     "PanoramicCamera",
     "OmniCamera",
     "Renderer",

@@ -195,6 +195,59 @@ SEASONS: dict[str, Season] = {s.name: s for s in (Season.spring(), Season.summer
                                                    Season.winter())}
 
 
+def season_of_year(fraction: float) -> Season:
+    """The garden's look ``fraction`` of a year after the start of spring.
+
+    The named seasons (:data:`SEASONS`) hold at the middle of their quarter
+    (0.125 spring, 0.375 summer, 0.625 autumn, 0.875 winter); in between
+    colours, leaf cover and sun elevation range blend linearly, and the year
+    wraps (0.99 lies between winter and spring). The result is named after
+    the quarter ``fraction`` falls in.
+
+    Parameters
+    ----------
+    fraction : float
+        Time of year as a fraction; any finite number (taken modulo 1).
+
+    Returns
+    -------
+    Season
+
+    Raises
+    ------
+    ValueError
+        A non-finite or non-numeric ``fraction``.
+
+    Examples
+    --------
+    >>> season_of_year(0.375) == SEASONS["summer"]
+    True
+    >>> season_of_year(0.5).name
+    'autumn'
+    """
+    try:
+        f = float(fraction)
+    except (TypeError, ValueError):
+        f = float("nan")
+    if not np.isfinite(f):
+        raise ValueError(f"fraction of the year must be a finite number, got {fraction!r}")
+    f %= 1.0
+    order = list(SEASONS.values())
+    pos = (f - 0.125) * 4 % 4  # 0 at mid-spring, 1 at mid-summer, ...
+    i = int(np.floor(pos)) % 4
+    w = pos - np.floor(pos)
+    a, b = order[i], order[(i + 1) % 4]
+    if w == 0:
+        return a
+
+    def mix(u: Any, v: Any) -> Any:
+        return tuple(float((1 - w) * x + w * y) for x, y in zip(u, v))
+
+    return Season(order[int(f * 4) % 4].name, ground=mix(a.ground, b.ground), foliage=mix(a.foliage, b.foliage),
+                  sky=mix(a.sky, b.sky), leaf_cover=float((1 - w) * a.leaf_cover + w * b.leaf_cover),
+                  sun_elevation_deg=mix(a.sun_elevation_deg, b.sun_elevation_deg))
+
+
 @dataclass(frozen=True)
 class Lighting:
     """A lighting condition, optionally in a season.

@@ -18,7 +18,7 @@ import numpy as np
 
 from . import trajectories as T
 from .cameras import OmniCamera, PanoramicCamera
-from .conditions import SEASONS, Lighting, Season
+from .conditions import SEASONS, Lighting, Season, season_of_year
 from .render import Renderer
 from .robot import Robot
 from .world import World
@@ -273,6 +273,47 @@ _add(Preset(
     lambda: PanoramicCamera(600, 60),
     lambda rng: [RunSpec("loop", lambda w, r: T.border_loop(w.area, 279, rng=r), _year_of_conditions(rng, 10),
                          jitter=LOOP_JITTER)],
+))
+
+
+def _weather(rng: np.random.Generator, season: Season, fraction: float | None = None) -> Lighting:
+    """One day's light in ``season``: intensity 0.75..1.25, a random sun
+    azimuth, the sun elevation drawn in the season's range."""
+    lo, hi = season.sun_elevation_deg
+    return Lighting(intensity=float(rng.uniform(0.75, 1.25)), sun_azimuth_deg=float(rng.uniform(0, 360)),
+                    sun_elevation_deg=float(rng.uniform(lo, hi)), season=season)
+
+
+def _year_lapse(rng: np.random.Generator, n: int = 512) -> LightFn:
+    """A time-lapse over a year from the start of spring: at progress ``s``
+    the season of :func:`season_of_year` (``s``) under that day's weather
+    (:func:`_weather`; ``n`` days drawn once, the nearest one is used)."""
+    days = [_weather(rng, season_of_year(i / n), i / n) for i in range(n)]
+    return lambda s: days[min(int(round(float(s) * (n - 1))), n - 1)]
+
+
+#: thesis 6.1: the camera pose of the year time-lapse in an area centred at the origin (x, y m, heading rad)
+LAPSE_POSE = (0.0, -2.0, np.pi / 2)
+
+
+def _seasons_61(rng: np.random.Generator) -> list[RunSpec]:
+    seasons = {name: _weather(rng, s) for name, s in SEASONS.items()}
+    lapse = _year_lapse(rng)
+    return [RunSpec("route", lambda w, r: T.border_loop(w.area, 160, rng=r), seasons),
+            RunSpec("year", lambda w, r: T.Trajectory(np.tile(LAPSE_POSE, (101, 1)), np.arange(101) * 86400.0 * 3.6),
+                    {"year": lapse})]
+
+
+_add(Preset(
+    "thesis-6.1-seasons", "6.1",
+    "15x15 m garden for local visual features over the seasons: a 160-frame border-wire loop ('route') driven "
+    "exactly once in each season (conditions spring, summer, autumn, winter: lawn, foliage and sky colours, "
+    "thinning crowns, the season's sun height and shadows, a random day's light), and a fixed camera "
+    "recording 101 frames over one year from the start of spring ('year', condition 'year': the season blends "
+    "continuously, the light changes from frame to frame); 1200x120 RGB panoramas",
+    _garden((15.0, 15.0), 30),
+    lambda: PanoramicCamera(1200, 120),
+    _seasons_61,
 ))
 
 

@@ -9,4 +9,5 @@ from . import train  # noqa: F401
 from . import localize  # noqa: F401
 from . import navigate  # noqa: F401
 from . import groundtruth  # noqa: F401
+from . import features  # noqa: F401
 from . import experiment  # noqa: F401

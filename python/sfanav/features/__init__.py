@@ -1,0 +1,18 @@
+"""Local visual features over the seasons (thesis 6.1).
+
+* :mod:`~sfanav.features.detectors`: detection and description on
+  panoramas (FAST + BRIEF, ORB, SIFT, upright SIFT; OpenCV's free build),
+  matching with the mutual consistency check or the ratio test.
+* :mod:`~sfanav.features.descriptor`: the 77-dimensional texture (uniform
+  LBP) and colour (hue) statistics around a keypoint.
+* :mod:`~sfanav.features.robustness`: stable / unstable labels over the
+  seasons, an RBF SVM that predicts a keypoint's long-term robustness, its
+  JSON file, and top-k selection by predicted robustness.
+"""
+
+from .descriptor import DIM, robustness_vectors
+from .detectors import DETECTORS, Features, detect, match, pixel_distance, true_match
+from .robustness import RobustnessPredictor, balanced, stability_labels, training_samples
+
+__all__ = ["DETECTORS", "DIM", "Features", "RobustnessPredictor", "balanced", "detect", "match", "pixel_distance",
+           "robustness_vectors", "stability_labels", "training_samples", "true_match"]

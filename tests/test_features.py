@@ -1,0 +1,138 @@
+"""sfanav.features: the robustness vector, stability labels, the predictor
+file, the features CLI and the 6.1 experiments' quick runs."""
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from sfanav.features import (DIM, Features, RobustnessPredictor, balanced, detect, match, robustness_vectors,
+                             stability_labels)
+
+PY = str(Path(__file__).resolve().parents[1] / "python")
+
+
+def _image(seed=0, h=40, w=160):
+    return (np.random.default_rng(seed).random((h, w, 3)) * 255).astype(np.uint8)
+
+
+def test_robustness_vector_is_77_normalised_histograms():
+    v = robustness_vectors(_image(), np.array([[5.0, 3.0], [80.0, 20.0], [159.0, 39.0]]))
+    assert v.shape == (3, DIM) == (3, 77)
+    assert np.allclose(v[:, :59].sum(1), 1) and np.allclose(v[:, 59:].sum(1), 1) and (v >= 0).all()
+    flat = np.full((40, 160, 3), (200, 30, 30), np.uint8)  # uniform red: one LBP code, one hue bin
+    u = robustness_vectors(flat, [[50.0, 20.0]])
+    assert np.isclose(u[0, :59].max(), 1) and np.isclose(u[0, 59:].max(), 1) and u[0, 59] == 1
+
+
+def test_robustness_vector_refuses_bad_input():
+    with pytest.raises(ValueError, match="RGB"):
+        robustness_vectors(np.zeros((40, 160)), [[1.0, 1.0]])
+    with pytest.raises(ValueError, match=r"\(n, 2\)"):
+        robustness_vectors(_image(), [1.0, 2.0, 3.0])
+    with pytest.raises(TypeError):
+        robustness_vectors(_image(), [["a", "b"]])
+
+
+def _feats(xy, bits):
+    xy = np.asarray(xy, float)
+    return Features(xy, np.arange(len(xy), 0, -1.0), np.ones(len(xy)), np.asarray(bits, np.uint8), True, 100)
+
+
+def test_stability_labels_known_answer():
+    d = np.eye(4, 32, dtype=np.uint8) * 255  # four far-apart binary descriptors
+    a = _feats([[10, 10], [30, 10], [50, 10], [70, 10]], d)
+    b = _feats([[11, 10], [30, 11], [90, 10], [70, 30]], d)  # 0, 1 in place; 2 and 3 moved
+    c = _feats([[10, 11], [60, 10], [50, 10], [70, 10]], d)  # 0, 2, 3 in place; 1 moved
+    la, lb, lc = stability_labels([a, b, c], threshold=5)
+    assert la.tolist() == [1, -1, -1, -1]
+    assert lb.tolist() == [1, -1, 0, 0] and lc.tolist() == [1, 0, -1, -1]
+    idx = balanced(np.array([1, 0, 0, 0, -1, 1]), 0)
+    assert sorted(np.array([1, 0, 0, 0, -1, 1])[idx].tolist()) == [0, 0, 1, 1]
+    with pytest.raises(ValueError, match="two seasons"):
+        stability_labels([a])
+
+
+def test_detect_and_match_same_image():
+    img = _image(1, 60, 300)
+    f = detect(img, "fast-brief", 150)
+    assert 0 < len(f) <= 150 and f.descriptors.shape[1] == 32 and np.all(np.diff(f.response) <= 0)
+    pairs = match(f, f)
+    assert len(pairs) > 0.9 * len(f) and np.all(pairs[:, 0] == pairs[:, 1])
+    with pytest.raises(ValueError, match="unknown detector"):
+        detect(img, "surf")
+
+
+@pytest.fixture(scope="module")
+def predictor():
+    rng = np.random.default_rng(0)
+    X = np.abs(np.vstack([rng.normal(0, 1, (30, DIM)), rng.normal(1.5, 1, (30, DIM))]))
+    return RobustnessPredictor.fit(X, np.repeat([0, 1], 30), detector="fast-brief",
+                                   grid={"C": [1.0, 10.0], "gamma": [0.01]}, cv=3), X
+
+
+def test_predictor_matches_sklearn_and_round_trips(predictor, tmp_path):
+    p, X = predictor
+    from sklearn.svm import SVC
+
+    svm = SVC(kernel="rbf", C=p.info["C"], gamma=p.gamma).fit((X - p.mean) / p.scale, np.repeat([0, 1], 30))
+    assert np.allclose(p.decision_function(X), svm.decision_function((X - p.mean) / p.scale), atol=1e-8)
+    path = p.save(tmp_path / "p.json")
+    q = RobustnessPredictor.load(path)
+    assert np.array_equal(q.decision_function(X), p.decision_function(X)) and q.detector == "fast-brief"
+    sel = q.select(_image(2, 60, 300), 10)
+    assert len(sel) == 10
+
+
+def test_predictor_file_rejects_corruption_and_wrong_version(predictor, tmp_path):
+    p, _ = predictor
+    path = p.save(tmp_path / "p.json")
+    doc = json.loads(path.read_text())
+    doc["predictor"]["intercept"] += 1.0
+    bad = tmp_path / "bad.json"
+    bad.write_text(json.dumps(doc))
+    with pytest.raises(ValueError, match="corrupted"):
+        RobustnessPredictor.load(bad)
+    doc = json.loads(path.read_text())
+    doc["version"] = 99
+    bad.write_text(json.dumps(doc))
+    with pytest.raises(ValueError, match="version 99"):
+        RobustnessPredictor.load(bad)
+    bad.write_text("not json")
+    with pytest.raises(ValueError, match="not JSON"):
+        RobustnessPredictor.load(bad)
+    with pytest.raises(FileNotFoundError):
+        RobustnessPredictor.load(tmp_path / "missing.json")
+
+
+def _cli(*args, cwd=None):
+    return subprocess.run([sys.executable, "-m", "sfanav", *args], capture_output=True, text=True, cwd=cwd,
+                          env={"PYTHONPATH": PY, "PATH": "/usr/bin:/bin"})
+
+
+def test_cli_errors_are_one_line(tmp_path, predictor):
+    r = _cli("features", "select", "--predictor", str(tmp_path / "none.json"), "--dataset", str(tmp_path),
+             "--out", str(tmp_path / "k.json"))
+    assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1 and "does not exist" in r.stderr
+    bad = tmp_path / "bad.json"
+    bad.write_text("{}")
+    r = _cli("features", "select", "--predictor", str(bad), "--dataset", str(tmp_path), "--out",
+             str(tmp_path / "k.json"))
+    assert r.returncode == 2 and "not a robustness predictor" in r.stderr and len(r.stderr.strip().splitlines()) == 1
+    r = _cli("features", "train", "--dataset", str(tmp_path / "nope"), "--out", str(tmp_path / "p.json"))
+    assert r.returncode == 2 and "dataset" in r.stderr and len(r.stderr.strip().splitlines()) == 1
+
+
+def test_experiments_quick_rows(tmp_path):
+    from sfanav import experiments
+
+    r = experiments.run("6.1.1", tmp_path, quick=True, progress=False)
+    assert r.row("fast-brief: true matches, first frame") > 0
+    assert r.row("best detector (most true matches over the year)") in ("fast-brief", "sift")
+    r = experiments.run("6.1.2", tmp_path, quick=True, progress=False)
+    assert np.isfinite(r.row("fast-brief: F1 gain % summer to spring"))
+    assert 0.5 <= r.row("fast-brief: predictor CV accuracy") <= 1
+    assert any("thesis" in k for k in r.targets)
