@@ -24,8 +24,18 @@ from typing import Any
 import numpy as np
 
 from .. import sim
-from ..features import DETECTORS, RobustnessPredictor, balanced, detect, match, robustness_vectors, stability_labels
-from ..features.detectors import true_match
+from ..features import (
+    DETECTORS,
+    RobustnessPredictor,
+    balanced,
+    descriptor_distances,
+    detect,
+    match,
+    match_distances,
+    robustness_vectors,
+    stability_labels,
+    true_match,
+)
 from . import ExperimentResult, register
 from .localization import progress_log, simulated
 
@@ -162,16 +172,19 @@ def exp_612(out: Path, *, quick: bool, seed: int, progress: bool) -> ExperimentR
             ref_all = detect(ref_img, det, n_detect)
             scores = pred.score_keypoints(ref_img, ref_all)
             qs = {q: detect(image(f, q), det, max(memory)) for q in queries}
+            # one distance matrix per query, sliced for every memory size (features come sorted by response)
+            dist = {q: descriptor_distances(ref_all, qf) for q, qf in qs.items()}
             for mi, m in enumerate(memory):
-                conv = ref_all.strongest(m)
-                pool = np.arange(min(len(ref_all), int(np.ceil(1.5 * m))))  # ref_all is sorted by response
-                robust = ref_all.subset(pool[np.argsort(-scores[pool], kind="stable")[:m]])
+                conv = np.arange(min(len(ref_all), m))
+                pool = np.arange(min(len(ref_all), int(np.ceil(1.5 * m))))
+                robust = pool[np.argsort(-scores[pool], kind="stable")[:m]]
                 for q, qf in qs.items():
-                    qm = qf.strongest(m)
-                    for how, r in (("response", conv), ("robust", robust)):
-                        pairs = match(r, qm, cross_check=True)
-                        ok = true_match(r, qm, pairs, THRESHOLD)
-                        counts[(q, how)][mi] += (int(ok.sum()), int((~ok).sum()), len(r))
+                    cols = np.arange(min(len(qf), m))
+                    qm = qf.subset(cols)
+                    for how, kept in (("response", conv), ("robust", robust)):
+                        pairs = match_distances(dist[q][np.ix_(kept, cols)], cross_check=True)
+                        ok = true_match(ref_all.subset(kept), qm, pairs, THRESHOLD)
+                        counts[(q, how)][mi] += (int(ok.sum()), int((~ok).sum()), len(kept))
         for q in queries:
             f_conv = np.array([_f1(*c) for c in counts[(q, "response")]])
             f_rob = np.array([_f1(*c) for c in counts[(q, "robust")]])

@@ -11,8 +11,18 @@
 """
 
 from .descriptor import DIM, robustness_vectors
-from .detectors import DETECTORS, Features, detect, match, pixel_distance, true_match
+from .detectors import (
+    DETECTORS,
+    Features,
+    descriptor_distances,
+    detect,
+    match,
+    match_distances,
+    pixel_distance,
+    true_match,
+)
 from .robustness import RobustnessPredictor, balanced, stability_labels, training_samples
 
-__all__ = ["DETECTORS", "DIM", "Features", "RobustnessPredictor", "balanced", "detect", "match", "pixel_distance",
+__all__ = ["DETECTORS", "DIM", "Features", "RobustnessPredictor", "balanced", "descriptor_distances", "detect", "match",
+           "match_distances", "pixel_distance",
            "robustness_vectors", "stability_labels", "training_samples", "true_match"]

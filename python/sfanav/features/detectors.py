@@ -209,7 +209,10 @@ def pixel_distance(a: np.ndarray, b: np.ndarray, width: int | None = None) -> np
     return np.hypot(d[..., 0], d[..., 1])
 
 
-def _distances(a: Features, b: Features) -> np.ndarray:
+def descriptor_distances(a: Features, b: Features) -> np.ndarray:
+    """Descriptor distances (len(a), len(b)) float32: Hamming for binary
+    descriptors, Euclidean for real ones. Raises ValueError for features of
+    different detectors."""
     if a.binary != b.binary or a.descriptors.shape[1:] != b.descriptors.shape[1:]:
         raise ValueError("features to match must come from the same detector")
     if a.binary:
@@ -243,14 +246,26 @@ def match(reference: Features, query: Features, *, cross_check: bool = True,
     """
     if len(reference) == 0 or len(query) == 0:
         return np.zeros((0, 2), np.intp)
-    D = _distances(reference, query)
+    return match_distances(descriptor_distances(reference, query), cross_check=cross_check, ratio=ratio)
+
+
+def match_distances(D: np.ndarray, *, cross_check: bool = True, ratio: float | None = None) -> np.ndarray:
+    """:func:`match` on a precomputed distance matrix ``D`` (n_reference,
+    n_query), e.g. a block of one :func:`descriptor_distances` matrix
+    shared by several subsets of the same features. Returns (m, 2) index
+    pairs into ``D``'s rows and columns."""
+    D = np.asarray(D)
+    if D.ndim != 2:
+        raise ValueError(f"D must be a 2-D distance matrix, got shape {D.shape}")
+    if D.shape[0] == 0 or D.shape[1] == 0:
+        return np.zeros((0, 2), np.intp)
     j = np.argmin(D, axis=1)
-    i = np.arange(len(reference))
-    keep = np.ones(len(reference), bool)
+    i = np.arange(D.shape[0])
+    keep = np.ones(D.shape[0], bool)
     if cross_check:
         keep &= np.argmin(D, axis=0)[j] == i
     if ratio is not None:
-        if len(query) < 2:
+        if D.shape[1] < 2:
             keep[:] = False
         else:
             two = np.partition(D, 1, axis=1)[:, :2]
