@@ -241,9 +241,14 @@ def _read_track(bag: _Bag, topic: str, what: str, time: str) -> _Track:
     if len(bad):
         i = int(bad[0])
         raise ValueError(f"{what} topic {topic}: timestamps must increase strictly; message {i + 1} "
-                         f"(t={t[i + 1] / 1e9!r} s) does not come after message {i} (t={t[i] / 1e9!r} s)"
+                         f"(t={_sec(t[i + 1])} s) does not come after message {i} (t={_sec(t[i])} s)"
                          + ("; with time='bag' (--time bag) the bag's own order is used" if time == "header" else ""))
     return _Track(topic, what, t, np.array(poses, float))
+
+
+def _sec(ns: Any) -> str:
+    """A time in ns as seconds for a message."""
+    return repr(float(ns) / 1e9)
 
 
 def _wrap(a: np.ndarray) -> np.ndarray:
@@ -290,15 +295,15 @@ def _apply_outside(track: _Track, status: np.ndarray, values: np.ndarray, img_ns
             j = int(np.nonzero(np.isin(status, (1, 2)))[0][0])
             raise ValueError(
                 f"{n_out} image(s) lie outside the time span of the {what} topic {topic} "
-                f"[{track.ns[0] / 1e9!r}, {track.ns[-1] / 1e9!r}] s, first image {j} at t={img_ns[j] / 1e9!r} s; "
+                f"[{_sec(track.ns[0])}, {_sec(track.ns[-1])}] s, first image {j} at t={_sec(img_ns[j])} s; "
                 "pass outside='drop' (--outside drop) to leave them out, or 'empty' to keep them without a pose")
         if n_gap:
             j = int(np.nonzero(status == 3)[0][0])
             k = int(np.searchsorted(track.ns, img_ns[j])) - 1
             raise ValueError(
                 f"{n_gap} image(s) fall in gaps of the {what} topic {topic} longer than max_gap={max_gap} s, "
-                f"first image {j} at t={img_ns[j] / 1e9!r} s, between messages at {track.ns[k] / 1e9!r} and "
-                f"{track.ns[k + 1] / 1e9!r} s; pass outside='drop' (--outside drop) to leave them out, 'empty' "
+                f"first image {j} at t={_sec(img_ns[j])} s, between messages at {_sec(track.ns[k])} and "
+                f"{_sec(track.ns[k + 1])} s; pass outside='drop' (--outside drop) to leave them out, 'empty' "
                 "to keep them without a pose, or a larger max_gap (--max-gap)")
     elif outside == "drop":
         keep &= status == 0
@@ -387,7 +392,7 @@ def import_bag(bag: str | os.PathLike, out: str | os.PathLike, *, image_topic: s
         if len(bad):
             i = int(bad[0])
             raise ValueError(f"image topic {image_topic}: timestamps must not decrease; image {i + 1} "
-                             f"(t={img_ns[i + 1] / 1e9!r} s) comes after image {i} (t={img_ns[i] / 1e9!r} s)"
+                             f"(t={_sec(img_ns[i + 1])} s) comes after image {i} (t={_sec(img_ns[i])} s)"
                              + ("; with time='bag' (--time bag) the bag's own order is used"
                                 if time == "header" else ""))
         keep = np.ones(len(img_ns), bool)
