@@ -284,8 +284,9 @@ def _gaps(track: _Track, max_gap_ns: float) -> list[list[float]]:
 
 
 def _apply_outside(track: _Track, status: np.ndarray, values: np.ndarray, img_ns: np.ndarray, keep: np.ndarray,
-                   outside: str, max_gap: float, log: Log) -> dict[str, Any]:
-    """Enforces ``outside`` for one track; returns its report for the metadata."""
+                   outside: str, max_gap: float, notes: list[str]) -> dict[str, Any]:
+    """Enforces ``outside`` for one track; returns its report for the
+    metadata and adds a note on its gaps to ``notes``."""
     max_gap_ns = max_gap * 1e9
     gaps = _gaps(track, max_gap_ns)
     n_out, n_gap = int(np.isin(status, (1, 2)).sum()), int((status == 3).sum())
@@ -312,7 +313,7 @@ def _apply_outside(track: _Track, status: np.ndarray, values: np.ndarray, img_ns
     if gaps or n_out or n_gap:
         done = {"error": "", "drop": ", left out", "empty": f", kept without {what}"}[outside]
         longest = max((b - a for a, b in gaps), default=0.0)
-        log(f"{what} topic {topic}: {len(gaps)} gap(s) longer than {max_gap} s"
+        notes.append(f"{what} topic {topic}: {len(gaps)} gap(s) longer than {max_gap} s"
             + (f" (longest {longest:.2f} s)" if gaps else "") + f"; {n_gap} image(s) in them and {n_out} outside "
             f"its time span{done if (n_gap or n_out) else ''}")
     return {"topic": topic, "messages": len(track.ns), "gaps": len(gaps), "gap_intervals_s": gaps[:MAX_LISTED_GAPS],
@@ -321,12 +322,11 @@ def _apply_outside(track: _Track, status: np.ndarray, values: np.ndarray, img_ns
 
 # ---------------------------------------------------------------- import
 
-def _choose_image_topic(info: BagInfo, image_topic: str | None, log: Log) -> str:
+def _choose_image_topic(info: BagInfo, image_topic: str | None) -> str:
     if image_topic is not None:
         return _check_topic(info, image_topic, IMAGE_TYPES, "image")
     cands = [t.name for t in info.topics if t.msgtype in IMAGE_TYPES and t.count]
     if len(cands) == 1:
-        log(f"images from {cands[0]}, the bag's only image topic")
         return cands[0]
     if not cands:
         raise ValueError(f"bag {info.path} has no image topic ({' or '.join(IMAGE_TYPES)}); its topics: "
@@ -379,49 +379,52 @@ def import_bag(bag: str | os.PathLike, out: str | os.PathLike, *, image_topic: s
         raise FileExistsError(f"{out} is not empty; pass overwrite=True (--overwrite) to replace it")
     with _Bag(bag) as b:
         info = b.info()
-        image_topic = _choose_image_topic(info, image_topic, log)
+        cam_topic = _choose_image_topic(info, image_topic)
         tracks = []
         if odom_topic is not None:
             tracks.append(_read_track(b, _check_topic(info, odom_topic, POSE_TYPES, "odometry"), "odometry", time))
         if pose_topic is not None:
             tracks.append(_read_track(b, _check_topic(info, pose_topic, POSE_TYPES, "ground truth"),
                                       "ground truth", time))
-        img_ns = np.array([_stamp(m, rec, time, image_topic, k)
-                           for k, (rec, m) in enumerate(b.messages(image_topic))], np.int64)
+        img_ns = np.array([_stamp(m, rec, time, cam_topic, k)
+                           for k, (rec, m) in enumerate(b.messages(cam_topic))], np.int64)
         bad = np.nonzero(np.diff(img_ns) < 0)[0]
         if len(bad):
             i = int(bad[0])
-            raise ValueError(f"image topic {image_topic}: timestamps must not decrease; image {i + 1} "
+            raise ValueError(f"image topic {cam_topic}: timestamps must not decrease; image {i + 1} "
                              f"(t={_sec(img_ns[i + 1])} s) comes after image {i} (t={_sec(img_ns[i])} s)"
                              + ("; with time='bag' (--time bag) the bag's own order is used"
                                 if time == "header" else ""))
         keep = np.ones(len(img_ns), bool)
         values: dict[str, np.ndarray] = {}
         reports: dict[str, Any] = {}
+        notes = [] if image_topic is not None else [f"images from {cam_topic}, the bag's only image topic"]
         for tr in tracks:
             v, status = _interpolate(tr, img_ns, max_gap * 1e9)
-            reports[tr.what.replace(" ", "_")] = _apply_outside(tr, status, v, img_ns, keep, outside, max_gap, log)
+            reports[tr.what.replace(" ", "_")] = _apply_outside(tr, status, v, img_ns, keep, outside, max_gap, notes)
             values[tr.what] = v
         n = int(keep.sum())
         if n == 0:
-            raise ValueError(f"no image of {image_topic} lies within the time span of the pose topics")
+            raise ValueError(f"no image of {cam_topic} lies within the time span of the pose topics")
         if n < len(keep):
-            log(f"{len(keep) - n} of {len(keep)} images left out (no pose at their time)")
+            notes.append(f"{len(keep) - n} of {len(keep)} images left out (no pose at their time)")
+        for note in notes:
+            log(note)
         unknown = np.full((len(img_ns), 3), np.nan)
         gt, odo = values.get("ground truth", unknown), values.get("odometry", unknown)
         meta = {"source": "rosbag", "bag": str(Path(bag)), "ros": info.ros,
-                "topics": {"image": image_topic, "odometry": odom_topic, "ground_truth": pose_topic},
+                "topics": {"image": cam_topic, "odometry": odom_topic, "ground_truth": pose_topic},
                 "time": "header stamps" if time == "header" else "bag record times",
                 "interpolation": "linear on timestamps, heading along the shorter arc", "max_gap_s": max_gap,
                 "outside": outside, "images_in_bag": len(img_ns), "images_left_out": len(img_ns) - n,
                 "poses": reports}
-        bar = progress_bar(progress, n, f"importing {image_topic}")
+        bar = progress_bar(progress, n, f"importing {cam_topic}")
         frame = 0
         shape: tuple[int, ...] | None = None
         try:
             with DatasetWriter(out, meta, overwrite=overwrite) as w:
                 k = -1
-                for k, (rec, msg) in enumerate(b.messages(image_topic)):
+                for k, (rec, msg) in enumerate(b.messages(cam_topic)):
                     if k >= len(img_ns):
                         break
                     if not keep[k]:
@@ -429,11 +432,11 @@ def import_bag(bag: str | os.PathLike, out: str | os.PathLike, *, image_topic: s
                     try:
                         data, suffix, shp = _image_file(msg)
                     except ValueError as exc:
-                        raise ValueError(f"image {k} of {image_topic}: {exc}") from None
+                        raise ValueError(f"image {k} of {cam_topic}: {exc}") from None
                     if shape is None:
                         shape = shp
                     elif shp != shape:
-                        raise ValueError(f"image {k} of {image_topic} has shape {shp}, unlike {shape} before it")
+                        raise ValueError(f"image {k} of {cam_topic} has shape {shp}, unlike {shape} before it")
                     w.add_encoded(data, suffix, shape=shp, frame=frame, timestamp=img_ns[k] / 1e9, pose=gt[k],
                                   odometry=odo[k], camera=camera, condition=condition, run=run)
                     frame += 1
@@ -441,7 +444,7 @@ def import_bag(bag: str | os.PathLike, out: str | os.PathLike, *, image_topic: s
                         bar.update(1)
                 if k + 1 != len(img_ns):
                     raise ValueError(f"bag {b.path} changed while it was read ({len(img_ns)} images of "
-                                     f"{image_topic}, then {k + 1})")
+                                     f"{cam_topic}, then {k + 1})")
         finally:
             if bar is not None:
                 bar.close()
