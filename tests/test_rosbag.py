@@ -76,7 +76,31 @@ def test_round_trip_through_a_bag_gives_the_direct_export(runs, tmp_path, camera
         assert_same_run(got, want)
         again = Dataset(tmp_path / f"ds-{run}")  # what a later command reads
         assert_same_run(again, want)
-        assert again.metadata["source"] == "rosbag" and again.metadata["ros"] == (1 if name.endswith(".bag") else 2)
+        assert again.metadata["source"] == "rosbag"
+        assert again.metadata["bags"][0]["ros"] == (1 if name.endswith(".bag") else 2)
+
+
+def test_several_bags_become_the_runs_of_one_dataset(runs, tmp_path):
+    direct = runs["panorama"]
+    bags = [write_run(tmp_path / "train.bag", direct.select(run="train")),
+            write_run(tmp_path / "test.mcap", direct.select(run="test"), fmt="png")]
+    got = Dataset.from_bag(bags, tmp_path / "ds", image_topic="/camera/image", odom_topic="/odom",
+                           pose_topic="/ground_truth", log=lambda m: None)  # runs named after the bags
+    assert sorted(set(got.runs.tolist())) == ["test", "train"]
+    np.testing.assert_array_equal(got.frames, np.arange(len(direct)))
+    for run in ("train", "test"):
+        a, b = got.select(run=run), direct.select(run=run)
+        np.testing.assert_allclose(a.poses, b.poses, atol=1e-9)
+        np.testing.assert_allclose(a.odometry[:, :2], b.odometry[:, :2], atol=1e-9)
+        for x, y in zip(a.images(), b.images()):
+            np.testing.assert_array_equal(x, y)
+    assert [b["run"] for b in got.metadata["bags"]] == ["train", "test"]
+    with pytest.raises(ValueError, match="one run name per bag: 2 bags, 1 run names"):
+        Dataset.from_bag(bags, tmp_path / "x", odom_topic="/odom", run=["a"])
+    with pytest.raises(ValueError, match="a run name of its own"):
+        Dataset.from_bag(bags, tmp_path / "x", odom_topic="/odom", run=["a", "a"])
+    with pytest.raises(ValueError, match="one run name per bag"):
+        Dataset.from_bag(bags, tmp_path / "x", odom_topic="/odom", run="a")
 
 
 def test_jpeg_images_are_kept_as_the_robot_sent_them(runs, tmp_path):
@@ -144,7 +168,7 @@ def test_images_no_pose_covers_are_an_error_or_dropped_or_kept_empty(tmp_path):
     ds = Dataset.from_bag(bag, tmp_path / "c", odom_topic="/odom", pose_topic="/gt", outside="drop", log=notes.append)
     t = ds.timestamps - T0
     assert np.all((t >= 1.0) & (t <= 8.9)) and not np.any((t > 3.8) & (t < 7.0))
-    assert ds.metadata["poses"]["ground_truth"]["gap_intervals_s"] == [[pytest.approx(T0 + 3.8), pytest.approx(T0 + 7.0)]]
+    assert ds.metadata["bags"][0]["poses"]["ground_truth"]["gap_intervals_s"] == [[pytest.approx(T0 + 3.8), pytest.approx(T0 + 7.0)]]
     assert any("/gt: 1 gap(s) longer than 1.0 s" in n for n in notes)
     ds = Dataset.from_bag(bag, tmp_path / "d", odom_topic="/odom", pose_topic="/gt", outside="empty",
                           log=lambda m: None)
@@ -291,7 +315,7 @@ def test_an_undecodable_image_is_named_and_leaves_no_dataset(tmp_path):
                                                            format="jpeg" if k == 3 else "png",
                                                            data=broken if k == 3 else png)
                 w.write(cam, int((t + 0.5) * 1e9), store.serialize_ros1(img, "sensor_msgs/msg/CompressedImage"))
-    with pytest.raises(ValueError, match=r"image 3 of /cam: cannot decode the compressed image \(jpeg, 21 bytes\)"):
+    with pytest.raises(ValueError, match=r"image 3 of /cam in .*bad.bag: cannot decode the compressed image \(jpeg, 21 bytes\)"):
         Dataset.from_bag(bag, tmp_path / "ds", odom_topic="/odom", log=lambda m: None)
     assert not (tmp_path / "ds" / "metadata.json").exists()
 

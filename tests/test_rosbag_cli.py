@@ -84,9 +84,11 @@ def bags(tmp_path_factory):
 
 
 def test_list_prints_topics_types_and_counts(bags, capsys):
-    code, out, err = run(capsys, "import", bags["train"], "--list")
+    code, out, err = run(capsys, "import", bags["train"], bags["test"], "--list")
     assert code == 0, err
-    lines = out.splitlines()
+    first, second = out.split("\n\n")
+    assert "(ROS 2)" in second.splitlines()[0] and "sensor_msgs/msg/CompressedImage" in second
+    lines = first.splitlines()
     assert "(ROS 1)" in lines[0]
     rows = {ln.split()[0]: ln.split()[1:3] for ln in lines[2:]}
     assert rows["/camera/image_raw"] == ["sensor_msgs/msg/Image", "40"]
@@ -98,27 +100,25 @@ def test_from_bags_to_a_model_to_estimates_that_replay(bags, tmp_path, capsys):
     """The README's "Your own robot": import, train without ground truth, localize with odometry into a bag."""
     from rosbags.highlevel import AnyReader
 
-    garden, run2 = tmp_path / "garden", tmp_path / "garden-run2"
-    code, out, err = run(capsys, "import", bags["train"], "--image-topic", "/camera/image_raw", "--odom-topic",
-                         "/odom", "--run", "train", "--out", garden, "--no-progress")
+    garden = tmp_path / "garden"
+    code, out, err = run(capsys, "import", bags["train"], bags["test"], "--odom-topic", "/odom",
+                         "--run", "train", "test", "--out", garden, "--no-progress")
     assert code == 0, err
-    assert out.strip() == f"wrote 40 images to {garden} (run train)"
-    code, out, err = run(capsys, "import", bags["test"], "--image-topic", "/camera/image_raw/compressed",
-                         "--odom-topic", "/odom", "--pose-topic", "/ground_truth", "--run", "test",
-                         "--out", run2, "--no-progress")
-    assert code == 0, err
+    assert out.strip() == f"wrote 80 images to {garden} (runs train, test)"
+    assert "run1.bag: images from /camera/image_raw, the bag's only image topic" in err
+    assert "run2.mcap: images from /camera/image_raw/compressed" in err
     ds = Dataset(garden)
-    assert len(ds) == 40 and ds.has_odometry and np.isnan(ds.poses).all()
+    assert len(ds) == 80 and ds.has_odometry and np.isnan(ds.poses).all()
     want = bags["sim"].select(run="train")
     # odometry at 23 Hz, interpolated at the image times: the simulated odometry to within its curvature
-    np.testing.assert_allclose(ds.odometry[:, :2], want.odometry[:, :2], atol=0.01)
+    np.testing.assert_allclose(ds.select(run="train").odometry[:, :2], want.odometry[:, :2], atol=0.01)
     model = tmp_path / "robot.sfa"
     code, out, err = run(capsys, "train", "--dataset", garden, "--config", bags["config"], "--supervision",
                          "odometry", "--out", model, "--no-progress")
     assert code == 0, err
     est_bag, est_csv = tmp_path / "estimates.bag", tmp_path / "estimates.csv"
-    code, out, err = run(capsys, "localize", model, run2, "--odometry", "--out", est_bag, "--out", est_csv,
-                         "--no-progress")
+    code, out, err = run(capsys, "localize", model, garden, "--run", "test", "--odometry", "--out", est_bag,
+                         "--out", est_csv, "--no-progress")
     assert code == 0, err
     assert f"to {est_bag} and {est_csv}" in out
     with open(est_csv, newline="") as f:
@@ -129,13 +129,19 @@ def test_from_bags_to_a_model_to_estimates_that_replay(bags, tmp_path, capsys):
         for c, ns, raw in r.messages():
             msgs.setdefault(c.topic, []).append((ns, r.deserialize(raw, c.msgtype)))
     assert sorted(msgs) == ["/sfanav/estimate", "/sfanav/fused"]
-    stamps = np.round((Dataset(run2).timestamps) * 1e9).astype(np.int64)
+    stamps = np.round(ds.select(run="test").timestamps * 1e9).astype(np.int64)
     for topic in msgs:
         assert [ns for ns, _ in msgs[topic]] == stamps.tolist()
     est = np.array([(m.pose.position.x, m.pose.position.y) for _, m in msgs["/sfanav/estimate"]])
     fused = np.array([(m.pose.pose.position.x, m.pose.pose.position.y) for _, m in msgs["/sfanav/fused"]])
     np.testing.assert_allclose(est, [(float(r["x"]), float(r["y"])) for r in rows], atol=1e-4)
     np.testing.assert_allclose(fused, [(float(r["fused_x"]), float(r["fused_y"])) for r in rows], atol=1e-4)
+    run2 = tmp_path / "run2"  # one bag, with its ground truth
+    code, out, err = run(capsys, "import", bags["test"], "--image-topic", "/camera/image_raw/compressed",
+                         "--odom-topic", "/odom", "--pose-topic", "/ground_truth", "--run", "test", "--out", run2,
+                         "--no-progress")
+    assert code == 0 and out.strip() == f"wrote 40 images to {run2} (run test)", err
+    assert np.isfinite(Dataset(run2).poses).all()
     # a ROS 2 bag of the estimates alone
     code, out, err = run(capsys, "localize", model, run2, "--out", tmp_path / "estimates.mcap", "--no-progress",
                          "--frame-id", "odom")

@@ -431,13 +431,14 @@ class Dataset:
         return Dataset(out)
 
     @classmethod
-    def from_bag(cls, bag: str | os.PathLike, out: str | os.PathLike, *, image_topic: str | None = None,
-                 odom_topic: str | None = None, pose_topic: str | None = None, run: str = "0",
+    def from_bag(cls, bag: str | os.PathLike | Sequence[str | os.PathLike], out: str | os.PathLike, *,
+                 image_topic: str | None = None, odom_topic: str | None = None, pose_topic: str | None = None,
+                 run: str | Sequence[str] | None = None,
                  camera: str = "center", condition: str = "default", time: str = "header",
                  outside: str = "error", max_gap: float = 1.0, overwrite: bool = False, progress: bool = False,
                  log: Any = None) -> "Dataset":
-        """Imports a robot's recorded run from a ROS bag as an sfanav dataset
-        at ``out`` and returns it opened.
+        """Imports a robot's recorded runs from ROS bags (one run per bag) as
+        an sfanav dataset at ``out`` and returns it opened.
 
         Reads ROS 1 bags (``.bag``), ROS 2 bag folders (SQLite or MCAP) and
         single ``.db3`` / ``.mcap`` files with the pure-Python ``rosbags``
@@ -455,8 +456,10 @@ class Dataset:
 
         Parameters
         ----------
-        bag : path
-            A ROS 1 ``.bag``, a ROS 2 bag folder, or a ``.db3`` / ``.mcap`` file.
+        bag : path or sequence of paths
+            A ROS 1 ``.bag``, a ROS 2 bag folder, or a ``.db3`` / ``.mcap``
+            file; several bags become several runs of one dataset (the
+            topics and options apply to each).
         out : path
             The dataset to write (a new or empty folder, unless ``overwrite``).
         image_topic : str, optional
@@ -470,8 +473,11 @@ class Dataset:
             ``geometry_msgs/PoseWithCovarianceStamped`` or
             ``nav_msgs/Odometry``): the ``x, y, heading`` columns (empty
             without it). At least one of ``odom_topic`` and ``pose_topic``.
-        run, camera, condition : str
-            Names of the images' run, camera and recording condition.
+        run : str or sequence of str, optional
+            The run's name (one per bag); default ``0`` for one bag, else the
+            bags' file names without suffix.
+        camera, condition : str
+            Names of the images' camera and recording condition.
         time : ``"header"`` or ``"bag"``
             The messages' header stamps (default), or the times the bag
             recorded them (for drivers that leave the stamps at 0).
@@ -509,9 +515,9 @@ class Dataset:
 
         Examples
         --------
-        >>> ds = Dataset.from_bag("run1.bag", "garden", image_topic="/camera/image_raw",
-        ...                       odom_topic="/odom", run="train")          # doctest: +SKIP
-        >>> ds.odometry.shape                                               # doctest: +SKIP
+        >>> ds = Dataset.from_bag(["run1.bag", "run2.bag"], "garden", image_topic="/camera/image_raw",
+        ...                       odom_topic="/odom", run=["train", "test"])  # doctest: +SKIP
+        >>> ds.select(run="train").odometry.shape                           # doctest: +SKIP
         (5000, 3)
         """
         from .._progress import stderr_log

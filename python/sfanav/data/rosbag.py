@@ -1,5 +1,5 @@
-"""Reading ROS bags: a robot's recorded run (camera images, wheel odometry,
-optionally a ground-truth pose) as an sfanav dataset.
+"""Reading ROS bags: a robot's recorded runs (camera images, wheel odometry,
+optionally a ground-truth pose; one run per bag) as an sfanav dataset.
 
 :func:`import_bag` (and :meth:`sfanav.Dataset.from_bag`, ``sfanav import``)
 reads ROS 1 bags (``.bag``), ROS 2 bag folders (SQLite or MCAP storage) and
@@ -360,92 +360,151 @@ def _image_file(msg: Any) -> tuple[bytes, str, tuple[int, ...]]:
     return encode_png(img), ".png", img.shape
 
 
-def import_bag(bag: str | os.PathLike, out: str | os.PathLike, *, image_topic: str | None = None,
-               odom_topic: str | None = None, pose_topic: str | None = None, run: str = "0",
-               camera: str = "center", condition: str = "default", time: str = "header", outside: str = "error",
-               max_gap: float = 1.0, overwrite: bool = False, progress: bool = False,
-               log: Log = stderr_log) -> Any:
-    """Imports a recorded run from a ROS bag as an sfanav dataset and returns
-    it opened (see :meth:`sfanav.Dataset.from_bag`, which calls this)."""
-    from .dataset import Dataset
+@dataclass
+class _Plan:
+    """One bag's images after the first pass: their stamps (ns), which are
+    kept, and their ground truth and odometry (N, 3; NaN unknown)."""
 
-    max_gap = _check_options(time, outside, max_gap)
-    run, camera, condition = check_name(run, "run"), check_name(camera, "camera"), check_name(condition, "condition")
-    if odom_topic is None and pose_topic is None:
-        raise ValueError("give the odometry topic (odom_topic=, --odom-topic), the ground-truth pose topic "
-                         "(pose_topic=, --pose-topic) or both: the images need poses")
-    out = Path(out)
-    if out.is_dir() and any(out.iterdir()) and not overwrite:
-        raise FileExistsError(f"{out} is not empty; pass overwrite=True (--overwrite) to replace it")
-    with _Bag(bag) as b:
+    path: Path
+    run: str
+    ros: int
+    topic: str
+    img_ns: np.ndarray
+    keep: np.ndarray
+    gt: np.ndarray
+    odo: np.ndarray
+    report: dict[str, Any]
+    notes: list[str]
+
+
+def _plan(path: Path, run: str, image_topic: str | None, odom_topic: str | None, pose_topic: str | None,
+          time: str, outside: str, max_gap: float) -> _Plan:
+    """The first pass over a bag: poses, image stamps, the checks and the matching."""
+    with _Bag(path) as b:
         info = b.info()
-        cam_topic = _choose_image_topic(info, image_topic)
+        topic = _choose_image_topic(info, image_topic)
         tracks = []
         if odom_topic is not None:
             tracks.append(_read_track(b, _check_topic(info, odom_topic, POSE_TYPES, "odometry"), "odometry", time))
         if pose_topic is not None:
             tracks.append(_read_track(b, _check_topic(info, pose_topic, POSE_TYPES, "ground truth"),
                                       "ground truth", time))
-        img_ns = np.array([_stamp(m, rec, time, cam_topic, k)
-                           for k, (rec, m) in enumerate(b.messages(cam_topic))], np.int64)
-        bad = np.nonzero(np.diff(img_ns) < 0)[0]
-        if len(bad):
-            i = int(bad[0])
-            raise ValueError(f"image topic {cam_topic}: timestamps must not decrease; image {i + 1} "
-                             f"(t={_sec(img_ns[i + 1])} s) comes after image {i} (t={_sec(img_ns[i])} s)"
-                             + ("; with time='bag' (--time bag) the bag's own order is used"
-                                if time == "header" else ""))
-        keep = np.ones(len(img_ns), bool)
-        values: dict[str, np.ndarray] = {}
-        reports: dict[str, Any] = {}
-        notes = [] if image_topic is not None else [f"images from {cam_topic}, the bag's only image topic"]
-        for tr in tracks:
-            v, status = _interpolate(tr, img_ns, max_gap * 1e9)
-            reports[tr.what.replace(" ", "_")] = _apply_outside(tr, status, v, img_ns, keep, outside, max_gap, notes)
-            values[tr.what] = v
-        n = int(keep.sum())
-        if n == 0:
-            raise ValueError(f"no image of {cam_topic} lies within the time span of the pose topics")
-        if n < len(keep):
-            notes.append(f"{len(keep) - n} of {len(keep)} images left out (no pose at their time)")
-        for note in notes:
-            log(note)
-        unknown = np.full((len(img_ns), 3), np.nan)
-        gt, odo = values.get("ground truth", unknown), values.get("odometry", unknown)
-        meta = {"source": "rosbag", "bag": str(Path(bag)), "ros": info.ros,
-                "topics": {"image": cam_topic, "odometry": odom_topic, "ground_truth": pose_topic},
-                "time": "header stamps" if time == "header" else "bag record times",
-                "interpolation": "linear on timestamps, heading along the shorter arc", "max_gap_s": max_gap,
-                "outside": outside, "images_in_bag": len(img_ns), "images_left_out": len(img_ns) - n,
-                "poses": reports}
-        bar = progress_bar(progress, n, f"importing {cam_topic}")
-        frame = 0
-        shape: tuple[int, ...] | None = None
-        try:
-            with DatasetWriter(out, meta, overwrite=overwrite) as w:
-                k = -1
-                for k, (rec, msg) in enumerate(b.messages(cam_topic)):
-                    if k >= len(img_ns):
-                        break
-                    if not keep[k]:
-                        continue
-                    try:
-                        data, suffix, shp = _image_file(msg)
-                    except ValueError as exc:
-                        raise ValueError(f"image {k} of {cam_topic}: {exc}") from None
-                    if shape is None:
-                        shape = shp
-                    elif shp != shape:
-                        raise ValueError(f"image {k} of {cam_topic} has shape {shp}, unlike {shape} before it")
-                    w.add_encoded(data, suffix, shape=shp, frame=frame, timestamp=img_ns[k] / 1e9, pose=gt[k],
-                                  odometry=odo[k], camera=camera, condition=condition, run=run)
-                    frame += 1
-                    if bar is not None:
-                        bar.update(1)
-                if k + 1 != len(img_ns):
-                    raise ValueError(f"bag {b.path} changed while it was read ({len(img_ns)} images of "
-                                     f"{cam_topic}, then {k + 1})")
-        finally:
+        img_ns = np.array([_stamp(m, rec, time, topic, k) for k, (rec, m) in enumerate(b.messages(topic))], np.int64)
+    bad = np.nonzero(np.diff(img_ns) < 0)[0]
+    if len(bad):
+        i = int(bad[0])
+        raise ValueError(f"image topic {topic}: timestamps must not decrease; image {i + 1} "
+                         f"(t={_sec(img_ns[i + 1])} s) comes after image {i} (t={_sec(img_ns[i])} s)"
+                         + ("; with time='bag' (--time bag) the bag's own order is used" if time == "header" else ""))
+    keep = np.ones(len(img_ns), bool)
+    values: dict[str, np.ndarray] = {}
+    reports: dict[str, Any] = {}
+    notes = [] if image_topic is not None else [f"images from {topic}, the bag's only image topic"]
+    for tr in tracks:
+        v, status = _interpolate(tr, img_ns, max_gap * 1e9)
+        reports[tr.what.replace(" ", "_")] = _apply_outside(tr, status, v, img_ns, keep, outside, max_gap, notes)
+        values[tr.what] = v
+    n = int(keep.sum())
+    if n == 0:
+        raise ValueError(f"no image of {topic} in {path} lies within the time span of the pose topics")
+    if n < len(keep):
+        notes.append(f"{len(keep) - n} of {len(keep)} images left out (no pose at their time)")
+    unknown = np.full((len(img_ns), 3), np.nan)
+    report = {"path": str(path), "ros": info.ros, "run": run,
+              "topics": {"image": topic, "odometry": odom_topic, "ground_truth": pose_topic},
+              "images_in_bag": len(img_ns), "images_left_out": len(img_ns) - n, "poses": reports}
+    return _Plan(path, run, info.ros, topic, img_ns, keep, values.get("ground truth", unknown),
+                 values.get("odometry", unknown), report, notes)
+
+
+def _write_images(plan: _Plan, w: DatasetWriter, frame: int, camera: str, condition: str, shape: list[Any],
+                  bar: Any) -> int:
+    """The second pass over a bag: decodes and writes its kept images from
+    frame id ``frame`` on; returns the next frame id. ``shape`` holds the
+    first image's shape (all must share it)."""
+    k = -1
+    with _Bag(plan.path) as b:
+        for k, (_, msg) in enumerate(b.messages(plan.topic)):
+            if k >= len(plan.img_ns):
+                break
+            if not plan.keep[k]:
+                continue
+            try:
+                data, suffix, shp = _image_file(msg)
+            except ValueError as exc:
+                raise ValueError(f"image {k} of {plan.topic} in {plan.path}: {exc}") from None
+            if not shape:
+                shape.append(shp)
+            elif shp != shape[0]:
+                raise ValueError(f"image {k} of {plan.topic} in {plan.path} has shape {shp}, unlike {shape[0]} "
+                                 "before it")
+            w.add_encoded(data, suffix, shape=shp, frame=frame, timestamp=plan.img_ns[k] / 1e9, pose=plan.gt[k],
+                          odometry=plan.odo[k], camera=camera, condition=condition, run=plan.run)
+            frame += 1
             if bar is not None:
-                bar.close()
+                bar.update(1)
+        if k + 1 != len(plan.img_ns):
+            raise ValueError(f"bag {plan.path} changed while it was read ({len(plan.img_ns)} images of "
+                             f"{plan.topic}, then {k + 1})")
+    return frame
+
+
+def _runs(paths: list[Path], run: Any) -> list[str]:
+    if run is None:
+        names = ["0"] if len(paths) == 1 else [p.stem or p.name for p in paths]
+    elif isinstance(run, str):
+        if len(paths) != 1:
+            raise ValueError(f"give one run name per bag ({len(paths)} bags), got {run!r}")
+        names = [run]
+    else:
+        names = [str(r) for r in run]
+        if len(names) != len(paths):
+            raise ValueError(f"give one run name per bag: {len(paths)} bags, {len(names)} run names")
+    names = [check_name(r, "run") for r in names]
+    if len(set(names)) != len(names):
+        raise ValueError(f"each bag needs a run name of its own, got {', '.join(names)}")
+    return names
+
+
+def import_bag(bag: Any, out: str | os.PathLike, *, image_topic: str | None = None,
+               odom_topic: str | None = None, pose_topic: str | None = None, run: Any = None,
+               camera: str = "center", condition: str = "default", time: str = "header", outside: str = "error",
+               max_gap: float = 1.0, overwrite: bool = False, progress: bool = False,
+               log: Log = stderr_log) -> Any:
+    """Imports recorded runs from ROS bags (one run per bag) as an sfanav
+    dataset and returns it opened (see :meth:`sfanav.Dataset.from_bag`,
+    which calls this)."""
+    from .dataset import Dataset
+
+    paths = [Path(bag)] if isinstance(bag, (str, os.PathLike)) else [Path(b) for b in bag]
+    if not paths:
+        raise ValueError("no bag given")
+    max_gap = _check_options(time, outside, max_gap)
+    runs = _runs(paths, run)
+    camera, condition = check_name(camera, "camera"), check_name(condition, "condition")
+    if odom_topic is None and pose_topic is None:
+        raise ValueError("give the odometry topic (odom_topic=, --odom-topic), the ground-truth pose topic "
+                         "(pose_topic=, --pose-topic) or both: the images need poses")
+    out = Path(out)
+    if out.is_dir() and any(out.iterdir()) and not overwrite:
+        raise FileExistsError(f"{out} is not empty; pass overwrite=True (--overwrite) to replace it")
+    plans = [_plan(p, r, image_topic, odom_topic, pose_topic, time, outside, max_gap) for p, r in zip(paths, runs)]
+    for plan in plans:
+        for note in plan.notes:
+            log(note if len(plans) == 1 else f"{plan.path.name}: {note}")
+    meta = {"source": "rosbag", "time": "header stamps" if time == "header" else "bag record times",
+            "interpolation": "linear on timestamps, heading along the shorter arc", "max_gap_s": max_gap,
+            "outside": outside, "images_left_out": sum(p.report["images_left_out"] for p in plans),
+            "bags": [p.report for p in plans]}
+    total = sum(int(p.keep.sum()) for p in plans)
+    bar = progress_bar(progress, total, "importing")
+    shape: list[Any] = []
+    frame = 0
+    try:
+        with DatasetWriter(out, meta, overwrite=overwrite) as w:
+            for plan in plans:
+                frame = _write_images(plan, w, frame, camera, condition, shape, bar)
+    finally:
+        if bar is not None:
+            bar.close()
     return Dataset(out)
