@@ -168,7 +168,8 @@ def test_images_no_pose_covers_are_an_error_or_dropped_or_kept_empty(tmp_path):
     ds = Dataset.from_bag(bag, tmp_path / "c", odom_topic="/odom", pose_topic="/gt", outside="drop", log=notes.append)
     t = ds.timestamps - T0
     assert np.all((t >= 1.0) & (t <= 8.9)) and not np.any((t > 3.8) & (t < 7.0))
-    assert ds.metadata["bags"][0]["poses"]["ground_truth"]["gap_intervals_s"] == [[pytest.approx(T0 + 3.8), pytest.approx(T0 + 7.0)]]
+    gaps = ds.metadata["bags"][0]["poses"]["ground_truth"]["gap_intervals_s"]
+    assert gaps == [[pytest.approx(T0 + 3.8), pytest.approx(T0 + 7.0)]]
     assert any("/gt: 1 gap(s) longer than 1.0 s" in n for n in notes)
     ds = Dataset.from_bag(bag, tmp_path / "d", odom_topic="/odom", pose_topic="/gt", outside="empty",
                           log=lambda m: None)
@@ -315,7 +316,8 @@ def test_an_undecodable_image_is_named_and_leaves_no_dataset(tmp_path):
                                                            format="jpeg" if k == 3 else "png",
                                                            data=broken if k == 3 else png)
                 w.write(cam, int((t + 0.5) * 1e9), store.serialize_ros1(img, "sensor_msgs/msg/CompressedImage"))
-    with pytest.raises(ValueError, match=r"image 3 of /cam in .*bad.bag: cannot decode the compressed image \(jpeg, 21 bytes\)"):
+    with pytest.raises(ValueError, match=r"image 3 of /cam in .*bad.bag: cannot decode the compressed image "
+                                         r"\(jpeg, 21 bytes\)"):
         Dataset.from_bag(bag, tmp_path / "ds", odom_topic="/odom", log=lambda m: None)
     assert not (tmp_path / "ds" / "metadata.json").exists()
 
@@ -353,7 +355,8 @@ def test_raw_encodings_with_padded_rows():
     v16 = rng.integers(0, 65536, (5, 7)).astype(np.uint16)
     for big in (0, 1):
         raw = v16.astype(">u2" if big else "<u2").view(np.uint8)
-        np.testing.assert_array_equal(decode_image(image_msg("mono16", 5, 7, raw, 14, big)), (v16 >> 8).astype(np.uint8))
+        np.testing.assert_array_equal(decode_image(image_msg("mono16", 5, 7, raw, 14, big)),
+                                      (v16 >> 8).astype(np.uint8))
     with pytest.raises(ValueError, match="encoding 'bayer_rggb8' is not supported"):
         decode_image(image_msg("bayer_rggb8", 5, 7, np.zeros(35), 7))
     with pytest.raises(ValueError, match="a 7x5 rgb8 image needs 21 bytes a row"):
@@ -405,7 +408,8 @@ def test_estimates_replay_as_pose_stamped_and_odometry(tmp_path, name):
         for c, ns, raw in r.messages():
             m = r.deserialize(raw, c.msgtype)
             got.setdefault((c.topic, c.msgtype), []).append((ns, m))
-    assert set(got) == {("/sfanav/estimate", "geometry_msgs/msg/PoseStamped"), ("/sfanav/fused", "nav_msgs/msg/Odometry")}
+    assert set(got) == {("/sfanav/estimate", "geometry_msgs/msg/PoseStamped"),
+                        ("/sfanav/fused", "nav_msgs/msg/Odometry")}
     est = got[("/sfanav/estimate", "geometry_msgs/msg/PoseStamped")]
     assert [ns for ns, _ in est] == [int(round(v * 1e9)) for v in np.delete(t, 2)]
     assert [(m.pose.position.x, m.pose.position.y) for _, m in est] == [tuple(v) for v in np.delete(xy, 2, 0)]
@@ -423,7 +427,8 @@ def test_bag_info_lists_topics_types_and_counts(runs, tmp_path):
     info = bag_info(bag)
     assert info.ros == 2 and info.start == pytest.approx(T0 + runs["panorama"].select(run="test").timestamps[0])
     assert [(t.name, t.msgtype, t.count) for t in info.topics] == [
-        ("/camera/image", "sensor_msgs/msg/CompressedImage", 20), ("/ground_truth", "geometry_msgs/msg/PoseStamped", 20),
+        ("/camera/image", "sensor_msgs/msg/CompressedImage", 20),
+        ("/ground_truth", "geometry_msgs/msg/PoseStamped", 20),
         ("/odom", "nav_msgs/msg/Odometry", 20)]
     text = info.describe()
     assert "sensor_msgs/msg/CompressedImage" in text and str(Path(bag)) in text

@@ -16,8 +16,9 @@ def _add_import(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p = sub.add_parser(
         "import",
         help="a robot's ROS bags (images, odometry, ground truth) as a dataset",
-        description=wrap("Import recorded runs from ROS bags as an sfanav dataset, one run per bag: a ROS 1 .bag, "
-                         "a ROS 2 bag folder (SQLite or MCAP) or a .db3 / .mcap file, read with the pure-Python rosbags "
+        description=wrap("Import recorded runs from ROS bags as an sfanav dataset, one run per bag: a ROS 1 "
+                         ".bag, a ROS 2 bag folder (SQLite or MCAP) or a .db3 / .mcap file, read with the "
+                         "pure-Python rosbags "
                          "(pip install \"sfanav[ros]\"; no ROS installation). Images (sensor_msgs/Image rgb8, "
                          "bgr8, mono8, ...; sensor_msgs/CompressedImage JPEG or PNG, kept as they are) are "
                          "written as they come, omnidirectional ones unchanged for the unwarping of train and "
