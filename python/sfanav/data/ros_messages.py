@@ -21,6 +21,7 @@ versions, as ``rosbags`` reports them.
 
 from __future__ import annotations
 
+import functools
 import math
 from typing import Any
 
@@ -73,11 +74,16 @@ def require_rosbags() -> Any:
 
 
 def typestore(ros: int) -> Any:
-    """The ``rosbags`` type store of ROS 1 (Noetic) or ROS 2 (Humble)."""
-    from rosbags.typesys import Stores, get_typestore
-
+    """The ``rosbags`` type store of ROS 1 (Noetic) or ROS 2 (Humble), made once."""
     if ros not in (1, 2):
         raise ValueError(f"ros must be 1 or 2, got {ros!r}")
+    return _typestore(ros)
+
+
+@functools.lru_cache(maxsize=2)
+def _typestore(ros: int) -> Any:
+    from rosbags.typesys import Stores, get_typestore
+
     return get_typestore(Stores.ROS1_NOETIC if ros == 1 else Stores.ROS2_HUMBLE)
 
 

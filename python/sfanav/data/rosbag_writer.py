@@ -42,7 +42,8 @@ def stamp_ns(t: Any, what: str = "timestamp") -> int:
         raise TypeError(f"{what} must be a number of seconds, got {t!r}") from None
     if not math.isfinite(v) or v < 0:
         raise ValueError(f"{what} must be a finite number of seconds >= 0, got {t!r}")
-    return int(round(v * 1e9))
+    sec = math.floor(v)  # whole seconds apart: v * 1e9 would round Unix times to 256 ns
+    return int(sec) * 1_000_000_000 + int(round((v - sec) * 1e9))
 
 
 class BagWriter:
