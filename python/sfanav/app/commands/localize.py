@@ -31,8 +31,8 @@ def _add_localize(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("model", metavar="MODEL", help="model file from sfanav train")
     p.add_argument("input", metavar="INPUT", help="dataset directory, image folder or video file")
     p.add_argument("--out", required=True, action="append", metavar="CSV|BAG",
-                   help="file to write: a CSV (frame,x,y), or a ROS bag NAME.bag (ROS 1) or NAME.mcap (ROS 2, "
-                        "needs pip install \"sfanav[ros]\"); give --out twice for both")
+                   help="file to write: a CSV (frame,x,y), or a ROS bag, NAME.bag (ROS 1) or NAME.mcap (ROS 2) "
+                        "(needs pip install \"sfanav[ros]\"); give --out twice for both")
     p.add_argument("--frame-id", default="map", metavar="FRAME",
                    help="frame_id of the poses in a bag (default map)")
     p.add_argument("--run", dest="run_name", default=None, metavar="RUN", help="only this run of a dataset (default: all images)")
