@@ -42,6 +42,17 @@ def pos_int(text: str) -> int:
     return v
 
 
+def pos_float(text: str) -> float:
+    """A finite number > 0."""
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not (math.isfinite(v) and v > 0):
+        raise argparse.ArgumentTypeError(f"expected a finite number > 0, got {text!r}")
+    return v
+
+
 def fraction(text: str) -> float:
     """A fraction in (0, 1] ("0.6") or a percentage with its sign ("60%")."""
     t = text.strip()

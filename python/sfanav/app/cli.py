@@ -4,10 +4,12 @@ Subcommands:
 
 * ``sfanav simulate --preset NAME --out DIR [--seed N]``: a dataset from the
   built-in garden simulator.
+* ``sfanav import BAG [BAG ...] --odom-topic T --out DIR``: a robot's ROS
+  bags (images, odometry, ground truth) as a dataset, one run per bag.
 * ``sfanav train --dataset DIR --preset NAME|--config FILE --out MODEL``:
   train a network under simulated rotation and the regression to metres.
-* ``sfanav localize MODEL INPUT --out CSV``: positions of a dataset, an image
-  folder or a video, one CSV row ``frame,x,y`` per image.
+* ``sfanav localize MODEL INPUT --out CSV|BAG``: positions of a dataset, an
+  image folder or a video, one CSV row ``frame,x,y`` per image, or a ROS bag.
 * ``sfanav evaluate MODEL DATASET --out DIR``: metrics, baselines, plots and a
   Markdown report.
 * ``sfanav navigate MODEL DATASET --start X,Y --target X,Y --out DIR``: drive

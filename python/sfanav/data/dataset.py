@@ -430,6 +430,104 @@ class Dataset:
                            camera=cols["camera"][i], condition=cols["condition"][i])
         return Dataset(out)
 
+    @classmethod
+    def from_bag(cls, bag: str | os.PathLike | Sequence[str | os.PathLike], out: str | os.PathLike, *,
+                 image_topic: str | None = None, odom_topic: str | None = None, pose_topic: str | None = None,
+                 run: str | Sequence[str] | None = None,
+                 camera: str = "center", condition: str = "default", time: str = "header",
+                 outside: str = "error", max_gap: float = 1.0, overwrite: bool = False, progress: bool = False,
+                 log: Any = None) -> "Dataset":
+        """Imports a robot's recorded runs from ROS bags (one run per bag) as
+        an sfanav dataset at ``out`` and returns it opened.
+
+        Reads ROS 1 bags (``.bag``), ROS 2 bag folders (SQLite or MCAP) and
+        single ``.db3`` / ``.mcap`` files with the pure-Python ``rosbags``
+        (``pip install "sfanav[ros]"``; no ROS installation). Images are
+        decoded (``sensor_msgs/Image`` in ``rgb8``, ``bgr8``, ``mono8``,
+        ``rgba8``, ``bgra8``, ``mono16``; ``sensor_msgs/CompressedImage``
+        JPEG or PNG, kept as they are) and not altered otherwise:
+        omnidirectional images stay omnidirectional for the unwarping of
+        training and localization. Each image gets the odometry and the
+        ground truth linearly interpolated at its timestamp, the heading (the
+        quaternion's yaw) along the shorter arc, as :meth:`from_recording`
+        does. The import streams (bounded memory) and is atomic: an
+        interrupted import leaves no dataset a later command takes for
+        complete.
+
+        Parameters
+        ----------
+        bag : path or sequence of paths
+            A ROS 1 ``.bag``, a ROS 2 bag folder, or a ``.db3`` / ``.mcap``
+            file; several bags become several runs of one dataset (the
+            topics and options apply to each).
+        out : path
+            The dataset to write (a new or empty folder, unless ``overwrite``).
+        image_topic : str, optional
+            ``sensor_msgs/Image`` or ``sensor_msgs/CompressedImage`` topic;
+            default: the bag's only image topic.
+        odom_topic : str, optional
+            Wheel odometry (``nav_msgs/Odometry``, or a pose type): the
+            ``odom_x, odom_y, odom_heading`` columns.
+        pose_topic : str, optional
+            Ground truth (``geometry_msgs/PoseStamped``,
+            ``geometry_msgs/PoseWithCovarianceStamped`` or
+            ``nav_msgs/Odometry``): the ``x, y, heading`` columns (empty
+            without it). At least one of ``odom_topic`` and ``pose_topic``.
+        run : str or sequence of str, optional
+            The run's name (one per bag); default ``0`` for one bag, else the
+            bags' file names without suffix.
+        camera, condition : str
+            Names of the images' camera and recording condition.
+        time : ``"header"`` or ``"bag"``
+            The messages' header stamps (default), or the times the bag
+            recorded them (for drivers that leave the stamps at 0).
+        outside : ``"error"``, ``"drop"`` or ``"empty"``
+            What to do with images no pose covers (before a pose topic's first
+            message, after its last, or in a gap between two messages longer
+            than ``max_gap``): raise (default), leave them out, or keep them
+            with that pose empty (NaN; never zeros).
+        max_gap : float
+            Longest interval (s) between two pose messages that is
+            interpolated across (default 1).
+        progress : bool
+            A progress bar.
+        log : callable, optional
+            Receives the notes (gaps, images left out); default stderr.
+
+        Returns
+        -------
+        Dataset
+            Timestamps in seconds (the bag's clock), positions in metres and
+            headings in radians in the frames of the pose topics.
+
+        Raises
+        ------
+        FileNotFoundError
+            No bag at ``bag``.
+        ValueError
+            A missing topic, unsorted or missing (0) stamps, images no pose
+            covers (``outside="error"``), an undecodable image, a truncated
+            or damaged bag; ``out`` not empty (FileExistsError).
+        TypeError
+            A topic of the wrong message type.
+        ImportError
+            Without ``rosbags``.
+
+        Examples
+        --------
+        >>> ds = Dataset.from_bag(["run1.bag", "run2.bag"], "garden", image_topic="/camera/image_raw",
+        ...                       odom_topic="/odom", run=["train", "test"])  # doctest: +SKIP
+        >>> ds.select(run="train").odometry.shape                           # doctest: +SKIP
+        (5000, 3)
+        """
+        from .._progress import stderr_log
+        from .rosbag import import_bag
+
+        return import_bag(bag, out, image_topic=image_topic, odom_topic=odom_topic, pose_topic=pose_topic,
+                          run=run, camera=camera, condition=condition, time=time, outside=outside,
+                          max_gap=max_gap, overwrite=overwrite, progress=progress,
+                          log=stderr_log if log is None else log)
+
 
 def _interp_angle(t: np.ndarray, tp: np.ndarray, ang: np.ndarray) -> np.ndarray:
     """Linear interpolation of angles (rad) along the shorter arc, wrapped to [-pi, pi)."""

@@ -31,7 +31,9 @@ class ImageSource:
     order; ``frames`` are their ids (dataset frame ids, else 0, 1, ...);
     ``xy`` the ground truth (datasets only, else None; NaN where unknown);
     ``odometry`` the odometry poses (N, 3) (datasets only, else None; NaN
-    where unknown); ``n`` the count if known."""
+    where unknown); ``timestamps`` the images' times in seconds (datasets
+    only, else None; :meth:`times` also covers videos); ``fps`` a video's
+    frame rate; ``n`` the count if known."""
 
     kind: str
     description: str
@@ -40,9 +42,20 @@ class ImageSource:
     xy: np.ndarray | None
     _batches: Callable[[int], Iterator[np.ndarray]]
     odometry: np.ndarray | None = None
+    timestamps: np.ndarray | None = None
+    fps: float | None = None
 
     def batches(self, batch_size: int = 64) -> Iterator[np.ndarray]:
         return self._batches(check_int(batch_size, "batch_size"))
+
+    def times(self, n: int) -> np.ndarray | None:
+        """The times (s) of the first ``n`` images: a dataset's timestamps, a
+        video's frame index / frame rate, else None (an image folder)."""
+        if self.timestamps is not None:
+            return self.timestamps[:n]
+        if self.fps:
+            return np.arange(n) / self.fps
+        return None
 
 
 def _is_dataset_dir(p: Path) -> bool:
@@ -92,7 +105,7 @@ def open_images(path: str | os.PathLike, *, run: str | None = None, camera: str 
                 return ds.images(batch_size=bs, gray=gray)
 
             return ImageSource("dataset", f"dataset {p} ({len(ds)} images)", len(ds), ds.frames.copy(),
-                               ds.poses[:, :2].copy(), ds_batches, ds.odometry.copy())
+                               ds.poses[:, :2].copy(), ds_batches, ds.odometry.copy(), ds.timestamps.astype(float))
         if run is not None:
             raise ValueError(f"--run applies to datasets; {p} is an image folder")
         files = sorted(f for f in p.iterdir() if f.is_file() and f.suffix.lower() in IMAGE_SUFFIXES)
@@ -121,6 +134,7 @@ def open_images(path: str | os.PathLike, *, run: str | None = None, camera: str 
     cap = cv2.VideoCapture(str(p))
     ok = cap.isOpened()
     count = int(cap.get(cv2.CAP_PROP_FRAME_COUNT) or 0) if ok else 0
+    fps = float(cap.get(cv2.CAP_PROP_FPS) or 0.0) if ok else 0.0
     cap.release()
     if not ok:
         raise ValueError(f"{p} is not a dataset, an image folder or a video OpenCV can read")
@@ -142,7 +156,8 @@ def open_images(path: str | os.PathLike, *, run: str | None = None, camera: str 
         if buf:
             yield np.stack(buf)
 
-    return ImageSource("video", f"video {p} (~{count} frames)", count or None, None, None, video_batches)
+    return ImageSource("video", f"video {p} (~{count} frames)", count or None, None, None, video_batches,
+                       fps=fps if 0 < fps < 10_000 else None)
 
 
 def load_run(ds: Dataset, prep: Preprocessing, *, mirror: Any = None, log: Log = stderr_log,

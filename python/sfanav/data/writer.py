@@ -100,6 +100,26 @@ class DatasetWriter:
         self._write_row(key, run, t, pose_v, odo, condition, rel, extra)
         return rel
 
+    def add_encoded(self, data: bytes, suffix: str, *, shape: Sequence[int], frame: int, timestamp: float,
+                    pose: Sequence[float], odometry: Sequence[float] | None = None, camera: str = "center",
+                    condition: str = "default", run: str = "0", **extra: Any) -> str:
+        """Writes an image that is already an image file's bytes (``suffix``
+        ``.png`` or ``.jpg``, e.g. a compressed camera message kept as it is)
+        with its row; ``shape`` is the decoded image's shape. Pose and
+        odometry entries may be NaN (unknown, written as empty cells).
+        Returns the image's relative path."""
+        if suffix not in (".png", ".jpg"):
+            raise ValueError(f"suffix must be '.png' or '.jpg', got {suffix!r}")
+        key, camera, condition, run, t = self._check_row(frame, timestamp, camera, condition, run, extra)
+        pose_v = _triple(pose, "pose", allow_nan=True)
+        odo = _triple(odometry, "odometry", allow_nan=True) if odometry is not None else (math.nan,) * 3
+        rel = f"images/{int(frame):06d}_{camera}{suffix}"
+        with open(self.path / rel, "wb") as f:
+            f.write(data)
+        self._shapes.setdefault(camera, [int(s) for s in shape])
+        self._write_row(key, run, t, pose_v, odo, condition, rel, extra)
+        return rel
+
     def _check_row(self, frame: Any, timestamp: Any, camera: Any, condition: Any, run: Any,
                    extra: dict[str, Any]) -> tuple[tuple[int, str], str, str, str, float]:
         if self._file.closed:

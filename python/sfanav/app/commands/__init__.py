@@ -5,6 +5,7 @@ with :func:`sfanav.app.registry.command`."""
 # the import order is the order of the subcommands in the help
 
 from . import simulate  # noqa: F401
+from . import bag_import  # noqa: F401
 from . import train  # noqa: F401
 from . import localize  # noqa: F401
 from . import navigate  # noqa: F401

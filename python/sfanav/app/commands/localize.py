@@ -17,16 +17,24 @@ def _add_localize(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
         help="estimate x, y for every image of a dataset, an image folder or a video",
         description=wrap("Localize every image of INPUT with a trained model: a dataset directory, a folder of "
                     "images (png, jpg, ...; sorted by name) or a video file. Writes a CSV with columns "
-                    "frame,x,y (frame: the dataset's frame id, else the image's index; x, y in metres). "
+                    "frame,x,y (frame: the dataset's frame id, else the image's index; x, y in metres), or "
+                    "a ROS bag (--out NAME.bag for ROS 1, NAME.mcap for ROS 2) that replays in rviz, Foxglove "
+                    "or PlotJuggler: geometry_msgs/PoseStamped on /sfanav/estimate and, with --odometry, the "
+                    "fused track as nav_msgs/Odometry on /sfanav/fused, stamped with the images' times. "
                     "Images are converted as the model was trained: panoramas of another size are resized, "
                     "omnidirectional (mirror) images unwarped with --mirror or an estimated mirror, and "
                     "a message says which."),
-        epilog="example:\n  sfanav localize garden.sfa garden --run test --out test.csv",
+        epilog="example:\n  sfanav localize garden.sfa garden --run test --out test.csv\n"
+               "  sfanav localize robot.sfa run2 --odometry --out estimates.bag --out estimates.csv",
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("model", metavar="MODEL", help="model file from sfanav train")
     p.add_argument("input", metavar="INPUT", help="dataset directory, image folder or video file")
-    p.add_argument("--out", required=True, metavar="CSV", help="CSV file to write (frame,x,y)")
+    p.add_argument("--out", required=True, action="append", metavar="CSV|BAG",
+                   help="file to write: a CSV (frame,x,y), or a ROS bag, NAME.bag (ROS 1) or NAME.mcap (ROS 2) "
+                        "(needs pip install \"sfanav[ros]\"); give --out twice for both")
+    p.add_argument("--frame-id", default="map", metavar="FRAME",
+                   help="frame_id of the poses in a bag (default map)")
     p.add_argument("--run", dest="run_name", default=None, metavar="RUN", help="only this run of a dataset (default: all images)")
     p.add_argument("--camera", default=None, metavar="NAME", help="camera of a multi-camera dataset")
     p.add_argument("--mirror", default=None, metavar="CX,CY,INNER,OUTER",
@@ -51,6 +59,8 @@ def _run_localize(args: argparse.Namespace) -> int:
 
     from ..._progress import progress_bar
     from ...data.preprocessing import Preprocessing, Preprocessor
+    from ...data.ros_messages import require_rosbags
+    from ...data.rosbag_writer import BAG_SUFFIXES, write_estimates
     from ...data.sources import open_images
     from ...localization.error_metrics import med
     from ...odometry.fusion import fuse
@@ -59,8 +69,16 @@ def _run_localize(args: argparse.Namespace) -> int:
     if args.rotations and loc.rotation_pooling_ > 1:
         raise UsageError(f"{args.model} averages its features over {loc.rotation_pooling_} rotations already "
                           "(rotation pooling): --rotations applies to models without it")
-    out = new_file(args.out, args.overwrite, "CSV")
+    outs = [new_file(o, args.overwrite, "output") for o in args.out]
+    if len({o.resolve() for o in outs}) != len(outs):
+        raise UsageError("--out names the same file twice")
+    bags = [o for o in outs if o.suffix.lower() in BAG_SUFFIXES]
+    if bags:
+        require_rosbags()
     src = open_images(args.input, run=args.run_name, camera=args.camera)
+    if bags and src.timestamps is None and src.fps is None:
+        raise UsageError(f"a bag needs the images' times: {args.input} is an image folder without them; localize "
+                         "a dataset (sfanav import makes one from a bag) or a video, or write a CSV")
     if args.odometry:
         if src.odometry is None or not np.isfinite(src.odometry).all():
             raise UsageError(f"--odometry needs a dataset with odometry (odom_x, odom_y, odom_heading) for every "
@@ -86,15 +104,20 @@ def _run_localize(args: argparse.Namespace) -> int:
     fused = None
     if args.odometry:
         fused = fuse(src.odometry, xy, loc.info["ekf_noise"])
-    tmp = out.with_name(out.name + ".part")
-    with open(tmp, "w", newline="") as f:
-        w = csv.writer(f)
-        w.writerow(["frame", "x", "y"] + (["fused_x", "fused_y", "fused_heading"] if fused is not None else []))
-        for i, (fr, (x, y)) in enumerate(zip(frames, xy)):
-            extra = [f"{v:.4f}" for v in fused[i]] if fused is not None else []
-            w.writerow([int(fr), f"{x:.4f}", f"{y:.4f}"] + extra)
-    tmp.replace(out)
-    msg = f"wrote {len(xy)} positions" + (" and the fused track" if fused is not None else "") + f" to {out}"
+    for out in outs:
+        if out in bags:
+            write_estimates(out, src.times(len(xy)), xy, fused, frame_id=args.frame_id, overwrite=True)
+            continue
+        tmp = out.with_name(out.name + ".part")
+        with open(tmp, "w", newline="") as f:
+            w = csv.writer(f)
+            w.writerow(["frame", "x", "y"] + (["fused_x", "fused_y", "fused_heading"] if fused is not None else []))
+            for i, (fr, (x, y)) in enumerate(zip(frames, xy)):
+                extra = [f"{v:.4f}" for v in fused[i]] if fused is not None else []
+                w.writerow([int(fr), f"{x:.4f}", f"{y:.4f}"] + extra)
+        tmp.replace(out)
+    msg = (f"wrote {len(xy)} positions" + (" and the fused track" if fused is not None else "")
+           + f" to {' and '.join(str(o) for o in outs)}")
     if loc.info.get("supervision") == "odometry":
         msg += " (metres in the training run's odometry frame)"
     elif src.xy is not None and np.isfinite(src.xy).all():
