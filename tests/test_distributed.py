@@ -73,20 +73,31 @@ def _n_samples(net):
             for node in layer for st in node["stages"]]
 
 
-def assert_same_fit(a, b, tol=1e-9, weight_tol=None, images=IMAGES, weights=True):
+def assert_same_fit(a, b, tol=1e-9, weight_tol=None, images=IMAGES):
     """Node weights and transform outputs agree to ``tol`` relative (the
-    weights to ``weight_tol`` where the problem itself is ill-conditioned;
-    not at all with ``weights=False``, for fits whose nodes have degenerate
-    delta values, where the eigenvectors are any basis of their subspace)."""
+    weights to ``weight_tol`` where the problem itself is ill-conditioned)."""
     wa, wb = _weights(a), _weights(b)
     assert len(wa) == len(wb) and wa
-    if weights:
-        assert _rel(wa, wb) < (weight_tol or tol), _rel(wa, wb)
+    assert _rel(wa, wb) < (weight_tol or tol), _rel(wa, wb)
     assert _n_samples(a) == _n_samples(b) and _n_pairs(a) == _n_pairs(b)
     ya, yb = a.transform(images), b.transform(images)
     assert np.max(np.abs(ya - yb)) / np.max(np.abs(ya)) < tol
     da, db = a.delta_values_, b.delta_values_
     np.testing.assert_allclose(da, db, rtol=tol, atol=tol * np.max(np.abs(da)))
+
+
+def assert_same_features(a, b, tol=1e-9):
+    """For fits whose top node has equal delta values (separate recordings
+    give features constant within each recording, delta 0): the same delta
+    values and the same feature space, the outputs one orthogonal basis
+    change apart (within the equal-delta blocks), and the same counts."""
+    da, db = a.delta_values_, b.delta_values_
+    np.testing.assert_allclose(da, db, rtol=tol, atol=tol * np.max(np.abs(da)))
+    ya, yb = a.transform(IMAGES), b.transform(IMAGES)
+    r, *_ = np.linalg.lstsq(ya, yb, rcond=None)
+    assert np.max(np.abs(ya @ r - yb)) / np.max(np.abs(yb)) < tol
+    np.testing.assert_allclose(r @ r.T, np.eye(len(r)), atol=1e-6)
+    assert _n_samples(a) == _n_samples(b) and _n_pairs(a) == _n_pairs(b)
 
 
 @pytest.fixture(scope="module")
@@ -131,17 +142,15 @@ def test_transition_weight_and_naive_path(tw, fast):
 
 
 def test_breaks_wherever_they_fall():
-    # (with this break the top node's reduction has pairs of equal delta
-    # values, 6e-13 apart: its weights are any basis of those planes, so
-    # the fits are compared by outputs, delta values and counts)
+    # (separate recordings make equal delta values: the fits are compared by
+    # their feature spaces, delta values and counts)
     at_cut = distributed_fit(Network(TINY), np.split(IMAGES, [12, 20]), ROT, breaks=[20])
     inside = distributed_fit(Network(TINY), np.split(IMAGES, [12]), ROT, breaks=[20])
     whole = distributed_fit(Network(TINY), IMAGES, ROT, breaks=[20])
-    assert_same_fit(at_cut, inside, weights=False)
-    assert_same_fit(at_cut, whole, weights=False)
+    assert_same_features(at_cut, inside)
+    assert_same_features(at_cut, whole)
     # every partition its own recording = breaks at the partition starts
-    assert_same_fit(distributed_fit(Network(TINY), np.split(IMAGES, [20]), ROT, breaks="partitions"), whole,
-                    weights=False)
+    assert_same_features(distributed_fit(Network(TINY), np.split(IMAGES, [20]), ROT, breaks="partitions"), whole)
     unbroken = distributed_fit(Network(TINY), np.split(IMAGES, [12, 20]), ROT)
     ya, yb = at_cut.transform(IMAGES), unbroken.transform(IMAGES)
     assert np.max(np.abs(np.abs(ya) - np.abs(yb))) > 1e-3
@@ -217,7 +226,7 @@ def test_dask_array_and_breaks(client, reference):
     assert_same_fit(reference, distributed_fit(Network(TINY), arr, ROT, client=client))
     local = distributed_fit(Network(TINY), np.split(IMAGES, [10]), ROT, breaks=[10, 22])
     on_cluster = distributed_fit(Network(TINY), arr, ROT, client=client, breaks=[10, 22])
-    assert_same_fit(local, on_cluster, weights=False)  # (degenerate delta values possible, see above)
+    assert_same_features(local, on_cluster)
 
 
 def _slow_block(path, lo, hi, log):

@@ -341,7 +341,7 @@ def fit(network: Any, images: Any, rotation: Any = None, *, client: Any = None, 
     batch_size = check_int(batch_size, "batch_size")
     if n_partitions is not None:
         n_partitions = check_int(n_partitions, "n_partitions")
-    elif client is not None:
+    elif client is not None and (isinstance(images, (np.ndarray, str, os.PathLike)) or _is_dataset(images)):
         n_partitions = max(1, len(client.scheduler_info().get("workers", {})))
     dask_array = _is_dask_array(images)
     if dask_array:
@@ -416,21 +416,23 @@ class _DaskRunner:
         if not isinstance(client, Client):
             raise TypeError(f"client must be a dask.distributed.Client, got {type(client).__name__}")
         self.client = client
-        self.array = array
         self.parts = parts
         self.token = uuid.uuid4().hex[:8]
+        self.inputs = self._inputs(array)
 
-    def _inputs(self) -> list[tuple[Any, Any]]:
-        """Per partition: (data, prev) as futures for a Dask array (recomputed
-        by Dask from the array's graph if a worker holding them dies), else
-        (None, None): the task reads its source itself."""
-        if self.array is None:
+    def _inputs(self, array: Any) -> list[tuple[Any, Any]]:
+        """Per partition: (data, prev). For a Dask array, futures of its
+        blocks and of the frames before them, computed once for the whole
+        fit (Dask recomputes them from the array's graph if a worker holding
+        them dies; submitting the same keys again in every pass races with
+        their release). Else (None, None): the task reads its source."""
+        if array is None:
             return [(None, None)] * len(self.parts)
-        blocks = self.array.to_delayed().ravel().tolist()
+        blocks = array.to_delayed().ravel().tolist()
         data = self.client.compute(blocks)
         out = []
         for p, d in zip(self.parts, data):
-            prev = self.client.compute(self.array[p.start - 1 : p.start]) if p.continues else None
+            prev = self.client.compute(array[p.start - 1 : p.start]) if p.continues else None
             out.append((d, prev))
         return out
 
@@ -441,7 +443,7 @@ class _DaskRunner:
         tag = f"{self.token}-l{job.layer}p{job.pass_}"
         [net_f] = c.scatter([net_bytes], broadcast=True, hash=False)
         [job_f] = c.scatter([job], broadcast=True, hash=False)
-        inputs = self._inputs()
+        inputs = self.inputs
         futures = [
             c.submit(_partition_statistics, net_f, job_f, p, d, q, key=f"sfanav-partition-{tag}-{p.index}", pure=False)
             for p, (d, q) in zip(self.parts, inputs)
@@ -462,8 +464,7 @@ class _DaskRunner:
         try:
             return level[0].result()
         finally:
-            del futures, level, inputs
-            c.cancel([net_f, job_f])
+            del futures, level, net_f, job_f  # released, not cancelled (a rerun task may still need them)
 
     def close(self) -> None:
-        pass
+        self.inputs = []
