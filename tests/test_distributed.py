@@ -86,14 +86,14 @@ def assert_same_fit(a, b, tol=1e-9, weight_tol=None, images=IMAGES):
     np.testing.assert_allclose(da, db, rtol=tol, atol=tol * np.max(np.abs(da)))
 
 
-def assert_same_features(a, b, tol=1e-9):
+def assert_same_features(a, b, tol=1e-9, images=IMAGES):
     """For fits whose top node has equal delta values (separate recordings
     give features constant within each recording, delta 0): the same delta
     values and the same feature space, the outputs one orthogonal basis
     change apart (within the equal-delta blocks), and the same counts."""
     da, db = a.delta_values_, b.delta_values_
     np.testing.assert_allclose(da, db, rtol=tol, atol=tol * np.max(np.abs(da)))
-    ya, yb = a.transform(IMAGES), b.transform(IMAGES)
+    ya, yb = a.transform(images), b.transform(images)
     r, *_ = np.linalg.lstsq(ya, yb, rcond=None)
     assert np.max(np.abs(ya @ r - yb)) / np.max(np.abs(yb)) < tol
     np.testing.assert_allclose(r @ r.T, np.eye(len(r)), atol=1e-6)
@@ -166,6 +166,27 @@ def test_partition_links():
         partitions_of([IMAGES], breaks=[N])
 
 
+def _dataset(path, images, runs):
+    from sfanav.data.dataset import Dataset
+    from sfanav.data.writer import DatasetWriter
+
+    with DatasetWriter(path) as w:
+        for i, (img, run) in enumerate(zip(images, runs)):
+            w.add(img, frame=i, timestamp=float(i), pose=(0.1 * i, 0.0, 0.0), run=run)
+    return Dataset(path)
+
+
+def test_dataset_frames_with_runs_as_recordings(tmp_path):
+    u8 = (IMAGES * 255).astype(np.uint8)
+    ds = _dataset(tmp_path / "ds", u8, ["a"] * 20 + ["b"] * 16)
+    parts = partitions_of(ds, n_partitions=3)
+    assert [(p.start, p.n, p.continues, p.breaks) for p in parts] == [(0, 12, False, ()), (12, 12, True, (8,)),
+                                                                      (24, 12, True, ())]
+    net = distributed_fit(Network(TINY), ds, ROT, n_partitions=3)
+    local = distributed_fit(Network(TINY), np.split(u8, [20]), ROT, breaks="partitions")
+    assert_same_features(local, net, images=u8)
+
+
 def test_bad_partition_is_named(tmp_path):
     bad = IMAGES.copy()
     bad[23, 2, 5, 1] = np.nan
@@ -227,6 +248,13 @@ def test_dask_array_and_breaks(client, reference):
     local = distributed_fit(Network(TINY), np.split(IMAGES, [10]), ROT, breaks=[10, 22])
     on_cluster = distributed_fit(Network(TINY), arr, ROT, client=client, breaks=[10, 22])
     assert_same_features(local, on_cluster)
+
+
+def test_dask_dataset(client, tmp_path):
+    u8 = (IMAGES * 255).astype(np.uint8)
+    ds = _dataset(tmp_path / "ds", u8, ["a"] * 36)
+    ref = Network(TINY).fit(u8, ROT, progress=False)
+    assert_same_fit(ref, Network(TINY).fit(ds, ROT, client=client), images=u8)  # one partition per worker
 
 
 def _slow_block(path, lo, hi, log):

@@ -46,7 +46,7 @@ from typing import Any
 import numpy as np
 
 from .. import _core
-from .._checks import as_image_batch, check_int
+from .._checks import as_image_batch, check_int, check_nonneg_float
 from .._progress import progress_bar
 
 __all__ = ["fit", "Partition", "partitions_of"]
@@ -267,7 +267,7 @@ def _partition_statistics(net_bytes: bytes, job: _Job, part: Partition, data: An
         if "partition" not in msg:
             msg = f"{part.describe()}: {msg}"
         raise type(exc)(msg) from exc
-    return [Statistics._wrap(s) for s in stats], int(tr.images_seen)
+    return [Statistics.from_core(s) for s in stats], int(tr.images_seen)
 
 
 def _merge(a: tuple[list[Any], int], b: tuple[list[Any], int]) -> tuple[list[Any], int]:
@@ -330,14 +330,14 @@ def fit(network: Any, images: Any, rotation: Any = None, *, client: Any = None, 
     each recording starting a new sequence). Errors in a partition name it
     and the frame.
     """
-    from .network import Network, Rotation, _check_transition_weight, _pixel_scale
+    from .network import Network, Rotation
 
     if not isinstance(network, Network):
         raise TypeError(f"network must be a sfanav.Network, got {type(network).__name__}")
     rotation = rotation or Rotation()
     if not isinstance(rotation, Rotation):
         raise TypeError("rotation must be a sfanav.Rotation")
-    transition_weight = _check_transition_weight(transition_weight)
+    transition_weight = check_nonneg_float(transition_weight, "transition_weight")
     batch_size = check_int(batch_size, "batch_size")
     if n_partitions is not None:
         n_partitions = check_int(n_partitions, "n_partitions")
@@ -396,7 +396,7 @@ def fit(network: Any, images: Any, rotation: Any = None, *, client: Any = None, 
     network._period = period
     network._step = rotation.step
     network.cache_plan_ = []
-    network.input_scale_ = _pixel_scale(first)
+    network.input_scale_ = float(max(first.max(), -float(first.min())))  # as Network.fit: the first batch's
     network.transition_weight_ = transition_weight
     network.n_pairs_ = 0
     network.n_loop_closures_ = 0
