@@ -435,6 +435,38 @@ impl SfaNode {
         Ok(())
     }
 
+    /// Adds statistics gathered elsewhere for the stage in training (e.g.
+    /// by a copy of this node fed another part of the data, exported with
+    /// [`statistics`](Self::statistics)): `stats` must have the dimension of
+    /// that stage's (expanded) input. `n_features` sets the node up if it
+    /// has not seen data yet (and must match it otherwise).
+    pub fn merge_stage_statistics(&mut self, n_features: usize, stats: &Accumulator) -> Result<()> {
+        if self.n_features.is_none() {
+            self.init(n_features)?;
+        }
+        if self.n_features != Some(n_features) {
+            return Err(SfaError::ShapeMismatch {
+                what: "number of input features of the merged statistics",
+                expected: self.n_features.unwrap_or(0),
+                got: n_features,
+            });
+        }
+        let stage = &mut self.stages[self.training_stage];
+        if stats.dim() != stage.expanded_dim() {
+            return Err(SfaError::ShapeMismatch {
+                what: "dimension of the merged statistics (the stage in training)",
+                expected: stage.expanded_dim(),
+                got: stats.dim(),
+            });
+        }
+        let acc = stage.acc.as_mut().ok_or_else(|| {
+            SfaError::NotFitted("the model was saved without training statistics; it cannot be trained further".into())
+        })?;
+        acc.merge(stats)?;
+        stage.solution = None;
+        Ok(())
+    }
+
     /// Feeds a *graph* of samples to the stage in training: every row of `x`
     /// is a sample with weight `sample_weights[i]` (default 1; 0 makes a row
     /// usable as a pair end only), and every edge `[a, b]` is a derivative

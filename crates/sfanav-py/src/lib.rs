@@ -1,6 +1,7 @@
 //! Thin pyo3 bindings of `sfa-core`, importable as `sfanav._core`.
 //!
-//! One file per Python class (`statistics.rs`, `node.rs`, `network.rs`),
+//! One file per Python class (`statistics.rs`, `node.rs`, `network.rs`,
+//! `trainer.rs`),
 //! with the glue beside them: error mapping, GIL release and panic
 //! containment (`error.rs`), NumPy conversion (`arrays.rs`), model-state
 //! dicts (`state.rs`), worker threads (`threads.rs`) and the module-level
@@ -15,6 +16,7 @@ mod node;
 mod state;
 mod statistics;
 mod threads;
+mod trainer;
 
 use pyo3::prelude::*;
 
@@ -33,5 +35,6 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<statistics::PyStatistics>()?;
     m.add_class::<node::PySfaNode>()?;
     m.add_class::<network::PyNetwork>()?;
+    m.add_class::<trainer::PyLayerTrainer>()?;
     Ok(())
 }

@@ -17,7 +17,7 @@ use std::sync::Arc;
 
 /// Borrows an image batch and checks its height and channel count against
 /// the network's input (the width is the panorama period, free).
-fn network_images<'py>(obj: &Bound<'py, PyAny>, net: &Network, what: &str) -> PyResult<Images<'py>> {
+pub(crate) fn network_images<'py>(obj: &Bound<'py, PyAny>, net: &Network, what: &str) -> PyResult<Images<'py>> {
     let images = Images::borrow(obj)?;
     let [_, h, _, c] = images.shape;
     let (eh, _, ec) = net.input_shape();

@@ -481,6 +481,8 @@ class Network:
         pair_layers: Sequence[int] | None = None,
         loop_closures: Any = None,
         closure_weights: Any = None,
+        client: Any = None,
+        breaks: Any = None,
     ) -> "Network":
         """Trains the network layer by layer, in the order the images come.
 
@@ -557,6 +559,18 @@ class Network:
             Each closure's weight in [0, 1], mixing its interleaved sequence
             with the plain rotation (None: 1, the thesis; ``"score"``: the
             detector's match confidence).
+        client : dask.distributed.Client, optional
+            Train on a Dask cluster (``pip install "sfanav[dask]"``): the
+            images (a list of arrays or ``.npy`` paths, one partition each;
+            one array or ``.npy`` path, cut into one partition per worker;
+            or a Dask array chunked along the frames) are streamed by the
+            workers, their statistics merged in a tree, each layer solved
+            here (:func:`sfanav.sfa.distributed.fit`; the same result up to
+            rounding). No field cache, spatial pairs or loop closures yet
+            (ValueError). See docs/distributed.md.
+        breaks : frame indices or ``"partitions"``, optional
+            With ``client``: frames that start a new recording (no
+            derivative pair with the frame before).
 
         Returns ``self``; ``input_scale_`` keeps the largest pixel value of
         the first training batch, and :meth:`transform` warns when images
@@ -567,6 +581,19 @@ class Network:
         comes out unchanged. The training loop runs in the Rust core
         (``sfa_core::training::fit``) with the GIL released.
         """
+        if client is not None or breaks is not None:
+            unsupported = [name for name, given in (("spatial pairs", pairs is not None),
+                                                    ("loop closures", loop_closures is not None))
+                           if given]
+            if unsupported:
+                raise ValueError(f"distributed training (client=...) does not support {' or '.join(unsupported)} "
+                                 "yet; train in one process (client=None) for them")
+            if client is None:
+                raise ValueError("breaks needs client (or call sfanav.sfa.distributed.fit with client=None)")
+            from .distributed import fit as distributed_fit
+
+            return distributed_fit(self, images, rotation, client=client, breaks=breaks, fast=fast,
+                                   transition_weight=transition_weight, batch_size=batch_size, progress=progress)
         rotation = rotation or Rotation()
         transition_weight = _check_transition_weight(transition_weight)
         shifted = False

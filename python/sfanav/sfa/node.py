@@ -362,6 +362,14 @@ class Statistics:
         obj._acc = acc
         return obj
 
+    @classmethod
+    def from_core(cls, acc: _core.Statistics) -> "Statistics":
+        """Wraps statistics the Rust core made (e.g. a partition's, in
+        :mod:`sfanav.sfa.distributed`); no copy."""
+        if not isinstance(acc, _core.Statistics):
+            raise TypeError(f"expected sfanav._core.Statistics, got {type(acc).__name__}")
+        return cls._wrap(acc)
+
     def update(self, X: np.ndarray, *, new_sequence: bool = False) -> "Statistics":
         self._acc.update(as_float_2d(X, "X", min_samples=0), new_sequence=bool(new_sequence))
         return self

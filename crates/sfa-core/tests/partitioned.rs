@@ -1,0 +1,242 @@
+//! Partitioned (distributed) training: trainers on copies of the network,
+//! one per partition of the images, merged on a driver, reproduce `fit`.
+mod common;
+use common::Rng;
+use sfa_core::{
+    fit, Accumulator, CachePolicy, FitOptions, InMemory, LayerSpec, LayerTrainer, Network, NetworkSpec, Result,
+    Rotation, TrainingPath,
+};
+
+/// `n` periodic random images `h x w x c` with smooth structure.
+fn images(n: usize, h: usize, w: usize, c: usize, seed: u64) -> Vec<f64> {
+    let mut r = Rng::new(seed);
+    let mut out = Vec::with_capacity(n * h * w * c);
+    for _ in 0..n {
+        let phases: Vec<f64> = (0..6).map(|_| r.next() * 3.0).collect();
+        for y in 0..h {
+            for x in 0..w {
+                for ch in 0..c {
+                    let a = 2.0 * std::f64::consts::PI * x as f64 / w as f64;
+                    let v = (a + phases[0] + y as f64 * 0.3).sin()
+                        + 0.5 * (2.0 * a + phases[1] * (1.0 + ch as f64)).cos()
+                        + 0.3 * (3.0 * a + phases[2] * y as f64).sin()
+                        + 0.2 * r.next();
+                    out.push(v);
+                }
+            }
+        }
+    }
+    out
+}
+
+fn spec(v: usize, c: usize, sharing: bool) -> NetworkSpec {
+    let n_w1 = (v - 4) / 2 + 1;
+    NetworkSpec {
+        height: 6,
+        width: v,
+        channels: c,
+        layers: vec![
+            LayerSpec { rf: (4, 3), stride: (2, 3), n_out: 4, reduce_to: Some(5), degree: 2 },
+            LayerSpec { rf: (n_w1, 2), stride: (1, 1), n_out: 3, reduce_to: Some(6), degree: 2 },
+        ],
+        weight_sharing: sharing,
+        tol: 1e-10,
+        mixed_precision: false,
+    }
+}
+
+fn max_rel(a: &[f64], b: &[f64]) -> f64 {
+    let scale = a.iter().map(|v| v.abs()).fold(0.0, f64::max).max(1e-300);
+    a.iter().zip(b).map(|(x, y)| (x - y).abs()).fold(0.0, f64::max) / scale
+}
+
+fn max_abs(a: &[f64]) -> f64 {
+    a.iter().map(|v| v.abs()).fold(0.0, f64::max)
+}
+
+fn max_abs_diff(a: &[f64], b: &[f64]) -> f64 {
+    a.iter().zip(b).map(|(x, y)| (x - y).abs()).fold(0.0, f64::max)
+}
+
+/// Largest relative difference of any stage's projection, mean or delta
+/// values over every node.
+fn weights_differ(a: &Network, b: &Network) -> f64 {
+    let mut e = 0.0f64;
+    for l in 0..a.n_layers() {
+        for (na, nb) in a.nodes(l).iter().zip(b.nodes(l)) {
+            for (sa, sb) in na.state(false).stages.iter().zip(&nb.state(false).stages) {
+                let (pa, pb) = (sa.solution.as_ref().unwrap(), sb.solution.as_ref().unwrap());
+                e = e.max(max_rel(&pa.projection, &pb.projection));
+                // means on the scale of the (unit-variance) signals: near 0 above layer 1
+                e = e.max(max_abs_diff(&pa.mean, &pb.mean) / max_abs(&pa.mean).max(1.0));
+                e = e.max(max_rel(&pa.delta, &pb.delta));
+            }
+        }
+    }
+    e
+}
+
+#[derive(Clone, Copy)]
+struct Plan<'a> {
+    rot: Rotation,
+    path: TrainingPath,
+    tw: f64,
+    lag: bool,
+    /// Partition starts after the first (image indices).
+    cuts: &'a [usize],
+    /// Images that start a new recording (no pair with the image before).
+    breaks: &'a [usize],
+    /// Images per feed call.
+    batch: usize,
+}
+
+/// Every layer and pass: each partition on its own copy of the network,
+/// statistics merged in partition order on the driver.
+fn fit_partitioned(net: &mut Network, imgs: &[f64], n: usize, p: &Plan<'_>) -> Result<()> {
+    let size = imgs.len() / n;
+    let mut bounds = vec![0];
+    bounds.extend_from_slice(p.cuts);
+    bounds.push(n);
+    while net.n_trained() < net.n_layers() {
+        let layer = net.n_trained();
+        let n_passes = net.nodes(layer)[0].n_stages();
+        for pass in 0..n_passes {
+            let mut merged: Option<Vec<Accumulator>> = None;
+            let mut total = 0;
+            for w in bounds.windows(2) {
+                let (a, b) = (w[0], w[1]);
+                let mut local = net.clone();
+                let mut tr = LayerTrainer::resume(&local, layer, pass, p.rot, p.path)?;
+                tr.set_transition_weight(p.tw)?;
+                tr.set_lag_products(p.lag);
+                tr.set_reference_image(&local, &imgs[..size])?;
+                if a > 0 && !p.breaks.contains(&a) {
+                    tr.prime(&local, &imgs[(a - 1) * size..a * size])?;
+                }
+                let mut i = a;
+                while i < b {
+                    if i > a && p.breaks.contains(&i) {
+                        tr.break_sequence();
+                    }
+                    // a batch ends before the next break
+                    let mut j = (i + p.batch).min(b);
+                    if let Some(&k) = p.breaks.iter().filter(|&&k| k > i && k < j).min() {
+                        j = k;
+                    }
+                    tr.feed(&mut local, &imgs[i * size..j * size], j - i)?;
+                    i = j;
+                }
+                let st = tr.statistics(&local)?;
+                total += b - a;
+                merged = Some(match merged {
+                    None => st,
+                    Some(mut m) => {
+                        for (x, y) in m.iter_mut().zip(&st) {
+                            x.merge(y)?;
+                        }
+                        m
+                    }
+                });
+            }
+            let mut tr = LayerTrainer::resume(net, layer, pass, p.rot, p.path)?;
+            tr.merge_statistics(net, &merged.expect("a partition"), total)?;
+            tr.end_pass(net)?;
+        }
+    }
+    Ok(())
+}
+
+fn single(net: &mut Network, imgs: &[f64], n: usize, p: &Plan<'_>, cache: bool) {
+    let mut opts = FitOptions::new(p.rot);
+    opts.path = p.path;
+    opts.cache = if cache { CachePolicy::Always } else { CachePolicy::Never };
+    opts.transition_weight = p.tw;
+    opts.lag_products = p.lag;
+    fit(net, &mut InMemory::new(imgs, n, 7).unwrap(), &opts, &mut |_| Ok(())).unwrap();
+}
+
+#[test]
+fn partitions_reproduce_fit() {
+    let (w, c, n) = (24, 3, 30);
+    let imgs = images(n, 6, w, c, 11);
+    let rot = Rotation { step: 3, period: w };
+    for (sharing, path, tw, lag) in [
+        (true, TrainingPath::Fast, 1.0, true),
+        (true, TrainingPath::Fast, 1.0, false),
+        (true, TrainingPath::Fast, 4.0, true),
+        (true, TrainingPath::Naive, 1.0, false),
+        (false, TrainingPath::Naive, 1.0, false),
+        (false, TrainingPath::Naive, 2.5, false),
+    ] {
+        for cuts in [&[][..], &[13][..], &[1, 17][..], &[9, 10, 29][..]] {
+            let p = Plan { rot, path, tw, lag, cuts, breaks: &[], batch: 4 };
+            let mut reference = Network::new(spec(w, c, sharing)).unwrap();
+            single(&mut reference, &imgs, n, &p, path == TrainingPath::Fast);
+            let mut net = Network::new(spec(w, c, sharing)).unwrap();
+            fit_partitioned(&mut net, &imgs, n, &p).unwrap();
+            assert!(net.is_trained());
+            let e = weights_differ(&reference, &net);
+            assert!(e < 1e-9, "sharing={sharing} {path:?} tw={tw} lag={lag} cuts={cuts:?}: weights differ by {e}");
+            let (ya, yb) = (reference.transform(&imgs[..5 * 6 * w * c], 5).unwrap(), net.transform(&imgs[..5 * 6 * w * c], 5).unwrap());
+            assert!(max_rel(&ya, &yb) < 1e-9);
+        }
+    }
+}
+
+#[test]
+fn breaks_end_the_sequence_wherever_they_fall() {
+    let (w, c, n) = (24, 1, 30);
+    let imgs = images(n, 6, w, c, 5);
+    let rot = Rotation { step: 4, period: w };
+    for (sharing, path) in [(true, TrainingPath::Fast), (false, TrainingPath::Naive)] {
+        let plan = |cuts, breaks| Plan { rot, path, tw: 1.0, lag: true, cuts, breaks, batch: 5 };
+        let run = |p: &Plan<'_>| {
+            let mut net = Network::new(spec(w, c, sharing)).unwrap();
+            fit_partitioned(&mut net, &imgs, n, p).unwrap();
+            net
+        };
+        // a break at a partition boundary or inside a partition: the same
+        let at_cut = run(&plan(&[12, 21], &[21]));
+        let inside = run(&plan(&[12], &[21]));
+        let one_part = run(&plan(&[], &[21]));
+        assert!(weights_differ(&at_cut, &inside) < 1e-9);
+        assert!(weights_differ(&at_cut, &one_part) < 1e-9);
+        // and not the same as without the break
+        let unbroken = run(&plan(&[12, 21], &[]));
+        assert!(weights_differ(&at_cut, &unbroken) > 1e-6);
+    }
+}
+
+#[test]
+fn resume_checks_layer_and_pass() {
+    let (w, c, n) = (24, 1, 12);
+    let imgs = images(n, 6, w, c, 3);
+    let size = 6 * w * c;
+    let rot = Rotation { step: 4, period: w };
+    let mut net = Network::new(spec(w, c, true)).unwrap();
+    assert!(LayerTrainer::resume(&net, 0, 1, rot, TrainingPath::Fast).is_err()); // pass 0 first
+    assert!(LayerTrainer::resume(&net, 0, 2, rot, TrainingPath::Fast).is_err()); // two passes
+    assert!(LayerTrainer::resume(&net, 1, 0, rot, TrainingPath::Fast).is_err()); // layer 1 untrained
+    let mut tr = LayerTrainer::resume(&net, 0, 0, rot, TrainingPath::Fast).unwrap();
+    assert!(tr.statistics(&net).is_err()); // nothing fed
+    let mut nan = imgs[..size].to_vec();
+    nan[7] = f64::NAN;
+    let e = tr.prime(&net, &nan).unwrap_err().to_string();
+    assert!(e.contains("the image before this partition"), "{e}");
+    let mut bad = imgs.clone();
+    bad[5 * size + 3] = f64::NAN;
+    let e = tr.feed(&mut net.clone(), &bad, n).unwrap_err().to_string();
+    assert!(e.contains("image 5"), "{e}");
+    tr.feed(&mut net, &imgs, n).unwrap();
+    let st = tr.statistics(&net).unwrap();
+    // merging into a trainer at another pass fails
+    let mut driver = Network::new(spec(w, c, true)).unwrap();
+    let mut d0 = LayerTrainer::resume(&driver, 0, 0, rot, TrainingPath::Fast).unwrap();
+    d0.merge_statistics(&mut driver, &st, n).unwrap();
+    d0.end_pass(&mut driver).unwrap();
+    assert!(LayerTrainer::resume(&driver, 0, 0, rot, TrainingPath::Fast).is_err());
+    let mut d1 = LayerTrainer::resume(&driver, 0, 1, rot, TrainingPath::Fast).unwrap();
+    assert!(d1.merge_statistics(&mut driver, &st, n).is_err()); // stage-0 statistics
+    assert!(d1.merge_statistics(&mut driver, &[], n).is_err());
+}
+

@@ -1,0 +1,470 @@
+"""Partitioned (distributed) training of a :class:`~sfanav.Network` (issue 24).
+
+The training images are split into *partitions* (a list of arrays or
+``.npy`` files, one array or ``.npy`` file cut into pieces, a
+:class:`~sfanav.data.Dataset`'s frames, or a Dask array chunked along the
+frames). For every layer and pass:
+
+1. the driver ships the network (its checked model-file bytes, with the
+   statistics of the layer in training) to the workers;
+2. each partition, on a worker, streams its images through the solved
+   lower layers and accumulates the statistics of the stage in training
+   (``_core.LayerTrainer``, ``sfa_core::LayerTrainer::resume``);
+3. the partitions' statistics are merged pairwise in a tree
+   (``Statistics.merge``: exact sums);
+4. the driver adds the merged statistics to its network and solves the
+   stage (``LayerTrainer.merge_statistics`` / ``end_pass``).
+
+Exactness: a partition that continues the previous partition's sequence
+is *primed* with the image before it, so the derivative pairs between
+that image and its own first image are counted once, by this partition;
+every partition gets the lag-product reference of the run's first image.
+The result equals :meth:`Network.fit` up to rounding (1e-9 relative on the
+node weights in the tests; the summation order differs). Frames listed in
+``breaks`` start a new recording: no pair joins them to the frame before.
+
+Faults: each partition task returns its own statistics and nothing is
+accumulated in place, so Dask may rerun a task whose worker died; only
+completed partitions are merged, each once.
+
+``client=None`` runs the same steps in this process, one partition after
+another (no Dask needed). Dask is imported only when a client or a Dask
+array is given (``pip install "sfanav[dask]"``). Not supported yet:
+spatial pairs, loop closures and the field cache (every pass recomputes
+the lower layers of its partition). See ``docs/distributed.md``.
+"""
+
+from __future__ import annotations
+
+import os
+import uuid
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .. import _core
+from .._checks import as_image_batch, check_int, check_nonneg_float
+from .._progress import progress_bar
+
+__all__ = ["fit", "Partition", "partitions_of"]
+
+
+@dataclass(frozen=True)
+class Partition:
+    """One partition of the training images.
+
+    ``source`` is an array (N, H, W[, C]), an ``.npy`` path (memory-mapped
+    on the worker), a ``(Dataset, gray, size)`` triple, or None for a block
+    of a Dask array (handed to the task by Dask); ``lo:hi`` are the frames
+    of the source it holds; ``start`` the index of its first frame in the
+    whole run. ``continues``: whether its first frame continues the
+    sequence of the frame before it (the previous partition's last);
+    ``breaks``: frames (counted within the partition, > 0) that start a
+    new recording."""
+
+    index: int
+    start: int
+    n: int
+    source: Any
+    lo: int = 0
+    continues: bool = False
+    breaks: tuple[int, ...] = ()
+    prev: Any = field(default=None, repr=False)  # (source, lo) of the frame before, when it continues
+
+    def describe(self) -> str:
+        return f"partition {self.index} (frames {self.start}..{self.start + self.n - 1} of the run)"
+
+
+@dataclass(frozen=True)
+class _Job:
+    """What every partition task of one pass needs besides its data."""
+
+    layer: int
+    pass_: int
+    step: int
+    period: int
+    fast: bool
+    transition_weight: float
+    batch_size: int
+    first_image: np.ndarray  # (1, H, W[, C]): the run's first image, the lag-product reference
+
+
+def _is_dask_array(x: Any) -> bool:
+    return type(x).__module__.startswith("dask.array") and hasattr(x, "chunks") and hasattr(x, "to_delayed")
+
+
+def _is_dataset(x: Any) -> bool:
+    from ..data.dataset import Dataset
+
+    return isinstance(x, Dataset)
+
+
+def _open(source: Any) -> Any:
+    """An indexable array of frames for a partition's source (memory-mapped
+    for ``.npy`` paths)."""
+    if isinstance(source, (str, os.PathLike)):
+        path = Path(source)
+        if path.suffix != ".npy":
+            raise ValueError(f"{path}: give .npy arrays of images (N, H, W[, C])")
+        return np.load(path, mmap_mode="r", allow_pickle=False)
+    return source
+
+
+def _read(source: Any, lo: int, hi: int) -> np.ndarray:
+    """Frames ``lo:hi`` of a source as a batch."""
+    if isinstance(source, tuple) and len(source) == 3 and _is_dataset(source[0]):
+        ds, gray, size = source
+        return np.stack(list(ds.images(gray=gray, size=size, indices=np.arange(lo, hi))))
+    return as_image_batch(_open(source)[lo:hi])
+
+
+def _length(source: Any) -> int:
+    arr = _open(source)
+    if not hasattr(arr, "shape") or len(arr.shape) not in (3, 4):
+        raise ValueError(f"a partition must be an array (N, H, W[, C]) or an .npy path, got "
+                         f"{getattr(arr, 'shape', type(arr).__name__)}")
+    return int(arr.shape[0])
+
+
+def _split(n: int, k: int) -> list[tuple[int, int]]:
+    """``k`` contiguous ranges covering ``0:n`` (sizes differ by at most 1)."""
+    k = max(1, min(k, n))
+    edges = [round(i * n / k) for i in range(k + 1)]
+    return [(edges[i], edges[i + 1]) for i in range(k) if edges[i + 1] > edges[i]]
+
+
+def partitions_of(images: Any, *, n_partitions: int | None = None, breaks: Any = None,
+                  gray: bool = False, size: tuple[int, int] | None = None) -> list[Partition]:
+    """The partitions of ``images`` (see :func:`fit`) with their sequence
+    links. ``breaks``: frame indices of the whole run that start a new
+    recording, or ``"partitions"`` (every partition its own recording); a
+    Dataset also breaks wherever its ``run`` column changes."""
+    ranges: list[tuple[Any, int, int]] = []  # (source, lo, hi), in run order
+    if _is_dask_array(images):
+        if images.ndim not in (3, 4):
+            raise ValueError(f"images must have shape (N, H, W) or (N, H, W, C), got {images.shape}")
+        lo = 0
+        for c in images.chunks[0]:
+            ranges.append((None, lo, lo + c))
+            lo += c
+    elif _is_dataset(images):
+        run_breaks = [i for i in range(1, len(images)) if images.runs[i] != images.runs[i - 1]]
+        extra = [] if breaks is None or isinstance(breaks, str) else list(breaks)
+        breaks = breaks if isinstance(breaks, str) else sorted(set(run_breaks) | {int(b) for b in extra})
+        src = (images, bool(gray), size)
+        ranges = [(src, a, b) for a, b in _split(len(images), n_partitions or 1)]
+    elif isinstance(images, (np.ndarray, str, os.PathLike)):
+        n = _length(images)
+        ranges = [(images, a, b) for a, b in _split(n, n_partitions or 1)]
+    elif isinstance(images, (list, tuple)):
+        if n_partitions is not None:
+            raise ValueError("n_partitions splits one array, .npy file or Dataset; a list is already partitioned")
+        for i, src in enumerate(images):
+            if not isinstance(src, (np.ndarray, str, os.PathLike)):
+                raise TypeError(f"partition {i}: give an array (N, H, W[, C]) or an .npy path, "
+                                f"got {type(src).__name__}")
+            ranges.append((src, 0, _length(src)))
+    else:
+        raise TypeError("distributed training reads a list of arrays or .npy paths, one array or .npy path, "
+                        f"a Dataset or a Dask array, not {type(images).__name__}")
+    ranges = [r for r in ranges if r[2] > r[1]]
+    if not ranges:
+        raise ValueError("no training images")
+    total = sum(hi - lo for _, lo, hi in ranges)
+    starts = np.cumsum([0] + [hi - lo for _, lo, hi in ranges[:-1]]).tolist()
+    if isinstance(breaks, str):
+        if breaks != "partitions":
+            raise ValueError(f'breaks must be frame indices or "partitions", got {breaks!r}')
+        bset = set(starts)
+    else:
+        bset = set()
+        for b in [] if breaks is None else list(breaks):
+            b = check_int(b, "a break", minimum=0)
+            if b >= total:
+                raise ValueError(f"break {b} is beyond the {total} training images")
+            bset.add(b)
+    parts = []
+    for i, ((src, lo, hi), start) in enumerate(zip(ranges, starts)):
+        n = hi - lo
+        cont = i > 0 and start not in bset
+        prev = None
+        if cont:
+            psrc, _, phi = ranges[i - 1]
+            prev = (psrc, phi - 1)
+        local = tuple(sorted(b - start for b in bset if start < b < start + n))
+        parts.append(Partition(i, int(start), n, src, lo, cont, local, prev))
+    return parts
+
+
+# ------------------------------------------------------------------ worker side
+
+
+def _network_from_bytes(data: bytes) -> Any:
+    from .network import Network
+
+    return Network.from_bytes(data)
+
+
+def _check_batch(batch: np.ndarray, part: Partition, offset: int, job: _Job, hw: tuple[int, int, int]) -> None:
+    """Shape and finiteness of a partition's batch, with errors naming the
+    partition and frame."""
+    h, _, c = hw
+    bc = 1 if batch.ndim == 3 else batch.shape[3]
+    if batch.shape[1] != h or bc != c or batch.shape[2] != job.period:
+        raise ValueError(f"{part.describe()}: images are {batch.shape[2]}x{batch.shape[1]} with {bc} channel(s), "
+                         f"the run's are {job.period}x{h} with {c}")
+    if batch.dtype.kind == "f":
+        bad = ~np.isfinite(batch.reshape(len(batch), -1)).all(axis=1)
+        if bad.any():
+            k = offset + int(np.argmax(bad))
+            raise ValueError(f"{part.describe()}: frame {k} of the partition (frame {part.start + k} of the run) "
+                             "contains NaN or infinity")
+
+
+def _partition_statistics(net_bytes: bytes, job: _Job, part: Partition, data: Any = None,
+                          prev: Any = None) -> tuple[list[Any], int]:
+    """One partition's statistics of the layer and pass in training: a list
+    (one per node) of :class:`~sfanav.sfa.node.Statistics` and the number
+    of images. ``data``: the partition's frames when Dask hands them over
+    (a Dask array block); ``prev``: the frame before the partition (1, H,
+    W[, C]) when the partition continues the sequence (else read from
+    ``part.prev``)."""
+    from .node import Statistics
+
+    net = _network_from_bytes(net_bytes)
+    core = net._net
+    hw = net.input_shape
+    tr = _core.LayerTrainer(core, job.layer, job.pass_, job.step, job.period, fast=job.fast,
+                            transition_weight=job.transition_weight)
+    tr.set_reference_image(core, job.first_image)
+    try:
+        if part.continues:
+            if prev is None:
+                psrc, pi = part.prev
+                prev = _read(psrc, pi, pi + 1)
+            prev = as_image_batch(prev)
+            try:
+                _check_batch(prev, part, 0, job, hw)
+            except ValueError as exc:
+                raise ValueError(f"the frame before {part.describe()} is bad: {exc}") from None
+            tr.prime(core, prev)
+        frames = as_image_batch(data) if data is not None else None
+        if frames is not None and len(frames) != part.n:
+            raise ValueError(f"{part.describe()}: {len(frames)} frames, expected {part.n}")
+        cuts = sorted({0, part.n, *range(0, part.n, job.batch_size), *part.breaks})
+        for a, b in zip(cuts[:-1], cuts[1:]):
+            batch = frames[a:b] if frames is not None else _read(part.source, part.lo + a, part.lo + b)
+            _check_batch(batch, part, a, job, hw)
+            if a in part.breaks:
+                tr.break_sequence()
+            tr.feed(core, batch)
+        stats = tr.statistics(core)
+    except (ValueError, TypeError) as exc:
+        msg = str(exc)
+        if "partition" not in msg:
+            msg = f"{part.describe()}: {msg}"
+        raise type(exc)(msg) from exc
+    return [Statistics.from_core(s) for s in stats], int(tr.images_seen)
+
+
+def _merge(a: tuple[list[Any], int], b: tuple[list[Any], int]) -> tuple[list[Any], int]:
+    """Two partial results merged (new objects: inputs are not modified, so
+    a rerun task never sees its input merged twice)."""
+    out = []
+    for x, y in zip(a[0], b[0]):
+        m = x.copy()
+        m.merge(y)
+        out.append(m)
+    return out, a[1] + b[1]
+
+
+def _tree(items: list[Any], merge: Any) -> Any:
+    while len(items) > 1:
+        items = [merge(items[i], items[i + 1]) if i + 1 < len(items) else items[i] for i in range(0, len(items), 2)]
+    return items[0]
+
+
+# ------------------------------------------------------------------ driver
+
+
+def _first_frames(images: Any, parts: list[Partition], k: int) -> np.ndarray:
+    """The run's first ``k`` frames (at most the first partition's)."""
+    p = parts[0]
+    k = min(k, p.n)
+    if _is_dask_array(images):
+        return as_image_batch(np.asarray(images[:k].compute()))
+    return _read(p.source, p.lo, p.lo + k)
+
+
+def fit(network: Any, images: Any, rotation: Any = None, *, client: Any = None, n_partitions: int | None = None,
+        breaks: Any = None, fast: bool = True, transition_weight: float = 1.0, batch_size: int = 16,
+        progress: bool = False, gray: bool = False, size: tuple[int, int] | None = None) -> Any:
+    """Trains ``network`` (every layer, from scratch) on partitioned images,
+    on a Dask cluster (``client``) or in this process (``client=None``).
+
+    Parameters
+    ----------
+    network : sfanav.Network
+    images : list of arrays / ``.npy`` paths (one partition each), one
+        array or ``.npy`` path (cut into ``n_partitions``), a Dataset (cut
+        into ``n_partitions``; read with ``gray`` and ``size``), or a Dask
+        array (one partition per chunk along the frames). The order of the
+        partitions is the order of the run.
+    rotation : Rotation, default ``Rotation()``
+    client : dask.distributed.Client or None
+    n_partitions : int, optional
+        Pieces of one array, file or Dataset (default: the client's
+        workers, or 1).
+    breaks : frame indices (of the whole run) that start a new recording,
+        or ``"partitions"``. Default: one sequence (a Dataset breaks where
+        its ``run`` changes).
+    fast, transition_weight, batch_size : as in :meth:`Network.fit`
+    progress : bool
+        A bar per pass counting the partitions done.
+
+    Returns ``network``, fitted. The result equals ``network.fit(all images,
+    ...)`` with ``cache=False`` up to rounding (with breaks: the same run with
+    each recording starting a new sequence). Errors in a partition name it
+    and the frame.
+    """
+    from .network import Network, Rotation
+
+    if not isinstance(network, Network):
+        raise TypeError(f"network must be a sfanav.Network, got {type(network).__name__}")
+    rotation = rotation or Rotation()
+    if not isinstance(rotation, Rotation):
+        raise TypeError("rotation must be a sfanav.Rotation")
+    transition_weight = check_nonneg_float(transition_weight, "transition_weight")
+    batch_size = check_int(batch_size, "batch_size")
+    if n_partitions is not None:
+        n_partitions = check_int(n_partitions, "n_partitions")
+    elif client is not None and (isinstance(images, (np.ndarray, str, os.PathLike)) or _is_dataset(images)):
+        n_partitions = max(1, len(client.scheduler_info().get("workers", {})))
+    dask_array = _is_dask_array(images)
+    if dask_array:
+        if client is None:
+            raise ValueError("a Dask array needs a client (or compute it and pass the array)")
+        images = images.rechunk({i: -1 for i in range(1, images.ndim)})
+    parts = partitions_of(images, n_partitions=n_partitions, breaks=breaks, gray=gray, size=size)
+    first = _first_frames(images, parts, batch_size)
+    period = first.shape[2]
+    network._check_images(first, period, training=True)
+    v = network.input_shape[1]
+    if round(rotation.window * period) != v:
+        raise ValueError(
+            f"the network's input is {v} px wide, but a {rotation.window:.0%} window of "
+            f"{period}-px panoramas is {round(rotation.window * period)} px: build the network for that width"
+        )
+    net = Network(network.config)
+    n_layers = net._net.n_layers
+    runner = _DaskRunner(client, images if dask_array else None, parts) if client is not None else None
+    try:
+        for layer in range(n_layers):
+            pass_ = 0
+            while True:
+                job = _Job(layer, pass_, rotation.step, period, bool(fast), transition_weight, batch_size,
+                           np.ascontiguousarray(first[:1]))
+                net_bytes = net.to_bytes(include_statistics=True)
+                bar = progress_bar(progress, len(parts), f"layer {layer + 1}/{n_layers} pass {pass_ + 1}",
+                                   unit="partition")
+                try:
+                    if runner is None:
+                        results = []
+                        for p in parts:
+                            results.append(_partition_statistics(net_bytes, job, p))
+                            if bar is not None:
+                                bar.update(1)
+                        stats, n = _tree(results, _merge)
+                    else:
+                        stats, n = runner.run(net_bytes, job, bar)
+                finally:
+                    if bar is not None:
+                        bar.close()
+                tr = _core.LayerTrainer(net._net, layer, pass_, rotation.step, period, fast=bool(fast),
+                                        transition_weight=transition_weight)
+                tr.merge_statistics(net._net, [s._acc for s in stats], n)
+                if tr.end_pass(net._net):
+                    break
+                pass_ += 1
+    finally:
+        if runner is not None:
+            runner.close()
+    network._net = net._net
+    network._period = period
+    network._step = rotation.step
+    network.cache_plan_ = []
+    network.input_scale_ = float(max(first.max(), -float(first.min())))  # as Network.fit: the first batch's
+    network.transition_weight_ = transition_weight
+    network.n_pairs_ = 0
+    network.n_loop_closures_ = 0
+    network.n_partitions_ = len(parts)
+    return network
+
+
+class _DaskRunner:
+    """Runs the partition tasks of a pass on a Dask cluster and merges
+    their results in a tree on the workers."""
+
+    def __init__(self, client: Any, array: Any, parts: list[Partition]) -> None:
+        try:
+            from distributed import Client
+        except ImportError as exc:  # pragma: no cover - exercised without dask
+            raise ImportError('distributed training needs Dask: pip install "sfanav[dask]"') from exc
+        if not isinstance(client, Client):
+            raise TypeError(f"client must be a dask.distributed.Client, got {type(client).__name__}")
+        self.client = client
+        self.parts = parts
+        self.token = uuid.uuid4().hex[:8]
+        self.inputs = self._inputs(array)
+
+    def _inputs(self, array: Any) -> list[tuple[Any, Any]]:
+        """Per partition: (data, prev). For a Dask array, futures of its
+        blocks and of the frames before them, computed once for the whole
+        fit (Dask recomputes them from the array's graph if a worker holding
+        them dies; submitting the same keys again in every pass races with
+        their release). Else (None, None): the task reads its source."""
+        if array is None:
+            return [(None, None)] * len(self.parts)
+        blocks = array.to_delayed().ravel().tolist()
+        data = self.client.compute(blocks)
+        out = []
+        for p, d in zip(self.parts, data):
+            prev = self.client.compute(array[p.start - 1 : p.start]) if p.continues else None
+            out.append((d, prev))
+        return out
+
+    def run(self, net_bytes: bytes, job: _Job, bar: Any) -> tuple[list[Any], int]:
+        from distributed import as_completed
+
+        c = self.client
+        tag = f"{self.token}-l{job.layer}p{job.pass_}"
+        [net_f] = c.scatter([net_bytes], broadcast=True, hash=False)
+        [job_f] = c.scatter([job], broadcast=True, hash=False)
+        inputs = self.inputs
+        futures = [
+            c.submit(_partition_statistics, net_f, job_f, p, d, q, key=f"sfanav-partition-{tag}-{p.index}", pure=False)
+            for p, (d, q) in zip(self.parts, inputs)
+        ]
+        level, depth = futures, 0
+        while len(level) > 1:
+            nxt = []
+            for i in range(0, len(level), 2):
+                if i + 1 < len(level):
+                    nxt.append(c.submit(_merge, level[i], level[i + 1], key=f"sfanav-merge-{tag}-{depth}-{i}",
+                                        pure=False))
+                else:
+                    nxt.append(level[i])
+            level, depth = nxt, depth + 1
+        if bar is not None:
+            for _ in as_completed(futures):
+                bar.update(1)
+        try:
+            return level[0].result()
+        finally:
+            del futures, level, net_f, job_f  # released, not cancelled (a rerun task may still need them)
+
+    def close(self) -> None:
+        self.inputs = []
