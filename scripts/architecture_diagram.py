@@ -17,7 +17,7 @@ from collections import Counter
 from pathlib import Path
 
 PKG = Path(__file__).resolve().parents[1] / "python" / "sfanav"
-STAGES = ["data", "groundtruth", "sim", "loopclosure", "sfa", "localization", "odometry", "navigation", "experiments", "app"]
+STAGES = ["data", "groundtruth", "sim", "loopclosure", "sfa", "localization", "landmarks", "odometry", "navigation", "experiments", "app"]
 LABEL = {
     "data": "data<br/>images, datasets, unwarping",
     "groundtruth": "groundtruth<br/>marker ground truth, camera calibration",
@@ -25,6 +25,7 @@ LABEL = {
     "loopclosure": "loopclosure<br/>places seen again, long-term order",
     "sfa": "sfa<br/>SFA node, network -> slow features",
     "localization": "localization<br/>slow features -> position",
+    "landmarks": "landmarks<br/>marker views -> stacked position",
     "odometry": "odometry<br/>metric map, EKF, loop closures",
     "navigation": "navigation<br/>cost, gradient, descents",
     "experiments": "experiments<br/>thesis reruns",

@@ -11,6 +11,8 @@ all markers (zeros and a "missing" flag for a marker not seen).
 How it works and what it measures: docs/landmarks.md.
 """
 
+from .model import N_OUTPUTS, NETWORK_PRESET, LandmarkLocalizer
 from .views import MARGIN, VIEW_SIZE, MarkerViews, ViewExtractor, marker_view, polar_angle
 
-__all__ = ["MARGIN", "VIEW_SIZE", "MarkerViews", "ViewExtractor", "marker_view", "polar_angle"]
+__all__ = ["MARGIN", "N_OUTPUTS", "NETWORK_PRESET", "VIEW_SIZE", "LandmarkLocalizer", "MarkerViews", "ViewExtractor",
+           "marker_view", "polar_angle"]

@@ -147,6 +147,18 @@ class MarkerViews:
         """The views of some images (an index or boolean mask over the images)."""
         return MarkerViews(self.ids, self.views[index], self.found[index], self.angles[index], self.corners[index])
 
+    @classmethod
+    def concatenate(cls, parts: Sequence["MarkerViews"]) -> "MarkerViews":
+        """The views of several image sequences one after the other (same
+        markers); ValueError for an empty list or different markers."""
+        parts = list(parts)
+        if not parts:
+            raise ValueError("no views to concatenate")
+        if any(p.ids != parts[0].ids for p in parts):
+            raise ValueError(f"views of different markers: {sorted({p.ids for p in parts})}")
+        return cls(parts[0].ids, *(np.concatenate([getattr(p, f) for p in parts])
+                                   for f in ("views", "found", "angles", "corners")))
+
     def hide(self, marker_id: int, mask: Any) -> "MarkerViews":
         """A copy with ``marker_id`` treated as not found in the images of
         ``mask`` (N,) bool (zeros, NaN angles and corners there)."""
@@ -398,7 +410,8 @@ class _Strip:
             return {}
         for c, mid in zip(corners, ids.ravel()):
             c = np.asarray(c, float).reshape(4, 2)
-            area = 0.5 * abs(float(np.cross(c[2] - c[0], c[3] - c[1])))
+            d1, d2 = c[2] - c[0], c[3] - c[1]
+            area = 0.5 * abs(float(d1[0] * d2[1] - d1[1] * d2[0]))
             mid = int(mid)
             if mid not in out or area > out[mid][0]:
                 out[mid] = (area, c)
