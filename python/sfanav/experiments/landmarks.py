@@ -28,6 +28,7 @@ from ..landmarks.views import MarkerViews, ViewExtractor
 from ..localization.error_metrics import localization_metrics
 from ..localization.evaluation import coordinate_range
 from ..localization.plots import plot_trajectory
+from ..localization.readouts import make_readout
 from ..localization.training import fit_localizer, train_default
 from ..sfa.network import Network, Rotation
 from ..sim.presets import LANDMARK_MARKERS
@@ -153,6 +154,13 @@ def _variant(out: Path, name: str, runs: dict[str, Any], cam: sim.OmniCamera, wo
                             marker_positions=world.markers, log=log,
                             text=[f"Scene: {name}, {len(V_tr)} training and {len(V_te)} test frames."])
     rows = landmark_rows(ev, suffix=suffix, thesis=thesis)
+    # the same stack read by a GP (ARD kernel, marginal likelihood): the sfanav default's kind of readout
+    V_te_stack = loc.stack(V_te)
+    gp = make_readout({"kind": "gp", "n_outputs": V_te_stack.shape[1]}).fit(loc.stack(V_tr), xy_tr)
+    gp_med = localization_metrics(gp.predict(V_te_stack), xy_te)["med"]
+    log(f"{name}: stacked features read by a GP: MED {gp_med:.3f} m")
+    rows.append({"metric": f"MED (m) stacked [GP readout]{suffix}", "thesis": None, "sfanav": gp_med,
+                 "protocol": "test-run"})
     rows.append({"metric": f"training (s) landmark networks{suffix}", "thesis": None,
                  "sfanav": float(loc.info["fit_seconds"])})
     data = {"P_tr": P_tr, "P_te": P_te, "xy_tr": xy_tr, "xy_te": xy_te, "views": (V_tr, V_te)}
