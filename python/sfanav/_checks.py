@@ -230,3 +230,15 @@ def check_marker_ids(ids: Any, name: str = "ids") -> tuple[int, ...]:
     if len(set(out)) != len(out):
         raise ValueError(f"{name} repeats a marker id: {out}")
     return tuple(out)
+
+
+def as_pair(value: Any, name: str) -> tuple[float, float]:
+    """Two finite numbers (e.g. a point (x, y) or radii (inner, outer)) as
+    floats; ValueError naming ``name`` otherwise."""
+    try:
+        a, b = (float(x) for x in value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be two numbers, got {value!r}") from None
+    if not (np.isfinite(a) and np.isfinite(b)):
+        raise ValueError(f"{name} must be finite, got {value!r}")
+    return a, b

@@ -113,6 +113,14 @@ def evaluate_landmarks(
     ------
     ValueError
         For positions whose number does not match the views.
+
+    Examples
+    --------
+    >>> V_tr, V_te = loc.extractor.transform(train_images), loc.extractor.transform(test_images)  # doctest: +SKIP
+    >>> ev = evaluate_landmarks(loc, V_te, test_xy, train_views=V_tr, train_xy=train_xy,
+    ...                         out="report")                                                     # doctest: +SKIP
+    >>> ev.metrics["med"], ev.markers[136]["detection rate"]                                      # doctest: +SKIP
+    (0.17, 0.99)
     """
     Y = as_matrix(test_xy, "test_xy", n_cols=2)
     check_same_length(test_views.found, Y, "test_views", "test_xy")
@@ -202,7 +210,14 @@ def landmark_rows(ev: LandmarkEvaluation, *, suffix: str = "", thesis: Mapping[s
     ``MAE y (%) stacked``, ``stacked / best single marker``, ``query ms``,
     ``model bytes``, and per peer ``MED (m) <name>``, ``bytes per place
     <name>``, ``query ms <name>``. ``suffix`` is appended to every name,
-    ``thesis`` maps names (without it) to the thesis's values."""
+    ``thesis`` maps names (without it) to the thesis's values.
+
+    Examples
+    --------
+    >>> rows = landmark_rows(ev, suffix=" [occlusion]", thesis={"MED (m) stacked": 0.32})   # doctest: +SKIP
+    >>> [r for r in rows if r["metric"] == "MED (m) stacked [occlusion]"][0]["thesis"]      # doctest: +SKIP
+    0.32
+    """
     th = dict(thesis or {})
     rows: list[dict[str, Any]] = []
 
@@ -246,7 +261,13 @@ def plot_visibility(runs: Sequence[tuple[str, MarkerViews, np.ndarray]], path: A
     trajectory as a line, crosses where the marker was not found, the
     marker's occluded region dotted (``regions``: marker id -> ((x_lo,
     x_hi), (y_lo, y_hi)), None unbounded, drawn to the plot's edge) and the
-    marker itself as a star (``marker_positions``). Returns the PNG path."""
+    marker itself as a star (``marker_positions``). Returns the PNG path.
+
+    Examples
+    --------
+    >>> plot_visibility([("test", V_te, test_xy)], "visibility.png",
+    ...                 regions={136: ((None, 0.0), (None, 0.0))})                   # doctest: +SKIP
+    """
     ids = list(runs[0][1].ids)
     fig = figure(3.6 * len(ids), 3.4 * len(runs))
     axes = np.atleast_2d(fig.subplots(len(runs), len(ids), squeeze=False))

@@ -30,7 +30,7 @@ from typing import Any
 
 import numpy as np
 
-from .._checks import as_images, check_int, check_marker_ids, check_nonneg_float
+from .._checks import as_images, as_pair, check_int, check_marker_ids, check_nonneg_float
 from .._progress import progress_bar
 from ..groundtruth.board import DEFAULT_DICTIONARY, aruco_dictionary
 from ..groundtruth.markers import as_gray
@@ -48,7 +48,13 @@ MIN_SIDE_PX = 4.0
 def polar_angle(points: Any, center: Sequence[float]) -> np.ndarray:
     """Polar angle (rad, counter-clockwise as displayed, 0 along +x, in
     (-pi, pi]) of image points (..., 2) around ``center`` = (cx, cy) px:
-    ``atan2(-(y - cy), x - cx)`` (image rows grow downwards)."""
+    ``atan2(-(y - cy), x - cx)`` (image rows grow downwards).
+
+    Examples
+    --------
+    >>> float(polar_angle([99.5, 0.0], (99.5, 99.5)))   # straight up
+    1.5707963267948966
+    """
     p = np.asarray(points, float)
     return np.arctan2(-(p[..., 1] - center[1]), p[..., 0] - center[0])
 
@@ -114,6 +120,12 @@ class MarkerViews:
         The marker's polar angle in the image (rad; NaN where not found).
     corners : ndarray (N, k, 4, 2) float
         Its corners in the image (px; NaN where not found).
+
+    Examples
+    --------
+    >>> mv = ViewExtractor([136, 144]).transform(omni_images)       # doctest: +SKIP
+    >>> views_136, frames = mv.of(136)        # (n, 120, 120, 3), (n,)    # doctest: +SKIP
+    >>> mv.hide(144, xy[:, 0] > 0).found.mean(axis=0)              # doctest: +SKIP
     """
 
     ids: tuple[int, ...]
@@ -218,8 +230,8 @@ class ViewExtractor:
         self.margin = check_nonneg_float(margin, "margin")
         aruco_dictionary(dictionary)  # ValueError for an unknown name
         self.dictionary = dictionary
-        self.center = None if center is None else _pair(center, "center")
-        self.ring = None if ring is None else _pair(ring, "ring")
+        self.center = None if center is None else as_pair(center, "center")
+        self.ring = None if ring is None else as_pair(ring, "ring")
         if self.ring is not None and not 0 <= self.ring[0] < self.ring[1]:
             raise ValueError(f"ring must be (inner, outer) radii with 0 <= inner < outer (px), got {ring!r}")
         if not isinstance(gray, (bool, np.bool_)):
@@ -358,16 +370,6 @@ class ViewExtractor:
                        center=d.get("center"), ring=d.get("ring"), gray=d.get("gray", False))
         except (KeyError, TypeError) as exc:
             raise ValueError(f"invalid view extractor record: {exc}") from None
-
-
-def _pair(v: Any, name: str) -> tuple[float, float]:
-    try:
-        a, b = (float(x) for x in v)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be two numbers (px), got {v!r}") from None
-    if not (math.isfinite(a) and math.isfinite(b)):
-        raise ValueError(f"{name} must be finite, got {v!r}")
-    return a, b
 
 
 class _Strip:
