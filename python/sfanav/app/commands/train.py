@@ -28,7 +28,7 @@ def _add_train(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                     "evaluate. Images of another size are resized, omnidirectional images unwarped (with "
                     "--mirror or an estimated mirror)."),
         epilog="network presets: thesis-5.1 (350x40 RGB), thesis-5.2 (600x60 RGB), thesis-5.3 (409x40 gray) "
-               "(thesis tables), sfanav-default (350x40 RGB). A config file is TOML or JSON in the presets' "
+               "(thesis tables), sfanav-default (350x40 RGB), landmark-120 (120x120 RGB marker views, with --landmarks). A config file is TOML or JSON in the presets' "
                "format (sfanav.Network.preset_path('thesis-5.1') shows one).\n\n"
                "example:\n  sfanav simulate --preset demo --out garden\n"
                "  sfanav train --dataset garden --out garden.sfa                       # the sfanav default\n"
