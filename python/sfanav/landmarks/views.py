@@ -43,6 +43,8 @@ INNER_FRACTION = 0.5
 """Default inner radius of the searched ring, as a fraction of its outer radius."""
 MIN_SIDE_PX = 4.0
 """Smallest marker side (strip pixels) the detector looks for."""
+MAX_VIEW_SIZE = 1024
+"""Largest view side (px) an extractor accepts (a model file cannot ask for huge views)."""
 
 
 def polar_angle(points: Any, center: Sequence[float]) -> np.ndarray:
@@ -227,6 +229,8 @@ class ViewExtractor:
                  ring: Sequence[float] | None = None, gray: bool = False) -> None:
         self.ids = check_marker_ids(ids)
         self.size = check_int(size, "size", minimum=8)
+        if self.size > MAX_VIEW_SIZE:
+            raise ValueError(f"size must be at most {MAX_VIEW_SIZE} px, got {self.size}")
         self.margin = check_nonneg_float(margin, "margin")
         aruco_dictionary(dictionary)  # ValueError for an unknown name
         self.dictionary = dictionary
