@@ -17,7 +17,8 @@ from collections import Counter
 from pathlib import Path
 
 PKG = Path(__file__).resolve().parents[1] / "python" / "sfanav"
-STAGES = ["data", "features", "groundtruth", "sim", "loopclosure", "sfa", "localization", "odometry", "navigation", "experiments", "app"]
+STAGES = ["data", "features", "groundtruth", "sim", "loopclosure", "sfa", "localization", "landmarks", "odometry", "navigation",
+          "experiments", "app"]
 LABEL = {
     "data": "data<br/>images, datasets, unwarping",
     "features": "features<br/>local features over the seasons, robustness prediction",
@@ -26,6 +27,7 @@ LABEL = {
     "loopclosure": "loopclosure<br/>places seen again, long-term order",
     "sfa": "sfa<br/>SFA node, network -> slow features",
     "localization": "localization<br/>slow features -> position",
+    "landmarks": "landmarks<br/>marker views -> stacked position",
     "odometry": "odometry<br/>metric map, EKF, loop closures",
     "navigation": "navigation<br/>cost, gradient, descents",
     "experiments": "experiments<br/>thesis reruns",

@@ -16,8 +16,10 @@ PKG = Path(sfanav.__file__).parent
 # before it, never one after it. The private helpers (_checks, _progress,
 # _plotting, _threads, _core, _compat) come first; the package root
 # re-exports the stages; app and experiments sit on top.
-ORDER = ["_private", "data", "features", "groundtruth", "sim", "loopclosure", "sfa", "localization", "odometry", "navigation", "_root", "experiments", "app"]
-LIBRARY = {"_private", "data", "features", "groundtruth", "sim", "loopclosure", "sfa", "localization", "odometry", "navigation", "_root"}
+ORDER = ["_private", "data", "features", "groundtruth", "sim", "loopclosure", "sfa", "localization", "landmarks", "odometry",
+         "navigation", "_root", "experiments", "app"]
+LIBRARY = {"_private", "data", "features", "groundtruth", "sim", "loopclosure", "sfa", "localization", "landmarks", "odometry",
+           "navigation", "_root"}
 
 
 def _module_name(path: Path) -> str:
@@ -146,7 +148,7 @@ def test_no_module_reaches_into_another_modules_private_attributes():
     assert not bad, "\n".join(bad)
 
 
-@pytest.mark.parametrize("stage", ["data", "groundtruth", "sfa", "localization", "odometry", "navigation", "sim", "loopclosure"])
+@pytest.mark.parametrize("stage", ["data", "groundtruth", "sfa", "localization", "landmarks", "odometry", "navigation", "sim", "loopclosure"])
 def test_each_stage_imports_on_its_own(stage):
     code = f"import sfanav.{stage}"
     subprocess.run([sys.executable, "-c", code], check=True)

@@ -7,6 +7,7 @@ The package follows the pipeline, one subpackage per stage::
     loopclosure   places seen again: loop-closure detectors, long-term training order
     sfa           SFA nodes and the receptive-field network -> slow features
     localization  slow features -> metric position (readouts, evaluation)
+    landmarks     landmark views -> one network per marker -> stacked position readout
     odometry      metric learning from odometry, EKF fusion, loop closures
     navigation    cost, gradient and descents along slow features
     sim           the built-in simulated garden
@@ -22,10 +23,11 @@ from __future__ import annotations
 
 from typing import Any
 
-from . import _compat, data, groundtruth, localization, loopclosure, navigation, odometry, sfa, sim
+from . import _compat, data, groundtruth, landmarks, localization, loopclosure, navigation, odometry, sfa, sim
 from ._core import __version__
 from ._resources import get_memory_limit, get_num_threads, set_memory_limit, set_num_threads
 from .data import Dataset, DatasetWriter, Unwarper, estimate_mirror, write_dataset
+from .landmarks import LandmarkLocalizer
 from .localization import Localizer, QuadraticRegression
 from .loopclosure import BagOfWordsDetector, FourierDetector, GroundTruthDetector, LoopClosures, make_detector
 from .navigation import (
@@ -57,6 +59,7 @@ __all__ = [
     "LoopClosures",
     "Dataset",
     "DatasetWriter",
+    "LandmarkLocalizer",
     "Localizer",
     "MetricLearner",
     "Navigator",
@@ -80,6 +83,7 @@ __all__ = [
     "get_memory_limit",
     "get_num_threads",
     "groundtruth",
+    "landmarks",
     "load",
     "make_detector",
     "localization",

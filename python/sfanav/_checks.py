@@ -199,3 +199,46 @@ def as_image_batch(a: Any, name: str = "images") -> np.ndarray:
     if arr.ndim not in (3, 4):
         raise ValueError(f"{name} must have shape (N, H, W) or (N, H, W, C), got {arr.shape}")
     return np.ascontiguousarray(arr)
+
+
+def check_marker_ids(ids: Any, name: str = "ids") -> tuple[int, ...]:
+    """Marker ids (ArUco): a non-empty sequence of distinct integers >= 0,
+    as a tuple. A comma-separated string (``"136,144"``) is read too.
+    TypeError for non-integers, ValueError for an empty list, negative or
+    repeated ids."""
+    if isinstance(ids, str):
+        parts = [p.strip() for p in ids.split(",") if p.strip()]
+        try:
+            ids = [int(p) for p in parts]
+        except ValueError:
+            raise ValueError(f"{name} must be comma-separated integers (e.g. 136,144), got {ids!r}") from None
+    if isinstance(ids, (int, np.integer)) and not isinstance(ids, (bool, np.bool_)):
+        ids = [ids]
+    try:
+        items = list(ids)
+    except TypeError:
+        raise TypeError(f"{name} must be a sequence of integer marker ids, got {type(ids).__name__}") from None
+    out = []
+    for v in items:
+        if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, np.integer)):
+            raise TypeError(f"{name} must hold integer marker ids, got {v!r}")
+        if v < 0:
+            raise ValueError(f"{name}: marker ids are >= 0, got {int(v)}")
+        out.append(int(v))
+    if not out:
+        raise ValueError(f"{name} is empty: name at least one marker id")
+    if len(set(out)) != len(out):
+        raise ValueError(f"{name} repeats a marker id: {out}")
+    return tuple(out)
+
+
+def as_pair(value: Any, name: str) -> tuple[float, float]:
+    """Two finite numbers (e.g. a point (x, y) or radii (inner, outer)) as
+    floats; ValueError naming ``name`` otherwise."""
+    try:
+        a, b = (float(x) for x in value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be two numbers, got {value!r}") from None
+    if not (np.isfinite(a) and np.isfinite(b)):
+        raise ValueError(f"{name} must be finite, got {value!r}")
+    return a, b

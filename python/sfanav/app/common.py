@@ -43,13 +43,21 @@ def new_file(text: str, overwrite: bool, what: str = "output") -> "Path":
     return p
 
 
-def load_localizer(path: str) -> "Any":
+def load_localizer(path: str, *, landmarks: bool = False) -> "Any":
     """The localizer in the model file ``path``: a UsageError if the file
-    is missing, holds something else, or has no network to read images."""
+    is missing, holds something else, or has no network to read images.
+    ``landmarks``: a landmark model (:class:`sfanav.landmarks.LandmarkLocalizer`)
+    is accepted too."""
     from .. import load
+    from ..landmarks.model import LandmarkLocalizer
     from ..localization.localizer import Localizer
 
     model = load(existing_path(path, "model file"))
+    if isinstance(model, LandmarkLocalizer):
+        if not landmarks:
+            raise UsageError(f"{path} is a landmark model (sfanav train --landmarks): it localizes with sfanav "
+                             "localize and evaluate, not here")
+        return model
     if not isinstance(model, Localizer):
         raise UsageError(f"{path} holds a {type(model).__name__}, not a localizer (make one with sfanav train)")
     if model.network is None:

@@ -44,7 +44,7 @@ else:  # pragma: no cover
 
 from .._progress import progress_bar
 
-PRESETS = ("thesis-5.1", "thesis-5.2", "thesis-5.3", "sfanav-default")
+PRESETS = ("thesis-5.1", "thesis-5.2", "thesis-5.3", "sfanav-default", "landmark-120")
 
 
 MAX_CONFIG_BYTES = 1_000_000  # a network config file is small text

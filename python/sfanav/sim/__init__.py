@@ -34,13 +34,14 @@ from .robot import (
 )
 from .textures import Texture
 from .trajectories import Trajectory, VelocityRegions
-from .world import DynamicCylinder, Primitive, World, WorldObject
+from .world import DynamicCylinder, MarkerOcclusion, Primitive, World, WorldObject
 
 __all__ = [
     "World",
     "WorldObject",
     "Primitive",
     "DynamicCylinder",
+    "MarkerOcclusion",
     "Texture",
     "Lighting",
     "Season",

@@ -174,6 +174,9 @@ class Renderer:
         self.pyramids = {name: Pyramid(make_texture(spec), spec.tile) for name, spec in world.textures.items()}
         self._atlas = _Atlas(self.pyramids)
         self._static = _Prims([p for o in world.objects for p in o.parts], self._atlas)
+        owner = {id(p): o.marker_id for o in world.objects for p in o.parts}
+        self._marker_of = np.array([-1 if owner[id(p)] is None else owner[id(p)] for p in self._static.list], np.int64)
+        self._covered: dict[frozenset[int], _Prims] = {}
         self._foliage, self._crowns = self._vegetation()
         self._build_ground()
         self._build_sky()
@@ -434,10 +437,25 @@ class Renderer:
             out[gr] = col
         # objects
         P = self._static
+        hidden = self.world.hidden_markers(x, y) if self.world.occlusions else frozenset()
+        if hidden:
+            P = self._with_covered_markers(hidden)
         if self.world.dynamic:
             P = P.plus(_Prims([dd.primitive_at(time) for dd in self.world.dynamic], self._atlas))
         self._draw(P, gd, grid, x, y, heading, ux, uy, out, depth, light)
         return out
+
+    def _with_covered_markers(self, hidden: frozenset[int]) -> _Prims:
+        """The static primitives with the faces of the ``hidden`` markers
+        covered (drawn with the board's side texture), cached per set."""
+        if hidden not in self._covered:
+            P = object.__new__(_Prims)
+            for f in _Prims.FIELDS:
+                setattr(P, f, getattr(self._static, f))
+            P.list = self._static.list
+            P.front = np.where(np.isin(self._marker_of, list(hidden)), -1, self._static.front)
+            self._covered[hidden] = P
+        return self._covered[hidden]
 
     def _draw(self, P: _Prims, gd: dict[str, Any], grid: RayGrid, cx: float, cy: float, heading: float,
               ux: np.ndarray, uy: np.ndarray, out: np.ndarray, depth: np.ndarray, light: Lighting) -> None:

@@ -173,6 +173,86 @@ class DynamicCylinder:
 
 
 @dataclass
+class MarkerOcclusion:
+    """A marker hidden from a region of the area (thesis 5.4.1, occlusions).
+
+    While the camera stands inside the rectangle ``x_range`` x ``y_range``
+    (metres, bounds included; None: unbounded on that side), the marker's
+    face is covered: the renderer draws the board's plain side texture in
+    its place, so the marker cannot be detected from there. From everywhere
+    else it looks as usual.
+
+    Attributes
+    ----------
+    marker_id : int
+        The hidden marker (an id of the world's ``markers``).
+    x_range, y_range : (lo, hi)
+        The region, metres; ``lo`` or ``hi`` None for no bound.
+
+    Examples
+    --------
+    >>> occ = MarkerOcclusion(136, (None, 0.0), (None, 0.0))   # x <= 0 and y <= 0
+    >>> bool(occ.contains(-1.0, -2.0)), bool(occ.contains(1.0, -2.0))
+    (True, False)
+    """
+
+    marker_id: int
+    x_range: tuple[float | None, float | None] = (None, None)
+    y_range: tuple[float | None, float | None] = (None, None)
+
+    def __post_init__(self) -> None:
+        if isinstance(self.marker_id, bool) or not isinstance(self.marker_id, (int, np.integer)):
+            raise TypeError(f"occlusion marker_id must be an integer, got {self.marker_id!r}")
+        self.marker_id = int(self.marker_id)
+        self.x_range = _bounds(self.x_range, "x_range")
+        self.y_range = _bounds(self.y_range, "y_range")
+
+    def contains(self, x: Any, y: Any) -> np.ndarray:
+        """Whether camera positions ``(x, y)`` (metres, broadcast) lie in the region."""
+        x, y = np.asarray(x, float), np.asarray(y, float)
+        inside = np.ones(np.broadcast(x, y).shape, bool)
+        for v, (lo, hi) in ((x, self.x_range), (y, self.y_range)):
+            if lo is not None:
+                inside &= v >= lo
+            if hi is not None:
+                inside &= v <= hi
+        return inside
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"marker_id": self.marker_id, "x_range": list(self.x_range), "y_range": list(self.y_range)}
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> "MarkerOcclusion":
+        """An occlusion from :meth:`to_dict` output; ValueError for unknown or missing keys."""
+        if isinstance(d, MarkerOcclusion):
+            return d
+        if not isinstance(d, dict):
+            raise TypeError(f"an occlusion is a MarkerOcclusion or a dict, got {type(d).__name__}")
+        unknown = set(d) - {"marker_id", "x_range", "y_range"}
+        if unknown or "marker_id" not in d:
+            raise ValueError(f"an occlusion is {{'marker_id', 'x_range', 'y_range'}}, got keys {sorted(map(str, d))}")
+        return cls(d["marker_id"], tuple(d.get("x_range", (None, None))), tuple(d.get("y_range", (None, None))))
+
+
+def _bounds(r: Any, name: str) -> tuple[float | None, float | None]:
+    try:
+        lo, hi = r
+    except (TypeError, ValueError):
+        raise ValueError(f"occlusion {name} must be (lo, hi) in metres (None: unbounded), got {r!r}") from None
+    out = []
+    for v in (lo, hi):
+        if v is None:
+            out.append(None)
+            continue
+        if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) or not np.isfinite(v):
+            raise ValueError(f"occlusion {name} bounds must be finite numbers or None, got {r!r}")
+        out.append(float(v))
+    if out[0] is not None and out[1] is not None and out[0] > out[1]:
+        raise ValueError(f"occlusion {name} must have lo <= hi, got {r!r}")
+    return out[0], out[1]
+
+
+@dataclass
 class GroundSpec:
     """The lawn: a photographic detail texture (``detail``, tiling every
     ``detail_tile`` metres) times a large-scale colour map (two greens mixed
@@ -246,6 +326,8 @@ class World:
     textures : dict of str to Texture
     ground, sky : GroundSpec, SkySpec
     dynamic : list of DynamicCylinder
+    occlusions : list of MarkerOcclusion
+        Markers hidden from regions of the area (thesis 5.4.1).
     seed : int or None
         The seed it was generated from.
     """
@@ -259,6 +341,7 @@ class World:
     sky: SkySpec = field(default_factory=SkySpec)
     dynamic: list[DynamicCylinder] = field(default_factory=list)
     seed: int | None = None
+    occlusions: list[MarkerOcclusion] = field(default_factory=list)
 
     def __post_init__(self) -> None:
         self.area = (float(self.area[0]), float(self.area[1]))
@@ -272,6 +355,12 @@ class World:
         for d in self.dynamic:
             if d.texture not in self.textures:
                 raise ValueError(f"dynamic object uses texture {d.texture!r}, which the world does not define")
+        self.occlusions = [MarkerOcclusion.from_dict(o) for o in self.occlusions]
+        ids = {o.marker_id for o in self.objects if o.marker_id is not None}
+        for occ in self.occlusions:
+            if occ.marker_id not in ids:
+                raise ValueError(f"occlusion of marker {occ.marker_id}, but the world has "
+                                 + (f"markers {sorted(ids)} only" if ids else "no markers"))
 
     # ------------------------------------------------------------ generation
 
@@ -290,6 +379,7 @@ class World:
         marker_dictionary: str = "DICT_ARUCO_ORIGINAL",
         obstacles: Sequence[str | dict[str, Any]] = (),
         dynamic: DynamicCylinder | dict[str, Any] | None = None,
+        occlusions: Sequence[MarkerOcclusion | dict[str, Any]] = (),
         cloud_cover: float = 0.45,
         inner: dict[str, int] | None = None,
         patches: dict[str, int] | None = None,
@@ -327,6 +417,11 @@ class World:
         dynamic : DynamicCylinder or dict, optional
             A moving textured cylinder; a dict is passed to DynamicCylinder
             (``orbit`` defaults to the free radius).
+        occlusions : sequence of MarkerOcclusion or dict
+            Markers hidden from regions of the area (thesis 5.4.1), e.g.
+            ``{"marker_id": 136, "x_range": [None, 0], "y_range": [None, 0]}``;
+            each must name one of ``markers``. They draw no random numbers:
+            the world is otherwise the same with and without them.
         cloud_cover : float
             Fraction of the sky under clouds, in [0, 1].
         inner : dict, optional
@@ -420,6 +515,7 @@ class World:
             if inner:
                 placed.extend(b2.inner(inner, placed))
         world.objects = placed
+        world.occlusions = list(occlusions)
         if dynamic is not None:
             world.add_dynamic(dynamic, seed=int(rng.integers(2**31)))
         world.__post_init__()
@@ -465,6 +561,10 @@ class World:
                 out[o.marker_id] = (board.x, board.y)
         return out
 
+    def hidden_markers(self, x: float, y: float) -> frozenset[int]:
+        """Ids of the markers an occlusion hides from a camera at ``(x, y)`` (m)."""
+        return frozenset(o.marker_id for o in self.occlusions if bool(o.contains(x, y)))
+
     def in_area(self, x: Any, y: Any, margin: float = 0.0) -> np.ndarray:
         """Whether points lie inside the free area shrunk by ``margin`` (m)."""
         x, y = np.asarray(x, float), np.asarray(y, float)
@@ -506,6 +606,8 @@ class World:
             "textures": {k: t.to_dict() for k, t in self.textures.items()},
             "objects": [asdict(o) for o in self.objects],
             "dynamic": [asdict(d) for d in self.dynamic],
+            # worlds without occlusions write what they always wrote
+            **({"occlusions": [o.to_dict() for o in self.occlusions]} if self.occlusions else {}),
         }
 
     @classmethod
@@ -530,6 +632,7 @@ class World:
                 sky=SkySpec(**_tuples(d["sky"])),
                 dynamic=[DynamicCylinder(**_tuples(x)) for x in d.get("dynamic", [])],
                 seed=d.get("seed"),
+                occlusions=[MarkerOcclusion.from_dict(o) for o in d.get("occlusions", [])],
             )
         except (KeyError, TypeError) as exc:
             raise ValueError(f"world file is missing or has a bad field: {exc}") from None

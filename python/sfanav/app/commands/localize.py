@@ -8,6 +8,7 @@ from .. import arguments as arg
 from ..common import existing_path, fmt, load_localizer, log, mirror_of, new_file, table, wrap
 from ..failures import UsageError
 from ..registry import command
+from .landmarks import evaluate_landmarks_command, is_landmark_model, localize_landmarks
 
 
 @command("localize")
@@ -65,7 +66,9 @@ def _run_localize(args: argparse.Namespace) -> int:
     from ...localization.error_metrics import med
     from ...odometry.fusion import fuse
 
-    loc = load_localizer(args.model)
+    loc = load_localizer(args.model, landmarks=True)
+    if is_landmark_model(loc):
+        return localize_landmarks(args, loc, new_file(args.out, args.overwrite, "CSV"))
     if args.rotations and loc.rotation_pooling_ > 1:
         raise UsageError(f"{args.model} averages its features over {loc.rotation_pooling_} rotations already "
                           "(rotation pooling): --rotations applies to models without it")
@@ -169,7 +172,9 @@ def _run_evaluate(args: argparse.Namespace) -> int:
     from ...data.sources import load_run, select_run
     from ...localization.evaluation import evaluate, evaluation_rows, metrics_json
 
-    loc = load_localizer(args.model)
+    loc = load_localizer(args.model, landmarks=True)
+    if is_landmark_model(loc):
+        return evaluate_landmarks_command(args, loc)
     ds = Dataset(existing_path(args.dataset, "dataset"))
     runs = set(ds.runs.tolist())
     run = args.run_name if args.run_name is not None else ("test" if "test" in runs else None)

@@ -9,6 +9,7 @@ from .. import arguments as arg
 from ..common import existing_path, log, new_file, wrap
 from ..failures import UsageError
 from ..registry import command
+from .landmarks import add_train_arguments, train_landmarks
 
 
 @command("train")
@@ -27,11 +28,13 @@ def _add_train(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                     "evaluate. Images of another size are resized, omnidirectional images unwarped (with "
                     "--mirror or an estimated mirror)."),
         epilog="network presets: thesis-5.1 (350x40 RGB), thesis-5.2 (600x60 RGB), thesis-5.3 (409x40 gray) "
-               "(thesis tables), sfanav-default (350x40 RGB). A config file is TOML or JSON in the presets' "
+               "(thesis tables), sfanav-default (350x40 RGB), landmark-120 (120x120 RGB marker views, with --landmarks). A config file is TOML or JSON in the presets' "
                "format (sfanav.Network.preset_path('thesis-5.1') shows one).\n\n"
                "example:\n  sfanav simulate --preset demo --out garden\n"
                "  sfanav train --dataset garden --out garden.sfa                       # the sfanav default\n"
-               "  sfanav train --dataset garden --preset thesis-5.2 --precision mixed --out thesis.sfa",
+               "  sfanav train --dataset garden --preset thesis-5.2 --precision mixed --out thesis.sfa\n"
+               "  sfanav simulate --preset thesis-5.4-landmarks --out marked\n"
+               "  sfanav train --dataset marked --landmarks 136,144 --out landmarks.sfa   # thesis 5.4",
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     net = p.add_mutually_exclusive_group(required=False)
@@ -93,6 +96,7 @@ def _add_train(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                    help="mirror of omnidirectional images, pixels (default: estimated)")
     p.add_argument("--overwrite", action="store_true", help="replace an existing model file")
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
+    add_train_arguments(p)
     p.set_defaults(run=_run_train)
     return p
 
@@ -128,6 +132,8 @@ def _run_train(args: argparse.Namespace) -> int:
 
     t0 = time.perf_counter()
     out = new_file(args.out, args.overwrite, "model file")
+    if args.landmarks is not None:
+        return train_landmarks(args, out)
     ds = Dataset(existing_path(args.dataset, "dataset"))
     run = args.run_name
     if run is None and "train" in set(ds.runs.tolist()):
