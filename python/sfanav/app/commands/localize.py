@@ -58,6 +58,8 @@ def _run_localize(args: argparse.Namespace) -> int:
 
     import numpy as np
 
+    from pathlib import Path
+
     from ..._progress import progress_bar
     from ...data.preprocessing import Preprocessing, Preprocessor
     from ...data.ros_messages import require_rosbags
@@ -68,7 +70,9 @@ def _run_localize(args: argparse.Namespace) -> int:
 
     loc = load_localizer(args.model, landmarks=True)
     if is_landmark_model(loc):
-        return localize_landmarks(args, loc, new_file(args.out, args.overwrite, "CSV"))
+        if len(args.out) != 1 or Path(args.out[0]).suffix.lower() in BAG_SUFFIXES:
+            raise UsageError(f"{args.model} is a landmark model: it writes one CSV (--out FILE.csv), not bags")
+        return localize_landmarks(args, loc, new_file(args.out[0], args.overwrite, "CSV"))
     if args.rotations and loc.rotation_pooling_ > 1:
         raise UsageError(f"{args.model} averages its features over {loc.rotation_pooling_} rotations already "
                           "(rotation pooling): --rotations applies to models without it")
