@@ -123,6 +123,15 @@ def test_simulating_on_uneven_ground_is_deterministic_and_flat_presets_are_uncha
     with pytest.raises((KeyError, ValueError)):
         flat.column("roll_deg")
     assert "terrain" not in flat.metadata
+    # the uneven preset driven flat (a control): the same poses, level images
+    control = sim.simulate("thesis-5.2.3-outdoor", tmp_path / "d", seed=2, max_frames=6, camera=cam, progress=False,
+                           flat=True)
+    assert "terrain" not in control.metadata
+    np.testing.assert_array_equal(control.poses, one.poses)
+    np.testing.assert_array_equal(control.image(k), sim.Renderer(world).render(cam, one.poses[k],
+                                                                               float(one.timestamps[k])))
+    with pytest.raises(TypeError, match="flat must be a bool"):
+        sim.simulate("demo", tmp_path / "e", max_frames=2, camera=cam, progress=False, flat="yes")
     r = sim.Renderer(sim.World.load(tmp_path / "c" / "world.json"))
     for i in range(len(flat)):
         np.testing.assert_array_equal(flat.image(i), r.render(cam, flat.poses[i], float(flat.timestamps[i])))

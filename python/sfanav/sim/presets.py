@@ -495,7 +495,7 @@ def preset_world(preset: str, seed: int = 0) -> World:
 
 def simulate(preset: str, out: str | os.PathLike, seed: int = 0, *, max_frames: int | None = None,
              camera: PanoramicCamera | OmniCamera | None = None, overwrite: bool = False,
-             progress: bool = True) -> Any:
+             progress: bool = True, flat: bool = False) -> Any:
     """Generates a preset's dataset.
 
     Parameters
@@ -514,6 +514,9 @@ def simulate(preset: str, out: str | os.PathLike, seed: int = 0, *, max_frames: 
         Replaces the preset's camera.
     progress : bool
         A progress bar (tqdm).
+    flat : bool
+        Drive a preset with uneven ground on flat ground instead (a control:
+        the same world, runs and images as far as the ground allows).
 
     Returns
     -------
@@ -530,6 +533,8 @@ def simulate(preset: str, out: str | os.PathLike, seed: int = 0, *, max_frames: 
     if max_frames is not None and (isinstance(max_frames, bool) or not isinstance(max_frames, (int, np.integer))
                                    or max_frames < 1):
         raise ValueError(f"max_frames must be a positive integer, got {max_frames!r}")
+    if not isinstance(flat, (bool, np.bool_)):
+        raise TypeError(f"flat must be a bool, got {flat!r}")
     s_world, s_runs, s_traj, s_odo = random_streams(seed)
     world = World.generate(int(s_world.integers(2**31)), **p.world)
     cam = camera or p.camera()
@@ -542,7 +547,7 @@ def simulate(preset: str, out: str | os.PathLike, seed: int = 0, *, max_frames: 
         world.add_dynamic({"period": float(max(trajs[0].times[-1], 1e-3)), "radius": 0.6, "height": 2.5},
                           seed=int(s_world.integers(2**31)))
     renderer = Renderer(world)
-    heights = preset_terrain(preset, seed)
+    heights = None if flat else preset_terrain(preset, seed)
     total = sum(len(t) * len(r.conditions) * len(robot.cameras) for t, r in zip(trajs, runs))
     attitude_cols = set(ATTITUDE_COLUMNS) if heights is not None else set()
     extra_cols = sorted({k for t in trajs for k in t.extra} | attitude_cols)
@@ -558,8 +563,8 @@ def simulate(preset: str, out: str | os.PathLike, seed: int = 0, *, max_frames: 
         "world": "world.json",
         "runs": {},
     }
-    if p.terrain is not None:
-        meta["terrain"] = p.terrain.to_dict()
+    if heights is not None:
+        meta["terrain"] = heights.ground.to_dict()
     bar = None
     if progress:
         from tqdm.auto import tqdm
