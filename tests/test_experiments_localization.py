@@ -97,3 +97,26 @@ def test_window_network_tiles_every_window():
             assert net.input_shape == (H, V, 3)
     with pytest.raises(ValueError, match="multiples of 5"):
         window_network(17, 20)
+
+
+def test_5_2_3_quick(tmp_path):
+    assert "5.2.3" in experiments.names()
+    res = experiments.run("5.2.3", tmp_path, quick=True, progress=False)
+    tags = ["thesis configuration", "thesis configuration, jitter 0.8 px", "thesis configuration, flat ground",
+            "sfanav default", "sfanav default, jitter 0.8 px", "sfanav default, flat ground"]
+    required = [f"MED (m) [{t}]" for t in tags] + BASELINES + [f"{b} [flat ground]" for b in BASELINES] + [
+        "MED gain from jitter (m) [thesis configuration]", "MED gain from jitter (m) [sfanav default]",
+        "MED cost of the uneven ground (m) [sfanav default]", "camera tilt rms (deg), train run",
+        "horizon ring shift rms (px), test run", "best sfanav MED (m), uneven ground"]
+    rows = check(res, tmp_path, required)
+    # the thesis's 0.33 m beside the jittered rows (its method), the SLAM peers as the thesis's only
+    assert rows["MED (m) [thesis configuration, jitter 0.8 px]"]["thesis"] == 0.33
+    assert rows["MED (m) [thesis configuration]"]["thesis"] is None
+    assert rows["MED (m) [sfanav default, flat ground]"]["thesis"] is None
+    assert rows["MED (m) ORB-SLAM, test run alone (thesis Table 5.6, median of 5 runs)"]["thesis"] == 0.35
+    assert rows["MED (m) LSD-SLAM, training + test runs (thesis Table 5.6, median of 5 runs)"]["thesis"] == 0.53
+    assert rows["camera tilt rms (deg), train run"]["sfanav"] > 0.5  # the ground is uneven
+    gain = rows["MED gain from jitter (m) [sfanav default]"]["sfanav"]
+    assert gain == rows["MED (m) [sfanav default]"]["sfanav"] - rows["MED (m) [sfanav default, jitter 0.8 px]"]["sfanav"]
+    assert any("firing_maps" in p for p in res.plots) and any("trajectory" in p for p in res.plots)
+    assert len(res.targets) == 1 and "quick" in res.notes

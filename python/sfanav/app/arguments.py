@@ -81,3 +81,14 @@ def xy(text: str) -> tuple[float, ...]:
     if len(v) not in (2, 3) or not all(abs(t) < float("inf") for t in v):
         raise argparse.ArgumentTypeError(f"expected X,Y or X,Y,HEADING_DEG (finite numbers), got {text!r}")
     return v
+
+
+def nonneg_float(text: str) -> float:
+    """A finite number >= 0 ("5", "2.5")."""
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number >= 0, got {text!r}") from None
+    if not (math.isfinite(v) and v >= 0):
+        raise argparse.ArgumentTypeError(f"expected a finite number >= 0, got {text!r}")
+    return v

@@ -3,8 +3,10 @@
 * :class:`Preprocessing`: panorama size (width = 360 degrees), gray or RGB,
   per-image normalisation; stored in a localizer's model file.
 * :class:`Preprocessor`: applies it to batches of images: panoramas of the
-  right size pass as they are, omnidirectional (mirror) images are unwarped,
-  other panoramas resized; then gray conversion and normalisation."""
+  right size pass as they are, omnidirectional (mirror) images are unwarped
+  (for training, optionally with a random centre offset per image: the
+  thesis's centre jitter), other panoramas resized; then gray conversion and
+  normalisation."""
 
 from __future__ import annotations
 
@@ -13,6 +15,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from .._checks import check_nonneg_float
 from .._progress import Log, stderr_log
 
 if TYPE_CHECKING:  # annotations only: data/ sits below the network and the localizer
@@ -146,12 +149,52 @@ class Preprocessor:
 
     Then RGB becomes gray if the network is gray, and each image is
     normalised if ``prep.normalize``.
+
+    Parameters
+    ----------
+    prep : Preprocessing
+        What the network expects.
+    mirror : (cx, cy, inner, outer) or "CX,CY,INNER,OUTER", optional
+        The mirror of omnidirectional images, pixels; default estimated.
+    log : callable
+        Where the one-line account of the conversion goes.
+    jitter : float
+        Centre jitter, pixels (thesis 5.2.1: 5): every omnidirectional image
+        is unwarped about the mirror centre moved by a random offset drawn
+        uniformly from ``[-jitter, jitter]`` in x and in y, so that a network
+        trained on them learns to ignore where the horizon ring lies (a
+        robot tilting on uneven ground moves it). A training augmentation:
+        leave it 0 for images to localize. Panoramas are not unwarped and
+        pass without jitter (the log says so). Must be smaller than the
+        mirror ring's width.
+    seed : int, optional
+        Seeds the offsets: same seed and images, same panoramas.
+
+    Raises
+    ------
+    TypeError, ValueError
+        A ``jitter`` that is not a finite number >= 0, or (on the first
+        batch) not smaller than the mirror ring's width; a malformed
+        ``mirror``.
+
+    Examples
+    --------
+    >>> prep = Preprocessing(409, 40, gray=True, normalize=True)
+    >>> train = Preprocessor(prep, jitter=5.0, seed=0)     # doctest: +SKIP
+    >>> X = train(omni_images)                             # doctest: +SKIP
+    >>> test = Preprocessor(prep, mirror=train.mirror_used)  # no jitter  # doctest: +SKIP
     """
 
-    def __init__(self, prep: Preprocessing, *, mirror: Any = None, log: Log = stderr_log) -> None:
+    def __init__(self, prep: Preprocessing, *, mirror: Any = None, log: Log = stderr_log, jitter: float = 0.0,
+                 seed: int | None = None) -> None:
         self.prep = prep
         self.mirror = _parse_mirror(mirror)
         self.log = log
+        self.jitter = check_nonneg_float(jitter, "jitter")
+        if seed is not None and (isinstance(seed, (bool, np.bool_)) or not isinstance(seed, (int, np.integer))
+                                 or seed < 0):
+            raise ValueError(f"seed must be a non-negative integer or None, got {seed!r}")
+        self.seed = seed
         self.mode: str | None = None
         self._unwarper: Any = None
         self.message = ""
@@ -162,27 +205,40 @@ class Preprocessor:
         W, H = self.prep.size
         if (w, h) == (W, H):
             self.mode = "as-is"
+            self._say_no_jitter(f"{w}x{h} panoramas")
             return
         if w < 2 * h:
-            from .unwarp import Unwarper, estimate_mirror
+            from .unwarp import Mirror, estimate_mirror
 
             if self.mirror is not None:
                 cx, cy, r0, r1 = self.mirror
-                self._unwarper = Unwarper((cx, cy), r0, r1, (W, H))
+                m = Mirror((cx, cy), r0, r1)
                 how = f"given mirror: center ({cx:.1f}, {cy:.1f}) px, radii {r0:.1f}..{r1:.1f} px"
             else:
                 m = estimate_mirror(batch)
-                self._unwarper = m.unwarper((W, H))
                 self.mirror = (float(m.center[0]), float(m.center[1]), float(m.inner_radius), float(m.outer_radius))
                 how = (f"estimated mirror center ({m.center[0]:.1f}, {m.center[1]:.1f}) px, radii "
                        f"{m.inner_radius:.1f}..{m.outer_radius:.1f} px; pass --mirror CX,CY,INNER,OUTER to set it")
+            ring = m.outer_radius - m.inner_radius
+            if self.jitter >= ring:
+                raise ValueError(f"centre jitter {self.jitter:g} px is not smaller than the mirror ring's width "
+                                 f"({ring:.1f} px, radii {m.inner_radius:.1f}..{m.outer_radius:.1f})")
+            self._unwarper = m.unwarper((W, H), jitter=self.jitter, random_state=self.seed)
+            if self.jitter:
+                how += f"; centre jittered by up to +-{self.jitter:g} px per image (seed {self.seed})"
             self.mode = "unwarp"
             self.mirror_used = self.mirror
             self.message = f"unwarping {w}x{h} omnidirectional images to {W}x{H} panoramas: {how}"
         else:
             self.mode = "resize"
             self.message = f"resizing {w}x{h} images to {W}x{H}, the panorama size the model was trained on"
+            self._say_no_jitter(f"{w}x{h} panoramas")
         self.log(self.message)
+
+    def _say_no_jitter(self, what: str) -> None:
+        if self.jitter:
+            self.log(f"centre jitter ({self.jitter:g} px) applies to omnidirectional images only: the {what} "
+                     "pass without it")
 
     def __call__(self, batch: np.ndarray) -> np.ndarray:
         a = np.asarray(batch)

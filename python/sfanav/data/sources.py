@@ -162,11 +162,23 @@ def open_images(path: str | os.PathLike, *, run: str | None = None, camera: str 
 
 def load_run(ds: Dataset, prep: Preprocessing, *, mirror: Any = None, log: Log = stderr_log,
              progress: bool = False, batch_size: int = 64,
-             preprocessor: Preprocessor | None = None) -> tuple[np.ndarray, np.ndarray]:
+             preprocessor: Preprocessor | None = None, jitter: float = 0.0,
+             seed: int | None = None) -> tuple[np.ndarray, np.ndarray]:
     """All images of a (one-camera) dataset as the network's input array and
-    their positions (N, 2) in metres (converted by ``preprocessor``, or a new
-    :class:`Preprocessor` with ``mirror``)."""
-    conform = preprocessor or Preprocessor(prep, mirror=mirror, log=log)
+    their positions (N, 2) in metres.
+
+    The images are converted by ``preprocessor``, or by a new
+    :class:`Preprocessor` with ``mirror``, ``jitter`` (centre jitter in
+    pixels for omnidirectional images: a training augmentation) and
+    ``seed``; giving both a preprocessor and a jitter is a ValueError.
+
+    Examples
+    --------
+    >>> X, xy = load_run(ds.select(run="train"), prep, jitter=5.0, seed=0)  # doctest: +SKIP
+    """
+    if preprocessor is not None and (jitter or seed is not None):
+        raise ValueError("load_run: give the jitter and seed to the Preprocessor, not beside it")
+    conform = preprocessor or Preprocessor(prep, mirror=mirror, log=log, jitter=jitter, seed=seed)
     out: np.ndarray | None = None
     bar = progress_bar(progress, len(ds), "reading images")
     i = 0

@@ -59,23 +59,26 @@ def progress_log(progress: bool):
 
 
 def simulated(out: Path, preset: str, seed: int, *, quick: bool, camera: Any = None, max_frames: int | None = None,
-              progress: bool = True) -> Dataset:
+              progress: bool = True, flat: bool = False) -> Dataset:
     """The preset's dataset under ``out/data``, simulated once and reused
-    when a dataset with the same preset, seed, frames and camera is there."""
-    name = f"{preset}-seed{seed}" + ("-quick" if quick else "")
+    when a dataset with the same preset, seed, frames, camera and ground is
+    there. ``flat``: a preset with uneven ground driven on flat ground."""
+    name = f"{preset}-seed{seed}" + ("-flat" if flat else "") + ("-quick" if quick else "")
     path = out / "data" / name
     cam_dict = (camera or sim.presets.get(preset).camera()).to_dict()
+    uneven = not flat and sim.presets.get(preset).terrain is not None
     if (path / "metadata.json").exists():
         try:
             ds = Dataset(path)
             md = ds.metadata
             if (md.get("preset") == preset and md.get("seed") == seed and md.get("max_frames") == max_frames
-                    and md.get("camera") == json.loads(json.dumps(cam_dict))):
+                    and md.get("camera") == json.loads(json.dumps(cam_dict)) and ("terrain" in md) == uneven):
                 progress_log(progress)(f"reusing the simulated dataset {path}")
                 return ds
         except (ValueError, OSError):
             pass
-    return sim.simulate(preset, path, seed, max_frames=max_frames, camera=camera, overwrite=True, progress=progress)
+    return sim.simulate(preset, path, seed, max_frames=max_frames, camera=camera, overwrite=True, progress=progress,
+                        flat=flat)
 
 
 def tiny_config(width: int, height: int, channels: int, out: int = 12, degree: int = 2,
@@ -120,10 +123,12 @@ def _run_localization(out: Path, ds: Dataset, net: Network, *, prefix: str, titl
                       normalize: bool = False, step: int = 5, window: float = 1.0, thesis: dict[str, Any] | None = None,
                       suffix: str = "", baselines: bool = True, data: tuple | None = None, text: tuple = (),
                       plots: bool = True, baseline_queries: int | None = 1000, readout: str = "quadratic",
-                      rows: Any = None):
+                      rows: Any = None, signature: str | None = None, n_repeats: int = 100):
     """Train on the ``train`` run, evaluate on ``test``; returns (evaluation, rows, info, data).
     ``readout="quadratic"`` (8 outputs, no ``rows``) is the thesis's
-    configuration; ``"auto"`` with 8 or 12 outputs the sfanav default's."""
+    configuration; ``"auto"`` with 8 or 12 outputs the sfanav default's
+    (with ``signature="fourier"`` as ``sfanav train`` makes it).
+    ``n_repeats``: of the random-split protocol."""
     log = progress_log(progress)
     prep = Preprocessing.for_network(net, window=window, normalize=normalize)
     if data is None:
@@ -134,12 +139,13 @@ def _run_localization(out: Path, ds: Dataset, net: Network, *, prefix: str, titl
     t0 = time.perf_counter()
     loc = fit_localizer(net, X_tr, xy_tr, rotation=Rotation(step=step, window=window),
                         n_outputs=8 if readout == "quadratic" else None, readout=readout, rows=rows, prep=prep,
-                        progress=progress)
+                        progress=progress, signature=signature)
     fit_s = time.perf_counter() - t0
     log(f"{title}: trained on {len(X_tr)} images in {fit_s:.0f} s; readout {loc.describe_readout()}")
     ev = evaluate(loc, X_te, xy_te, train_images=X_tr, train_xy=xy_tr, out=out if plots else None, prefix=prefix,
                   title=title,
-                  run_baselines=baselines, seed=seed, log=log, text=text, baseline_queries=baseline_queries)
+                  run_baselines=baselines, seed=seed, log=log, text=text, baseline_queries=baseline_queries,
+                  n_repeats=n_repeats)
     rows = evaluation_rows(ev, suffix=suffix, thesis=thesis)
     info = {"localizer": loc, "n_train": len(X_tr), "n_test": len(X_te), "fit_s": fit_s, "prep": prep.describe(),
             "network_s": loc.info["fit_seconds"], "readout_s": loc.info["readout_seconds"],
@@ -479,3 +485,157 @@ def exp_5_2(out: Path, *, quick: bool, seed: int, progress: bool) -> ExperimentR
         "memory and the Fourier signature instead.\n" + ngt_note
     )
     return ExperimentResult("5.2", rows, plots, notes)
+
+
+THESIS_5_2_3 = 0.33
+"""Thesis 5.2.3: SFA's mean Euclidean distance on the outdoor test run (m)."""
+
+SLAM_5_2_3 = (("ORB-SLAM, test run alone", 0.35), ("ORB-SLAM, training + test runs", 0.99),
+              ("LSD-SLAM, training + test runs", 0.53), ("LSD-SLAM, test run alone", 1.51))
+"""Thesis Table 5.6: the monocular SLAM systems' median MED over five runs (m)."""
+
+CENTRE_JITTER_PX = 5.0
+"""Thesis 5.2.1: the unwarping centre's random offset, +- pixels."""
+
+SPLIT_REPEATS_5_2_3 = 10
+"""Repeats of the random-split rows in 5.2.3 (not the thesis's protocol there; each repeat refits the readout)."""
+
+
+def _attitude_rows(ds: Dataset) -> tuple[list[dict[str, Any]], np.ndarray, float]:
+    """Rows on how much the camera tilted per run, the test run's tilt per
+    frame (deg) and the horizon ring's shift per degree of tilt (px)."""
+    cam = sim.camera_from_dict(ds.metadata["camera"])
+    px_per_deg = float(cam.radius_of_elevation(np.radians(0.5)) - cam.radius_of_elevation(np.radians(-0.5)))
+    rows: list[dict[str, Any]] = []
+    test_tilt = np.zeros(0)
+    for run in ("train", "test"):
+        part = ds.select(run=run)
+        tilt = np.hypot(part.column("roll_deg").astype(float), part.column("pitch_deg").astype(float))
+        dz = part.column("camera_dz_m").astype(float)
+        rows += [
+            {"metric": f"camera tilt rms (deg), {run} run", "thesis": None, "sfanav": float(np.sqrt(np.mean(tilt**2)))},
+            {"metric": f"camera tilt 95th percentile (deg), {run} run", "thesis": None,
+             "sfanav": float(np.percentile(tilt, 95))},
+            {"metric": f"horizon ring shift rms (px), {run} run", "thesis": None,
+             "sfanav": float(np.sqrt(np.mean(tilt**2))) * px_per_deg},
+            {"metric": f"camera height change rms (m), {run} run", "thesis": None,
+             "sfanav": float(np.sqrt(np.mean((dz - dz.mean()) ** 2)))},
+        ]
+        if run == "test":
+            test_tilt = tilt
+    return rows, test_tilt, px_per_deg
+
+
+@register("5.2.3", "outdoor, uneven grass (5x7 m), omnidirectional images unwarped with and without +-5 px centre "
+                   "jitter, and a flat-ground control; thesis 0.33 m (ORB-SLAM 0.35, LSD-SLAM 0.53)")
+def exp_5_2_3(out: Path, *, quick: bool, seed: int, progress: bool) -> ExperimentResult:
+    from ..data.preprocessing import Preprocessor
+    from ..localization.recipe import default_network, default_rows
+
+    preset = "thesis-5.2.3-outdoor"
+    log = progress_log(progress)
+    if quick:
+        cam = sim.OmniCamera(64, elevation_deg=(-30.0, 20.0))
+        ds, flat = (simulated(out, preset, seed, quick=True, camera=cam, max_frames=40, progress=progress, flat=f)
+                    for f in (False, True))
+        nets = {"thesis configuration": lambda: Network(tiny_config(60, 8, 1)),
+                "sfanav default": lambda: Network(tiny_config(60, 8, 3))}
+    else:
+        ds, flat = (simulated(out, preset, seed, quick=False, progress=progress, flat=f) for f in (False, True))
+        nets = {"thesis configuration": lambda: Network.from_preset("thesis-5.3", out=12),
+                "sfanav default": default_network}
+    size = int(ds.metadata["camera"]["size"])
+    jitter = CENTRE_JITTER_PX * size / 400  # the thesis's 5 px at the preset's 400 px image
+    elev = tuple(ds.metadata["camera"]["elevation_deg"])
+    rows, test_tilt, px_per_deg = _attitude_rows(ds)
+    plots: list[str] = []
+    meds: dict[str, float] = {}
+    preds: dict[str, np.ndarray] = {}
+    infos: dict[str, dict[str, Any]] = {}
+    mirror: Any = None
+    baseline_rows: list[dict[str, Any]] = []
+    for config, make in nets.items():
+        thesis_cfg = config == "thesis configuration"
+        prep = Preprocessing.for_network(make(), normalize=thesis_cfg)
+        pre = Preprocessor(prep, mirror=mirror, log=log)
+        X_tr, xy_tr = load_run(ds.select(run="train"), prep, preprocessor=pre)
+        mirror = pre.mirror_used  # estimated on the first training images, then kept for every run
+        X_te, xy_te = load_run(ds.select(run="test"), prep, mirror=mirror, log=log)
+        X_jit, _ = load_run(ds.select(run="train"), prep, mirror=mirror, log=log, jitter=jitter, seed=seed)
+        Xf_tr, xyf_tr = load_run(flat.select(run="train"), prep, mirror=mirror, log=log)
+        Xf_te, xyf_te = load_run(flat.select(run="test"), prep, mirror=mirror, log=log)
+        jtag = f"{config}, jitter {jitter:g} px"
+        for tag, data, scene in ((config, (X_tr, xy_tr, X_te, xy_te), ds),
+                                 (jtag, (X_jit, xy_tr, X_te, xy_te), ds),
+                                 (f"{config}, flat ground", (Xf_tr, xyf_tr, Xf_te, xyf_te), flat)):
+            label = f" [{tag}]"
+            prefix = "5.2.3-" + tag.replace(" ", "-").replace(",", "") + "-"
+            kw: dict[str, Any] = ({"readout": "quadratic"} if thesis_cfg else
+                                  {"readout": "auto", "rows": default_rows(elev), "signature": "fourier"})
+            peers = thesis_cfg and tag != jtag
+            ev, r, info, _ = _run_localization(
+                out, scene, make(), prefix=prefix, title=f"5.2.3 outdoor, {tag}", seed=seed,
+                progress=progress, normalize=thesis_cfg, suffix=label, baselines=peers, data=data,
+                thesis={"MED (m)": THESIS_5_2_3} if tag == jtag else None, baseline_queries=500,
+                n_repeats=SPLIT_REPEATS_5_2_3, **kw)
+            rows += [dict(row, configuration=tag) for row in r if "baseline" not in row]
+            if peers:
+                baseline_rows += [dict(row, metric=row["metric"] + (" [flat ground]" if scene is flat else ""))
+                                  for row in evaluation_rows(ev) if "baseline" in row]
+            rows.append({"metric": f"training (s){label}", "thesis": None, "sfanav": info["network_s"],
+                         "configuration": tag})
+            meds[tag], preds[tag], infos[tag] = ev.metrics["med"], ev.predictions, info
+            plots += _plots(ev)
+            log(f"5.2.3 {tag}: MED {ev.metrics['med']:.3f} m")
+        rows += [{"metric": f"MED gain from jitter (m) [{config}]", "thesis": None,
+                  "sfanav": meds[config] - meds[jtag], "configuration": config},
+                 {"metric": f"MED cost of the uneven ground (m) [{config}]", "thesis": None,
+                  "sfanav": meds[config] - meds[f"{config}, flat ground"], "configuration": config}]
+    # where the camera tilted most: the test frames above the 75th percentile of tilt (the flat control drives
+    # the same test walk)
+    q75 = float(np.percentile(test_tilt, 75))
+    steep = test_tilt > q75
+    xy_te = ds.select(run="test").poses[:, :2]
+    for tag, pred in preds.items():
+        err = np.hypot(*(pred - xy_te).T)
+        rows.append({"metric": f"MED (m), test frames tilted > {q75:.1f} deg [{tag}]", "thesis": None,
+                     "sfanav": float(err[steep].mean()), "configuration": tag})
+    rows += baseline_rows
+    rows += [{"metric": f"MED (m) {name} (thesis Table 5.6, median of 5 runs)", "thesis": v,
+              "sfanav": "(thesis only)"} for name, v in SLAM_5_2_3]
+    uneven = {k: v for k, v in meds.items() if "flat" not in k}
+    best = min(uneven, key=uneven.get)
+    rows.append({"metric": "best sfanav MED (m), uneven ground", "thesis": THESIS_5_2_3, "sfanav": uneven[best],
+                 "configuration": best})
+    first = next(iter(infos.values()))
+    notes = (
+        f"Scene: sim preset {preset} (seed {seed}): a 5x7 m area of uneven grass in a garden, seen by a "
+        f"{size}x{size} omnidirectional camera (spherical mirror, elevation {elev[0]:g}..{elev[1]:g} deg). The "
+        "ground's bumps and swell under the robot's four wheels tilt the camera and move it up and down (rows "
+        f"'camera tilt ...'); a tilt moves the horizon ring by about {px_per_deg:.2f} px per degree. "
+        f"{first['n_train']} training images (grid with crossings and large-radius turns), {first['n_test']} test "
+        "images (random walk). Every run is unwarped about one mirror, estimated on the first training images "
+        f"(centre {mirror[0]:.1f}, {mirror[1]:.1f} px, radii {mirror[2]:.1f}..{mirror[3]:.1f} px); '[..., jitter "
+        f"{jitter:g} px]' rows train on the training images unwarped about the centre moved by a random offset in "
+        f"[-{jitter:g}, {jitter:g}] px in x and y (seed {seed}; thesis 5.2.1), the test images are unwarped without "
+        "jitter. '[..., flat ground]' rows: the control, the same world, runs and camera on flat ground (no tilt, "
+        "no bob). Thesis configuration: "
+        + ("a tiny 2-layer net (quick smoke run; numbers not meaningful)" if quick else
+           "Table 5.3 (thesis-5.3 preset, double precision) with 12 top outputs")
+        + f" on {infos['thesis configuration']['prep']} panoramas, quadratic regression of the 8 slowest "
+        "outputs. sfanav default: "
+        + ("a tiny 2-layer RGB net (quick)" if quick else "network sfanav-default")
+        + f" on {infos['sfanav default']['prep']} panoramas, the horizon band of rows, auto readout with the "
+        "Fourier signature, rotation pooling (as 'sfanav train' makes it; readouts: "
+        + "; ".join(f"{k}: {v['readout']}" for k, v in infos.items() if "default" in k)
+        + "). Rotation 5 px, 100 % window; readouts fitted on the training run, MED on the test run (the "
+        f"thesis's protocol; the '(random splits)' rows: {SPLIT_REPEATS_5_2_3} random 50/50 splits of the test run). "
+        "Peers (perfect memory, Fourier signature) store the thesis configuration's "
+        "unjittered training panoramas and answer 500 evenly spaced test images. The thesis compared with "
+        "monocular SLAM on its real recordings (Table 5.6): "
+        + "; ".join(f"{n} {v:g} m" for n, v in SLAM_5_2_3)
+        + "; those rows are the thesis's only."
+    )
+    targets = {f"5.2.3 MED <= {THESIS_5_2_3} m on uneven ground (best sfanav: {best})":
+               bool(uneven[best] <= THESIS_5_2_3)}
+    return ExperimentResult("5.2.3", rows, plots, notes, targets=targets)

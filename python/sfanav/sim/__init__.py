@@ -10,6 +10,8 @@
   closed-loop stepping.
 * ``trajectories``: grid exploration, random lines, border loop, line
   segments, random walks, velocity regions.
+* :class:`UnevenGround`, :class:`HeightField`, :class:`Attitude`
+  (``terrain.py``): uneven ground that tilts and bobs the camera.
 * ``presets``: the thesis's scenes; :func:`simulate` writes a dataset.
 """
 
@@ -32,6 +34,7 @@ from .robot import (
     unicycle_step,
     wrap_angle,
 )
+from .terrain import Attitude, HeightField, UnevenGround
 from .textures import Texture
 from .trajectories import Trajectory, VelocityRegions
 from .world import DynamicCylinder, MarkerOcclusion, Primitive, World, WorldObject
@@ -65,4 +68,7 @@ __all__ = [
     "bearings",
     "column_of_bearing",
     "camera_from_dict",
+    "Attitude",
+    "HeightField",
+    "UnevenGround",
 ]

@@ -37,6 +37,68 @@ class RayGrid:
         self.pixel_angle = 2 * np.pi / self.W
 
 
+class LevelGrid:
+    """The level ray grid a tilted camera's view is resampled from.
+
+    A camera tilted on uneven ground casts its grid's rays in tilted
+    directions. Every ray still leaves the same viewpoint, so the tilted
+    view is a resampling of a level one: this grid has the camera grid's
+    bearings and equiangular rows at the camera grid's finest elevation step
+    (leaving out steps under a quarter of the median, such as an omni
+    grid's clipped edge rows),
+    ``margin_deg`` beyond its elevation range on both sides (within +-89
+    degrees). :meth:`maps` gives, for an attitude, where each cell of the
+    camera grid looks in this grid.
+
+    Parameters
+    ----------
+    grid : RayGrid
+        The camera's ray grid.
+    margin_deg : float
+        Extra elevation (degrees) above and below; at least the largest tilt
+        to render.
+    """
+
+    def __init__(self, grid: RayGrid, margin_deg: float):
+        self.camera_grid = grid
+        self.margin_deg = float(margin_deg)
+        steps = np.abs(np.diff(grid.elev))
+        steps = steps[steps > 0.25 * np.median(steps)] if len(steps) else steps  # not the clipped edge rows
+        step = float(steps.min()) if len(steps) else np.radians(0.5)
+        m = np.radians(self.margin_deg)
+        top = min(float(grid.elev[0]) + m, np.radians(89.0))
+        bottom = max(float(grid.elev[-1]) - m, np.radians(-89.0))
+        n = max(2, int(np.ceil((top - bottom) / step)))
+        self.top, self.step = top, (top - bottom) / n
+        self.grid = RayGrid(grid.bearings, top - (np.arange(n) + 0.5) * self.step, grid.h)
+        b, e = np.meshgrid(grid.bearings, grid.elev)
+        self._rays = np.stack([np.cos(e) * np.cos(b), np.cos(e) * np.sin(b), np.sin(e)], axis=-1)
+
+    def maps(self, rotation: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(map_x, map_y)`` float32 (H, W) of the camera grid: the column
+        and row of this grid (padded by one wrapped column, as
+        :meth:`resample` pads it) that each camera ray looks at when the
+        camera is turned by ``rotation`` (3, 3), camera frame to level frame
+        (:meth:`sfanav.sim.terrain.Attitude.rotation`)."""
+        d = self._rays @ np.asarray(rotation, float).T
+        b = np.arctan2(d[..., 1], d[..., 0])
+        e = np.arcsin(np.clip(d[..., 2], -1.0, 1.0))
+        W = self.grid.W
+        col = column_of_bearing(b, W)
+        col = np.where(col < 0, col + W, col)
+        row = (self.top - e) / self.step - 0.5
+        return col.astype(np.float32), row.astype(np.float32)
+
+    def resample(self, level_img: np.ndarray, rotation: np.ndarray) -> np.ndarray:
+        """The camera grid's image (H, W, C) float32 from this grid's
+        rendered image (rows beyond the margin repeat the edge rows)."""
+        import cv2
+
+        mx, my = self.maps(rotation)
+        padded = np.concatenate([level_img, level_img[:, :1]], axis=1)
+        return cv2.remap(padded, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+
+
 def _check_size(v: Any, name: str, lo: int = 2) -> int:
     if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < lo:
         raise ValueError(f"{name} must be an integer >= {lo}, got {v!r}")

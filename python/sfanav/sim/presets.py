@@ -21,6 +21,7 @@ from .cameras import OmniCamera, PanoramicCamera
 from .conditions import SEASONS, Lighting, Season, season_of_year
 from .render import Renderer
 from .robot import Robot
+from .terrain import HeightField, UnevenGround
 from .world import World
 
 LightFn = Callable[[float], Lighting]  # progress in [0, 1] -> lighting
@@ -70,6 +71,7 @@ class Preset:
     runs: Callable[[np.random.Generator], list[RunSpec]]
     robot: Callable[[], Robot] = Robot
     dynamic: bool = False  # a cylinder circling the area once during the first run
+    terrain: UnevenGround | None = None  # uneven ground: the camera tilts and bobs (default flat)
 
 
 def _garden(area: tuple[float, float], n_objects: int = 30, **kw: Any) -> dict[str, Any]:
@@ -176,6 +178,21 @@ _add(Preset(
     lambda: PanoramicCamera(409, 40, rgb=False),
     lambda rng: [RunSpec("train", lambda w, r: T.grid(w.area, spacing=0.4, step=0.03, turn="spot", margin=0.3)),
                  RunSpec("test", lambda w, r: T.random_walk(w.area, 800, 0.04, margin=0.3, rng=r, world=w))],
+))
+
+
+_add(Preset(
+    "thesis-5.2.3-outdoor", "5.2.3",
+    "5x7 m patch of uneven grass (the thesis's outdoor comparison with SLAM) in a garden, seen by a 400x400 "
+    "omnidirectional camera (spherical mirror, elevation -30..+20 deg): bumps and swell under the four wheels tilt "
+    "the robot (roll and pitch about 2 deg rms, up to ~7 deg) and move the camera up and down (about 2 cm rms); "
+    "a grid exploration with crossings and large-radius turns, 5 cm per frame (~2400 frames), and a 1000-frame "
+    "test walk",
+    _garden((5.0, 7.0), 30, depth=8.0),
+    lambda: OmniCamera(400, elevation_deg=(-30.0, 20.0)),
+    lambda rng: [RunSpec("train", lambda w, r: T.grid(w.area, spacing=0.5, step=0.05, turn="arc", margin=0.3)),
+                 RunSpec("test", lambda w, r: T.random_walk(w.area, 1000, 0.04, margin=0.3, rng=r, world=w))],
+    terrain=UnevenGround(),
 ))
 
 
@@ -536,6 +553,19 @@ def _jitter_stream(seed: int) -> np.random.Generator:
     return np.random.default_rng(np.random.SeedSequence(int(seed), spawn_key=(4,)))
 
 
+def _terrain_stream(seed: int) -> np.random.Generator:
+    """The random stream of a preset seed's uneven ground: the seed's sixth
+    child sequence, independent of the others."""
+    return np.random.default_rng(np.random.SeedSequence(int(seed), spawn_key=(5,)))
+
+
+def preset_terrain(preset: str, seed: int = 0) -> HeightField | None:
+    """The ground-height field that ``simulate(preset, ..., seed)`` drives
+    on, or None for a preset on flat ground."""
+    p = get(preset)
+    return None if p.terrain is None else p.terrain.field(_terrain_stream(seed))
+
+
 def preset_world(preset: str, seed: int = 0) -> World:
     """The world that ``simulate(preset, ..., seed)`` uses (without the
     dynamic object, whose period depends on the run)."""
@@ -545,7 +575,7 @@ def preset_world(preset: str, seed: int = 0) -> World:
 
 def simulate(preset: str, out: str | os.PathLike, seed: int = 0, *, max_frames: int | None = None,
              camera: PanoramicCamera | OmniCamera | None = None, overwrite: bool = False,
-             progress: bool = True) -> Any:
+             progress: bool = True, flat: bool = False) -> Any:
     """Generates a preset's dataset.
 
     Parameters
@@ -556,17 +586,25 @@ def simulate(preset: str, out: str | os.PathLike, seed: int = 0, *, max_frames: 
         Directory of the dataset (must not exist or be empty, unless ``overwrite``).
     seed : int
         Seeds the world, the trajectories, the lighting conditions, the
-        odometry noise and the pose jitter: same seed, same dataset.
+        odometry noise, the pose jitter and the uneven ground: same seed,
+        same dataset.
     max_frames : int, optional
         Keep only the first frames of every run (quick looks, tests).
     camera : PanoramicCamera or OmniCamera, optional
         Replaces the preset's camera.
     progress : bool
         A progress bar (tqdm).
+    flat : bool
+        Drive a preset with uneven ground on flat ground instead (a control:
+        the same world, runs and images as far as the ground allows).
 
     Returns
     -------
     sfanav.Dataset
+        A preset with uneven ground (``Preset.terrain``) adds the columns
+        ``roll_deg``, ``pitch_deg`` and ``camera_dz_m`` (the robot's
+        attitude per frame, :class:`~sfanav.sim.terrain.Attitude`) and
+        records the ground's recipe in the metadata (``terrain``).
     """
     from ..data.dataset import Dataset
     from ..data.writer import DatasetWriter
@@ -575,6 +613,8 @@ def simulate(preset: str, out: str | os.PathLike, seed: int = 0, *, max_frames: 
     if max_frames is not None and (isinstance(max_frames, bool) or not isinstance(max_frames, (int, np.integer))
                                    or max_frames < 1):
         raise ValueError(f"max_frames must be a positive integer, got {max_frames!r}")
+    if not isinstance(flat, (bool, np.bool_)):
+        raise TypeError(f"flat must be a bool, got {flat!r}")
     s_world, s_runs, s_traj, s_odo = random_streams(seed)
     world = World.generate(int(s_world.integers(2**31)), **p.world)
     cam = camera or p.camera()
@@ -587,8 +627,10 @@ def simulate(preset: str, out: str | os.PathLike, seed: int = 0, *, max_frames: 
         world.add_dynamic({"period": float(max(trajs[0].times[-1], 1e-3)), "radius": 0.6, "height": 2.5},
                           seed=int(s_world.integers(2**31)))
     renderer = Renderer(world)
+    heights = None if flat else preset_terrain(preset, seed)
     total = sum(len(t) * len(r.conditions) * len(robot.cameras) for t, r in zip(trajs, runs))
-    extra_cols = sorted({k for t in trajs for k in t.extra})
+    attitude_cols = set(ATTITUDE_COLUMNS) if heights is not None else set()
+    extra_cols = sorted({k for t in trajs for k in t.extra} | attitude_cols)
     meta = {
         "source": "sfanav.sim",
         "preset": p.name,
@@ -601,6 +643,8 @@ def simulate(preset: str, out: str | os.PathLike, seed: int = 0, *, max_frames: 
         "world": "world.json",
         "runs": {},
     }
+    if heights is not None:
+        meta["terrain"] = heights.ground.to_dict()
     bar = None
     if progress:
         from tqdm.auto import tqdm
@@ -617,7 +661,7 @@ def simulate(preset: str, out: str | os.PathLike, seed: int = 0, *, max_frames: 
                     "changing": True, "start": light(0.0).to_dict(), "end": light(1.0).to_dict()}
                 drive = tr if r.jitter is None else T.jitter(whole, *r.jitter, rng=s_jit)[: len(tr)]
                 frame = _record(w, renderer, robot, cam, drive, run=r.name, condition=cond, lighting=light,
-                                frame0=frame, rng=s_odo, bar=bar)
+                                frame0=frame, rng=s_odo, bar=bar, heights=heights)
             meta["runs"][r.name] = info
         w.metadata.update(meta)
         world.save(Path(out) / "world.json")
@@ -626,16 +670,26 @@ def simulate(preset: str, out: str | os.PathLike, seed: int = 0, *, max_frames: 
     return Dataset(out)
 
 
+ATTITUDE_COLUMNS = ("roll_deg", "pitch_deg", "camera_dz_m")
+"""The per-frame columns of a dataset simulated on uneven ground."""
+
+
 def _record(w: Any, renderer: Renderer, robot: Robot, cam: Any, tr: T.Trajectory, *, run: str, condition: str,
-            lighting: Lighting | LightFn, frame0: int, rng: np.random.Generator, bar: Any) -> int:
+            lighting: Lighting | LightFn, frame0: int, rng: np.random.Generator, bar: Any,
+            heights: HeightField | None = None) -> int:
     cam_poses = robot.camera_poses(tr.poses)
     odo = robot.camera_poses(robot.odometry(tr.poses, rng))
     n = len(tr)
+    attitudes = heights.attitudes(tr.poses) if heights is not None else None  # the robot's, shared by its cameras
     for k in range(n):
         light = lighting if isinstance(lighting, Lighting) else lighting(k / max(n - 1, 1))
         extra = {c: v[k].item() for c, v in tr.extra.items()}
+        att = None
+        if attitudes is not None:
+            att = attitudes[k]
+            extra.update(roll_deg=att.roll_deg, pitch_deg=att.pitch_deg, camera_dz_m=att.height_m)
         for name in robot.cameras:
-            img = renderer.render(cam, cam_poses[name][k], float(tr.times[k]), light)
+            img = renderer.render(cam, cam_poses[name][k], float(tr.times[k]), light, attitude=att)
             w.add(img, frame=frame0 + k, timestamp=float(tr.times[k]), pose=cam_poses[name][k],
                   odometry=odo[name][k], camera=name, condition=condition, run=run, **extra)
             if bar is not None:

@@ -36,9 +36,10 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from .cameras import Camera, OmniCamera, PanoramicCamera, RayGrid, column_of_bearing
+from .cameras import Camera, LevelGrid, OmniCamera, PanoramicCamera, RayGrid, column_of_bearing
 from .conditions import DECIDUOUS_KINDS, Lighting, Season
 from .ground import lawn_map, shadow_map
+from .terrain import MAX_TILT_DEG, Attitude
 from .textures import Pyramid, fractal_noise, make_texture, photo
 from .world import Primitive, World
 
@@ -46,6 +47,9 @@ _LUMA = np.array([0.299, 0.587, 0.114], np.float32)
 
 
 FOG_DISTANCE = 250.0  # m; aerial perspective: far surfaces fade to the horizon colour
+
+
+LEVEL_MARGINS_DEG = (4.0, 8.0, 16.0, 2 * MAX_TILT_DEG)  # elevation margins of the level grids of tilted views
 
 
 SHAPE_CODE = {"ellipsoid": 0, "box": 1, "cylinder": 2}
@@ -183,6 +187,7 @@ class Renderer:
         self._ground_cache: dict[tuple, np.ndarray] = {}
         self._sky_cache: dict[Season, np.ndarray] = {}
         self._grid_cache: dict[int, dict[str, Any]] = {}
+        self._level_cache: dict[tuple[int, float], LevelGrid] = {}
 
     def _vegetation(self) -> tuple[np.ndarray, np.ndarray]:
         """Per static primitive (in ``self._static`` order): deciduous foliage
@@ -315,25 +320,45 @@ class Renderer:
 
     # ------------------------------------------------------------ per-grid data
 
-    def _grid_data(self, grid: RayGrid) -> dict[str, Any]:
+    def _grid_data(self, grid: RayGrid, height: float | None = None) -> dict[str, Any]:
+        """Per-grid constants (cached per grid), for a camera ``height``
+        metres above the ground (default the grid's mount height; another
+        height recomputes the ground rows, uncached)."""
         key = id(grid)
         gd = self._grid_cache.get(key)
-        if gd is not None and gd["grid"] is grid:
+        if gd is None or gd["grid"] is not grid:
+            gd = {"grid": grid, "h": grid.h}
+            sky_rows = np.nonzero(grid.elev >= 0)[0]
+            gnd_rows = np.nonzero(grid.elev < 0)[0]
+            gd["sky_rows"] = slice(int(sky_rows[0]), int(sky_rows[-1]) + 1) if len(sky_rows) else slice(0, 0)
+            gd["gnd_rows"] = slice(int(gnd_rows[0]), int(gnd_rows[-1]) + 1) if len(gnd_rows) else slice(0, 0)
+            if len(sky_rows):
+                gd["sky_k"] = np.clip(np.searchsorted(self._sky_el, grid.elev[sky_rows]), 0, len(self._sky_el) - 1)
+                gd["sky_panels"] = {}
+            gd.update(self._ground_data(grid, grid.h, gd["gnd_rows"], gd["sky_rows"]))
+            gd["neg_elev"] = -grid.elev
+            if len(self._grid_cache) > 16:
+                self._grid_cache.clear()
+            self._grid_cache[key] = gd
+        if height is None or height == grid.h:
             return gd
-        gd = {"grid": grid}
-        sky_rows = np.nonzero(grid.elev >= 0)[0]
-        gnd_rows = np.nonzero(grid.elev < 0)[0]
-        gd["sky_rows"] = slice(int(sky_rows[0]), int(sky_rows[-1]) + 1) if len(sky_rows) else slice(0, 0)
-        gd["gnd_rows"] = slice(int(gnd_rows[0]), int(gnd_rows[-1]) + 1) if len(gnd_rows) else slice(0, 0)
-        if len(sky_rows):
-            gd["sky_k"] = np.clip(np.searchsorted(self._sky_el, grid.elev[sky_rows]), 0, len(self._sky_el) - 1)
-            gd["sky_panels"] = {}
-        if len(gnd_rows):
+        out = dict(gd)
+        out["h"] = float(height)
+        out.update(self._ground_data(grid, float(height), gd["gnd_rows"], gd["sky_rows"]))
+        return out
+
+    def _ground_data(self, grid: RayGrid, h: float, gr: slice, sr: slice) -> dict[str, Any]:
+        """The ground rows' distances, texture levels and fog, and the
+        initial depth buffer, for a camera ``h`` metres above the ground."""
+        gd: dict[str, Any] = {}
+        n_gnd, n_sky = gr.stop - gr.start, sr.stop - sr.start
+        if n_gnd:
+            gnd_rows = np.arange(gr.start, gr.stop)
             t = grid.tan[gnd_rows]
-            d = grid.h / -t  # horizontal distance of the ground hit, per row
+            d = h / -t  # horizontal distance of the ground hit, per row
             # texel footprint: the larger of the radial and tangential pixel extents
-            de = np.abs(np.gradient(grid.elev))[gnd_rows] if grid.H > 1 else np.full(len(gnd_rows), 0.01)
-            foot = np.maximum(d * d / grid.h * de, d * grid.pixel_angle)
+            de = np.abs(np.gradient(grid.elev))[gnd_rows] if grid.H > 1 else np.full(n_gnd, 0.01)
+            foot = np.maximum(d * d / h * de, d * grid.pixel_angle)
             lev = np.clip(np.log2(np.maximum(foot / self._detail.texel, 1.0)).astype(int), 0,
                           len(self._det_n) - 1)
             n_l = self._det_n[lev]
@@ -349,14 +374,10 @@ class Renderer:
             far = d > half_period - self.world.outer_radius - 1.0
             gd["gnd_map_off"] = np.where(far, self._gmap_n * self._gmap_n, 0)[:, None].astype(np.int64)
             gd["depth_init"] = np.concatenate(
-                [np.full(len(sky_rows), np.inf), d]
+                [np.full(n_sky, np.inf), d]
             )[:, None] * np.ones((1, grid.W))
         else:
             gd["depth_init"] = np.full((grid.H, grid.W), np.inf)
-        gd["neg_elev"] = -grid.elev
-        if len(self._grid_cache) > 16:
-            self._grid_cache.clear()
-        self._grid_cache[key] = gd
         return gd
 
     def _sky_panel(self, gd: dict[str, Any], season: Season | None) -> np.ndarray:
@@ -376,7 +397,7 @@ class Renderer:
     # ------------------------------------------------------------ rendering
 
     def render(self, camera: Camera, pose: Sequence[float], time: float = 0.0,
-               lighting: Lighting | None = None) -> np.ndarray:
+               lighting: Lighting | None = None, attitude: Attitude | None = None) -> np.ndarray:
         """Renders one image.
 
         Parameters
@@ -388,25 +409,66 @@ class Renderer:
             Seconds, for the dynamic objects.
         lighting : Lighting, optional
             Default: the renderer's.
+        attitude : Attitude, optional
+            The camera's roll, pitch and height change on uneven ground
+            (:mod:`sfanav.sim.terrain`); default level at its mount height.
+            A tilted camera's view is resampled from a level view of the same
+            viewpoint (:class:`~sfanav.sim.cameras.LevelGrid`), so the
+            world's horizon runs off-centre through the image.
 
         Returns
         -------
         ndarray uint8, ``camera.shape``.
+
+        Raises
+        ------
+        TypeError
+            ``camera`` or ``attitude`` of the wrong type.
+        ValueError
+            A pose that is not three finite numbers, or an attitude that
+            puts the camera at or below the ground.
         """
         if not isinstance(camera, (PanoramicCamera, OmniCamera)):
             raise TypeError(f"camera must be a PanoramicCamera or OmniCamera, got {type(camera).__name__}")
+        if attitude is not None and not isinstance(attitude, Attitude):
+            raise TypeError(f"attitude must be an Attitude (sfanav.sim.terrain), got {type(attitude).__name__}")
         x, y, heading = _pose3(pose)
         light = lighting or self.lighting
-        img = self._render_grid(camera.grid, x, y, heading, time, light)
+        if attitude is None or attitude.identity:
+            img = self._render_grid(camera.grid, x, y, heading, time, light)
+        else:
+            h = camera.grid.h + attitude.height_m
+            if not h > 0.01:
+                raise ValueError(f"attitude height_m {attitude.height_m} puts the camera ({camera.grid.h} m up) "
+                                 "at or below the ground")
+            if attitude.level:
+                img = self._render_grid(camera.grid, x, y, heading, time, light, height=h)
+            else:
+                level = self._level_grid(camera.grid, attitude.tilt_deg)
+                img = self._render_grid(level.grid, x, y, heading, time, light, height=h)
+                img = level.resample(img, attitude.rotation())
         if isinstance(camera, OmniCamera):
             img = camera.finish(img)
         return _to_uint8(img, camera.rgb, light.rgb)
 
+    def _level_grid(self, grid: RayGrid, tilt_deg: float) -> LevelGrid:
+        """The (cached) level grid with the smallest of a few margins that
+        covers a tilt of ``tilt_deg``."""
+        margin = next(m for m in LEVEL_MARGINS_DEG if m >= tilt_deg + 0.5)
+        key = (id(grid), margin)
+        level = self._level_cache.get(key)
+        if level is None or level.camera_grid is not grid:
+            if len(self._level_cache) > 8:
+                self._level_cache.clear()
+            level = self._level_cache[key] = LevelGrid(grid, margin)
+        return level
+
     def _render_grid(self, grid: RayGrid, x: float, y: float, heading: float, time: float,
-                     light: Lighting) -> np.ndarray:
+                     light: Lighting, height: float | None = None) -> np.ndarray:
         """Float32 image (H, W, 4) of a ray grid, before the light's intensity
-        and tint; channel 3 is padding (see :meth:`render`)."""
-        gd = self._grid_data(grid)
+        and tint; channel 3 is padding (see :meth:`render`). ``height``: the
+        camera's height above the ground (default the grid's)."""
+        gd = self._grid_data(grid, height)
         H, W = grid.H, grid.W
         phi = heading + grid.bearings
         ux, uy = np.cos(phi), np.sin(phi)
@@ -465,7 +527,7 @@ class Renderer:
         n = len(P.code)
         if n == 0:
             return
-        W, h = grid.W, grid.h
+        W, h = grid.W, gd["h"]
         atlas = self._atlas
         season = light.season
         if season is not None:  # the dynamic primitives (after the static ones) are no plants

@@ -26,7 +26,8 @@ def _add_train(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                     "preset: the thesis's configuration (all rows, quadratic regression of 8 outputs). Writes "
                     "one model file (network, readout and the image preprocessing) for sfanav localize / "
                     "evaluate. Images of another size are resized, omnidirectional images unwarped (with "
-                    "--mirror or an estimated mirror)."),
+                    "--mirror or an estimated mirror; --jitter moves the unwarping centre by a random offset per "
+                    "training image, thesis 5.2.1, so that the model ignores a robot's tilt on uneven ground)."),
         epilog="network presets: thesis-5.1 (350x40 RGB), thesis-5.2 (600x60 RGB), thesis-5.3 (409x40 gray) "
                "(thesis tables), sfanav-default (350x40 RGB), landmark-120 (120x120 RGB marker views, with --landmarks). A config file is TOML or JSON in the presets' "
                "format (sfanav.Network.preset_path('thesis-5.1') shows one).\n\n"
@@ -34,7 +35,9 @@ def _add_train(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                "  sfanav train --dataset garden --out garden.sfa                       # the sfanav default\n"
                "  sfanav train --dataset garden --preset thesis-5.2 --precision mixed --out thesis.sfa\n"
                "  sfanav simulate --preset thesis-5.4-landmarks --out marked\n"
-               "  sfanav train --dataset marked --landmarks 136,144 --out landmarks.sfa   # thesis 5.4",
+               "  sfanav train --dataset marked --landmarks 136,144 --out landmarks.sfa   # thesis 5.4\n"
+               "  sfanav simulate --preset thesis-5.2.3-outdoor --out grass                # omnidirectional, tilting\n"
+               "  sfanav train --dataset grass --preset thesis-5.3 --normalize --jitter 5 --out grass.sfa",
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     net = p.add_mutually_exclusive_group(required=False)
@@ -94,6 +97,13 @@ def _add_train(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                    help="normalize every image to zero mean and unit variance (thesis 5.2)")
     p.add_argument("--mirror", default=None, metavar="CX,CY,INNER,OUTER",
                    help="mirror of omnidirectional images, pixels (default: estimated)")
+    p.add_argument("--jitter", type=arg.nonneg_float, default=0.0, metavar="PX",
+                   help="centre jitter for omnidirectional images (thesis 5.2.1: 5): each training image is "
+                        "unwarped about the mirror centre moved by a random offset in [-PX, PX] in x and y, so "
+                        "that the model ignores where the horizon ring lies (a robot tilting on uneven ground "
+                        "moves it); training only, localization unwarps without it. Default 0 (none)")
+    p.add_argument("--jitter-seed", type=arg.nonneg_int, default=0, metavar="N",
+                   help="seed of the centre jitter's offsets (default 0)")
     p.add_argument("--overwrite", action="store_true", help="replace an existing model file")
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
     add_train_arguments(p)
@@ -131,6 +141,8 @@ def _run_train(args: argparse.Namespace) -> int:
     from ...sfa.network import Rotation
 
     t0 = time.perf_counter()
+    if args.jitter_seed and not args.jitter:
+        raise UsageError("--jitter-seed needs --jitter")
     out = new_file(args.out, args.overwrite, "model file")
     if args.landmarks is not None:
         return train_landmarks(args, out)
@@ -170,7 +182,7 @@ def _run_train(args: argparse.Namespace) -> int:
          + f" as {prep.describe()} panoramas; network: {net!r}; rows: {rows.describe() if rows else 'all'}; "
          + f"readout: {recipe.readout}" + (f" with the {recipe.signature} signature" if recipe.signature else "")
          + (" (the sfanav default)" if recipe.name == "sfanav default" else ""))
-    preprocessor = Preprocessor(prep, mirror=args.mirror, log=log)
+    preprocessor = Preprocessor(prep, mirror=args.mirror, log=log, jitter=args.jitter, seed=args.jitter_seed)
     images, xy = load_run(train, prep, preprocessor=preprocessor, progress=not args.no_progress)
     closures = None
     if args.loop_closures is not None:  # image detectors without an odometry gate: dead reckoning drifts
@@ -205,6 +217,9 @@ def _run_train(args: argparse.Namespace) -> int:
         loc.info["supervision"] = "ground-truth"
     if preprocessor.mirror_used is not None:
         loc.info["mirror"] = list(preprocessor.mirror_used)  # localize and evaluate reuse it
+        if args.jitter:
+            loc.info["centre_jitter_px"] = args.jitter  # training only
+            loc.info["centre_jitter_seed"] = args.jitter_seed
     if np.isfinite(odometry).all():
         try:
             feats = loc.readout_features(loc.features(images),
