@@ -11,43 +11,7 @@ import sfanav
 from sfanav import sim
 from sfanav.app.cli import main
 from sfanav.data import write_image
-
-TINY_TOML = """
-[input]
-width = 60
-height = 8
-channels = 3
-
-[network]
-precision = "mixed"
-
-[[layers]]
-rf = [6, 4]
-stride = [3, 4]
-out = 8
-
-[[layers]]
-rf = "full"
-out = 10
-"""
-
-
-def run(capsys, *args):
-    try:
-        code = main([str(a) for a in args])
-    except SystemExit as exc:
-        code = exc.code
-    out = capsys.readouterr()
-    return code, out.out, out.err
-
-
-def assert_one_line_error(code, err, *words):
-    assert code == 2
-    lines = [ln for ln in err.splitlines() if ln.strip()]
-    assert len(lines) == 1, err
-    assert "Traceback" not in err
-    for w in words:
-        assert w in lines[0], lines[0]
+from clitools import TINY_TOML, assert_one_line_error, run
 
 
 @pytest.fixture(scope="module")

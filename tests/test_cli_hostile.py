@@ -18,7 +18,7 @@ from modeltools import edit_model
 from sfanav import sim
 from sfanav.app.arguments import fraction as _fraction
 from sfanav.app.cli import main
-from test_cli import TINY_TOML, assert_one_line_error, run
+from clitools import TINY_TOML, assert_one_line_error, run
 
 
 @pytest.fixture(scope="module")

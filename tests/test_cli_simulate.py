@@ -8,16 +8,7 @@ import numpy as np
 import pytest
 
 from sfanav import Dataset, sim
-from sfanav.app.cli import main
-
-
-def run(capsys, *args):
-    try:
-        code = main(list(args))
-    except SystemExit as exc:
-        code = exc.code
-    out = capsys.readouterr()
-    return code, out.out, out.err
+from clitools import run
 
 
 def test_help_lists_the_presets(capsys):

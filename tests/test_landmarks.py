@@ -11,8 +11,8 @@ import pytest
 
 import sfanav
 from sfanav import sim
-from sfanav.app.cli import main
 from sfanav.landmarks import LandmarkLocalizer, MarkerViews, ViewExtractor, marker_view, polar_angle
+from clitools import run
 
 pytest.importorskip("cv2")
 
@@ -220,14 +220,6 @@ def test_occlusion_hides_the_marker_in_its_region_and_only_there(renderer):
 
 
 # ---------------------------------------------------------------- command line
-
-def run(capsys, *args):
-    try:
-        code = main([str(a) for a in args])
-    except SystemExit as exc:
-        code = exc.code
-    out = capsys.readouterr()
-    return code, out.out, out.err
 
 
 def assert_one_line_error(code, err, *words):

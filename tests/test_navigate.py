@@ -12,18 +12,10 @@ import sfanav
 from sfanav import sim
 from sfanav.app.cli import main
 from sfanav.navigation import Mission, image_goal, navigate
+from clitools import run
 
 TINY = {"input": {"width": 60, "height": 8, "channels": 3}, "network": {"precision": "mixed"},
         "layers": [{"rf": [6, 4], "stride": [3, 4], "out": 8}, {"rf": "full", "out": 10}]}
-
-
-def run(capsys, *args):
-    try:
-        code = main([str(a) for a in args])
-    except SystemExit as exc:
-        code = exc.code
-    out = capsys.readouterr()
-    return code, out.out, out.err
 
 
 @pytest.fixture(scope="module")

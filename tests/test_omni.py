@@ -14,7 +14,7 @@ from sfanav.data.sources import load_run
 from sfanav.sim import Attitude, UnevenGround
 from sfanav.sim.presets import preset_terrain
 
-from test_cli import TINY_TOML, assert_one_line_error, run
+from clitools import TINY_TOML, assert_one_line_error, run
 
 
 @pytest.fixture(scope="module")

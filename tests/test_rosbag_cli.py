@@ -11,45 +11,9 @@ import pytest
 from sfanav import Dataset, sim
 from sfanav.app.cli import main
 from sfanav.data import BagWriter
+from clitools import TINY_TOML, assert_one_line_error, run
 
 T0 = 1000.0
-
-TINY_TOML = """
-[input]
-width = 60
-height = 8
-channels = 3
-
-[network]
-precision = "mixed"
-
-[[layers]]
-rf = [6, 4]
-stride = [3, 4]
-out = 8
-
-[[layers]]
-rf = "full"
-out = 10
-"""
-
-
-def run(capsys, *args):
-    try:
-        code = main([str(a) for a in args])
-    except SystemExit as exc:
-        code = exc.code
-    out = capsys.readouterr()
-    return code, out.out, out.err
-
-
-def assert_one_line_error(code, err, *words):
-    assert code == 2
-    lines = [ln for ln in err.splitlines() if ln.strip()]
-    assert len(lines) == 1, err
-    assert "Traceback" not in err
-    for w in words:
-        assert w in lines[0], lines[0]
 
 
 def write_bag(path, ds, *, fmt="raw", odom_rate=None):

@@ -6,11 +6,20 @@ from __future__ import annotations
 
 import os
 import tempfile
+from collections.abc import Iterable, Sequence
 from pathlib import Path
+from typing import Any
 
 
 def write_text_atomic(path: str | os.PathLike, text: str, *, overwrite: bool = True) -> Path:
-    """Writes ``text`` (UTF-8) to ``path`` atomically and returns the path.
+    """Writes ``text`` (UTF-8) to ``path`` atomically and returns the path
+    (see :func:`write_bytes_atomic` for the errors)."""
+    return write_bytes_atomic(path, text.encode("utf-8"), overwrite=overwrite)
+
+
+def write_bytes_atomic(path: str | os.PathLike, data: bytes, *, overwrite: bool = True) -> Path:
+    """Writes ``data`` to ``path`` atomically (a temporary file in the same
+    folder, flushed to disk, then renamed) and returns the path.
 
     Raises
     ------
@@ -26,8 +35,8 @@ def write_text_atomic(path: str | os.PathLike, text: str, *, overwrite: bool = T
         raise FileExistsError(f"{p} exists; pass overwrite=True to replace it")
     fd, tmp = tempfile.mkstemp(prefix=f".{p.name}.", suffix=".part", dir=p.parent)
     try:
-        with os.fdopen(fd, "w", encoding="utf-8", newline="") as f:
-            f.write(text)
+        with os.fdopen(fd, "wb") as f:
+            f.write(data)
             f.flush()
             os.fsync(f.fileno())
         os.replace(tmp, p)
@@ -36,3 +45,17 @@ def write_text_atomic(path: str | os.PathLike, text: str, *, overwrite: bool = T
             os.unlink(tmp)
         raise
     return p
+
+
+def write_csv_atomic(path: str | os.PathLike, header: Sequence[str], rows: Iterable[Sequence[Any]], *,
+                     overwrite: bool = True) -> Path:
+    """Writes a CSV (``header``, then ``rows``, each a sequence of cells)
+    atomically and returns the path (see :func:`write_bytes_atomic`)."""
+    import csv
+    import io
+
+    buf = io.StringIO(newline="")
+    w = csv.writer(buf)
+    w.writerow(header)
+    w.writerows(rows)
+    return write_text_atomic(path, buf.getvalue(), overwrite=overwrite)

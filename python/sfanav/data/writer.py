@@ -18,6 +18,7 @@ from typing import Any
 
 import numpy as np
 
+from .._files import write_text_atomic
 from .images import write_image
 from .schema import COLUMNS, FORMAT, UNITS, VERSION, check_name, format_float
 
@@ -153,9 +154,7 @@ class DatasetWriter:
         self._file.close()
         meta = {"format": FORMAT, "version": VERSION, "units": UNITS, "n_images": self.count,
                 "image_shapes": self._shapes, **self.metadata}
-        tmp = self.path / "metadata.json.part"
-        tmp.write_text(json.dumps(meta, indent=1, default=_json_default))
-        os.replace(tmp, self.path / "metadata.json")
+        write_text_atomic(self.path / "metadata.json", json.dumps(meta, indent=1, default=_json_default))
 
     def abort(self) -> None:
         """Stops writing without completing the dataset: ``frames.csv`` is

@@ -28,12 +28,13 @@ import hashlib
 import io
 import json
 import os
-import tempfile
 import zipfile
 from pathlib import Path
 from typing import Any, Callable
 
 import numpy as np
+
+from .._files import write_bytes_atomic
 
 FORMAT = "sfanav-model"
 
@@ -156,16 +157,7 @@ def save_model(path: str | os.PathLike, kind: str, state: dict[str, Any], *, ver
         raise IsADirectoryError(f"{path} is a directory, not a model file path")
     data = dumps(kind, state, version=version)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=".sfanav-", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(data)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
-    return path
+    return write_bytes_atomic(path, data)
 
 
 def _depth_ok(tree: Any, limit: int) -> bool:

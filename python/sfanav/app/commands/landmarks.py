@@ -147,10 +147,9 @@ def check_image_size(loc: Any, shape: tuple[int, ...], what: str) -> None:
 def localize_landmarks(args: argparse.Namespace, loc: Any, out: "Path") -> int:
     """``sfanav localize`` with a landmark model: frame, x, y and one
     found-flag column per marker."""
-    import csv
-
     import numpy as np
 
+    from ..._files import write_csv_atomic
     from ..._progress import progress_bar
     from ...data.sources import open_images
     from ...landmarks.views import MarkerViews
@@ -176,13 +175,9 @@ def localize_landmarks(args: argparse.Namespace, loc: Any, out: "Path") -> int:
     views = MarkerViews.concatenate(parts)
     xy = loc.predict_views(views)
     frames = src.frames if src.frames is not None else np.arange(len(xy))
-    tmp = out.with_name(out.name + ".part")
-    with open(tmp, "w", newline="") as f:
-        w = csv.writer(f)
-        w.writerow(["frame", "x", "y"] + [f"found_{m}" for m in loc.ids])
-        for i, (fr, (x, y)) in enumerate(zip(frames, xy)):
-            w.writerow([int(fr), f"{x:.4f}", f"{y:.4f}"] + [int(v) for v in views.found[i]])
-    tmp.replace(out)
+    write_csv_atomic(out, ["frame", "x", "y"] + [f"found_{m}" for m in loc.ids],
+                     ([int(fr), f"{x:.4f}", f"{y:.4f}"] + [int(v) for v in views.found[i]]
+                      for i, (fr, (x, y)) in enumerate(zip(frames, xy))))
     found = ", ".join(f"{m} in {100 * r:.1f} %" for m, r in zip(loc.ids, views.detection_rate()))
     msg = f"wrote {len(xy)} positions to {out} (markers found: {found}"
     if src.xy is not None and np.isfinite(src.xy).all():

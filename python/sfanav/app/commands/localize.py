@@ -54,12 +54,12 @@ def _add_localize(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
 
 
 def _run_localize(args: argparse.Namespace) -> int:
-    import csv
 
     import numpy as np
 
     from pathlib import Path
 
+    from ..._files import write_csv_atomic
     from ..._progress import progress_bar
     from ...data.preprocessing import Preprocessing, Preprocessor
     from ...data.ros_messages import require_rosbags
@@ -115,14 +115,9 @@ def _run_localize(args: argparse.Namespace) -> int:
         if out in bags:
             write_estimates(out, src.times(len(xy)), xy, fused, frame_id=args.frame_id, overwrite=True)
             continue
-        tmp = out.with_name(out.name + ".part")
-        with open(tmp, "w", newline="") as f:
-            w = csv.writer(f)
-            w.writerow(["frame", "x", "y"] + (["fused_x", "fused_y", "fused_heading"] if fused is not None else []))
-            for i, (fr, (x, y)) in enumerate(zip(frames, xy)):
-                extra = [f"{v:.4f}" for v in fused[i]] if fused is not None else []
-                w.writerow([int(fr), f"{x:.4f}", f"{y:.4f}"] + extra)
-        tmp.replace(out)
+        write_csv_atomic(out, ["frame", "x", "y"] + (["fused_x", "fused_y", "fused_heading"] if fused is not None else []),
+                         ([int(fr), f"{x:.4f}", f"{y:.4f}"] + ([f"{v:.4f}" for v in fused[i]] if fused is not None else [])
+                          for i, (fr, (x, y)) in enumerate(zip(frames, xy))))
     msg = (f"wrote {len(xy)} positions" + (" and the fused track" if fused is not None else "")
            + f" to {' and '.join(str(o) for o in outs)}")
     if loc.info.get("supervision") == "odometry":

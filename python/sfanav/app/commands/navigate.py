@@ -51,13 +51,13 @@ def _add_navigate(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
 
 
 def _run_navigate(args: argparse.Namespace) -> int:
-    import csv
     import json
     import math
     from pathlib import Path
 
     import numpy as np
 
+    from ..._files import write_csv_atomic, write_text_atomic
     from ...data.dataset import Dataset
     from ...data.images import read_image
     from ...data.preprocessing import Preprocessing, Preprocessor
@@ -147,13 +147,7 @@ def _run_navigate(args: argparse.Namespace) -> int:
                        success_radius=args.success_radius, max_iterations=args.max_stops, seed=args.seed)
     out.mkdir(parents=True, exist_ok=True)
     r = mission.result
-    tmp = out / "path.csv.part"
-    with open(tmp, "w", newline="") as f:
-        w = csv.writer(f)
-        w.writerow(["stop", "x", "y"])
-        for i, (x, y) in enumerate(r.path):
-            w.writerow([i, f"{x:.4f}", f"{y:.4f}"])
-    tmp.replace(out / "path.csv")
+    write_csv_atomic(out / "path.csv", ["stop", "x", "y"], ([i, f"{x:.4f}", f"{y:.4f}"] for i, (x, y) in enumerate(r.path)))
     title = ("reached" if r.success else r.reason) + (f", efficiency {mission.efficiency:.2f}" if r.success else "")
     plot_trajectories([r], out / "trajectory.png", world=world, cols=1, titles=[title],
                       optimal=None if mission.optimal_path is None else [mission.optimal_path],
@@ -161,9 +155,7 @@ def _run_navigate(args: argparse.Namespace) -> int:
     summary = {"model": str(args.model), "dataset": str(args.dataset), "exploration run": run,
                "supervision": loc.info.get("supervision", "ground-truth"), "target": what,
                "geodesic field": not args.straight, **mission.to_dict()}
-    tmp = out / "navigation.json.part"
-    tmp.write_text(json.dumps(summary, indent=2) + "\n")
-    tmp.replace(out / "navigation.json")
+    write_text_atomic(out / "navigation.json", json.dumps(summary, indent=2) + "\n")
     print(f"{'reached' if r.success else 'did not reach'} the target after {r.iterations} stops, "
           f"{r.travelled:.2f} m travelled (optimal {mission.optimal:.2f} m"
           + (f", efficiency {mission.efficiency:.2f})" if r.success else f"; {r.reason})")

@@ -1,0 +1,46 @@
+"""Helpers of the command-line tests: run ``sfanav`` in-process and check
+its one-line errors; the tiny network config the CLI tests train."""
+
+from __future__ import annotations
+
+from sfanav.app.cli import main
+
+#: a two-layer network for 60x8 RGB panoramas (seconds to train)
+TINY_TOML = """
+[input]
+width = 60
+height = 8
+channels = 3
+
+[network]
+precision = "mixed"
+
+[[layers]]
+rf = [6, 4]
+stride = [3, 4]
+out = 8
+
+[[layers]]
+rf = "full"
+out = 10
+"""
+
+
+def run(capsys, *args):
+    """``sfanav ARGS`` in this process: (exit status, stdout, stderr)."""
+    try:
+        code = main([str(a) for a in args])
+    except SystemExit as exc:
+        code = exc.code
+    out = capsys.readouterr()
+    return code, out.out, out.err
+
+
+def assert_one_line_error(code, err, *words):
+    """Exit status 2, one line on stderr with every word, no traceback."""
+    assert code == 2
+    lines = [ln for ln in err.splitlines() if ln.strip()]
+    assert len(lines) == 1, err
+    assert "Traceback" not in err
+    for w in words:
+        assert w in lines[0], lines[0]
