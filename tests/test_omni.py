@@ -195,6 +195,7 @@ def test_train_with_jitter_on_omni_images(omni, tmp_path, capsys):
                          tmp_path / "j.sfa", "--jitter", "1.5", "--jitter-seed", "3", "--no-progress")
     assert code == 0, err
     assert "centre jittered by up to +-1.5 px per image (seed 3)" in err
+    assert "the network learns from the jittered panoramas, the readout from the unjittered ones" in err
     loc = sfanav.load(tmp_path / "j.sfa")
     assert loc.info["centre_jitter_px"] == 1.5 and loc.info["centre_jitter_seed"] == 3 and len(loc.info["mirror"]) == 4
     # localization unwarps with the model's mirror, without jitter
@@ -240,3 +241,27 @@ def test_jitter_shows_in_train_help(capsys):
         main(["train", "--help"])
     out = capsys.readouterr().out
     assert "--jitter PX" in out and "--jitter-seed N" in out
+
+
+def test_fit_localizer_trains_the_network_on_network_images(omni):
+    from sfanav.localization import fit_localizer
+    from sfanav.sfa.network import Network, Rotation
+
+    cfg = {"input": {"width": 60, "height": 8, "channels": 1}, "network": {"precision": "double"},
+           "layers": [{"rf": [6, 4], "stride": [3, 4], "out": 6}, {"rf": "full", "out": 6}]}
+    ds = Dataset(omni["data"]).select(run="train")
+    prep = Preprocessing(60, 8, gray=True, normalize=True)
+    X, xy = load_run(ds, prep, log=lambda m: None)
+    mirror = Preprocessor(prep, log=lambda m: None)
+    mirror(ds.load_images())
+    Xj, _ = load_run(ds, prep, mirror=mirror.mirror_used, jitter=1.5, seed=0, log=lambda m: None)
+    kw = dict(rotation=Rotation(step=5), readout="quadratic", n_outputs=4, progress=False)
+    plain = fit_localizer(Network(cfg), X, xy, **kw)
+    same = fit_localizer(Network(cfg), X, xy, network_images=X, **kw)
+    np.testing.assert_allclose(plain.predict(X), same.predict(X))
+    jit = fit_localizer(Network(cfg), X, xy, network_images=Xj, **kw)
+    net_only = fit_localizer(Network(cfg), Xj, xy, **kw)  # the same network, readout on the jittered images
+    np.testing.assert_allclose(jit.features(X), net_only.features(X), atol=1e-6)
+    assert not np.allclose(jit.predict(X), net_only.predict(X))
+    with pytest.raises(ValueError, match="network_images must have the shape of images"):
+        fit_localizer(Network(cfg), X, xy, network_images=Xj[:-1], **kw)

@@ -123,12 +123,14 @@ def _run_localization(out: Path, ds: Dataset, net: Network, *, prefix: str, titl
                       normalize: bool = False, step: int = 5, window: float = 1.0, thesis: dict[str, Any] | None = None,
                       suffix: str = "", baselines: bool = True, data: tuple | None = None, text: tuple = (),
                       plots: bool = True, baseline_queries: int | None = 1000, readout: str = "quadratic",
-                      rows: Any = None, signature: str | None = None, n_repeats: int = 100):
+                      rows: Any = None, signature: str | None = None, n_repeats: int = 100,
+                      network_images: Any = None):
     """Train on the ``train`` run, evaluate on ``test``; returns (evaluation, rows, info, data).
     ``readout="quadratic"`` (8 outputs, no ``rows``) is the thesis's
     configuration; ``"auto"`` with 8 or 12 outputs the sfanav default's
     (with ``signature="fourier"`` as ``sfanav train`` makes it).
-    ``n_repeats``: of the random-split protocol."""
+    ``n_repeats``: of the random-split protocol; ``network_images``: what
+    the network learns from instead of the training images (jittered)."""
     log = progress_log(progress)
     prep = Preprocessing.for_network(net, window=window, normalize=normalize)
     if data is None:
@@ -139,7 +141,7 @@ def _run_localization(out: Path, ds: Dataset, net: Network, *, prefix: str, titl
     t0 = time.perf_counter()
     loc = fit_localizer(net, X_tr, xy_tr, rotation=Rotation(step=step, window=window),
                         n_outputs=8 if readout == "quadratic" else None, readout=readout, rows=rows, prep=prep,
-                        progress=progress, signature=signature)
+                        progress=progress, signature=signature, network_images=network_images)
     fit_s = time.perf_counter() - t0
     log(f"{title}: trained on {len(X_tr)} images in {fit_s:.0f} s; readout {loc.describe_readout()}")
     ev = evaluate(loc, X_te, xy_te, train_images=X_tr, train_xy=xy_tr, out=out if plots else None, prefix=prefix,
@@ -565,9 +567,9 @@ def exp_5_2_3(out: Path, *, quick: bool, seed: int, progress: bool) -> Experimen
         Xf_tr, xyf_tr = load_run(flat.select(run="train"), prep, mirror=mirror, log=log)
         Xf_te, xyf_te = load_run(flat.select(run="test"), prep, mirror=mirror, log=log)
         jtag = f"{config}, jitter {jitter:g} px"
-        for tag, data, scene in ((config, (X_tr, xy_tr, X_te, xy_te), ds),
-                                 (jtag, (X_jit, xy_tr, X_te, xy_te), ds),
-                                 (f"{config}, flat ground", (Xf_tr, xyf_tr, Xf_te, xyf_te), flat)):
+        for tag, data, scene, Xn in ((config, (X_tr, xy_tr, X_te, xy_te), ds, None),
+                                     (jtag, (X_tr, xy_tr, X_te, xy_te), ds, X_jit),
+                                     (f"{config}, flat ground", (Xf_tr, xyf_tr, Xf_te, xyf_te), flat, None)):
             label = f" [{tag}]"
             prefix = "5.2.3-" + tag.replace(" ", "-").replace(",", "") + "-"
             kw: dict[str, Any] = ({"readout": "quadratic"} if thesis_cfg else
@@ -577,7 +579,7 @@ def exp_5_2_3(out: Path, *, quick: bool, seed: int, progress: bool) -> Experimen
                 out, scene, make(), prefix=prefix, title=f"5.2.3 outdoor, {tag}", seed=seed,
                 progress=progress, normalize=thesis_cfg, suffix=label, baselines=peers, data=data,
                 thesis={"MED (m)": THESIS_5_2_3} if tag == jtag else None, baseline_queries=500,
-                n_repeats=SPLIT_REPEATS_5_2_3, **kw)
+                n_repeats=SPLIT_REPEATS_5_2_3, network_images=Xn, **kw)
             rows += [dict(row, configuration=tag) for row in r if "baseline" not in row]
             if peers:
                 baseline_rows += [dict(row, metric=row["metric"] + (" [flat ground]" if scene is flat else ""))
@@ -616,9 +618,9 @@ def exp_5_2_3(out: Path, *, quick: bool, seed: int, progress: bool) -> Experimen
         f"{first['n_train']} training images (grid with crossings and large-radius turns), {first['n_test']} test "
         "images (random walk). Every run is unwarped about one mirror, estimated on the first training images "
         f"(centre {mirror[0]:.1f}, {mirror[1]:.1f} px, radii {mirror[2]:.1f}..{mirror[3]:.1f} px); '[..., jitter "
-        f"{jitter:g} px]' rows train on the training images unwarped about the centre moved by a random offset in "
-        f"[-{jitter:g}, {jitter:g}] px in x and y (seed {seed}; thesis 5.2.1), the test images are unwarped without "
-        "jitter. '[..., flat ground]' rows: the control, the same world, runs and camera on flat ground (no tilt, "
+        f"{jitter:g} px]' rows train the network on the training images unwarped about the centre moved by a random "
+        f"offset in [-{jitter:g}, {jitter:g}] px in x and y (seed {seed}; thesis 5.2.1) and fit the readout on the "
+        "same images unwarped without jitter, as the test images are (as 'sfanav train --jitter' does). '[..., flat ground]' rows: the control, the same world, runs and camera on flat ground (no tilt, "
         "no bob). Thesis configuration: "
         + ("a tiny 2-layer net (quick smoke run; numbers not meaningful)" if quick else
            "Table 5.3 (thesis-5.3 preset, double precision) with 12 top outputs")

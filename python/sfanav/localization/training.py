@@ -34,6 +34,7 @@ def fit_localizer(
     signature: str | None = None,
     loop_closures: Any = None,
     closure_weights: Any = None,
+    network_images: np.ndarray | None = None,
 ) -> Localizer:
     """Trains ``network`` on ``images`` (the training run, in temporal order)
     under simulated rotation and fits the readout of its slowest outputs to
@@ -55,15 +56,36 @@ def fit_localizer(
     network's training, as :meth:`sfanav.Network.fit` (indices into
     ``images``; closures found with :mod:`sfanav.loopclosure`). The
     returned localizer's ``info`` records preprocessing, rotation, training
-    time (seconds: network) and readout selection time."""
+    time (seconds: network) and readout selection time.
+
+    ``network_images``: the images the network is trained on, when they
+    differ from ``images`` (the same run, same shape and order), e.g. the run
+    unwarped with centre jitter (:class:`sfanav.data.Preprocessor`): the
+    network then learns to ignore the jitter, and the readout (and the
+    signature) is fitted on ``images`` as the queries will look. Default:
+    ``images``.
+
+    Examples
+    --------
+    >>> X, xy = load_run(train, prep, mirror=m)                        # doctest: +SKIP
+    >>> Xj, _ = load_run(train, prep, mirror=m, jitter=5.0, seed=0)    # doctest: +SKIP
+    >>> loc = fit_localizer(net, X, xy, network_images=Xj)             # doctest: +SKIP
+    """
     rotation = rotation or Rotation()
     raw = images
+    if network_images is not None:
+        shape = getattr(network_images, "shape", None)
+        if shape != getattr(images, "shape", None):
+            raise ValueError(f"network_images must have the shape of images {getattr(images, 'shape', None)}, "
+                             f"got {shape}")
     if rows is not None and not rows.identity:
         images = rows(images)
+        network_images = None if network_images is None else rows(network_images)
     else:
         rows = None
     t0 = time.perf_counter()
-    network.fit(images, rotation, progress=progress, loop_closures=loop_closures, closure_weights=closure_weights)
+    network.fit(images if network_images is None else network_images, rotation, progress=progress,
+                loop_closures=loop_closures, closure_weights=closure_weights)
     fit_s = time.perf_counter() - t0
     check_n_outputs(n_outputs, network.n_outputs_)
     loc = Localizer(network, n_outputs=n_outputs, readout=readout, rows=rows, rotation_pooling=rotation_pooling,

@@ -98,10 +98,11 @@ def _add_train(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--mirror", default=None, metavar="CX,CY,INNER,OUTER",
                    help="mirror of omnidirectional images, pixels (default: estimated)")
     p.add_argument("--jitter", type=arg.nonneg_float, default=0.0, metavar="PX",
-                   help="centre jitter for omnidirectional images (thesis 5.2.1: 5): each training image is "
-                        "unwarped about the mirror centre moved by a random offset in [-PX, PX] in x and y, so "
-                        "that the model ignores where the horizon ring lies (a robot tilting on uneven ground "
-                        "moves it); training only, localization unwarps without it. Default 0 (none)")
+                   help="centre jitter for omnidirectional images (thesis 5.2.1: 5): the network learns from "
+                        "the training images unwarped about the mirror centre moved by a random offset in "
+                        "[-PX, PX] in x and y, so that it ignores where the horizon ring lies (a robot tilting on "
+                        "uneven ground moves it); the readout is fitted on the images unwarped without jitter, "
+                        "as localization unwarps them. Default 0 (none); docs/experiments.md 5.2.3")
     p.add_argument("--jitter-seed", type=arg.nonneg_int, default=0, metavar="N",
                    help="seed of the centre jitter's offsets (default 0)")
     p.add_argument("--overwrite", action="store_true", help="replace an existing model file")
@@ -182,8 +183,17 @@ def _run_train(args: argparse.Namespace) -> int:
          + f" as {prep.describe()} panoramas; network: {net!r}; rows: {rows.describe() if rows else 'all'}; "
          + f"readout: {recipe.readout}" + (f" with the {recipe.signature} signature" if recipe.signature else "")
          + (" (the sfanav default)" if recipe.name == "sfanav default" else ""))
-    preprocessor = Preprocessor(prep, mirror=args.mirror, log=log, jitter=args.jitter, seed=args.jitter_seed)
+    preprocessor = Preprocessor(prep, mirror=args.mirror, log=log)
     images, xy = load_run(train, prep, preprocessor=preprocessor, progress=not args.no_progress)
+    network_images = None
+    if args.jitter and preprocessor.mode == "unwarp":
+        jittered = Preprocessor(prep, mirror=preprocessor.mirror_used, log=log, jitter=args.jitter,
+                                seed=args.jitter_seed)
+        network_images, _ = load_run(train, prep, preprocessor=jittered, progress=not args.no_progress)
+        log("the network learns from the jittered panoramas, the readout from the unjittered ones")
+    elif args.jitter:
+        log(f"centre jitter ({args.jitter:g} px) applies to omnidirectional images only: these images are not "
+            "unwarped, so the model is trained without it")
     closures = None
     if args.loop_closures is not None:  # image detectors without an odometry gate: dead reckoning drifts
         from ...loopclosure import make_detector
@@ -193,8 +203,8 @@ def _run_train(args: argparse.Namespace) -> int:
         log(f"loop closures ({args.loop_closures}): {len(closures)} images trained with their earlier visit "
              "interleaved" + (", weighted by match confidence" if args.closure_weights == "score" else ""))
     weights = "score" if closures is not None and args.closure_weights == "score" else None
-    fit_kw = dict(loop_closures=closures, closure_weights=weights, rotation=Rotation(step=args.step, window=args.window),
-                  n_outputs=recipe.n_outputs,
+    fit_kw = dict(loop_closures=closures, closure_weights=weights, network_images=network_images,
+                  rotation=Rotation(step=args.step, window=args.window), n_outputs=recipe.n_outputs,
                   readout=recipe.readout, rows=rows, prep=prep, progress=not args.no_progress,
                   rotation_pooling=recipe.rotation_pooling, signature=recipe.signature,
                   info={"dataset": str(args.dataset), "run": run,
@@ -217,8 +227,8 @@ def _run_train(args: argparse.Namespace) -> int:
         loc.info["supervision"] = "ground-truth"
     if preprocessor.mirror_used is not None:
         loc.info["mirror"] = list(preprocessor.mirror_used)  # localize and evaluate reuse it
-        if args.jitter:
-            loc.info["centre_jitter_px"] = args.jitter  # training only
+        if network_images is not None:
+            loc.info["centre_jitter_px"] = args.jitter  # the network's training only
             loc.info["centre_jitter_seed"] = args.jitter_seed
     if np.isfinite(odometry).all():
         try:
