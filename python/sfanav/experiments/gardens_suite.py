@@ -57,7 +57,7 @@ ABLATIONS = ("slow features only", "signature only")
 signature), and the signature's GP alone."""
 PEERS = ("perfect memory", "Fourier signature")
 RATIO_METRICS = ("MAE x (%)", "MAE y (%)", "MED (m)", "p95 (m)")
-TARGET_WORST, TARGET_MEDIAN = 0.9, 0.7  # ratio default / best peer (issue: worst case and median)
+TARGET_WORST, TARGET_MEDIAN = 0.9, 0.7  # ratio default / best peer: worst case and median
 THESIS_SPEC = {"kind": "quadratic", "n_outputs": 8, "ridge": 0.0}
 
 

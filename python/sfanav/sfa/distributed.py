@@ -1,4 +1,4 @@
-"""Partitioned (distributed) training of a :class:`~sfanav.Network` (issue 24).
+"""Partitioned (distributed) training of a :class:`~sfanav.Network`.
 
 The training images are split into *partitions* (a list of arrays or
 ``.npy`` files, one array or ``.npy`` file cut into pieces, a
