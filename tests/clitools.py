@@ -3,7 +3,15 @@ its one-line errors; the tiny network config the CLI tests train."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
+import sfanav
 from sfanav.app.cli import main
+
+#: the directory that holds the ``sfanav`` package these tests imported (the
+#: installed wheel in CI, ``python/`` in an editable install): subprocesses put
+#: it on ``PYTHONPATH`` so they test the same build, never the bare source tree
+SFANAV_ROOT = str(Path(sfanav.__file__).resolve().parents[1])
 
 #: a two-layer network for 60x8 RGB panoramas (seconds to train)
 TINY_TOML = """

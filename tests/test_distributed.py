@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
+from clitools import SFANAV_ROOT
 from sfanav import Network, Rotation
 from sfanav.sfa.distributed import fit as distributed_fit
 from sfanav.sfa.distributed import partitions_of
@@ -214,17 +214,25 @@ def client():
     pytest.importorskip("dask")
     distributed = pytest.importorskip("distributed")
     here = Path(__file__).resolve().parent
-    # the worker processes import sfanav (and this module's loaders) from the same places
-    os.environ["PYTHONPATH"] = os.pathsep.join([str(here.parent / "python"), str(here)] + [
-        p for p in os.environ.get("PYTHONPATH", "").split(os.pathsep) if p])
-    cluster = distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None,
-                                       silence_logs=50)
-    c = distributed.Client(cluster)
+    # the worker processes import sfanav (and this module's loaders) from the same places;
+    # the variable is restored afterwards so that later tests' subprocesses do not inherit it
+    saved = os.environ.get("PYTHONPATH")
+    os.environ["PYTHONPATH"] = os.pathsep.join([SFANAV_ROOT, str(here)] + [
+        p for p in (saved or "").split(os.pathsep) if p])
     try:
-        yield c
+        cluster = distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                           dashboard_address=None, silence_logs=50)
+        c = distributed.Client(cluster)
+        try:
+            yield c
+        finally:
+            c.close()
+            cluster.close()
     finally:
-        c.close()
-        cluster.close()
+        if saved is None:
+            os.environ.pop("PYTHONPATH", None)
+        else:
+            os.environ["PYTHONPATH"] = saved
 
 
 def test_dask_fit_equals_single_process(client, reference, tmp_path):
@@ -313,5 +321,5 @@ def test_dask_is_optional():
 
     code = ("import sys, numpy as np, sfanav; from sfanav.sfa import distributed; "
             "assert 'dask' not in sys.modules and 'distributed' not in sys.modules")
-    env = dict(os.environ, PYTHONPATH=str(Path(__file__).resolve().parent.parent / "python"))
+    env = dict(os.environ, PYTHONPATH=SFANAV_ROOT)
     subprocess.run([sys.executable, "-c", code], check=True, env=env)

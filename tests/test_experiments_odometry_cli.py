@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
+from clitools import SFANAV_ROOT
 from sfanav import experiments
 from sfanav.experiments.odometry import sim_lines
 from sfanav.odometry import dead_reckon
@@ -74,7 +74,7 @@ def test_5_3_1_quick(name, out):
 
 def test_5_3_2_cli_quick(out):
     # after 5.3.1-real in the same directory: reuses its dataset and features
-    env = {**os.environ, "PYTHONPATH": str(Path(experiments.__file__).parents[2])}
+    env = {**os.environ, "PYTHONPATH": SFANAV_ROOT}
     p = subprocess.run([sys.executable, "-m", "sfanav.app.cli", "experiment", "5.3.2", "--quick", "--out", str(out),
                         "--no-progress"], capture_output=True, text=True, env=env, timeout=600)
     assert p.returncode == 0, p.stderr

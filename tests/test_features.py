@@ -4,15 +4,22 @@ file, the features CLI and the 6.1 experiments' quick runs."""
 import json
 import subprocess
 import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
+from clitools import SFANAV_ROOT
+from sfanav.features import (
+    DIM,
+    Features,
+    RobustnessPredictor,
+    balanced,
+    detect,
+    match,
+    robustness_vectors,
+    stability_labels,
+)
 
-from sfanav.features import (DIM, Features, RobustnessPredictor, balanced, detect, match, robustness_vectors,
-                             stability_labels)
-
-PY = str(Path(__file__).resolve().parents[1] / "python")
+PY = SFANAV_ROOT
 
 
 def _image(seed=0, h=40, w=160):
