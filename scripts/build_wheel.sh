@@ -11,6 +11,9 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 export PATH="$HOME/.cargo/bin:$PATH"
 PY="${PYTHON:-python3}"
+# maturin finds zig through `python3 -m ziglang` on PATH: put $PY's directory
+# first so that a virtual environment's interpreter (PYTHON=venv/bin/python) is it
+PATH="$(dirname "$(command -v "$PY")"):$PATH"
 OUT="${1:-dist}"
 "$PY" -m pip install --quiet --disable-pip-version-check "maturin>=1.7,<2" "ziglang>=0.11"
 "$PY" -m maturin build --quiet --release --zig --compatibility manylinux2014 --out "$OUT"
