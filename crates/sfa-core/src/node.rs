@@ -26,6 +26,8 @@ use faer::linalg::matmul::matmul;
 use faer::{Accum, MatRef, Par};
 use rayon::prelude::*;
 
+mod batch;
+
 /// Hyper-parameters of a node.
 #[derive(Clone, Debug, PartialEq)]
 pub struct NodeConfig {

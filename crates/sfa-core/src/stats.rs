@@ -71,7 +71,10 @@ pub struct AccumulatorState {
     pub mixed: bool,
 }
 
+mod batch;
+
 pub use crate::moments::set_block_rows;
+pub use batch::{GraphPart, RowMap};
 use crate::moments::*;
 
 impl Accumulator {

@@ -10,12 +10,25 @@ use crate::fields::{
 use crate::network::{check_images, Network};
 use crate::pixel::Pixel;
 use crate::rotation::{Rotation, TrainingPath};
-use crate::stats::Accumulator;
+use crate::stats::{Accumulator, GraphPart};
 use crate::view::View;
 use rayon::prelude::*;
 use std::sync::Arc;
 
 mod partitioned;
+
+/// One image's rows and graph, ready for accumulation (see
+/// [`LayerTrainer::prepare_shared`]).
+struct SharedGraph {
+    rows: Vec<f64>,
+    start: usize,
+    n: usize,
+    width: usize,
+    from_stage: usize,
+    weights: Vec<f64>,
+    edges: Vec<[usize; 2]>,
+    edge_weights: Vec<f64>,
+}
 
 
 /// Trains one layer of a network, pass by pass, on images streamed in
@@ -254,18 +267,12 @@ impl LayerTrainer {
                     })
                     .collect()
             };
-            for g in graphs {
-                match g.and_then(|gr| self.feed_shared(net, gr)) {
-                    Ok(()) => self.images_seen += 1,
-                    Err(e) => {
-                        result = Err(e);
-                        break;
-                    }
-                }
-            }
-            if result.is_err() {
+            let n = graphs.len();
+            if let Err(e) = graphs.into_iter().collect::<Result<Vec<_>>>().and_then(|b| self.feed_shared(net, b)) {
+                result = Err(e);
                 break;
             }
+            self.images_seen += n;
         }
         self.cache = Some(cache);
         self.partner_cache = partners;
@@ -331,6 +338,8 @@ impl LayerTrainer {
         };
         let d = net.geometry()[layer].in_dim;
         let mixed = net.spec().mixed_precision;
+        let shared = net.spec().weight_sharing;
+        let mut batch = Vec::with_capacity(if shared { graphs.len() } else { 0 });
         for gr in graphs {
             let (gr, field, partner) = gr?;
             if self.caching {
@@ -341,25 +350,59 @@ impl LayerTrainer {
                     }
                 }
             }
-            if net.spec().weight_sharing {
-                self.feed_shared(net, gr)?;
+            if shared {
+                batch.push(gr);
             } else {
                 self.feed_individual(net, gr, d)?;
+                self.images_seen += 1;
             }
-            self.images_seen += 1;
+        }
+        if shared {
+            let n = batch.len();
+            self.feed_shared(net, batch)?;
+            self.images_seen += n;
         }
         Ok(())
     }
 
-    fn feed_shared(&mut self, net: &mut Network, gr: ImageGraph) -> Result<()> {
+    /// Feeds consecutive images' graphs (weight sharing): each image's
+    /// rows get the previous image's last views as leading pair ends, then
+    /// all images are accumulated at once ([`SfaNode::partial_fit_graphs`]).
+    fn feed_shared(&mut self, net: &mut Network, graphs: Vec<ImageGraph>) -> Result<()> {
+        let prepared: Vec<SharedGraph> = graphs.into_iter().map(|gr| self.prepare_shared(net, gr)).collect::<Result<_>>()?;
+        let node = &mut net.nodes_mut(self.layer)[0];
+        let mut i = 0;
+        while i < prepared.len() {
+            let from = prepared[i].from_stage;
+            let j = i + prepared[i..].iter().take_while(|p| p.from_stage == from).count();
+            let parts = prepared[i..j]
+                .iter()
+                .map(|p| {
+                    Ok(GraphPart {
+                        x: View::from_slice(&p.rows[p.start * p.width..], p.n, p.width)?,
+                        weights: Some(&p.weights),
+                        edges: &p.edges,
+                        edge_weights: Some(&p.edge_weights),
+                    })
+                })
+                .collect::<Result<Vec<_>>>()?;
+            node.partial_fit_graphs(from, &parts)?;
+            i = j;
+        }
+        Ok(())
+    }
+
+    /// One image's graph with the previous image's last views in its
+    /// reserved leading rows (weight-0 samples that end one pair each);
+    /// keeps this image's last views as the next tail and merges its
+    /// lag-product statistics.
+    fn prepare_shared(&mut self, net: &mut Network, gr: ImageGraph) -> Result<SharedGraph> {
         let ns = gr.first.len();
         let d = gr.width;
         let mut rows = gr.rows;
         let (start, n, weights, edges, ew) = match self.tail.take() {
             None => (gr.lead, gr.n, gr.weights, gr.edges, gr.edge_weights),
             Some(tail) => {
-                // The previous image's last views go into the reserved
-                // leading rows, as weight-0 samples that end one pair each.
                 debug_assert_eq!(gr.lead, ns);
                 rows[..ns * d].copy_from_slice(&tail);
                 let mut w = vec![0.0; ns];
@@ -386,19 +429,12 @@ impl LayerTrainer {
             let src = own + r * d;
             tail[i * d..(i + 1) * d].copy_from_slice(&rows[src..src + d]);
         }
-        let node = &mut net.nodes_mut(self.layer)[0];
         if let Some(m) = &gr.moments {
-            node.merge_statistics(m)?;
+            net.nodes_mut(self.layer)[0].merge_statistics(m)?;
             self.lag_images += 1;
         }
-        let x = View::from_slice(&rows[start * d..], n, d)?;
-        if gr.from_stage == 0 {
-            node.partial_fit_graph(x, Some(&weights), &edges, Some(&ew))?;
-        } else {
-            node.partial_fit_graph_from(gr.from_stage, x, Some(&weights), &edges, Some(&ew))?;
-        }
         self.tail = Some(tail);
-        Ok(())
+        Ok(SharedGraph { rows, start, n, width: d, from_stage: gr.from_stage, weights, edges, edge_weights: ew })
     }
 
     fn feed_individual(&mut self, net: &mut Network, gr: ImageGraph, d: usize) -> Result<()> {

@@ -176,3 +176,49 @@ fn bad_input_is_an_error_not_a_panic() {
     assert!(node.partial_fit(View::from_slice(&x[..2], 1, 2).unwrap(), false).is_err());
     assert!(expand(View::from_slice(&[f64::INFINITY], 1, 1).unwrap(), 2).is_err());
 }
+
+#[test]
+fn a_batch_of_graphs_trains_a_node_as_the_graphs_one_by_one() {
+    use sfa_core::stats::GraphPart;
+    let (d, sizes) = (5, [300usize, 1, 450, 200]);
+    let n: usize = sizes.iter().sum();
+    let x = common::correlated(n, d, 41);
+    let cfg = NodeConfig { n_components: 3, degree: 2, reduce_to: Some(4), tol: 1e-10, mixed_precision: false };
+    // per graph: consecutive rows as edges, every third row weight 2
+    let graphs: Vec<(usize, usize, Vec<f64>, Vec<[usize; 2]>)> = sizes
+        .iter()
+        .scan(0, |s, &m| {
+            let g = (*s, m, (0..m).map(|i| if i % 3 == 0 { 2.0 } else { 1.0 }).collect(), (1..m).map(|i| [i - 1, i]).collect());
+            *s += m;
+            Some(g)
+        })
+        .collect();
+    let (mut one, mut batch) = (SfaNode::new(cfg.clone()).unwrap(), SfaNode::new(cfg).unwrap());
+    for _stage in 0..2 {
+        for (s, m, w, e) in &graphs {
+            one.partial_fit_graph(View::from_slice(&x[s * d..(s + m) * d], *m, d).unwrap(), Some(w), e, None).unwrap();
+        }
+        let ps: Vec<GraphPart<'_, f64>> = graphs
+            .iter()
+            .map(|(s, m, w, e)| GraphPart {
+                x: View::from_slice(&x[s * d..(s + m) * d], *m, d).unwrap(),
+                weights: Some(w),
+                edges: e,
+                edge_weights: None,
+            })
+            .collect();
+        batch.partial_fit_graphs(0, &ps).unwrap();
+        one.finish_stage().unwrap();
+        batch.finish_stage().unwrap();
+    }
+    let (ya, yb) = (one.transform(View::from_slice(&x, n, d).unwrap()).unwrap(), batch.transform(View::from_slice(&x, n, d).unwrap()).unwrap());
+    let scale = ya.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    let diff = ya.iter().zip(&yb).fold(0.0f64, |m, (a, b)| m.max((a - b).abs()));
+    assert!(diff <= 1e-9 * scale, "outputs differ by {diff}");
+    // the expansion overflows: a clear error, nothing added
+    let huge = vec![1e200; 2 * d];
+    let ps = [GraphPart { x: View::from_slice(&huge, 2, d).unwrap(), weights: None, edges: &[[0, 1]], edge_weights: None }];
+    let mut fresh = SfaNode::new(NodeConfig { n_components: 1, degree: 2, reduce_to: None, tol: 1e-10, mixed_precision: false }).unwrap();
+    let err = fresh.partial_fit_graphs(0, &ps).unwrap_err();
+    assert!(err.to_string().contains("overflows"), "{err}");
+}

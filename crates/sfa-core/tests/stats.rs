@@ -200,3 +200,110 @@ fn mixed_precision_is_close_to_double() {
     let back = Accumulator::from_state(&b.state()).unwrap();
     assert!(back.is_mixed_precision());
 }
+
+/// Random graphs over `parts` blocks of rows: weights in [0, 2] (some 0),
+/// edges between random rows of the same block.
+fn random_graphs(x: &[f64], d: usize, sizes: &[usize], seed: u64) -> Vec<(usize, usize, Vec<f64>, Vec<[usize; 2]>, Vec<f64>)> {
+    let mut r = common::Rng::new(seed);
+    let mut start = 0;
+    let mut out = Vec::new();
+    for &n in sizes {
+        let w: Vec<f64> = (0..n).map(|i| if i % 7 == 3 { 0.0 } else { 1.0 + r.next() }).collect();
+        let edges: Vec<[usize; 2]> = (0..2 * n)
+            .map(|_| [((r.next() + 1.0) / 2.0 * n as f64) as usize % n, ((r.next() + 1.0) / 2.0 * n as f64) as usize % n])
+            .collect();
+        let ew: Vec<f64> = edges.iter().map(|_| 1.0 + r.next()).collect();
+        out.push((start, n, w, edges, ew));
+        start += n;
+    }
+    assert!(start * d <= x.len());
+    out
+}
+
+#[test]
+fn a_batch_of_graphs_equals_the_graphs_one_by_one() {
+    use sfa_core::stats::GraphPart;
+    let d = 6;
+    let sizes = [1, 40, 0, 700, 3, 333];
+    let n: usize = sizes.iter().sum();
+    let x = correlated(n, d, 31);
+    let graphs = random_graphs(&x, d, &sizes, 5);
+    let mut one = Accumulator::new(d).unwrap();
+    for (s, m, w, e, ew) in &graphs {
+        one.add_graph(View::from_slice(&x[s * d..(s + m) * d], *m, d).unwrap(), Some(w), e, Some(ew)).unwrap();
+    }
+    sfa_core::stats::set_block_rows(29); // cross block and part boundaries inside and between graphs
+    let parts: Vec<GraphPart<'_, f64>> = graphs
+        .iter()
+        .map(|(s, m, w, e, ew)| GraphPart {
+            x: View::from_slice(&x[s * d..(s + m) * d], *m, d).unwrap(),
+            weights: Some(w),
+            edges: e,
+            edge_weights: Some(ew),
+        })
+        .collect();
+    let mut batch = Accumulator::new(d).unwrap();
+    batch.add_graphs(&parts, None).unwrap();
+    sfa_core::stats::set_block_rows(0);
+    assert_same(&one, &batch, 1e-12);
+    assert_eq!(one.weight_sum(), batch.weight_sum());
+    assert!((one.pair_weight_sum() - batch.pair_weight_sum()).abs() < 1e-9);
+}
+
+#[test]
+fn a_mapped_batch_equals_the_mapped_rows() {
+    use sfa_core::stats::GraphPart;
+    use sfa_core::Expansion;
+    let d = 4;
+    let ex = Expansion::new(d, 2).unwrap();
+    let e = ex.out_dim();
+    let sizes = [50, 120];
+    let n: usize = sizes.iter().sum();
+    let x = correlated(n, d, 32);
+    let mut xe = vec![0.0; n * e];
+    for i in 0..n {
+        ex.expand_row(&x[i * d..(i + 1) * d], &mut xe[i * e..(i + 1) * e]);
+    }
+    let graphs = random_graphs(&x, d, &sizes, 6);
+    let mut plain = Accumulator::new(e).unwrap();
+    for (s, m, w, ed, ew) in &graphs {
+        plain.add_graph(View::from_slice(&xe[s * e..(s + m) * e], *m, e).unwrap(), Some(w), ed, Some(ew)).unwrap();
+    }
+    let parts: Vec<GraphPart<'_, f64>> = graphs
+        .iter()
+        .map(|(s, m, w, ed, ew)| GraphPart {
+            x: View::from_slice(&x[s * d..(s + m) * d], *m, d).unwrap(),
+            weights: Some(w),
+            edges: ed,
+            edge_weights: Some(ew),
+        })
+        .collect();
+    let f = |a: &[f64], o: &mut [f64]| ex.expand_row(a, o);
+    let mut mapped = Accumulator::new(e).unwrap();
+    mapped.add_graphs(&parts, Some((d, &f))).unwrap();
+    assert_same(&plain, &mapped, 1e-12);
+}
+
+#[test]
+fn a_failing_batch_adds_nothing() {
+    use sfa_core::stats::GraphPart;
+    let d = 3;
+    let x = correlated(20, d, 33);
+    let mut bad = x.clone();
+    bad[13 * d + 1] = f64::NAN;
+    let mut a = Accumulator::new(d).unwrap();
+    a.update(View::from_slice(&x, 20, d).unwrap(), false).unwrap();
+    let before = a.state();
+    let edges = [[0usize, 1usize]];
+    let ok = GraphPart { x: View::from_slice(&x, 20, d).unwrap(), weights: None, edges: &edges, edge_weights: None };
+    let nan = GraphPart { x: View::from_slice(&bad, 20, d).unwrap(), weights: None, edges: &edges, edge_weights: None };
+    assert!(matches!(a.add_graphs(&[ok, nan], None), Err(SfaError::NonFinite { row: 13, col: 1, .. })));
+    assert_eq!(a.state(), before);
+    // wrong width and an edge outside its graph
+    let wide = GraphPart { x: View::from_slice(&x[..20], 5, 4).unwrap(), weights: None, edges: &[], edge_weights: None };
+    assert!(matches!(a.add_graphs(&[wide], None), Err(SfaError::ShapeMismatch { .. })));
+    let far = [[0usize, 20usize]];
+    let out = GraphPart { x: View::from_slice(&x, 20, d).unwrap(), weights: None, edges: &far, edge_weights: None };
+    assert!(matches!(a.add_graphs(&[out], None), Err(SfaError::InvalidArgument(_))));
+    assert_eq!(a.state(), before);
+}
