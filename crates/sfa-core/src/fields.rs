@@ -9,7 +9,6 @@ use crate::network::{LayerGeometry, Network};
 use crate::periodic;
 use crate::pixel::Pixel;
 use crate::rotation::Rotation;
-use crate::stats::Accumulator;
 use crate::view::View;
 
 /// One image's training graph for a layer: patch rows, their sample weights,
@@ -43,9 +42,9 @@ pub(crate) struct ImageGraph {
     pub(crate) alt_first: Vec<usize>,
     pub(crate) alt_weight: f64,
     /// Statistics formed without rows (first layer, lag products; see
-    /// `periodic.rs`); the rows are then only the first and last
-    /// views, as weight-0 pair ends.
-    pub(crate) moments: Option<Accumulator>,
+    /// `periodic.rs`), combined with other images' by the trainer; the
+    /// rows are then only the first and last views, as weight-0 pair ends.
+    pub(crate) moments: Option<periodic::LatticeImage>,
 }
 
 /// Distinct offsets `(k * step + j * t) mod period` for `k < views`,
@@ -242,7 +241,7 @@ pub(crate) fn fast_graph(
             v
         };
         if let Some(plan) = periodic::plan(g, &per_column(&mult), &per_column(&pmult)) {
-            let moments = periodic::lattice_moments(g, &plan, image, w, s, reference, net.spec().mixed_precision)?;
+            let moments = periodic::lattice_image(g, &plan, image, w, s, reference, net.spec().mixed_precision);
             // Rows: per RF row, the first views then the last views.
             let ends: Vec<usize> = (0..g.n_w).map(first_offset).chain((0..g.n_w).map(last_offset)).collect();
             let rows = periodic_patches(g, 1, w, image, None, &ends, lead);

@@ -26,7 +26,7 @@
 //! outer product per patch. Exact up to rounding; the caller falls back to
 //! the plain path when the plan does not pay ([`plan`] returns None).
 
-use crate::error::Result;
+use crate::error::{Result, SfaError};
 use crate::network::LayerGeometry;
 use crate::stats::Accumulator;
 use crate::view::{Sample, View};
@@ -49,6 +49,8 @@ pub(crate) struct Plan {
     /// Offsets with a positive multiplicity (the unweighted counts).
     n_samples: usize,
     n_pairs: usize,
+    /// The period (panorama width) the plan is for.
+    period: usize,
 }
 
 fn gcd(a: usize, b: usize) -> usize {
@@ -92,7 +94,7 @@ pub(crate) fn plan(geom: &LayerGeometry, mult: &[f64], pmult: &[f64]) -> Option<
     let rows = |n: usize| n as f64 * d * d / 2.0;
     let structured = lag + rows(short_samples.len() + short_pairs.len());
     let plain = rows(n_samples + n_pairs);
-    (structured < 0.75 * plain).then_some(Plan { g, w_max, p_max, short_samples, short_pairs, n_samples, n_pairs })
+    (structured < 0.75 * plain).then_some(Plan { g, w_max, p_max, short_samples, short_pairs, n_samples, n_pairs, period: w })
 }
 
 /// One RF row's columns, `(w + rf_w - 1) x q` row-major, wrapped around
@@ -200,13 +202,25 @@ impl LatticeSums {
     }
 }
 
-/// Statistics of layer 0's periodic patches of one `in_h x period x in_c`
-/// image (row-major; the network may see a narrower window) under `plan`: weighted samples `P(r, o)` and weighted pairs
-/// `P(r, o + step) - P(r, o)`, as an accumulator whose reference point is
-/// the per-channel `reference` (e.g. the first image's channel means)
-/// repeated over the patch. `mixed`: lag products in f32 summed in f64 per
-/// row and lattice class (as the accumulator's mixed precision does).
-pub(crate) fn lattice_moments(
+/// One image's share of layer 0's periodic-patch statistics under a
+/// [`Plan`]: its lattice sums (samples and derivatives) and its correction
+/// rows (the shortfall offsets' patches and derivatives, centred, in patch
+/// order), to be combined with other images' by [`lattice_moments`].
+pub(crate) struct LatticeImage {
+    plan: Plan,
+    x: LatticeSums,
+    dx: LatticeSums,
+    short_x: Vec<f64>,
+    short_d: Vec<f64>,
+}
+
+/// [`LatticeImage`] of one `in_h x period x in_c` image (row-major; the
+/// network may see a narrower window): weighted samples `P(r, o)` and
+/// weighted pairs `P(r, o + step) - P(r, o)`, centred at the per-channel
+/// `reference` (e.g. the first image's channel means) repeated over the
+/// patch. `mixed`: lag products in f32 summed in f64 per row and lattice
+/// class (as the accumulator's mixed precision does).
+pub(crate) fn lattice_image(
     geom: &LayerGeometry,
     plan: &Plan,
     image: &[f64],
@@ -214,7 +228,7 @@ pub(crate) fn lattice_moments(
     step: usize,
     reference: &[f64],
     mixed: bool,
-) -> Result<Accumulator> {
+) -> LatticeImage {
     let (w, c, d) = (period, geom.in_c, geom.in_dim);
     debug_assert_eq!(image.len(), geom.in_h * w * c);
     let g = plan.g;
@@ -277,21 +291,44 @@ pub(crate) fn lattice_moments(
         x.add(&p.x);
         dx.add(&p.dx);
     }
+    short_x.truncate(geom.n_h * ns * d);
+    short_d.truncate(geom.n_h * np * d);
+    LatticeImage { plan: plan.clone(), x, dx, short_x, short_d }
+}
+
+/// The statistics of layer 0's periodic patches of `images` (their
+/// [`LatticeImage`]s, all under one plan and one `reference`), as one
+/// accumulator: the lattice sums are added up and assembled once, and the
+/// correction rows of all images are accumulated at once.
+pub(crate) fn lattice_moments(geom: &LayerGeometry, images: &[LatticeImage], reference: &[f64], mixed: bool) -> Result<Accumulator> {
+    let (c, d) = (geom.in_c, geom.in_dim);
+    let plan = &images.first().ok_or_else(|| SfaError::InvalidArgument("no lattice images".into()))?.plan;
+    let g = plan.g;
+    let mut x = LatticeSums::zeros(geom, g);
+    let mut dx = LatticeSums::zeros(geom, g);
+    for im in images {
+        debug_assert_eq!((im.plan.g, im.plan.w_max, im.plan.p_max), (g, plan.w_max, plan.p_max));
+        x.add(&im.x);
+        dx.add(&im.dx);
+    }
     let wx: Vec<f64> = (0..geom.n_h).flat_map(|_| plan.short_samples.iter().map(|&(_, v)| v)).collect();
     let wd: Vec<f64> = (0..geom.n_h).flat_map(|_| plan.short_pairs.iter().map(|&(_, v)| v)).collect();
     // The shortfall, as ordinary weighted rows relative to the same (zero)
     // reference in the centred coordinates.
     let mut short = Accumulator::with_reference(vec![0.0; d])?;
     short.set_mixed_precision(mixed);
-    short.add_samples(View::from_slice(&short_x[..wx.len() * d], wx.len(), d)?, Some(&wx))?;
-    short.add_differences(View::from_slice(&short_d[..wd.len() * d], wd.len(), d)?, Some(&wd))?;
+    let sx = images.iter().map(|im| View::from_slice(&im.short_x, wx.len(), d)).collect::<Result<Vec<_>>>()?;
+    let sd = images.iter().map(|im| View::from_slice(&im.short_d, wd.len(), d)).collect::<Result<Vec<_>>>()?;
+    short.add_samples_batch(&sx, &wx)?;
+    short.add_differences_batch(&sd, &wd)?;
+    let k = images.len();
     let n_h = geom.n_h as f64;
-    let lattice = (w / g) as f64;
+    let lattice = (plan.period / g) as f64;
     let shift: Vec<f64> = (0..d).map(|i| reference[i % c]).collect();
     let (sum, sxx) = x.assemble(geom, g, plan.w_max);
     let (sum_d, sdd) = dx.assemble(geom, g, plan.p_max);
-    let samples = ((geom.n_h * plan.n_samples) as u64, plan.w_max * n_h * lattice, sum, sxx);
-    let pairs = ((geom.n_h * plan.n_pairs) as u64, plan.p_max * n_h * lattice, sum_d, sdd);
+    let samples = ((k * geom.n_h * plan.n_samples) as u64, k as f64 * plan.w_max * n_h * lattice, sum, sxx);
+    let pairs = ((k * geom.n_h * plan.n_pairs) as u64, k as f64 * plan.p_max * n_h * lattice, sum_d, sdd);
     Ok(short.lattice_minus(shift, samples, pairs))
 }
 

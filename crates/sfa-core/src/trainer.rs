@@ -17,6 +17,9 @@ use std::sync::Arc;
 
 mod partitioned;
 
+/// Images whose graphs are built (in parallel) and accumulated at once.
+const FEED_CHUNK: usize = 16;
+
 /// One image's rows and graph, ready for accumulation (see
 /// [`LayerTrainer::prepare_shared`]).
 struct SharedGraph {
@@ -243,7 +246,7 @@ impl LayerTrainer {
         let partners = self.partner_cache.take();
         let closures = self.closures.clone();
         let (layer, rot) = (self.layer, self.rot);
-        let chunk = 16;
+        let chunk = FEED_CHUNK;
         let mut result = Ok(());
         for (c, part) in cache.chunks(chunk).enumerate() {
             let graphs: Vec<Result<ImageGraph>> = {
@@ -306,61 +309,65 @@ impl LayerTrainer {
             // reference point for the whole pass.
             self.reference = Some(channel_means(&images[..size], c));
         }
-        type Fed = (ImageGraph, Option<Field>, Option<Field>);
-        let base = self.images_seen;
-        let graphs: Vec<Result<Fed>> = {
-            let net_ref: &Network = net;
-            let reference = self.reference.as_deref();
-            let closures = self.closures.as_deref();
-            images
-                .par_chunks(size)
-                .enumerate()
-                .map(|(b, img)| -> Result<Fed> {
-                    match (path, closures.and_then(|c| c.partner(base + b))) {
-                        (TrainingPath::Fast, None) => {
-                            let (g, f) = fast_graph(net_ref, &rot, &P::image_f64(img), layer, None, reference)?;
-                            Ok((g, f, None))
+        // Images are turned into graphs and accumulated a chunk at a time,
+        // which bounds the memory of the graphs in flight.
+        for chunk in images[..n * size].chunks(FEED_CHUNK * size) {
+            let base = self.images_seen;
+            type Fed = (ImageGraph, Option<Field>, Option<Field>);
+            let graphs: Vec<Result<Fed>> = {
+                let net_ref: &Network = net;
+                let reference = self.reference.as_deref();
+                let closures = self.closures.as_deref();
+                chunk
+                    .par_chunks(size)
+                    .enumerate()
+                    .map(|(b, img)| -> Result<Fed> {
+                        match (path, closures.and_then(|c| c.partner(base + b))) {
+                            (TrainingPath::Fast, None) => {
+                                let (g, f) = fast_graph(net_ref, &rot, &P::image_f64(img), layer, None, reference)?;
+                                Ok((g, f, None))
+                            }
+                            (TrainingPath::Naive, None) => Ok((naive_graph(net_ref, &rot, img, layer)?, None, None)),
+                            (TrainingPath::Fast, Some((a, w))) => {
+                                // every view as a row (no lag products), for both images
+                                let (gc, fc) = fast_graph(net_ref, &rot, &P::image_f64(img), layer, None, None)?;
+                                let (ga, fa) = fast_graph(net_ref, &rot, a, layer, None, None)?;
+                                Ok((interleaved_graph(gc, ga, w)?, fc, fa))
+                            }
+                            (TrainingPath::Naive, Some((a, w))) => {
+                                let (gc, ga) = (naive_graph(net_ref, &rot, img, layer)?, naive_graph(net_ref, &rot, a, layer)?);
+                                Ok((interleaved_graph(gc, ga, w)?, None, None))
+                            }
                         }
-                        (TrainingPath::Naive, None) => Ok((naive_graph(net_ref, &rot, img, layer)?, None, None)),
-                        (TrainingPath::Fast, Some((a, w))) => {
-                            // every view as a row (no lag products), for both images
-                            let (gc, fc) = fast_graph(net_ref, &rot, &P::image_f64(img), layer, None, None)?;
-                            let (ga, fa) = fast_graph(net_ref, &rot, a, layer, None, None)?;
-                            Ok((interleaved_graph(gc, ga, w)?, fc, fa))
-                        }
-                        (TrainingPath::Naive, Some((a, w))) => {
-                            let (gc, ga) = (naive_graph(net_ref, &rot, img, layer)?, naive_graph(net_ref, &rot, a, layer)?);
-                            Ok((interleaved_graph(gc, ga, w)?, None, None))
+                    })
+                    .collect()
+            };
+            let d = net.geometry()[layer].in_dim;
+            let mixed = net.spec().mixed_precision;
+            let shared = net.spec().weight_sharing;
+            let mut batch = Vec::with_capacity(if shared { graphs.len() } else { 0 });
+            for gr in graphs {
+                let (gr, field, partner) = gr?;
+                if self.caching {
+                    if let Some(f) = field {
+                        self.building.push(f.compact(mixed));
+                        if self.closures.is_some() {
+                            self.partner_building.push(partner.map(|f| f.compact(mixed)));
                         }
                     }
-                })
-                .collect()
-        };
-        let d = net.geometry()[layer].in_dim;
-        let mixed = net.spec().mixed_precision;
-        let shared = net.spec().weight_sharing;
-        let mut batch = Vec::with_capacity(if shared { graphs.len() } else { 0 });
-        for gr in graphs {
-            let (gr, field, partner) = gr?;
-            if self.caching {
-                if let Some(f) = field {
-                    self.building.push(f.compact(mixed));
-                    if self.closures.is_some() {
-                        self.partner_building.push(partner.map(|f| f.compact(mixed)));
-                    }
+                }
+                if shared {
+                    batch.push(gr);
+                } else {
+                    self.feed_individual(net, gr, d)?;
+                    self.images_seen += 1;
                 }
             }
             if shared {
-                batch.push(gr);
-            } else {
-                self.feed_individual(net, gr, d)?;
-                self.images_seen += 1;
+                let n = batch.len();
+                self.feed_shared(net, batch)?;
+                self.images_seen += n;
             }
-        }
-        if shared {
-            let n = batch.len();
-            self.feed_shared(net, batch)?;
-            self.images_seen += n;
         }
         Ok(())
     }
@@ -369,7 +376,16 @@ impl LayerTrainer {
     /// rows get the previous image's last views as leading pair ends, then
     /// all images are accumulated at once ([`SfaNode::partial_fit_graphs`]).
     fn feed_shared(&mut self, net: &mut Network, graphs: Vec<ImageGraph>) -> Result<()> {
-        let prepared: Vec<SharedGraph> = graphs.into_iter().map(|gr| self.prepare_shared(net, gr)).collect::<Result<_>>()?;
+        let mut lattice = Vec::new();
+        let prepared: Vec<SharedGraph> =
+            graphs.into_iter().map(|gr| self.prepare_shared(gr, &mut lattice)).collect::<Result<_>>()?;
+        if !lattice.is_empty() {
+            let reference = self.reference.as_deref().expect("lag products have a reference");
+            let geom = &net.geometry()[self.layer];
+            let m = crate::periodic::lattice_moments(geom, &lattice, reference, net.spec().mixed_precision)?;
+            net.nodes_mut(self.layer)[0].merge_statistics(&m)?;
+            self.lag_images += lattice.len();
+        }
         let node = &mut net.nodes_mut(self.layer)[0];
         let mut i = 0;
         while i < prepared.len() {
@@ -394,9 +410,9 @@ impl LayerTrainer {
 
     /// One image's graph with the previous image's last views in its
     /// reserved leading rows (weight-0 samples that end one pair each);
-    /// keeps this image's last views as the next tail and merges its
-    /// lag-product statistics.
-    fn prepare_shared(&mut self, net: &mut Network, gr: ImageGraph) -> Result<SharedGraph> {
+    /// keeps this image's last views as the next tail and moves its
+    /// lag-product statistics to `lattice`.
+    fn prepare_shared(&mut self, gr: ImageGraph, lattice: &mut Vec<crate::periodic::LatticeImage>) -> Result<SharedGraph> {
         let ns = gr.first.len();
         let d = gr.width;
         let mut rows = gr.rows;
@@ -429,9 +445,8 @@ impl LayerTrainer {
             let src = own + r * d;
             tail[i * d..(i + 1) * d].copy_from_slice(&rows[src..src + d]);
         }
-        if let Some(m) = &gr.moments {
-            net.nodes_mut(self.layer)[0].merge_statistics(m)?;
-            self.lag_images += 1;
+        if let Some(m) = gr.moments {
+            lattice.push(m);
         }
         self.tail = Some(tail);
         Ok(SharedGraph { rows, start, n, width: d, from_stage: gr.from_stage, weights, edges, edge_weights: ew })

@@ -203,3 +203,56 @@ impl Accumulator {
         })
     }
 }
+
+impl Accumulator {
+    /// [`add_samples`](Self::add_samples) of several row blocks at once,
+    /// each with the same `weights` (one per row). Checked and gathered
+    /// before anything is added.
+    pub fn add_samples_batch<T: Sample>(&mut self, blocks: &[View<'_, T>], weights: &[f64]) -> Result<()> {
+        let parts: Vec<GraphPart<'_, T>> =
+            blocks.iter().map(|&x| GraphPart { x, weights: Some(weights), edges: &[], edge_weights: None }).collect();
+        self.add_graphs(&parts, None)
+    }
+
+    /// [`add_differences`](Self::add_differences) of several blocks of
+    /// derivative rows at once, each with the same `weights` (one per
+    /// row). Checked and gathered before anything is added.
+    pub fn add_differences_batch<T: Sample>(&mut self, blocks: &[View<'_, T>], weights: &[f64]) -> Result<()> {
+        let d = self.dim;
+        for x in blocks {
+            if x.ncols() != d {
+                return Err(SfaError::ShapeMismatch { what: "number of features", expected: d, got: x.ncols() });
+            }
+            check_weights(Some(weights), x.nrows(), "difference weights")?;
+        }
+        let offsets = prefix(blocks.iter().map(|x| x.nrows()));
+        let n = *offsets.last().unwrap();
+        if n == 0 {
+            return Ok(());
+        }
+        let m = parallel_moments(n, d, Kind::Pairs, self.mixed, "pairs", |s, e, _cb, db, _sum, sum_d| {
+            let mut p = part_of(&offsets, s);
+            for (k, i) in (s..e).enumerate() {
+                while i >= offsets[p + 1] {
+                    p += 1;
+                }
+                let local = i - offsets[p];
+                let out = &mut db[k * d..(k + 1) * d];
+                blocks[p].row_into(local, None, out);
+                if let Some(j) = first_non_finite(out) {
+                    return Err((local, j));
+                }
+                let w = weights[local];
+                let sw = w.sqrt();
+                for (acc, v) in sum_d.iter_mut().zip(out.iter_mut()) {
+                    *acc += w * *v;
+                    *v *= sw;
+                }
+            }
+            Ok((0, e - s))
+        })?;
+        self.absorb(&m);
+        self.pair_weight_sum += blocks.len() as f64 * weights.iter().sum::<f64>();
+        Ok(())
+    }
+}
