@@ -393,7 +393,10 @@ def test_streaming_sources_agree(world, tmp_path):
     np.save(tmp_path / "imgs.npy", sub)
     for src in (list(sub), lambda: iter(sub), str(tmp_path / "imgs.npy")):
         other = sfanav.Network(tiny_config(top_out=3)).fit(src, rot, batch_size=7, progress=False)
-        np.testing.assert_allclose(other.delta_values_, ref.delta_values_, rtol=1e-9)
+        # the batch size changes only the order of the sums (the statistics agree to 1e-12);
+        # the top node's small delta values amplify that rounding
+        np.testing.assert_allclose(other.delta_values_, ref.delta_values_, rtol=1e-6)
+        np.testing.assert_allclose(other.transform(sub[:5]), ref.transform(sub[:5]), rtol=1e-6, atol=1e-6)
     with pytest.raises(TypeError, match="one-shot iterator"):
         sfanav.Network(tiny_config()).fit((im for im in sub), rot, progress=False)
 

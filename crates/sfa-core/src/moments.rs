@@ -28,6 +28,11 @@ pub(crate) fn block_rows(dim: usize) -> usize {
     }
 }
 
+/// Most rows whose products are summed in f32 before they are added to
+/// the f64 sums (mixed precision): bounds the f32 rounding of a moment to
+/// about 256 ulp, whatever the number of rows fed in one call.
+const MIXED_BLOCK_ROWS: usize = 256;
+
 /// Fewest rows worth a parallel part of their own: about 2^25 multiply-adds
 /// of SYRK work (372 rows at d = 300, 2048 at d = 128), so that one image's
 /// patches of a 300-dim layer (1800 rows in Table 5.2 layer 2) still use
@@ -179,7 +184,7 @@ where
 {
     let parts = MAX_PARTS.min(n.div_ceil(min_rows_per_part(d))).max(1);
     let per = n.div_ceil(parts);
-    let br = block_rows(d);
+    let br = if mixed { block_rows(d).min(MIXED_BLOCK_ROWS) } else { block_rows(d) };
     let results: Vec<std::result::Result<Moments, (usize, usize)>> = (0..parts)
         .into_par_iter()
         .map(|p| {
