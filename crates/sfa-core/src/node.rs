@@ -28,6 +28,11 @@ use rayon::prelude::*;
 
 mod batch;
 
+thread_local! {
+    /// Expanded rows of one block in [`Stage::apply`], reused across calls.
+    static APPLY_SCRATCH: std::cell::RefCell<Vec<f64>> = const { std::cell::RefCell::new(Vec::new()) };
+}
+
 /// Hyper-parameters of a node.
 #[derive(Clone, Debug, PartialEq)]
 pub struct NodeConfig {
@@ -170,30 +175,42 @@ impl Stage {
         Ok(std::borrow::Cow::Owned(out))
     }
 
-    /// Sequential forward pass of `n` rows (row-major, `input_dim` wide).
+    /// Sequential forward pass of `n` rows (row-major, `input_dim` wide):
+    /// `(expand(x) - mean) P`, computed as `expand(x) P - mean P` block by
+    /// block, so the expanded rows only ever exist for one cache-sized
+    /// block (in a per-thread scratch buffer) and are not centred in a
+    /// separate pass.
     fn apply(&self, input: &[f64], n: usize) -> Vec<f64> {
+        const BLOCK: usize = 128;
         let sol = self.solution.as_ref().expect("stage solved");
         let ed = self.expanded_dim();
-        let mut e = match &self.expansion {
-            Some(ex) => {
-                let mut out = vec![0.0; n * ed];
-                for (o, x) in out.chunks_mut(ed).zip(input.chunks(self.input_dim)) {
-                    ex.expand_row(x, o);
-                }
-                out
-            }
-            None => input[..n * ed].to_vec(),
-        };
-        for row in e.chunks_mut(ed) {
-            row.iter_mut().zip(&sol.mean).for_each(|(v, m)| *v -= m);
-        }
         let m = sol.n_out;
+        let rhs = MatRef::from_row_major_slice(&sol.projection, ed, m);
+        let bias: Vec<f64> = (0..m).map(|j| (0..ed).map(|i| sol.mean[i] * sol.projection[i * m + j]).sum()).collect();
         let mut out = vec![0.0; n * m];
-        {
-            let lhs = MatRef::from_row_major_slice(&e, n, ed);
-            let rhs = MatRef::from_row_major_slice(&sol.projection, ed, m);
-            let dst = faer::MatMut::from_row_major_slice_mut(&mut out, n, m);
-            matmul(dst, Accum::Replace, lhs, rhs, 1.0, Par::Seq);
+        match &self.expansion {
+            None => {
+                let lhs = MatRef::from_row_major_slice(&input[..n * ed], n, ed);
+                let dst = faer::MatMut::from_row_major_slice_mut(&mut out, n, m);
+                matmul(dst, Accum::Replace, lhs, rhs, 1.0, Par::Seq);
+            }
+            Some(ex) => APPLY_SCRATCH.with(|scratch| {
+                let mut buf = scratch.borrow_mut();
+                buf.resize(BLOCK * ed, 0.0);
+                let d = self.input_dim;
+                for (ob, ib) in out.chunks_mut(BLOCK * m).zip(input[..n * d].chunks(BLOCK * d)) {
+                    let nb = ob.len() / m;
+                    for (e, x) in buf.chunks_mut(ed).zip(ib.chunks(d)) {
+                        ex.expand_row(x, e);
+                    }
+                    let lhs = MatRef::from_row_major_slice(&buf[..nb * ed], nb, ed);
+                    let dst = faer::MatMut::from_row_major_slice_mut(ob, nb, m);
+                    matmul(dst, Accum::Replace, lhs, rhs, 1.0, Par::Seq);
+                }
+            }),
+        }
+        for row in out.chunks_mut(m.max(1)) {
+            row.iter_mut().zip(&bias).for_each(|(v, b)| *v -= b);
         }
         out
     }
