@@ -643,8 +643,8 @@ impl LayerTrainer {
         };
         for (e, &(a, b, w)) in pairs.iter().enumerate() {
             let shift = shifts.map_or(0, |sh| sh[e] % self.rot.period);
-            if w == 0.0 || a == b {
-                continue;
+            if w == 0.0 || (a == b && shift == 0) {
+                continue; // (an image and its rolled self do make a pair)
             }
             let (ga, gb) = (&graphs[a], &graphs[b]);
             let d = ga.width;
