@@ -10,7 +10,6 @@ import signal
 import sys
 import threading
 import time
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -323,26 +322,14 @@ def test_bad_partner_and_pair_images_are_named():
 def client():
     pytest.importorskip("dask")
     distributed = pytest.importorskip("distributed")
-    here = Path(__file__).resolve().parent
-    # the worker processes import sfanav (and this module's loaders) from the same places;
-    # the variable is restored afterwards so that later tests' subprocesses do not inherit it
-    saved = os.environ.get("PYTHONPATH")
-    os.environ["PYTHONPATH"] = os.pathsep.join([SFANAV_ROOT, str(here)] + [
-        p for p in (saved or "").split(os.pathsep) if p])
-    try:
-        cluster = distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
-                                           dashboard_address=None, silence_logs=50)
+    from dasktools import local_cluster
+
+    with local_cluster(2) as cluster:
         c = distributed.Client(cluster)
         try:
             yield c
         finally:
             c.close()
-            cluster.close()
-    finally:
-        if saved is None:
-            os.environ.pop("PYTHONPATH", None)
-        else:
-            os.environ["PYTHONPATH"] = saved
 
 
 def test_dask_fit_equals_single_process(client, reference, tmp_path):
