@@ -428,6 +428,20 @@ def test_dask_bad_partition_is_named(client):
         distributed_fit(Network(TINY), np.split(bad, [9, 18, 27]), ROT, client=client)
 
 
+def test_dask_default_malloc_setting_draws_a_warning(client):
+    import warnings
+
+    import distributed
+    from dasktools import local_cluster
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # the recommended setup: no warning
+        distributed_fit(Network(TINY), IMAGES[:12], ROT, client=client)
+    with (local_cluster(1, dask_malloc_default=True) as cluster, distributed.Client(cluster) as c,
+          pytest.warns(UserWarning, match=r"MALLOC_TRIM_THRESHOLD_=65536 .*about 2x slower")):
+        distributed_fit(Network(TINY), IMAGES[:12], ROT, client=c)
+
+
 def test_dask_is_optional():
     """Importing sfanav and the distributed module does not import Dask."""
     import subprocess

@@ -6,7 +6,7 @@ The training images are split into *partitions* (a list of arrays or
 frames). For every layer and pass:
 
 1. the driver ships the network (its checked model-file bytes, with the
-   statistics of the layer in training) to the workers;
+   statistics of the stage in training only) to the workers;
 2. each partition, on a worker, streams its images through the solved
    lower layers and accumulates the statistics of the stage in training
    (``_core.LayerTrainer``, ``sfa_core::LayerTrainer::resume``);
@@ -62,6 +62,7 @@ from .distributed_feedback import (
     pair_statistics,
     pair_tasks,
 )
+from .modelfile import dumps
 
 __all__ = ["Partition", "fit", "partitions_of"]
 
@@ -370,6 +371,19 @@ def _tree(items: list[Any], merge: Any) -> Any:
 # ------------------------------------------------------------------ driver
 
 
+def _pass_bytes(net: Any, layer: int, pass_: int) -> bytes:
+    """The network as the tasks of a pass need it: its checked model-file
+    bytes with the training statistics of the stage in training only (the
+    trained layers and the solved stages travel without theirs)."""
+    state = net._state(include_statistics=True)
+    for i, nodes in enumerate(state["nodes"]):
+        for node in nodes:
+            for k, stage in enumerate(node["stages"]):
+                if (i, k) != (layer, pass_):
+                    stage["stats"] = None
+    return dumps("Network", state)
+
+
 def _first_frames(images: Any, parts: list[Partition], k: int) -> np.ndarray:
     """The run's first ``k`` frames (at most the first partition's)."""
     p = parts[0]
@@ -496,7 +510,7 @@ def fit(network: Any, images: Any, rotation: Any = None, *, client: Any = None, 
                 job = _Job(layer, pass_, rotation.step, period, bool(fast), transition_weight, batch_size,
                            np.ascontiguousarray(first[:1]))
                 t0 = time.perf_counter()
-                net_bytes = net.to_bytes(include_statistics=True)
+                net_bytes = _pass_bytes(net, layer, pass_)
                 t1 = time.perf_counter()
                 with_pairs = layer in pair_at
                 n_tasks = len(parts) + (len(tasks) if with_pairs else 0)
@@ -561,6 +575,30 @@ def _identity(x: Any) -> Any:
     return x
 
 
+MALLOC_WARNING = (
+    "the Dask workers run with MALLOC_TRIM_THRESHOLD_={value} (the Dask nanny's default), which makes sfanav's "
+    "training about 2x slower on Linux (glibc then maps and unmaps every large buffer anew); start the workers "
+    "with the dask config distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_ set to None "
+    "(docs/distributed.md)")
+
+
+def _worker_malloc_setting() -> tuple[str, str | None]:
+    """A worker's platform and MALLOC_TRIM_THRESHOLD_ (run on the workers)."""
+    import sys
+
+    return sys.platform, os.environ.get("MALLOC_TRIM_THRESHOLD_")
+
+
+def _warn_about_malloc(client: Any) -> None:
+    """Warns when Linux workers run with MALLOC_TRIM_THRESHOLD_ set: glibc
+    then keeps its mmap threshold fixed, and the core's large temporary
+    buffers cost page faults on every allocation."""
+    values = sorted({v for plat, v in client.run(_worker_malloc_setting).values()
+                     if plat.startswith("linux") and v is not None})
+    if values:
+        warnings.warn(MALLOC_WARNING.format(value=", ".join(values)), UserWarning, stacklevel=4)
+
+
 def _readable(source: Any) -> bool:
     """Whether workers read ``source`` themselves (a path or a Dataset)."""
     return isinstance(source, (str, os.PathLike)) or (isinstance(source, tuple) and len(source) == 3
@@ -583,6 +621,7 @@ class _DaskRunner:
     def __init__(self, client: Any, array: Any, parts: list[Partition], closures: list[PartitionClosures | None],
                  tasks: list[PairTask]) -> None:
         _check_client(client)
+        _warn_about_malloc(client)
         self.client = client
         self.parts = parts
         self.tasks = tasks
