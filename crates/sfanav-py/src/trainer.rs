@@ -111,6 +111,7 @@ impl PyLayerTrainer {
     /// (N, H, W[, C]) given here (indices into them), image `b` seen rolled
     /// left by `shifts[e]` columns when given; no samples and no sequence.
     #[pyo3(signature = (net, images, a, b, weights, shifts=None))]
+    #[allow(clippy::too_many_arguments)]
     fn feed_pairs(&mut self, py: Python<'_>, net: &mut PyNetwork, images: &Bound<'_, PyAny>, a: Vec<usize>,
                   b: Vec<usize>, weights: Vec<f64>, shifts: Option<Vec<usize>>) -> PyResult<()> {
         let images = self.images(images, net, "pair images")?;
