@@ -422,6 +422,28 @@ def test_killed_worker_is_retried_without_double_counting(client, reference, tmp
     client.wait_for_workers(2, timeout=60)
 
 
+def test_lost_in_memory_partition_is_recomputed(client, reference):
+    """In-memory partitions are held on the cluster for the whole fit; a
+    worker killed after the first pass takes its copies along, and the
+    later passes get them back from the task graph."""
+    pids = client.run(os.getpid)
+    killed = []
+
+    def kill_a_holder(record):
+        if killed:
+            return
+        for addr, keys in client.has_what().items():
+            if any(str(k).startswith("sfanav-input-") for k in keys) and addr in pids:
+                os.kill(pids[addr], signal.SIGKILL)
+                killed.append(addr)
+                return
+
+    net = distributed_fit(Network(TINY), np.split(IMAGES, [10, 20, 30]), ROT, client=client, on_pass=kill_a_holder)
+    assert killed
+    assert_same_fit(reference, net)
+    client.wait_for_workers(2, timeout=60)
+
+
 def test_dask_bad_partition_is_named(client):
     bad = IMAGES.copy()
     bad[30, 0, 0, 0] = np.inf

@@ -690,8 +690,9 @@ class _DaskRunner:
 
         c = self.client
         tag = f"{self.token}-l{job.layer}p{job.pass_}"
-        [net_f] = c.scatter([net_bytes], broadcast=True, hash=False)
-        [job_f] = c.scatter([job], broadcast=True, hash=False)
+        # held like the inputs (a scatter to a worker that died since the last pass would fail); the workers
+        # fetch them from each other
+        net_f, job_f = self._hold(net_bytes, f"network-{tag}"), self._hold(job, f"job-{tag}")
         futures = [
             c.submit(_partition_statistics, net_f, job_f, p, d, q, cl, key=f"sfanav-partition-{tag}-{p.index}",
                      pure=False)
