@@ -278,6 +278,15 @@ def test_closures_and_pairs_together_on_the_naive_path_and_npy_shards(tmp_path):
     assert_same_outputs(ref, distributed_fit(Network(TINY), paths, ROT, **kw))
 
 
+def test_closures_and_pairs_read_from_a_dataset(tmp_path):
+    u8 = (IMAGES * 255).astype(np.uint8)
+    ds = _dataset(tmp_path / "ds", u8, ["a"] * N)
+    kw = {"loop_closures": CLOSURES, "pairs": PAIRS + (SHIFTS,)}
+    ref = Network(TINY).fit(u8, ROT, cache=False, progress=False, **kw)
+    assert_same_outputs(ref, distributed_fit(Network(TINY), ds, ROT, n_partitions=3, pair_task_images=9, **kw),
+                        images=u8)
+
+
 def test_place_major_order_with_feedback():
     """Long-term training (thesis 6.2.2): two recordings of one route in
     place-major order, each image's partner the previous recording's image
@@ -361,6 +370,10 @@ def test_dask_dataset(client, tmp_path):
     ds = _dataset(tmp_path / "ds", u8, ["a"] * 36)
     ref = Network(TINY).fit(u8, ROT, progress=False)
     assert_same_fit(ref, Network(TINY).fit(ds, ROT, client=client), images=u8)  # one partition per worker
+    # the workers read the pair tasks' frames from the Dataset too
+    kw = {"loop_closures": CLOSURES, "pairs": PAIRS + (SHIFTS,)}
+    ref = Network(TINY).fit(u8, ROT, cache=False, progress=False, **kw)
+    assert_same_outputs(ref, Network(TINY).fit(ds, ROT, client=client, **kw), images=u8)
 
 
 def test_dask_closures_and_pairs(client, tmp_path):
