@@ -287,6 +287,14 @@ def test_spatial_pairs_fast_equals_naive_and_validate():
     sp6 = sfanav.spatial_pairs(xy, radius=0.15, k=3, shifts=48, shift_step=6, seed=2)
     assert np.all(sp6[3] % 6 == 0) and np.any(sp6[3])
     np.testing.assert_allclose(fit(pairs=sp6).delta_values_, fit(pairs=sp6, cache=False).delta_values_, rtol=1e-9)
+    # an image paired with itself rolled is a pair, in cached passes as in streamed ones (unrolled: none)
+    own = (np.array([3, 7, 7]), np.array([9, 7, 12]), np.ones(3), np.array([6, 12, 0]))
+    cached, streamed = fit(pairs=own), fit(pairs=own, cache=False)
+    assert cached._net.node_states(True)[-1][0]["stages"][-1]["stats"]["n_pairs"] == \
+        streamed._net.node_states(True)[-1][0]["stages"][-1]["stats"]["n_pairs"]
+    np.testing.assert_allclose(cached.delta_values_, streamed.delta_values_, rtol=1e-9)
+    unrolled = fit(pairs=(own[0], own[1], own[2], np.array([6, 0, 0])), cache=False)
+    assert not np.allclose(unrolled.delta_values_, streamed.delta_values_, rtol=1e-6)
     # a full-period shift is no shift
     full = fit(pairs=(pairs[0], pairs[1], pairs[2], np.full(len(pairs[0]), 48)), cache=False)
     np.testing.assert_allclose(full.delta_values_, uncached.delta_values_, rtol=1e-12)

@@ -76,6 +76,8 @@ pub struct LayerTrainer {
     /// with transition weight 1 the nodes otherwise continue their own
     /// sequences).
     by_tail: bool,
+    /// Spatial pairs added in the pass in progress.
+    pairs_fed: usize,
 }
 
 impl LayerTrainer {
@@ -119,6 +121,7 @@ impl LayerTrainer {
             partner_cache: None,
             partner_building: Vec::new(),
             by_tail: false,
+            pairs_fed: 0,
         })
     }
 
@@ -161,7 +164,8 @@ impl LayerTrainer {
     /// rotation by the closure's weight (see [`LoopClosures`]). Image
     /// indices count the images in the order they are fed. The partners'
     /// fields join the cache. Inherited by [`next_layer`](Self::next_layer);
-    /// set before the first pass.
+    /// set before the first image of a pass, and before the first pass
+    /// when the fields are cached (the cache keeps the partners' fields).
     pub fn set_loop_closures(&mut self, net: &Network, closures: Option<Arc<LoopClosures>>) -> Result<()> {
         if let Some(c) = &closures {
             let (h, _, ch) = net.input_shape();
@@ -170,8 +174,10 @@ impl LayerTrainer {
                 return Err(SfaError::ShapeMismatch { what: "values per loop-closure partner image", expected: size, got: c.image_size() });
             }
         }
-        if self.pass > 0 || self.images_seen > 0 {
-            return Err(SfaError::InvalidArgument("set loop closures before the first pass".into()));
+        if self.images_seen > 0 || self.cache.is_some() || !self.building.is_empty() {
+            return Err(SfaError::InvalidArgument(
+                "set loop closures before the first image of a pass (before the first pass with the field cache)".into(),
+            ));
         }
         self.closures = closures.filter(|c| !c.is_empty());
         Ok(())
@@ -694,9 +700,10 @@ impl LayerTrainer {
         };
         for (e, &(a, b, w)) in pairs.iter().enumerate() {
             let shift = shifts.map_or(0, |sh| sh[e] % self.rot.period);
-            if w == 0.0 || a == b {
-                continue;
+            if w == 0.0 || (a == b && shift == 0) {
+                continue; // (an image and its rolled self do make a pair)
             }
+            self.pairs_fed += 1;
             let (ga, gb) = (&graphs[a], &graphs[b]);
             let d = ga.width;
             let n = ga.n;
@@ -775,6 +782,7 @@ impl LayerTrainer {
             e => e,
         })?;
         self.pass += 1;
+        self.pairs_fed = 0;
         self.tail = None;
         self.by_tail = false;
         self.reference = None;

@@ -32,7 +32,7 @@ pub(crate) fn network_images<'py>(obj: &Bound<'py, PyAny>, net: &Network, what: 
 /// Loop closures as Python passes them: the current images' indices, the
 /// closures' weights and the aligned partner images `(M, H, W[, C])`, one
 /// per closure (converted to f64 here, after a memory check).
-fn loop_closures(net: &Network, period: usize, current: Vec<usize>, weights: Vec<f64>,
+pub(crate) fn loop_closures(net: &Network, period: usize, current: Vec<usize>, weights: Vec<f64>,
                  partners: &Bound<'_, PyAny>) -> PyResult<LoopClosures> {
     let images = network_images(partners, net, "loop-closure partner images")?;
     let [m, _, w, _] = images.shape;
@@ -56,7 +56,7 @@ fn loop_closures(net: &Network, period: usize, current: Vec<usize>, weights: Vec
 /// Spatial pairs as Python passes them: (a, b, weights, shifts or None).
 type PairsArg = (Vec<usize>, Vec<usize>, Vec<f64>, Option<Vec<usize>>);
 
-fn zip_pairs(a: Vec<usize>, b: Vec<usize>, w: Vec<f64>) -> PyResult<Vec<(usize, usize, f64)>> {
+pub(crate) fn zip_pairs(a: Vec<usize>, b: Vec<usize>, w: Vec<f64>) -> PyResult<Vec<(usize, usize, f64)>> {
     if a.len() != b.len() || a.len() != w.len() {
         return Err(PyValueError::new_err(format!(
             "pairs: a, b and weights must have the same length, got {}, {} and {}",

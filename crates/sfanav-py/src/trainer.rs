@@ -4,11 +4,12 @@
 
 use crate::arrays::Images;
 use crate::error::{guard, run};
-use crate::network::{network_images, PyNetwork};
+use crate::network::{loop_closures, network_images, zip_pairs, PyNetwork};
 use crate::statistics::PyStatistics;
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use sfa_core::{with_pixels, Accumulator, LayerTrainer, Rotation, TrainingPath};
+use std::sync::Arc;
 
 /// One pass of one layer on a copy of the network (see
 /// sfa_core::LayerTrainer): feed a partition's images, export the
@@ -84,8 +85,42 @@ impl PyLayerTrainer {
         self.inner.images_seen()
     }
 
+    /// Spatial pairs fed in this pass (weight > 0, between two different
+    /// images or an image and itself rolled).
+    #[getter]
+    fn pairs_fed(&self) -> usize {
+        self.inner.pairs_fed()
+    }
+
     fn n_passes(&self, net: &PyNetwork) -> usize {
         self.inner.n_passes(&net.inner)
+    }
+
+    /// The loop closures of this partition's images: `current` indexes the
+    /// images in the order this trainer is fed them, `partners` (M, H, W[,
+    /// C]) are the aligned earlier images, `weights` in [0, 1]. Before the
+    /// first image of the pass.
+    fn set_loop_closures(&mut self, net: &PyNetwork, current: Vec<usize>, weights: Vec<f64>,
+                         partners: &Bound<'_, PyAny>) -> PyResult<()> {
+        let lc = loop_closures(&net.inner, self.period, current, weights, partners)?;
+        let (tr, n) = (&mut self.inner, &net.inner);
+        guard(|| tr.set_loop_closures(n, Some(Arc::new(lc))))
+    }
+
+    /// Adds spatial pairs `(a[e], b[e], weights[e])` between the images
+    /// (N, H, W[, C]) given here (indices into them), image `b` seen rolled
+    /// left by `shifts[e]` columns when given; no samples and no sequence.
+    #[pyo3(signature = (net, images, a, b, weights, shifts=None))]
+    #[allow(clippy::too_many_arguments)]
+    fn feed_pairs(&mut self, py: Python<'_>, net: &mut PyNetwork, images: &Bound<'_, PyAny>, a: Vec<usize>,
+                  b: Vec<usize>, weights: Vec<f64>, shifts: Option<Vec<usize>>) -> PyResult<()> {
+        let images = self.images(images, net, "pair images")?;
+        let n = images.shape[0];
+        let pairs = zip_pairs(a, b, weights)?;
+        let data = images.data();
+        let px = data.pixels();
+        let (tr, nt) = (&mut self.inner, &mut net.inner);
+        run(py, || with_pixels!(px, s => tr.feed_pairs_shifted(nt, s, n, &pairs, shifts.as_deref())))
     }
 
     /// The first image of the whole pass (1, H, W[, C]): the reference

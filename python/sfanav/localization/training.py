@@ -35,6 +35,7 @@ def fit_localizer(
     loop_closures: Any = None,
     closure_weights: Any = None,
     network_images: np.ndarray | None = None,
+    network_fit: dict[str, Any] | None = None,
 ) -> Localizer:
     """Trains ``network`` on ``images`` (the training run, in temporal order)
     under simulated rotation and fits the readout of its slowest outputs to
@@ -65,6 +66,10 @@ def fit_localizer(
     signature) is fitted on ``images`` as the queries will look. Default:
     ``images``.
 
+    ``network_fit``: more keyword arguments of the network's
+    :meth:`~sfanav.Network.fit`, e.g. ``{"client": dask_client, "breaks":
+    [...]}`` to train it on a Dask cluster (docs/distributed.md).
+
     Examples
     --------
     >>> X, xy = load_run(train, prep, mirror=m)                        # doctest: +SKIP
@@ -85,7 +90,7 @@ def fit_localizer(
         rows = None
     t0 = time.perf_counter()
     network.fit(images if network_images is None else network_images, rotation, progress=progress,
-                loop_closures=loop_closures, closure_weights=closure_weights)
+                loop_closures=loop_closures, closure_weights=closure_weights, **(network_fit or {}))
     fit_s = time.perf_counter() - t0
     check_n_outputs(n_outputs, network.n_outputs_)
     loc = Localizer(network, n_outputs=n_outputs, readout=readout, rows=rows, rotation_pooling=rotation_pooling,

@@ -44,23 +44,13 @@ def _closure_arrays(loop_closures: Any) -> tuple[np.ndarray, np.ndarray, np.ndar
     return out[0], out[1], out[2], None if score is None else np.asarray(score, dtype=np.float64)
 
 
-def closure_partners(images: np.ndarray, loop_closures: Any,
-                     weights: Any = None) -> tuple[list[int], list[float], np.ndarray]:
-    """What the core trains on for ``loop_closures`` of the training run
-    ``images`` (N, H, W[, C]): the current images' indices, the closures'
-    weights and the aligned partner images ``np.roll(images[past], shift,
-    axis=2)`` (M, H, W[, C]) in the images' dtype.
-
-    ``weights``: None (1 per closure: the thesis), ``"score"`` (each
-    closure's match confidence ``loop_closures.score``, clipped to [0, 1])
-    or an array (M,) in [0, 1].
-
-    Raises TypeError / ValueError for closures that are not index arrays of
-    one length, indices outside the run, a closure of an image with itself,
-    two closures of one current image, or weights outside [0, 1].
-    """
+def check_closures(loop_closures: Any, n: int,
+                   weights: Any = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """``(past, current, shift, weight)`` arrays (M,) of ``loop_closures``
+    of a training run of ``n`` images, checked as in
+    :func:`closure_partners` (which see for ``weights``)."""
     past, current, shift, score = _closure_arrays(loop_closures)
-    n, m = len(images), len(current)
+    m = len(current)
     for name, idx in (("past", past), ("current", current)):
         if m and (idx.min() < 0 or idx.max() >= n):
             raise ValueError(f"loop_closures: {name} must index the {n} training images (0..{n - 1})")
@@ -84,8 +74,34 @@ def closure_partners(images: np.ndarray, loop_closures: Any,
             raise ValueError(f"closure_weights must have one value per closure ({m}), got shape {w.shape}")
         if not np.all(np.isfinite(w) & (w >= 0) & (w <= 1)):
             raise ValueError("closure_weights must be finite and in [0, 1]")
-    width = images.shape[2]
-    partners = np.empty((m,) + images.shape[1:], dtype=images.dtype)
-    for i, (p, s) in enumerate(zip(past, shift)):
-        partners[i] = np.roll(images[p], int(s) % width, axis=1)
+    return past, current, shift, w
+
+
+def aligned_partners(frames: np.ndarray, shift: Any) -> np.ndarray:
+    """``np.roll(frames[i], shift[i], axis=1)`` for every frame (M, H, W[,
+    C]): the earlier visits turned to the current images' orientation."""
+    width = frames.shape[2]
+    out = np.empty_like(frames)
+    for i, s in enumerate(np.asarray(shift, dtype=np.int64)):
+        out[i] = np.roll(frames[i], int(s) % width, axis=1)
+    return out
+
+
+def closure_partners(images: np.ndarray, loop_closures: Any,
+                     weights: Any = None) -> tuple[list[int], list[float], np.ndarray]:
+    """What the core trains on for ``loop_closures`` of the training run
+    ``images`` (N, H, W[, C]): the current images' indices, the closures'
+    weights and the aligned partner images ``np.roll(images[past], shift,
+    axis=2)`` (M, H, W[, C]) in the images' dtype.
+
+    ``weights``: None (1 per closure: the thesis), ``"score"`` (each
+    closure's match confidence ``loop_closures.score``, clipped to [0, 1])
+    or an array (M,) in [0, 1].
+
+    Raises TypeError / ValueError for closures that are not index arrays of
+    one length, indices outside the run, a closure of an image with itself,
+    two closures of one current image, or weights outside [0, 1].
+    """
+    past, current, shift, w = check_closures(loop_closures, len(images), weights)
+    partners = aligned_partners(np.asarray(images[past]), shift)
     return current.tolist(), w.tolist(), partners

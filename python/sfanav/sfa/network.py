@@ -566,8 +566,9 @@ class Network:
             or a Dask array chunked along the frames) are streamed by the
             workers, their statistics merged in a tree, each layer solved
             here (:func:`sfanav.sfa.distributed.fit`; the same result up to
-            rounding). No field cache, spatial pairs or loop closures yet
-            (ValueError). See docs/distributed.md.
+            rounding, with loop closures and spatial pairs too, indexing
+            the frames of the whole run). No field cache (``cache`` is
+            ignored). See docs/distributed.md.
         breaks : frame indices or ``"partitions"``, optional
             With ``client``: frames that start a new recording (no
             derivative pair with the frame before).
@@ -582,18 +583,14 @@ class Network:
         (``sfa_core::training::fit``) with the GIL released.
         """
         if client is not None or breaks is not None:
-            unsupported = [name for name, given in (("spatial pairs", pairs is not None),
-                                                    ("loop closures", loop_closures is not None))
-                           if given]
-            if unsupported:
-                raise ValueError(f"distributed training (client=...) does not support {' or '.join(unsupported)} "
-                                 "yet; train in one process (client=None) for them")
             if client is None:
                 raise ValueError("breaks needs client (or call sfanav.sfa.distributed.fit with client=None)")
             from .distributed import fit as distributed_fit
 
             return distributed_fit(self, images, rotation, client=client, breaks=breaks, fast=fast,
-                                   transition_weight=transition_weight, batch_size=batch_size, progress=progress)
+                                   transition_weight=transition_weight, batch_size=batch_size, progress=progress,
+                                   loop_closures=loop_closures, closure_weights=closure_weights, pairs=pairs,
+                                   pair_layers=pair_layers)
         rotation = rotation or Rotation()
         transition_weight = _check_transition_weight(transition_weight)
         shifted = False

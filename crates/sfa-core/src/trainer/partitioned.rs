@@ -15,8 +15,12 @@ impl LayerTrainer {
     /// pass. The partition boundaries leave the result unchanged when each
     /// partition but the first is [`prime`](Self::prime)d with the image
     /// before it and every trainer gets the pass's
-    /// [`set_reference_image`](Self::set_reference_image). No field cache,
-    /// loop closures or spatial pairs.
+    /// [`set_reference_image`](Self::set_reference_image). No field cache.
+    /// Loop closures: each partition's trainer gets the closures of its own
+    /// images ([`set_loop_closures`](Self::set_loop_closures), indices
+    /// counted within the partition). Spatial pairs may go to trainers of
+    /// their own that are fed pairs only
+    /// ([`feed_pairs_shifted`](Self::feed_pairs_shifted)).
     pub fn resume(net: &Network, layer: usize, pass: usize, rot: Rotation, path: TrainingPath) -> Result<Self> {
         let mut tr = LayerTrainer::new(net, layer, rot, path)?;
         let n_passes = tr.n_passes(net);
@@ -60,6 +64,12 @@ impl LayerTrainer {
         self.images_seen
     }
 
+    /// Spatial pairs added in the pass in progress (those with weight > 0
+    /// between two different images, or an image and itself rolled).
+    pub fn pairs_fed(&self) -> usize {
+        self.pairs_fed
+    }
+
     /// Sets the reference point of the first layer's lag-product statistics
     /// for this pass from `image` (one image, `height x period x
     /// channels`), which must be the first image of the whole pass; every
@@ -87,7 +97,9 @@ impl LayerTrainer {
     /// the next one fed, without adding its statistics: the derivative
     /// pairs between it and the next image are then counted by this
     /// trainer. For a partition whose first image continues the previous
-    /// partition's last (that partition counts everything before).
+    /// partition's last (that partition counts everything before). With
+    /// loop closures the tail is the same whether or not that image has a
+    /// closure (an interleaved sequence ends at the image's own last view).
     pub fn prime<P: Pixel>(&mut self, net: &Network, image: &[P]) -> Result<()> {
         let (h, _, c) = net.input_shape();
         let size = h * self.rot.period * c;
@@ -95,10 +107,8 @@ impl LayerTrainer {
             SfaError::InvalidArgument(m) => SfaError::InvalidArgument(format!("the image before this partition: {m}")),
             e => e,
         })?;
-        if self.closures.is_some() || self.cache.is_some() || self.caching {
-            return Err(SfaError::InvalidArgument(
-                "prime works without loop closures and without the field cache".into(),
-            ));
+        if self.cache.is_some() || self.caching {
+            return Err(SfaError::InvalidArgument("prime works without the field cache".into()));
         }
         let (layer, rot) = (self.layer, self.rot);
         let gr = match self.path {
@@ -123,12 +133,12 @@ impl LayerTrainer {
         self.by_tail = true;
     }
 
-    /// The statistics this trainer's images added to the stage in training
-    /// of each node of the layer (one per node; the statistics that the
-    /// network held before are included, so feed a network fresh from the
-    /// end of the previous pass).
+    /// The statistics this trainer's images (and spatial pairs) added to
+    /// the stage in training of each node of the layer (one per node; the
+    /// statistics that the network held before are included, so feed a
+    /// network fresh from the end of the previous pass).
     pub fn statistics(&self, net: &Network) -> Result<Vec<Accumulator>> {
-        if self.images_seen == 0 {
+        if self.images_seen == 0 && self.pairs_fed == 0 {
             return Err(SfaError::TooFewSamples { what: "training images in this partition", needed: 1, got: 0 });
         }
         net.nodes(self.layer)

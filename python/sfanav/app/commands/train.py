@@ -105,6 +105,13 @@ def _add_train(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                         "as localization unwarps them. Default 0 (none); docs/experiments.md 5.2.3")
     p.add_argument("--jitter-seed", type=arg.nonneg_int, default=0, metavar="N",
                    help="seed of the centre jitter's offsets (default 0)")
+    p.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                   help="train the network on the Dask cluster whose scheduler is at ADDRESS (e.g. "
+                        "tcp://10.0.0.5:8786; needs pip install \"sfanav[dask]\" here and on the workers): "
+                        "the run's preprocessed frames are cut into one partition per worker, a change of the "
+                        "dataset's run column starts a new recording, and everything else (reading, readout) "
+                        "runs here. The result equals training without it up to rounding "
+                        "(docs/distributed.md)")
     p.add_argument("--overwrite", action="store_true", help="replace an existing model file")
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
     add_train_arguments(p)
@@ -126,7 +133,54 @@ def _network_from_args(args: argparse.Namespace) -> "Any":
     return Network(config)
 
 
+SCHEDULER_TIMEOUT = 5.0
+"""Seconds to wait for the Dask scheduler of ``--scheduler``."""
+
+
+def _connect(address: str) -> Any:
+    """A ``dask.distributed.Client`` of the scheduler at ``address``; a
+    UsageError when Dask is missing or the scheduler does not answer within
+    SCHEDULER_TIMEOUT seconds."""
+    try:
+        from distributed import Client
+        from distributed.comm.addressing import parse_address
+        from distributed.comm.registry import get_backend
+    except ImportError:
+        raise UsageError('--scheduler needs Dask: pip install "sfanav[dask]"') from None
+    try:
+        get_backend(parse_address(address)[0])
+    except (ValueError, TypeError) as exc:
+        raise UsageError(f"--scheduler {address} is not a Dask scheduler address: {exc}") from None
+    try:
+        client = Client(address, timeout=SCHEDULER_TIMEOUT, set_as_default=False)
+    except (OSError, TimeoutError, ValueError, TypeError) as exc:
+        msg = " ".join(str(exc).split()) or type(exc).__name__
+        raise UsageError(f"cannot reach the Dask scheduler at {address}: {msg}") from None
+    n = len(client.scheduler_info().get("workers", {}))
+    if n == 0:
+        client.close()
+        raise UsageError(f"the Dask scheduler at {address} has no workers")
+    log(f"training the network on the Dask scheduler at {address} ({n} worker(s))")
+    return client
+
+
+def _run_breaks(runs: Any) -> list[int] | None:
+    """Frames where the run column changes (None when it never does)."""
+    b = [i for i in range(1, len(runs)) if runs[i] != runs[i - 1]]
+    return b or None
+
+
 def _run_train(args: argparse.Namespace) -> int:
+    import contextlib
+
+    if args.scheduler is not None and args.landmarks is not None:
+        raise UsageError("--scheduler trains the panorama network; landmark models (--landmarks) train in this "
+                         "process")
+    with contextlib.ExitStack() as stack:
+        return _train(args, stack)
+
+
+def _train(args: argparse.Namespace, stack: Any) -> int:
     import time
 
     import numpy as np
@@ -153,6 +207,10 @@ def _run_train(args: argparse.Namespace) -> int:
         run = "train"
     train = select_run(ds, run, args.camera)
     net = _network_from_args(args)
+    client = None
+    if args.scheduler is not None:
+        client = _connect(args.scheduler)
+        stack.callback(client.close)
     check_n_outputs(args.n_outputs, net.n_outputs_, name="--n-outputs")
     if args.signature == "fourier" and args.readout == "quadratic":
         raise UsageError("--signature fourier needs the auto readout; the quadratic readout reads slow features only")
@@ -203,7 +261,15 @@ def _run_train(args: argparse.Namespace) -> int:
         log(f"loop closures ({args.loop_closures}): {len(closures)} images trained with their earlier visit "
              "interleaved" + (", weighted by match confidence" if args.closure_weights == "score" else ""))
     weights = "score" if closures is not None and args.closure_weights == "score" else None
+    network_fit = {}
+    if client is not None:
+        breaks = _run_breaks(train.runs)
+        network_fit = {"client": client, "breaks": breaks}
+        if breaks:
+            log(f"{len(breaks) + 1} runs: each is its own recording for the network (no derivative pair across "
+                "a run change)")
     fit_kw = dict(loop_closures=closures, closure_weights=weights, network_images=network_images,
+                  network_fit=network_fit,
                   rotation=Rotation(step=args.step, window=args.window), n_outputs=recipe.n_outputs,
                   readout=recipe.readout, rows=rows, prep=prep, progress=not args.no_progress,
                   rotation_pooling=recipe.rotation_pooling, signature=recipe.signature,
