@@ -165,7 +165,7 @@ def _cache_name(sc: Scene, what: str, seed: int, *parts: Any) -> str:
 def network_config(quick: bool) -> dict[str, Any]:
     """The network: thesis Table 5.2 (600 x 60 RGB) in mixed precision, or a
     two-layer network for 120 x 16 gray panoramas (quick)."""
-    from ..sfa.network import preset_config
+    from ..sfa.config import preset_config
 
     if quick:
         return {

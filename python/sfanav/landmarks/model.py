@@ -26,7 +26,8 @@ from .._checks import NotFittedError, as_matrix, check_int, check_n_outputs, che
 from ..localization.error_metrics import localization_metrics
 from ..localization.readouts import describe_spec, make_readout, readout_from_state, readout_state
 from ..sfa.modelfile import read_model, register_loader, save_model
-from ..sfa.network import Network, Rotation, preset_config
+from ..sfa.config import preset_config
+from ..sfa.network import Network, Rotation
 from .views import MarkerViews, ViewExtractor
 
 NETWORK_PRESET = "landmark-120"

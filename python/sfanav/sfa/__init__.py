@@ -25,13 +25,8 @@ from .diagnostics import (
     plot_eta,
 )
 from .modelfile import FORMAT, VERSION, load, read_model, register_loader, save_model
-from .network import (
-    DEFAULT_CACHE_LIMIT,
-    PRESETS,
-    Network,
-    Rotation,
-    resolve_config,
-)
+from .config import PRESETS, resolve_config
+from .network import DEFAULT_CACHE_LIMIT, Network, Rotation
 from .pairs import spatial_pairs
 from .node import SFA, NotFittedError, Statistics, beta_values, expand, expanded_dim
 

@@ -65,7 +65,7 @@ def train_landmarks(args: argparse.Namespace, out: "Path") -> int:
     from ...data.sources import select_run
     from ...landmarks.model import LandmarkLocalizer, N_OUTPUTS, NETWORK_PRESET
     from ...landmarks.views import ViewExtractor
-    from ...sfa.network import read_config_file
+    from ...sfa.config import read_config_file
 
     t0 = time.perf_counter()
     for dest, unset, flag in WHOLE_IMAGE_OPTIONS:
@@ -97,7 +97,7 @@ def train_landmarks(args: argparse.Namespace, out: "Path") -> int:
     else:
         network = args.preset or NETWORK_PRESET
     if args.precision:
-        from ...sfa.network import preset_config
+        from ...sfa.config import preset_config
 
         network = dict(preset_config(network) if isinstance(network, str) else network)
         network["network"] = {**network.get("network", {}), "precision": args.precision}

@@ -120,7 +120,8 @@ def _add_train(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
 
 
 def _network_from_args(args: argparse.Namespace) -> "Any":
-    from ...sfa.network import Network, read_config_file
+    from ...sfa.config import read_config_file
+    from ...sfa.network import Network
 
     if args.preset is not None or args.config is None:
         over = {"precision": args.precision} if args.precision else {}
