@@ -483,41 +483,7 @@ impl Accumulator {
         edges: &[[usize; 2]],
         edge_weights: Option<&[f64]>,
     ) -> Result<()> {
-        self.check_width(&x)?;
-        check_weights(sample_weights, x.nrows(), "sample weights")?;
-        Self::check_edges(&x, edges, edge_weights)?;
-        if x.nrows() == 0 {
-            return Ok(());
-        }
-        let had_shift = self.shift.is_some();
-        self.ensure_shift(&x, "samples")?;
-        let no_samples = sample_weights.is_some_and(|w| w.iter().all(|&v| v == 0.0));
-        let gathered = if no_samples {
-            // Pair ends only: no sample products (rows are still checked).
-            x.check_finite("samples").map(|_| Moments::empty(self.dim))
-        } else {
-            self.sample_moments(&x, sample_weights)
-        }
-        .and_then(|ms| {
-            let mp = if edges.is_empty() { None } else { Some(self.indexed_pair_moments(&x, edges, edge_weights)?) };
-            Ok((ms, mp))
-        });
-        match gathered {
-            Ok((ms, mp)) => {
-                self.absorb_samples(&ms, x.nrows(), sample_weights);
-                if let Some(mp) = mp {
-                    self.absorb_pairs(&mp, edges.len(), edge_weights);
-                }
-                Ok(())
-            }
-            Err(e) => {
-                if !had_shift {
-                    self.shift = None;
-                    self.first = None;
-                }
-                Err(e)
-            }
-        }
+        self.add_graphs(&[GraphPart { x, weights: sample_weights, edges, edge_weights }], None)
     }
 
     /// Adds everything `other` accumulated (exact up to rounding). No

@@ -228,9 +228,12 @@ fn a_batch_of_graphs_equals_the_graphs_one_by_one() {
     let n: usize = sizes.iter().sum();
     let x = correlated(n, d, 31);
     let graphs = random_graphs(&x, d, &sizes, 5);
+    // reference: the samples and the indexed pairs of each graph, added separately
     let mut one = Accumulator::new(d).unwrap();
     for (s, m, w, e, ew) in &graphs {
-        one.add_graph(View::from_slice(&x[s * d..(s + m) * d], *m, d).unwrap(), Some(w), e, Some(ew)).unwrap();
+        let v = View::from_slice(&x[s * d..(s + m) * d], *m, d).unwrap();
+        one.add_samples(v, Some(w)).unwrap();
+        one.add_pairs_indexed(v, e, Some(ew)).unwrap();
     }
     sfa_core::stats::set_block_rows(29); // cross block and part boundaries inside and between graphs
     let parts: Vec<GraphPart<'_, f64>> = graphs
@@ -267,7 +270,9 @@ fn a_mapped_batch_equals_the_mapped_rows() {
     let graphs = random_graphs(&x, d, &sizes, 6);
     let mut plain = Accumulator::new(e).unwrap();
     for (s, m, w, ed, ew) in &graphs {
-        plain.add_graph(View::from_slice(&xe[s * e..(s + m) * e], *m, e).unwrap(), Some(w), ed, Some(ew)).unwrap();
+        let v = View::from_slice(&xe[s * e..(s + m) * e], *m, e).unwrap();
+        plain.add_samples(v, Some(w)).unwrap();
+        plain.add_pairs_indexed(v, ed, Some(ew)).unwrap();
     }
     let parts: Vec<GraphPart<'_, f64>> = graphs
         .iter()
