@@ -131,12 +131,12 @@ def test_cache_names_follow_the_scene():
 
     a, b = EN.scene("open", 0, quick=True), EN.scene("open", 0, quick=True)
     cfg = EN.network_config(True)
-    assert EN._cache_name(a, a.name, 0, cfg) == EN._cache_name(b, b.name, 0, cfg)
+    assert EN.cache_name(a, a.name, 0, cfg) == EN.cache_name(b, b.name, 0, cfg)
     patchy = EN.scene("open", 0, quick=True, lawn="patchy")
     assert a.world.ground != patchy.world.ground
-    assert EN._cache_name(a, a.name, 0, cfg) != EN._cache_name(patchy, patchy.name, 0, cfg)
-    assert EN._cache_name(a, a.name, 0, cfg) != EN._cache_name(a, a.name, 0, {**cfg, "layers": []})
-    assert EN._cache_name(a, a.name, 0, cfg).startswith("quick-open-seed0-")
+    assert EN.cache_name(a, a.name, 0, cfg) != EN.cache_name(patchy, patchy.name, 0, cfg)
+    assert EN.cache_name(a, a.name, 0, cfg) != EN.cache_name(a, a.name, 0, {**cfg, "layers": []})
+    assert EN.cache_name(a, a.name, 0, cfg).startswith("quick-open-seed0-")
 
 
 def test_fresh_noise_gives_every_arm_the_same_odometry_noise():
