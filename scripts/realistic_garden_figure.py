@@ -17,7 +17,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from sfanav import sim  # noqa: E402
-from sfanav.sim.world import BLOCK_HEIGHT  # noqa: E402
+from sfanav.sim.primitives import BLOCK_HEIGHT  # noqa: E402
 
 
 def main() -> None:

@@ -37,7 +37,8 @@ from .robot import (
 from .terrain import Attitude, HeightField, UnevenGround
 from .textures import Texture
 from .trajectories import Trajectory, VelocityRegions
-from .world import DynamicCylinder, MarkerOcclusion, Primitive, World, WorldObject
+from .primitives import Primitive, WorldObject
+from .world import DynamicCylinder, MarkerOcclusion, World
 
 __all__ = [
     "World",

@@ -23,7 +23,8 @@ from typing import Any, Sequence
 import numpy as np
 
 from .textures import fractal_noise
-from .world import GroundSpec, Primitive
+from .primitives import Primitive
+from .world import GroundSpec
 
 
 @dataclass

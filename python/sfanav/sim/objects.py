@@ -16,12 +16,15 @@ Units: metres, radians (yaw counter-clockwise from +x); colours RGB in [0, 1].
 from __future__ import annotations
 
 from dataclasses import asdict
-from typing import Any, Sequence
+from typing import TYPE_CHECKING, Any, Sequence
 
 import numpy as np
 
+from .primitives import BLOCK_HEIGHT, INNER_TYPES, PATCH_KINDS, Primitive, WorldObject
 from .textures import Texture
-from .world import BLOCK_HEIGHT, INNER_TYPES, PATCH_KINDS, Primitive, World, WorldObject
+
+if TYPE_CHECKING:
+    from .world import World
 
 
 class ObjectBuilder:

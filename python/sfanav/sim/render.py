@@ -41,7 +41,8 @@ from .conditions import DECIDUOUS_KINDS, Lighting, Season
 from .ground import lawn_map, shadow_map
 from .terrain import MAX_TILT_DEG, Attitude
 from .textures import Pyramid, fractal_noise, make_texture, photo
-from .world import Primitive, World
+from .primitives import Primitive
+from .world import World
 
 _LUMA = np.array([0.299, 0.587, 0.114], np.float32)
 

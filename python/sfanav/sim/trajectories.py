@@ -526,7 +526,7 @@ def detour(traj: Trajectory, world: Any, *, margin: float = 0.45, speed: float =
     recomputed from ``speed`` (m/s) and ``turn_rate`` (rad/s); extra
     columns are dropped. A trajectory that touches no obstacle comes back
     unchanged."""
-    from .world import BLOCK_HEIGHT
+    from .primitives import BLOCK_HEIGHT
 
     P = traj.poses
     blocked = np.asarray(world.collides(P[:, 0], P[:, 1], margin), bool)
