@@ -20,7 +20,7 @@
 use crate::error::{Result, SfaError};
 use crate::expansion::{expanded_dim, Expansion};
 use crate::solve::{self, DEFAULT_TOL};
-use crate::stats::{Accumulator, AccumulatorState};
+use crate::stats::{Accumulator, AccumulatorState, GraphPart};
 use crate::view::{Sample, View};
 use faer::linalg::matmul::matmul;
 use faer::{Accum, MatRef, Par};
@@ -491,8 +491,9 @@ impl SfaNode {
     /// usable as a pair end only), and every edge `[a, b]` is a derivative
     /// pair `x[b] - x[a]` with weight `edge_weights[e]` (default 1). The
     /// sequence API ([`partial_fit`](Self::partial_fit)) is the special case
-    /// of a path graph. All rows of one call are expanded at once: keep calls
-    /// moderate (e.g. one image's patches).
+    /// of a path graph. The stage's expansion is applied block by block;
+    /// [`partial_fit_graphs`](Self::partial_fit_graphs) takes many graphs at
+    /// once.
     pub fn partial_fit_graph<T: Sample>(
         &mut self,
         x: View<'_, T>,
@@ -500,22 +501,8 @@ impl SfaNode {
         edges: &[[usize; 2]],
         edge_weights: Option<&[f64]>,
     ) -> Result<()> {
-        let s = self.begin_training(&x)?;
-        let n = x.nrows();
-        if n == 0 {
-            return Ok(());
-        }
-        x.check_finite("input")?;
-        self.stages[s].solution = None;
-        // `add_graph` checks and gathers everything before adding, so a
-        // failure leaves the statistics as they were.
-        if s == 0 && self.stages[0].expansion.is_none() {
-            // Zero-copy: the first stage reads the caller's rows.
-            let acc = self.stages[0].acc.as_mut().expect("acc");
-            return acc.add_graph(x, sample_weights, edges, edge_weights);
-        }
-        let input = self.forward_block(x, 0, s)?;
-        self.fit_stage_input(s, &input, n, sample_weights, edges, edge_weights)
+        // checked and gathered before anything is added: a failure leaves the statistics as they were
+        self.partial_fit_graphs(0, &[GraphPart { x, weights: sample_weights, edges, edge_weights }])
     }
 
     /// [`partial_fit_graph`](Self::partial_fit_graph) for rows that already
@@ -530,44 +517,13 @@ impl SfaNode {
         edges: &[[usize; 2]],
         edge_weights: Option<&[f64]>,
     ) -> Result<()> {
-        if self.n_features.is_none() {
-            return Err(SfaError::NotFitted("the node has not seen raw input yet".into()));
-        }
-        let s = self.training_stage;
-        if from == 0 || from > s {
+        if from == 0 {
             return Err(SfaError::InvalidArgument(format!(
-                "rows after stage {from} cannot train stage {s} (need 1 <= from <= stage in training)"
+                "rows after stage 0 cannot train stage {} (need 1 <= from <= stage in training)",
+                self.training_stage
             )));
         }
-        let width = self.stage_input_width(from)?;
-        if y.ncols() != width {
-            return Err(SfaError::ShapeMismatch { what: "width of the stage input", expected: width, got: y.ncols() });
-        }
-        let n = y.nrows();
-        if n == 0 {
-            return Ok(());
-        }
-        y.check_finite("stage input")?;
-        self.stages[s].solution = None;
-        let input = self.forward_block(y, from, s)?;
-        self.fit_stage_input(s, &input, n, sample_weights, edges, edge_weights)
-    }
-
-    /// Expands stage `s`'s input rows and adds them as a weighted graph.
-    fn fit_stage_input(
-        &mut self,
-        s: usize,
-        input: &[f64],
-        n: usize,
-        sample_weights: Option<&[f64]>,
-        edges: &[[usize; 2]],
-        edge_weights: Option<&[f64]>,
-    ) -> Result<()> {
-        let stage = &mut self.stages[s];
-        let ed = stage.expanded_dim();
-        let data = stage.expand_rows(input, n)?;
-        let v = View::from_slice(&data, n, ed)?;
-        stage.acc.as_mut().expect("acc").add_graph(v, sample_weights, edges, edge_weights)
+        self.partial_fit_graphs(from, &[GraphPart { x: y, weights: sample_weights, edges, edge_weights }])
     }
 
     /// Width of stage `from`'s input: the raw width for 0, else the outputs

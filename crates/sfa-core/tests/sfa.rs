@@ -184,19 +184,20 @@ fn a_batch_of_graphs_trains_a_node_as_the_graphs_one_by_one() {
     let n: usize = sizes.iter().sum();
     let x = common::correlated(n, d, 41);
     let cfg = NodeConfig { n_components: 3, degree: 2, reduce_to: Some(4), tol: 1e-10, mixed_precision: false };
-    // per graph: consecutive rows as edges, every third row weight 2
+    // per graph: a path over its rows (consecutive rows as edges, unit weights), so that the
+    // sequence API (Accumulator::update, an independent path) is the reference
     let graphs: Vec<(usize, usize, Vec<f64>, Vec<[usize; 2]>)> = sizes
         .iter()
         .scan(0, |s, &m| {
-            let g = (*s, m, (0..m).map(|i| if i % 3 == 0 { 2.0 } else { 1.0 }).collect(), (1..m).map(|i| [i - 1, i]).collect());
+            let g = (*s, m, vec![1.0; m], (1..m).map(|i| [i - 1, i]).collect());
             *s += m;
             Some(g)
         })
         .collect();
     let (mut one, mut batch) = (SfaNode::new(cfg.clone()).unwrap(), SfaNode::new(cfg).unwrap());
     for _stage in 0..2 {
-        for (s, m, w, e) in &graphs {
-            one.partial_fit_graph(View::from_slice(&x[s * d..(s + m) * d], *m, d).unwrap(), Some(w), e, None).unwrap();
+        for (s, m, _, _) in &graphs {
+            one.partial_fit(View::from_slice(&x[s * d..(s + m) * d], *m, d).unwrap(), true).unwrap();
         }
         let ps: Vec<GraphPart<'_, f64>> = graphs
             .iter()
