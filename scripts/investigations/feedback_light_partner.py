@@ -12,7 +12,6 @@ import time
 from pathlib import Path
 
 import numpy as np
-
 from sfanav.data import Dataset, Preprocessing, load_run
 from sfanav.localization.error_metrics import localization_metrics
 from sfanav.localization.recipe import default_network, recipe_for
