@@ -34,6 +34,18 @@ out = 10
 """
 
 
+def tiny_dataset(root):
+    """A 60x8 dataset of the demo garden (train and test runs) under
+    ``root/data`` and the tiny config as ``root/tiny.toml``: (dataset, config path)."""
+    from sfanav import sim
+
+    ds = sim.simulate("demo", root / "data", seed=3, max_frames=40, camera=sim.PanoramicCamera(60, 8),
+                      progress=False)
+    cfg = root / "tiny.toml"
+    cfg.write_text(TINY_TOML)
+    return ds, cfg
+
+
 def run(capsys, *args):
     """``sfanav ARGS`` in this process: (exit status, stdout, stderr)."""
     try:

@@ -6,22 +6,18 @@ import json
 
 import numpy as np
 import pytest
-
 import sfanav
+from clitools import TINY_TOML, assert_one_line_error, run, tiny_dataset
 from sfanav import sim
 from sfanav.app.cli import main
 from sfanav.data import write_image
-from clitools import TINY_TOML, assert_one_line_error, run
 
 
 @pytest.fixture(scope="module")
 def tiny(tmp_path_factory):
     """A 60x8 dataset of the demo garden (train and test runs), a tiny config and a trained model."""
     root = tmp_path_factory.mktemp("cli")
-    ds = sim.simulate("demo", root / "data", seed=3, max_frames=40, camera=sim.PanoramicCamera(60, 8),
-                      progress=False)
-    cfg = root / "tiny.toml"
-    cfg.write_text(TINY_TOML)
+    ds, cfg = tiny_dataset(root)
     model = root / "tiny.sfa"
     code = main(["train", "--dataset", str(root / "data"), "--config", str(cfg), "--out", str(model),
                  "--no-progress"])

@@ -8,18 +8,14 @@ import time
 import numpy as np
 import pytest
 import sfanav
-from clitools import TINY_TOML, assert_one_line_error, run
-from sfanav import sim
+from clitools import assert_one_line_error, run, tiny_dataset
 
 
 @pytest.fixture(scope="module")
 def tiny(tmp_path_factory):
     """A 60x8 dataset of the demo garden (train and test runs) and the tiny config."""
     root = tmp_path_factory.mktemp("scheduler")
-    ds = sim.simulate("demo", root / "data", seed=3, max_frames=40, camera=sim.PanoramicCamera(60, 8),
-                      progress=False)
-    cfg = root / "tiny.toml"
-    cfg.write_text(TINY_TOML)
+    ds, cfg = tiny_dataset(root)
     return {"root": root, "ds": ds, "config": cfg}
 
 
