@@ -91,13 +91,21 @@ struct Plan<'a> {
     batch: usize,
 }
 
+impl Plan<'_> {
+    /// Partition boundaries of `n` images: 0, the cuts, `n`.
+    fn bounds(&self, n: usize) -> Vec<usize> {
+        let mut b = vec![0];
+        b.extend_from_slice(self.cuts);
+        b.push(n);
+        b
+    }
+}
+
 /// Every layer and pass: each partition on its own copy of the network,
 /// statistics merged in partition order on the driver.
 fn fit_partitioned(net: &mut Network, imgs: &[f64], n: usize, p: &Plan<'_>) -> Result<()> {
     let size = imgs.len() / n;
-    let mut bounds = vec![0];
-    bounds.extend_from_slice(p.cuts);
-    bounds.push(n);
+    let bounds = p.bounds(n);
     while net.n_trained() < net.n_layers() {
         let layer = net.n_trained();
         let n_passes = net.nodes(layer)[0].n_stages();
@@ -256,9 +264,7 @@ fn fit_partitioned_feedback(
     pairs: &[(usize, usize, f64)],
 ) -> Result<()> {
     let size = imgs.len() / n;
-    let mut bounds = vec![0];
-    bounds.extend_from_slice(p.cuts);
-    bounds.push(n);
+    let bounds = p.bounds(n);
     while net.n_trained() < net.n_layers() {
         let layer = net.n_trained();
         for pass in 0..net.nodes(layer)[0].n_stages() {
