@@ -113,38 +113,38 @@ def test_722_rows(results):
 
 
 def test_image_trials_from_the_environment(monkeypatch):
-    from sfanav.experiments import navigation as EN
+    from sfanav.experiments import navigation_scenes as NS
 
-    monkeypatch.delenv(EN.IMAGE_TRIALS_ENV, raising=False)
-    assert EN.image_trials(50) == 50
-    monkeypatch.setenv(EN.IMAGE_TRIALS_ENV, "12")
-    assert EN.image_trials(50) == 12
-    assert EN.image_trials(8) == 8  # never more than the experiment's own count
+    monkeypatch.delenv(NS.IMAGE_TRIALS_ENV, raising=False)
+    assert NS.image_trials(50) == 50
+    monkeypatch.setenv(NS.IMAGE_TRIALS_ENV, "12")
+    assert NS.image_trials(50) == 12
+    assert NS.image_trials(8) == 8  # never more than the experiment's own count
     for bad in ("0", "-3", "many"):
-        monkeypatch.setenv(EN.IMAGE_TRIALS_ENV, bad)
-        with pytest.raises(ValueError, match=EN.IMAGE_TRIALS_ENV):
-            EN.image_trials(50)
+        monkeypatch.setenv(NS.IMAGE_TRIALS_ENV, bad)
+        with pytest.raises(ValueError, match=NS.IMAGE_TRIALS_ENV):
+            NS.image_trials(50)
 
 
 def test_cache_names_follow_the_scene():
-    from sfanav.experiments import navigation as EN
+    from sfanav.experiments import navigation_scenes as NS
 
-    a, b = EN.scene("open", 0, quick=True), EN.scene("open", 0, quick=True)
-    cfg = EN.network_config(True)
-    assert EN.cache_name(a, a.name, 0, cfg) == EN.cache_name(b, b.name, 0, cfg)
-    patchy = EN.scene("open", 0, quick=True, lawn="patchy")
+    a, b = NS.scene("open", 0, quick=True), NS.scene("open", 0, quick=True)
+    cfg = NS.network_config(True)
+    assert NS.cache_name(a, a.name, 0, cfg) == NS.cache_name(b, b.name, 0, cfg)
+    patchy = NS.scene("open", 0, quick=True, lawn="patchy")
     assert a.world.ground != patchy.world.ground
-    assert EN.cache_name(a, a.name, 0, cfg) != EN.cache_name(patchy, patchy.name, 0, cfg)
-    assert EN.cache_name(a, a.name, 0, cfg) != EN.cache_name(a, a.name, 0, {**cfg, "layers": []})
-    assert EN.cache_name(a, a.name, 0, cfg).startswith("quick-open-seed0-")
+    assert NS.cache_name(a, a.name, 0, cfg) != NS.cache_name(patchy, patchy.name, 0, cfg)
+    assert NS.cache_name(a, a.name, 0, cfg) != NS.cache_name(a, a.name, 0, {**cfg, "layers": []})
+    assert NS.cache_name(a, a.name, 0, cfg).startswith("quick-open-seed0-")
 
 
 def test_fresh_noise_gives_every_arm_the_same_odometry_noise():
     """Scene.fresh_noise restarts the simulator's odometry noise: the same
     moves after it give the same odometry, whatever ran before."""
-    from sfanav.experiments import navigation as navexp
+    from sfanav.experiments import navigation_scenes as NS
 
-    sc = navexp.scene("open", quick=True)
+    sc = NS.scene("open", quick=True)
 
     def drive():
         sim = sc.fresh_noise()

@@ -31,6 +31,7 @@ import numpy as np
 
 from sfanav import navigation as nav
 from sfanav.experiments import navigation as EN
+from sfanav.experiments import navigation_scenes as NS
 from sfanav.sfa import load
 from sfanav.sfa import Network, Rotation, spatial_pairs
 from sfanav.sim.cameras import PanoramicCamera
@@ -38,7 +39,7 @@ from sfanav.sim.cameras import PanoramicCamera
 BAND = (-10.0, 20.0)
 
 
-def band_network(sc: EN.Scene, frames: int, cache: Path, pairs: bool = False) -> Network:
+def band_network(sc: NS.Scene, frames: int, cache: Path, pairs: bool = False) -> Network:
     if cache.exists():
         return load(cache)
     r = sc.simulator.renderer
@@ -80,7 +81,7 @@ def main() -> None:
     a = ap.parse_args()
     if not 1 <= a.trials <= 50:
         raise SystemExit("--trials must be in 1..50")
-    base = EN.scene("open", 0, lawn=a.lawn)
+    base = NS.scene("open", 0, lawn=a.lawn)
     t0 = time.time()
     if a.full_network is not None:
         sc, tag = base, "full"
@@ -98,7 +99,7 @@ def main() -> None:
     w = nav.beta_weights(beta, relative=True)
     # the trials of 7.1-open (50 drawn, the first --trials used)
     S, T, *_ = EN.trials_71(sc, "open", a.trial_seed, a.trials)
-    arms = [("thesis rule, n=2", nav.ThesisDescent(EN.ETA, EN.GAMMA), 2, None),
+    arms = [("thesis rule, n=2", nav.ThesisDescent(NS.ETA, NS.GAMMA), 2, None),
             ("robust descent, n=2", nav.RobustDescent(), 2, None),
             (f"robust descent, n={a.n} weighted", nav.RobustDescent(), a.n, w)]
     if a.only_weighted:
@@ -106,7 +107,7 @@ def main() -> None:
     rows, results = [], {}
     for label, d, n, ww in arms:
         t = time.time()
-        s = nav.evaluate_trials(EN.navigator(sc, net, d, n=n, weights=ww), S, T)
+        s = nav.evaluate_trials(NS.navigator(sc, net, d, n=n, weights=ww), S, T)
         results[label] = s
         rows.append({"arm": label, "success": s.success_rate, "efficiency": s.efficiency,
                      "mean_stops": s.mean_iterations, "reasons": s.reasons, "seconds": time.time() - t})
@@ -114,8 +115,8 @@ def main() -> None:
     out = {"trial_seed": a.trial_seed, "trials": a.trials, "frames": a.frames, "network": tag, "band_deg": BAND if tag == "band" else None,
            "beta": beta.tolist(), "fit_seconds": t_fit, "rows": rows}
     if a.grid:
-        xs, ys, F = EN.grid_features(sc, net, 0.5, False)
-        out["position_code_rms_m"] = {n: EN.position_code_error(xs, ys, F, n) for n in range(2, 9)}
+        xs, ys, F = NS.grid_features(sc, net, 0.5, False)
+        out["position_code_rms_m"] = {n: NS.position_code_error(xs, ys, F, n) for n in range(2, 9)}
         tf = F[np.argmin(abs(ys - T[0][1])), np.argmin(abs(xs - T[0][0]))]
         nav.plot_cost_surface(xs, ys, F, tf, a.out / f"nav-{tag}-arm-cost-surface.png", ns=(2, a.n), weights=w,
                               n_firing=4, target=T[0], world=sc.world,

@@ -29,6 +29,7 @@ from sfanav import navigation as nav
 from sfanav.localization.recipe import CAMERA_ELEVATION
 from sfanav.localization import default_network, default_rows
 from sfanav.experiments import navigation as E
+from sfanav.experiments import navigation_scenes as NS
 from sfanav.sfa import load
 from sfanav.sfa import Network, Rotation
 from sfanav.sim.cameras import PanoramicCamera
@@ -48,7 +49,7 @@ class RowNorm:
         return f
 
 
-def network(kind: str, sc: E.Scene, lawn: str, cache: Path) -> tuple[Any, Any, Any]:
+def network(kind: str, sc: NS.Scene, lawn: str, cache: Path) -> tuple[Any, Any, Any]:
     """(network, camera, rows) of a kind, trained on the scene's run or loaded."""
     if kind == "default":
         cam, rows = PanoramicCamera(350, 40), default_rows(CAMERA_ELEVATION)
@@ -60,7 +61,7 @@ def network(kind: str, sc: E.Scene, lawn: str, cache: Path) -> tuple[Any, Any, A
         return load(path), cam, rows
     ren = sc.simulator.renderer
     imgs = np.stack([ren.render(cam, p) for p in sc.trajectory.poses])
-    net = default_network() if kind == "default" else Network(E.network_config(False))
+    net = default_network() if kind == "default" else Network(NS.network_config(False))
     t = time.time()
     net.fit(imgs if rows is None else rows(imgs), rotation=Rotation(5), progress=False)
     print(f"  trained {path.name} in {time.time() - t:.0f} s", flush=True)
@@ -80,20 +81,20 @@ def main() -> None:
     print("| network | lawn | position code RMS s1-s2 / s1-s8 (m) | thesis rule n = 2 | thesis rule n = 8 weighted |")
     print("|---|---|---|---|---|")
     for lawn in a.lawn:
-        sc = E.scene(a.kind, 0, lawn=lawn)
+        sc = NS.scene(a.kind, 0, lawn=lawn)
         starts, targets, opt, _, _ = E.trials_71(sc, a.kind, 0, a.trials)  # the experiment's first trials
         for kind in a.networks:
             net, cam, rows = network(kind, sc, lawn, a.cache)
-            xs, ys, F = E.grid_features(sc, net, 0.5, False, camera=cam, rows=rows)
-            code = " / ".join(f"{E.position_code_error(xs, ys, F, n):.2f}" for n in (2, 8))
+            xs, ys, F = NS.grid_features(sc, net, 0.5, False, camera=cam, rows=rows)
+            code = " / ".join(f"{NS.position_code_error(xs, ys, F, n):.2f}" for n in (2, 8))
             cells = []
             for n in (2, 8):
                 w = None if n == 2 else nav.beta_weights(np.asarray(net.beta_values_, float)[:n], relative=True)
                 sim = Simulator(sc.world, sc.camera, sc.robot, seed=0)  # every arm from the same odometry noise
                 sim.renderer = sc.simulator.renderer
                 navi = nav.Navigator(sim, nav.ImageFeatures(net, sc.simulator.renderer, cam, rows=rows),
-                                     nav.ThesisDescent(E.ETA, E.GAMMA), n_outputs=n, weights=w,
-                                     success_radius=E.SUCCESS_RADIUS, max_iterations=E.MAX_ITERATIONS)
+                                     nav.ThesisDescent(NS.ETA, NS.GAMMA), n_outputs=n, weights=w,
+                                     success_radius=NS.SUCCESS_RADIUS, max_iterations=NS.MAX_ITERATIONS)
                 s = nav.evaluate_trials(navi, starts, targets, optimal_lengths=opt, progress=False)
                 cells.append(f"{s.success_rate:.2f} / {s.efficiency:.2f}")
             print(f"| {kind} | {lawn} | {code} | {cells[0]} | {cells[1]} |", flush=True)

@@ -21,7 +21,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from sfanav.experiments import navigation as E
+
+from sfanav.experiments import navigation_scenes as NS
 from sfanav.sfa import load
 from sfanav.sfa import Network, Rotation
 
@@ -38,7 +39,7 @@ def main() -> None:
     ap.add_argument("--network", type=Path, help="a trained network of this scene (else trained, about 6 min)")
     ap.add_argument("--out", type=Path, default=Path("runs/lawn"), help="where a trained network is saved")
     a = ap.parse_args()
-    sc = E.scene(a.kind, 0, lawn=a.lawn)
+    sc = NS.scene(a.kind, 0, lawn=a.lawn)
     poses = sc.trajectory.poses
     ren = sc.simulator.renderer
     imgs = np.stack([ren.render(sc.camera, p) for p in poses])
@@ -46,7 +47,7 @@ def main() -> None:
         net = load(a.network)
     else:
         t = time.time()
-        net = Network(E.network_config(False))
+        net = Network(NS.network_config(False))
         net.fit(imgs, rotation=Rotation(5), progress=False)
         a.out.mkdir(parents=True, exist_ok=True)
         path = a.out / f"thesis-5.2-{a.kind}-{a.lawn}.sfanav"
@@ -71,7 +72,7 @@ def main() -> None:
         print(f"s{i + 1} | " + " | ".join(f"{r2(cols[R], Y[:, i]):.2f}" for R in (1.0, 3.0, 6.0))
               + f" | {r2(P, Y[:, i]):.2f}")
     Z = (Y - Y.mean(0)) / Y.std(0)
-    C = E.coordinate_model(sc)(xy)
+    C = NS.coordinate_model(sc)(xy)
     C = (C - C.mean(0)) / C.std(0)
     d = lambda M: " ".join(f"{v:.5f}" for v in np.mean(np.diff(M[:, :4], axis=0) ** 2, axis=0))
     print(f"Delta s1-s4 per frame: network {d(Z)}; SFA on the coordinates {d(C)}")

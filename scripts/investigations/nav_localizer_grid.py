@@ -15,7 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
-from sfanav.experiments import navigation as E
+
+from sfanav.experiments import navigation_scenes as NS
 from sfanav.sfa import load
 from sfanav.sim.cameras import PanoramicCamera
 
@@ -28,7 +29,7 @@ def main() -> None:
     ap.add_argument("--spacing", type=float, default=1.0, help="grid spacing (m)")
     ap.add_argument("--seed", type=int, default=0, help="random headings")
     a = ap.parse_args()
-    sc = E.scene(a.kind, 0, lawn=a.lawn)
+    sc = NS.scene(a.kind, 0, lawn=a.lawn)
     loc = load(a.localizer)
     w, h = sc.area
     xs = np.arange(-w / 2 + a.spacing / 2, w / 2, a.spacing)

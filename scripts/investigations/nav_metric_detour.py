@@ -19,6 +19,7 @@ from pathlib import Path
 
 from sfanav import navigation as nav
 from sfanav.experiments import navigation as E
+from sfanav.experiments import navigation_scenes as NS
 from sfanav.sfa import load
 from sfanav.sim.cameras import PanoramicCamera
 
@@ -31,7 +32,7 @@ def main() -> None:
     ap.add_argument("--trial-seed", type=int, default=7)
     ap.add_argument("--only", nargs="+", help="run only these variants (names as printed)")
     a = ap.parse_args()
-    sc = E.scene(a.kind, 0)
+    sc = NS.scene(a.kind, 0)
     loc = load(a.localizer)
     starts, targets, opt, _, _ = E.trials_71(sc, a.kind, a.trial_seed, a.trials)
     field = nav.GeodesicField(sc.trajectory.poses[:, :2])
@@ -54,7 +55,7 @@ def main() -> None:
         t = time.time()
         sim = sc.fresh_noise()  # the same odometry noise for every variant
         navi = nav.Navigator(sim, feats, nav.MetricDescent(**kw), n_outputs=2,
-                             success_radius=E.SUCCESS_RADIUS, max_iterations=E.MAX_ITERATIONS)
+                             success_radius=NS.SUCCESS_RADIUS, max_iterations=NS.MAX_ITERATIONS)
         s = nav.evaluate_trials(navi, starts, targets, optimal_lengths=opt, progress=False)
         print(f"{a.kind} | {name} | success {s.success_rate:.2f} | efficiency {s.efficiency:.3f} | "
               f"stops {s.mean_iterations:.1f} | {time.time() - t:.0f} s", flush=True)

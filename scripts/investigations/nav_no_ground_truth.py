@@ -19,6 +19,7 @@ import numpy as np
 
 from sfanav import navigation as nav
 from sfanav.experiments import navigation as N
+from sfanav.experiments import navigation_scenes as NS
 
 
 def main() -> None:
@@ -32,17 +33,17 @@ def main() -> None:
     out.mkdir(parents=True, exist_ok=True)
     for kind in a.kinds:
         t0 = time.perf_counter()
-        sc = N.scene(kind, a.seed)
+        sc = NS.scene(kind, a.seed)
         starts, targets, optimal, _, _ = N.trials_71(sc, kind, a.seed, a.trials)
-        loc, cam = N.metric_localizer(sc, out, a.seed, progress=True)
-        free, free_xy, info = N.no_ground_truth_localizer(sc, out, a.seed, loc, cam, progress=True)
+        loc, cam = NS.metric_localizer(sc, out, a.seed, progress=True)
+        free, free_xy, info = NS.no_ground_truth_localizer(sc, out, a.seed, loc, cam, progress=True)
         arms = [("metric descent + geodesic field", loc, nav.GeodesicField(sc.trajectory.poses[:, :2])),
                 ("metric descent + geodesic field, no ground truth", free, nav.GeodesicField(free_xy))]
         res = {"kind": kind, "trials": a.trials, "no ground truth": info, "arms": {}}
         for name, L, field in arms:
             navi = nav.Navigator(sc.fresh_noise(), nav.MetricFeatures(L, sc.simulator.renderer, cam),
-                                 nav.MetricDescent(field=field), n_outputs=2, success_radius=N.SUCCESS_RADIUS,
-                                 max_iterations=N.MAX_ITERATIONS)
+                                 nav.MetricDescent(field=field), n_outputs=2, success_radius=NS.SUCCESS_RADIUS,
+                                 max_iterations=NS.MAX_ITERATIONS)
             s = nav.evaluate_trials(navi, starts, targets, optimal_lengths=optimal, progress=True, desc=name)
             res["arms"][name] = {"success rate": s.success_rate, "efficiency": s.efficiency,
                                  "mean stops": s.mean_iterations, "reasons": s.reasons}

@@ -30,12 +30,12 @@ def median_error(P: np.ndarray, T: np.ndarray) -> float:
 
 
 def nav_run(kind: str, out: Path):
-    from sfanav.experiments import navigation as N
+    from sfanav.experiments import navigation_scenes as NS
 
-    sc = N.scene(kind, 0)
-    loc, cam = N.metric_localizer(sc, out, 0, progress=True)
-    imgs = N.training_images(sc, cam, progress=True)
-    return imgs, loc.features(imgs), N.exploration_odometry(sc, 0), sc.trajectory.poses[:, :2]
+    sc = NS.scene(kind, 0)
+    loc, cam = NS.metric_localizer(sc, out, 0, progress=True)
+    imgs = NS.training_images(sc, cam, progress=True)
+    return imgs, loc.features(imgs), NS.exploration_odometry(sc, 0), sc.trajectory.poses[:, :2]
 
 
 def garden_run(seed: int, out: Path):

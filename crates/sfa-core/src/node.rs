@@ -159,6 +159,13 @@ impl Stage {
         self.expansion.as_ref().map_or(self.input_dim, |e| e.out_dim())
     }
 
+    /// The statistics in training; an error for a stage saved without them.
+    fn acc_mut(&mut self) -> Result<&mut Accumulator> {
+        self.acc.as_mut().ok_or_else(|| {
+            SfaError::NotFitted("the model was saved without training statistics; it cannot be trained further".into())
+        })
+    }
+
     /// The stage's expansion of `n` finite input rows (borrowed when the
     /// stage does not expand); fails when a product overflows to infinity.
     fn expand_rows<'a>(&self, input: &'a [f64], n: usize) -> Result<std::borrow::Cow<'a, [f64]>> {
@@ -375,11 +382,7 @@ impl SfaNode {
         }
         self.check_width(x)?;
         let s = self.training_stage;
-        if self.stages[s].acc.is_none() {
-            return Err(SfaError::NotFitted(
-                "the model was saved without training statistics; it cannot be trained further".into(),
-            ));
-        }
+        self.stages[s].acc_mut()?;
         Ok(s)
     }
 
@@ -446,10 +449,7 @@ impl SfaNode {
             });
         }
         let stage = &mut self.stages[0];
-        let acc = stage.acc.as_mut().ok_or_else(|| {
-            SfaError::NotFitted("the model was saved without training statistics; it cannot be trained further".into())
-        })?;
-        acc.merge(stats)?;
+        stage.acc_mut()?.merge(stats)?;
         stage.solution = None;
         Ok(())
     }
@@ -478,10 +478,7 @@ impl SfaNode {
                 got: stats.dim(),
             });
         }
-        let acc = stage.acc.as_mut().ok_or_else(|| {
-            SfaError::NotFitted("the model was saved without training statistics; it cannot be trained further".into())
-        })?;
-        acc.merge(stats)?;
+        stage.acc_mut()?.merge(stats)?;
         stage.solution = None;
         Ok(())
     }

@@ -74,3 +74,25 @@ pub fn naive_stats(x: &[f64], n: usize, d: usize) -> (Vec<f64>, Mat<f64>, Mat<f6
     });
     (mean, cov, dcov)
 }
+
+/// `n` periodic random images `h x w x c` with smooth structure.
+pub fn images(n: usize, h: usize, w: usize, c: usize, seed: u64) -> Vec<f64> {
+    let mut r = Rng::new(seed);
+    let mut out = Vec::with_capacity(n * h * w * c);
+    for _ in 0..n {
+        let phases: Vec<f64> = (0..6).map(|_| r.next() * 3.0).collect();
+        for y in 0..h {
+            for x in 0..w {
+                for ch in 0..c {
+                    let a = 2.0 * std::f64::consts::PI * x as f64 / w as f64;
+                    let v = (a + phases[0] + y as f64 * 0.3).sin()
+                        + 0.5 * (2.0 * a + phases[1] * (1.0 + ch as f64)).cos()
+                        + 0.3 * (3.0 * a + phases[2] * y as f64).sin()
+                        + 0.2 * r.next();
+                    out.push(v);
+                }
+            }
+        }
+    }
+    out
+}

@@ -1,34 +1,13 @@
 //! Partitioned (distributed) training: trainers on copies of the network,
 //! one per partition of the images, merged on a driver, reproduce `fit`.
 mod common;
-use common::Rng;
+use common::images;
 use sfa_core::{
     fit, Accumulator, CachePolicy, FitOptions, InMemory, LayerSpec, LayerTrainer, LoopClosures, Network, NetworkSpec,
     Result, Rotation, SpatialPairs, TrainingPath,
 };
 use std::sync::Arc;
 
-/// `n` periodic random images `h x w x c` with smooth structure.
-fn images(n: usize, h: usize, w: usize, c: usize, seed: u64) -> Vec<f64> {
-    let mut r = Rng::new(seed);
-    let mut out = Vec::with_capacity(n * h * w * c);
-    for _ in 0..n {
-        let phases: Vec<f64> = (0..6).map(|_| r.next() * 3.0).collect();
-        for y in 0..h {
-            for x in 0..w {
-                for ch in 0..c {
-                    let a = 2.0 * std::f64::consts::PI * x as f64 / w as f64;
-                    let v = (a + phases[0] + y as f64 * 0.3).sin()
-                        + 0.5 * (2.0 * a + phases[1] * (1.0 + ch as f64)).cos()
-                        + 0.3 * (3.0 * a + phases[2] * y as f64).sin()
-                        + 0.2 * r.next();
-                    out.push(v);
-                }
-            }
-        }
-    }
-    out
-}
 
 fn spec(v: usize, c: usize, sharing: bool) -> NetworkSpec {
     let n_w1 = (v - 4) / 2 + 1;
@@ -101,60 +80,6 @@ impl Plan<'_> {
     }
 }
 
-/// Every layer and pass: each partition on its own copy of the network,
-/// statistics merged in partition order on the driver.
-fn fit_partitioned(net: &mut Network, imgs: &[f64], n: usize, p: &Plan<'_>) -> Result<()> {
-    let size = imgs.len() / n;
-    let bounds = p.bounds(n);
-    while net.n_trained() < net.n_layers() {
-        let layer = net.n_trained();
-        let n_passes = net.nodes(layer)[0].n_stages();
-        for pass in 0..n_passes {
-            let mut merged: Option<Vec<Accumulator>> = None;
-            let mut total = 0;
-            for w in bounds.windows(2) {
-                let (a, b) = (w[0], w[1]);
-                let mut local = net.clone();
-                let mut tr = LayerTrainer::resume(&local, layer, pass, p.rot, p.path)?;
-                tr.set_transition_weight(p.tw)?;
-                tr.set_lag_products(p.lag);
-                tr.set_reference_image(&local, &imgs[..size])?;
-                if a > 0 && !p.breaks.contains(&a) {
-                    tr.prime(&local, &imgs[(a - 1) * size..a * size])?;
-                }
-                let mut i = a;
-                while i < b {
-                    if i > a && p.breaks.contains(&i) {
-                        tr.break_sequence();
-                    }
-                    // a batch ends before the next break
-                    let mut j = (i + p.batch).min(b);
-                    if let Some(&k) = p.breaks.iter().filter(|&&k| k > i && k < j).min() {
-                        j = k;
-                    }
-                    tr.feed(&mut local, &imgs[i * size..j * size], j - i)?;
-                    i = j;
-                }
-                let st = tr.statistics(&local)?;
-                total += b - a;
-                merged = Some(match merged {
-                    None => st,
-                    Some(mut m) => {
-                        for (x, y) in m.iter_mut().zip(&st) {
-                            x.merge(y)?;
-                        }
-                        m
-                    }
-                });
-            }
-            let mut tr = LayerTrainer::resume(net, layer, pass, p.rot, p.path)?;
-            tr.merge_statistics(net, &merged.expect("a partition"), total)?;
-            tr.end_pass(net)?;
-        }
-    }
-    Ok(())
-}
-
 fn single(net: &mut Network, imgs: &[f64], n: usize, p: &Plan<'_>, cache: bool) {
     let mut opts = FitOptions::new(p.rot);
     opts.path = p.path;
@@ -182,7 +107,7 @@ fn partitions_reproduce_fit() {
             let mut reference = Network::new(spec(w, c, sharing)).unwrap();
             single(&mut reference, &imgs, n, &p, path == TrainingPath::Fast);
             let mut net = Network::new(spec(w, c, sharing)).unwrap();
-            fit_partitioned(&mut net, &imgs, n, &p).unwrap();
+            fit_partitioned(&mut net, &imgs, n, &p, &[], &[]).unwrap();
             assert!(net.is_trained());
             let e = weights_differ(&reference, &net);
             assert!(e < 1e-9, "sharing={sharing} {path:?} tw={tw} lag={lag} cuts={cuts:?}: weights differ by {e}");
@@ -201,7 +126,7 @@ fn breaks_end_the_sequence_wherever_they_fall() {
         let plan = |cuts, breaks| Plan { rot, path, tw: 1.0, lag: true, cuts, breaks, batch: 5 };
         let run = |p: &Plan<'_>| {
             let mut net = Network::new(spec(w, c, sharing)).unwrap();
-            fit_partitioned(&mut net, &imgs, n, p).unwrap();
+            fit_partitioned(&mut net, &imgs, n, p, &[], &[]).unwrap();
             net
         };
         // a break at a partition boundary or inside a partition: the same
@@ -249,13 +174,15 @@ fn resume_checks_layer_and_pass() {
     assert!(d1.merge_statistics(&mut driver, &[], n).is_err());
 }
 
-
-/// Loop closures `(past, current, weight)` and spatial pairs `(a, b,
-/// weight)` of the whole run, split as the distributed fit splits them:
+/// Every layer and pass: each partition on its own copy of the network
+/// (primed with the image before it unless a recording breaks there),
+/// statistics merged in partition order on the driver. Loop closures
+/// `(past, current, weight)` and spatial pairs `(a, b, weight)` of the
+/// whole run are split as the distributed fit splits them:
 /// each partition's trainer gets the closures of its own images (indices
 /// counted within it, partners the earlier images), and the pairs go to
 /// trainers of their own, fed pairs only, two pairs each.
-fn fit_partitioned_feedback(
+fn fit_partitioned(
     net: &mut Network,
     imgs: &[f64],
     n: usize,
@@ -283,12 +210,21 @@ fn fit_partitioned_feedback(
                     tr.set_loop_closures(&local, Some(Arc::new(lc)))?;
                 }
                 tr.set_reference_image(&local, &imgs[..size])?;
-                if a > 0 {
+                if a > 0 && !p.breaks.contains(&a) {
                     tr.prime(&local, &imgs[(a - 1) * size..a * size])?;
                 }
-                for i in (a..b).step_by(p.batch) {
-                    let j = (i + p.batch).min(b);
+                let mut i = a;
+                while i < b {
+                    if i > a && p.breaks.contains(&i) {
+                        tr.break_sequence();
+                    }
+                    // a batch ends before the next break
+                    let mut j = (i + p.batch).min(b);
+                    if let Some(&k) = p.breaks.iter().filter(|&&k| k > i && k < j).min() {
+                        j = k;
+                    }
                     tr.feed(&mut local, &imgs[i * size..j * size], j - i)?;
+                    i = j;
                 }
                 results.push(tr.statistics(&local)?);
             }
@@ -341,7 +277,7 @@ fn closures_and_pairs_split_over_partitions_reproduce_fit() {
         let mut reference = Network::new(spec(w, c, true)).unwrap();
         fit(&mut reference, &mut InMemory::new(&imgs, n, 7).unwrap(), &opts, &mut |_| Ok(())).unwrap();
         let mut net = Network::new(spec(w, c, true)).unwrap();
-        fit_partitioned_feedback(&mut net, &imgs, n, &p, &closures, &pairs).unwrap();
+        fit_partitioned(&mut net, &imgs, n, &p, &closures, &pairs).unwrap();
         // (closures and pairs leave near-null directions of the top expansion ill-determined: the outputs and
         // the samples and pairs counted are compared tightly, the weights loosely)
         let (ya, yb) = (reference.transform(&imgs, n).unwrap(), net.transform(&imgs, n).unwrap());

@@ -35,29 +35,24 @@ import numpy as np
 
 from .. import navigation as nav
 from . import ExperimentResult, register
-from .navigation_scenes import (  # noqa: F401 (scene helpers, also used through this module)
+from .navigation_scenes import (
     DEFAULT_NET_WEIGHTED_N,
     ETA,
     GAMMA,
-    IMAGE_TRIALS_ENV,
     MAX_ITERATIONS,
     QUICK_ITERATIONS,
     SUCCESS_RADIUS,
     Scene,
-    cache_name,
     coordinate_model,
-    exploration_odometry,
     free_space,
     grid_features,
     image_trials,
     metric_localizer,
     navigator,
-    network_config,
     no_ground_truth_localizer,
     position_code_error,
     scene,
     scene_network,
-    training_images,
     trial_rng,
 )
 

@@ -29,14 +29,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from .objects import ObjectBuilder
-from .primitives import (  # noqa: F401 (re-exported)
-    BLOCK_HEIGHT,
-    INNER_TYPES,
-    PATCH_KINDS,
-    SHAPES,
-    Primitive,
-    WorldObject,
-)
+from .primitives import BLOCK_HEIGHT, Primitive, WorldObject
 from .textures import Texture
 
 FORMAT = "sfanav-world"
@@ -195,7 +188,7 @@ class GroundSpec:
     by fractal noise, with drier patches) sampled every ``resolution`` m.
 
     ``patches``: dicts painted over the lawn's colour map (the realistic gardens'
-    realistic gardens), each with a ``kind`` from ``PATCH_KINDS``:
+    realistic gardens), each with a ``kind`` from ``sim.primitives.PATCH_KINDS``:
     ``{"kind": "patio", "x", "y", "length", "width", "yaw", "tile"}`` (grey
     stone slabs of ``tile`` m with dark joints), ``{"kind": "path",
     "points": [[x, y], ...], "width"}`` (a gravel path along a polyline),
@@ -211,7 +204,7 @@ class GroundSpec:
     dry: tuple[float, float, float] = (0.50, 0.47, 0.30)
     dry_fraction: float = 0.12
     resolution: float = 0.1
-    patches: tuple = ()  # ground patches painted over the lawn (see PATCH_KINDS)
+    patches: tuple = ()  # ground patches painted over the lawn (see sim.primitives.PATCH_KINDS)
 
 
 LAWNS = ("patchy", "uniform")
@@ -362,7 +355,7 @@ class World:
             Fraction of the sky under clouds, in [0, 1].
         inner : dict, optional
             Objects standing *inside* the free area (the realistic
-            gardens), counts per type from ``INNER_TYPES``: ``tree`` (small
+            gardens), counts per type from ``sim.primitives.INNER_TYPES``: ``tree`` (small
             garden trees; the robot drives under the crown, around the
             trunk), ``bush``, ``pole`` (thin painted posts: washing-line and
             lamp posts), ``shed`` (against the area border). They are
@@ -371,7 +364,7 @@ class World:
             world's outer objects do not depend on them.
         patches : dict, optional
             Ground patches inside the area, counts per kind from
-            ``PATCH_KINDS`` (``patio``, ``path``, ``bed``); see
+            ``sim.primitives.PATCH_KINDS`` (``patio``, ``path``, ``bed``); see
             :class:`GroundSpec`. Also their own random stream.
         lawn : {"patchy", "uniform"}
             ``"patchy"`` (default): the lawn's colour varies over metres (two

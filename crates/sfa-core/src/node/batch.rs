@@ -32,6 +32,7 @@ impl SfaNode {
             }
             s
         };
+        self.stages[s].acc_mut()?; // a stage saved without statistics cannot train
         let width = self.stage_input_width(from)?;
         for p in parts {
             if p.x.ncols() != width {
