@@ -70,7 +70,7 @@ def test_5_1_3_quick(tmp_path):
     assert (tmp_path / "5.1.3-windows.png").exists()
 
 
-def test_5_2_quick(tmp_path):
+def test_5_2_quick(tmp_path, monkeypatch):
     res = experiments.run("5.2", tmp_path, quick=True, progress=False)
     required = [f"{n} {run}" for run in ("indoor I", "indoor II") for n in BASE + BASELINES]
     rows = check(res, tmp_path, required)
@@ -85,6 +85,15 @@ def test_5_2_quick(tmp_path):
     ds = simulated(tmp_path, "thesis-5.2-indoor-I", 0, quick=True, camera=sim.PanoramicCamera(60, 8, rgb=False),
                    max_frames=40, progress=False)
     assert (ds.root / "frames.csv").stat().st_mtime_ns == stamp and len(ds) == 80
+    # a preset redefined since (another description) is simulated again, not taken from the stale copy
+    import dataclasses
+
+    real = sim.presets.get("thesis-5.2-indoor-I")
+    changed = dataclasses.replace(real, description=real.description + " (redefined)")
+    monkeypatch.setattr(sim.presets, "get", lambda name: changed if name == real.name else real)
+    ds = simulated(tmp_path, "thesis-5.2-indoor-I", 0, quick=True, camera=sim.PanoramicCamera(60, 8, rgb=False),
+                   max_frames=40, progress=False)
+    assert (ds.root / "frames.csv").stat().st_mtime_ns != stamp
 
 
 def test_window_network_tiles_every_window():

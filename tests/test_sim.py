@@ -235,6 +235,35 @@ def test_lighting_intensity_tint_and_sun(renderer):
         Lighting(sun_elevation_deg=0)
 
 
+
+def test_sun_intensity_lights_the_sunlit_parts_only(renderer):
+    """The direct light scales, the sky does not: no gain undoes it (thesis 6.2.1's lamp)."""
+    cam = PanoramicCamera(120, 16)
+    weak, normal, strong = (renderer.render(cam, (0.5, 0.5, 0), lighting=Lighting(sun_intensity=s)).astype(float)
+                            for s in (0.1, 1.0, 2.0))
+    above, below = cam.elevations > 0, cam.elevations < 0
+    assert above.any() and below.any()
+    assert (weak <= strong).all()
+    # the sky keeps its light (objects in front of it do not)
+    assert (weak[above] == strong[above]).all(axis=-1).mean() > 0.5
+    assert weak[below].mean() < normal[below].mean() < strong[below].mean()
+    assert np.array_equal(normal, renderer.render(cam, (0.5, 0.5, 0), lighting=Lighting()))
+
+    def normalised(img):
+        g = img.mean(axis=-1)
+        return (g - g.mean()) / g.std()
+
+    # per-image normalisation undoes a change of intensity (up to rounding), not one of the sun's strength
+    dim = renderer.render(cam, (0.5, 0.5, 0), lighting=Lighting(intensity=0.6)).astype(float)
+    gain_change = np.abs(normalised(dim) - normalised(normal)).mean()
+    sun_change = np.abs(normalised(weak) - normalised(strong)).mean()
+    assert sun_change > 5 * gain_change
+    for bad in (-0.5, float("nan"), float("inf")):
+        with pytest.raises(ValueError, match="sun_intensity"):
+            Lighting(sun_intensity=bad)
+    assert "sun_intensity" not in Lighting().to_dict()  # datasets of the default light are written as before
+    assert Lighting.from_dict(Lighting(sun_intensity=0.3).to_dict()) == Lighting(sun_intensity=0.3)
+
 def test_ground_shadows(garden):
     ren = Renderer(garden)
     sm = ren._shadow_map(Lighting(sun_elevation_deg=30))

@@ -61,8 +61,8 @@ def progress_log(progress: bool):
 def simulated(out: Path, preset: str, seed: int, *, quick: bool, camera: Any = None, max_frames: int | None = None,
               progress: bool = True, flat: bool = False) -> Dataset:
     """The preset's dataset under ``out/data``, simulated once and reused
-    when a dataset with the same preset, seed, frames, camera and ground is
-    there. ``flat``: a preset with uneven ground driven on flat ground."""
+    when a dataset with the same preset (name and description), seed,
+    frames, camera and ground is there. ``flat``: a preset with uneven ground driven on flat ground."""
     name = f"{preset}-seed{seed}" + ("-flat" if flat else "") + ("-quick" if quick else "")
     path = out / "data" / name
     cam_dict = (camera or sim.presets.get(preset).camera()).to_dict()
@@ -71,7 +71,8 @@ def simulated(out: Path, preset: str, seed: int, *, quick: bool, camera: Any = N
         try:
             ds = Dataset(path)
             md = ds.metadata
-            if (md.get("preset") == preset and md.get("seed") == seed and md.get("max_frames") == max_frames
+            if (md.get("preset") == preset and md.get("description") == sim.presets.get(preset).description
+                    and md.get("seed") == seed and md.get("max_frames") == max_frames
                     and md.get("camera") == json.loads(json.dumps(cam_dict)) and ("terrain" in md) == uneven):
                 progress_log(progress)(f"reusing the simulated dataset {path}")
                 return ds

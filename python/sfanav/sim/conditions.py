@@ -264,6 +264,12 @@ class Lighting:
         objects facing the sun are brighter; objects cast shadows on the ground.
     ambient : float
         Share of sky light that reaches every surface, in [0, 1].
+    sun_intensity : float
+        Strength of the direct sunlight relative to the sky light (1: the
+        default balance). It scales only the direct term of the shading, so
+        sunlit surfaces brighten while the sky and the shade keep their
+        light: a lamp turned up in a scene whose sky stays (thesis 6.2.1),
+        which no gain on the whole image undoes, unlike ``intensity``.
     shadows : bool
         Ground shadows of the static objects.
     season : Season or None
@@ -275,8 +281,8 @@ class Lighting:
     Raises
     ------
     ValueError
-        A negative or non-finite intensity, a bad tint, a sun elevation
-        outside (0, 90], an ambient outside [0, 1].
+        A negative or non-finite intensity or sun intensity, a bad tint, a
+        sun elevation outside (0, 90], an ambient outside [0, 1].
     TypeError
         A season that is not a :class:`Season`.
     """
@@ -288,10 +294,13 @@ class Lighting:
     ambient: float = 0.6
     shadows: bool = True
     season: Season | None = None
+    sun_intensity: float = 1.0
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.intensity) and self.intensity >= 0):
             raise ValueError(f"light intensity must be finite and >= 0, got {self.intensity}")
+        if not (np.isfinite(self.sun_intensity) and self.sun_intensity >= 0):
+            raise ValueError(f"sun_intensity must be finite and >= 0, got {self.sun_intensity}")
         tint = tuple(float(t) for t in self.tint)
         if len(tint) != 3 or min(tint) < 0:
             raise ValueError(f"light tint must be three non-negative numbers, got {self.tint!r}")
@@ -314,7 +323,8 @@ class Lighting:
         return (self.intensity * np.asarray(self.tint)).astype(np.float32)
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-able fields; ``"season"`` only when there is one."""
+        """JSON-able fields; ``"season"`` only when there is one,
+        ``"sun_intensity"`` only when it is not 1."""
         d = {
             "intensity": self.intensity,
             "tint": list(self.tint),
@@ -325,6 +335,8 @@ class Lighting:
         }
         if self.season is not None:
             d["season"] = self.season.to_dict()
+        if self.sun_intensity != 1.0:
+            d["sun_intensity"] = self.sun_intensity
         return d
 
     @classmethod

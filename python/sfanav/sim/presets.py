@@ -82,6 +82,10 @@ def _ramp(lo: float, hi: float) -> LightFn:
     return lambda s: Lighting(intensity=lo + (hi - lo) * s)
 
 
+def _sun_ramp(lo: float, hi: float) -> LightFn:
+    return lambda s: Lighting(sun_intensity=lo + (hi - lo) * s)
+
+
 def _random_conditions(rng: np.random.Generator, n: int,
                        seasons: Sequence[Season] | None = None) -> dict[str, Lighting]:
     """Thesis 6.2.2: lamp energy in [3, 8], its y in [-10, 10], red channel in
@@ -286,8 +290,22 @@ _add(Preset(
 
 _add(Preset(
     "thesis-6.2.1-light", "6.2.1",
-    "as thesis-6.2.1-static, but the light intensity rises from 0.4 to 1.4 through the training run "
-    "(condition 'light-ramp'); the test run is lit normally",
+    "as thesis-6.2.1-static, but the direct sunlight rises from 0.1 to 2.0 of its normal strength through the "
+    "training run while the sky light stays, like the thesis's lamp turned up in a scene whose sky does not change "
+    "(condition 'sun-ramp'); the test run is lit normally",
+    _garden((16.0, 18.0), 30, markers=(136, 144)),
+    lambda: OmniCamera(500),
+    lambda rng: [RunSpec("train", lambda w, r: T.grid(w.area, spacing=1.6, step=0.26),
+                         {"sun-ramp": _sun_ramp(0.1, 2.0)}),
+                 RunSpec("test", lambda w, r: T.random_walk(w.area, 1090, rng=r, world=w))],
+))
+
+
+_add(Preset(
+    "thesis-6.2.1-gain", "6.2.1",
+    "as thesis-6.2.1-static, but the light intensity of the whole scene, sky included, rises from 0.4 to 1.4 "
+    "through the training run (condition 'light-ramp': a global gain, which per-image normalisation undoes); "
+    "the test run is lit normally",
     _garden((16.0, 18.0), 30, markers=(136, 144)),
     lambda: OmniCamera(500),
     lambda rng: [RunSpec("train", lambda w, r: T.grid(w.area, spacing=1.6, step=0.26),

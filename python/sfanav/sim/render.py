@@ -241,7 +241,7 @@ class Renderer:
 
     def _lit_ground(self, light: Lighting) -> np.ndarray:
         season = light.season
-        key = (light.sun_azimuth_deg, light.sun_elevation_deg, light.ambient, light.shadows,
+        key = (light.sun_azimuth_deg, light.sun_elevation_deg, light.ambient, light.sun_intensity, light.shadows,
                None if season is None else (season.ground, season.leaf_cover))
         lit = self._ground_cache.get(key)
         if lit is None:
@@ -249,7 +249,7 @@ class Renderer:
             if season is not None:
                 gmap = gmap * (1 + self._lawn * (np.asarray(season.ground, np.float32) - 1))
             s = light.sun
-            direct = (1 - light.ambient) * max(s[2], 0.0) / np.sin(np.radians(50.0))
+            direct = light.sun_intensity * (1 - light.ambient) * max(s[2], 0.0) / np.sin(np.radians(50.0))
             shade = light.ambient + direct * (1.0 - self._shadow_map(light))
             # two copies: with shadows, and without for ground so far away that the
             # periodic map would repeat the shadows of the objects
@@ -656,7 +656,8 @@ class Renderer:
             sun = light.sun
             norm = np.sqrt((nrm * nrm).sum(axis=1))
             lam = np.maximum((nrm @ sun) / np.maximum(norm, 1e-12), 0.0)
-            shade = (light.ambient + (1 - light.ambient) / np.sin(np.radians(50.0)) * lam).astype(np.float32)
+            direct = light.sun_intensity * (1 - light.ambient) / np.sin(np.radians(50.0))
+            shade = (light.ambient + direct * lam).astype(np.float32)
             rgba *= shade[:, None]
             fog = (1.0 - np.exp(-rho[pid[win]] / FOG_DISTANCE)).astype(np.float32)[:, None]
             rgba += fog * (self._horizon(season) - rgba)
