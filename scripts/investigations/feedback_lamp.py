@@ -1,9 +1,9 @@
 #!/usr/bin/env python3
 """Feedback when the direct sunlight (the thesis's lamp) rises through training while the sky stays
-(preset thesis-6.2.1-lamp): the sfanav default (350x40) on raw and on normalised panoramas, standard and with
+(preset thesis-6.2.1-light): the sfanav default (350x40) on raw and on normalised panoramas, standard and with
 ground-truth closures (0.1 m, 50 frames apart); MED on the test walk, beside the peers (docs/experiments.md, 6.2.1).
 
-    sfanav simulate --preset thesis-6.2.1-lamp --out runs/lamp/data
+    sfanav simulate --preset thesis-6.2.1-light --out runs/lamp/data
     PYTHONPATH=python python3 scripts/investigations/feedback_lamp.py runs/lamp/data [--configs raw,normalised]
 """
 import argparse

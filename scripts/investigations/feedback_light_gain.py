@@ -3,7 +3,7 @@
 (a global gain, not zero mean / unit variance): standard and with ground-truth closures (0.1 m); MED on the test walk
 (docs/experiments.md, 6.2.1-light).
 
-    PYTHONPATH=python python3 scripts/investigations/feedback_light_gain.py runs/exp62/data/thesis-6.2.1-light-seed0
+    PYTHONPATH=python python3 scripts/investigations/feedback_light_gain.py runs/621-gain  # after: sfanav simulate --preset thesis-6.2.1-gain --out runs/621-gain
 """
 import sys
 import time

@@ -4,7 +4,7 @@ frame with. Ground-truth closures within 0.1 m and at least 50 frames earlier, o
 chosen as (a) the nearest in position (GroundTruthDetector, the experiment's choice), (b) the earliest visit,
 (c) the visit whose mean brightness differs most from the frame's. MED on the test walk (docs/experiments.md).
 
-    PYTHONPATH=python python3 scripts/investigations/feedback_light_partner.py runs/exp62/data/thesis-6.2.1-light-seed0
+    PYTHONPATH=python python3 scripts/investigations/feedback_light_partner.py runs/621-gain  # after: sfanav simulate --preset thesis-6.2.1-gain --out runs/621-gain
 """
 import json
 import sys

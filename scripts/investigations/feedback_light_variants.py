@@ -3,7 +3,7 @@
 0.1 / 0.3 m), BoW closures, and per-image normalisation of the panoramas (thesis 5.2's preprocessing), each
 standard and with feedback; MED on the test walk (docs/loop-closures.md).
 
-    PYTHONPATH=python python3 scripts/investigations/feedback_light_variants.py runs/exp62/data/thesis-6.2.1-light-seed0
+    PYTHONPATH=python python3 scripts/investigations/feedback_light_variants.py runs/621-gain  # after: sfanav simulate --preset thesis-6.2.1-gain --out runs/621-gain
 """
 import json
 import sys

@@ -3,7 +3,7 @@
 (docs/loop-closures.md): the sfanav default's network (350x40) or the thesis configuration's (600x60) on the
 6.2.1 changing-light training run with its ground-truth closures (0.1 m, gap 50).
 
-    PYTHONPATH=python python3 scripts/investigations/feedback_timing.py runs/exp62/data/thesis-6.2.1-light-seed0 --pairs 3
+    PYTHONPATH=python python3 scripts/investigations/feedback_timing.py runs/621-gain --pairs 3  # after: sfanav simulate --preset thesis-6.2.1-gain --out runs/621-gain
 """
 import argparse
 import time

@@ -3,8 +3,8 @@
 precision at 0.1 m, accepted closures, their precision and mean true distance, and the BoW acceptance
 threshold's trade-off; plots of the closures.
 
-    sfanav simulate --preset thesis-6.2.1-light --out runs/621-light --seed 0
-    PYTHONPATH=python python3 scripts/investigations/loop_closure_detectors.py runs/621-light
+    sfanav simulate --preset thesis-6.2.1-gain --out runs/621-gain --seed 0   # measured on the global-gain scene
+    PYTHONPATH=python python3 scripts/investigations/loop_closure_detectors.py runs/621-gain
 """
 import sys
 import time
