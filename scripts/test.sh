@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # The whole test suite: builds sfanav's wheel from this checkout and installs
-# it with the test extras, then runs the Rust core's tests, the Python tests,
+# it with the test extras (after checking the Rust formatting), then runs the Rust core's tests, the Python tests,
 # the wheel in a fresh virtual environment without a Rust toolchain, and a
 # bounded fuzzing run of the model loader and the config parser.
 set -euo pipefail
@@ -9,6 +9,10 @@ export PATH="$HOME/.cargo/bin:$PATH"
 PY="${PYTHON:-python3}"
 WORK="$(mktemp -d)"
 trap 'rm -rf "$WORK"' EXIT
+
+echo "== cargo fmt --check (rustfmt.toml)"
+cargo fmt --version >/dev/null 2>&1 || rustup component add rustfmt
+cargo fmt --all -- --check
 
 echo "== building the wheel and the sdist (scripts/build_wheel.sh)"
 ./scripts/build_wheel.sh "$WORK/dist"

@@ -14,7 +14,17 @@ fn main() {
         let t = Instant::now();
         for _ in 0..n_blocks {
             let m = MatRef::from_row_major_slice(&x64, rows, d);
-            tri(acc.as_mut(), BlockStructure::TriangularLower, Accum::Add, m.transpose(), BlockStructure::Rectangular, m, BlockStructure::Rectangular, 1.0, Par::Seq);
+            tri(
+                acc.as_mut(),
+                BlockStructure::TriangularLower,
+                Accum::Add,
+                m.transpose(),
+                BlockStructure::Rectangular,
+                m,
+                BlockStructure::Rectangular,
+                1.0,
+                Par::Seq,
+            );
         }
         let t64 = t.elapsed().as_secs_f64();
         let mut tmp = Mat::<f32>::zeros(d, d);
@@ -22,11 +32,30 @@ fn main() {
         let t = Instant::now();
         for _ in 0..n_blocks {
             let m = MatRef::from_row_major_slice(&x32, rows, d);
-            tri(tmp.as_mut(), BlockStructure::TriangularLower, Accum::Replace, m.transpose(), BlockStructure::Rectangular, m, BlockStructure::Rectangular, 1.0f32, Par::Seq);
-            for j in 0..d { for i in j..d { acc2[(i, j)] += tmp[(i, j)] as f64; } }
+            tri(
+                tmp.as_mut(),
+                BlockStructure::TriangularLower,
+                Accum::Replace,
+                m.transpose(),
+                BlockStructure::Rectangular,
+                m,
+                BlockStructure::Rectangular,
+                1.0f32,
+                Par::Seq,
+            );
+            for j in 0..d {
+                for i in j..d {
+                    acc2[(i, j)] += tmp[(i, j)] as f64;
+                }
+            }
         }
         let t32 = t.elapsed().as_secs_f64();
         let gf = (n_blocks * rows * d * d) as f64 * 1e-9;
-        println!("d={d} rows/block={rows}: f64 {:.1} GFLOP/s  f32+add {:.1} GFLOP/s  ratio {:.2}", gf / t64, gf / t32, t64 / t32);
+        println!(
+            "d={d} rows/block={rows}: f64 {:.1} GFLOP/s  f32+add {:.1} GFLOP/s  ratio {:.2}",
+            gf / t64,
+            gf / t32,
+            t64 / t32
+        );
     }
 }

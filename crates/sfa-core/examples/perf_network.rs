@@ -52,7 +52,12 @@ fn main() {
         height: 60,
         width: 600,
         channels: 3,
-        layers: vec![layer((12, 12), (6, 6), 12), layer((5, 5), (2, 2), 14), layer((6, 3), (3, 1), 16), layer((15, 1), (1, 1), 8)],
+        layers: vec![
+            layer((12, 12), (6, 6), 12),
+            layer((5, 5), (2, 2), 14),
+            layer((6, 3), (3, 1), 16),
+            layer((15, 1), (1, 1), 8),
+        ],
         weight_sharing: true,
         tol: 1e-10,
         mixed_precision: mixed,

@@ -13,7 +13,17 @@ fn main() {
         let t = Instant::now();
         for c in x.chunks(br * d) {
             let m = MatRef::from_row_major_slice(c, c.len() / d, d);
-            tri(dst.as_mut(), BlockStructure::TriangularLower, Accum::Add, m.transpose(), BlockStructure::Rectangular, m, BlockStructure::Rectangular, 1.0, Par::rayon(0));
+            tri(
+                dst.as_mut(),
+                BlockStructure::TriangularLower,
+                Accum::Add,
+                m.transpose(),
+                BlockStructure::Rectangular,
+                m,
+                BlockStructure::Rectangular,
+                1.0,
+                Par::rayon(0),
+            );
         }
         let t1 = t.elapsed().as_secs_f64();
         let mut dst = Mat::<f64>::zeros(d, d);
@@ -27,7 +37,17 @@ fn main() {
         let t = Instant::now();
         for c in x.chunks(br * d) {
             let m = MatRef::from_row_major_slice(c, c.len() / d, d);
-            tri(dst.as_mut(), BlockStructure::TriangularLower, Accum::Add, m.transpose(), BlockStructure::Rectangular, m, BlockStructure::Rectangular, 1.0, Par::Seq);
+            tri(
+                dst.as_mut(),
+                BlockStructure::TriangularLower,
+                Accum::Add,
+                m.transpose(),
+                BlockStructure::Rectangular,
+                m,
+                BlockStructure::Rectangular,
+                1.0,
+                Par::Seq,
+            );
         }
         let t3 = t.elapsed().as_secs_f64();
         // Column-major copy of the block (features contiguous per column).
@@ -36,9 +56,23 @@ fn main() {
         let t = Instant::now();
         for c in x.chunks(br * d) {
             let nb = c.len() / d;
-            for j in 0..d { for i in 0..nb { cm[(i, j)] = c[i * d + j]; } }
+            for j in 0..d {
+                for i in 0..nb {
+                    cm[(i, j)] = c[i * d + j];
+                }
+            }
             let m = cm.as_ref().subrows(0, nb);
-            tri(dst.as_mut(), BlockStructure::TriangularLower, Accum::Add, m.transpose(), BlockStructure::Rectangular, m, BlockStructure::Rectangular, 1.0, Par::rayon(0));
+            tri(
+                dst.as_mut(),
+                BlockStructure::TriangularLower,
+                Accum::Add,
+                m.transpose(),
+                BlockStructure::Rectangular,
+                m,
+                BlockStructure::Rectangular,
+                1.0,
+                Par::rayon(0),
+            );
         }
         let t4 = t.elapsed().as_secs_f64();
         println!("block {br}: tri syrk {t1:.3}s  full gemm {t2:.3}s  tri seq {t3:.3}s  colmajor tri {t4:.3}s");

@@ -9,31 +9,14 @@ pub enum SfaError {
     /// An argument is outside its domain (a degree of 0, a negative weight, ...).
     InvalidArgument(String),
     /// Shapes disagree (feature count, weight count, ...).
-    ShapeMismatch {
-        what: &'static str,
-        expected: usize,
-        got: usize,
-    },
+    ShapeMismatch { what: &'static str, expected: usize, got: usize },
     /// The input holds NaN or an infinity.
-    NonFinite {
-        what: &'static str,
-        row: usize,
-        col: usize,
-    },
+    NonFinite { what: &'static str, row: usize, col: usize },
     /// Not enough data to form the requested statistic.
-    TooFewSamples {
-        what: &'static str,
-        needed: usize,
-        got: usize,
-    },
+    TooFewSamples { what: &'static str, needed: usize, got: usize },
     /// After dropping directions whose variance is below the tolerance, fewer
     /// directions remain than outputs were requested.
-    RankDeficient {
-        rank: usize,
-        requested: usize,
-        dim: usize,
-        tol: f64,
-    },
+    RankDeficient { rank: usize, requested: usize, dim: usize, tol: f64 },
     /// The model has not been trained (far enough) for this call.
     NotFitted(String),
     /// A saved state is internally inconsistent.
@@ -45,11 +28,7 @@ pub enum SfaError {
     Interrupted(String),
     /// A request needs more memory than the limit ([`crate::memory`]);
     /// `bytes` is None when the size does not even fit a `usize`.
-    TooLarge {
-        what: String,
-        bytes: Option<usize>,
-        limit: usize,
-    },
+    TooLarge { what: String, bytes: Option<usize>, limit: usize },
 }
 
 impl fmt::Display for SfaError {
@@ -59,19 +38,13 @@ impl fmt::Display for SfaError {
             SfaError::ShapeMismatch { what, expected, got } => {
                 write!(f, "{what}: expected {expected}, got {got}")
             }
-            SfaError::NonFinite { what, row, col } => write!(
-                f,
-                "{what} contains NaN or infinity (first at row {row}, column {col})"
-            ),
+            SfaError::NonFinite { what, row, col } => {
+                write!(f, "{what} contains NaN or infinity (first at row {row}, column {col})")
+            }
             SfaError::TooFewSamples { what, needed, got } => {
                 write!(f, "{what}: needs at least {needed}, got {got}")
             }
-            SfaError::RankDeficient {
-                rank,
-                requested,
-                dim,
-                tol,
-            } => write!(
+            SfaError::RankDeficient { rank, requested, dim, tol } => write!(
                 f,
                 "singular problem: the input covariance has only {rank} of {dim} directions \
                  with variance above {tol:e} x the largest, fewer than the {requested} \

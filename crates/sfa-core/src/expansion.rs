@@ -36,19 +36,14 @@ fn binomial(n: usize, k: usize) -> Option<usize> {
 /// `C(dim + degree, degree) - 1`.
 pub fn expanded_dim(dim: usize, degree: usize) -> Result<usize> {
     check_degree(degree)?;
-    dim.checked_add(degree)
-        .and_then(|n| binomial(n, degree))
-        .map(|c| c - 1)
-        .ok_or_else(|| SfaError::InvalidArgument(format!(
-            "expansion of {dim} features to degree {degree} has too many terms"
-        )))
+    dim.checked_add(degree).and_then(|n| binomial(n, degree)).map(|c| c - 1).ok_or_else(|| {
+        SfaError::InvalidArgument(format!("expansion of {dim} features to degree {degree} has too many terms"))
+    })
 }
 
 fn check_degree(degree: usize) -> Result<()> {
     if degree == 0 || degree > MAX_DEGREE {
-        return Err(SfaError::InvalidArgument(format!(
-            "degree must be between 1 and {MAX_DEGREE}, got {degree}"
-        )));
+        return Err(SfaError::InvalidArgument(format!("degree must be between 1 and {MAX_DEGREE}, got {degree}")));
     }
     Ok(())
 }
@@ -91,13 +86,7 @@ impl Expansion {
             starts.push(s);
         }
         debug_assert_eq!(lens.iter().sum::<usize>(), out_dim);
-        Ok(Expansion {
-            dim,
-            degree,
-            out_dim,
-            starts,
-            lens,
-        })
+        Ok(Expansion { dim, degree, out_dim, starts, lens })
     }
 
     /// Input dimension.
@@ -148,49 +137,41 @@ impl Expansion {
         let n = x.len() / self.dim.max(1);
         debug_assert_eq!(out.len(), n * self.out_dim);
         let rows_per_task = (1 << 14) / self.out_dim.max(1) + 1;
-        out.par_chunks_mut(self.out_dim * rows_per_task)
-            .zip(x.par_chunks(self.dim * rows_per_task))
-            .for_each(|(o, xi)| {
+        out.par_chunks_mut(self.out_dim * rows_per_task).zip(x.par_chunks(self.dim * rows_per_task)).for_each(
+            |(o, xi)| {
                 for (orow, xrow) in o.chunks_mut(self.out_dim).zip(xi.chunks(self.dim)) {
                     self.expand_row(xrow, orow);
                 }
-            });
+            },
+        );
     }
 
     /// Expands every row of `x` into a new row-major `n x out_dim` vector of
     /// the same sample type, in parallel. Fails on NaN/inf or a wrong width.
     pub fn expand<T: Sample>(&self, x: View<'_, T>) -> Result<Vec<T>> {
         if x.ncols() != self.dim {
-            return Err(SfaError::ShapeMismatch {
-                what: "number of features",
-                expected: self.dim,
-                got: x.ncols(),
-            });
+            return Err(SfaError::ShapeMismatch { what: "number of features", expected: self.dim, got: x.ncols() });
         }
         x.check_finite("input")?;
         let n = x.nrows();
         let od = self.out_dim;
-        let mut out = crate::memory::filled(
-            n.checked_mul(od).unwrap_or(usize::MAX),
-            T::from_f64(0.0),
-            || format!("the expansion of {n} rows to {od} terms"),
-        )?;
+        let mut out = crate::memory::filled(n.checked_mul(od).unwrap_or(usize::MAX), T::from_f64(0.0), || {
+            format!("the expansion of {n} rows to {od} terms")
+        })?;
         let rows_per_task = ((1 << 14) / od).max(1);
-        out.par_chunks_mut(od * rows_per_task)
-            .enumerate()
-            .for_each_init(
-                || (vec![0.0; self.dim], vec![0.0; od]),
-                |(xr, er), (c, o)| {
-                    let r0 = c * rows_per_task;
-                    for (k, orow) in o.chunks_mut(od).enumerate() {
-                        x.row_into(r0 + k, None, xr);
-                        self.expand_row(xr, er);
-                        for (d, &s) in orow.iter_mut().zip(er.iter()) {
-                            *d = T::from_f64(s);
-                        }
+        out.par_chunks_mut(od * rows_per_task).enumerate().for_each_init(
+            || (vec![0.0; self.dim], vec![0.0; od]),
+            |(xr, er), (c, o)| {
+                let r0 = c * rows_per_task;
+                for (k, orow) in o.chunks_mut(od).enumerate() {
+                    x.row_into(r0 + k, None, xr);
+                    self.expand_row(xr, er);
+                    for (d, &s) in orow.iter_mut().zip(er.iter()) {
+                        *d = T::from_f64(s);
                     }
-                },
-            );
+                }
+            },
+        );
         Ok(out)
     }
 
@@ -238,10 +219,8 @@ mod tests {
     fn order_is_documented_order() {
         let e = Expansion::new(3, 2).unwrap();
         let m = e.monomials();
-        let want: Vec<Vec<usize>> = vec![
-            vec![0], vec![1], vec![2],
-            vec![0, 0], vec![0, 1], vec![0, 2], vec![1, 1], vec![1, 2], vec![2, 2],
-        ];
+        let want: Vec<Vec<usize>> =
+            vec![vec![0], vec![1], vec![2], vec![0, 0], vec![0, 1], vec![0, 2], vec![1, 1], vec![1, 2], vec![2, 2]];
         assert_eq!(m, want);
         let x = [2.0, 3.0, 5.0];
         let mut out = vec![0.0; 9];

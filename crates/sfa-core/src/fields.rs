@@ -107,10 +107,9 @@ impl Field {
 
     pub(crate) fn compact(self, f32_storage: bool) -> Field {
         match (self.data, f32_storage) {
-            (FieldData::F64(v), true) => Field {
-                data: FieldData::F32(v.into_iter().map(|x| x as f32).collect()),
-                ..self
-            },
+            (FieldData::F64(v), true) => {
+                Field { data: FieldData::F32(v.into_iter().map(|x| x as f32).collect()), ..self }
+            }
             (data, _) => Field { data, ..self },
         }
     }
@@ -146,9 +145,8 @@ pub(crate) fn periodic_patches(
                 for m in 0..g.rf_w {
                     let col = (o + m * dilation) % period;
                     match below {
-                        None => p[w..w + c].copy_from_slice(
-                            &image[(src_row * period + col) * c..(src_row * period + col + 1) * c],
-                        ),
+                        None => p[w..w + c]
+                            .copy_from_slice(&image[(src_row * period + col) * c..(src_row * period + col + 1) * c]),
                         Some(f) => {
                             let i = f.idx[col];
                             debug_assert!(i != usize::MAX, "offset {col} missing below");
@@ -165,7 +163,13 @@ pub(crate) fn periodic_patches(
 
 /// Layer `l`'s periodic field of one image, from the image (l = 0) or the
 /// field of layer `l - 1`.
-pub(crate) fn layer_field(net: &Network, rot: &Rotation, l: usize, image: &[f64], below: Option<&Field>) -> Result<Field> {
+pub(crate) fn layer_field(
+    net: &Network,
+    rot: &Rotation,
+    l: usize,
+    image: &[f64],
+    below: Option<&Field>,
+) -> Result<Field> {
     let geom = net.geometry();
     let t = cum_strides(geom);
     let g = &geom[l];
@@ -324,9 +328,7 @@ pub(crate) fn fast_graph(
 pub(crate) fn check_pairs(pairs: &[(usize, usize, f64)], n: usize) -> Result<()> {
     for (e, &(a, b, w)) in pairs.iter().enumerate() {
         if a >= n || b >= n {
-            return Err(SfaError::InvalidArgument(format!(
-                "pair {e} ({a}, {b}) names an image beyond the {n} given"
-            )));
+            return Err(SfaError::InvalidArgument(format!("pair {e} ({a}, {b}) names an image beyond the {n} given")));
         }
         if !(w.is_finite() && w >= 0.0) {
             return Err(SfaError::InvalidArgument(format!(

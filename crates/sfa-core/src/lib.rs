@@ -19,10 +19,10 @@
 
 pub mod closures;
 pub mod error;
-mod fields;
-mod moments;
 pub mod expansion;
+mod fields;
 pub mod memory;
+mod moments;
 pub mod network;
 pub mod node;
 mod periodic;
@@ -37,15 +37,15 @@ pub mod view;
 pub use closures::LoopClosures;
 pub use error::{Result, SfaError};
 pub use expansion::{expand, expanded_dim, Expansion};
-pub use node::{beta_values, NodeConfig, NodeState, SfaNode, SolutionState, StageState};
-pub use solve::{solve, solve_up_to, GeneralizedEigen, DEFAULT_TOL};
-pub use stats::{Accumulator, AccumulatorState};
-pub use view::{Sample, View};
 pub use network::{LayerGeometry, LayerSpec, Network, NetworkSpec};
+pub use node::{beta_values, NodeConfig, NodeState, SfaNode, SolutionState, StageState};
 pub use pixel::{Batch, Pixel, Pixels};
 pub use rotation::{transform_rotations, Rotation, TrainingPath};
+pub use solve::{solve, solve_up_to, GeneralizedEigen, DEFAULT_TOL};
+pub use stats::{Accumulator, AccumulatorState};
 pub use trainer::LayerTrainer;
 pub use training::{
     fit, BatchSource, CacheDecision, CachePolicy, FitOptions, FitReport, InMemory, Progress, ProgressEvent,
     SpatialPairs,
 };
+pub use view::{Sample, View};

@@ -38,9 +38,7 @@ pub fn explicit_limit() -> Option<usize> {
 
 fn physical_memory() -> usize {
     static PHYS: OnceLock<usize> = OnceLock::new();
-    *PHYS.get_or_init(|| {
-        read_kib("/proc/meminfo", "MemTotal:").unwrap_or(usize::MAX / 1024).saturating_mul(1024)
-    })
+    *PHYS.get_or_init(|| read_kib("/proc/meminfo", "MemTotal:").unwrap_or(usize::MAX / 1024).saturating_mul(1024))
 }
 
 /// The value in KiB after `key` in a `/proc` file of "Key: value kB" lines.
@@ -116,11 +114,7 @@ pub fn filled<T: Clone>(n: usize, value: T, what: impl FnOnce() -> String) -> Re
     let bytes = bytes_of(std::mem::size_of::<T>(), &[n]);
     check(&mut name, bytes)?;
     let mut v = Vec::new();
-    v.try_reserve_exact(n).map_err(|_| SfaError::TooLarge {
-        what: name(),
-        bytes,
-        limit: limit(),
-    })?;
+    v.try_reserve_exact(n).map_err(|_| SfaError::TooLarge { what: name(), bytes, limit: limit() })?;
     v.resize(n, value);
     Ok(v)
 }

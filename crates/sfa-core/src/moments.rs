@@ -64,7 +64,14 @@ pub(crate) fn syrk_add(dst: &mut Mat<f64>, rows: &[f64], n: usize, d: usize) {
 
 /// Mixed precision: `dst += rows^T rows` with the block's products formed in
 /// f32 (`tmp` holds the block result) and added into the f64 sums.
-pub(crate) fn syrk_add_mixed(dst: &mut Mat<f64>, rows: &[f64], n: usize, d: usize, buf: &mut Vec<f32>, tmp: &mut Mat<f32>) {
+pub(crate) fn syrk_add_mixed(
+    dst: &mut Mat<f64>,
+    rows: &[f64],
+    n: usize,
+    d: usize,
+    buf: &mut Vec<f32>,
+    tmp: &mut Mat<f32>,
+) {
     if n == 0 {
         return;
     }
@@ -122,13 +129,7 @@ impl Moments {
     pub(crate) fn zeros(d: usize, kind: Kind) -> Self {
         let ds = if kind.samples() { d } else { 0 };
         let dp = if kind.pairs() { d } else { 0 };
-        Moments {
-            sxx: Mat::zeros(ds, ds),
-            sdd: Mat::zeros(dp, dp),
-            sum: vec![0.0; d],
-            sum_d: vec![0.0; d],
-            n_pairs: 0,
-        }
+        Moments { sxx: Mat::zeros(ds, ds), sdd: Mat::zeros(dp, dp), sum: vec![0.0; d], sum_d: vec![0.0; d], n_pairs: 0 }
     }
 
     /// No moments at all (nothing to add).
@@ -153,7 +154,10 @@ pub(crate) fn add_lower(dst: &mut Mat<f64>, src: &Mat<f64>) {
     }
     debug_assert_eq!(dst.nrows(), d);
     for j in 0..d {
-        let (dc, sc) = (dst.col_mut(j).try_as_col_major_mut().expect("contiguous"), src.col(j).try_as_col_major().expect("contiguous"));
+        let (dc, sc) = (
+            dst.col_mut(j).try_as_col_major_mut().expect("contiguous"),
+            src.col(j).try_as_col_major().expect("contiguous"),
+        );
         dc.as_slice_mut()[j..].iter_mut().zip(&sc.as_slice()[j..]).for_each(|(a, b)| *a += b);
     }
 }
@@ -178,7 +182,14 @@ pub(crate) const MAX_PARTS: usize = 16;
 /// of the sums depend on `n` and `d` only, so the result is the same for
 /// every thread count. (Splitting the long row dimension beats splitting
 /// the small `d x d` output; measured in `docs/benchmarks.md`.)
-pub(crate) fn parallel_moments<F>(n: usize, d: usize, kind: Kind, mixed: bool, what: &'static str, fill: F) -> Result<Moments>
+pub(crate) fn parallel_moments<F>(
+    n: usize,
+    d: usize,
+    kind: Kind,
+    mixed: bool,
+    what: &'static str,
+    fill: F,
+) -> Result<Moments>
 where
     F: Fn(usize, usize, &mut [f64], &mut [f64], &mut [f64], &mut [f64]) -> Filled + Sync,
 {
@@ -240,11 +251,7 @@ pub(crate) fn first_non_finite(row: &[f64]) -> Option<usize> {
 pub(crate) fn check_weights(w: Option<&[f64]>, n: usize, what: &'static str) -> Result<()> {
     if let Some(w) = w {
         if w.len() != n {
-            return Err(SfaError::ShapeMismatch {
-                what,
-                expected: n,
-                got: w.len(),
-            });
+            return Err(SfaError::ShapeMismatch { what, expected: n, got: w.len() });
         }
         if let Some(i) = w.iter().position(|v| !(v.is_finite() && *v >= 0.0)) {
             return Err(SfaError::InvalidArgument(format!(
@@ -255,4 +262,3 @@ pub(crate) fn check_weights(w: Option<&[f64]>, n: usize, what: &'static str) -> 
     }
     Ok(())
 }
-

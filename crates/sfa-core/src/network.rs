@@ -114,10 +114,7 @@ pub(crate) fn check_images<P: Pixel>(images: &[P], n: usize, size: usize, first:
         return Ok(());
     }
     if let Some(i) = images.iter().position(|v| !v.to_f64().is_finite()) {
-        return Err(SfaError::InvalidArgument(format!(
-            "image {} contains NaN or infinity",
-            first + i / size.max(1)
-        )));
+        return Err(SfaError::InvalidArgument(format!("image {} contains NaN or infinity", first + i / size.max(1))));
     }
     Ok(())
 }
@@ -184,9 +181,7 @@ impl NetworkSpec {
                 return bad(format!("{name}: RF size, stride and output dim must be positive"));
             }
             if rw > w || rh > h {
-                return bad(format!(
-                    "{name}: RF {rw}x{rh} is larger than its {w}x{h} input"
-                ));
+                return bad(format!("{name}: RF {rw}x{rh} is larger than its {w}x{h} input"));
             }
             if (w - rw) % sw != 0 || (h - rh) % sh != 0 {
                 return bad(format!(
@@ -401,10 +396,8 @@ impl Network {
         let size = h * w * c;
         check_images(images, n, size, 0)?;
         let m = self.n_outputs();
-        let outs: Vec<Result<Vec<f64>>> = images
-            .par_chunks(size)
-            .map(|img| self.field_below(img, self.geom.len()))
-            .collect();
+        let outs: Vec<Result<Vec<f64>>> =
+            images.par_chunks(size).map(|img| self.field_below(img, self.geom.len())).collect();
         let mut y = Vec::with_capacity(n * m);
         for o in outs {
             y.extend(o?);
@@ -414,10 +407,7 @@ impl Network {
 
     /// Node states, per layer (for saving).
     pub fn node_states(&self, with_statistics: bool) -> Vec<Vec<NodeState>> {
-        self.nodes
-            .iter()
-            .map(|ns| ns.iter().map(|n| n.state(with_statistics)).collect())
-            .collect()
+        self.nodes.iter().map(|ns| ns.iter().map(|n| n.state(with_statistics)).collect()).collect()
     }
 
     /// Rebuilds a network from its spec, node states and trained-layer count.
@@ -428,7 +418,12 @@ impl Network {
         }
         for (l, st) in states.iter().enumerate() {
             if st.len() != net.nodes[l].len() {
-                return Err(SfaError::InvalidState(format!("layer {} has {} nodes, expected {}", l + 1, st.len(), net.nodes[l].len())));
+                return Err(SfaError::InvalidState(format!(
+                    "layer {} has {} nodes, expected {}",
+                    l + 1,
+                    st.len(),
+                    net.nodes[l].len()
+                )));
             }
             let g = &net.geom[l];
             let want = NodeConfig {
@@ -455,7 +450,10 @@ impl Network {
             let nodes = st.iter().map(SfaNode::from_state).collect::<Result<Vec<_>>>()?;
             for n in &nodes {
                 if l < trained && !n.is_solved() {
-                    return Err(SfaError::InvalidState(format!("layer {} is marked trained but a node is not solved", l + 1)));
+                    return Err(SfaError::InvalidState(format!(
+                        "layer {} is marked trained but a node is not solved",
+                        l + 1
+                    )));
                 }
             }
             net.nodes[l] = nodes;

@@ -58,13 +58,7 @@ pub const MIXED_TOL_FLOOR: f64 = 1e-6;
 impl NodeConfig {
     /// Linear SFA with `n_components` outputs.
     pub fn linear(n_components: usize) -> Self {
-        NodeConfig {
-            n_components,
-            degree: 1,
-            reduce_to: None,
-            tol: DEFAULT_TOL,
-            mixed_precision: false,
-        }
+        NodeConfig { n_components, degree: 1, reduce_to: None, tol: DEFAULT_TOL, mixed_precision: false }
     }
 
     fn validate(&self) -> Result<()> {
@@ -76,10 +70,7 @@ impl NodeConfig {
             return Err(SfaError::InvalidArgument("reduce_to must be at least 1".into()));
         }
         if !(self.tol.is_finite() && self.tol >= 0.0 && self.tol < 1.0) {
-            return Err(SfaError::InvalidArgument(format!(
-                "tol must be in [0, 1), got {}",
-                self.tol
-            )));
+            return Err(SfaError::InvalidArgument(format!("tol must be in [0, 1), got {}", self.tol)));
         }
         Ok(())
     }
@@ -147,11 +138,7 @@ impl Stage {
 
     /// A stage with neither statistics nor a solution (for restoring).
     fn plan(input_dim: usize, degree: usize, n_out: usize) -> Result<Self> {
-        let expansion = if degree > 1 {
-            Some(Expansion::new(input_dim, degree)?)
-        } else {
-            None
-        };
+        let expansion = if degree > 1 { Some(Expansion::new(input_dim, degree)?) } else { None };
         Ok(Stage { degree, n_out, input_dim, expansion, acc: None, solution: None })
     }
 
@@ -223,9 +210,10 @@ impl Stage {
     }
 
     fn solve(&mut self, tol: f64, strict: bool) -> Result<()> {
-        let acc = self.acc.as_ref().ok_or_else(|| {
-            SfaError::NotFitted("this stage has no training statistics (they were not saved)".into())
-        })?;
+        let acc = self
+            .acc
+            .as_ref()
+            .ok_or_else(|| SfaError::NotFitted("this stage has no training statistics (they were not saved)".into()))?;
         let c = acc.covariance()?;
         let cd = acc.derivative_covariance()?;
         let tol = if acc.is_mixed_precision() { tol.max(MIXED_TOL_FLOOR) } else { tol };
@@ -242,10 +230,8 @@ impl Stage {
             solve::solve_up_to(cd.as_ref(), c.as_ref(), self.n_out.min(ed), tol)?
         };
         let n_out = g.values.len();
-        let projection = (0..ed)
-            .flat_map(|i| (0..n_out).map(move |j| (i, j)))
-            .map(|(i, j)| g.vectors[(i, j)])
-            .collect();
+        let projection =
+            (0..ed).flat_map(|i| (0..n_out).map(move |j| (i, j))).map(|(i, j)| g.vectors[(i, j)]).collect();
         self.solution = Some(SolutionState {
             mean: acc.mean()?,
             projection,
@@ -286,12 +272,7 @@ impl SfaNode {
     /// A new, untrained node.
     pub fn new(config: NodeConfig) -> Result<Self> {
         config.validate()?;
-        Ok(SfaNode {
-            config,
-            n_features: None,
-            stages: Vec::new(),
-            training_stage: 0,
-        })
+        Ok(SfaNode { config, n_features: None, stages: Vec::new(), training_stage: 0 })
     }
 
     /// The node's hyper-parameters.
@@ -578,20 +559,18 @@ impl SfaNode {
                 .n_out
         };
         let mut out = vec![0.0; n * width];
-        out.par_chunks_mut(TASK_ROWS * width)
-            .enumerate()
-            .for_each(|(c, o)| {
-                let r0 = c * TASK_ROWS;
-                let nr = o.len() / width.max(1);
-                let mut cur = vec![0.0; nr * d];
-                for (k, row) in cur.chunks_mut(d).enumerate() {
-                    x.row_into(r0 + k, None, row);
-                }
-                for st in &self.stages[from..upto] {
-                    cur = st.apply(&cur, nr);
-                }
-                o.copy_from_slice(&cur);
-            });
+        out.par_chunks_mut(TASK_ROWS * width).enumerate().for_each(|(c, o)| {
+            let r0 = c * TASK_ROWS;
+            let nr = o.len() / width.max(1);
+            let mut cur = vec![0.0; nr * d];
+            for (k, row) in cur.chunks_mut(d).enumerate() {
+                x.row_into(r0 + k, None, row);
+            }
+            for st in &self.stages[from..upto] {
+                cur = st.apply(&cur, nr);
+            }
+            o.copy_from_slice(&cur);
+        });
         Ok(out)
     }
 
@@ -691,18 +670,12 @@ impl SfaNode {
 
     /// Total rank deficit over the stages (dropped covariance directions).
     pub fn rank_deficits(&self) -> Vec<usize> {
-        self.stages
-            .iter()
-            .map(|s| s.solution.as_ref().map_or(0, |x| x.dropped.len()))
-            .collect()
+        self.stages.iter().map(|s| s.solution.as_ref().map_or(0, |x| x.dropped.len())).collect()
     }
 
     /// Effective output count of each solved stage.
     pub fn stage_outputs(&self) -> Vec<usize> {
-        self.stages
-            .iter()
-            .map(|s| s.solution.as_ref().map_or(0, |x| x.n_out))
-            .collect()
+        self.stages.iter().map(|s| s.solution.as_ref().map_or(0, |x| x.n_out)).collect()
     }
 
     /// The training statistics of the stage in training.
@@ -725,11 +698,7 @@ impl SfaNode {
                     n_out: s.n_out,
                     input_dim: s.input_dim,
                     solution: s.solution.clone(),
-                    stats: if with_statistics {
-                        s.acc.as_ref().map(|a| a.state())
-                    } else {
-                        None
-                    },
+                    stats: if with_statistics { s.acc.as_ref().map(|a| a.state()) } else { None },
                 })
                 .collect(),
         }
@@ -757,11 +726,7 @@ impl SfaNode {
         for (i, ss) in st.stages.iter().enumerate() {
             let last = i + 1 == n_stages;
             let want_degree = if last { st.config.degree } else { 1 };
-            let want_out = if last {
-                st.config.n_components
-            } else {
-                st.config.reduce_to.unwrap_or(0)
-            };
+            let want_out = if last { st.config.n_components } else { st.config.reduce_to.unwrap_or(0) };
             if ss.degree != want_degree || ss.n_out != want_out || ss.input_dim != input_dim {
                 return bad(format!("stage {i} does not match the node's configuration"));
             }
@@ -802,7 +767,13 @@ impl SfaNode {
                     && sol.delta.len() == sol.n_out
                     && sol.rank.checked_add(sol.dropped.len()) == Some(ed)
                     && sol.n_out <= sol.rank
-                    && sol.mean.iter().chain(&sol.projection).chain(&sol.delta).chain(&sol.dropped).all(|v| v.is_finite());
+                    && sol
+                        .mean
+                        .iter()
+                        .chain(&sol.projection)
+                        .chain(&sol.delta)
+                        .chain(&sol.dropped)
+                        .all(|v| v.is_finite());
                 if !ok {
                     return bad(format!("stage {i} solution has inconsistent shapes or values"));
                 }
@@ -822,10 +793,7 @@ impl SfaNode {
 /// Delta to beta: `beta = sqrt(Delta) / (2 pi)` (thesis section 7.2.1),
 /// Delta clipped at 0 against rounding.
 pub fn beta_values(delta: &[f64]) -> Vec<f64> {
-    delta
-        .iter()
-        .map(|d| d.max(0.0).sqrt() / (2.0 * std::f64::consts::PI))
-        .collect()
+    delta.iter().map(|d| d.max(0.0).sqrt() / (2.0 * std::f64::consts::PI)).collect()
 }
 
 /// A node is moved into worker threads (GIL-free calls, parallel layers).

@@ -69,9 +69,7 @@ pub(crate) fn plan(geom: &LayerGeometry, mult: &[f64], pmult: &[f64]) -> Option<
     if w == 0 || pmult.len() != w {
         return None;
     }
-    let g = (0..w)
-        .filter(|&o| mult[o] > 0.0 || pmult[o] > 0.0)
-        .fold(w, gcd);
+    let g = (0..w).filter(|&o| mult[o] > 0.0 || pmult[o] > 0.0).fold(w, gcd);
     let lattice = (0..w).step_by(g);
     let w_max = lattice.clone().map(|o| mult[o]).fold(0.0, f64::max);
     let p_max = lattice.clone().map(|o| pmult[o]).fold(0.0, f64::max);
@@ -94,7 +92,16 @@ pub(crate) fn plan(geom: &LayerGeometry, mult: &[f64], pmult: &[f64]) -> Option<
     let rows = |n: usize| n as f64 * d * d / 2.0;
     let structured = lag + rows(short_samples.len() + short_pairs.len());
     let plain = rows(n_samples + n_pairs);
-    (structured < 0.75 * plain).then_some(Plan { g, w_max, p_max, short_samples, short_pairs, n_samples, n_pairs, period: w })
+    (structured < 0.75 * plain).then_some(Plan {
+        g,
+        w_max,
+        p_max,
+        short_samples,
+        short_pairs,
+        n_samples,
+        n_pairs,
+        period: w,
+    })
 }
 
 /// One RF row's columns, `(w + rf_w - 1) x q` row-major, wrapped around
@@ -151,10 +158,7 @@ struct LatticeSums {
 impl LatticeSums {
     fn zeros(geom: &LayerGeometry, g: usize) -> Self {
         let q = geom.rf_h * geom.in_c;
-        LatticeSums {
-            h: (0..g).map(|_| Mat::zeros(q, geom.rf_w * q)).collect(),
-            s: vec![vec![0.0; q]; g],
-        }
+        LatticeSums { h: (0..g).map(|_| Mat::zeros(q, geom.rf_w * q)).collect(), s: vec![vec![0.0; q]; g] }
     }
 
     fn add(&mut self, o: &LatticeSums) {
@@ -300,7 +304,12 @@ pub(crate) fn lattice_image(
 /// [`LatticeImage`]s, all under one plan and one `reference`), as one
 /// accumulator: the lattice sums are added up and assembled once, and the
 /// correction rows of all images are accumulated at once.
-pub(crate) fn lattice_moments(geom: &LayerGeometry, images: &[LatticeImage], reference: &[f64], mixed: bool) -> Result<Accumulator> {
+pub(crate) fn lattice_moments(
+    geom: &LayerGeometry,
+    images: &[LatticeImage],
+    reference: &[f64],
+    mixed: bool,
+) -> Result<Accumulator> {
     let (c, d) = (geom.in_c, geom.in_dim);
     let plan = &images.first().ok_or_else(|| SfaError::InvalidArgument("no lattice images".into()))?.plan;
     let g = plan.g;

@@ -89,14 +89,9 @@ fn solve_impl(a: MatRef<'_, f64>, b: MatRef<'_, f64>, n: usize, tol: f64, strict
     }
     // The whitening, the reduced problem and the eigen workspaces: about
     // six d x d matrices at once.
-    crate::memory::check(
-        || format!("the eigenproblem of {d} dimensions"),
-        crate::memory::bytes_of(48, &[d, d]),
-    )?;
+    crate::memory::check(|| format!("the eigenproblem of {d} dimensions"), crate::memory::bytes_of(48, &[d, d]))?;
     if !(tol.is_finite() && tol >= 0.0 && tol < 1.0) {
-        return Err(SfaError::InvalidArgument(format!(
-            "tol must be in [0, 1), got {tol}"
-        )));
+        return Err(SfaError::InvalidArgument(format!("tol must be in [0, 1), got {tol}")));
     }
     if n == 0 || n > d {
         return Err(SfaError::InvalidArgument(format!(
@@ -117,12 +112,7 @@ fn solve_impl(a: MatRef<'_, f64>, b: MatRef<'_, f64>, n: usize, tol: f64, strict
     let (s, u) = eigh(b, "covariance")?;
     let smax = s.last().copied().unwrap_or(0.0);
     if !(smax > 0.0) {
-        return Err(SfaError::RankDeficient {
-            rank: 0,
-            requested: n,
-            dim: d,
-            tol,
-        });
+        return Err(SfaError::RankDeficient { rank: 0, requested: n, dim: d, tol });
     }
     let thresh = tol * smax;
     let keep: Vec<usize> = (0..d).filter(|&i| s[i] > thresh).collect();
@@ -130,12 +120,7 @@ fn solve_impl(a: MatRef<'_, f64>, b: MatRef<'_, f64>, n: usize, tol: f64, strict
     let r = keep.len();
     let n = if strict { n } else { n.min(r) };
     if r < n || r == 0 {
-        return Err(SfaError::RankDeficient {
-            rank: r,
-            requested: n,
-            dim: d,
-            tol,
-        });
+        return Err(SfaError::RankDeficient { rank: r, requested: n, dim: d, tol });
     }
     // Whitening matrix W = U_r S_r^{-1/2}, dim x r.
     let w = Mat::from_fn(d, r, |i, k| u[(i, keep[k])] / s[keep[k]].sqrt());
@@ -161,10 +146,5 @@ fn solve_impl(a: MatRef<'_, f64>, b: MatRef<'_, f64>, n: usize, tol: f64, strict
             }
         }
     }
-    Ok(GeneralizedEigen {
-        values: l[..n].to_vec(),
-        vectors: p,
-        rank: r,
-        dropped,
-    })
+    Ok(GeneralizedEigen { values: l[..n].to_vec(), vectors: p, rank: r, dropped })
 }

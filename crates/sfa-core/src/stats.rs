@@ -74,16 +74,14 @@ pub struct AccumulatorState {
 mod batch;
 
 pub use crate::moments::set_block_rows;
-pub use batch::{GraphPart, RowMap};
 use crate::moments::*;
+pub use batch::{GraphPart, RowMap};
 
 impl Accumulator {
     /// An empty accumulator for `dim`-dimensional samples.
     pub fn new(dim: usize) -> Result<Self> {
         if dim == 0 {
-            return Err(SfaError::InvalidArgument(
-                "statistics need at least one feature".into(),
-            ));
+            return Err(SfaError::InvalidArgument("statistics need at least one feature".into()));
         }
         let what = || format!("statistics of {dim} features (two {dim} x {dim} matrices)");
         crate::memory::check(what, crate::memory::bytes_of(16, &[dim, dim]))?;
@@ -195,11 +193,7 @@ impl Accumulator {
 
     fn check_width<T: Sample>(&self, x: &View<'_, T>) -> Result<()> {
         if x.ncols() != self.dim {
-            return Err(SfaError::ShapeMismatch {
-                what: "number of features",
-                expected: self.dim,
-                got: x.ncols(),
-            });
+            return Err(SfaError::ShapeMismatch { what: "number of features", expected: self.dim, got: x.ncols() });
         }
         Ok(())
     }
@@ -242,10 +236,7 @@ impl Accumulator {
         let d = self.dim;
         let shift = self.shift.as_deref().expect("shift set");
         // The carried sample, centred like the others.
-        let carry: Option<Vec<f64>> = self
-            .last
-            .as_ref()
-            .map(|l| l.iter().zip(shift).map(|(a, b)| a - b).collect());
+        let carry: Option<Vec<f64>> = self.last.as_ref().map(|l| l.iter().zip(shift).map(|(a, b)| a - b).collect());
         let m = parallel_moments(n, d, Kind::Both, self.mixed, "input", |s, e, cb, db, sum, sum_d| {
             let nr = e - s;
             for (k, i) in (s..e).enumerate() {
@@ -272,10 +263,7 @@ impl Accumulator {
             }
             for k in 1..nr {
                 let (prev, cur) = (&cb[(k - 1) * d..k * d], &cb[k * d..(k + 1) * d]);
-                db[nd * d..(nd + 1) * d]
-                    .iter_mut()
-                    .zip(cur.iter().zip(prev))
-                    .for_each(|(o, (c, p))| *o = c - p);
+                db[nd * d..(nd + 1) * d].iter_mut().zip(cur.iter().zip(prev)).for_each(|(o, (c, p))| *o = c - p);
                 nd += 1;
             }
             for row in db[..nd * d].chunks_exact(d) {
@@ -358,12 +346,7 @@ impl Accumulator {
     /// Adds derivative pairs `d_i = b_i - a_i` with optional non-negative
     /// weights (default 1). Touches neither the sample moments nor the open
     /// sequence.
-    pub fn add_pairs<T: Sample>(
-        &mut self,
-        a: View<'_, T>,
-        b: View<'_, T>,
-        weights: Option<&[f64]>,
-    ) -> Result<()> {
+    pub fn add_pairs<T: Sample>(&mut self, a: View<'_, T>, b: View<'_, T>, weights: Option<&[f64]>) -> Result<()> {
         self.check_width(&a)?;
         self.check_width(&b)?;
         if a.nrows() != b.nrows() {
@@ -442,7 +425,12 @@ impl Accumulator {
     }
 
     /// Moments of the indexed pairs `x[b] - x[a]` (checked), not yet added.
-    fn indexed_pair_moments<T: Sample>(&self, x: &View<'_, T>, edges: &[[usize; 2]], weights: Option<&[f64]>) -> Result<Moments> {
+    fn indexed_pair_moments<T: Sample>(
+        &self,
+        x: &View<'_, T>,
+        edges: &[[usize; 2]],
+        weights: Option<&[f64]>,
+    ) -> Result<Moments> {
         self.pair_moments(edges.len(), weights, |i, row, tmp| {
             let [ia, ib] = edges[i];
             x.row_into(ib, None, row);
@@ -515,10 +503,7 @@ impl Accumulator {
         let w = other.weight_sum;
         for i in 0..d {
             for j in 0..=i {
-                let v = other.sxx[(i, j)]
-                    + other.sum[i] * delta[j]
-                    + delta[i] * other.sum[j]
-                    + w * delta[i] * delta[j];
+                let v = other.sxx[(i, j)] + other.sum[i] * delta[j] + delta[i] * other.sum[j] + w * delta[i] * delta[j];
                 self.sxx[(i, j)] += v;
             }
             self.sum[i] += other.sum[i] + w * delta[i];
@@ -553,11 +538,7 @@ impl Accumulator {
         self.merge(other)?;
         if let Some((l, f)) = bridge {
             let d = self.dim;
-            self.add_pairs(
-                View::from_slice(&l, 1, d)?,
-                View::from_slice(&f, 1, d)?,
-                None,
-            )?;
+            self.add_pairs(View::from_slice(&l, 1, d)?, View::from_slice(&f, 1, d)?, None)?;
         }
         self.last = other.last.clone();
         Ok(())
@@ -567,11 +548,7 @@ impl Accumulator {
     pub fn mean(&self) -> Result<Vec<f64>> {
         self.require_samples(1)?;
         let shift = self.shift.as_ref().expect("shift set");
-        Ok(shift
-            .iter()
-            .zip(&self.sum)
-            .map(|(s, v)| s + v / self.weight_sum)
-            .collect())
+        Ok(shift.iter().zip(&self.sum).map(|(s, v)| s + v / self.weight_sum).collect())
     }
 
     fn require_samples(&self, needed: usize) -> Result<()> {
@@ -633,11 +610,7 @@ impl Accumulator {
     /// Weighted mean of the derivative (diagnostic: near zero on long series).
     pub fn derivative_mean(&self) -> Result<Vec<f64>> {
         if self.pair_weight_sum <= 0.0 {
-            return Err(SfaError::TooFewSamples {
-                what: "number of derivative pairs",
-                needed: 1,
-                got: 0,
-            });
+            return Err(SfaError::TooFewSamples { what: "number of derivative pairs", needed: 1, got: 0 });
         }
         Ok(self.sum_d.iter().map(|v| v / self.pair_weight_sum).collect())
     }
@@ -683,12 +656,9 @@ impl Accumulator {
         let Some(dd) = d.checked_mul(d) else {
             return bad(format!("dimension {d} is too large"));
         };
-        for (name, len, want) in [
-            ("sum", s.sum.len(), d),
-            ("sum_d", s.sum_d.len(), d),
-            ("sxx", s.sxx.len(), dd),
-            ("sdd", s.sdd.len(), dd),
-        ] {
+        for (name, len, want) in
+            [("sum", s.sum.len(), d), ("sum_d", s.sum_d.len(), d), ("sxx", s.sxx.len(), dd), ("sdd", s.sdd.len(), dd)]
+        {
             if len != want {
                 return bad(format!("{name} has {len} values, expected {want}"));
             }

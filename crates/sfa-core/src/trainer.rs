@@ -2,8 +2,8 @@
 //! ([`LayerTrainer`]); [`crate::training::fit`] drives it through every
 //! layer.
 
-use crate::error::{Result, SfaError};
 use crate::closures::LoopClosures;
+use crate::error::{Result, SfaError};
 use crate::fields::{
     check_pairs, cum_strides, fast_graph, interleaved_graph, layer_field, naive_graph, offset_set, Field, ImageGraph,
 };
@@ -32,7 +32,6 @@ struct SharedGraph {
     edges: Vec<[usize; 2]>,
     edge_weights: Vec<f64>,
 }
-
 
 /// Trains one layer of a network, pass by pass, on images streamed in
 /// chunks. Usage: for each pass (`n_passes()`), feed every image in order
@@ -150,9 +149,7 @@ impl LayerTrainer {
     /// Inherited by [`next_layer`](Self::next_layer).
     pub fn set_transition_weight(&mut self, w: f64) -> Result<()> {
         if !(w.is_finite() && w >= 0.0) {
-            return Err(SfaError::InvalidArgument(format!(
-                "transition_weight must be a finite number >= 0, got {w}"
-            )));
+            return Err(SfaError::InvalidArgument(format!("transition_weight must be a finite number >= 0, got {w}")));
         }
         self.transition_weight = w;
         Ok(())
@@ -171,12 +168,17 @@ impl LayerTrainer {
             let (h, _, ch) = net.input_shape();
             let size = h * self.rot.period * ch;
             if !c.is_empty() && c.image_size() != size {
-                return Err(SfaError::ShapeMismatch { what: "values per loop-closure partner image", expected: size, got: c.image_size() });
+                return Err(SfaError::ShapeMismatch {
+                    what: "values per loop-closure partner image",
+                    expected: size,
+                    got: c.image_size(),
+                });
             }
         }
         if self.images_seen > 0 || self.cache.is_some() || !self.building.is_empty() {
             return Err(SfaError::InvalidArgument(
-                "set loop closures before the first image of a pass (before the first pass with the field cache)".into(),
+                "set loop closures before the first image of a pass (before the first pass with the field cache)"
+                    .into(),
             ));
         }
         self.closures = closures.filter(|c| !c.is_empty());
@@ -245,10 +247,8 @@ impl LayerTrainer {
 
     /// Feeds the next pass from the cache (every cached image, in order).
     pub fn feed_cached(&mut self, net: &mut Network) -> Result<()> {
-        let cache = self
-            .cache
-            .take()
-            .ok_or_else(|| SfaError::InvalidArgument("this trainer has no cached fields".into()))?;
+        let cache =
+            self.cache.take().ok_or_else(|| SfaError::InvalidArgument("this trainer has no cached fields".into()))?;
         let partners = self.partner_cache.take();
         let closures = self.closures.clone();
         let (layer, rot) = (self.layer, self.rot);
@@ -341,7 +341,8 @@ impl LayerTrainer {
                                 Ok((interleaved_graph(gc, ga, w)?, fc, fa))
                             }
                             (TrainingPath::Naive, Some((a, w))) => {
-                                let (gc, ga) = (naive_graph(net_ref, &rot, img, layer)?, naive_graph(net_ref, &rot, a, layer)?);
+                                let (gc, ga) =
+                                    (naive_graph(net_ref, &rot, img, layer)?, naive_graph(net_ref, &rot, a, layer)?);
                                 Ok((interleaved_graph(gc, ga, w)?, None, None))
                             }
                         }
@@ -418,7 +419,11 @@ impl LayerTrainer {
     /// reserved leading rows (weight-0 samples that end one pair each);
     /// keeps this image's last views as the next tail and moves its
     /// lag-product statistics to `lattice`.
-    fn prepare_shared(&mut self, gr: ImageGraph, lattice: &mut Vec<crate::periodic::LatticeImage>) -> Result<SharedGraph> {
+    fn prepare_shared(
+        &mut self,
+        gr: ImageGraph,
+        lattice: &mut Vec<crate::periodic::LatticeImage>,
+    ) -> Result<SharedGraph> {
         let ns = gr.first.len();
         let d = gr.width;
         let mut rows = gr.rows;
@@ -565,7 +570,11 @@ impl LayerTrainer {
         check_pairs(pairs, n)?;
         if let Some(sh) = shifts {
             if sh.len() != pairs.len() {
-                return Err(SfaError::ShapeMismatch { what: "number of pair shifts", expected: pairs.len(), got: sh.len() });
+                return Err(SfaError::ShapeMismatch {
+                    what: "number of pair shifts",
+                    expected: pairs.len(),
+                    got: sh.len(),
+                });
             }
         }
         // Image b of every shifted pair, rolled, after the given images.
@@ -592,7 +601,9 @@ impl LayerTrainer {
                 .par_chunks(size)
                 .chain(rolled.par_chunks(size))
                 .map(|img| match path {
-                    TrainingPath::Fast => fast_graph(net_ref, &rot, &P::image_f64(img), layer, None, None).map(|(g, _)| g),
+                    TrainingPath::Fast => {
+                        fast_graph(net_ref, &rot, &P::image_f64(img), layer, None, None).map(|(g, _)| g)
+                    }
                     TrainingPath::Naive => naive_graph(net_ref, &rot, img, layer),
                 })
                 .collect();
@@ -621,7 +632,11 @@ impl LayerTrainer {
     ) -> Result<()> {
         if let Some(sh) = shifts {
             if sh.len() != pairs.len() {
-                return Err(SfaError::ShapeMismatch { what: "number of pair shifts", expected: pairs.len(), got: sh.len() });
+                return Err(SfaError::ShapeMismatch {
+                    what: "number of pair shifts",
+                    expected: pairs.len(),
+                    got: sh.len(),
+                });
             }
             let (step, w) = (self.rot.step, self.rot.period);
             if let Some(e) = sh.iter().position(|&x| x % w != 0 && (w % step != 0 || x % step != 0)) {
@@ -632,10 +647,8 @@ impl LayerTrainer {
                 )));
             }
         }
-        let cache = self
-            .cache
-            .take()
-            .ok_or_else(|| SfaError::InvalidArgument("this trainer has no cached fields".into()))?;
+        let cache =
+            self.cache.take().ok_or_else(|| SfaError::InvalidArgument("this trainer has no cached fields".into()))?;
         let result = (|| {
             check_pairs(pairs, cache.len())?;
             let (layer, rot) = (self.layer, self.rot);
@@ -749,7 +762,12 @@ impl LayerTrainer {
                     }
                     let edges: Vec<[usize; 2]> = (0..kv).map(|k| [k, kv + k]).collect();
                     let ew = vec![w; kv];
-                    node.partial_fit_graph(View::from_slice(&x, 2 * kv, d)?, Some(&vec![0.0; 2 * kv]), &edges, Some(&ew))
+                    node.partial_fit_graph(
+                        View::from_slice(&x, 2 * kv, d)?,
+                        Some(&vec![0.0; 2 * kv]),
+                        &edges,
+                        Some(&ew),
+                    )
                 })?;
             }
         }
@@ -766,13 +784,8 @@ impl LayerTrainer {
         let last = self.pass + 1 == n_passes;
         let layer = self.layer;
         let nodes = net.nodes_mut(layer);
-        let r: Result<()> = nodes.par_iter_mut().try_for_each(|node| {
-            if last {
-                node.ensure_solved()
-            } else {
-                node.finish_stage()
-            }
-        });
+        let r: Result<()> =
+            nodes.par_iter_mut().try_for_each(|node| if last { node.ensure_solved() } else { node.finish_stage() });
         r.map_err(|e| match e {
             SfaError::RankDeficient { rank, requested, dim, tol } => SfaError::InvalidArgument(format!(
                 "layer {}: {}",

@@ -16,12 +16,12 @@
 use crate::closures::LoopClosures;
 use crate::error::{Result, SfaError};
 use crate::fields::field_bytes;
-use std::sync::Arc;
 use crate::network::Network;
 use crate::pixel::{Batch, Pixel};
 use crate::rotation::{Rotation, TrainingPath};
 use crate::trainer::LayerTrainer;
 use crate::with_pixels;
+use std::sync::Arc;
 
 /// Where training images come from. Every pass reads all images, in the
 /// same order, as batches `n x height x period x channels` of any pixel
@@ -56,10 +56,7 @@ impl<'a, P: Pixel> InMemory<'a, P> {
     /// `n` images in one slice, handed out `batch` at a time (at least 1).
     pub fn new(images: &'a [P], n: usize, batch: usize) -> Result<Self> {
         if n == 0 || images.len() % n != 0 {
-            return Err(SfaError::InvalidArgument(format!(
-                "{} values do not split into {n} images",
-                images.len()
-            )));
+            return Err(SfaError::InvalidArgument(format!("{} values do not split into {n} images", images.len())));
         }
         Ok(InMemory { images, n, batch: batch.max(1) })
     }

@@ -54,9 +54,8 @@ unsafe impl<T: Sync> Sync for View<'_, T> {}
 impl<'a, T: Sample> View<'a, T> {
     /// A view of a C-contiguous (row-major) slice.
     pub fn from_slice(data: &'a [T], nrows: usize, ncols: usize) -> Result<Self> {
-        let need = nrows.checked_mul(ncols).ok_or_else(|| {
-            SfaError::InvalidArgument("array shape overflows usize".into())
-        })?;
+        let need =
+            nrows.checked_mul(ncols).ok_or_else(|| SfaError::InvalidArgument("array shape overflows usize".into()))?;
         if data.len() != need {
             return Err(SfaError::ShapeMismatch {
                 what: "slice length for the given shape",
@@ -64,14 +63,7 @@ impl<'a, T: Sample> View<'a, T> {
                 got: data.len(),
             });
         }
-        Ok(View {
-            ptr: data.as_ptr(),
-            nrows,
-            ncols,
-            row_stride: ncols as isize,
-            col_stride: 1,
-            _life: PhantomData,
-        })
+        Ok(View { ptr: data.as_ptr(), nrows, ncols, row_stride: ncols as isize, col_stride: 1, _life: PhantomData })
     }
 
     /// A view of raw strided memory (strides in elements, may be negative).
@@ -86,14 +78,7 @@ impl<'a, T: Sample> View<'a, T> {
         row_stride: isize,
         col_stride: isize,
     ) -> Self {
-        View {
-            ptr,
-            nrows,
-            ncols,
-            row_stride,
-            col_stride,
-            _life: PhantomData,
-        }
+        View { ptr, nrows, ncols, row_stride, col_stride, _life: PhantomData }
     }
 
     /// Number of rows (samples).
@@ -111,11 +96,7 @@ impl<'a, T: Sample> View<'a, T> {
     pub fn get(&self, i: usize, j: usize) -> T {
         debug_assert!(i < self.nrows && j < self.ncols);
         // SAFETY: in bounds by the construction contract.
-        unsafe {
-            *self
-                .ptr
-                .offset(i as isize * self.row_stride + j as isize * self.col_stride)
-        }
+        unsafe { *self.ptr.offset(i as isize * self.row_stride + j as isize * self.col_stride) }
     }
 
     /// Rows `start..end` as a view.
@@ -141,9 +122,7 @@ impl<'a, T: Sample> View<'a, T> {
     fn row_slice(&self, i: usize) -> Option<&'a [T]> {
         if self.col_stride == 1 || self.ncols <= 1 {
             // SAFETY: contiguous row of ncols valid elements.
-            Some(unsafe {
-                std::slice::from_raw_parts(self.ptr.offset(i as isize * self.row_stride), self.ncols)
-            })
+            Some(unsafe { std::slice::from_raw_parts(self.ptr.offset(i as isize * self.row_stride), self.ncols) })
         } else {
             None
         }
@@ -175,14 +154,13 @@ impl<'a, T: Sample> View<'a, T> {
     /// Returns the first non-finite element, if any (row, column).
     pub fn find_non_finite(&self) -> Option<(usize, usize)> {
         use rayon::prelude::*;
-        (0..self.nrows).into_par_iter().find_first(|&i| {
-            (0..self.ncols).any(|j| !self.get(i, j).to_f64().is_finite())
-        }).map(|i| {
-            let j = (0..self.ncols)
-                .find(|&j| !self.get(i, j).to_f64().is_finite())
-                .unwrap_or(0);
-            (i, j)
-        })
+        (0..self.nrows)
+            .into_par_iter()
+            .find_first(|&i| (0..self.ncols).any(|j| !self.get(i, j).to_f64().is_finite()))
+            .map(|i| {
+                let j = (0..self.ncols).find(|&j| !self.get(i, j).to_f64().is_finite()).unwrap_or(0);
+                (i, j)
+            })
     }
 
     /// Fails with [`SfaError::NonFinite`] if any element is NaN or infinite.

@@ -67,9 +67,7 @@ pub fn naive_stats(x: &[f64], n: usize, d: usize) -> (Vec<f64>, Mat<f64>, Mat<f6
         (0..n).map(|i| (x[i * d + a] - mean[a]) * (x[i * d + b] - mean[b])).sum::<f64>() / n as f64
     });
     let dcov = Mat::from_fn(d, d, |a, b| {
-        (1..n)
-            .map(|i| (x[i * d + a] - x[(i - 1) * d + a]) * (x[i * d + b] - x[(i - 1) * d + b]))
-            .sum::<f64>()
+        (1..n).map(|i| (x[i * d + a] - x[(i - 1) * d + a]) * (x[i * d + b] - x[(i - 1) * d + b])).sum::<f64>()
             / (n - 1) as f64
     });
     (mean, cov, dcov)

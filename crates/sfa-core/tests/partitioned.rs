@@ -8,7 +8,6 @@ use sfa_core::{
 };
 use std::sync::Arc;
 
-
 fn spec(v: usize, c: usize, sharing: bool) -> NetworkSpec {
     let n_w1 = (v - 4) / 2 + 1;
     NetworkSpec {
@@ -111,7 +110,10 @@ fn partitions_reproduce_fit() {
             assert!(net.is_trained());
             let e = weights_differ(&reference, &net);
             assert!(e < 1e-9, "sharing={sharing} {path:?} tw={tw} lag={lag} cuts={cuts:?}: weights differ by {e}");
-            let (ya, yb) = (reference.transform(&imgs[..5 * 6 * w * c], 5).unwrap(), net.transform(&imgs[..5 * 6 * w * c], 5).unwrap());
+            let (ya, yb) = (
+                reference.transform(&imgs[..5 * 6 * w * c], 5).unwrap(),
+                net.transform(&imgs[..5 * 6 * w * c], 5).unwrap(),
+            );
             assert!(max_rel(&ya, &yb) < 1e-9);
         }
     }
@@ -204,9 +206,13 @@ fn fit_partitioned(
                 tr.set_lag_products(p.lag);
                 let own: Vec<&(usize, usize, f64)> = closures.iter().filter(|c| (a..b).contains(&c.1)).collect();
                 if !own.is_empty() {
-                    let partners: Vec<f64> = own.iter().flat_map(|c| imgs[c.0 * size..(c.0 + 1) * size].to_vec()).collect();
-                    let lc = LoopClosures::new(own.iter().map(|c| c.1 - a).collect(), own.iter().map(|c| c.2).collect(),
-                                               partners)?;
+                    let partners: Vec<f64> =
+                        own.iter().flat_map(|c| imgs[c.0 * size..(c.0 + 1) * size].to_vec()).collect();
+                    let lc = LoopClosures::new(
+                        own.iter().map(|c| c.1 - a).collect(),
+                        own.iter().map(|c| c.2).collect(),
+                        partners,
+                    )?;
                     tr.set_loop_closures(&local, Some(Arc::new(lc)))?;
                 }
                 tr.set_reference_image(&local, &imgs[..size])?;
@@ -285,9 +291,18 @@ fn closures_and_pairs_split_over_partitions_reproduce_fit() {
         assert!(weights_differ(&reference, &net) < 1e-5, "{path:?}: {}", weights_differ(&reference, &net));
         let counts = |net: &Network| -> Vec<(u64, u64)> {
             (0..net.n_layers())
-                .flat_map(|l| net.nodes(l).iter().flat_map(|node| {
-                    node.state(true).stages.iter().map(|s| s.stats.as_ref().map_or((0, 0), |a| (a.n_samples, a.n_pairs))).collect::<Vec<_>>()
-                }).collect::<Vec<_>>())
+                .flat_map(|l| {
+                    net.nodes(l)
+                        .iter()
+                        .flat_map(|node| {
+                            node.state(true)
+                                .stages
+                                .iter()
+                                .map(|s| s.stats.as_ref().map_or((0, 0), |a| (a.n_samples, a.n_pairs)))
+                                .collect::<Vec<_>>()
+                        })
+                        .collect::<Vec<_>>()
+                })
                 .collect()
         };
         assert_eq!(counts(&reference), counts(&net), "{path:?}");

@@ -19,7 +19,14 @@ fn fit_with(net: &mut Network, imgs: &[f64], n: usize, opts: &FitOptions) -> Res
     fit(net, &mut InMemory::new(imgs, n, 16)?, opts, &mut |_| Ok(()))
 }
 
-fn train(net: &mut Network, rot: Rotation, imgs: &[f64], n: usize, path: TrainingPath, cache: bool) -> Result<FitReport> {
+fn train(
+    net: &mut Network,
+    rot: Rotation,
+    imgs: &[f64],
+    n: usize,
+    path: TrainingPath,
+    cache: bool,
+) -> Result<FitReport> {
     fit_with(net, imgs, n, &options(rot, path, cache, 1.0))
 }
 
@@ -34,7 +41,6 @@ fn train_weighted(
 ) -> Result<FitReport> {
     fit_with(net, imgs, n, &options(rot, path, cache, tw))
 }
-
 
 fn spec(v: usize, c: usize, stride: usize, sharing: bool) -> NetworkSpec {
     let n_w1 = (v - 4) / stride + 1;
@@ -335,9 +341,18 @@ fn lag_products_mixed_precision_close_to_plain() {
 
 /// Trains every layer with the spatial pairs fed in every pass (from the
 /// cache when the pass reads it).
-fn train_pairs(net: &mut Network, rot: Rotation, imgs: &[f64], n: usize, path: TrainingPath, cache: bool, pairs: &[(usize, usize, f64)]) {
+fn train_pairs(
+    net: &mut Network,
+    rot: Rotation,
+    imgs: &[f64],
+    n: usize,
+    path: TrainingPath,
+    cache: bool,
+    pairs: &[(usize, usize, f64)],
+) {
     let mut opts = options(rot, path, cache, 1.0);
-    opts.pairs = Some(SpatialPairs { pairs: pairs.to_vec(), shifts: None, layers: (0..net.n_layers()).collect(), chunk: 7 });
+    opts.pairs =
+        Some(SpatialPairs { pairs: pairs.to_vec(), shifts: None, layers: (0..net.n_layers()).collect(), chunk: 7 });
     fit_with(net, imgs, n, &opts).unwrap();
 }
 
@@ -473,7 +488,8 @@ fn shifted_pairs_from_cache_equal_rolled_images() {
     // fit: streamed passes roll image b of each pair, cached passes read
     // the cached fields at shifted offsets.
     let mut opts = options(rot, TrainingPath::Fast, true, 1.0);
-    opts.pairs = Some(SpatialPairs { pairs: pairs.clone(), shifts: Some(shifts.clone()), layers: vec![0, 1, 2], chunk: 5 });
+    opts.pairs =
+        Some(SpatialPairs { pairs: pairs.clone(), shifts: Some(shifts.clone()), layers: vec![0, 1, 2], chunk: 5 });
     let mut cached_passes = 0;
     let mut count = |p: &Progress| {
         cached_passes += usize::from(p.cached && p.event == ProgressEvent::Start);
@@ -505,7 +521,8 @@ fn u8_pixels_equal_f64() {
     fit(&mut b, &mut InMemory::new(&as_f64, n, 6).unwrap(), &opts, &mut |_| Ok(())).unwrap();
     assert_eq!(projections(&a), projections(&b));
     assert_eq!(a.transform(&bytes, n).unwrap(), b.transform(&as_f64, n).unwrap());
-    let (ra, rb) = (transform_rotations(&a, rot, &bytes, n).unwrap(), transform_rotations(&b, rot, &as_f64, n).unwrap());
+    let (ra, rb) =
+        (transform_rotations(&a, rot, &bytes, n).unwrap(), transform_rotations(&b, rot, &as_f64, n).unwrap());
     assert_eq!(ra, rb);
 }
 
@@ -549,7 +566,11 @@ fn fit_progress_cache_plan_and_errors() {
     // A failing progress callback ends training with its error.
     let mut net = base.clone();
     let e = fit(&mut net, &mut InMemory::new(&imgs, n, 8).unwrap(), &opts, &mut |p: &Progress| {
-        if p.layer == 1 { Err(SfaError::Interrupted("stop".into())) } else { Ok(()) }
+        if p.layer == 1 {
+            Err(SfaError::Interrupted("stop".into()))
+        } else {
+            Ok(())
+        }
     })
     .unwrap_err();
     assert_eq!(e, SfaError::Interrupted("stop".into()));
@@ -588,12 +609,9 @@ fn loop_closures_fast_equals_naive() {
             }
         }
     }
-    let lc = LoopClosures::new(
-        closures.iter().map(|x| x.1).collect(),
-        closures.iter().map(|x| x.3).collect(),
-        partners,
-    )
-    .unwrap();
+    let lc =
+        LoopClosures::new(closures.iter().map(|x| x.1).collect(), closures.iter().map(|x| x.3).collect(), partners)
+            .unwrap();
     for (v, stride, step) in [(24, 2, 3), (16, 3, 5), (24, 4, 4)] {
         let rot = Rotation { step, period: w };
         let base = Network::new(spec(v, c, stride, true)).unwrap();
@@ -614,7 +632,10 @@ fn loop_closures_fast_equals_naive() {
                 for (sa, sb) in a.stages.iter().zip(&b.stages) {
                     let (pa, pb) = (sa.solution.as_ref().unwrap(), sb.solution.as_ref().unwrap());
                     let e = max_rel(&pa.delta, &pb.delta);
-                    assert!(e < 1e-9, "v={v} stride={stride} step={step} cache={cache} layer {l}: delta differs by {e}");
+                    assert!(
+                        e < 1e-9,
+                        "v={v} stride={stride} step={step} cache={cache} layer {l}: delta differs by {e}"
+                    );
                 }
             }
         }

@@ -38,7 +38,8 @@ fn fit(x: &[f64], n: usize, d: usize, cfg: NodeConfig) -> SfaNode {
 fn wiskott_sejnowski_toy_problem() {
     let n = 5000;
     let x = toy(n);
-    let node = fit(&x, n, 2, NodeConfig { n_components: 1, degree: 2, reduce_to: None, tol: 1e-10, mixed_precision: false });
+    let node =
+        fit(&x, n, 2, NodeConfig { n_components: 1, degree: 2, reduce_to: None, tol: 1e-10, mixed_precision: false });
     let y = node.transform(View::from_slice(&x, n, 2).unwrap()).unwrap();
     let s: Vec<f64> = (0..n).map(|i| (i as f64 / (n - 1) as f64 * 2.0 * std::f64::consts::PI).sin()).collect();
     assert!(corr(&y, &s).abs() > 0.99, "corr {}", corr(&y, &s));
@@ -153,7 +154,12 @@ fn chunked_partial_fit_equals_fit() {
 fn state_round_trip_is_bit_exact() {
     let (n, d) = (800, 4);
     let x = correlated(n, d, 17);
-    let node = fit(&x, n, d, NodeConfig { n_components: 3, degree: 2, reduce_to: Some(3), tol: 1e-10, mixed_precision: false });
+    let node = fit(
+        &x,
+        n,
+        d,
+        NodeConfig { n_components: 3, degree: 2, reduce_to: Some(3), tol: 1e-10, mixed_precision: false },
+    );
     let back = SfaNode::from_state(&node.state(true)).unwrap();
     assert_eq!(node.state(true), back.state(true));
     let v = View::from_slice(&x, n, d).unwrap();
@@ -166,8 +172,22 @@ fn state_round_trip_is_bit_exact() {
 #[test]
 fn bad_input_is_an_error_not_a_panic() {
     assert!(SfaNode::new(NodeConfig::linear(0)).is_err());
-    assert!(SfaNode::new(NodeConfig { n_components: 1, degree: 0, reduce_to: None, tol: 1e-10, mixed_precision: false }).is_err());
-    assert!(SfaNode::new(NodeConfig { n_components: 1, degree: 1, reduce_to: None, tol: f64::NAN, mixed_precision: false }).is_err());
+    assert!(SfaNode::new(NodeConfig {
+        n_components: 1,
+        degree: 0,
+        reduce_to: None,
+        tol: 1e-10,
+        mixed_precision: false
+    })
+    .is_err());
+    assert!(SfaNode::new(NodeConfig {
+        n_components: 1,
+        degree: 1,
+        reduce_to: None,
+        tol: f64::NAN,
+        mixed_precision: false
+    })
+    .is_err());
     let mut node = SfaNode::new(NodeConfig::linear(2)).unwrap();
     let x = [1.0, 2.0, 3.0];
     assert!(matches!(node.transform(View::from_slice(&x, 1, 3).unwrap()), Err(SfaError::NotFitted(_))));
@@ -212,14 +232,46 @@ fn a_batch_of_graphs_trains_a_node_as_the_graphs_one_by_one() {
         one.finish_stage().unwrap();
         batch.finish_stage().unwrap();
     }
-    let (ya, yb) = (one.transform(View::from_slice(&x, n, d).unwrap()).unwrap(), batch.transform(View::from_slice(&x, n, d).unwrap()).unwrap());
+    let (ya, yb) = (
+        one.transform(View::from_slice(&x, n, d).unwrap()).unwrap(),
+        batch.transform(View::from_slice(&x, n, d).unwrap()).unwrap(),
+    );
     let scale = ya.iter().fold(0.0f64, |m, v| m.max(v.abs()));
     let diff = ya.iter().zip(&yb).fold(0.0f64, |m, (a, b)| m.max((a - b).abs()));
     assert!(diff <= 1e-9 * scale, "outputs differ by {diff}");
     // the expansion overflows: a clear error, nothing added
     let huge = vec![1e200; 2 * d];
-    let ps = [GraphPart { x: View::from_slice(&huge, 2, d).unwrap(), weights: None, edges: &[[0, 1]], edge_weights: None }];
-    let mut fresh = SfaNode::new(NodeConfig { n_components: 1, degree: 2, reduce_to: None, tol: 1e-10, mixed_precision: false }).unwrap();
+    let ps =
+        [GraphPart { x: View::from_slice(&huge, 2, d).unwrap(), weights: None, edges: &[[0, 1]], edge_weights: None }];
+    let mut fresh =
+        SfaNode::new(NodeConfig { n_components: 1, degree: 2, reduce_to: None, tol: 1e-10, mixed_precision: false })
+            .unwrap();
     let err = fresh.partial_fit_graphs(0, &ps).unwrap_err();
     assert!(err.to_string().contains("overflows"), "{err}");
+}
+
+#[test]
+fn a_node_loaded_without_statistics_refuses_more_training() {
+    use sfa_core::stats::GraphPart;
+    let (n, d) = (400, 4);
+    let x = correlated(n, d, 23);
+    let node = fit(
+        &x,
+        n,
+        d,
+        NodeConfig { n_components: 3, degree: 2, reduce_to: Some(3), tol: 1e-10, mixed_precision: false },
+    );
+    let mut loaded = SfaNode::from_state(&node.state(false)).unwrap();
+    let edges: Vec<[usize; 2]> = (1..n).map(|i| [i - 1, i]).collect();
+    let part = |x| GraphPart { x, weights: None, edges: &edges, edge_weights: None };
+    // rows of stage 0 (raw input) and of stage 1 (the reduced rows): an error, never a panic
+    let raw = part(View::from_slice(&x, n, d).unwrap());
+    assert!(matches!(loaded.partial_fit_graphs(0, &[raw]), Err(SfaError::NotFitted(_))));
+    let reduced = vec![0.5; n * 3];
+    let mid = part(View::from_slice(&reduced, n, 3).unwrap());
+    assert!(matches!(loaded.partial_fit_graphs(1, &[mid]), Err(SfaError::NotFitted(_))));
+    assert!(matches!(loaded.partial_fit(View::from_slice(&x, n, d).unwrap(), true), Err(SfaError::NotFitted(_))));
+    // the loaded node still transforms as the trained one
+    let v = View::from_slice(&x, n, d).unwrap();
+    assert_eq!(node.transform(v).unwrap(), loaded.transform(v).unwrap());
 }

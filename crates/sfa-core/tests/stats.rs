@@ -95,13 +95,24 @@ fn weights_equal_repetition() {
     let w: Vec<f64> = (0..n).map(|i| (i % 3) as f64).collect();
     let mut weighted = Accumulator::new(d).unwrap();
     weighted.add_samples(View::from_slice(&x, n, d).unwrap(), Some(&w)).unwrap();
-    weighted.add_pairs(View::from_slice(&x[..(n - 1) * d], n - 1, d).unwrap(), View::from_slice(&x[d..], n - 1, d).unwrap(), Some(&w[..n - 1])).unwrap();
+    weighted
+        .add_pairs(
+            View::from_slice(&x[..(n - 1) * d], n - 1, d).unwrap(),
+            View::from_slice(&x[d..], n - 1, d).unwrap(),
+            Some(&w[..n - 1]),
+        )
+        .unwrap();
     let mut rep = Accumulator::new(d).unwrap();
     for i in 0..n {
         for _ in 0..(i % 3) {
             rep.add_samples(View::from_slice(&x[i * d..(i + 1) * d], 1, d).unwrap(), None).unwrap();
             if i + 1 < n {
-                rep.add_pairs(View::from_slice(&x[i * d..(i + 1) * d], 1, d).unwrap(), View::from_slice(&x[(i + 1) * d..(i + 2) * d], 1, d).unwrap(), None).unwrap();
+                rep.add_pairs(
+                    View::from_slice(&x[i * d..(i + 1) * d], 1, d).unwrap(),
+                    View::from_slice(&x[(i + 1) * d..(i + 2) * d], 1, d).unwrap(),
+                    None,
+                )
+                .unwrap();
             }
         }
     }
@@ -203,14 +214,21 @@ fn mixed_precision_is_close_to_double() {
 
 /// Random graphs over `parts` blocks of rows: weights in [0, 2] (some 0),
 /// edges between random rows of the same block.
-fn random_graphs(x: &[f64], d: usize, sizes: &[usize], seed: u64) -> Vec<(usize, usize, Vec<f64>, Vec<[usize; 2]>, Vec<f64>)> {
+fn random_graphs(
+    x: &[f64],
+    d: usize,
+    sizes: &[usize],
+    seed: u64,
+) -> Vec<(usize, usize, Vec<f64>, Vec<[usize; 2]>, Vec<f64>)> {
     let mut r = common::Rng::new(seed);
     let mut start = 0;
     let mut out = Vec::new();
     for &n in sizes {
         let w: Vec<f64> = (0..n).map(|i| if i % 7 == 3 { 0.0 } else { 1.0 + r.next() }).collect();
         let edges: Vec<[usize; 2]> = (0..2 * n)
-            .map(|_| [((r.next() + 1.0) / 2.0 * n as f64) as usize % n, ((r.next() + 1.0) / 2.0 * n as f64) as usize % n])
+            .map(|_| {
+                [((r.next() + 1.0) / 2.0 * n as f64) as usize % n, ((r.next() + 1.0) / 2.0 * n as f64) as usize % n]
+            })
             .collect();
         let ew: Vec<f64> = edges.iter().map(|_| 1.0 + r.next()).collect();
         out.push((start, n, w, edges, ew));
@@ -305,7 +323,8 @@ fn a_failing_batch_adds_nothing() {
     assert!(matches!(a.add_graphs(&[ok, nan], None), Err(SfaError::NonFinite { row: 13, col: 1, .. })));
     assert_eq!(a.state(), before);
     // wrong width and an edge outside its graph
-    let wide = GraphPart { x: View::from_slice(&x[..20], 5, 4).unwrap(), weights: None, edges: &[], edge_weights: None };
+    let wide =
+        GraphPart { x: View::from_slice(&x[..20], 5, 4).unwrap(), weights: None, edges: &[], edge_weights: None };
     assert!(matches!(a.add_graphs(&[wide], None), Err(SfaError::ShapeMismatch { .. })));
     let far = [[0usize, 20usize]];
     let out = GraphPart { x: View::from_slice(&x, 20, d).unwrap(), weights: None, edges: &far, edge_weights: None };

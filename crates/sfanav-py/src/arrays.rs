@@ -3,7 +3,8 @@
 
 use numpy::ndarray::Array2;
 use numpy::{
-    IntoPyArray, PyArray1, PyArray2, PyArrayDyn, PyArrayMethods, PyReadonlyArray1, PyReadonlyArrayDyn, PyUntypedArrayMethods,
+    IntoPyArray, PyArray1, PyArray2, PyArrayDyn, PyArrayMethods, PyReadonlyArray1, PyReadonlyArrayDyn,
+    PyUntypedArrayMethods,
 };
 use pyo3::exceptions::{PyRuntimeError, PyTypeError, PyValueError};
 use pyo3::prelude::*;
@@ -23,9 +24,7 @@ pub(crate) fn arr2<'py>(obj: &Bound<'py, PyAny>, name: &str) -> PyResult<Arr<'py
     if let Ok(a) = obj.cast::<PyArray2<f32>>() {
         return Ok(Arr::F32(a.try_readonly().map_err(|e| PyValueError::new_err(format!("{name}: {e}")))?));
     }
-    Err(PyTypeError::new_err(format!(
-        "{name} must be a 2-D float32 or float64 NumPy array"
-    )))
+    Err(PyTypeError::new_err(format!("{name} must be a 2-D float32 or float64 NumPy array")))
 }
 
 pub(crate) fn view_of<'a, T: numpy::Element + sfa_core::Sample>(a: &'a numpy::PyReadonlyArray2<'_, T>) -> View<'a, T> {
@@ -37,9 +36,14 @@ pub(crate) fn view_of<'a, T: numpy::Element + sfa_core::Sample>(a: &'a numpy::Py
     unsafe { View::from_raw_parts(v.as_ptr(), n, d, s[0], s[1]) }
 }
 
-pub(crate) fn out2<'py, T: numpy::Element>(py: Python<'py>, v: Vec<T>, n: usize, m: usize) -> PyResult<Bound<'py, PyAny>> {
-    let a = Array2::from_shape_vec((n, m), v)
-        .map_err(|e| PyRuntimeError::new_err(format!("internal shape error: {e}")))?;
+pub(crate) fn out2<'py, T: numpy::Element>(
+    py: Python<'py>,
+    v: Vec<T>,
+    n: usize,
+    m: usize,
+) -> PyResult<Bound<'py, PyAny>> {
+    let a =
+        Array2::from_shape_vec((n, m), v).map_err(|e| PyRuntimeError::new_err(format!("internal shape error: {e}")))?;
     Ok(a.into_pyarray(py).into_any())
 }
 

@@ -39,9 +39,7 @@ fn contain<R>(f: impl FnOnce() -> sfa_core::Result<R>) -> PyResult<R> {
                 .cloned()
                 .or_else(|| p.downcast_ref::<&str>().map(|s| s.to_string()))
                 .unwrap_or_else(|| "unknown panic".into());
-            Err(PyRuntimeError::new_err(format!(
-                "internal error in sfanav's Rust core (please report): {msg}"
-            )))
+            Err(PyRuntimeError::new_err(format!("internal error in sfanav's Rust core (please report): {msg}")))
         }
     }
 }

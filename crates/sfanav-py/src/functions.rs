@@ -53,7 +53,6 @@ pub(crate) fn solve_generalized<'py>(
     Ok((vec1(py, g.values), mat_to_py(py, g.vectors)?, g.rank, vec1(py, g.dropped)))
 }
 
-
 /// set_memory_limit(bytes): the limit (bytes) that the core checks its
 /// large requests against; 0 restores the automatic limit.
 #[pyfunction]
@@ -76,7 +75,11 @@ pub(crate) fn _test_panic(py: Python<'_>, pooled: bool) -> PyResult<()> {
     if pooled {
         run(py, || -> sfa_core::Result<()> {
             use rayon::prelude::*;
-            (0..4).into_par_iter().for_each(|i| if i == 3 { panic!("test panic in a worker") });
+            (0..4).into_par_iter().for_each(|i| {
+                if i == 3 {
+                    panic!("test panic in a worker")
+                }
+            });
             Ok(())
         })
     } else {

@@ -10,8 +10,8 @@ use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
 use sfa_core::{
-    fit, transform_rotations, with_pixels, Batch, BatchSource, CachePolicy, FitOptions, LayerSpec, LoopClosures, Network,
-    NetworkSpec, Pixel, Progress, ProgressEvent, Rotation, SpatialPairs, TrainingPath,
+    fit, transform_rotations, with_pixels, Batch, BatchSource, CachePolicy, FitOptions, LayerSpec, LoopClosures,
+    Network, NetworkSpec, Pixel, Progress, ProgressEvent, Rotation, SpatialPairs, TrainingPath,
 };
 use std::sync::Arc;
 
@@ -32,14 +32,17 @@ pub(crate) fn network_images<'py>(obj: &Bound<'py, PyAny>, net: &Network, what: 
 /// Loop closures as Python passes them: the current images' indices, the
 /// closures' weights and the aligned partner images `(M, H, W[, C])`, one
 /// per closure (converted to f64 here, after a memory check).
-pub(crate) fn loop_closures(net: &Network, period: usize, current: Vec<usize>, weights: Vec<f64>,
-                 partners: &Bound<'_, PyAny>) -> PyResult<LoopClosures> {
+pub(crate) fn loop_closures(
+    net: &Network,
+    period: usize,
+    current: Vec<usize>,
+    weights: Vec<f64>,
+    partners: &Bound<'_, PyAny>,
+) -> PyResult<LoopClosures> {
     let images = network_images(partners, net, "loop-closure partner images")?;
     let [m, _, w, _] = images.shape;
     if m != current.len() {
-        return Err(PyValueError::new_err(format!(
-            "{} loop closures but {m} partner images", current.len()
-        )));
+        return Err(PyValueError::new_err(format!("{} loop closures but {m} partner images", current.len())));
     }
     if w != period {
         return Err(PyValueError::new_err(format!(
@@ -109,7 +112,10 @@ impl BatchSource for PySource {
         self.total
     }
 
-    fn for_each_batch(&mut self, f: &mut (dyn FnMut(Batch<'_>) -> sfa_core::Result<()> + Send)) -> sfa_core::Result<()> {
+    fn for_each_batch(
+        &mut self,
+        f: &mut (dyn FnMut(Batch<'_>) -> sfa_core::Result<()> + Send),
+    ) -> sfa_core::Result<()> {
         let (batches, shape) = (&self.batches, self.shape);
         let r = Python::attach(|py| -> PyResult<sfa_core::Result<()>> {
             for item in batches.bind(py).call0()?.try_iter()? {
@@ -122,7 +128,11 @@ impl BatchSource for PySource {
         self.raised.keep(r)
     }
 
-    fn gather(&mut self, ids: &[usize], f: &mut (dyn FnMut(Batch<'_>) -> sfa_core::Result<()> + Send)) -> sfa_core::Result<()> {
+    fn gather(
+        &mut self,
+        ids: &[usize],
+        f: &mut (dyn FnMut(Batch<'_>) -> sfa_core::Result<()> + Send),
+    ) -> sfa_core::Result<()> {
         let (gather, shape) = (&self.gather, self.shape);
         let r = Python::attach(|py| -> PyResult<sfa_core::Result<()>> {
             let gather = gather.as_ref().ok_or_else(|| PyValueError::new_err("spatial pairs need gather(ids)"))?;
@@ -141,9 +151,8 @@ pub(crate) fn spec_from_dict(d: &Bound<'_, PyDict>) -> PyResult<NetworkSpec> {
         .map_err(|_| PyValueError::new_err("network spec: 'layers' must be a list"))?;
     let mut layers = Vec::new();
     for item in list.iter() {
-        let l = item
-            .cast_into::<PyDict>()
-            .map_err(|_| PyValueError::new_err("network spec: each layer must be a dict"))?;
+        let l =
+            item.cast_into::<PyDict>().map_err(|_| PyValueError::new_err("network spec: each layer must be a dict"))?;
         layers.push(LayerSpec {
             rf: get(&l, "rf")?,
             stride: get(&l, "stride")?,
@@ -195,20 +204,31 @@ impl PyNetwork {
             let nodes = self.inner.nodes(l);
             let rd: Vec<Vec<usize>> = nodes.iter().map(|n| n.rank_deficits()).collect();
             d.set_item("rank_deficits", rd)?;
-            d.set_item("reduced_to", nodes.iter().map(|n| n.stage_outputs().first().copied().unwrap_or(0)).collect::<Vec<_>>())?;
+            d.set_item(
+                "reduced_to",
+                nodes.iter().map(|n| n.stage_outputs().first().copied().unwrap_or(0)).collect::<Vec<_>>(),
+            )?;
             out.append(d)?;
         }
         Ok(out)
     }
 
     #[getter]
-    fn n_layers(&self) -> usize { self.inner.n_layers() }
+    fn n_layers(&self) -> usize {
+        self.inner.n_layers()
+    }
     #[getter]
-    fn n_trained(&self) -> usize { self.inner.n_trained() }
+    fn n_trained(&self) -> usize {
+        self.inner.n_trained()
+    }
     #[getter]
-    fn n_outputs(&self) -> usize { self.inner.n_outputs() }
+    fn n_outputs(&self) -> usize {
+        self.inner.n_outputs()
+    }
     #[getter]
-    fn input_shape(&self) -> (usize, usize, usize) { self.inner.input_shape() }
+    fn input_shape(&self) -> (usize, usize, usize) {
+        self.inner.input_shape()
+    }
 
     #[getter]
     fn delta_values<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
@@ -235,7 +255,12 @@ impl PyNetwork {
     }
 
     /// transform_rotations(images, step) -> (N, K, n_outputs)
-    fn transform_rotations<'py>(&self, py: Python<'py>, images: &Bound<'py, PyAny>, step: usize) -> PyResult<Bound<'py, PyAny>> {
+    fn transform_rotations<'py>(
+        &self,
+        py: Python<'py>,
+        images: &Bound<'py, PyAny>,
+        step: usize,
+    ) -> PyResult<Bound<'py, PyAny>> {
         let images = network_images(images, &self.inner, "images")?;
         let [n, _, w, _] = images.shape;
         let rot = Rotation { step, period: w };
@@ -297,7 +322,9 @@ impl PyNetwork {
                 None => (0..n_layers).collect(),
                 Some(ls) => {
                     if let Some(&l) = ls.iter().find(|&&l| l == 0 || l > n_layers) {
-                        return Err(PyValueError::new_err(format!("pair_layers must name layers 1..{n_layers}, got {l}")));
+                        return Err(PyValueError::new_err(format!(
+                            "pair_layers must name layers 1..{n_layers}, got {l}"
+                        )));
                     }
                     ls.into_iter().map(|l| l - 1).collect()
                 }

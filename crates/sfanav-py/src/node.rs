@@ -19,7 +19,13 @@ pub(crate) struct PySfaNode {
 impl PySfaNode {
     #[new]
     #[pyo3(signature = (n_components, degree=1, reduce_to=None, tol=sfa_core::DEFAULT_TOL, mixed_precision=false))]
-    fn new(n_components: usize, degree: usize, reduce_to: Option<usize>, tol: f64, mixed_precision: bool) -> PyResult<Self> {
+    fn new(
+        n_components: usize,
+        degree: usize,
+        reduce_to: Option<usize>,
+        tol: f64,
+        mixed_precision: bool,
+    ) -> PyResult<Self> {
         let inner = guard(|| SfaNode::new(NodeConfig { n_components, degree, reduce_to, tol, mixed_precision }))?;
         Ok(PySfaNode { inner })
     }
@@ -28,8 +34,14 @@ impl PySfaNode {
     fn partial_fit(&mut self, py: Python<'_>, x: &Bound<'_, PyAny>, new_sequence: bool) -> PyResult<()> {
         let node = &mut self.inner;
         match arr2(x, "X")? {
-            Arr::F64(a) => { let v = view_of(&a); run(py, || node.partial_fit(v, new_sequence)) }
-            Arr::F32(a) => { let v = view_of(&a); run(py, || node.partial_fit(v, new_sequence)) }
+            Arr::F64(a) => {
+                let v = view_of(&a);
+                run(py, || node.partial_fit(v, new_sequence))
+            }
+            Arr::F32(a) => {
+                let v = view_of(&a);
+                run(py, || node.partial_fit(v, new_sequence))
+            }
         }
     }
 
@@ -51,8 +63,18 @@ impl PySfaNode {
         let node = &self.inner;
         let m = node.n_outputs();
         match arr2(x, "X")? {
-            Arr::F64(a) => { let v = view_of(&a); let n = v.nrows(); let y = run(py, || node.transform(v))?; out2(py, y, n, m) }
-            Arr::F32(a) => { let v = view_of(&a); let n = v.nrows(); let y = run(py, || node.transform(v))?; out2(py, y, n, m) }
+            Arr::F64(a) => {
+                let v = view_of(&a);
+                let n = v.nrows();
+                let y = run(py, || node.transform(v))?;
+                out2(py, y, n, m)
+            }
+            Arr::F32(a) => {
+                let v = view_of(&a);
+                let n = v.nrows();
+                let y = run(py, || node.transform(v))?;
+                out2(py, y, n, m)
+            }
         }
     }
 
@@ -62,17 +84,29 @@ impl PySfaNode {
     }
 
     #[getter]
-    fn n_features(&self) -> Option<usize> { self.inner.n_features() }
+    fn n_features(&self) -> Option<usize> {
+        self.inner.n_features()
+    }
     #[getter]
-    fn n_stages(&self) -> usize { self.inner.n_stages() }
+    fn n_stages(&self) -> usize {
+        self.inner.n_stages()
+    }
     #[getter]
-    fn training_stage(&self) -> usize { self.inner.training_stage() }
+    fn training_stage(&self) -> usize {
+        self.inner.training_stage()
+    }
     #[getter]
-    fn is_solved(&self) -> bool { self.inner.is_solved() }
+    fn is_solved(&self) -> bool {
+        self.inner.is_solved()
+    }
     #[getter]
-    fn rank_deficits(&self) -> Vec<usize> { self.inner.rank_deficits() }
+    fn rank_deficits(&self) -> Vec<usize> {
+        self.inner.rank_deficits()
+    }
     #[getter]
-    fn stage_outputs(&self) -> Vec<usize> { self.inner.stage_outputs() }
+    fn stage_outputs(&self) -> Vec<usize> {
+        self.inner.stage_outputs()
+    }
 
     fn statistics(&self) -> Option<PyStatistics> {
         self.inner.statistics().map(|a| PyStatistics { inner: a.clone() })

@@ -17,7 +17,8 @@ where
     match d.get_item(key)? {
         Some(v) => v.extract::<T>().map_err(|_| {
             let got = v.repr().map_or_else(|_| "?".to_string(), |r| r.to_string());
-            let got: String = if got.chars().count() > 60 { got.chars().take(60).chain("...".chars()).collect() } else { got };
+            let got: String =
+                if got.chars().count() > 60 { got.chars().take(60).chain("...".chars()).collect() } else { got };
             PyValueError::new_err(format!("invalid model state: field '{key}' must be {}, got {got}", expected::<T>()))
         }),
         None => Err(PyValueError::new_err(format!("invalid model state: missing field '{key}'"))),
@@ -150,9 +151,8 @@ pub(crate) fn node_state_from_dict(d: &Bound<'_, PyDict>) -> PyResult<NodeState>
         tol: get(d, "tol")?,
         mixed_precision: get_bool_or(d, "mixed_precision", false)?,
     };
-    let list = d
-        .get_item("stages")?
-        .ok_or_else(|| PyValueError::new_err("invalid model state: missing field 'stages'"))?;
+    let list =
+        d.get_item("stages")?.ok_or_else(|| PyValueError::new_err("invalid model state: missing field 'stages'"))?;
     let list = list
         .cast_into::<PyList>()
         .map_err(|_| PyValueError::new_err("invalid model state: 'stages' must be a list"))?;
@@ -184,11 +184,5 @@ pub(crate) fn node_state_from_dict(d: &Bound<'_, PyDict>) -> PyResult<NodeState>
             stats,
         });
     }
-    Ok(NodeState {
-        config,
-        n_features: get(d, "n_features")?,
-        training_stage: get(d, "training_stage")?,
-        stages,
-    })
+    Ok(NodeState { config, n_features: get(d, "n_features")?, training_stage: get(d, "training_stage")?, stages })
 }
-

@@ -27,28 +27,57 @@ impl PyStatistics {
     fn update(&mut self, py: Python<'_>, x: &Bound<'_, PyAny>, new_sequence: bool) -> PyResult<()> {
         let acc = &mut self.inner;
         match arr2(x, "X")? {
-            Arr::F64(a) => { let v = view_of(&a); run(py, || acc.update(v, new_sequence)) }
-            Arr::F32(a) => { let v = view_of(&a); run(py, || acc.update(v, new_sequence)) }
+            Arr::F64(a) => {
+                let v = view_of(&a);
+                run(py, || acc.update(v, new_sequence))
+            }
+            Arr::F32(a) => {
+                let v = view_of(&a);
+                run(py, || acc.update(v, new_sequence))
+            }
         }
     }
 
     #[pyo3(signature = (x, weights=None))]
-    fn add_samples(&mut self, py: Python<'_>, x: &Bound<'_, PyAny>, weights: Option<PyReadonlyArray1<'_, f64>>) -> PyResult<()> {
+    fn add_samples(
+        &mut self,
+        py: Python<'_>,
+        x: &Bound<'_, PyAny>,
+        weights: Option<PyReadonlyArray1<'_, f64>>,
+    ) -> PyResult<()> {
         let w = opt_weights(weights)?;
         let acc = &mut self.inner;
         match arr2(x, "X")? {
-            Arr::F64(a) => { let v = view_of(&a); run(py, || acc.add_samples(v, w.as_deref())) }
-            Arr::F32(a) => { let v = view_of(&a); run(py, || acc.add_samples(v, w.as_deref())) }
+            Arr::F64(a) => {
+                let v = view_of(&a);
+                run(py, || acc.add_samples(v, w.as_deref()))
+            }
+            Arr::F32(a) => {
+                let v = view_of(&a);
+                run(py, || acc.add_samples(v, w.as_deref()))
+            }
         }
     }
 
     #[pyo3(signature = (a, b, weights=None))]
-    fn add_pairs(&mut self, py: Python<'_>, a: &Bound<'_, PyAny>, b: &Bound<'_, PyAny>, weights: Option<PyReadonlyArray1<'_, f64>>) -> PyResult<()> {
+    fn add_pairs(
+        &mut self,
+        py: Python<'_>,
+        a: &Bound<'_, PyAny>,
+        b: &Bound<'_, PyAny>,
+        weights: Option<PyReadonlyArray1<'_, f64>>,
+    ) -> PyResult<()> {
         let w = opt_weights(weights)?;
         let acc = &mut self.inner;
         match (arr2(a, "a")?, arr2(b, "b")?) {
-            (Arr::F64(a), Arr::F64(b)) => { let (va, vb) = (view_of(&a), view_of(&b)); run(py, || acc.add_pairs(va, vb, w.as_deref())) }
-            (Arr::F32(a), Arr::F32(b)) => { let (va, vb) = (view_of(&a), view_of(&b)); run(py, || acc.add_pairs(va, vb, w.as_deref())) }
+            (Arr::F64(a), Arr::F64(b)) => {
+                let (va, vb) = (view_of(&a), view_of(&b));
+                run(py, || acc.add_pairs(va, vb, w.as_deref()))
+            }
+            (Arr::F32(a), Arr::F32(b)) => {
+                let (va, vb) = (view_of(&a), view_of(&b));
+                run(py, || acc.add_pairs(va, vb, w.as_deref()))
+            }
             _ => Err(PyTypeError::new_err("a and b must have the same dtype")),
         }
     }
@@ -88,15 +117,25 @@ impl PyStatistics {
     }
 
     #[getter]
-    fn dim(&self) -> usize { self.inner.dim() }
+    fn dim(&self) -> usize {
+        self.inner.dim()
+    }
     #[getter]
-    fn n_samples(&self) -> u64 { self.inner.n_samples() }
+    fn n_samples(&self) -> u64 {
+        self.inner.n_samples()
+    }
     #[getter]
-    fn n_pairs(&self) -> u64 { self.inner.n_pairs() }
+    fn n_pairs(&self) -> u64 {
+        self.inner.n_pairs()
+    }
     #[getter]
-    fn weight_sum(&self) -> f64 { self.inner.weight_sum() }
+    fn weight_sum(&self) -> f64 {
+        self.inner.weight_sum()
+    }
     #[getter]
-    fn pair_weight_sum(&self) -> f64 { self.inner.pair_weight_sum() }
+    fn pair_weight_sum(&self) -> f64 {
+        self.inner.pair_weight_sum()
+    }
 
     fn get_state<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         acc_state_to_dict(py, &self.inner.state())
@@ -111,8 +150,9 @@ impl PyStatistics {
     fn __repr__(&self) -> String {
         format!(
             "Statistics(dim={}, n_samples={}, n_pairs={})",
-            self.inner.dim(), self.inner.n_samples(), self.inner.n_pairs()
+            self.inner.dim(),
+            self.inner.n_samples(),
+            self.inner.n_pairs()
         )
     }
 }
-

@@ -15,9 +15,7 @@ pub(crate) fn current_pool() -> Option<Arc<rayon::ThreadPool>> {
 /// core, the default).
 #[pyfunction]
 pub(crate) fn set_num_threads(n: usize) -> PyResult<()> {
-    let mut g = POOL
-        .lock()
-        .map_err(|_| PyRuntimeError::new_err("thread pool lock poisoned"))?;
+    let mut g = POOL.lock().map_err(|_| PyRuntimeError::new_err("thread pool lock poisoned"))?;
     if n == 0 {
         *g = None;
         return Ok(());

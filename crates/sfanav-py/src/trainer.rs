@@ -26,7 +26,10 @@ impl PyLayerTrainer {
         let images = network_images(obj, &net.inner, what)?;
         let w = images.shape[2];
         if w != self.period {
-            return Err(PyValueError::new_err(format!("{what} are {w} px wide, the training panoramas {}", self.period)));
+            return Err(PyValueError::new_err(format!(
+                "{what} are {w} px wide, the training panoramas {}",
+                self.period
+            )));
         }
         Ok(images)
     }
@@ -35,7 +38,10 @@ impl PyLayerTrainer {
     fn one_image<'py>(&self, obj: &Bound<'py, PyAny>, net: &PyNetwork, what: &str) -> PyResult<Images<'py>> {
         let images = self.images(obj, net, what)?;
         if images.shape[0] != 1 {
-            return Err(PyValueError::new_err(format!("{what}: give one image as a batch of 1, got {}", images.shape[0])));
+            return Err(PyValueError::new_err(format!(
+                "{what}: give one image as a batch of 1, got {}",
+                images.shape[0]
+            )));
         }
         Ok(images)
     }
@@ -100,8 +106,13 @@ impl PyLayerTrainer {
     /// images in the order this trainer is fed them, `partners` (M, H, W[,
     /// C]) are the aligned earlier images, `weights` in [0, 1]. Before the
     /// first image of the pass.
-    fn set_loop_closures(&mut self, net: &PyNetwork, current: Vec<usize>, weights: Vec<f64>,
-                         partners: &Bound<'_, PyAny>) -> PyResult<()> {
+    fn set_loop_closures(
+        &mut self,
+        net: &PyNetwork,
+        current: Vec<usize>,
+        weights: Vec<f64>,
+        partners: &Bound<'_, PyAny>,
+    ) -> PyResult<()> {
         let lc = loop_closures(&net.inner, self.period, current, weights, partners)?;
         let (tr, n) = (&mut self.inner, &net.inner);
         guard(|| tr.set_loop_closures(n, Some(Arc::new(lc))))
@@ -112,8 +123,16 @@ impl PyLayerTrainer {
     /// left by `shifts[e]` columns when given; no samples and no sequence.
     #[pyo3(signature = (net, images, a, b, weights, shifts=None))]
     #[allow(clippy::too_many_arguments)]
-    fn feed_pairs(&mut self, py: Python<'_>, net: &mut PyNetwork, images: &Bound<'_, PyAny>, a: Vec<usize>,
-                  b: Vec<usize>, weights: Vec<f64>, shifts: Option<Vec<usize>>) -> PyResult<()> {
+    fn feed_pairs(
+        &mut self,
+        py: Python<'_>,
+        net: &mut PyNetwork,
+        images: &Bound<'_, PyAny>,
+        a: Vec<usize>,
+        b: Vec<usize>,
+        weights: Vec<f64>,
+        shifts: Option<Vec<usize>>,
+    ) -> PyResult<()> {
         let images = self.images(images, net, "pair images")?;
         let n = images.shape[0];
         let pairs = zip_pairs(a, b, weights)?;
@@ -167,7 +186,12 @@ impl PyLayerTrainer {
     }
 
     /// Adds the merged statistics of `n_images` images (one per node).
-    fn merge_statistics(&mut self, net: &mut PyNetwork, stats: Vec<PyRef<'_, PyStatistics>>, n_images: usize) -> PyResult<()> {
+    fn merge_statistics(
+        &mut self,
+        net: &mut PyNetwork,
+        stats: Vec<PyRef<'_, PyStatistics>>,
+        n_images: usize,
+    ) -> PyResult<()> {
         let accs: Vec<Accumulator> = stats.iter().map(|s| s.inner.clone()).collect();
         let (tr, nt) = (&mut self.inner, &mut net.inner);
         guard(|| tr.merge_statistics(nt, &accs, n_images))
@@ -180,6 +204,11 @@ impl PyLayerTrainer {
     }
 
     fn __repr__(&self) -> String {
-        format!("LayerTrainer(layer={}, pass={}, images_seen={})", self.inner.layer(), self.inner.pass(), self.inner.images_seen())
+        format!(
+            "LayerTrainer(layer={}, pass={}, images_seen={})",
+            self.inner.layer(),
+            self.inner.pass(),
+            self.inner.images_seen()
+        )
     }
 }

@@ -36,7 +36,11 @@ impl SfaNode {
         let width = self.stage_input_width(from)?;
         for p in parts {
             if p.x.ncols() != width {
-                return Err(SfaError::ShapeMismatch { what: "width of the stage input", expected: width, got: p.x.ncols() });
+                return Err(SfaError::ShapeMismatch {
+                    what: "width of the stage input",
+                    expected: width,
+                    got: p.x.ncols(),
+                });
             }
             p.x.check_finite(if from == 0 { "input" } else { "stage input" })?;
         }

@@ -112,7 +112,9 @@ impl LayerTrainer {
         }
         let (layer, rot) = (self.layer, self.rot);
         let gr = match self.path {
-            TrainingPath::Fast => fast_graph(net, &rot, &P::image_f64(image), layer, None, self.reference.as_deref())?.0,
+            TrainingPath::Fast => {
+                fast_graph(net, &rot, &P::image_f64(image), layer, None, self.reference.as_deref())?.0
+            }
             TrainingPath::Naive => naive_graph(net, &rot, image, layer)?,
         };
         let d = gr.width;
@@ -160,7 +162,11 @@ impl LayerTrainer {
         let d = net.geometry()[layer].in_dim;
         let nodes = net.nodes_mut(layer);
         if stats.len() != nodes.len() {
-            return Err(SfaError::ShapeMismatch { what: "statistics per node of the layer", expected: nodes.len(), got: stats.len() });
+            return Err(SfaError::ShapeMismatch {
+                what: "statistics per node of the layer",
+                expected: nodes.len(),
+                got: stats.len(),
+            });
         }
         if let Some(node) = nodes.first() {
             let stage = if node.n_features().is_some() { node.training_stage() } else { 0 };
