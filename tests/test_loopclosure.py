@@ -96,6 +96,22 @@ def test_image_detectors_close_the_loop():
     np.testing.assert_allclose(np.linalg.norm(H, axis=1), 1.0, rtol=1e-9)
 
 
+
+def test_a_revisit_that_looks_identical_is_a_closure_not_an_error():
+    """A static scene driven twice over the same poses renders identical panoramas: their aligned distance is
+    zero up to rounding (it was slightly negative and the score left [0, 1])."""
+    imgs, xy, _ = _loop_run(n_lap=40, laps=1)
+    rng = np.random.default_rng(3)
+    X = np.concatenate([imgs, imgs[rng.permutation(15)[:10]]])  # ten exact revisits, >= 25 frames later
+    det = BagOfWordsDetector(n_words=40, keypoint_size=4, grid_step=2, min_gap=20)
+    cand = det.candidates(X)
+    assert np.all((cand.score >= 0) & (cand.score <= 1))
+    revisit = cand.current >= len(imgs)
+    assert revisit.sum() == 10
+    # every revisit is matched to an identical earlier panorama (score 1: distance 0)
+    np.testing.assert_array_equal(X[cand.past[revisit]], X[cand.current[revisit]])
+    np.testing.assert_allclose(cand.score[revisit], 1.0, atol=1e-5)
+
 def test_odometry_gate_and_the_old_path():
     imgs, xy, _ = _loop_run()
     far = xy + np.array([[5.0, 0.0]]) * (np.arange(len(xy)) >= 60)[:, None]  # odometry says: never back

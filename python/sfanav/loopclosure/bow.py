@@ -223,4 +223,5 @@ def _aligned_distance(a: np.ndarray, B: np.ndarray) -> np.ndarray:
     fa = np.fft.rfft(a, axis=1)
     fb = np.fft.rfft(B, axis=2)
     corr = np.fft.irfft((fa[None] * np.conj(fb)).sum(axis=1), n=W, axis=1).max(axis=1)
-    return ((a**2).sum() + (B**2).sum(axis=(1, 2)) - 2.0 * corr) / a.size
+    # identical panoramas give zero up to rounding, which may be slightly negative
+    return np.maximum(((a**2).sum() + (B**2).sum(axis=(1, 2)) - 2.0 * corr) / a.size, 0.0)
