@@ -68,9 +68,12 @@ class BagOfWordsDetector(LoopClosureDetector):
     verify : int, default 20
         Candidates re-ranked by the aligned image distance (1: the
         histograms alone decide).
-    accept : float, default 0.5
+    accept : float, default 0.7
         A match is accepted when its aligned image distance is at most
         ``accept`` times the frame's distance to its temporal neighbours.
+        Lower: fewer, more precise closures; feedback training gains more
+        from more closures a few decimetres apart than from fewer exact
+        ones under changing light (docs/loop-closures.md).
     min_gap, max_odometry_distance, neighbor_lag, suppress
         As :class:`~sfanav.loopclosure.FourierDetector`.
     seed : int
@@ -82,7 +85,7 @@ class BagOfWordsDetector(LoopClosureDetector):
 
     def __init__(self, n_words: int = 1500, keypoint_size: float = 4.0, grid_step: int = 4,
                  rows: tuple[float, float] = (0.0, 1.0), max_descriptors: int = 200_000, verify: int = 20,
-                 min_gap: int = 40, max_odometry_distance: float = 3.0, accept: float = 0.5, neighbor_lag: int = 2,
+                 min_gap: int = 40, max_odometry_distance: float = 3.0, accept: float = 0.7, neighbor_lag: int = 2,
                  suppress: int = 0, seed: int = 0) -> None:
         self.n_words = n_words
         self.keypoint_size = keypoint_size
