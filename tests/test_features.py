@@ -16,6 +16,7 @@ from sfanav.features import (
     detect,
     match,
     robustness_vectors,
+    select_ranked,
     stability_labels,
 )
 
@@ -92,6 +93,38 @@ def test_predictor_matches_sklearn_and_round_trips(predictor, tmp_path):
     assert np.array_equal(q.decision_function(X), p.decision_function(X)) and q.detector == "fast-brief"
     sel = q.select(_image(2, 60, 300), 10)
     assert len(sel) == 10
+
+
+def test_select_ranked_known_answers():
+    s = np.array([0.1, -2.0, 1.5, 0.3, 5.0])  # scores of keypoints in response order
+    # pool: the ceil(1.5 * 2) = 3 strongest; rank sums 0+1, 1+2, 2+0 -> keypoints 0 and 2 (tie: the stronger)
+    assert select_ranked(s, 2).tolist() == [0, 2]
+    assert select_ranked(s, 2, method="robust").tolist() == [2, 0]
+    # the whole list as the pool: the fifth keypoint, weakest but most robust, gets in
+    assert select_ranked(s, 2, candidates=3.0, method="robust").tolist() == [4, 2]
+    assert select_ranked(s, 10).tolist() == [0, 2, 4, 1, 3]  # rank sums 3, 5, 3, 5, 4
+    assert select_ranked(s, 3, candidates=0.5).tolist() == [0, 2, 1]  # a pool below k counts as k
+    assert select_ranked([], 3).tolist() == []
+    for bad, match in (({"k": 0}, "k"), ({"candidates": 0.0}, "candidates"), ({"method": "best"}, "unknown selection"),
+                       ({"scores": [[1.0]]}, "1-d"), ({"scores": [np.nan]}, "finite")):
+        kw = {"scores": s, "k": 2, **bad}
+        with pytest.raises(ValueError, match=match):
+            select_ranked(kw.pop("scores"), kw.pop("k"), **kw)
+
+
+def test_select_methods_keep_k_of_the_candidates(predictor):
+    p, _ = predictor
+    img = _image(2, 60, 300)
+    pool = detect(img, "fast-brief", 15)
+    scores = p.score_keypoints(img, pool)
+    for method in ("rank-sum", "robust"):
+        kept = p.select(img, 10, method=method)
+        assert len(kept) == 10
+        idx = select_ranked(scores, 10, method=method)
+        np.testing.assert_array_equal(kept.xy, pool.xy[idx])
+    assert np.array_equal(p.select(img, 10).xy, p.select(img, 10, method="rank-sum").xy)
+    with pytest.raises(ValueError, match="unknown selection method"):
+        p.select(img, 10, method="best")
 
 
 def test_predictor_file_rejects_corruption_and_wrong_version(predictor, tmp_path):
