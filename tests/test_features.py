@@ -176,3 +176,26 @@ def test_experiments_quick_rows(tmp_path):
     assert np.isfinite(r.row("fast-brief: F1 gain % summer to spring"))
     assert 0.5 <= r.row("fast-brief: predictor CV accuracy") <= 1
     assert any("thesis" in k for k in r.targets)
+
+
+def test_cli_select_method(tmp_path, predictor):
+    from sfanav.data.writer import DatasetWriter
+
+    p, _ = predictor
+    path = p.save(tmp_path / "p.json")
+    with DatasetWriter(tmp_path / "ds", {"source": "test"}) as w:
+        for k in range(2):
+            w.add(_image(k, 60, 300), frame=k, timestamp=float(k), pose=(0.0, 0.0, 0.0), condition="spring")
+    out = {}
+    for method in ("rank-sum", "robust"):
+        r = _cli("features", "select", "--predictor", str(path), "--dataset", str(tmp_path / "ds"), "--top-k", "10",
+                 "--method", method, "--out", str(tmp_path / f"{method}.json"))
+        assert r.returncode == 0, r.stderr
+        out[method] = json.loads((tmp_path / f"{method}.json").read_text())
+        assert out[method]["method"] == method and len(out[method]["images"][0]["keypoints"]) == 10
+    img = _image(0, 60, 300)
+    want = p.select(img, 10, method="robust")
+    np.testing.assert_allclose([kp[:2] for kp in out["robust"]["images"][0]["keypoints"]], want.xy, atol=0.01)
+    r = _cli("features", "select", "--predictor", str(path), "--dataset", str(tmp_path / "ds"), "--method", "best",
+             "--out", str(tmp_path / "x.json"))
+    assert r.returncode == 2 and "invalid choice" in r.stderr
