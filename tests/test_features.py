@@ -16,6 +16,7 @@ from sfanav.features import (
     detect,
     match,
     robustness_vectors,
+    select_ranked,
     stability_labels,
 )
 
@@ -94,6 +95,38 @@ def test_predictor_matches_sklearn_and_round_trips(predictor, tmp_path):
     assert len(sel) == 10
 
 
+def test_select_ranked_known_answers():
+    s = np.array([0.1, -2.0, 1.5, 0.3, 5.0])  # scores of keypoints in response order
+    # pool: the ceil(1.5 * 2) = 3 strongest; rank sums 0+1, 1+2, 2+0 -> keypoints 0 and 2 (tie: the stronger)
+    assert select_ranked(s, 2).tolist() == [0, 2]
+    assert select_ranked(s, 2, method="robust").tolist() == [2, 0]
+    # the whole list as the pool: the fifth keypoint, weakest but most robust, gets in
+    assert select_ranked(s, 2, candidates=3.0, method="robust").tolist() == [4, 2]
+    assert select_ranked(s, 10).tolist() == [0, 2, 4, 1, 3]  # rank sums 3, 5, 3, 5, 4
+    assert select_ranked(s, 3, candidates=0.5).tolist() == [0, 2, 1]  # a pool below k counts as k
+    assert select_ranked([], 3).tolist() == []
+    for bad, match in (({"k": 0}, "k"), ({"candidates": 0.0}, "candidates"), ({"method": "best"}, "unknown selection"),
+                       ({"scores": [[1.0]]}, "1-d"), ({"scores": [np.nan]}, "finite")):
+        kw = {"scores": s, "k": 2, **bad}
+        with pytest.raises(ValueError, match=match):
+            select_ranked(kw.pop("scores"), kw.pop("k"), **kw)
+
+
+def test_select_methods_keep_k_of_the_candidates(predictor):
+    p, _ = predictor
+    img = _image(2, 60, 300)
+    pool = detect(img, "fast-brief", 15)
+    scores = p.score_keypoints(img, pool)
+    for method in ("rank-sum", "robust"):
+        kept = p.select(img, 10, method=method)
+        assert len(kept) == 10
+        idx = select_ranked(scores, 10, method=method)
+        np.testing.assert_array_equal(kept.xy, pool.xy[idx])
+    assert np.array_equal(p.select(img, 10).xy, p.select(img, 10, method="rank-sum").xy)
+    with pytest.raises(ValueError, match="unknown selection method"):
+        p.select(img, 10, method="best")
+
+
 def test_predictor_file_rejects_corruption_and_wrong_version(predictor, tmp_path):
     p, _ = predictor
     path = p.save(tmp_path / "p.json")
@@ -143,3 +176,26 @@ def test_experiments_quick_rows(tmp_path):
     assert np.isfinite(r.row("fast-brief: F1 gain % summer to spring"))
     assert 0.5 <= r.row("fast-brief: predictor CV accuracy") <= 1
     assert any("thesis" in k for k in r.targets)
+
+
+def test_cli_select_method(tmp_path, predictor):
+    from sfanav.data.writer import DatasetWriter
+
+    p, _ = predictor
+    path = p.save(tmp_path / "p.json")
+    with DatasetWriter(tmp_path / "ds", {"source": "test"}) as w:
+        for k in range(2):
+            w.add(_image(k, 60, 300), frame=k, timestamp=float(k), pose=(0.0, 0.0, 0.0), condition="spring")
+    out = {}
+    for method in ("rank-sum", "robust"):
+        r = _cli("features", "select", "--predictor", str(path), "--dataset", str(tmp_path / "ds"), "--top-k", "10",
+                 "--method", method, "--out", str(tmp_path / f"{method}.json"))
+        assert r.returncode == 0, r.stderr
+        out[method] = json.loads((tmp_path / f"{method}.json").read_text())
+        assert out[method]["method"] == method and len(out[method]["images"][0]["keypoints"]) == 10
+    img = _image(0, 60, 300)
+    want = p.select(img, 10, method="robust")
+    np.testing.assert_allclose([kp[:2] for kp in out["robust"]["images"][0]["keypoints"]], want.xy, atol=0.01)
+    r = _cli("features", "select", "--predictor", str(path), "--dataset", str(tmp_path / "ds"), "--method", "best",
+             "--out", str(tmp_path / "x.json"))
+    assert r.returncode == 2 and "invalid choice" in r.stderr

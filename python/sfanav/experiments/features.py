@@ -10,10 +10,13 @@
   ``route``). Stable / unstable features from the first half of the loop in
   spring, summer and autumn train the robustness predictor; on the second
   half, spring is the reference and summer, autumn and the held-out winter
-  are matched to it for memory sizes 5..2000, keeping the reference features
-  of largest detector response or the most robust of 1.5 times as many.
-  F1 (precision: true among mutual matches; recall: true matches per
-  reference feature kept) and its mean relative gain.
+  are matched to it for memory sizes 5..2000, keeping the m reference
+  features of largest detector response, or m of the 1.5 m strongest chosen
+  by predicted robustness (:func:`~sfanav.features.select_ranked`: the
+  library default ``rank-sum``, rank by response plus rank by robustness,
+  and the thesis's rule ``robust``, the m most robust). F1 (precision: true
+  among mutual matches; recall: true matches per reference feature kept)
+  and its mean relative gain over the response selection.
 """
 
 from __future__ import annotations
@@ -26,6 +29,7 @@ import numpy as np
 from .. import sim
 from ..features import (
     DETECTORS,
+    METHODS,
     RobustnessPredictor,
     balanced,
     descriptor_distances,
@@ -33,6 +37,7 @@ from ..features import (
     match,
     match_distances,
     robustness_vectors,
+    select_ranked,
     stability_labels,
     true_match,
 )
@@ -51,6 +56,8 @@ THRESHOLD = 10.0
 GRID = {"C": [1.0, 10.0, 100.0], "gamma": [0.003, 0.01, 0.03]}
 #: most balanced training samples per detector in the full run
 MAX_SAMPLES = 4000
+#: candidate pool of the robustness selection, in multiples of the memory size
+CANDIDATES = 1.5
 QUICK_CAMERA = (300, 40)
 
 
@@ -138,7 +145,8 @@ def exp_612(out: Path, *, quick: bool, seed: int, progress: bool) -> ExperimentR
     queries = ("summer", "autumn", "winter")
     memory = (5, 10, 20, 50) if quick else MEMORY
     dets = ("fast-brief",) if quick else DETECTORS
-    n_detect = int(np.ceil(1.5 * max(memory)))
+    n_detect = int(np.ceil(CANDIDATES * max(memory)))
+    default = METHODS[0]  # RobustnessPredictor.select's default; the thesis's rule is "robust"
     grid = {"C": [1.0], "gamma": [0.01]} if quick else GRID
     cv = 2 if quick else 5
     rng = np.random.default_rng(seed)
@@ -166,7 +174,8 @@ def exp_612(out: Path, *, quick: bool, seed: int, progress: bool) -> ExperimentR
         log(f"6.1.2: {det}: {len(sel)} balanced samples of {len(ya)} labelled, grid search")
         pred = RobustnessPredictor.fit(Xa[sel], ya[sel], detector=det, grid=grid, cv=cv, seed=seed)
         log(f"6.1.2: {det}: C {pred.info['C']:g}, gamma {pred.gamma:g}, CV accuracy {pred.info['cv_accuracy']:.3f}")
-        counts = {(q, how): np.zeros((len(memory), 3), int) for q in queries for how in ("response", "robust")}
+        hows = ("response",) + METHODS
+        counts = {(q, how): np.zeros((len(memory), 3), int) for q in queries for how in hows}
         for f in test_f:
             ref_img = image(f, "spring")
             ref_all = detect(ref_img, det, n_detect)
@@ -175,27 +184,30 @@ def exp_612(out: Path, *, quick: bool, seed: int, progress: bool) -> ExperimentR
             # one distance matrix per query, sliced for every memory size (features come sorted by response)
             dist = {q: descriptor_distances(ref_all, qf) for q, qf in qs.items()}
             for mi, m in enumerate(memory):
-                conv = np.arange(min(len(ref_all), m))
-                pool = np.arange(min(len(ref_all), int(np.ceil(1.5 * m))))
-                robust = pool[np.argsort(-scores[pool], kind="stable")[:m]]
+                kept_by = {"response": np.arange(min(len(ref_all), m)),
+                           **{how: select_ranked(scores, m, candidates=CANDIDATES, method=how) for how in METHODS}}
                 for q, qf in qs.items():
                     cols = np.arange(min(len(qf), m))
                     qm = qf.subset(cols)
-                    for how, kept in (("response", conv), ("robust", robust)):
+                    for how, kept in kept_by.items():
                         pairs = match_distances(dist[q][np.ix_(kept, cols)], cross_check=True)
                         ok = true_match(ref_all.subset(kept), qm, pairs, THRESHOLD)
                         counts[(q, how)][mi] += (int(ok.sum()), int((~ok).sum()), len(kept))
         for q in queries:
-            f_conv = np.array([_f1(*c) for c in counts[(q, "response")]])
-            f_rob = np.array([_f1(*c) for c in counts[(q, "robust")]])
+            f1s = {how: np.array([_f1(*c) for c in counts[(q, how)]]) for how in hows}
+            f_conv = f1s["response"]
             valid = f_conv > 0
-            gain = float(np.mean((f_rob[valid] - f_conv[valid]) / f_conv[valid]) * 100) if valid.any() else float("nan")
+            gain = {how: float(np.mean((f1s[how][valid] - f_conv[valid]) / f_conv[valid]) * 100) if valid.any()
+                    else float("nan") for how in METHODS}
             thesis = THESIS_612.get((det, q))
             held = " (held-out season)" if q == "winter" else ""
-            rows.append({"metric": f"{det}: F1 gain % {q} to spring{held}", "thesis": thesis, "sfanav": gain})
-            rows.append({"metric": f"{det}: mean F1 {q} to spring, response / robust", "thesis": None,
-                         "sfanav": f"{f_conv.mean():.3f} / {f_rob.mean():.3f}"})
-            curves[f"{det}/{q}"] = {"response": f_conv.tolist(), "robust": f_rob.tolist()}
+            rows.append({"metric": f"{det}: F1 gain % {q} to spring{held}", "thesis": thesis, "sfanav": gain[default]})
+            for how in METHODS[1:]:
+                rows.append({"metric": f"{det}: F1 gain % {q} to spring, selection '{how}'", "thesis": thesis,
+                             "sfanav": gain[how]})
+            rows.append({"metric": f"{det}: mean F1 {q} to spring, {' / '.join(hows)}", "thesis": None,
+                         "sfanav": " / ".join(f"{f1s[how].mean():.3f}" for how in hows)})
+            curves[f"{det}/{q}"] = {how: f.tolist() for how, f in f1s.items()}
         rows.append({"metric": f"{det}: predictor CV accuracy", "thesis": None, "sfanav": pred.info["cv_accuracy"]})
         rows.append({"metric": f"{det}: balanced training samples", "thesis": 10000 if det == "fast-brief" else None,
                      "sfanav": int(len(sel))})
@@ -212,7 +224,9 @@ def exp_612(out: Path, *, quick: bool, seed: int, progress: bool) -> ExperimentR
     notes = (f"preset {PRESET}, run 'route': training on loop poses {int(train_f[0])}..{int(train_f[-1])} in "
              f"{', '.join(seasons)} (stable: matched in all, ratio 0.75, {THRESHOLD:g} px; unstable: in none; "
              f"balanced), test on poses {int(test_f[0])}..{int(test_f[-1])}; reference spring, memory sizes "
-             f"{', '.join(map(str, memory))}; gain = mean over memory sizes of the relative F1 change. "
+             f"{', '.join(map(str, memory))}; gain = mean over memory sizes of the relative F1 change of the "
+             f"selection '{default}' (rank by response + rank by robustness among the {CANDIDATES:g} m strongest; "
+             "rows 'robust': the m most robust of them, the thesis's rule) over the m strongest. "
              "Thesis SURF rows are compared with SIFT (the stand-in).")
     return ExperimentResult("6.1.2", rows, [str(path)], notes, targets=targets, figures={"F1 against memory": path},
                             details={"memory": list(memory), "f1": curves})
@@ -226,7 +240,8 @@ def _plot_612(path: Path, memory: Any, curves: dict[str, Any]) -> None:
     axes = fig.subplots(1, len(keys), squeeze=False)
     for ax, k in zip(axes[0], keys):
         ax.semilogx(memory, curves[k]["response"], "o-", ms=3, label="detector response")
-        ax.semilogx(memory, curves[k]["robust"], "o-", ms=3, label="predicted robustness")
+        ax.semilogx(memory, curves[k]["rank-sum"], "o-", ms=3, label="response + robustness ranks (default)")
+        ax.semilogx(memory, curves[k]["robust"], "o--", ms=3, label="predicted robustness (thesis)")
         ax.set_title(k.replace("/", ", ") + " to spring", fontsize=8)
         ax.set_xlabel("memory (features)")
     axes[0][0].set_ylabel("F1")

@@ -7,7 +7,8 @@
   LBP) and colour (hue) statistics around a keypoint.
 * :mod:`~sfanav.features.robustness`: stable / unstable labels over the
   seasons, an RBF SVM that predicts a keypoint's long-term robustness, its
-  JSON file, and top-k selection by predicted robustness.
+  JSON file, and top-k selection by detector response and predicted
+  robustness.
 """
 
 from .descriptor import DIM, robustness_vectors
@@ -21,8 +22,8 @@ from .detectors import (
     pixel_distance,
     true_match,
 )
-from .robustness import RobustnessPredictor, balanced, stability_labels, training_samples
+from .robustness import METHODS, RobustnessPredictor, balanced, select_ranked, stability_labels, training_samples
 
-__all__ = ["DETECTORS", "DIM", "Features", "RobustnessPredictor", "balanced", "descriptor_distances", "detect", "match",
+__all__ = ["DETECTORS", "DIM", "METHODS", "Features", "RobustnessPredictor", "balanced", "descriptor_distances", "detect", "match",
            "match_distances", "pixel_distance",
-           "robustness_vectors", "stability_labels", "training_samples", "true_match"]
+           "robustness_vectors", "select_ranked", "stability_labels", "training_samples", "true_match"]

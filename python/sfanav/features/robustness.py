@@ -8,9 +8,11 @@
    77-dimensional texture and colour vectors
    (:func:`~sfanav.features.descriptor.robustness_vectors`), standardised,
    C and gamma by grid search with 5-fold cross-validation.
-4. :meth:`RobustnessPredictor.select` keeps the ``k`` keypoints of an image
-   that it finds most robust, out of the ``1.5 k`` of largest detector
-   response.
+4. :meth:`RobustnessPredictor.select` keeps ``k`` keypoints of an image
+   out of the ``1.5 k`` of largest detector response (:func:`select_ranked`):
+   by default those of the smallest sum of their rank by response and their
+   rank by predicted robustness (``method="rank-sum"``), or the ``k`` most
+   robust (``method="robust"``, the thesis's rule).
 
 The predictor is saved as JSON (no pickle): format name, version, the
 scaler, the support vectors, dual coefficients, intercept and gamma, with a
@@ -43,6 +45,10 @@ from .detectors import Features, detect, match, pixel_distance
 FORMAT = "sfanav-robustness-predictor"
 VERSION = 1
 STABLE, UNSTABLE, NEITHER = 1, 0, -1
+#: how :func:`select_ranked` picks keypoints (see there); the first is the default
+METHODS = ("rank-sum", "robust")
+#: default candidate pool of :func:`select_ranked`, in multiples of the number kept
+CANDIDATES = 1.5
 #: default grid of the support vector machine (gamma in units of 1 / (77 * variance) as scikit-learn's "scale")
 GRID = {"C": [0.3, 1.0, 3.0, 10.0, 30.0], "gamma": [0.003, 0.01, 0.03, 0.1]}
 
@@ -150,6 +156,71 @@ def training_samples(places: Any, detector: str = "fast-brief", *, n: int = 1000
     return np.vstack(X), np.concatenate(y)
 
 
+def select_ranked(scores: Any, k: int, *, candidates: float = CANDIDATES, method: str = METHODS[0]) -> np.ndarray:
+    """Which ``k`` of a detector's keypoints to keep, given their predicted
+    robustness.
+
+    The keypoints are those of an image sorted by decreasing detector
+    response (as :func:`~sfanav.features.detectors.detect` returns them);
+    the candidates are the ``ceil(candidates * k)`` strongest. ``method``:
+
+    * ``"rank-sum"`` (default): the ``k`` candidates of smallest sum of their
+      rank by response and their rank by score (ties: the stronger
+      response). Strong keypoints predicted unstable give way to slightly
+      weaker ones predicted stable.
+    * ``"robust"``: the ``k`` candidates of largest score (the thesis's
+      rule).
+
+    How the two compare on the simulated seasons: docs/experiments.md, 6.1.2.
+
+    Parameters
+    ----------
+    scores : array (n,)
+        Predicted robustness of the keypoints, in response order (larger:
+        more robust; e.g. :meth:`RobustnessPredictor.score_keypoints`).
+    k : int
+        Keypoints to keep (>= 1); all if there are fewer.
+    candidates : float
+        Pool size in multiples of ``k`` (> 0; values below 1 count as 1).
+    method : str
+        One of :data:`METHODS`.
+
+    Returns
+    -------
+    ndarray (min(k, n),) int
+        Indices into ``scores``, best first.
+
+    Raises
+    ------
+    ValueError
+        ``k`` < 1, ``candidates`` <= 0, an unknown method, scores not a
+        finite 1-d array.
+
+    Examples
+    --------
+    >>> select_ranked([0.1, -2.0, 1.5, 0.3], 2, candidates=2.0)
+    array([0, 2])
+    >>> select_ranked([0.1, -2.0, 1.5, 0.3], 2, candidates=2.0, method="robust")
+    array([2, 3])
+    """
+    from .._checks import check_int, check_positive_float
+
+    k = check_int(k, "k", minimum=1)
+    c = check_positive_float(candidates, "candidates")
+    if method not in METHODS:
+        raise ValueError(f"unknown selection method {method!r}; available: {', '.join(METHODS)}")
+    s = np.asarray(scores, dtype=float)
+    if s.ndim != 1 or not np.all(np.isfinite(s)):
+        raise ValueError(f"scores must be a finite 1-d array, got shape {s.shape}")
+    pool = s[: max(k, int(np.ceil(c * k)))]
+    by_score = np.argsort(-pool, kind="stable")
+    if method == "robust":
+        return by_score[:k]
+    rank = np.empty(len(pool))
+    rank[by_score] = np.arange(len(pool))
+    return np.argsort(np.arange(len(pool)) + rank, kind="stable")[:k]
+
+
 @dataclass
 class RobustnessPredictor:
     """An RBF support vector machine that scores keypoints' long-term
@@ -244,17 +315,22 @@ class RobustnessPredictor:
         """Scores (n,) of the keypoints of ``features`` in RGB ``image``."""
         return self.decision_function(robustness_vectors(image, features.xy, patch=self.patch))
 
-    def select(self, image: Any, k: int, *, candidates: float = 1.5, features: Features | None = None) -> Features:
-        """The ``k`` keypoints of ``image`` the predictor finds most robust,
-        out of the ``ceil(candidates * k)`` of largest response (detected
-        with the predictor's detector unless ``features`` are given)."""
+    def select(self, image: Any, k: int, *, candidates: float = CANDIDATES, method: str = METHODS[0],
+               features: Features | None = None) -> Features:
+        """``k`` keypoints of RGB ``image`` to keep in a long-term map: of the
+        ``ceil(candidates * k)`` of largest response (detected with the
+        predictor's detector unless ``features`` are given), those
+        :func:`select_ranked` picks by ``method`` (default ``"rank-sum"``:
+        rank by response plus rank by predicted robustness; ``"robust"``:
+        the most robust, the thesis's rule). ValueError as
+        :func:`select_ranked`."""
         from .._checks import check_int, check_positive_float
 
         k = check_int(k, "k", minimum=1)
-        m = int(np.ceil(check_positive_float(candidates, "candidates") * k))
+        m = max(k, int(np.ceil(check_positive_float(candidates, "candidates") * k)))
         pool = detect(image, self.detector, m) if features is None else features.strongest(m)
         s = self.score_keypoints(image, pool)
-        return pool.subset(np.argsort(-s, kind="stable")[:k])
+        return pool.subset(select_ranked(s, k, candidates=candidates, method=method))
 
     # ------------------------------------------------------------ file
 

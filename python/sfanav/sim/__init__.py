@@ -4,7 +4,8 @@
 * :class:`Renderer` (``render.py``), :class:`PanoramicCamera`,
   :class:`OmniCamera` (``cameras.py``): the ray caster.
 * :class:`Lighting`, :class:`Season` (``conditions.py``): recording
-  conditions, light and season.
+  conditions, light and season; ``transient.py``: objects that come and go
+  with the seasons (``World.generate(transient=...)``).
 * :class:`Robot`, :class:`OdometryNoise`, :func:`simulate_odometry`,
   :class:`Simulator` (``robot.py``): kinematics, camera mounts, odometry,
   closed-loop stepping.

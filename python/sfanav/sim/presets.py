@@ -378,14 +378,35 @@ def _seasons_61(rng: np.random.Generator) -> list[RunSpec]:
                     {"year": lapse})]
 
 
+#: thesis 6.1, "some objects that come and go": what stands on the lawn of thesis-6.1-seasons in which
+#: season (sim.transient; x, y m in the 15x15 m area, clear of the loop 1 m inside the border and of the
+#: year's camera at LAPSE_POSE). The tarp covers the furniture's place in autumn and winter.
+SEASONS_61_TRANSIENT = (
+    {"kind": "furniture", "seasons": ["spring", "summer"], "x": 3.0, "y": 3.0},
+    {"kind": "parasol", "seasons": ["summer"], "x": 3.0, "y": 3.0},
+    {"kind": "tarp", "seasons": ["autumn", "winter"], "x": 3.0, "y": 3.0},
+    {"kind": "paddling_pool", "seasons": ["summer"], "x": -3.0, "y": 2.5},
+    {"kind": "toys", "seasons": ["spring", "summer"], "x": -1.0, "y": 4.3},
+    {"kind": "wheelbarrow", "seasons": ["spring"], "x": -4.0, "y": -3.5},
+    {"kind": "leaf_pile", "seasons": ["autumn"], "x": -3.5, "y": -0.8},
+    {"kind": "leaf_pile", "seasons": ["autumn"], "x": 2.8, "y": -4.2},
+    {"kind": "snowman", "seasons": ["winter"], "x": 1.5, "y": 1.0},
+    {"kind": "snow_patch", "seasons": ["winter"], "x": -1.8, "y": -4.2},
+    {"kind": "snow_patch", "seasons": ["winter"], "x": 4.3, "y": -0.5},
+)
+
+
 _add(Preset(
     "thesis-6.1-seasons", "6.1",
     "15x15 m garden for local visual features over the seasons: a 160-frame border-wire loop ('route') driven "
     "exactly once in each season (conditions spring, summer, autumn, winter: lawn, foliage and sky colours, "
-    "thinning crowns, the season's sun height and shadows, a random day's light), and a fixed camera "
-    "recording 101 frames over one year from the start of spring ('year', condition 'year': the season blends "
-    "continuously, the light changes from frame to frame); 1200x120 RGB panoramas",
-    _garden((15.0, 15.0), 30),
+    "thinning crowns, the season's sun height and shadows, a random day's light, and objects on the lawn that "
+    "come and go: garden furniture in spring and summer, a parasol and a paddling pool in summer, toys, a "
+    "wheelbarrow in spring, leaf piles in autumn, a tarp in autumn and winter, a snowman and snow patches in "
+    "winter), and a fixed camera recording 101 frames over one year from the start of spring ('year', "
+    "condition 'year': the season blends continuously, the light changes from frame to frame, the objects "
+    "change with the quarter); 1200x120 RGB panoramas",
+    _garden((15.0, 15.0), 30, transient=SEASONS_61_TRANSIENT),
     lambda: PanoramicCamera(1200, 120),
     _seasons_61,
 ))

@@ -7,6 +7,7 @@ parts block the robot. Coordinates and angles as in :mod:`sfanav.sim.world`."""
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -84,7 +85,32 @@ class WorldObject:
     """A garden object: a kind, an anchor, a footprint radius and its parts.
 
     ``obstacle`` objects stand inside the free area and block the robot;
-    ``marker_id`` is set on marker boards."""
+    ``marker_id`` is set on marker boards.
+
+    ``seasons``: None (default) for an object that is always there, or the
+    names of the seasons (keys of :data:`sfanav.sim.conditions.SEASONS`:
+    ``"spring"``, ``"summer"``, ``"autumn"``, ``"winter"``) in which it is
+    there: a *transient* object, such as garden furniture in summer or a
+    snowman in winter (:mod:`sfanav.sim.transient`). The renderer draws it,
+    and its shadow, only under a :class:`~sfanav.sim.conditions.Lighting`
+    whose season has one of these names (a Lighting without a season counts
+    as summer; a season with another name, e.g. a custom one, shows no
+    transient object). Stored as a sorted tuple in the order of the year.
+
+    Raises
+    ------
+    ValueError
+        ``seasons`` empty, a bare string, or holding a name that is not a
+        named season, or a duplicate.
+
+    Examples
+    --------
+    >>> pool = WorldObject("paddling_pool", 1.0, 2.0, 1.0,
+    ...                    [Primitive("cylinder", 1.0, 2.0, 0.0, 0.35, "pool", radius=1.0)],
+    ...                    seasons=["summer"])
+    >>> pool.present("summer"), pool.present("winter"), pool.present(None)
+    (True, False, True)
+    """
 
     kind: str
     x: float
@@ -93,3 +119,35 @@ class WorldObject:
     parts: list[Primitive]
     obstacle: bool = False
     marker_id: int | None = None
+    seasons: tuple[str, ...] | None = None
+
+    def __post_init__(self) -> None:
+        if self.seasons is not None:
+            self.seasons = season_names(self.seasons, f"object {self.kind!r} seasons")
+
+    @property
+    def transient(self) -> bool:
+        """Whether the object is there in some seasons only."""
+        return self.seasons is not None
+
+    def present(self, season: str | None) -> bool:
+        """Whether the object is there in the season named ``season``
+        (None: no season, counted as summer)."""
+        return self.seasons is None or (season if season is not None else "summer") in self.seasons
+
+
+def season_names(value: Any, what: str = "seasons") -> tuple[str, ...]:
+    """The named seasons in ``value`` (a non-empty sequence of names from
+    :data:`sfanav.sim.conditions.SEASONS`) as a tuple in the order of the
+    year; ValueError for an empty sequence, a bare string, an unknown name
+    or a duplicate."""
+    from .conditions import SEASONS
+
+    if isinstance(value, str) or not isinstance(value, (list, tuple)) or not value:
+        raise ValueError(f"{what} must be a non-empty list of season names ({', '.join(SEASONS)}), got {value!r}")
+    bad = [v for v in value if v not in SEASONS]
+    if bad:
+        raise ValueError(f"{what}: unknown season names {bad!r}; available: {', '.join(SEASONS)}")
+    if len(set(value)) != len(value):
+        raise ValueError(f"{what} names a season twice: {list(value)!r}")
+    return tuple(s for s in SEASONS if s in value)

@@ -162,7 +162,9 @@ class Renderer:
     colour, and the colour of deciduous foliage (leaf-textured parts of
     ``DECIDUOUS_KINDS`` objects, and the distant tree line); crowns of
     trees and bushes are thinned by its ``leaf_cover`` (see
-    :meth:`Season.leafy`), and so are their shadows.
+    :meth:`Season.leafy`), and so are their shadows. Transient objects
+    (``WorldObject.seasons``) and their shadows are drawn only in their
+    seasons (a lighting without a season counts as summer).
 
     Parameters
     ----------
@@ -183,6 +185,9 @@ class Renderer:
         self._marker_of = np.array([-1 if owner[id(p)] is None else owner[id(p)] for p in self._static.list], np.int64)
         self._covered: dict[frozenset[int], _Prims] = {}
         self._foliage, self._crowns = self._vegetation()
+        seasons_of = {id(p): o.seasons for o in world.objects for p in o.parts}
+        self._seasons_of = [seasons_of[id(p)] for p in self._static.list]
+        self._presence: dict[str, np.ndarray | None] = {}
         self._build_ground()
         self._build_sky()
         self._ground_cache: dict[tuple, np.ndarray] = {}
@@ -200,6 +205,16 @@ class Renderer:
                             for p in self._static.list], bool)
         crowns = foliage & np.array([p.shape == "ellipsoid" for p in self._static.list], bool)
         return foliage, crowns
+
+    def _present(self, season: Season | None) -> np.ndarray | None:
+        """Per static primitive (in ``self._static`` order): whether its
+        object is there in ``season`` (bool array), or None when every
+        primitive is (a world without transient objects, or all there)."""
+        name = "summer" if season is None else season.name
+        if name not in self._presence:
+            mask = np.array([s is None or name in s for s in self._seasons_of], bool)
+            self._presence[name] = None if mask.all() else mask
+        return self._presence[name]
 
     # ------------------------------------------------------------ ground
 
@@ -237,12 +252,16 @@ class Renderer:
         weights = None
         if light.season is not None and light.season.leaf_cover < 1:
             weights = np.where(self._crowns, light.season.leaf_cover, 1.0)
+        present = self._present(light.season)
+        if present is not None:  # absent transient objects cast no shadow
+            weights = present * (1.0 if weights is None else weights)
         return shadow_map(self._static.list, light.sun, n, self._gmap_res, self._gmap_origin, weights)
 
     def _lit_ground(self, light: Lighting) -> np.ndarray:
         season = light.season
         key = (light.sun_azimuth_deg, light.sun_elevation_deg, light.ambient, light.sun_intensity, light.shadows,
-               None if season is None else (season.ground, season.leaf_cover))
+               None if season is None else (season.ground, season.leaf_cover),
+               None if self._present(season) is None else self._present(season).tobytes())
         lit = self._ground_cache.get(key)
         if lit is None:
             gmap = self._gmap
@@ -534,6 +553,7 @@ class Renderer:
         if season is not None:  # the dynamic primitives (after the static ones) are no plants
             pad = np.zeros(n - len(self._foliage), bool)
             foliage, crowns = np.concatenate([self._foliage, pad]), np.concatenate([self._crowns, pad])
+        present = self._present(season)  # None: every static primitive is there
         # --- per primitive: screen block
         qx, qy = P.x - cx, P.y - cy
         rho2 = qx * qx + qy * qy
@@ -555,6 +575,8 @@ class Renderer:
         c1 = np.where(full, W, c1)
         nc = c1 - c0
         cnt = np.maximum(r1 - r0, 0) * nc
+        if present is not None:  # transient objects out of season: no candidate pixels
+            cnt[: len(present)] *= present
         total = int(cnt.sum())
         if total == 0:
             return

@@ -5,9 +5,10 @@ distant tree line, with garden objects (trees, conifers, bushes, houses,
 sheds, fences, hedges, rocks, ArUco marker boards) placed at random polar
 coordinates whose radii lie beyond the free area where the robot moves: the
 construction of the thesis's Blender gardens. Optional obstacles (the
-v-shaped wall of section 7.1.2, boxes) stand inside the area, and an optional
-dynamic object (a textured cylinder circling the area, section 6.2.1) moves
-with time.
+v-shaped wall of section 7.1.2, boxes) stand inside the area, optional
+transient objects (garden furniture, a snowman, ...: :mod:`sfanav.sim.transient`)
+are there in some seasons only, and an optional dynamic object (a textured
+cylinder circling the area, section 6.2.1) moves with time.
 
 Coordinates: x east, y north, z up, metres; the free area is the rectangle
 ``|x| <= area[0]/2, |y| <= area[1]/2`` centred on the origin. Angles
@@ -31,6 +32,7 @@ import numpy as np
 from .objects import ObjectBuilder
 from .primitives import BLOCK_HEIGHT, Primitive, WorldObject
 from .textures import Texture
+from .transient import TransientBuilder
 
 FORMAT = "sfanav-world"
 
@@ -313,6 +315,7 @@ class World:
         inner: dict[str, int] | None = None,
         patches: dict[str, int] | None = None,
         lawn: str = "patchy",
+        transient: Sequence[dict[str, Any]] = (),
     ) -> "World":
         """Generates a garden, deterministically from ``seed``.
 
@@ -374,6 +377,19 @@ class World:
             garden: "a textured ground plane"). A hierarchical SFA network
             trained on a patchy lawn codes the lawn's colour around the robot
             in its slowest outputs (docs/navigation.md).
+        transient : sequence of dict
+            Objects that are there in some seasons only (thesis 6.1), e.g.
+            ``{"kind": "parasol", "seasons": ["summer"], "x": 3.0, "y": 3.0}``;
+            kinds ``sim.transient.TRANSIENT_KINDS``, keys and placement as
+            :mod:`sfanav.sim.transient` says (by default a random spot inside
+            the area). Drawn from their own random stream, so the rest of
+            the world is the same with and without them.
+
+        Raises
+        ------
+        ValueError
+            Bad sizes, counts, weights, kinds or specs (the message names
+            the argument).
         """
         if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)):
             raise TypeError(f"seed must be an integer, got {type(seed).__name__}")
@@ -441,6 +457,11 @@ class World:
                 world.ground.patches = tuple(b2.patches(patches))
             if inner:
                 placed.extend(b2.inner(inner, placed))
+        if transient:
+            # own stream as well: the rest of the world is the same with and without them
+            placed.extend(TransientBuilder(world, np.random.default_rng([int(seed), 11])).build(transient, placed))
+        elif transient is not None and not isinstance(transient, (list, tuple)):
+            raise ValueError(f"transient must be a list of dicts, got {transient!r}")
         world.objects = placed
         world.occlusions = list(occlusions)
         if dynamic is not None:
@@ -475,7 +496,8 @@ class World:
 
     @property
     def obstacles(self) -> list[WorldObject]:
-        """Objects inside the free area that block the robot."""
+        """Objects inside the free area that block the robot (transient ones
+        in every season)."""
         return [o for o in self.objects if o.obstacle]
 
     @property
@@ -512,9 +534,16 @@ class World:
         """Inside the area (shrunk by ``margin``) and clear of obstacles by ``margin``."""
         return self.in_area(x, y, margin) & ~self.collides(x, y, margin)
 
-    def primitives(self, t: float = 0.0) -> list[Primitive]:
-        """All primitives, with the dynamic objects where they are at time ``t`` (s)."""
-        prims = [p for o in self.objects for p in o.parts]
+    @property
+    def transient(self) -> list[WorldObject]:
+        """Objects that are there in some seasons only (``WorldObject.seasons``)."""
+        return [o for o in self.objects if o.seasons is not None]
+
+    def primitives(self, t: float = 0.0, season: str | None = None) -> list[Primitive]:
+        """The primitives of the objects there in the season named ``season``
+        (None: counted as summer, see ``WorldObject.present``), with the
+        dynamic objects where they are at time ``t`` (s)."""
+        prims = [p for o in self.objects if o.present(season) for p in o.parts]
         prims.extend(d.primitive_at(t) for d in self.dynamic)
         return prims
 
@@ -531,7 +560,7 @@ class World:
             "ground": _ground_dict(self.ground),
             "sky": asdict(self.sky),
             "textures": {k: t.to_dict() for k, t in self.textures.items()},
-            "objects": [asdict(o) for o in self.objects],
+            "objects": [_object_dict(o) for o in self.objects],
             "dynamic": [asdict(d) for d in self.dynamic],
             # worlds without occlusions write what they always wrote
             **({"occlusions": [o.to_dict() for o in self.occlusions]} if self.occlusions else {}),
@@ -579,6 +608,15 @@ class World:
         except json.JSONDecodeError as exc:
             raise ValueError(f"world file {path} is not valid JSON: {exc}") from None
         return cls.from_dict(d)
+
+
+def _object_dict(o: WorldObject) -> dict[str, Any]:
+    d = asdict(o)
+    if d["seasons"] is None:
+        del d["seasons"]  # worlds without transient objects write what they always wrote
+    else:
+        d["seasons"] = list(d["seasons"])
+    return d
 
 
 def _ground_dict(g: GroundSpec) -> dict[str, Any]:

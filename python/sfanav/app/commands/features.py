@@ -3,8 +3,9 @@
 ``sfanav features train`` learns a robustness predictor from a seasonal
 dataset (the same route recorded in several conditions, the k-th frame of
 each condition at the same pose, as preset ``thesis-6.1-seasons`` makes);
-``sfanav features select`` keeps the top-k most robust keypoints of every
-image of a dataset and writes them as JSON.
+``sfanav features select`` keeps k keypoints of every image of a dataset,
+chosen by detector response and predicted robustness (``--method``), and
+writes them as JSON.
 """
 
 from __future__ import annotations
@@ -27,7 +28,7 @@ EXAMPLES = """examples:
 
 @command("features")
 def _add_features(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
-    from ...features import DETECTORS
+    from ...features import DETECTORS, METHODS
 
     p = sub.add_parser("features", help="train a robustness predictor for local features; keep robust keypoints",
                        description=wrap("Local visual features over the seasons (thesis 6.1.2): train an SVM that "
@@ -54,14 +55,18 @@ def _add_features(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     t.add_argument("--seed", type=arg.nonneg_int, default=0, help="seed of the class balancing (0)")
     t.add_argument("--overwrite", action="store_true", help="replace an existing --out")
     t.set_defaults(run=_run_train)
-    s = fs.add_parser("select", help="keep the top-k most robust keypoints of every image",
+    s = fs.add_parser("select", help="keep k robust keypoints of every image",
                       description=wrap("Detects 1.5 k keypoints of largest response in every image, scores them "
-                                       "with the predictor and keeps the k most robust; writes JSON (per image: "
-                                       "x, y, detector response, robustness score)."))
+                                       "with the predictor and keeps k: by default those of the smallest sum of "
+                                       "their rank by response and their rank by robustness (--method rank-sum), "
+                                       "or the k most robust (--method robust, the thesis's rule); writes JSON "
+                                       "(per image: x, y, detector response, robustness score)."))
     s.add_argument("--predictor", required=True, metavar="FILE", help="file of sfanav features train")
     s.add_argument("--dataset", required=True, metavar="DIR", help="sfanav dataset (RGB images)")
     s.add_argument("--out", required=True, metavar="FILE", help="keypoint file to write (JSON)")
     s.add_argument("--top-k", type=arg.pos_int, default=200, metavar="K", help="keypoints per image (200)")
+    s.add_argument("--method", choices=METHODS, default=METHODS[0],
+                   help="rank-sum (default): response rank + robustness rank; robust: the most robust")
     s.add_argument("--run", dest="run_name", default=None, metavar="RUN", help="only this run")
     s.add_argument("--condition", default=None, help="only this condition")
     s.add_argument("--overwrite", action="store_true", help="replace an existing --out")
@@ -129,12 +134,13 @@ def _run_select(args: argparse.Namespace) -> int:
         img = ds.image(i)
         if img.ndim != 3:
             raise UsageError(f"{path} is a gray image; robustness prediction needs RGB (the hue histogram)")
-        kept = pred.select(img, args.top_k)
+        kept = pred.select(img, args.top_k, method=args.method)
         scores = pred.score_keypoints(img, kept)
         images.append({"image": str(path.name), "frame": int(ds.frames[i]),
                        "keypoints": [[round(float(x), 2), round(float(y), 2), float(r), round(float(s), 4)]
                                      for (x, y), r, s in zip(kept.xy, kept.response, scores)]})
     doc = {"format": "sfanav-robust-keypoints", "version": 1, "detector": pred.detector, "top_k": args.top_k,
+           "method": args.method,
            "columns": ["x", "y", "response", "robustness"], "images": images}
     write_text_atomic(out, json.dumps(doc), overwrite=True)
     print(f"wrote {out}: {sum(len(im['keypoints']) for im in images)} keypoints of {len(images)} images")
