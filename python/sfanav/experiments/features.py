@@ -134,6 +134,14 @@ def _f1(tp: int, fp: int, n_ref: int) -> float:
 
 @register("6.1.2", "robustness prediction (thesis 6.1.2): F1 gain over detector response +4.74..+11.79 %")
 def exp_612(out: Path, *, quick: bool, seed: int, progress: bool) -> ExperimentResult:
+    return run_612(out, quick=quick, seed=seed, progress=progress)
+
+
+def run_612(out: Path, *, quick: bool, seed: int, progress: bool,
+            match_threshold: float = THRESHOLD) -> ExperimentResult:
+    """Experiment 6.1.2; ``match_threshold``: the largest image distance
+    (px) of a true test match (the labels of the training features keep
+    ``THRESHOLD``)."""
     log = progress_log(progress)
     ds = _data(out, seed, quick, progress).select(run="route")
     by_season = {c: np.flatnonzero(ds.conditions == c)[np.argsort(ds.frames[ds.conditions == c], kind="stable")]
@@ -191,7 +199,7 @@ def exp_612(out: Path, *, quick: bool, seed: int, progress: bool) -> ExperimentR
                     qm = qf.subset(cols)
                     for how, kept in kept_by.items():
                         pairs = match_distances(dist[q][np.ix_(kept, cols)], cross_check=True)
-                        ok = true_match(ref_all.subset(kept), qm, pairs, THRESHOLD)
+                        ok = true_match(ref_all.subset(kept), qm, pairs, match_threshold)
                         counts[(q, how)][mi] += (int(ok.sum()), int((~ok).sum()), len(kept))
         for q in queries:
             f1s = {how: np.array([_f1(*c) for c in counts[(q, how)]]) for how in hows}
