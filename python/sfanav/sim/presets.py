@@ -406,7 +406,8 @@ _add(Preset(
     "thesis-6.1-seasons", "6.1",
     "15x15 m garden for local visual features over the seasons: a 160-frame border-wire loop ('route') driven "
     "exactly once in each season (conditions spring, summer, autumn, winter: lawn, foliage and sky colours, "
-    "thinning crowns, the season's sun height and shadows, a random day's light, and objects on the lawn that "
+    "thinning crowns, another fine pattern of leaves and grass, the season's sun height and shadows, a random "
+    "day's light, and objects on the lawn that "
     "come and go: garden furniture in spring and summer, a parasol and a paddling pool in summer, toys, a "
     "wheelbarrow in spring, leaf piles in autumn, a tarp in autumn and winter, a snowman and snow patches in "
     "winter), and a fixed camera recording 101 frames over one year from the start of spring ('year', "
