@@ -6,9 +6,17 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-
 from sfanav import sim
-from sfanav.sim import Lighting, PanoramicCamera, Primitive, Renderer, Season, Texture, World, WorldObject
+from sfanav.sim import (
+    Lighting,
+    PanoramicCamera,
+    Primitive,
+    Renderer,
+    Season,
+    Texture,
+    World,
+    WorldObject,
+)
 from sfanav.sim.world import GroundSpec
 
 CAM = PanoramicCamera(120, 24, (-40, 30))
