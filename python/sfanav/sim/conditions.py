@@ -30,6 +30,12 @@ DECIDUOUS_KINDS = ("tree", "bush", "hedge")
 #: edge of the world-space cells (m) in which a thinned crown has a leaf or a gap
 LEAF_CELL = 0.08
 
+#: the vegetation textures a season's ``texture_seed`` moves (:meth:`Season.texture_offset`)
+TEXTURE_PARTS = ("foliage", "lawn")
+
+#: range (m) of the offsets drawn by :meth:`Season.texture_offset`; far larger than any texture tile
+TEXTURE_SHIFT_RANGE = 1000.0
+
 
 def _rgb(value: Any, what: str) -> tuple[float, float, float]:
     try:
@@ -77,6 +83,21 @@ class Season:
         ``leaf_cover`` of full shadow, and the distant tree line lets
         ``(1 - leaf_cover) / 2`` of the sky through (half of it evergreen).
         At 1 crowns are solid.
+    texture_seed : int >= 0 or None
+        Changes the fine structure of the vegetation with the season (leaves
+        grow, fall and move, grass is mown or grows), not only its colour:
+        the renderer samples the leaf texture of deciduous foliage (the
+        parts recoloured by ``foliage``) and the lawn's grass detail (on the
+        lawn share of the ground, not patio, paths or beds) shifted by a
+        pseudo-random offset drawn from this seed (:meth:`texture_offset`,
+        up to ``TEXTURE_SHIFT_RANGE`` metres, wrapping in the tiled
+        textures). The same world point then shows a different leaf or
+        grass pattern in seasons with different seeds, while the textures'
+        colour and gray-level statistics stay the same. Bark, stone, wood,
+        paving, painted patches, markers, conifers, the distant tree line
+        and transient objects keep their texture. None (default): no shift,
+        the season renders pixel-identically to one without this option.
+        :func:`season_of_year` blends give None.
     sun_elevation_deg : (low, high)
         Typical elevations of the daytime sun in the season (degrees, for
         central Europe, about 51 deg N), for drawing a :class:`Lighting`'s
@@ -88,7 +109,8 @@ class Season:
     ValueError
         A colour that is not three finite non-negative numbers, a
         ``leaf_cover`` outside [0, 1], a sun elevation range outside
-        (0, 90] or with low > high, an empty name.
+        (0, 90] or with low > high, an empty name, a ``texture_seed`` that
+        is not None or a non-negative integer.
 
     Examples
     --------
@@ -96,6 +118,11 @@ class Season:
     0.65
     >>> Season("late winter", ground=(1.15, 0.85, 1.2), leaf_cover=0.2, sun_elevation_deg=(10, 25)).name
     'late winter'
+    >>> Season.spring().texture_seed is None
+    True
+    >>> from dataclasses import replace
+    >>> replace(Season.autumn(), texture_seed=3).texture_seed
+    3
     """
 
     name: str = "custom"
@@ -104,6 +131,7 @@ class Season:
     sky: tuple[float, float, float] = (1.0, 1.0, 1.0)
     leaf_cover: float = 1.0
     sun_elevation_deg: tuple[float, float] = (25.0, 60.0)
+    texture_seed: int | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.name, str) or not self.name:
@@ -125,6 +153,11 @@ class Season:
             raise ValueError("season sun_elevation_deg must be (low, high) degrees with 0 < low <= high <= 90, "
                              f"got {self.sun_elevation_deg!r}")
         object.__setattr__(self, "sun_elevation_deg", (lo, hi))
+        if self.texture_seed is not None:
+            seed = self.texture_seed
+            if isinstance(seed, (bool, np.bool_)) or not isinstance(seed, (int, np.integer)) or seed < 0:
+                raise ValueError(f"season texture_seed must be None or an integer >= 0, got {seed!r}")
+            object.__setattr__(self, "texture_seed", int(seed))
 
     # ------------------------------------------------------------ named seasons
 
@@ -172,10 +205,32 @@ class Season:
         u = (h >> np.uint64(11)).astype(np.float64) * (1.0 / 2**53)
         return u < self.leaf_cover
 
+    def texture_offset(self, part: str) -> tuple[float, float]:
+        """The shift (du, dv) in metres with which the renderer samples the
+        vegetation texture ``part`` (one of ``TEXTURE_PARTS``: ``"foliage"``
+        for deciduous leaves, ``"lawn"`` for the grass detail) in this
+        season: (0, 0) without a ``texture_seed``, otherwise two numbers in
+        [0, ``TEXTURE_SHIFT_RANGE``) drawn from the seed and the part.
+        ValueError for an unknown part.
+
+        >>> Season().texture_offset("lawn")
+        (0.0, 0.0)
+        >>> Season(texture_seed=1).texture_offset("lawn") != Season(texture_seed=2).texture_offset("lawn")
+        True
+        """
+        if part not in TEXTURE_PARTS:
+            raise ValueError(f"unknown texture part {part!r}; available: {', '.join(TEXTURE_PARTS)}")
+        if self.texture_seed is None:
+            return (0.0, 0.0)
+        rng = np.random.default_rng([self.texture_seed, TEXTURE_PARTS.index(part)])
+        du, dv = rng.uniform(0.0, TEXTURE_SHIFT_RANGE, 2)
+        return (float(du), float(dv))
+
     # ------------------------------------------------------------ JSON
 
     def to_dict(self) -> dict[str, Any]:
-        return {
+        """JSON-able fields; ``"texture_seed"`` only when there is one."""
+        d: dict[str, Any] = {
             "name": self.name,
             "ground": list(self.ground),
             "foliage": list(self.foliage),
@@ -183,6 +238,9 @@ class Season:
             "leaf_cover": self.leaf_cover,
             "sun_elevation_deg": list(self.sun_elevation_deg),
         }
+        if self.texture_seed is not None:
+            d["texture_seed"] = self.texture_seed
+        return d
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> "Season":

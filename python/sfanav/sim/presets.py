@@ -10,7 +10,7 @@ the same from the command line.
 from __future__ import annotations
 
 import os
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Callable, Sequence
 
@@ -370,8 +370,14 @@ def _year_lapse(rng: np.random.Generator, n: int = 512) -> LightFn:
 LAPSE_POSE = (0.0, -2.0, np.pi / 2)
 
 
+#: thesis 6.1: the texture seed of each named season in thesis-6.1-seasons' route (Season.texture_seed): the
+#: leaves and the grass have a different fine pattern in every season; other presets keep the plain seasons
+SEASONS_61_TEXTURE_SEEDS = {"spring": 1, "summer": 2, "autumn": 3, "winter": 4}
+
+
 def _seasons_61(rng: np.random.Generator) -> list[RunSpec]:
-    seasons = {name: _weather(rng, s) for name, s in SEASONS.items()}
+    seasons = {name: _weather(rng, replace(s, texture_seed=SEASONS_61_TEXTURE_SEEDS[name]))
+               for name, s in SEASONS.items()}
     lapse = _year_lapse(rng)
     return [RunSpec("route", lambda w, r: T.border_loop(w.area, 160, rng=r), seasons),
             RunSpec("year", lambda w, r: T.Trajectory(np.tile(LAPSE_POSE, (101, 1)), np.arange(101) * 86400.0 * 3.6),
@@ -400,7 +406,8 @@ _add(Preset(
     "thesis-6.1-seasons", "6.1",
     "15x15 m garden for local visual features over the seasons: a 160-frame border-wire loop ('route') driven "
     "exactly once in each season (conditions spring, summer, autumn, winter: lawn, foliage and sky colours, "
-    "thinning crowns, the season's sun height and shadows, a random day's light, and objects on the lawn that "
+    "thinning crowns, another fine pattern of leaves and grass, the season's sun height and shadows, a random "
+    "day's light, and objects on the lawn that "
     "come and go: garden furniture in spring and summer, a parasol and a paddling pool in summer, toys, a "
     "wheelbarrow in spring, leaf piles in autumn, a tarp in autumn and winter, a snowman and snow patches in "
     "winter), and a fixed camera recording 101 frames over one year from the start of spring ('year', "

@@ -164,7 +164,9 @@ class Renderer:
     trees and bushes are thinned by its ``leaf_cover`` (see
     :meth:`Season.leafy`), and so are their shadows. Transient objects
     (``WorldObject.seasons``) and their shadows are drawn only in their
-    seasons (a lighting without a season counts as summer).
+    seasons (a lighting without a season counts as summer). A season's
+    ``texture_seed`` shifts the leaf texture of deciduous foliage and the
+    grass detail of the lawn (:meth:`Season.texture_offset`).
 
     Parameters
     ----------
@@ -236,6 +238,8 @@ class Renderer:
         self._gmap_origin = lawn.origin
         self._gmap = lawn.colour  # (n, n, 3), row = y index, col = x index
         self._lawn = lawn.lawn[..., None]  # (n, n, 1): share of lawn, the part a season recolours
+        share = lawn.lawn.reshape(-1).astype(np.float32)
+        self._lawn_flat = np.concatenate([share, share])  # indexed like the lit ground (near and far copies)
 
     def ground_colour_map(self) -> tuple[np.ndarray, float, float]:
         """The lawn's colour map before light and texture: ``(map, resolution,
@@ -513,6 +517,13 @@ class Renderer:
             n, res, o = self._gmap_n, self._gmap_res, self._gmap_origin
             gi = (np.floor((X - o) / res).astype(np.int64) & (n - 1)) + (
                 np.floor((Y - o) / res).astype(np.int64) & (n - 1)) * n + gd["gnd_map_off"]
+            if light.season is not None and light.season.texture_seed is not None:
+                # the season's grass: the detail shifted on the lawn share, patio, paths and beds unchanged
+                du, dv = light.season.texture_offset("lawn")
+                iu = np.floor((X + du) * inv).astype(np.int64) & gd["det_mask"]
+                iv = np.floor((Y + dv) * inv).astype(np.int64) & gd["det_mask"]
+                grass = self._det_flat[gd["det_off"] + iv * gd["det_n"] + iu]
+                det = det + self._lawn_flat[gi] * (grass - det)
             col = self._lit_ground(light)[gi].view(np.float32).reshape(gi.shape + (4,)) * det[..., None]
             fog = gd["gnd_fog"]
             col += fog * (self._horizon(light.season) - col)
@@ -554,6 +565,9 @@ class Renderer:
             pad = np.zeros(n - len(self._foliage), bool)
             foliage, crowns = np.concatenate([self._foliage, pad]), np.concatenate([self._crowns, pad])
         present = self._present(season)  # None: every static primitive is there
+        shift = None  # the season's leaf pattern: (deciduous foliage mask, du, dv)
+        if season is not None and season.texture_seed is not None:
+            shift = (foliage, *season.texture_offset("foliage"))
         # --- per primitive: screen block
         qx, qy = P.x - cx, P.y - cy
         rho2 = qx * qx + qy * qy
@@ -657,7 +671,7 @@ class Renderer:
             if atlas.alpha[P.tex].any():
                 m = np.nonzero(atlas.alpha[P.tex][pid] & np.isfinite(d))[0]
                 if len(m):
-                    rgba, _ = self._surface(P, m, pid, d, face, t, vx, vy, qx, qy, h, level, bounds)
+                    rgba, _ = self._surface(P, m, pid, d, face, t, vx, vy, qx, qy, h, level, bounds, shift)
                     d[m[rgba[:, 3] < 0.5]] = np.inf
             # thinned crowns let the ray through where the season has no leaf
             if season is not None and season.leaf_cover < 1:
@@ -672,7 +686,7 @@ class Renderer:
             buf = base.copy()
             np.minimum.at(buf, pix[cand], d[cand])
             win = cand[d[cand] <= buf[pix[cand]]]
-            rgba, nrm = self._surface(P, win, pid, d, face, t, vx, vy, qx, qy, h, level, bounds)
+            rgba, nrm = self._surface(P, win, pid, d, face, t, vx, vy, qx, qy, h, level, bounds, shift)
             if season is not None:
                 rgba[foliage[pid[win]], :3] *= np.asarray(season.foliage, np.float32)
             sun = light.sun
@@ -688,9 +702,12 @@ class Renderer:
 
     def _surface(self, P: _Prims, idx: np.ndarray, pid: np.ndarray, d: np.ndarray, face: np.ndarray,
                  t: np.ndarray, vx: np.ndarray, vy: np.ndarray, qx: np.ndarray, qy: np.ndarray, h: float,
-                 level: np.ndarray, bounds: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+                 level: np.ndarray, bounds: np.ndarray,
+                 shift: tuple[np.ndarray, float, float] | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Texture colour (n, 4) and surface normal (n, 3) at the hits of
-        candidates ``idx`` (sorted)."""
+        candidates ``idx`` (sorted). ``shift``: (mask per primitive, du, dv
+        metres) moves the texture coordinates of the masked primitives (a
+        season's ``texture_seed``)."""
         atlas = self._atlas
         p = pid[idx]
         dw = d[idx]
@@ -743,6 +760,10 @@ class Renderer:
             nrm[cap, 2] = -np.sign(tt[cap])
             u[cap] = hx[cap] + P.x[p[cap]]
             v[cap] = hy[cap] + P.y[p[cap]]
+        if shift is not None:
+            moved = shift[0][p]
+            u[moved] += shift[1]
+            v[moved] += shift[2]
         rgba = atlas.sample(entry, u, v)
         fr = (fc == 3) & (P.front[p] >= 0)
         if fr.any():
