@@ -288,30 +288,30 @@ _add(Preset(
 ))
 
 
-_add(Preset(
-    "thesis-6.2.1-light", "6.2.1",
+def _light_621(name: str, description: str, condition: str, light: LightFn) -> Preset:
+    """A 6.2.1 scene whose training run is driven under ``light`` (the
+    condition ``condition``), its test run lit normally."""
+    return Preset(name, "6.2.1", description, _garden((16.0, 18.0), 30, markers=(136, 144)),
+                  lambda: OmniCamera(500),
+                  lambda rng: [RunSpec("train", lambda w, r: T.grid(w.area, spacing=1.6, step=0.26),
+                                       {condition: light}),
+                               RunSpec("test", lambda w, r: T.random_walk(w.area, 1090, rng=r, world=w))])
+
+
+_add(_light_621(
+    "thesis-6.2.1-light",
     "as thesis-6.2.1-static, but the direct sunlight rises from 0.1 to 2.0 of its normal strength through the "
     "training run while the sky light stays, like the thesis's lamp turned up in a scene whose sky does not change "
     "(condition 'sun-ramp'); the test run is lit normally",
-    _garden((16.0, 18.0), 30, markers=(136, 144)),
-    lambda: OmniCamera(500),
-    lambda rng: [RunSpec("train", lambda w, r: T.grid(w.area, spacing=1.6, step=0.26),
-                         {"sun-ramp": _sun_ramp(0.1, 2.0)}),
-                 RunSpec("test", lambda w, r: T.random_walk(w.area, 1090, rng=r, world=w))],
-))
+    "sun-ramp", _sun_ramp(0.1, 2.0)))
 
 
-_add(Preset(
-    "thesis-6.2.1-gain", "6.2.1",
+_add(_light_621(
+    "thesis-6.2.1-gain",
     "as thesis-6.2.1-static, but the light intensity of the whole scene, sky included, rises from 0.4 to 1.4 "
     "through the training run (condition 'light-ramp': a global gain, which per-image normalisation undoes); "
     "the test run is lit normally",
-    _garden((16.0, 18.0), 30, markers=(136, 144)),
-    lambda: OmniCamera(500),
-    lambda rng: [RunSpec("train", lambda w, r: T.grid(w.area, spacing=1.6, step=0.26),
-                         {"light-ramp": _ramp(0.4, 1.4)}),
-                 RunSpec("test", lambda w, r: T.random_walk(w.area, 1090, rng=r, world=w))],
-))
+    "light-ramp", _ramp(0.4, 1.4)))
 
 
 _add(Preset(
