@@ -263,16 +263,17 @@ class Renderer:
 
     def _lit_ground(self, light: Lighting) -> np.ndarray:
         season = light.season
+        present = self._present(season)
         key = (light.sun_azimuth_deg, light.sun_elevation_deg, light.ambient, light.sun_intensity, light.shadows,
                None if season is None else (season.ground, season.leaf_cover),
-               None if self._present(season) is None else self._present(season).tobytes())
+               None if present is None else present.tobytes())
         lit = self._ground_cache.get(key)
         if lit is None:
             gmap = self._gmap
             if season is not None:
                 gmap = gmap * (1 + self._lawn * (np.asarray(season.ground, np.float32) - 1))
             s = light.sun
-            direct = light.sun_intensity * (1 - light.ambient) * max(s[2], 0.0) / np.sin(np.radians(50.0))
+            direct = _direct_light(light) * max(s[2], 0.0)
             shade = light.ambient + direct * (1.0 - self._shadow_map(light))
             # two copies: with shadows, and without for ground so far away that the
             # periodic map would repeat the shadows of the objects
@@ -692,8 +693,7 @@ class Renderer:
             sun = light.sun
             norm = np.sqrt((nrm * nrm).sum(axis=1))
             lam = np.maximum((nrm @ sun) / np.maximum(norm, 1e-12), 0.0)
-            direct = light.sun_intensity * (1 - light.ambient) / np.sin(np.radians(50.0))
-            shade = (light.ambient + direct * lam).astype(np.float32)
+            shade = (light.ambient + _direct_light(light) * lam).astype(np.float32)
             rgba *= shade[:, None]
             fog = (1.0 - np.exp(-rho[pid[win]] / FOG_DISTANCE)).astype(np.float32)[:, None]
             rgba += fog * (self._horizon(season) - rgba)
@@ -775,6 +775,13 @@ class Renderer:
             fe = atlas.base[P.front[pf]] + level[1, pf]
             rgba[fr] = atlas.sample_stretched(fe, fu, fv)
         return rgba, nrm
+
+
+def _direct_light(light: Lighting) -> float:
+    """The direct sunlight on a surface facing the sun (Lambert factor 1):
+    the non-ambient share scaled by ``sun_intensity``, normalised so that
+    level ground under a 50 deg sun gets the full share."""
+    return light.sun_intensity * (1 - light.ambient) / float(np.sin(np.radians(50.0)))
 
 
 def _pose3(pose: Sequence[float]) -> tuple[float, float, float]:
