@@ -98,12 +98,14 @@ def test_predictor_matches_sklearn_and_round_trips(predictor, tmp_path):
 def test_select_ranked_known_answers():
     s = np.array([0.1, -2.0, 1.5, 0.3, 5.0])  # scores of keypoints in response order
     # pool: the ceil(1.5 * 2) = 3 strongest; rank sums 0+1, 1+2, 2+0 -> keypoints 0 and 2 (tie: the stronger)
-    assert select_ranked(s, 2).tolist() == [0, 2]
-    assert select_ranked(s, 2, method="robust").tolist() == [2, 0]
-    # the whole list as the pool: the fifth keypoint, weakest but most robust, gets in
+    assert select_ranked(s, 2, candidates=1.5, method="rank-sum").tolist() == [0, 2]
+    assert select_ranked(s, 2, candidates=1.5, method="robust").tolist() == [2, 0]
+    # the default: the most robust of the 4 k strongest (the whole list here): the fifth, weakest, gets in
+    assert select_ranked(s, 2).tolist() == [4, 2]
     assert select_ranked(s, 2, candidates=3.0, method="robust").tolist() == [4, 2]
-    assert select_ranked(s, 10).tolist() == [0, 2, 4, 1, 3]  # rank sums 3, 5, 3, 5, 4
-    assert select_ranked(s, 3, candidates=0.5).tolist() == [0, 2, 1]  # a pool below k counts as k
+    assert select_ranked(s, 1).tolist() == [2]  # pool of 4: the fifth keypoint is out
+    assert select_ranked(s, 10, method="rank-sum").tolist() == [0, 2, 4, 1, 3]  # rank sums 3, 5, 3, 5, 4
+    assert select_ranked(s, 3, candidates=0.5, method="rank-sum").tolist() == [0, 2, 1]  # a pool below k counts as k
     assert select_ranked([], 3).tolist() == []
     for bad, match in (({"k": 0}, "k"), ({"candidates": 0.0}, "candidates"), ({"method": "best"}, "unknown selection"),
                        ({"scores": [[1.0]]}, "1-d"), ({"scores": [np.nan]}, "finite")):
@@ -115,14 +117,14 @@ def test_select_ranked_known_answers():
 def test_select_methods_keep_k_of_the_candidates(predictor):
     p, _ = predictor
     img = _image(2, 60, 300)
-    pool = detect(img, "fast-brief", 15)
+    pool = detect(img, "fast-brief", 40)
     scores = p.score_keypoints(img, pool)
     for method in ("rank-sum", "robust"):
         kept = p.select(img, 10, method=method)
         assert len(kept) == 10
         idx = select_ranked(scores, 10, method=method)
         np.testing.assert_array_equal(kept.xy, pool.xy[idx])
-    assert np.array_equal(p.select(img, 10).xy, p.select(img, 10, method="rank-sum").xy)
+    assert np.array_equal(p.select(img, 10).xy, p.select(img, 10, method="robust", candidates=4.0).xy)
     with pytest.raises(ValueError, match="unknown selection method"):
         p.select(img, 10, method="best")
 
@@ -196,6 +198,16 @@ def test_cli_select_method(tmp_path, predictor):
     img = _image(0, 60, 300)
     want = p.select(img, 10, method="robust")
     np.testing.assert_allclose([kp[:2] for kp in out["robust"]["images"][0]["keypoints"]], want.xy, atol=0.01)
+    r = _cli("features", "select", "--predictor", str(path), "--dataset", str(tmp_path / "ds"), "--top-k", "10",
+             "--method", "rank-sum", "--candidates", "1.5", "--out", str(tmp_path / "thesis-pool.json"))
+    assert r.returncode == 0, r.stderr
+    doc = json.loads((tmp_path / "thesis-pool.json").read_text())
+    assert doc["candidates"] == 1.5
+    want = p.select(img, 10, method="rank-sum", candidates=1.5)
+    np.testing.assert_allclose([kp[:2] for kp in doc["images"][0]["keypoints"]], want.xy, atol=0.01)
     r = _cli("features", "select", "--predictor", str(path), "--dataset", str(tmp_path / "ds"), "--method", "best",
              "--out", str(tmp_path / "x.json"))
     assert r.returncode == 2 and "invalid choice" in r.stderr
+    r = _cli("features", "select", "--predictor", str(path), "--dataset", str(tmp_path / "ds"), "--candidates", "0",
+             "--out", str(tmp_path / "x.json"))
+    assert r.returncode == 2 and "--candidates" in r.stderr and len(r.stderr.strip().splitlines()) <= 3

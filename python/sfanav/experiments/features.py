@@ -7,16 +7,18 @@
   the two keypoints lie within 10 px (same pose). True matches against the
   days since the reference, per detector.
 * ``6.1.2``: the preset's 160-frame loop driven in every season (run
-  ``route``). Stable / unstable features from the first half of the loop in
-  spring, summer and autumn train the robustness predictor; on the second
-  half, spring is the reference and summer, autumn and the held-out winter
-  are matched to it for memory sizes 5..2000, keeping the m reference
-  features of largest detector response, or m of the 1.5 m strongest chosen
-  by predicted robustness (:func:`~sfanav.features.select_ranked`: the
-  library default ``rank-sum``, rank by response plus rank by robustness,
-  and the thesis's rule ``robust``, the m most robust). F1 (precision: true
-  among mutual matches; recall: true matches per reference feature kept)
-  and its mean relative gain over the response selection.
+  ``route``). Stable / unstable features from the first half of the loop
+  train robustness predictors: one on spring, summer and autumn (winter
+  held out), and one for each of the thesis's query seasons with that
+  season held out. On the second half, spring is the reference and summer,
+  autumn and winter are matched to it for memory sizes 5..2000, keeping m
+  features per image: the m of largest detector response on both sides
+  (the baseline), the thesis's rule (the m most robust of the 1.5 m
+  strongest reference features, the query's m strongest), and sfanav's
+  (:func:`~sfanav.features.select_ranked` with the library's defaults) on
+  the reference and the query alike; and rank-sum on the reference only. F1
+  (precision: true among mutual matches; recall: true matches per
+  reference feature kept) and its mean relative gain over the baseline.
 """
 
 from __future__ import annotations
@@ -28,6 +30,7 @@ import numpy as np
 
 from .. import sim
 from ..features import (
+    CANDIDATES,
     DETECTORS,
     METHODS,
     RobustnessPredictor,
@@ -56,8 +59,8 @@ THRESHOLD = 10.0
 GRID = {"C": [1.0, 10.0, 100.0], "gamma": [0.003, 0.01, 0.03]}
 #: most balanced training samples per detector in the full run
 MAX_SAMPLES = 4000
-#: candidate pool of the robustness selection, in multiples of the memory size
-CANDIDATES = 1.5
+#: candidate pool of the thesis's robustness selection, in multiples of the memory size
+THESIS_POOL = 1.5
 QUICK_CAMERA = (300, 40)
 
 
@@ -132,6 +135,46 @@ def _f1(tp: int, fp: int, n_ref: int) -> float:
     return 2 * p * r / (p + r) if p + r else 0.0
 
 
+#: how each compared selection picks (reference, query) keypoints: None = the m strongest, else
+#: (select_ranked method, candidate pool in multiples of m); "default" is the library's
+SELECTIONS = {
+    "response": (None, None),
+    "thesis": (("robust", THESIS_POOL), None),
+    "rank-sum, map only": (("rank-sum", THESIS_POOL), None),
+    "default": (("default", "default"), ("default", "default")),
+}
+#: the selections that are compared with every predictor; the held-out predictors run only these
+HELD_OUT_SELECTIONS = ("response", "thesis", "default")
+
+
+def _kept(rule: Any, scores: np.ndarray, m: int) -> np.ndarray:
+    if rule is None:
+        return np.arange(min(len(scores), m))
+    method, pool = rule
+    return select_ranked(scores, m, candidates=CANDIDATES if pool == "default" else pool,
+                         method=METHODS[0] if method == "default" else method)
+
+
+def _train_predictor(det: str, labelled: list[tuple[np.ndarray, list[np.ndarray]]], seasons: tuple[str, ...],
+                     all_seasons: tuple[str, ...], rng: np.random.Generator, grid: dict[str, Any], cv: int,
+                     seed: int, quick: bool) -> tuple[RobustnessPredictor, int, int]:
+    """A predictor from the training poses' features, labelled stable / unstable over ``seasons``.
+    ``labelled``: per pose, (features per season of ``all_seasons``, robustness vectors per season)."""
+    X, y = [], []
+    idx = [all_seasons.index(s) for s in seasons]
+    for feats, vecs in labelled:
+        labs = stability_labels([feats[i] for i in idx], threshold=THRESHOLD)
+        for i, lab in zip(idx, labs):
+            keep = lab >= 0
+            X.append(vecs[i][keep])
+            y.append(lab[keep])
+    Xa, ya = np.vstack(X), np.concatenate(y)
+    sel = balanced(ya, rng)
+    if not quick and len(sel) > MAX_SAMPLES:
+        sel = np.sort(rng.choice(sel, MAX_SAMPLES, replace=False))
+    return RobustnessPredictor.fit(Xa[sel], ya[sel], detector=det, grid=grid, cv=cv, seed=seed), len(sel), len(ya)
+
+
 @register("6.1.2", "robustness prediction (thesis 6.1.2): F1 gain over detector response +4.74..+11.79 %")
 def exp_612(out: Path, *, quick: bool, seed: int, progress: bool) -> ExperimentResult:
     return run_612(out, quick=quick, seed=seed, progress=progress)
@@ -149,12 +192,15 @@ def run_612(out: Path, *, quick: bool, seed: int, progress: bool,
     frames = np.arange(min(len(v) for v in by_season.values()))  # k: the k-th pose of the loop
     half = len(frames) // 2
     train_f, test_f = frames[:half], frames[half:]
+    all_seasons = ("spring", "summer", "autumn", "winter")
     seasons = ("spring", "summer", "autumn")
     queries = ("summer", "autumn", "winter")
+    # the main predictor (the thesis's three seasons; winter held out) and one per thesis query season held out
+    predictors = {"main": seasons, **{f"{q} held out": tuple(s for s in all_seasons if s != q)
+                                      for q in ("summer", "autumn")}}
     memory = (5, 10, 20, 50) if quick else MEMORY
     dets = ("fast-brief",) if quick else DETECTORS
-    n_detect = int(np.ceil(CANDIDATES * max(memory)))
-    default = METHODS[0]  # RobustnessPredictor.select's default; the thesis's rule is "robust"
+    n_detect = int(np.ceil(max(CANDIDATES, THESIS_POOL) * max(memory)))
     grid = {"C": [1.0], "gamma": [0.01]} if quick else GRID
     cv = 2 if quick else 5
     rng = np.random.default_rng(seed)
@@ -166,75 +212,85 @@ def run_612(out: Path, *, quick: bool, seed: int, progress: bool,
     curves: dict[str, Any] = {}
     for det in dets:
         log(f"6.1.2: {det}: training data")
-        X, y = [], []
+        labelled = []
         for f in train_f:
-            imgs = [image(f, s) for s in seasons]
+            imgs = [image(f, s) for s in all_seasons]
             feats = [detect(im, det, 1000) for im in imgs]
-            labs = stability_labels(feats, threshold=THRESHOLD)
-            for im, ft, lab in zip(imgs, feats, labs):
-                keep = lab >= 0
-                X.append(robustness_vectors(im, ft.xy[keep]))
-                y.append(lab[keep])
-        Xa, ya = np.vstack(X), np.concatenate(y)
-        sel = balanced(ya, rng)
-        if not quick and len(sel) > MAX_SAMPLES:
-            sel = np.sort(rng.choice(sel, MAX_SAMPLES, replace=False))
-        log(f"6.1.2: {det}: {len(sel)} balanced samples of {len(ya)} labelled, grid search")
-        pred = RobustnessPredictor.fit(Xa[sel], ya[sel], detector=det, grid=grid, cv=cv, seed=seed)
-        log(f"6.1.2: {det}: C {pred.info['C']:g}, gamma {pred.gamma:g}, CV accuracy {pred.info['cv_accuracy']:.3f}")
-        hows = ("response",) + METHODS
-        counts = {(q, how): np.zeros((len(memory), 3), int) for q in queries for how in hows}
+            labelled.append((feats, [robustness_vectors(im, ft.xy) for im, ft in zip(imgs, feats)]))
+        preds = {}
+        for name, train_seasons in predictors.items():
+            pred, n_sel, n_lab = _train_predictor(det, labelled, train_seasons, all_seasons, rng, grid, cv, seed,
+                                                  quick)
+            preds[name] = pred
+            log(f"6.1.2: {det}: predictor '{name}' ({', '.join(train_seasons)}): {n_sel} balanced samples of "
+                f"{n_lab} labelled, C {pred.info['C']:g}, gamma {pred.gamma:g}, CV accuracy "
+                f"{pred.info['cv_accuracy']:.3f}")
+            rows.append({"metric": f"{det}: predictor CV accuracy" + ("" if name == "main" else f" ({name})"),
+                         "thesis": None, "sfanav": pred.info["cv_accuracy"]})
+            if name == "main":
+                rows.append({"metric": f"{det}: balanced training samples", "thesis": 10000 if det == "fast-brief"
+                             else None, "sfanav": int(n_sel)})
+                if not quick:
+                    out.mkdir(parents=True, exist_ok=True)
+                    pred.save(out / f"6.1.2-predictor-{det}.json")
+        # (predictor, query, selection) -> per memory size (true, false, reference features kept)
+        runs = [("main", q, how) for q in queries for how in SELECTIONS]
+        runs += [(name, name.split()[0], how) for name in predictors if name != "main" for how in HELD_OUT_SELECTIONS]
+        counts = {r: np.zeros((len(memory), 3), int) for r in runs}
         for f in test_f:
             ref_img = image(f, "spring")
             ref_all = detect(ref_img, det, n_detect)
-            scores = pred.score_keypoints(ref_img, ref_all)
-            qs = {q: detect(image(f, q), det, max(memory)) for q in queries}
-            # one distance matrix per query, sliced for every memory size (features come sorted by response)
-            dist = {q: descriptor_distances(ref_all, qf) for q, qf in qs.items()}
+            q_img = {q: image(f, q) for q in queries}
+            q_all = {q: detect(q_img[q], det, n_detect) for q in queries}
+            # one distance matrix per query, sliced for every selection (features come sorted by response)
+            dist = {q: descriptor_distances(ref_all, qf) for q, qf in q_all.items()}
+            ref_vec = robustness_vectors(ref_img, ref_all.xy)
+            q_vec = {q: robustness_vectors(q_img[q], q_all[q].xy) for q in queries}
+            scores = {name: (p.decision_function(ref_vec), {q: p.decision_function(v) for q, v in q_vec.items()})
+                      for name, p in preds.items()}
             for mi, m in enumerate(memory):
-                kept_by = {"response": np.arange(min(len(ref_all), m)),
-                           **{how: select_ranked(scores, m, candidates=CANDIDATES, method=how) for how in METHODS}}
-                for q, qf in qs.items():
-                    cols = np.arange(min(len(qf), m))
-                    qm = qf.subset(cols)
-                    for how, kept in kept_by.items():
-                        pairs = match_distances(dist[q][np.ix_(kept, cols)], cross_check=True)
-                        ok = true_match(ref_all.subset(kept), qm, pairs, match_threshold)
-                        counts[(q, how)][mi] += (int(ok.sum()), int((~ok).sum()), len(kept))
-        for q in queries:
-            f1s = {how: np.array([_f1(*c) for c in counts[(q, how)]]) for how in hows}
+                for name, q, how in runs:
+                    s_ref, s_q = scores[name]
+                    rule_ref, rule_q = SELECTIONS[how]
+                    kept = _kept(rule_ref, s_ref, m)
+                    cols = _kept(rule_q, s_q[q], m)
+                    pairs = match_distances(dist[q][np.ix_(kept, cols)], cross_check=True)
+                    ok = true_match(ref_all.subset(kept), q_all[q].subset(cols), pairs, match_threshold)
+                    counts[(name, q, how)][mi] += (int(ok.sum()), int((~ok).sum()), len(kept))
+        for name, q in sorted({(n, q) for n, q, _ in runs}, key=lambda t: (t[0] != "main", queries.index(t[1]))):
+            hows = [h for n, qq, h in runs if n == name and qq == q]
+            f1s = {how: np.array([_f1(*c) for c in counts[(name, q, how)]]) for how in hows}
             f_conv = f1s["response"]
             valid = f_conv > 0
-            gain = {how: float(np.mean((f1s[how][valid] - f_conv[valid]) / f_conv[valid]) * 100) if valid.any()
-                    else float("nan") for how in METHODS}
             thesis = THESIS_612.get((det, q))
-            held = " (held-out season)" if q == "winter" else ""
-            rows.append({"metric": f"{det}: F1 gain % {q} to spring{held}", "thesis": thesis, "sfanav": gain[default]})
-            for how in METHODS[1:]:
-                rows.append({"metric": f"{det}: F1 gain % {q} to spring, selection '{how}'", "thesis": thesis,
-                             "sfanav": gain[how]})
-            rows.append({"metric": f"{det}: mean F1 {q} to spring, {' / '.join(hows)}", "thesis": None,
+            where = {"main": " (held-out season)" if q == "winter" else "", }.get(name, f" ({name})")
+            for how in hows[1:]:
+                gain = (float(np.mean((f1s[how][valid] - f_conv[valid]) / f_conv[valid]) * 100) if valid.any()
+                        else float("nan"))
+                label = "" if how == "default" else f", selection '{how}'"
+                rows.append({"metric": f"{det}: F1 gain % {q} to spring{where}{label}", "thesis": thesis,
+                             "sfanav": gain})
+            rows.append({"metric": f"{det}: mean F1 {q} to spring{where}, {' / '.join(hows)}", "thesis": None,
                          "sfanav": " / ".join(f"{f1s[how].mean():.3f}" for how in hows)})
-            curves[f"{det}/{q}"] = {how: f.tolist() for how, f in f1s.items()}
-        rows.append({"metric": f"{det}: predictor CV accuracy", "thesis": None, "sfanav": pred.info["cv_accuracy"]})
-        rows.append({"metric": f"{det}: balanced training samples", "thesis": 10000 if det == "fast-brief" else None,
-                     "sfanav": int(len(sel))})
-        if not quick:
-            out.mkdir(parents=True, exist_ok=True)
-            pred.save(out / f"6.1.2-predictor-{det}.json")
+            curves[f"{det}/{q}" + ("" if name == "main" else " held out")] = {how: f.tolist()
+                                                                               for how, f in f1s.items()}
     out.mkdir(parents=True, exist_ok=True)
     path = out / "6.1.2-f1.png"
-    _plot_612(path, memory, curves)
-    targets = {f"{det}: gain >= thesis {q} to spring": bool(next(r["sfanav"] for r in rows
-                                                                 if r["metric"].startswith(f"{det}: F1 gain % {q}"))
-                                                            >= THESIS_612[(det, q)])
-               for det, q in THESIS_612 if det in dets}
-    notes = (f"preset {PRESET}, run 'route': training on loop poses {int(train_f[0])}..{int(train_f[-1])} in "
-             f"{', '.join(seasons)} (stable: matched in all, ratio 0.75, {THRESHOLD:g} px; unstable: in none; "
-             f"balanced), test on poses {int(test_f[0])}..{int(test_f[-1])}; reference spring, memory sizes "
-             f"{', '.join(map(str, memory))}; gain = mean over memory sizes of the relative F1 change of the "
-             f"selection '{default}' (rank by response + rank by robustness among the {CANDIDATES:g} m strongest; "
-             "rows 'robust': the m most robust of them, the thesis's rule) over the m strongest. "
+    _plot_612(path, memory, {k: v for k, v in curves.items() if not k.endswith("held out")})
+    targets = {f"{det}: gain >= thesis {q} to spring, {q} held out": bool(
+        next(r["sfanav"] for r in rows if r["metric"] == f"{det}: F1 gain % {q} to spring ({q} held out)")
+        >= THESIS_612[(det, q)]) for det, q in THESIS_612 if det in dets}
+    notes = (f"preset {PRESET}, run 'route': predictors trained on loop poses {int(train_f[0])}..{int(train_f[-1])} "
+             f"(stable: matched in every training season, ratio 0.75, {THRESHOLD:g} px; unstable: in none; "
+             f"balanced): 'main' on {', '.join(seasons)} (winter held out), and for each thesis cell one without "
+             f"its query season ('summer held out': spring, autumn, winter; 'autumn held out': spring, summer, "
+             f"winter). Test on poses {int(test_f[0])}..{int(test_f[-1])}; reference spring, memory sizes "
+             f"{', '.join(map(str, memory))}; gain = mean over memory sizes of the relative F1 change over keeping "
+             f"the m strongest reference and query features. Selections: default = sfanav's "
+             f"(select_ranked method '{METHODS[0]}' among the {CANDIDATES:g} m strongest) on the reference and the "
+             f"query alike; 'rank-sum, map only' = rank by response + rank by robustness among the {THESIS_POOL:g} m "
+             f"strongest reference features (sfanav's rule before the query side was filtered); 'thesis' = the thesis's rule (the m most "
+             f"robust of the {THESIS_POOL:g} m strongest reference features, the query's m strongest). "
              "Thesis SURF rows are compared with SIFT (the stand-in).")
     return ExperimentResult("6.1.2", rows, [str(path)], notes, targets=targets, figures={"F1 against memory": path},
                             details={"memory": list(memory), "f1": curves})
@@ -248,8 +304,9 @@ def _plot_612(path: Path, memory: Any, curves: dict[str, Any]) -> None:
     axes = fig.subplots(1, len(keys), squeeze=False)
     for ax, k in zip(axes[0], keys):
         ax.semilogx(memory, curves[k]["response"], "o-", ms=3, label="detector response")
-        ax.semilogx(memory, curves[k]["rank-sum"], "o-", ms=3, label="response + robustness ranks (default)")
-        ax.semilogx(memory, curves[k]["robust"], "o--", ms=3, label="predicted robustness (thesis)")
+        ax.semilogx(memory, curves[k]["default"], "o-", ms=3, label="sfanav: map and query filtered")
+        ax.semilogx(memory, curves[k]["rank-sum, map only"], "o:", ms=3, label="rank-sum of 1.5 m, map only")
+        ax.semilogx(memory, curves[k]["thesis"], "o--", ms=3, label="thesis: most robust of 1.5 m, map only")
         ax.set_title(k.replace("/", ", ") + " to spring", fontsize=8)
         ax.set_xlabel("memory (features)")
     axes[0][0].set_ylabel("F1")

@@ -22,8 +22,8 @@ from .detectors import (
     pixel_distance,
     true_match,
 )
-from .robustness import METHODS, RobustnessPredictor, balanced, select_ranked, stability_labels, training_samples
+from .robustness import CANDIDATES, METHODS, RobustnessPredictor, balanced, select_ranked, stability_labels, training_samples
 
-__all__ = ["DETECTORS", "DIM", "METHODS", "Features", "RobustnessPredictor", "balanced", "descriptor_distances", "detect", "match",
+__all__ = ["CANDIDATES", "DETECTORS", "DIM", "METHODS", "Features", "RobustnessPredictor", "balanced", "descriptor_distances", "detect", "match",
            "match_distances", "pixel_distance",
            "robustness_vectors", "select_ranked", "stability_labels", "training_samples", "true_match"]

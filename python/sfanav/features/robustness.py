@@ -9,10 +9,13 @@
    (:func:`~sfanav.features.descriptor.robustness_vectors`), standardised,
    C and gamma by grid search with 5-fold cross-validation.
 4. :meth:`RobustnessPredictor.select` keeps ``k`` keypoints of an image
-   out of the ``1.5 k`` of largest detector response (:func:`select_ranked`):
-   by default those of the smallest sum of their rank by response and their
-   rank by predicted robustness (``method="rank-sum"``), or the ``k`` most
-   robust (``method="robust"``, the thesis's rule).
+   out of the ``4 k`` of largest detector response (:func:`select_ranked`):
+   by default the ``k`` most robust (``method="robust"``), or those of the
+   smallest sum of their rank by response and their rank by predicted
+   robustness (``method="rank-sum"``). Apply it to the map's images *and*
+   to the live images matched against the map: both sides then keep the
+   same kind of keypoint. The thesis filtered only the map, with a pool
+   of ``1.5 k`` (``candidates=1.5``).
 
 The predictor is saved as JSON (no pickle): format name, version, the
 scaler, the support vectors, dual coefficients, intercept and gamma, with a
@@ -46,9 +49,9 @@ FORMAT = "sfanav-robustness-predictor"
 VERSION = 1
 STABLE, UNSTABLE, NEITHER = 1, 0, -1
 #: how :func:`select_ranked` picks keypoints (see there); the first is the default
-METHODS = ("rank-sum", "robust")
+METHODS = ("robust", "rank-sum")
 #: default candidate pool of :func:`select_ranked`, in multiples of the number kept
-CANDIDATES = 1.5
+CANDIDATES = 4.0
 #: default grid of the support vector machine (gamma in units of 1 / (77 * variance) as scikit-learn's "scale")
 GRID = {"C": [0.3, 1.0, 3.0, 10.0, 30.0], "gamma": [0.003, 0.01, 0.03, 0.1]}
 
@@ -164,14 +167,19 @@ def select_ranked(scores: Any, k: int, *, candidates: float = CANDIDATES, method
     response (as :func:`~sfanav.features.detectors.detect` returns them);
     the candidates are the ``ceil(candidates * k)`` strongest. ``method``:
 
-    * ``"rank-sum"`` (default): the ``k`` candidates of smallest sum of their
-      rank by response and their rank by score (ties: the stronger
-      response). Strong keypoints predicted unstable give way to slightly
-      weaker ones predicted stable.
-    * ``"robust"``: the ``k`` candidates of largest score (the thesis's
-      rule).
+    * ``"robust"`` (default): the ``k`` candidates of largest score (the
+      thesis's rule, which used ``candidates=1.5``).
+    * ``"rank-sum"``: the ``k`` candidates of smallest sum of their rank by
+      response and their rank by score (ties: the stronger response).
+      Strong keypoints predicted unstable give way to slightly weaker ones
+      predicted stable.
 
-    How the two compare on the simulated seasons: docs/experiments.md, 6.1.2.
+    The defaults (the most robust of ``4 k``) are meant for selecting the
+    keypoints of the map *and* of the images matched against it. To filter
+    the map only and match it with the live images' strongest keypoints,
+    ``method="rank-sum", candidates=1.5`` is the better choice: a keypoint
+    taken from deep in a large pool rarely finds its counterpart among
+    another image's strongest. Measurements: docs/experiments.md, 6.1.2.
 
     Parameters
     ----------
@@ -199,9 +207,9 @@ def select_ranked(scores: Any, k: int, *, candidates: float = CANDIDATES, method
     Examples
     --------
     >>> select_ranked([0.1, -2.0, 1.5, 0.3], 2, candidates=2.0)
-    array([0, 2])
-    >>> select_ranked([0.1, -2.0, 1.5, 0.3], 2, candidates=2.0, method="robust")
     array([2, 3])
+    >>> select_ranked([0.1, -2.0, 1.5, 0.3], 2, candidates=2.0, method="rank-sum")
+    array([0, 2])
     """
     from .._checks import check_int, check_positive_float
 
@@ -320,9 +328,10 @@ class RobustnessPredictor:
         """``k`` keypoints of RGB ``image`` to keep in a long-term map: of the
         ``ceil(candidates * k)`` of largest response (detected with the
         predictor's detector unless ``features`` are given), those
-        :func:`select_ranked` picks by ``method`` (default ``"rank-sum"``:
-        rank by response plus rank by predicted robustness; ``"robust"``:
-        the most robust, the thesis's rule). ValueError as
+        :func:`select_ranked` picks by ``method`` (default ``"robust"``: the
+        most robust; ``"rank-sum"``: rank by response plus rank by predicted
+        robustness). Select the live images' keypoints the same way as the
+        map's (see :func:`select_ranked`). ValueError as
         :func:`select_ranked`."""
         from .._checks import check_int, check_positive_float
 

@@ -4,8 +4,9 @@
 dataset (the same route recorded in several conditions, the k-th frame of
 each condition at the same pose, as preset ``thesis-6.1-seasons`` makes);
 ``sfanav features select`` keeps k keypoints of every image of a dataset,
-chosen by detector response and predicted robustness (``--method``), and
-writes them as JSON.
+chosen by detector response and predicted robustness (``--method``,
+``--candidates``), and writes them as JSON. Select the map's keypoints and
+those of the images to match against it alike.
 """
 
 from __future__ import annotations
@@ -22,13 +23,15 @@ EXAMPLES = """examples:
   sfanav simulate --preset thesis-6.1-seasons --out seasons
   sfanav features train --dataset seasons --run route --seasons spring,summer,autumn --out robust.json
   sfanav features select --predictor robust.json --dataset seasons --run route --condition spring \\
-      --top-k 200 --out spring-keypoints.json
+      --top-k 200 --out map-keypoints.json
+  sfanav features select --predictor robust.json --dataset seasons --run route --condition winter \\
+      --top-k 200 --out live-keypoints.json
 """
 
 
 @command("features")
 def _add_features(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
-    from ...features import DETECTORS, METHODS
+    from ...features import CANDIDATES, DETECTORS, METHODS
 
     p = sub.add_parser("features", help="train a robustness predictor for local features; keep robust keypoints",
                        description=wrap("Local visual features over the seasons (thesis 6.1.2): train an SVM that "
@@ -56,17 +59,22 @@ def _add_features(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     t.add_argument("--overwrite", action="store_true", help="replace an existing --out")
     t.set_defaults(run=_run_train)
     s = fs.add_parser("select", help="keep k robust keypoints of every image",
-                      description=wrap("Detects 1.5 k keypoints of largest response in every image, scores them "
-                                       "with the predictor and keeps k: by default those of the smallest sum of "
-                                       "their rank by response and their rank by robustness (--method rank-sum), "
-                                       "or the k most robust (--method robust, the thesis's rule); writes JSON "
-                                       "(per image: x, y, detector response, robustness score)."))
+                      description=wrap("Detects the C k keypoints of largest response in every image (--candidates "
+                                       "C, default 4), scores them with the predictor and keeps k: by default the "
+                                       "k most robust (--method robust), or those of the smallest sum of their "
+                                       "rank by response and their rank by robustness (--method rank-sum); "
+                                       "writes JSON (per image: x, y, detector response, robustness score). "
+                                       "Select the map's images and the images matched against the map alike; "
+                                       "to filter the map only, --method rank-sum --candidates 1.5 does better "
+                                       "(the thesis: --method robust --candidates 1.5, map only)."))
     s.add_argument("--predictor", required=True, metavar="FILE", help="file of sfanav features train")
     s.add_argument("--dataset", required=True, metavar="DIR", help="sfanav dataset (RGB images)")
     s.add_argument("--out", required=True, metavar="FILE", help="keypoint file to write (JSON)")
     s.add_argument("--top-k", type=arg.pos_int, default=200, metavar="K", help="keypoints per image (200)")
     s.add_argument("--method", choices=METHODS, default=METHODS[0],
-                   help="rank-sum (default): response rank + robustness rank; robust: the most robust")
+                   help="robust (default): the most robust; rank-sum: response rank + robustness rank")
+    s.add_argument("--candidates", type=arg.pos_float, default=CANDIDATES, metavar="C",
+                   help=f"candidate pool in multiples of --top-k ({CANDIDATES:g})")
     s.add_argument("--run", dest="run_name", default=None, metavar="RUN", help="only this run")
     s.add_argument("--condition", default=None, help="only this condition")
     s.add_argument("--overwrite", action="store_true", help="replace an existing --out")
@@ -134,13 +142,13 @@ def _run_select(args: argparse.Namespace) -> int:
         img = ds.image(i)
         if img.ndim != 3:
             raise UsageError(f"{path} is a gray image; robustness prediction needs RGB (the hue histogram)")
-        kept = pred.select(img, args.top_k, method=args.method)
+        kept = pred.select(img, args.top_k, method=args.method, candidates=args.candidates)
         scores = pred.score_keypoints(img, kept)
         images.append({"image": str(path.name), "frame": int(ds.frames[i]),
                        "keypoints": [[round(float(x), 2), round(float(y), 2), float(r), round(float(s), 4)]
                                      for (x, y), r, s in zip(kept.xy, kept.response, scores)]})
     doc = {"format": "sfanav-robust-keypoints", "version": 1, "detector": pred.detector, "top_k": args.top_k,
-           "method": args.method,
+           "method": args.method, "candidates": args.candidates,
            "columns": ["x", "y", "response", "robustness"], "images": images}
     write_text_atomic(out, json.dumps(doc), overwrite=True)
     print(f"wrote {out}: {sum(len(im['keypoints']) for im in images)} keypoints of {len(images)} images")
