@@ -277,9 +277,17 @@ def run_612(out: Path, *, quick: bool, seed: int, progress: bool,
     out.mkdir(parents=True, exist_ok=True)
     path = out / "6.1.2-f1.png"
     _plot_612(path, memory, {k: v for k, v in curves.items() if not k.endswith("held out")})
-    targets = {f"{det}: gain >= thesis {q} to spring, {q} held out": bool(
-        next(r["sfanav"] for r in rows if r["metric"] == f"{det}: F1 gain % {q} to spring ({q} held out)")
-        >= THESIS_612[(det, q)]) for det, q in THESIS_612 if det in dets}
+    def gain_of(metric: str) -> float:
+        return next(r["sfanav"] for r in rows if r["metric"] == metric)
+
+    # the thesis's cells as the thesis measured them (other places, seasons seen in training), and the season
+    # no predictor saw (winter) against the detector's larger thesis gain
+    targets = {f"{det}: gain >= thesis {q} to spring": bool(gain_of(f"{det}: F1 gain % {q} to spring")
+                                                            >= THESIS_612[(det, q)])
+               for det, q in THESIS_612 if det in dets}
+    targets.update({f"{det}: gain on the held-out winter >= thesis's larger ({THESIS_612[(det, 'autumn')]:g} %)":
+                    bool(gain_of(f"{det}: F1 gain % winter to spring (held-out season)")
+                         >= THESIS_612[(det, "autumn")]) for det in ("fast-brief", "sift") if det in dets})
     notes = (f"preset {PRESET}, run 'route': predictors trained on loop poses {int(train_f[0])}..{int(train_f[-1])} "
              f"(stable: matched in every training season, ratio 0.75, {THRESHOLD:g} px; unstable: in none; "
              f"balanced): 'main' on {', '.join(seasons)} (winter held out), and for each thesis cell one without "
@@ -291,24 +299,39 @@ def run_612(out: Path, *, quick: bool, seed: int, progress: bool,
              f"query alike; 'rank-sum, map only' = rank by response + rank by robustness among the {THESIS_POOL:g} m "
              f"strongest reference features (sfanav's rule before the query side was filtered); 'thesis' = the thesis's rule (the m most "
              f"robust of the {THESIS_POOL:g} m strongest reference features, the query's m strongest). "
-             "Thesis SURF rows are compared with SIFT (the stand-in).")
+             "Thesis SURF rows are compared with SIFT (the stand-in). Targets: the thesis's four cells measured as "
+             "the thesis did (seasons seen in training, other places), and the season no predictor saw (winter) "
+             "against the detector's larger thesis gain; the rows with a thesis query season held out have no "
+             "target.")
     return ExperimentResult("6.1.2", rows, [str(path)], notes, targets=targets, figures={"F1 against memory": path},
                             details={"memory": list(memory), "f1": curves})
 
 
 def _plot_612(path: Path, memory: Any, curves: dict[str, Any]) -> None:
+    """F1 against memory size, one row per detector, one column per query season."""
     from .._plotting import figure, save_figure
 
-    keys = sorted(curves)
-    fig = figure(3.2 * len(keys), 3.2)
-    axes = fig.subplots(1, len(keys), squeeze=False)
-    for ax, k in zip(axes[0], keys):
-        ax.semilogx(memory, curves[k]["response"], "o-", ms=3, label="detector response")
-        ax.semilogx(memory, curves[k]["default"], "o-", ms=3, label="sfanav: map and query filtered")
-        ax.semilogx(memory, curves[k]["rank-sum, map only"], "o:", ms=3, label="rank-sum of 1.5 m, map only")
-        ax.semilogx(memory, curves[k]["thesis"], "o--", ms=3, label="thesis: most robust of 1.5 m, map only")
-        ax.set_title(k.replace("/", ", ") + " to spring", fontsize=8)
-        ax.set_xlabel("memory (features)")
-    axes[0][0].set_ylabel("F1")
+    dets = list(dict.fromkeys(k.split("/")[0] for k in curves))
+    queries = list(dict.fromkeys(k.split("/")[1] for k in curves))
+    fig = figure(3.4 * len(queries), 2.6 * len(dets))
+    axes = fig.subplots(len(dets), len(queries), squeeze=False)
+    styles = (("response", "o-", "detector response"), ("default", "o-", "sfanav: map and query filtered"),
+              ("rank-sum, map only", "o:", "rank-sum of 1.5 m, map only"),
+              ("thesis", "o--", "thesis: most robust of 1.5 m, map only"))
+    for i, det in enumerate(dets):
+        for j, q in enumerate(queries):
+            ax = axes[i][j]
+            c = curves.get(f"{det}/{q}")
+            if c is None:
+                ax.set_visible(False)
+                continue
+            for key, style, label in styles:
+                if key in c:
+                    ax.semilogx(memory, c[key], style, ms=3, label=label)
+            ax.set_title(f"{det}, {q} to spring", fontsize=8)
+            if i == len(dets) - 1:
+                ax.set_xlabel("memory (features)")
+            if j == 0:
+                ax.set_ylabel("F1")
     axes[0][0].legend(fontsize=7)
     save_figure(fig, path, 100)
