@@ -176,6 +176,10 @@ def test_experiments_quick_rows(tmp_path):
     assert r.row("best detector (most true matches over the year)") in ("fast-brief", "sift")
     r = experiments.run("6.1.2", tmp_path, quick=True, progress=False)
     assert np.isfinite(r.row("fast-brief: F1 gain % summer to spring"))
+    # the thesis's rule and the predictors trained without the query season are reported beside the default
+    assert np.isfinite(r.row("fast-brief: F1 gain % autumn to spring, selection 'thesis'"))
+    assert np.isfinite(r.row("fast-brief: F1 gain % autumn to spring (autumn held out)"))
+    assert 0.5 <= r.row("fast-brief: predictor CV accuracy (summer held out)") <= 1
     assert 0.5 <= r.row("fast-brief: predictor CV accuracy") <= 1
     assert any("thesis" in k for k in r.targets)
 

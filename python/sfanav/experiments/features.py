@@ -143,8 +143,6 @@ SELECTIONS = {
     "rank-sum, map only": (("rank-sum", THESIS_POOL), None),
     "default": (("default", "default"), ("default", "default")),
 }
-#: the selections that are compared with every predictor; the held-out predictors run only these
-HELD_OUT_SELECTIONS = ("response", "thesis", "default")
 
 
 def _kept(rule: Any, scores: np.ndarray, m: int) -> np.ndarray:
@@ -155,7 +153,7 @@ def _kept(rule: Any, scores: np.ndarray, m: int) -> np.ndarray:
                          method=METHODS[0] if method == "default" else method)
 
 
-def _train_predictor(det: str, labelled: list[tuple[np.ndarray, list[np.ndarray]]], seasons: tuple[str, ...],
+def _train_predictor(det: str, labelled: list[tuple[list[Any], list[np.ndarray]]], seasons: tuple[str, ...],
                      all_seasons: tuple[str, ...], rng: np.random.Generator, grid: dict[str, Any], cv: int,
                      seed: int, quick: bool) -> tuple[RobustnessPredictor, int, int]:
     """A predictor from the training poses' features, labelled stable / unstable over ``seasons``.
@@ -235,7 +233,7 @@ def run_612(out: Path, *, quick: bool, seed: int, progress: bool,
                     pred.save(out / f"6.1.2-predictor-{det}.json")
         # (predictor, query, selection) -> per memory size (true, false, reference features kept)
         runs = [("main", q, how) for q in queries for how in SELECTIONS]
-        runs += [(name, name.split()[0], how) for name in predictors if name != "main" for how in HELD_OUT_SELECTIONS]
+        runs += [(name, name.split()[0], how) for name in predictors if name != "main" for how in SELECTIONS]
         counts = {r: np.zeros((len(memory), 3), int) for r in runs}
         for f in test_f:
             ref_img = image(f, "spring")
