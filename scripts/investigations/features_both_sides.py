@@ -30,11 +30,11 @@ import time
 from pathlib import Path
 
 import numpy as np
-from sfanav.data import Dataset
-from sfanav.features import (RobustnessPredictor, balanced, descriptor_distances, detect, match, match_distances,
-                             robustness_vectors, select_ranked, stability_labels, true_match)
+from _seasons import f1, route_images, train_predictor
+from sfanav.features import (RobustnessPredictor, descriptor_distances, detect, match, match_distances, select_ranked,
+                             true_match)
 from sfanav.features.detectors import pixel_distance
-from sfanav.experiments.features import GRID, MAX_SAMPLES, MEMORY, THRESHOLD
+from sfanav.experiments.features import MEMORY, THRESHOLD
 
 QUERIES = ("summer", "autumn", "winter")
 TRAIN_SEASONS = ("spring", "summer", "autumn")
@@ -47,27 +47,8 @@ def variants(pools=POOLS) -> list[str]:
 
 
 
-def f1(tp: int, fp: int, n_ref: int) -> float:
-    p = tp / (tp + fp) if tp + fp else 0.0
-    r = tp / n_ref if n_ref else 0.0
-    return 2 * p * r / (p + r) if p + r else 0.0
-
-
 def train(image, det, frames, seed):
-    X, y = [], []
-    for f in frames:
-        imgs = [image(f, s) for s in TRAIN_SEASONS]
-        feats = [detect(im, det, 1000) for im in imgs]
-        for im, ft, lab in zip(imgs, feats, stability_labels(feats, threshold=THRESHOLD)):
-            keep = lab >= 0
-            X.append(robustness_vectors(im, ft.xy[keep]))
-            y.append(lab[keep])
-    Xa, ya = np.vstack(X), np.concatenate(y)
-    rng = np.random.default_rng(seed)
-    sel = balanced(ya, rng)
-    if len(sel) > MAX_SAMPLES:
-        sel = np.sort(rng.choice(sel, MAX_SAMPLES, replace=False))
-    return RobustnessPredictor.fit(Xa[sel], ya[sel], detector=det, grid=GRID, cv=5, seed=seed)
+    return train_predictor(image, det, frames, TRAIN_SEASONS, seed)
 
 
 def matched_in(a, b):
@@ -140,13 +121,7 @@ def main() -> None:
     a = ap.parse_args()
     pools = tuple(float(c) for c in a.pools.split(","))
     names = variants(pools)
-    ds = Dataset(a.run / "data" / f"thesis-6.1-seasons-seed{a.seed}").select(run="route")
-    by = {c: np.flatnonzero(ds.conditions == c)[np.argsort(ds.frames[ds.conditions == c], kind="stable")]
-          for c in np.unique(ds.conditions)}
-
-    def image(frame: int, season: str) -> np.ndarray:
-        return ds.image(int(by[season][frame]))
-
+    image = route_images(a.run, a.seed)
     outdir = a.run / "both-sides"
     outdir.mkdir(exist_ok=True)
     for det in a.detectors.split(","):

@@ -25,21 +25,13 @@ import argparse
 from pathlib import Path
 
 import numpy as np
-from sfanav.data import Dataset
-from sfanav.features import (RobustnessPredictor, balanced, descriptor_distances, detect, match_distances,
-                             robustness_vectors, select_ranked, stability_labels, true_match)
-from sfanav.experiments.features import GRID, MAX_SAMPLES, MEMORY, THRESHOLD
+from _seasons import f1, route_images, train_predictor
+from sfanav.features import descriptor_distances, detect, match_distances, robustness_vectors, select_ranked, true_match
+from sfanav.experiments.features import MEMORY, THRESHOLD
 
-SEASONS = ("spring", "summer", "autumn", "winter")
 RULES = {"resp": (None, None), "both-r4": (("robust", 4), ("robust", 4)), "ref-r4": (("robust", 4), None),
          "q-r4": (None, ("robust", 4)), "both-rs1.5": (("rank-sum", 1.5), ("rank-sum", 1.5)),
          "both-r1.5": (("robust", 1.5), ("robust", 1.5)), "ref-r4/q-rs1.5": (("robust", 4), ("rank-sum", 1.5))}
-
-
-def f1(tp: int, fp: int, n: int) -> float:
-    p = tp / (tp + fp) if tp + fp else 0.0
-    r = tp / n if n else 0.0
-    return 2 * p * r / (p + r) if p + r else 0.0
 
 
 def kept(rule, s: np.ndarray, m: int) -> np.ndarray:
@@ -55,12 +47,7 @@ def main() -> None:
     ap.add_argument("--no-hue", action="store_true")
     ap.add_argument("--seed", type=int, default=0)
     a = ap.parse_args()
-    ds = Dataset(a.run / "data" / f"thesis-6.1-seasons-seed{a.seed}").select(run="route")
-    by = {c: np.flatnonzero(ds.conditions == c)[np.argsort(ds.frames[ds.conditions == c], kind="stable")]
-          for c in np.unique(ds.conditions)}
-
-    def image(f: int, s: str) -> np.ndarray:
-        return ds.image(int(by[s][f]))
+    image = route_images(a.run, a.seed)
 
     def vectors(im: np.ndarray, xy: np.ndarray) -> np.ndarray:
         v = robustness_vectors(im, xy)
@@ -70,26 +57,10 @@ def main() -> None:
 
     other = "summer" if a.query == "autumn" else "autumn"
     sets = {"noq+winter": ("spring", other, "winter"), "noq": ("spring", other), "main": ("spring", "summer", "autumn")}
-    labelled = []
-    for f in range(80):
-        ims = [image(f, s) for s in SEASONS]
-        ft = [detect(im, a.detector, 1000) for im in ims]
-        labelled.append((ft, [vectors(im, x.xy) for im, x in zip(ims, ft)]))
     preds = {}
     for name, seasons in sets.items():
-        X, y = [], []
-        idx = [SEASONS.index(s) for s in seasons]
-        for ft, vec in labelled:
-            for i, lab in zip(idx, stability_labels([ft[i] for i in idx], threshold=THRESHOLD)):
-                keep = lab >= 0
-                X.append(vec[i][keep])
-                y.append(lab[keep])
-        Xa, ya = np.vstack(X), np.concatenate(y)
-        rng = np.random.default_rng(a.seed)
-        sel = balanced(ya, rng)
-        if len(sel) > MAX_SAMPLES:
-            sel = np.sort(rng.choice(sel, MAX_SAMPLES, replace=False))
-        preds[name] = RobustnessPredictor.fit(Xa[sel], ya[sel], detector=a.detector, grid=GRID, cv=5, seed=a.seed)
+        preds[name] = train_predictor(image, a.detector, range(80), seasons, a.seed,
+                                      vectors=lambda im, ft: vectors(im, ft.xy))
         print(f"predictor {name} ({', '.join(seasons)}): CV accuracy {preds[name].info['cv_accuracy']:.3f}", flush=True)
     counts = {(p, r): np.zeros((len(MEMORY), 3), int) for p in preds for r in RULES}
     for f in range(80, 160, a.step):

@@ -35,10 +35,10 @@ import time
 from pathlib import Path
 
 import numpy as np
-from sfanav.data import Dataset
-from sfanav.features import (RobustnessPredictor, balanced, descriptor_distances, detect, match_distances,
-                             robustness_vectors, stability_labels, true_match)
-from sfanav.experiments.features import GRID, MAX_SAMPLES, MEMORY, THRESHOLD
+from _seasons import f1, route_images, train_predictor
+from sfanav.features import (RobustnessPredictor, descriptor_distances, detect, match_distances, robustness_vectors,
+                             true_match)
+from sfanav.experiments.features import MEMORY, THRESHOLD
 
 VARIANTS = ["response", "robust-1.25", "robust-1.5", "robust-2", "robust-3", "robust-all", "ranksum-1.25",
             "ranksum-1.5", "ranksum-2", "ranksum-3", "ranksum-all", "product-1.5", "product-3", "product-all",
@@ -46,12 +46,6 @@ VARIANTS = ["response", "robust-1.25", "robust-1.5", "robust-2", "robust-3", "ro
 QUERIES = ("summer", "autumn", "winter")
 TRAIN_SEASONS = ("spring", "summer", "autumn")
 ALL = 20000  # "all keypoints"
-
-
-def f1(tp: int, fp: int, n_ref: int) -> float:
-    p = tp / (tp + fp) if tp + fp else 0.0
-    r = tp / n_ref if n_ref else 0.0
-    return 2 * p * r / (p + r) if p + r else 0.0
 
 
 def choose(variant: str, resp: np.ndarray, s: np.ndarray, m: int) -> np.ndarray:
@@ -100,20 +94,7 @@ def vectors(img, feats, scale):
 
 
 def train(image, det, frames, seed, scale):
-    X, y = [], []
-    for f in frames:
-        imgs = [image(f, s) for s in TRAIN_SEASONS]
-        feats = [detect(im, det, 1000) for im in imgs]
-        for im, ft, lab in zip(imgs, feats, stability_labels(feats, threshold=THRESHOLD)):
-            keep = lab >= 0
-            X.append(vectors(im, ft.subset(np.flatnonzero(keep)), scale))
-            y.append(lab[keep])
-    Xa, ya = np.vstack(X), np.concatenate(y)
-    rng = np.random.default_rng(seed)
-    sel = balanced(ya, rng)
-    if len(sel) > MAX_SAMPLES:
-        sel = np.sort(rng.choice(sel, MAX_SAMPLES, replace=False))
-    return RobustnessPredictor.fit(Xa[sel], ya[sel], detector=det, grid=GRID, cv=5, seed=seed)
+    return train_predictor(image, det, frames, TRAIN_SEASONS, seed, vectors=lambda im, ft: vectors(im, ft, scale))
 
 
 def evaluate(image, det, frames, pred, scale):
@@ -153,13 +134,7 @@ def main() -> None:
     ap.add_argument("--patch-scale", type=float, default=None)
     ap.add_argument("--seed", type=int, default=0)
     a = ap.parse_args()
-    ds = Dataset(a.run / "data" / f"thesis-6.1-seasons-seed{a.seed}").select(run="route")
-    by = {c: np.flatnonzero(ds.conditions == c)[np.argsort(ds.frames[ds.conditions == c], kind="stable")]
-          for c in np.unique(ds.conditions)}
-
-    def image(frame: int, season: str) -> np.ndarray:
-        return ds.image(int(by[season][frame]))
-
+    image = route_images(a.run, a.seed)
     outdir = a.run / "variants"
     outdir.mkdir(exist_ok=True)
     tag = "" if a.patch_scale is None else f"-scale{a.patch_scale:g}"
