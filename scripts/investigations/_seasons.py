@@ -7,7 +7,8 @@ from typing import Callable, Sequence
 
 import numpy as np
 from sfanav.data import Dataset
-from sfanav.features import RobustnessPredictor, balanced, detect, robustness_vectors, stability_labels
+from sfanav.features import (RobustnessPredictor, balanced, detect, match_distances, robustness_vectors,
+                             stability_labels, true_match)
 from sfanav.experiments.features import GRID, MAX_SAMPLES, THRESHOLD
 
 
@@ -51,3 +52,43 @@ def train_predictor(image: Callable[[int, str], np.ndarray], det: str, frames: S
     if len(sel) > MAX_SAMPLES:
         sel = np.sort(rng.choice(sel, MAX_SAMPLES, replace=False))
     return RobustnessPredictor.fit(Xa[sel], ya[sel], detector=det, grid=GRID, cv=5, seed=seed)
+
+
+def gains(counts: dict, names: Sequence[str], queries: Sequence[str]) -> dict:
+    """``{"name/query": {gain, mean_f1, f1}}`` from ``counts[(name, query)]`` (memory sizes, 3) of (true, false,
+    reference kept): the mean over memory sizes of the relative F1 change over ``"response"``, in %."""
+    out = {}
+    for q in queries:
+        base = np.array([f1(*c) for c in counts[("response", q)]])
+        valid = base > 0
+        for v in names:
+            fv = np.array([f1(*c) for c in counts[(v, q)]])
+            out[f"{v}/{q}"] = {"gain": float(np.mean((fv[valid] - base[valid]) / base[valid]) * 100),
+                               "mean_f1": float(fv.mean()), "f1": fv.tolist()}
+    return out
+
+
+def count_matches(dist: np.ndarray, ref, rows: np.ndarray, query, cols: np.ndarray) -> tuple[int, int, int]:
+    """(true, false, reference kept) of the mutual matches between reference features ``rows`` and query features
+    ``cols``, ``dist`` the full descriptor distance matrix (true: within THRESHOLD px)."""
+    pairs = match_distances(dist[np.ix_(rows, cols)], cross_check=True)
+    ok = true_match(ref.subset(rows), query.subset(cols), pairs, THRESHOLD)
+    return int(ok.sum()), int((~ok).sum()), len(rows)
+
+
+def load_or_train(path: Path, train: Callable[[], RobustnessPredictor]) -> RobustnessPredictor:
+    """The predictor saved at ``path``, or ``train()``'s, saved there."""
+    if Path(path).exists():
+        return RobustnessPredictor.load(path)
+    pred = train()
+    pred.save(path)
+    return pred
+
+
+def print_gains(res: dict, names: Sequence[str], queries: Sequence[str], width: int = 14) -> None:
+    """One line per variant: gain % / mean F1 per query season of :func:`gains`' result, and the mean gain."""
+    print(f"{'variant':{width}s}" + "".join(f"{q:>18s}" for q in queries) + f"{'mean gain':>11s}")
+    for v in names:
+        g = [res[f"{v}/{q}"]["gain"] for q in queries]
+        print(f"{v:{width}s}" + "".join(f"{gi:+9.1f} / {res[f'{v}/{q}']['mean_f1']:.3f}" for gi, q in zip(g, queries))
+              + f"{np.mean(g):+11.1f}", flush=True)

@@ -30,9 +30,8 @@ import time
 from pathlib import Path
 
 import numpy as np
-from _seasons import f1, route_images, train_predictor
-from sfanav.features import (RobustnessPredictor, descriptor_distances, detect, match, match_distances, select_ranked,
-                             true_match)
+from _seasons import count_matches, gains, load_or_train, print_gains, route_images, train_predictor
+from sfanav.features import descriptor_distances, detect, match, select_ranked
 from sfanav.features.detectors import pixel_distance
 from sfanav.experiments.features import MEMORY, THRESHOLD
 
@@ -94,18 +93,8 @@ def evaluate(image, det, frames, pred, names, pools):
                 rows = pick(v, o_ref if oracle else s_ref, m, "reference")
                 for q in QUERIES:
                     cols = pick(v, o_q[q] if oracle else s_q[q], m, "query")
-                    pairs = match_distances(dist[q][np.ix_(rows, cols)], cross_check=True)
-                    ok = true_match(ref.subset(rows), qf[q].subset(cols), pairs, THRESHOLD)
-                    counts[(v, q)][mi] += (int(ok.sum()), int((~ok).sum()), len(rows))
-    out = {}
-    for q in QUERIES:
-        base = np.array([f1(*c) for c in counts[("response", q)]])
-        valid = base > 0
-        for v in names:
-            fv = np.array([f1(*c) for c in counts[(v, q)]])
-            out[f"{v}/{q}"] = {"gain": float(np.mean((fv[valid] - base[valid]) / base[valid]) * 100),
-                               "mean_f1": float(fv.mean()), "f1": fv.tolist()}
-    return out
+                    counts[(v, q)][mi] += count_matches(dist[q], ref, rows, qf[q], cols)
+    return gains(counts, names, QUERIES)
 
 
 def main() -> None:
@@ -133,11 +122,7 @@ def main() -> None:
             else:
                 path = a.run / f"6.1.2-predictor-{det}.json"
                 train_f, test_f = np.arange(80), np.arange(80, 160)
-            if path.exists():
-                pred = RobustnessPredictor.load(path)
-            else:
-                pred = train(image, det, train_f, a.seed)
-                pred.save(path)
+            pred = load_or_train(path, lambda: train(image, det, train_f, a.seed))
             res = evaluate(image, det, test_f[::a.step], pred, names, pools)
             doc = {"detector": det, "split": split, "train_poses": [int(train_f[0]), int(train_f[-1])],
                    "eval_poses": test_f[::a.step].tolist(), "cv_accuracy": pred.info.get("cv_accuracy"),
@@ -146,11 +131,7 @@ def main() -> None:
             print(f"\n{det}, {split} (train {train_f[0]}..{train_f[-1]}, eval {test_f[0]}..{test_f[-1]} step "
                   f"{a.step}, CV {pred.info.get('cv_accuracy', float('nan')):.3f}, {time.time() - t0:.0f} s): "
                   "gain % / mean F1")
-            print(f"{'variant':18s}" + "".join(f"{q:>18s}" for q in QUERIES) + f"{'mean gain':>11s}")
-            for v in names:
-                g = [res[f"{v}/{q}"]["gain"] for q in QUERIES]
-                print(f"{v:18s}" + "".join(f"{gi:+9.1f} / {res[f'{v}/{q}']['mean_f1']:.3f}" for gi, q in zip(g, QUERIES))
-                      + f"{np.mean(g):+11.1f}", flush=True)
+            print_gains(res, names, QUERIES, 18)
 
 
 if __name__ == "__main__":

@@ -25,9 +25,9 @@ import argparse
 from pathlib import Path
 
 import numpy as np
-from _seasons import f1, route_images, train_predictor
-from sfanav.features import descriptor_distances, detect, match_distances, robustness_vectors, select_ranked, true_match
-from sfanav.experiments.features import MEMORY, THRESHOLD
+from _seasons import count_matches, f1, route_images, train_predictor
+from sfanav.features import descriptor_distances, detect, robustness_vectors, select_ranked
+from sfanav.experiments.features import MEMORY
 
 RULES = {"resp": (None, None), "both-r4": (("robust", 4), ("robust", 4)), "ref-r4": (("robust", 4), None),
          "q-r4": (None, ("robust", 4)), "both-rs1.5": (("rank-sum", 1.5), ("rank-sum", 1.5)),
@@ -73,9 +73,7 @@ def main() -> None:
             for mi, m in enumerate(MEMORY):
                 for r, (rule_ref, rule_q) in RULES.items():
                     i, j = kept(rule_ref, sr, m), kept(rule_q, sq, m)
-                    pairs = match_distances(D[np.ix_(i, j)], cross_check=True)
-                    ok = true_match(ref.subset(i), qf.subset(j), pairs, THRESHOLD)
-                    counts[(p, r)][mi] += (int(ok.sum()), int((~ok).sum()), len(i))
+                    counts[(p, r)][mi] += count_matches(D, ref, i, qf, j)
     print(f"\n{a.detector}, {a.query} to spring{' (no hue)' if a.no_hue else ''}: mean F1 gain % over the m strongest")
     for p in preds:
         base = np.array([f1(*c) for c in counts[(p, "resp")]])

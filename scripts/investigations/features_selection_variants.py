@@ -35,10 +35,9 @@ import time
 from pathlib import Path
 
 import numpy as np
-from _seasons import f1, route_images, train_predictor
-from sfanav.features import (RobustnessPredictor, descriptor_distances, detect, match_distances, robustness_vectors,
-                             true_match)
-from sfanav.experiments.features import MEMORY, THRESHOLD
+from _seasons import count_matches, gains, load_or_train, print_gains, route_images, train_predictor
+from sfanav.features import descriptor_distances, detect, robustness_vectors
+from sfanav.experiments.features import MEMORY
 
 VARIANTS = ["response", "robust-1.25", "robust-1.5", "robust-2", "robust-3", "robust-all", "ranksum-1.25",
             "ranksum-1.5", "ranksum-2", "ranksum-3", "ranksum-all", "product-1.5", "product-3", "product-all",
@@ -110,20 +109,9 @@ def evaluate(image, det, frames, pred, scale):
             kept = {v: choose(v, ref.response, s, m) for v in VARIANTS}
             for q, qf in qs.items():
                 cols = np.arange(min(len(qf), m))
-                qm = qf.subset(cols)
                 for v, idx in kept.items():
-                    pairs = match_distances(dist[q][np.ix_(idx, cols)], cross_check=True)
-                    ok = true_match(ref.subset(idx), qm, pairs, THRESHOLD)
-                    counts[(v, q)][mi] += (int(ok.sum()), int((~ok).sum()), len(idx))
-    out = {}
-    for q in QUERIES:
-        base = np.array([f1(*c) for c in counts[("response", q)]])
-        valid = base > 0
-        for v in VARIANTS:
-            fv = np.array([f1(*c) for c in counts[(v, q)]])
-            out[f"{v}/{q}"] = {"gain": float(np.mean((fv[valid] - base[valid]) / base[valid]) * 100),
-                               "mean_f1": float(fv.mean()), "f1": fv.tolist()}
-    return out
+                    counts[(v, q)][mi] += count_matches(dist[q], ref, idx, qf, cols)
+    return gains(counts, VARIANTS, QUERIES)
 
 
 def main() -> None:
@@ -148,11 +136,7 @@ def main() -> None:
                 path = (a.run / f"6.1.2-predictor-{det}.json" if a.patch_scale is None
                         else outdir / f"predictor-{det}{tag}-0-79.json")
                 train_f, test_f = np.arange(80), np.arange(80, 160)
-            if path.exists():
-                pred = RobustnessPredictor.load(path)
-            else:
-                pred = train(image, det, train_f, a.seed, a.patch_scale)
-                pred.save(path)
+            pred = load_or_train(path, lambda: train(image, det, train_f, a.seed, a.patch_scale))
             res = evaluate(image, det, test_f, pred, a.patch_scale)
             doc = {"detector": det, "split": split, "train_poses": [int(train_f[0]), int(train_f[-1])],
                    "eval_poses": [int(test_f[0]), int(test_f[-1])], "patch_scale": a.patch_scale,
@@ -161,11 +145,7 @@ def main() -> None:
             (outdir / f"{det}-{split}{tag}.json").write_text(json.dumps(doc, indent=1))
             print(f"\n{det}, {split} (train {train_f[0]}..{train_f[-1]}, eval {test_f[0]}..{test_f[-1]}, "
                   f"CV {pred.info.get('cv_accuracy', float('nan')):.3f}, {time.time() - t0:.0f} s): gain % / mean F1")
-            print(f"{'variant':14s}" + "".join(f"{q:>18s}" for q in QUERIES) + f"{'mean gain':>11s}")
-            for v in VARIANTS:
-                g = [res[f"{v}/{q}"]["gain"] for q in QUERIES]
-                print(f"{v:14s}" + "".join(f"{gi:+9.1f} / {res[f'{v}/{q}']['mean_f1']:.3f}" for gi, q in zip(g, QUERIES))
-                      + f"{np.mean(g):+11.1f}", flush=True)
+            print_gains(res, VARIANTS, QUERIES)
 
 
 if __name__ == "__main__":
