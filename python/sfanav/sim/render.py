@@ -40,8 +40,8 @@ from .cameras import Camera, LevelGrid, OmniCamera, PanoramicCamera, RayGrid, co
 from .conditions import DECIDUOUS_KINDS, Lighting, Season
 from .ground import lawn_map, shadow_map
 from .terrain import MAX_TILT_DEG, Attitude
+from .atlas import PrimitiveArrays, TextureAtlas
 from .textures import Pyramid, fractal_noise, make_texture, photo
-from .primitives import Primitive
 from .world import World
 
 _LUMA = np.array([0.299, 0.587, 0.114], np.float32)
@@ -51,102 +51,6 @@ FOG_DISTANCE = 250.0  # m; aerial perspective: far surfaces fade to the horizon 
 
 
 LEVEL_MARGINS_DEG = (4.0, 8.0, 16.0, 2 * MAX_TILT_DEG)  # elevation margins of the level grids of tilted views
-
-
-SHAPE_CODE = {"ellipsoid": 0, "box": 1, "cylinder": 2}
-
-
-class _Atlas:
-    """Every texture's mip levels in one flat RGBA array (T, 4), with per
-    (texture, level) entries: offset, height, width and texels per metre."""
-
-    def __init__(self, pyramids: dict[str, Pyramid]):
-        self.index: dict[str, int] = {}
-        chunks, off, hs, ws, su, sv = [], [], [], [], [], []
-        base, nlev, texel, alpha = [], [], [], []
-        pos = 0
-        for tid, (name, pyr) in enumerate(pyramids.items()):
-            self.index[name] = tid
-            base.append(len(off))
-            nlev.append(len(pyr.levels))
-            texel.append(pyr.texel)
-            alpha.append(pyr.has_alpha)
-            for lv, (h, w) in zip(pyr.levels, pyr.shapes):
-                if lv.shape[1] == 3:
-                    lv = np.concatenate([lv, np.ones((len(lv), 1), np.float32)], axis=1)
-                chunks.append(lv[:, :4])
-                off.append(pos)
-                pos += h * w
-                hs.append(h)
-                ws.append(w)
-                su.append(w / pyr.tile[0])
-                sv.append(h / pyr.tile[1])
-        self.flat = np.concatenate(chunks).astype(np.float32) if chunks else np.zeros((1, 4), np.float32)
-        self._vflat = self.flat.view("V16").ravel()  # one 16-byte texel per element: fast gathers
-        self.off = np.array(off, np.int64)
-        self.h = np.array(hs, np.int64)
-        self.w = np.array(ws, np.int64)
-        self.su = np.array(su, np.float64)
-        self.sv = np.array(sv, np.float64)
-        self.base = np.array(base, np.int64)
-        self.nlev = np.array(nlev, np.int64)
-        self.texel = np.array(texel, np.float64)
-        self.alpha = np.array(alpha, bool)
-        self.pow2 = bool(np.all((self.w & (self.w - 1)) == 0) and np.all((self.h & (self.h - 1)) == 0))
-
-    def sample(self, entry: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
-        """Wrapped nearest-texel lookup at surface coordinates in metres
-        (u along, v up). Returns (n, 4)."""
-        w, h = self.w[entry], self.h[entry]
-        if self.pow2:
-            iu = np.floor(u * self.su[entry]).astype(np.int64) & (w - 1)
-            iv = (-1 - np.floor(v * self.sv[entry]).astype(np.int64)) & (h - 1)
-        else:
-            iu = np.floor(u * self.su[entry]).astype(np.int64) % w
-            iv = (-1 - np.floor(v * self.sv[entry]).astype(np.int64)) % h
-        return self._vflat[self.off[entry] + iv * w + iu].view(np.float32).reshape(-1, 4)
-
-    def sample_stretched(self, entry: np.ndarray, fu: np.ndarray, fv: np.ndarray) -> np.ndarray:
-        """Lookup at tile fractions fu, fv in [0, 1] (v up), clamped."""
-        w, h = self.w[entry], self.h[entry]
-        iu = np.clip((fu * w).astype(np.int64), 0, w - 1)
-        iv = np.clip(((1.0 - fv) * h).astype(np.int64), 0, h - 1)
-        return self._vflat[self.off[entry] + iv * w + iu].view(np.float32).reshape(-1, 4)
-
-
-class _Prims:
-    """Primitive parameters as arrays, grouped by shape (ellipsoids, boxes,
-    cylinders), for the per-frame vector work."""
-
-    FIELDS = ("code", "x", "y", "z0", "z1", "r", "L2", "W2", "cos", "sin", "tex", "front", "rb")
-
-    def __init__(self, prims: list[Primitive], atlas: _Atlas):
-        order = sorted(range(len(prims)), key=lambda i: SHAPE_CODE[prims[i].shape])
-        self.list = [prims[i] for i in order]
-        L = self.list
-        self.code = np.array([SHAPE_CODE[p.shape] for p in L], np.int64)
-        self.x = np.array([p.x for p in L], float)
-        self.y = np.array([p.y for p in L], float)
-        self.z0 = np.array([p.z0 for p in L], float)
-        self.z1 = np.array([p.z1 for p in L], float)
-        self.r = np.array([p.radius for p in L], float)
-        self.L2 = np.array([p.length / 2 for p in L], float)
-        self.W2 = np.array([p.width / 2 for p in L], float)
-        self.cos = np.array([np.cos(p.yaw) for p in L], float)
-        self.sin = np.array([np.sin(p.yaw) for p in L], float)
-        self.tex = np.array([atlas.index[p.texture] for p in L], np.int64)
-        self.front = np.array([atlas.index[p.front] if p.front else -1 for p in L], np.int64)
-        self.rb = np.array([p.bound_radius for p in L], float)
-
-    def plus(self, extra: "_Prims") -> "_Prims":
-        """These primitives followed by ``extra`` (cylinders only, so the
-        shape groups stay contiguous)."""
-        assert not len(extra.code) or (extra.code == SHAPE_CODE["cylinder"]).all()
-        out = object.__new__(_Prims)
-        out.list = self.list + extra.list
-        for f in self.FIELDS:
-            setattr(out, f, np.concatenate([getattr(self, f), getattr(extra, f)]))
-        return out
 
 
 class Renderer:
@@ -181,11 +85,11 @@ class Renderer:
         self.world = world
         self.lighting = lighting or Lighting()
         self.pyramids = {name: Pyramid(make_texture(spec), spec.tile) for name, spec in world.textures.items()}
-        self._atlas = _Atlas(self.pyramids)
-        self._static = _Prims([p for o in world.objects for p in o.parts], self._atlas)
+        self._atlas = TextureAtlas(self.pyramids)
+        self._static = PrimitiveArrays([p for o in world.objects for p in o.parts], self._atlas)
         owner = {id(p): o.marker_id for o in world.objects for p in o.parts}
         self._marker_of = np.array([-1 if owner[id(p)] is None else owner[id(p)] for p in self._static.list], np.int64)
-        self._covered: dict[frozenset[int], _Prims] = {}
+        self._covered: dict[frozenset[int], PrimitiveArrays] = {}
         self._foliage, self._crowns = self._vegetation()
         seasons_of = {id(p): o.seasons for o in world.objects for p in o.parts}
         self._seasons_of = [seasons_of[id(p)] for p in self._static.list]
@@ -535,23 +439,23 @@ class Renderer:
         if hidden:
             P = self._with_covered_markers(hidden)
         if self.world.dynamic:
-            P = P.plus(_Prims([dd.primitive_at(time) for dd in self.world.dynamic], self._atlas))
+            P = P.plus(PrimitiveArrays([dd.primitive_at(time) for dd in self.world.dynamic], self._atlas))
         self._draw(P, gd, grid, x, y, heading, ux, uy, out, depth, light)
         return out
 
-    def _with_covered_markers(self, hidden: frozenset[int]) -> _Prims:
+    def _with_covered_markers(self, hidden: frozenset[int]) -> PrimitiveArrays:
         """The static primitives with the faces of the ``hidden`` markers
         covered (drawn with the board's side texture), cached per set."""
         if hidden not in self._covered:
-            P = object.__new__(_Prims)
-            for f in _Prims.FIELDS:
+            P = object.__new__(PrimitiveArrays)
+            for f in PrimitiveArrays.FIELDS:
                 setattr(P, f, getattr(self._static, f))
             P.list = self._static.list
             P.front = np.where(np.isin(self._marker_of, list(hidden)), -1, self._static.front)
             self._covered[hidden] = P
         return self._covered[hidden]
 
-    def _draw(self, P: _Prims, gd: dict[str, Any], grid: RayGrid, cx: float, cy: float, heading: float,
+    def _draw(self, P: PrimitiveArrays, gd: dict[str, Any], grid: RayGrid, cx: float, cy: float, heading: float,
               ux: np.ndarray, uy: np.ndarray, out: np.ndarray, depth: np.ndarray, light: Lighting) -> None:
         """Draws every primitive at once: candidate pixels are the union of
         the primitives' screen bounding blocks, intersected exactly in one
@@ -700,7 +604,7 @@ class Renderer:
         out.reshape(-1, 4)[pix[win]] = rgba
         base[pix[win]] = d[win]
 
-    def _surface(self, P: _Prims, idx: np.ndarray, pid: np.ndarray, d: np.ndarray, face: np.ndarray,
+    def _surface(self, P: PrimitiveArrays, idx: np.ndarray, pid: np.ndarray, d: np.ndarray, face: np.ndarray,
                  t: np.ndarray, vx: np.ndarray, vy: np.ndarray, qx: np.ndarray, qy: np.ndarray, h: float,
                  level: np.ndarray, bounds: np.ndarray,
                  shift: tuple[np.ndarray, float, float] | None = None) -> tuple[np.ndarray, np.ndarray]:
