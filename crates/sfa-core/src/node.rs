@@ -124,6 +124,8 @@ struct Stage {
     expansion: Option<Expansion>,
     acc: Option<Accumulator>,
     solution: Option<SolutionState>,
+    /// `mean P` of the solution (empty without one), subtracted by `apply`.
+    bias: Vec<f64>,
 }
 
 impl Stage {
@@ -139,7 +141,20 @@ impl Stage {
     /// A stage with neither statistics nor a solution (for restoring).
     fn plan(input_dim: usize, degree: usize, n_out: usize) -> Result<Self> {
         let expansion = if degree > 1 { Some(Expansion::new(input_dim, degree)?) } else { None };
-        Ok(Stage { degree, n_out, input_dim, expansion, acc: None, solution: None })
+        Ok(Stage { degree, n_out, input_dim, expansion, acc: None, solution: None, bias: Vec::new() })
+    }
+
+    /// Sets (or clears) the solution and the bias `mean P` that `apply`
+    /// subtracts, computed once here rather than on every call.
+    fn set_solution(&mut self, solution: Option<SolutionState>) {
+        self.bias = match &solution {
+            Some(sol) => {
+                let (ed, m) = (sol.mean.len(), sol.n_out);
+                (0..m).map(|j| (0..ed).map(|i| sol.mean[i] * sol.projection[i * m + j]).sum()).collect()
+            }
+            None => Vec::new(),
+        };
+        self.solution = solution;
     }
 
     fn expanded_dim(&self) -> usize {
@@ -180,7 +195,7 @@ impl Stage {
         let ed = self.expanded_dim();
         let m = sol.n_out;
         let rhs = MatRef::from_row_major_slice(&sol.projection, ed, m);
-        let bias: Vec<f64> = (0..m).map(|j| (0..ed).map(|i| sol.mean[i] * sol.projection[i * m + j]).sum()).collect();
+        let bias = &self.bias;
         let mut out = vec![0.0; n * m];
         match &self.expansion {
             None => {
@@ -204,7 +219,7 @@ impl Stage {
             }),
         }
         for row in out.chunks_mut(m.max(1)) {
-            row.iter_mut().zip(&bias).for_each(|(v, b)| *v -= b);
+            row.iter_mut().zip(bias).for_each(|(v, b)| *v -= b);
         }
         out
     }
@@ -232,14 +247,15 @@ impl Stage {
         let n_out = g.values.len();
         let projection =
             (0..ed).flat_map(|i| (0..n_out).map(move |j| (i, j))).map(|(i, j)| g.vectors[(i, j)]).collect();
-        self.solution = Some(SolutionState {
+        let solution = SolutionState {
             mean: acc.mean()?,
             projection,
             n_out,
             delta: g.values.clone(),
             rank: g.rank,
             dropped: g.dropped.clone(),
-        });
+        };
+        self.set_solution(Some(solution));
         Ok(())
     }
 }
@@ -372,7 +388,7 @@ impl SfaNode {
     pub fn partial_fit<T: Sample>(&mut self, x: View<'_, T>, new_sequence: bool) -> Result<()> {
         let s = self.begin_training(&x)?;
         // Invalidate the stage being trained.
-        self.stages[s].solution = None;
+        self.stages[s].set_solution(None);
         if s == 0 && self.stages[0].expansion.is_none() {
             // Zero-copy path: the accumulator reads the caller's array.
             return self.stages[0].acc.as_mut().expect("acc").update(x, new_sequence);
@@ -431,7 +447,7 @@ impl SfaNode {
         }
         let stage = &mut self.stages[0];
         stage.acc_mut()?.merge(stats)?;
-        stage.solution = None;
+        stage.set_solution(None);
         Ok(())
     }
 
@@ -460,7 +476,7 @@ impl SfaNode {
             });
         }
         stage.acc_mut()?.merge(stats)?;
-        stage.solution = None;
+        stage.set_solution(None);
         Ok(())
     }
 
@@ -781,7 +797,7 @@ impl SfaNode {
             } else if i + 1 < st.stages.len() {
                 return bad(format!("stage {i} is not solved but a later stage exists"));
             }
-            stage.solution = ss.solution.clone();
+            stage.set_solution(ss.solution.clone());
             node.stages.push(stage);
         }
         node.n_features = Some(st.n_features);
