@@ -136,12 +136,12 @@ def _f1(tp: int, fp: int, n_ref: int) -> float:
 
 
 #: how each compared selection picks (reference, query) keypoints: None = the m strongest, else
-#: (select_ranked method, candidate pool in multiples of m); "default" is the library's
+#: (select_ranked method, candidate pool in multiples of m); the "default" selection uses the library's defaults
 SELECTIONS = {
     "response": (None, None),
     "thesis": (("robust", THESIS_POOL), None),
     "rank-sum, map only": (("rank-sum", THESIS_POOL), None),
-    "default": (("default", "default"), ("default", "default")),
+    "default": ((METHODS[0], CANDIDATES), (METHODS[0], CANDIDATES)),
 }
 
 
@@ -149,8 +149,7 @@ def _kept(rule: Any, scores: np.ndarray, m: int) -> np.ndarray:
     if rule is None:
         return np.arange(min(len(scores), m))
     method, pool = rule
-    return select_ranked(scores, m, candidates=CANDIDATES if pool == "default" else pool,
-                         method=METHODS[0] if method == "default" else method)
+    return select_ranked(scores, m, candidates=pool, method=method)
 
 
 def _train_predictor(det: str, labelled: list[tuple[list[Any], list[np.ndarray]]], seasons: tuple[str, ...],
@@ -235,6 +234,7 @@ def run_612(out: Path, *, quick: bool, seed: int, progress: bool,
         runs = [("main", q, how) for q in queries for how in SELECTIONS]
         runs += [(name, name.split()[0], how) for name in predictors if name != "main" for how in SELECTIONS]
         counts = {r: np.zeros((len(memory), 3), int) for r in runs}
+        tested = {name: sorted({q for n, q, _ in runs if n == name}) for name in preds}
         for f in test_f:
             ref_img = image(f, "spring")
             ref_all = detect(ref_img, det, n_detect)
@@ -244,7 +244,8 @@ def run_612(out: Path, *, quick: bool, seed: int, progress: bool,
             dist = {q: descriptor_distances(ref_all, qf) for q, qf in q_all.items()}
             ref_vec = robustness_vectors(ref_img, ref_all.xy)
             q_vec = {q: robustness_vectors(q_img[q], q_all[q].xy) for q in queries}
-            scores = {name: (p.decision_function(ref_vec), {q: p.decision_function(v) for q, v in q_vec.items()})
+            # each predictor scores the reference and the queries it is tested on
+            scores = {name: (p.decision_function(ref_vec), {q: p.decision_function(q_vec[q]) for q in tested[name]})
                       for name, p in preds.items()}
             for mi, m in enumerate(memory):
                 for name, q, how in runs:

@@ -87,13 +87,12 @@ class Renderer:
         self.pyramids = {name: Pyramid(make_texture(spec), spec.tile) for name, spec in world.textures.items()}
         self._atlas = TextureAtlas(self.pyramids)
         self._static = PrimitiveArrays([p for o in world.objects for p in o.parts], self._atlas)
-        owner = {id(p): o.marker_id for o in world.objects for p in o.parts}
-        self._marker_of = np.array([-1 if owner[id(p)] is None else owner[id(p)] for p in self._static.list], np.int64)
+        owner = {id(p): o for o in world.objects for p in o.parts}
+        self._owners = [owner[id(p)] for p in self._static.list]  # the object of each static primitive
+        self._marker_of = np.array([-1 if o.marker_id is None else o.marker_id for o in self._owners], np.int64)
         self._covered: dict[frozenset[int], PrimitiveArrays] = {}
         self._foliage, self._crowns = self._vegetation()
-        seasons_of = {id(p): o.seasons for o in world.objects for p in o.parts}
-        self._seasons_of = [seasons_of[id(p)] for p in self._static.list]
-        self._presence: dict[str, np.ndarray | None] = {}
+        self._presence: dict[str | None, np.ndarray | None] = {}
         self._build_ground()
         self._build_sky()
         self._ground_cache: dict[tuple, np.ndarray] = {}
@@ -105,10 +104,9 @@ class Renderer:
         """Per static primitive (in ``self._static`` order): deciduous foliage
         (seasonal colour), and of those the crowns (ellipsoids of trees and
         bushes: seasonal leaf cover)."""
-        kind = {id(p): o.kind for o in self.world.objects for p in o.parts}
         tex = self.world.textures
-        foliage = np.array([kind[id(p)] in DECIDUOUS_KINDS and tex[p.texture].kind == "leaves"
-                            for p in self._static.list], bool)
+        foliage = np.array([o.kind in DECIDUOUS_KINDS and tex[p.texture].kind == "leaves"
+                            for o, p in zip(self._owners, self._static.list)], bool)
         crowns = foliage & np.array([p.shape == "ellipsoid" for p in self._static.list], bool)
         return foliage, crowns
 
@@ -116,9 +114,9 @@ class Renderer:
         """Per static primitive (in ``self._static`` order): whether its
         object is there in ``season`` (bool array), or None when every
         primitive is (a world without transient objects, or all there)."""
-        name = "summer" if season is None else season.name
+        name = None if season is None else season.name
         if name not in self._presence:
-            mask = np.array([s is None or name in s for s in self._seasons_of], bool)
+            mask = np.array([o.present(name) for o in self._owners], bool)
             self._presence[name] = None if mask.all() else mask
         return self._presence[name]
 

@@ -457,11 +457,9 @@ class World:
                 world.ground.patches = tuple(b2.patches(patches))
             if inner:
                 placed.extend(b2.inner(inner, placed))
-        if transient:
-            # own stream as well: the rest of the world is the same with and without them
-            placed.extend(TransientBuilder(world, np.random.default_rng([int(seed), 11])).build(transient, placed))
-        elif transient is not None and not isinstance(transient, (list, tuple)):
-            raise ValueError(f"transient must be a list of dicts, got {transient!r}")
+        # own stream as well: the rest of the world is the same with and without them
+        placed.extend(TransientBuilder(world, np.random.default_rng([int(seed), 11])).build(
+            () if transient is None else transient, placed))
         world.objects = placed
         world.occlusions = list(occlusions)
         if dynamic is not None:
@@ -537,7 +535,7 @@ class World:
     @property
     def transient(self) -> list[WorldObject]:
         """Objects that are there in some seasons only (``WorldObject.seasons``)."""
-        return [o for o in self.objects if o.seasons is not None]
+        return [o for o in self.objects if o.transient]
 
     def primitives(self, t: float = 0.0, season: str | None = None) -> list[Primitive]:
         """The primitives of the objects there in the season named ``season``
