@@ -11,6 +11,9 @@ network sees them.
 * :mod:`~sfanav.data.preprocessing`: :class:`Preprocessing` (what a model
   expects) and :class:`Preprocessor` (makes any input match it);
 * :mod:`~sfanav.data.image_rows`: the horizon band and row normalisation;
+* :mod:`~sfanav.data.corruptions`: what a robot's camera and image transport
+  do to its images (JPEG, sensor noise, blur, exposure, ...), for measuring
+  robustness;
 * :mod:`~sfanav.data.rosbag`: a robot's ROS bag as a dataset
   (:meth:`Dataset.from_bag`, :func:`bag_info`);
   :mod:`~sfanav.data.rosbag_writer`: :class:`BagWriter` (images, poses and
