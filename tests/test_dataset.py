@@ -274,3 +274,41 @@ def test_a_frames_table_that_disagrees_with_the_metadata_is_refused(tmp_path):
     (out / "frames.csv").write_text("".join(lines[:-1]))  # one row lost, as after a kill
     with pytest.raises(ValueError, match="incomplete or altered: metadata.json says 3 images, frames.csv has 2"):
         sfanav.data.Dataset(out)
+
+
+def test_a_staged_writer_leaves_nothing_until_complete_and_keeps_what_it_replaces(tmp_path):
+    from sfanav.data import DatasetWriter
+
+    out = tmp_path / "d"
+    img = np.zeros((4, 8, 3), np.uint8)
+    with pytest.raises(KeyboardInterrupt):
+        with DatasetWriter(out, staged=True) as w:
+            w.add(img, frame=0, timestamp=0.0, pose=(0, 0, 0))
+            assert w.folder != out and w.folder.parent == tmp_path and w.folder.name.startswith(".d.part-")
+            raise KeyboardInterrupt
+    assert list(tmp_path.iterdir()) == []
+    write_dataset(out, images(2), np.zeros((2, 3)))
+    with pytest.raises(FileExistsError, match="not empty; pass overwrite=True"):
+        DatasetWriter(out, staged=True)
+    with pytest.raises(ValueError, match="broken"):
+        with DatasetWriter(out, overwrite=True, staged=True) as w:
+            w.add(img, frame=0, timestamp=0.0, pose=(0, 0, 0))
+            raise ValueError("broken")
+    assert len(Dataset(out)) == 2 and sorted(p.name for p in tmp_path.iterdir()) == ["d"]
+    with DatasetWriter(out, overwrite=True, staged=True) as w:
+        for i in range(3):
+            w.add(img, frame=i, timestamp=float(i), pose=(0, 0, 0))
+        assert len(Dataset(out)) == 2  # the old one until close
+    assert len(Dataset(out)) == 3 and sorted(p.name for p in tmp_path.iterdir()) == ["d"]
+    other = tmp_path / "other"
+    other.mkdir()
+    (other / "precious.txt").write_text("x")
+    with pytest.raises(FileExistsError, match="not an sfanav dataset"):
+        DatasetWriter(other, overwrite=True, staged=True)
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    with DatasetWriter(empty, staged=True) as w:
+        w.add(img, frame=0, timestamp=0.0, pose=(0, 0, 0))
+    assert len(Dataset(empty)) == 1
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["d", "empty", "other"]
+

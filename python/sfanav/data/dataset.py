@@ -444,15 +444,17 @@ class Dataset:
         single ``.db3`` / ``.mcap`` files with the pure-Python ``rosbags``
         (``pip install "sfanav[ros]"``; no ROS installation). Images are
         decoded (``sensor_msgs/Image`` in ``rgb8``, ``bgr8``, ``mono8``,
-        ``rgba8``, ``bgra8``, ``mono16``; ``sensor_msgs/CompressedImage``
-        JPEG or PNG, kept as they are) and not altered otherwise:
+        ``rgba8``, ``bgra8``, ``mono16``, 8-bit Bayer (demosaiced);
+        ``sensor_msgs/CompressedImage`` JPEG or PNG, kept as they are) and
+        not altered otherwise:
         omnidirectional images stay omnidirectional for the unwarping of
         training and localization. Each image gets the odometry and the
         ground truth linearly interpolated at its timestamp, the heading (the
         quaternion's yaw) along the shorter arc, as :meth:`from_recording`
-        does. The import streams (bounded memory) and is atomic: an
-        interrupted import leaves no dataset a later command takes for
-        complete.
+        does. The import streams (bounded memory) and is atomic: the
+        dataset is written into a hidden folder beside ``out`` and renamed
+        to ``out`` once complete, so a failed or interrupted import leaves
+        nothing, and a dataset ``overwrite`` would replace stays until then.
 
         Parameters
         ----------
@@ -506,8 +508,10 @@ class Dataset:
             No bag at ``bag``.
         ValueError
             A missing topic, unsorted or missing (0) stamps, images no pose
-            covers (``outside="error"``), an undecodable image, a truncated
-            or damaged bag; ``out`` not empty (FileExistsError).
+            covers (``outside="error"``), a truncated or damaged bag; an
+            image that does not decode (an unsupported encoding, data cut
+            short) or whose size differs from the earlier images', named by
+            its topic, index and stamp; ``out`` not empty (FileExistsError).
         TypeError
             A topic of the wrong message type.
         ImportError

@@ -3,7 +3,10 @@ rows, :func:`write_dataset` writes a whole run at once. A dataset is complete
 only once its ``metadata.json`` exists, which is written last (atomically,
 with the number of images the reader checks); a writer left by an exception
 (an interrupted ``sfanav simulate``, say) writes none, so the folder is not
-taken for a dataset."""
+taken for a dataset. A staged writer (``staged=True``, what ``sfanav
+import`` uses) goes further: it writes into a hidden folder beside the
+destination and moves it into place only when complete, so an error leaves
+nothing, and a dataset it replaces stays until then."""
 
 from __future__ import annotations
 
@@ -12,6 +15,7 @@ import json
 import math
 import os
 import shutil
+import tempfile
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -36,6 +40,22 @@ class DatasetWriter:
         Replace an existing dataset at ``path`` (refused otherwise).
     extra_columns : sequence of str
         Names of extra per-image columns given to :meth:`add`.
+    staged : bool
+        Write into a hidden temporary folder beside ``path``
+        (``.NAME.part-XXXX``) and move it to ``path`` on :meth:`close`: an
+        error or an interrupt (:meth:`abort`) removes it and leaves ``path``
+        as it was, so a dataset that ``overwrite`` replaces is kept until
+        the new one is complete. Without it, files are written to ``path``
+        directly (which callers writing files of their own beside the
+        dataset, as the simulator's ``world.json``, rely on).
+
+    Attributes
+    ----------
+    path : Path
+        The dataset's destination.
+    folder : Path
+        Where the files are written while the writer is open: ``path``, or
+        the temporary folder of a staged writer.
 
     Examples
     --------
@@ -44,25 +64,34 @@ class DatasetWriter:
     """
 
     def __init__(self, path: str | os.PathLike, metadata: dict[str, Any] | None = None, *,
-                 overwrite: bool = False, extra_columns: Sequence[str] = ()):
+                 overwrite: bool = False, extra_columns: Sequence[str] = (), staged: bool = False):
         self.path = Path(path)
-        if self.path.exists():
-            if not self.path.is_dir():
-                raise FileExistsError(f"{self.path} exists and is not a directory")
-            if any(self.path.iterdir()):
-                if not overwrite:
-                    raise FileExistsError(f"{self.path} is not empty; pass overwrite=True (--overwrite) to replace it")
-                if not (self.path / "metadata.json").exists() and not (self.path / "frames.csv").exists():
-                    raise FileExistsError(f"{self.path} is not empty and not an sfanav dataset; refusing to overwrite it")
-                shutil.rmtree(self.path)
-        (self.path / "images").mkdir(parents=True, exist_ok=True)
         self.metadata = dict(metadata or {})
         json.dumps(self.metadata)  # fail early on non-JSON metadata
         self.extra = [check_name(c, "extra column name") for c in extra_columns]
         clash = set(self.extra) & set(COLUMNS)
         if clash:
             raise ValueError(f"extra columns {sorted(clash)} clash with the standard columns")
-        self._file = open(self.path / "frames.csv", "w", newline="")
+        self._overwrite = overwrite
+        self._replace = _check_destination(self.path, overwrite)
+        if staged:
+            # beside the destination (a symbolic link's target), so that the final move is a rename
+            dest = self.path.resolve() if self.path.is_symlink() else self.path
+            dest.parent.mkdir(parents=True, exist_ok=True)
+            self.folder = Path(tempfile.mkdtemp(prefix=f".{dest.name}.part-", dir=dest.parent))
+            self._dest: Path | None = dest
+        else:
+            if self._replace:
+                shutil.rmtree(self.path)
+            self.folder = self.path
+            self._dest = None
+        try:
+            (self.folder / "images").mkdir(parents=True, exist_ok=True)
+            self._file = open(self.folder / "frames.csv", "w", newline="")
+        except BaseException:
+            if self._dest is not None:
+                shutil.rmtree(self.folder, ignore_errors=True)
+            raise
         self._csv = csv.writer(self._file)
         self._csv.writerow(list(COLUMNS) + self.extra)
         self._seen: set[tuple[int, str]] = set()
@@ -79,7 +108,7 @@ class DatasetWriter:
         odo = _triple(odometry, "odometry") if odometry is not None else (math.nan,) * 3
         rel = f"images/{int(frame):06d}_{camera}.png"
         img = np.asarray(image)
-        write_image(self.path / rel, img)
+        write_image(self.folder / rel, img)
         self._shapes.setdefault(camera, list(img.shape))
         self._write_row(key, run, t, (x, y, th), odo, condition, rel, extra)
         return rel
@@ -97,7 +126,7 @@ class DatasetWriter:
         pose_v = _triple(pose, "pose", allow_nan=True)
         odo = _triple(odometry, "odometry", allow_nan=True) if odometry is not None else (math.nan,) * 3
         rel = f"images/{int(frame):06d}_{camera}{src.suffix.lower()}"
-        shutil.copy2(src, self.path / rel)
+        shutil.copy2(src, self.folder / rel)
         self._write_row(key, run, t, pose_v, odo, condition, rel, extra)
         return rel
 
@@ -115,7 +144,7 @@ class DatasetWriter:
         pose_v = _triple(pose, "pose", allow_nan=True)
         odo = _triple(odometry, "odometry", allow_nan=True) if odometry is not None else (math.nan,) * 3
         rel = f"images/{int(frame):06d}_{camera}{suffix}"
-        with open(self.path / rel, "wb") as f:
+        with open(self.folder / rel, "wb") as f:
             f.write(data)
         self._shapes.setdefault(camera, [int(s) for s in shape])
         self._write_row(key, run, t, pose_v, odo, condition, rel, extra)
@@ -149,18 +178,32 @@ class DatasetWriter:
         self.count += 1
 
     def close(self) -> None:
+        """Completes the dataset: writes ``metadata.json`` and, for a staged
+        writer, moves the dataset to ``path`` (replacing the one there)."""
         if self._file.closed:
             return
         self._file.close()
         meta = {"format": FORMAT, "version": VERSION, "units": UNITS, "n_images": self.count,
                 "image_shapes": self._shapes, **self.metadata}
-        write_text_atomic(self.path / "metadata.json", json.dumps(meta, indent=1, default=_json_default))
+        try:
+            write_text_atomic(self.folder / "metadata.json", json.dumps(meta, indent=1, default=_json_default))
+            if self._dest is not None:
+                _move_into_place(self.folder, self._dest, self._overwrite)
+        except BaseException:
+            self._discard()
+            raise
 
     def abort(self) -> None:
         """Stops writing without completing the dataset: ``frames.csv`` is
-        closed and no ``metadata.json`` is written, so readers refuse it."""
+        closed and no ``metadata.json`` is written, so readers refuse it; a
+        staged writer removes its temporary folder (``path`` stays as it was)."""
         if not self._file.closed:
             self._file.close()
+            self._discard()
+
+    def _discard(self) -> None:
+        if self._dest is not None:
+            shutil.rmtree(self.folder, ignore_errors=True)
 
     def __enter__(self) -> "DatasetWriter":
         return self
@@ -170,6 +213,43 @@ class DatasetWriter:
             self.close()
         else:  # an error or an interrupt: the dataset is incomplete
             self.abort()
+
+
+def _check_destination(path: Path, overwrite: bool) -> bool:
+    """Whether ``path`` holds a dataset to replace (refusing what must not
+    be replaced); False for a new or empty folder."""
+    if not path.exists():
+        return False
+    if not path.is_dir():
+        raise FileExistsError(f"{path} exists and is not a directory")
+    if not any(path.iterdir()):
+        return False
+    if not overwrite:
+        raise FileExistsError(f"{path} is not empty; pass overwrite=True (--overwrite) to replace it")
+    if not (path / "metadata.json").exists() and not (path / "frames.csv").exists():
+        raise FileExistsError(f"{path} is not empty and not an sfanav dataset; refusing to overwrite it")
+    return True
+
+
+def _move_into_place(folder: Path, dest: Path, overwrite: bool) -> None:
+    """Renames the complete dataset ``folder`` to ``dest``; a dataset at
+    ``dest`` is renamed aside first and removed once the new one is in place
+    (put back if the rename fails). Between the two renames ``dest`` is
+    briefly absent: a rename cannot swap two folders."""
+    if not _check_destination(dest, overwrite):  # checked again: the folder may have changed meanwhile
+        if dest.is_dir():
+            dest.rmdir()  # empty: nothing is lost
+        os.rename(folder, dest)
+        return
+    aside = Path(tempfile.mkdtemp(prefix=f".{dest.name}.old-", dir=dest.parent))
+    aside.rmdir()
+    os.rename(dest, aside)
+    try:
+        os.rename(folder, dest)
+    except BaseException:
+        os.rename(aside, dest)
+        raise
+    shutil.rmtree(aside, ignore_errors=True)
 
 
 def _json_default(o: Any) -> Any:
