@@ -106,7 +106,8 @@ def bad_image_cases():
         "half a jpeg": ([compressed_image(jpeg_bytes(i)) for i in imgs[:2]] + [compressed_image(jpeg[: len(jpeg) // 2])]
                         + [compressed_image(jpeg_bytes(imgs[3]))], ["cannot decode the compressed image", "truncated"]),
         "half a png": ([compressed_image(png_bytes(i), "png") for i in imgs[:2]]
-                       + [compressed_image(png[: len(png) // 2], "png")] + [compressed_image(png_bytes(imgs[3]), "png")],
+                       + [compressed_image(png[: len(png) // 2], "png")]
+                       + [compressed_image(png_bytes(imgs[3]), "png")],
                        ["cannot decode the compressed image", "truncated"]),
         "16UC3": ([raw_image(i) for i in imgs[:2]]
                   + [("sensor_msgs/msg/Image", dict(height=8, width=60, encoding="16UC3", is_bigendian=0, step=360,
@@ -126,7 +127,8 @@ def bad_image_cases():
         "gray among colour": ([raw_image(i) for i in imgs[:2]] + [raw_image(mono)] + [raw_image(imgs[3])],
                               ["has shape (8, 60), unlike (8, 60, 3)"]),
         "jpeg of another size": ([compressed_image(jpeg_bytes(i)) for i in imgs[:2]]
-                                 + [compressed_image(jpeg_bytes(imgs[2][:4]))] + [compressed_image(jpeg_bytes(imgs[3]))],
+                                 + [compressed_image(jpeg_bytes(imgs[2][:4]))]
+                                 + [compressed_image(jpeg_bytes(imgs[3]))],
                                  ["has shape (4, 60, 3), unlike (8, 60, 3)"]),
     }
 

@@ -549,3 +549,51 @@ def test_cut_jpeg_and_png_files_are_refused_before_opencv_sees_them():
                 decode_compressed(np.frombuffer(data[:cut], np.uint8), name.lower())
     assert truncation(b"neither a JPEG nor a PNG") is None
 
+
+# ---------------------------------------------------------------- exact stamps
+
+
+def header_ns(msg):
+    return int(msg.header.stamp.sec) * 10**9 + int(msg.header.stamp.nanosec)
+
+
+@pytest.mark.parametrize("ros", [1, 2])
+def test_import_keeps_the_images_exact_header_stamps(tmp_path, ros):
+    stamps = [STAMP0 + k * PERIOD for k in range(5)]
+    bag = write_camera_bag(tmp_path / ("run.bag" if ros == 1 else "run"), [raw_image(i) for i in good_images(5)],
+                           ros=ros)
+    ds = Dataset.from_bag(bag, tmp_path / "ds", odom_topic="/odom", log=lambda m: None)
+    assert ds.stamps_ns.dtype == np.int64 and ds.stamps_ns.tolist() == stamps
+    assert Dataset(tmp_path / "ds").stamps_ns.tolist() == stamps
+    np.testing.assert_allclose(ds.timestamps, np.array(stamps) / 1e9, rtol=0, atol=1e-6)
+    # --time bag: the record times, exactly too
+    ds = Dataset.from_bag(bag, tmp_path / "bag-times", odom_topic="/odom", time="bag", log=lambda m: None)
+    assert ds.stamps_ns.tolist() == stamps  # write_camera_bag records each message at its stamp
+
+
+@pytest.mark.parametrize("name", ["est.bag", "est.mcap"])
+def test_estimates_stamped_in_integer_nanoseconds_are_exact(tmp_path, name):
+    from rosbags.highlevel import AnyReader
+
+    stamps = np.array([STAMP0 + k * PERIOD for k in range(6)], np.int64)
+    xy = np.c_[np.arange(6.0), np.zeros(6)]
+    fused = np.c_[xy, np.zeros(6)]
+    assert write_estimates(tmp_path / name, stamps, xy, fused, unit="ns") == 12
+    with AnyReader([tmp_path / name]) as r:
+        got = {}
+        for c, ns, raw in r.messages():
+            m = r.deserialize(raw, c.msgtype)
+            got.setdefault(c.topic, []).append((ns, header_ns(m)))
+    for topic in ("/sfanav/estimate", "/sfanav/fused"):
+        assert got[topic] == [(int(v), int(v)) for v in stamps]
+    # float seconds cannot carry them: refused, and nanoseconds passed as seconds are caught
+    with pytest.raises(TypeError, match="integer nanoseconds"):
+        write_estimates(tmp_path / "f.bag", stamps / 1e9, xy, unit="ns")
+    with pytest.raises(ValueError, match="unit='ns'"):
+        write_estimates(tmp_path / "f.bag", stamps, xy)
+    with pytest.raises(ValueError, match="unit must be 's'"):
+        write_estimates(tmp_path / "f.bag", stamps, xy, unit="ms")
+    with pytest.raises(ValueError, match="stamp must be at least 0"):
+        write_estimates(tmp_path / "f.bag", -stamps, xy, unit="ns")
+    assert not (tmp_path / "f.bag").exists()
+

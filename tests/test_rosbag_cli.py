@@ -251,3 +251,35 @@ def test_a_bad_image_is_one_line_and_an_existing_dataset_survives(tmp_path, caps
     assert len(Dataset(tmp_path / "ds")) == 3
     assert sorted(p.name for p in tmp_path.iterdir()) == ["bad.bag", "ds", "good.bag"]
 
+
+@pytest.mark.parametrize("ros", [1, 2])
+def test_estimates_carry_their_images_exact_header_stamps(bags, model, tmp_path, capsys, ros):
+    """A robot's bag with Unix header stamps (odd nanoseconds, not exact as
+    float seconds) -> sfanav import -> localize --out est.bag / est.mcap:
+    every estimate's header stamp equals its image's, as integers, so
+    ROS's exact-time synchronisation pairs them."""
+    from rosbags.highlevel import AnyReader
+
+    imgs = list(bags["sim"].select(run="test").images())[:12]
+    stamps = [STAMP0 + k * PERIOD for k in range(len(imgs))]
+    assert any(round(s / 1e9 * 1e9) != s for s in stamps)
+    bag = write_camera_bag(tmp_path / ("robot.bag" if ros == 1 else "robot"), [raw_image(i) for i in imgs], ros=ros)
+    ds = tmp_path / "ds"
+    code, _, err = run(capsys, "import", bag, "--image-topic", "/cam", "--odom-topic", "/odom", "--out", ds,
+                       "--no-progress")
+    assert code == 0, err
+    assert Dataset(ds).stamps_ns.tolist() == stamps
+    for name in ("est.bag", "est.mcap"):
+        code, _, err = run(capsys, "localize", model, ds, "--odometry", "--out", tmp_path / name, "--out",
+                           tmp_path / f"{name}.csv", "--no-progress")
+        assert code == 0, err
+        with AnyReader([tmp_path / name]) as r:
+            got = {}
+            for c, ns, raw in r.messages():
+                m = r.deserialize(raw, c.msgtype)
+                got.setdefault(c.topic, []).append((ns, m.header.stamp.sec * 10**9 + m.header.stamp.nanosec))
+        assert sorted(got) == ["/sfanav/estimate", "/sfanav/fused"]
+        for topic, pairs in got.items():
+            assert [h for _, h in pairs] == stamps, topic  # header stamps, exactly
+            assert [ns for ns, _ in pairs] == stamps, topic  # and the bag's record times
+

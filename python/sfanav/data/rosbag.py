@@ -479,8 +479,9 @@ def _write_images(plan: _Plan, w: DatasetWriter, frame: int, camera: str, condit
             elif shp != shape[0]:
                 raise ValueError(f"{_image_name(plan.path, plan.topic, k, plan.img_ns[k])} has shape {shp}, "
                                  f"unlike {shape[0]} before it")
-            w.add_encoded(data, suffix, shape=shp, frame=frame, timestamp=plan.img_ns[k] / 1e9, pose=plan.gt[k],
-                          odometry=plan.odo[k], camera=camera, condition=condition, run=plan.run)
+            ns = int(plan.img_ns[k])
+            w.add_encoded(data, suffix, shape=shp, frame=frame, timestamp=ns / 1_000_000_000, stamp_ns=ns,
+                          pose=plan.gt[k], odometry=plan.odo[k], camera=camera, condition=condition, run=plan.run)
             frame += 1
             if bar is not None:
                 bar.update(1)
@@ -553,7 +554,7 @@ def import_bag(bag: Any, out: str | os.PathLike, *, image_topic: str | None = No
     shape: list[Any] = []
     frame = 0
     try:
-        with DatasetWriter(out, meta, overwrite=overwrite, staged=True) as w:
+        with DatasetWriter(out, meta, overwrite=overwrite, exact_stamps=True, staged=True) as w:
             for plan in plans:
                 frame = _write_images(plan, w, frame, camera, condition, shape, bar)
     finally:
