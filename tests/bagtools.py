@@ -12,8 +12,8 @@ PERIOD = 33_333_333  # ns: a 30 Hz camera
 
 
 def stamp_text(ns):
-    """A stamp in ns as the errors write it: exact seconds."""
-    return f"{ns // 10**9}.{ns % 10**9:09d}".rstrip("0")
+    """A stamp in ns as the errors write it: exact seconds (``1733000000.190123455``, ``1000.5``, ``1000.0``)."""
+    return f"{ns // 10**9}.{f'{ns % 10**9:09d}'.rstrip('0') or '0'}"
 
 
 def raw_image(img, encoding=None):
@@ -85,11 +85,13 @@ def write_camera_bag(path, images, *, stamps=None, odom=None, ros=1):
 
 
 def truncated(image, nbytes):
+    """An image message's fields with its data cut to ``nbytes``."""
     typ, fields = image
     return typ, {**fields, "data": fields["data"][:nbytes]}
 
 
 def good_images(n=4, h=8, w=60):
+    """``n`` random uint8 RGB images (the same for the same arguments)."""
     rng = np.random.default_rng(5)
     return [rng.integers(0, 256, (h, w, 3), dtype=np.uint8) for _ in range(n)]
 
