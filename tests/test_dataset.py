@@ -274,3 +274,127 @@ def test_a_frames_table_that_disagrees_with_the_metadata_is_refused(tmp_path):
     (out / "frames.csv").write_text("".join(lines[:-1]))  # one row lost, as after a kill
     with pytest.raises(ValueError, match="incomplete or altered: metadata.json says 3 images, frames.csv has 2"):
         sfanav.data.Dataset(out)
+
+
+def test_a_staged_writer_leaves_nothing_until_complete_and_keeps_what_it_replaces(tmp_path):
+    from sfanav.data import DatasetWriter
+
+    out = tmp_path / "d"
+    img = np.zeros((4, 8, 3), np.uint8)
+    with pytest.raises(KeyboardInterrupt):
+        with DatasetWriter(out, staged=True) as w:
+            w.add(img, frame=0, timestamp=0.0, pose=(0, 0, 0))
+            assert w.folder != out and w.folder.parent == tmp_path and w.folder.name.startswith(".d.part-")
+            raise KeyboardInterrupt
+    assert list(tmp_path.iterdir()) == []
+    write_dataset(out, images(2), np.zeros((2, 3)))
+    with pytest.raises(FileExistsError, match="not empty; pass overwrite=True"):
+        DatasetWriter(out, staged=True)
+    with pytest.raises(ValueError, match="broken"):
+        with DatasetWriter(out, overwrite=True, staged=True) as w:
+            w.add(img, frame=0, timestamp=0.0, pose=(0, 0, 0))
+            raise ValueError("broken")
+    assert len(Dataset(out)) == 2 and sorted(p.name for p in tmp_path.iterdir()) == ["d"]
+    with DatasetWriter(out, overwrite=True, staged=True) as w:
+        for i in range(3):
+            w.add(img, frame=i, timestamp=float(i), pose=(0, 0, 0))
+        assert len(Dataset(out)) == 2  # the old one until close
+    assert len(Dataset(out)) == 3 and sorted(p.name for p in tmp_path.iterdir()) == ["d"]
+    other = tmp_path / "other"
+    other.mkdir()
+    (other / "precious.txt").write_text("x")
+    with pytest.raises(FileExistsError, match="not an sfanav dataset"):
+        DatasetWriter(other, overwrite=True, staged=True)
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    with DatasetWriter(empty, staged=True) as w:
+        w.add(img, frame=0, timestamp=0.0, pose=(0, 0, 0))
+    assert len(Dataset(empty)) == 1
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["d", "empty", "other"]
+
+
+# ------------------------------------------------------------------ exact stamps (int64 ns)
+
+UNIX_NS = 1_733_000_000_123_456_789  # a Unix time in ns that float seconds cannot hold exactly
+
+
+def test_exact_stamps_round_trip_as_int64_nanoseconds(tmp_path):
+    ns = [UNIX_NS + k * 33_333_333 for k in range(5)]
+    assert any(int(round(v / 1e9 * 1e9)) != v for v in ns)  # float seconds would not do
+    img = np.zeros((4, 8, 3), np.uint8)
+    with DatasetWriter(tmp_path / "d", exact_stamps=True) as w:
+        for i, v in enumerate(ns[:3]):
+            w.add(img, frame=i, timestamp=v / 1e9, stamp_ns=v, pose=(i, 0, 0), run="a")
+        write_image(tmp_path / "x.png", img)
+        w.add_file(tmp_path / "x.png", frame=3, timestamp=ns[3] / 1e9, stamp_ns=np.int64(ns[3]), pose=(3, 0, 0),
+                   run="b")
+        w.add_encoded((tmp_path / "x.png").read_bytes(), ".png", shape=img.shape, frame=4, timestamp=ns[4] / 1e9,
+                      stamp_ns=ns[4], pose=(4, 0, 0), run="b")
+    ds = Dataset(tmp_path / "d")
+    assert ds.stamps_ns.dtype == np.int64 and ds.stamps_ns.tolist() == ns
+    np.testing.assert_allclose(ds.timestamps, np.array(ns) / 1e9, rtol=0, atol=1e-6)
+    assert ds.select(run="b").stamps_ns.tolist() == ns[3:]
+    assert ds.subset([4, 0]).stamps_ns.tolist() == [ns[4], ns[0]]
+    assert ds.metadata["units"]["stamp_ns"] == "ns"
+    with open(tmp_path / "d" / "frames.csv", newline="") as f:
+        rows = list(csv.reader(f))
+    assert rows[0][:4] == ["frame", "run", "timestamp", "stamp_ns"]
+    assert [r[3] for r in rows[1:]] == [str(v) for v in ns]  # the exact integer, readable by anything
+    # write_dataset takes them too, and derives the float timestamps from them
+    ds = write_dataset(tmp_path / "w", images(5), np.zeros((5, 3)), stamps_ns=np.array(ns, np.int64))
+    assert ds.stamps_ns.tolist() == ns
+    np.testing.assert_allclose(ds.timestamps, np.array(ns) / 1e9, rtol=0, atol=1e-6)
+
+
+def test_datasets_without_exact_stamps_still_load(tmp_path):
+    ds = write_dataset(tmp_path / "new", images(2), np.zeros((2, 3)), timestamps=[0.0, 0.5])
+    assert ds.stamps_ns is None and "stamp_ns" not in (tmp_path / "new" / "frames.csv").read_text()
+    assert "stamp_ns" not in ds.metadata["units"]
+    old = tmp_path / "old"  # as sfanav wrote datasets before the column existed
+    (old / "images").mkdir(parents=True)
+    write_image(old / "images" / "000000_center.png", images(1)[0])
+    (old / "frames.csv").write_text(
+        "frame,run,timestamp,x,y,heading,odom_x,odom_y,odom_heading,camera,condition,image,segment\n"
+        "0,train,1733000000.1234568,1.0,2.0,0.5,,,,center,default,images/000000_center.png,3\n")
+    (old / "metadata.json").write_text('{"format": "sfanav-dataset", "version": 1, "units": {"timestamp": "s"}, '
+                                       '"n_images": 1}')
+    ds = Dataset(old)
+    assert ds.stamps_ns is None and ds.timestamps.tolist() == [1733000000.1234568]
+    assert ds.column("segment").tolist() == [3]
+
+
+def test_exact_stamps_are_checked(tmp_path):
+    img = np.zeros((4, 8, 3), np.uint8)
+    with DatasetWriter(tmp_path / "plain") as w:
+        with pytest.raises(ValueError, match="stamp_ns given, but the writer has no exact stamps"):
+            w.add(img, frame=0, timestamp=1.0, stamp_ns=10**9, pose=(0, 0, 0))
+    with DatasetWriter(tmp_path / "exact", exact_stamps=True) as w:
+        with pytest.raises(ValueError, match="give stamp_ns"):
+            w.add(img, frame=0, timestamp=1.0, pose=(0, 0, 0))
+        with pytest.raises(TypeError, match="stamp_ns must be an integer"):
+            w.add(img, frame=0, timestamp=1.0, stamp_ns=1e9, pose=(0, 0, 0))
+        with pytest.raises(ValueError, match="stamp_ns must be at least 0"):
+            w.add(img, frame=0, timestamp=-1.0, stamp_ns=-10**9, pose=(0, 0, 0))
+        with pytest.raises(ValueError, match=r"timestamp 1.5 s and stamp_ns 1000000000 \(1.0 s\) disagree"):
+            w.add(img, frame=0, timestamp=1.5, stamp_ns=10**9, pose=(0, 0, 0))
+        w.add(img, frame=0, timestamp=UNIX_NS / 1e9, stamp_ns=UNIX_NS, pose=(0, 0, 0))
+        w.add(img, frame=1, timestamp=UNIX_NS / 1e9, stamp_ns=UNIX_NS + 1, pose=(0, 0, 0))
+    with pytest.raises(ValueError, match="clash with the standard columns"):
+        DatasetWriter(tmp_path / "x", extra_columns=["stamp_ns"])
+    d = tmp_path / "exact"
+    good = (d / "frames.csv").read_text()
+    lines = good.splitlines()
+    for bad, words in [(lines[2].replace(str(UNIX_NS + 1), "1733000000123456789.0"), "line 3: column 'stamp_ns' has"),
+                       (lines[2].replace(str(UNIX_NS + 1), ""), "line 3: column 'stamp_ns' has '', not an integer"),
+                       (lines[2].replace(str(UNIX_NS + 1), str(UNIX_NS + 10**6)),
+                        "line 3: timestamp 1733000000.1234567 s and stamp_ns 1733000000124456789"),
+                       (lines[2].replace(str(UNIX_NS + 1), str(UNIX_NS - 1)),
+                        "line 3: stamp_ns 1733000000123456788 is earlier than the previous image"),
+                       (lines[2].replace(str(UNIX_NS + 1), str(2**64)),
+                        "line 3: column 'stamp_ns' has 18446744073709551616, out of the int64 range")]:
+        (d / "frames.csv").write_text("\n".join([lines[0], lines[1], bad]) + "\n")
+        with pytest.raises(ValueError, match=words.replace("(", r"\(").replace(")", r"\)")):
+            Dataset(d)
+    (d / "frames.csv").write_text(good)
+    assert Dataset(d).stamps_ns.tolist() == [UNIX_NS, UNIX_NS + 1]
+

@@ -14,6 +14,9 @@ from sfanav import Dataset, sim
 from sfanav.data import BagWriter, bag_info, write_estimates
 from sfanav.data.ros_messages import decode_image, quaternion_from_yaw, typestore, yaw_from_quaternion
 
+from bagtools import (BAD_IMAGES, PERIOD, STAMP0, good_images, jpeg_bytes, png_bytes, raw_image, stamp_text,
+                      write_camera_bag)
+
 T0 = 1000.0  # s: bag times start here (a header stamp of 0 means "unset" in ROS)
 
 
@@ -277,12 +280,17 @@ def test_an_interrupted_import_leaves_no_dataset(runs, tmp_path, monkeypatch):
     monkeypatch.setattr(rosbag, "encode_png", interrupted)
     with pytest.raises(KeyboardInterrupt):
         Dataset.from_bag(bag, tmp_path / "ds", odom_topic="/odom", log=lambda m: None)
-    assert (tmp_path / "ds").exists() and not (tmp_path / "ds" / "metadata.json").exists()
-    with pytest.raises(FileNotFoundError, match="no metadata.json"):
-        Dataset(tmp_path / "ds")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["run.bag"]  # neither the dataset nor its temporary folder
+    (tmp_path / "ds").mkdir()  # an empty folder is filled
     monkeypatch.undo()
-    ds = Dataset.from_bag(bag, tmp_path / "ds", odom_topic="/odom", overwrite=True, log=lambda m: None)
+    ds = Dataset.from_bag(bag, tmp_path / "ds", odom_topic="/odom", log=lambda m: None)
     assert len(ds) == 20
+    calls.clear()
+    monkeypatch.setattr(rosbag, "encode_png", interrupted)
+    with pytest.raises(KeyboardInterrupt):  # replacing it is interrupted: it stays
+        Dataset.from_bag(bag, tmp_path / "ds", odom_topic="/odom", overwrite=True, log=lambda m: None)
+    assert len(Dataset(tmp_path / "ds")) == 20
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["ds", "run.bag"]
 
 
 def test_an_undecodable_image_is_named_and_leaves_no_dataset(tmp_path):
@@ -316,8 +324,8 @@ def test_an_undecodable_image_is_named_and_leaves_no_dataset(tmp_path):
                                                            format="jpeg" if k == 3 else "png",
                                                            data=broken if k == 3 else png)
                 w.write(cam, int((t + 0.5) * 1e9), store.serialize_ros1(img, "sensor_msgs/msg/CompressedImage"))
-    with pytest.raises(ValueError, match=r"image 3 of /cam in .*bad.bag: cannot decode the compressed image "
-                                         r"\(jpeg, 21 bytes\)"):
+    with pytest.raises(ValueError, match=r"image 3 of /cam in .*bad.bag \(t=1003.5 s\): cannot decode the compressed "
+                                         r"image \(jpeg, 21 bytes\)"):
         Dataset.from_bag(bag, tmp_path / "ds", odom_topic="/odom", log=lambda m: None)
     assert not (tmp_path / "ds" / "metadata.json").exists()
 
@@ -357,8 +365,8 @@ def test_raw_encodings_with_padded_rows():
         raw = v16.astype(">u2" if big else "<u2").view(np.uint8)
         np.testing.assert_array_equal(decode_image(image_msg("mono16", 5, 7, raw, 14, big)),
                                       (v16 >> 8).astype(np.uint8))
-    with pytest.raises(ValueError, match="encoding 'bayer_rggb8' is not supported"):
-        decode_image(image_msg("bayer_rggb8", 5, 7, np.zeros(35), 7))
+    with pytest.raises(ValueError, match="encoding 'bayer_rggb16' is not supported"):
+        decode_image(image_msg("bayer_rggb16", 5, 7, np.zeros(70), 14))
     with pytest.raises(ValueError, match="a 7x5 rgb8 image needs 21 bytes a row"):
         decode_image(image_msg("rgb8", 5, 7, np.zeros(50), 21))
 
@@ -432,3 +440,160 @@ def test_bag_info_lists_topics_types_and_counts(runs, tmp_path):
         ("/odom", "nav_msgs/msg/Odometry", 20)]
     text = info.describe()
     assert "sensor_msgs/msg/CompressedImage" in text and str(Path(bag)) in text
+
+
+# ---------------------------------------------------------------- bad images
+
+
+
+
+@pytest.mark.parametrize("case", list(BAD_IMAGES))
+def test_a_bad_image_is_one_error_naming_it_and_leaves_any_dataset_as_it_was(tmp_path, case):
+    """Image 2 of 4 is bad: the error names the topic, the message and its
+    stamp; no dataset is left, and an existing one that --overwrite would
+    replace stays as it was."""
+    images, words = BAD_IMAGES[case]
+    bag = write_camera_bag(tmp_path / "bad.bag", images)
+    with pytest.raises(ValueError) as err:
+        Dataset.from_bag(bag, tmp_path / "ds", odom_topic="/odom", log=lambda m: None)
+    msg = str(err.value)
+    assert msg.startswith(f"image 2 of /cam in {bag} (t={stamp_text(STAMP0 + 2 * PERIOD)} s)"), msg
+    for w in words:
+        assert w in msg, msg
+    assert "\n" not in msg
+    assert not (tmp_path / "ds").exists()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["bad.bag"]  # no temporary folder left either
+    # over a complete dataset: it stays as it was
+    good = write_camera_bag(tmp_path / "good.bag", [raw_image(i) for i in good_images(3)])
+    before = Dataset.from_bag(good, tmp_path / "ds", odom_topic="/odom", log=lambda m: None)
+    files = sorted((p.relative_to(tmp_path / "ds"), p.read_bytes()) for p in (tmp_path / "ds").rglob("*")
+                   if p.is_file())
+    with pytest.raises(ValueError, match=r"image 2 of /cam"):
+        Dataset.from_bag(bag, tmp_path / "ds", odom_topic="/odom", overwrite=True, log=lambda m: None)
+    after = sorted((p.relative_to(tmp_path / "ds"), p.read_bytes()) for p in (tmp_path / "ds").rglob("*")
+                   if p.is_file())
+    assert after == files
+    assert len(Dataset(tmp_path / "ds")) == len(before) == 3
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["bad.bag", "ds", "good.bag"]
+
+
+@pytest.mark.parametrize("case", ["16UC3", "yuv422", "truncated raw", "raw of another size", "gray among colour"])
+def test_bad_raw_images_are_found_before_anything_is_written(tmp_path, monkeypatch, case):
+    """Raw images are checked in the first pass (encoding, size, data length), with the stamps."""
+    import sfanav.data.rosbag as rosbag
+
+    def never(img):
+        raise AssertionError("an image was encoded before the bad one was found")
+
+    monkeypatch.setattr(rosbag, "encode_png", never)
+    bag = write_camera_bag(tmp_path / "bad.bag", BAD_IMAGES[case][0])
+    with pytest.raises(ValueError, match="image 2 of /cam"):
+        Dataset.from_bag(bag, tmp_path / "ds", odom_topic="/odom", log=lambda m: None)
+
+
+def test_bags_with_raw_images_of_different_sizes_are_refused_before_writing(tmp_path):
+    a = write_camera_bag(tmp_path / "a.bag", [raw_image(i) for i in good_images(3)])
+    b = write_camera_bag(tmp_path / "b.bag", [raw_image(i[:, :30]) for i in good_images(3)],
+                         stamps=[STAMP0 + 10**9 + k * PERIOD for k in range(3)])
+    with pytest.raises(ValueError, match=r"image 0 of /cam in .*b.bag \(t=1733000001.123456789 s\) has shape "
+                                         r"\(8, 30, 3\), unlike \(8, 60, 3\) of the images of .*a.bag"):
+        Dataset.from_bag([a, b], tmp_path / "ds", odom_topic="/odom", log=lambda m: None)
+    assert not (tmp_path / "ds").exists()
+
+
+def test_a_bad_image_that_is_left_out_does_not_matter(tmp_path):
+    """An image no pose covers is not written (outside='drop'), so it is not decoded either."""
+    imgs = good_images(4)
+    images = [raw_image(i) for i in imgs[:3]] + [raw_image(imgs[3], "yuv422")]
+    stamps = [STAMP0 + k * PERIOD for k in range(3)] + [STAMP0 + 100 * PERIOD]  # far after the odometry
+    bag = write_camera_bag(tmp_path / "late.bag", images, stamps=stamps,
+                           odom=[STAMP0 + k * PERIOD for k in range(-1, 4)])
+    ds = Dataset.from_bag(bag, tmp_path / "ds", odom_topic="/odom", outside="drop", log=lambda m: None)
+    assert len(ds) == 3
+
+
+def test_bayer_images_are_demosaiced(tmp_path):
+    """bayer_rggb8 (and the other 8-bit patterns) as cv_bridge reads them:
+    a smooth colour image mosaiced and demosaiced comes back close to itself."""
+    y, x = np.mgrid[0:16, 0:24]
+    rgb = np.dstack([40 + 8 * x, 200 - 6 * y, 60 + 3 * x + 2 * y]).astype(np.uint8)  # strong, distinct channels
+    patterns = {"bayer_rggb8": "rggb", "bayer_bggr8": "bggr", "bayer_gbrg8": "gbrg", "bayer_grbg8": "grbg"}
+    for enc, pat in patterns.items():
+        mosaic = np.zeros((16, 24), np.uint8)
+        for k, c in enumerate(pat):
+            dy, dx = divmod(k, 2)
+            mosaic[dy::2, dx::2] = rgb[dy::2, dx::2, "rgb".index(c)]
+        got = decode_image(image_msg(enc, 16, 24, mosaic, 24))
+        assert got.shape == (16, 24, 3), enc
+        err = np.abs(got[2:-2, 2:-2].astype(int) - rgb[2:-2, 2:-2]).mean(axis=(0, 1))
+        assert (err < 6).all(), (enc, err)
+    bag = write_camera_bag(tmp_path / "bayer.bag", [raw_image(np.zeros((8, 60), np.uint8), "bayer_rggb8")] * 3)
+    ds = Dataset.from_bag(bag, tmp_path / "ds", odom_topic="/odom", log=lambda m: None)
+    assert ds.image(0).shape == (8, 60, 3)
+
+
+def test_cut_jpeg_and_png_files_are_refused_before_opencv_sees_them():
+    """OpenCV either fails on a cut file with a message of its own on stderr
+    (libpng's) or, in some versions, decodes the part that is there."""
+    from sfanav.data.images import truncation
+    from sfanav.data.ros_messages import decode_compressed
+
+    img = good_images(1, h=32, w=48)[0]
+    for name, data in (("JPEG", jpeg_bytes(img)), ("PNG", png_bytes(img))):
+        assert truncation(data) is None
+        assert truncation(data + bytes(64)) is None  # padding after the end is allowed
+        np.testing.assert_array_equal(decode_compressed(np.frombuffer(data + bytes(64), np.uint8)).shape, img.shape)
+        for cut in (len(data) - 1, len(data) - 2, len(data) // 2, 20):
+            assert name in truncation(data[:cut]) and "truncated" in truncation(data[:cut]), (name, cut)
+            with pytest.raises(ValueError, match=f"cannot decode the compressed image .*: the {name} data ends"):
+                decode_compressed(np.frombuffer(data[:cut], np.uint8), name.lower())
+    assert truncation(b"neither a JPEG nor a PNG") is None
+
+
+# ---------------------------------------------------------------- exact stamps
+
+
+def header_ns(msg):
+    return int(msg.header.stamp.sec) * 10**9 + int(msg.header.stamp.nanosec)
+
+
+@pytest.mark.parametrize("ros", [1, 2])
+def test_import_keeps_the_images_exact_header_stamps(tmp_path, ros):
+    stamps = [STAMP0 + k * PERIOD for k in range(5)]
+    bag = write_camera_bag(tmp_path / ("run.bag" if ros == 1 else "run"), [raw_image(i) for i in good_images(5)],
+                           ros=ros)
+    ds = Dataset.from_bag(bag, tmp_path / "ds", odom_topic="/odom", log=lambda m: None)
+    assert ds.stamps_ns.dtype == np.int64 and ds.stamps_ns.tolist() == stamps
+    assert Dataset(tmp_path / "ds").stamps_ns.tolist() == stamps
+    np.testing.assert_allclose(ds.timestamps, np.array(stamps) / 1e9, rtol=0, atol=1e-6)
+    # --time bag: the record times, exactly too
+    ds = Dataset.from_bag(bag, tmp_path / "bag-times", odom_topic="/odom", time="bag", log=lambda m: None)
+    assert ds.stamps_ns.tolist() == stamps  # write_camera_bag records each message at its stamp
+
+
+@pytest.mark.parametrize("name", ["est.bag", "est.mcap"])
+def test_estimates_stamped_in_integer_nanoseconds_are_exact(tmp_path, name):
+    from rosbags.highlevel import AnyReader
+
+    stamps = np.array([STAMP0 + k * PERIOD for k in range(6)], np.int64)
+    xy = np.c_[np.arange(6.0), np.zeros(6)]
+    fused = np.c_[xy, np.zeros(6)]
+    assert write_estimates(tmp_path / name, stamps, xy, fused, unit="ns") == 12
+    with AnyReader([tmp_path / name]) as r:
+        got = {}
+        for c, ns, raw in r.messages():
+            m = r.deserialize(raw, c.msgtype)
+            got.setdefault(c.topic, []).append((ns, header_ns(m)))
+    for topic in ("/sfanav/estimate", "/sfanav/fused"):
+        assert got[topic] == [(int(v), int(v)) for v in stamps]
+    # float seconds cannot carry them: refused, and nanoseconds passed as seconds are caught
+    with pytest.raises(TypeError, match="integer nanoseconds"):
+        write_estimates(tmp_path / "f.bag", stamps / 1e9, xy, unit="ns")
+    with pytest.raises(ValueError, match="unit='ns'"):
+        write_estimates(tmp_path / "f.bag", stamps, xy)
+    with pytest.raises(ValueError, match="unit must be 's'"):
+        write_estimates(tmp_path / "f.bag", stamps, xy, unit="ms")
+    with pytest.raises(ValueError, match="stamp must be at least 0"):
+        write_estimates(tmp_path / "f.bag", -stamps, xy, unit="ns")
+    assert not (tmp_path / "f.bag").exists()
+

@@ -11,6 +11,7 @@ import pytest
 from sfanav import Dataset, sim
 from sfanav.app.cli import main
 from sfanav.data import BagWriter
+from bagtools import BAD_IMAGES, PERIOD, STAMP0, good_images, raw_image, stamp_text, write_camera_bag
 from clitools import TINY_TOML, assert_one_line_error, run
 
 T0 = 1000.0
@@ -176,9 +177,10 @@ def test_an_interrupted_import_exits_130_and_leaves_no_dataset(bags, tmp_path, c
     code, _, err = run(capsys, "import", bags["train"], "--odom-topic", "/odom", "--out", tmp_path / "ds",
                        "--no-progress")
     assert code == 130 and "interrupted" in err
+    assert not (tmp_path / "ds").exists() and list(tmp_path.iterdir()) == []
     code, _, err = run(capsys, "train", "--dataset", tmp_path / "ds", "--config", bags["config"], "--out",
                        tmp_path / "m.sfa", "--no-progress")
-    assert_one_line_error(code, err, "no metadata.json")
+    assert_one_line_error(code, err, "ds")
 
 
 @pytest.fixture(scope="module")
@@ -231,3 +233,53 @@ def test_localize_into_a_bag_needs_image_times(bags, model, tmp_path, capsys):
     assert_one_line_error(code, err, "a bag needs the images' times", "image folder")
     code, _, err = run(capsys, "localize", model, folder, "--out", tmp_path / "e.csv", "--out", tmp_path / "e.csv")
     assert_one_line_error(code, err, "same file twice")
+
+
+@pytest.mark.parametrize("case", ["half a jpeg", "half a png", "yuv422", "truncated raw", "jpeg of another size"])
+def test_a_bad_image_is_one_line_and_an_existing_dataset_survives(tmp_path, capsys, case):
+    images, words = BAD_IMAGES[case]
+    bad = write_camera_bag(tmp_path / "bad.bag", images)
+    args = ["--image-topic", "/cam", "--odom-topic", "/odom", "--out", tmp_path / "ds", "--no-progress"]
+    code, _, err = run(capsys, "import", bad, *args)
+    assert_one_line_error(code, err, f"image 2 of /cam in {bad} (t={stamp_text(STAMP0 + 2 * PERIOD)} s)", *words)
+    assert not (tmp_path / "ds").exists()
+    good = write_camera_bag(tmp_path / "good.bag", [raw_image(i) for i in good_images(3)])
+    code, _, err = run(capsys, "import", good, *args)
+    assert code == 0, err
+    code, _, err = run(capsys, "import", bad, *args, "--overwrite")
+    assert_one_line_error(code, err, "image 2 of /cam", *words)
+    assert len(Dataset(tmp_path / "ds")) == 3
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["bad.bag", "ds", "good.bag"]
+
+
+@pytest.mark.parametrize("ros", [1, 2])
+def test_estimates_carry_their_images_exact_header_stamps(bags, model, tmp_path, capsys, ros):
+    """A robot's bag with Unix header stamps (odd nanoseconds, not exact as
+    float seconds) -> sfanav import -> localize --out est.bag / est.mcap:
+    every estimate's header stamp equals its image's, as integers, so
+    ROS's exact-time synchronisation pairs them."""
+    from rosbags.highlevel import AnyReader
+
+    imgs = list(bags["sim"].select(run="test").images())[:12]
+    stamps = [STAMP0 + k * PERIOD for k in range(len(imgs))]
+    assert any(round(s / 1e9 * 1e9) != s for s in stamps)
+    bag = write_camera_bag(tmp_path / ("robot.bag" if ros == 1 else "robot"), [raw_image(i) for i in imgs], ros=ros)
+    ds = tmp_path / "ds"
+    code, _, err = run(capsys, "import", bag, "--image-topic", "/cam", "--odom-topic", "/odom", "--out", ds,
+                       "--no-progress")
+    assert code == 0, err
+    assert Dataset(ds).stamps_ns.tolist() == stamps
+    for name in ("est.bag", "est.mcap"):
+        code, _, err = run(capsys, "localize", model, ds, "--odometry", "--out", tmp_path / name, "--out",
+                           tmp_path / f"{name}.csv", "--no-progress")
+        assert code == 0, err
+        with AnyReader([tmp_path / name]) as r:
+            got = {}
+            for c, ns, raw in r.messages():
+                m = r.deserialize(raw, c.msgtype)
+                got.setdefault(c.topic, []).append((ns, m.header.stamp.sec * 10**9 + m.header.stamp.nanosec))
+        assert sorted(got) == ["/sfanav/estimate", "/sfanav/fused"]
+        for topic, pairs in got.items():
+            assert [h for _, h in pairs] == stamps, topic  # header stamps, exactly
+            assert [ns for ns, _ in pairs] == stamps, topic  # and the bag's record times
+

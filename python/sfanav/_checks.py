@@ -242,3 +242,19 @@ def as_pair(value: Any, name: str) -> tuple[float, float]:
     if not (np.isfinite(a) and np.isfinite(b)):
         raise ValueError(f"{name} must be finite, got {value!r}")
     return a, b
+
+
+def as_int_array(a: Any, name: str) -> np.ndarray:
+    """``a`` as a 1-D int64 array of integers (floats refused: exact counts,
+    such as nanoseconds, must not pass through float64)."""
+    try:
+        arr = np.asarray(a)
+    except Exception as exc:  # ragged lists and the like
+        raise TypeError(f"{name} must be array-like of integers: {exc}") from None
+    if arr.dtype.kind not in "iu":
+        raise TypeError(f"{name} must hold integers, got dtype {arr.dtype}")
+    if arr.ndim != 1:
+        raise ValueError(f"{name} must be one-dimensional, got shape {arr.shape}")
+    if arr.dtype.kind == "u" and arr.size and int(arr.max()) > np.iinfo(np.int64).max:
+        raise ValueError(f"{name} holds values beyond the int64 range")
+    return arr.astype(np.int64, copy=False)

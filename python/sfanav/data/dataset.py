@@ -12,6 +12,8 @@ The sfanav dataset is a directory::
 frame          integer frame id (the cameras of one robot pose share it)
 run            name of the run (e.g. ``train``, ``test``, ``lines``)
 timestamp      seconds
+stamp_ns       optional: the same time exactly, integer nanoseconds (int64; the
+               header stamps of an imported ROS bag; :attr:`Dataset.stamps_ns`)
 x, y           ground-truth position of the camera that took the image (m); empty if unknown
 heading        ground-truth heading (rad, counter-clockwise from +x); empty if unknown
 odom_x, ...    wheel-odometry estimate of the same (m, m, rad); empty if unknown
@@ -47,15 +49,19 @@ import numpy as np
 
 from .._progress import progress_bar
 from .images import read_image
+from .._checks import as_int_array
 from .schema import (
     COLUMNS,
     FLOAT_COLUMNS,
     FORMAT,
     INSECT_ENTRIES,
     INSECT_METADATA,
+    INT64_MAX,
+    STAMP_COLUMN,
     UNITS,
     VERSION,
     check_name,
+    stamps_disagree,
 )
 from .writer import DatasetWriter
 
@@ -64,14 +70,17 @@ def write_dataset(path: str | os.PathLike, images: Iterable[np.ndarray], poses: 
                   timestamps: Any = None, odometry: Any = None, cameras: Any = None, conditions: Any = None,
                   runs: Any = None, frames: Any = None, extra: dict[str, Any] | None = None,
                   metadata: dict[str, Any] | None = None, overwrite: bool = False,
-                  progress: bool = False) -> "Dataset":
+                  progress: bool = False, stamps_ns: Any = None) -> "Dataset":
     """Writes an sfanav dataset from arrays and returns it opened.
 
     Parameters
     ----------
     images : iterable of uint8 (H, W[, 3]) arrays, N of them (read lazily)
     poses : (N, 3) x m, y m, heading rad
-    timestamps : (N,) s, default 0, 1, 2, ...
+    timestamps : (N,) s, default 0, 1, 2, ... (or ``stamps_ns`` / 1e9)
+    stamps_ns : (N,) int, optional
+        The same times exactly, in integer nanoseconds (the ``stamp_ns``
+        column).
     odometry : (N, 3), optional
     cameras, conditions, runs : (N,) names or one name; default ``center``,
         ``default``, ``0``
@@ -93,7 +102,15 @@ def write_dataset(path: str | os.PathLike, images: Iterable[np.ndarray], poses: 
             raise ValueError(f"{name} must have {n} entries (one per pose), got shape {a.shape}")
         return a
 
-    ts = col(timestamps, None, "timestamps") if timestamps is not None else np.arange(n, dtype=float)
+    ns = None
+    if stamps_ns is not None:
+        ns = as_int_array(stamps_ns, "stamps_ns")
+        if ns.shape != (n,):
+            raise ValueError(f"stamps_ns must have {n} entries (one per pose), got shape {ns.shape}")
+    if timestamps is not None:
+        ts = col(timestamps, None, "timestamps")
+    else:
+        ts = ns / 1e9 if ns is not None else np.arange(n, dtype=float)
     O = None if odometry is None else np.asarray(odometry, float)
     if O is not None and O.shape != (n, 3):
         raise ValueError(f"odometry must have shape ({n}, 3), got {O.shape}")
@@ -103,7 +120,7 @@ def write_dataset(path: str | os.PathLike, images: Iterable[np.ndarray], poses: 
     frs = col(frames, None, "frames") if frames is not None else np.arange(n)
     ext = {k: col(v, None, f"extra column {k!r}") for k, v in (extra or {}).items()}
     it = iter(images)
-    with DatasetWriter(path, metadata, overwrite=overwrite, extra_columns=list(ext)) as w:
+    with DatasetWriter(path, metadata, overwrite=overwrite, extra_columns=list(ext), exact_stamps=ns is not None) as w:
         bar = progress_bar(progress, n, "writing")
         for i in range(n):
             try:
@@ -112,7 +129,7 @@ def write_dataset(path: str | os.PathLike, images: Iterable[np.ndarray], poses: 
                 raise ValueError(f"got {i} images for {n} poses") from None
             w.add(img, frame=int(frs[i]), timestamp=float(ts[i]), pose=P[i],
                   odometry=None if O is None else O[i], camera=str(cams[i]), condition=str(conds[i]),
-                  run=str(rns[i]), **{k: v[i] for k, v in ext.items()})
+                  run=str(rns[i]), stamp_ns=None if ns is None else int(ns[i]), **{k: v[i] for k, v in ext.items()})
             if bar is not None:
                 bar.update(1)
         if bar is not None:
@@ -213,6 +230,13 @@ class Dataset:
     def timestamps(self) -> np.ndarray:
         """(N,) seconds."""
         return self.columns["timestamp"]
+
+    @property
+    def stamps_ns(self) -> np.ndarray | None:
+        """(N,) int64: the same times exactly, in nanoseconds (the ``stamp_ns``
+        column: e.g. the header stamps of a ROS bag's images); None for a
+        dataset without it (simulated ones, and all written before it existed)."""
+        return self.columns.get(STAMP_COLUMN)
 
     @property
     def frames(self) -> np.ndarray:
@@ -444,15 +468,17 @@ class Dataset:
         single ``.db3`` / ``.mcap`` files with the pure-Python ``rosbags``
         (``pip install "sfanav[ros]"``; no ROS installation). Images are
         decoded (``sensor_msgs/Image`` in ``rgb8``, ``bgr8``, ``mono8``,
-        ``rgba8``, ``bgra8``, ``mono16``; ``sensor_msgs/CompressedImage``
-        JPEG or PNG, kept as they are) and not altered otherwise:
+        ``rgba8``, ``bgra8``, ``mono16``, 8-bit Bayer (demosaiced);
+        ``sensor_msgs/CompressedImage`` JPEG or PNG, kept as they are) and
+        not altered otherwise:
         omnidirectional images stay omnidirectional for the unwarping of
         training and localization. Each image gets the odometry and the
         ground truth linearly interpolated at its timestamp, the heading (the
         quaternion's yaw) along the shorter arc, as :meth:`from_recording`
-        does. The import streams (bounded memory) and is atomic: an
-        interrupted import leaves no dataset a later command takes for
-        complete.
+        does. The import streams (bounded memory) and is atomic: the
+        dataset is written into a hidden folder beside ``out`` and renamed
+        to ``out`` once complete, so a failed or interrupted import leaves
+        nothing, and a dataset ``overwrite`` would replace stays until then.
 
         Parameters
         ----------
@@ -497,8 +523,10 @@ class Dataset:
         Returns
         -------
         Dataset
-            Timestamps in seconds (the bag's clock), positions in metres and
-            headings in radians in the frames of the pose topics.
+            Timestamps in seconds (the bag's clock) and the same stamps
+            exactly as int64 nanoseconds (:attr:`stamps_ns`, the images'
+            header stamps), positions in metres and headings in radians in
+            the frames of the pose topics.
 
         Raises
         ------
@@ -506,8 +534,10 @@ class Dataset:
             No bag at ``bag``.
         ValueError
             A missing topic, unsorted or missing (0) stamps, images no pose
-            covers (``outside="error"``), an undecodable image, a truncated
-            or damaged bag; ``out`` not empty (FileExistsError).
+            covers (``outside="error"``), a truncated or damaged bag; an
+            image that does not decode (an unsupported encoding, data cut
+            short) or whose size differs from the earlier images', named by
+            its topic, index and stamp; ``out`` not empty (FileExistsError).
         TypeError
             A topic of the wrong message type.
         ImportError
@@ -604,9 +634,12 @@ def _read_csv_columns(path: Path, *, required: Sequence[str], floats: Sequence[s
                 data[h].append(v)
             elif h in ints:
                 try:
-                    data[h].append(int(cell))
+                    v = int(cell)
                 except ValueError:
                     raise ValueError(f"{what} {path} line {ln}: column {h!r} has {cell!r}, not an integer") from None
+                if not -INT64_MAX - 1 <= v <= INT64_MAX:
+                    raise ValueError(f"{what} {path} line {ln}: column {h!r} has {cell}, out of the int64 range")
+                data[h].append(v)
             else:
                 data[h].append(cell)
     out: dict[str, np.ndarray] = {}
@@ -641,8 +674,17 @@ def _read_sfanav(root: Path) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
         raise ValueError(f"{mpath}: version must be a positive integer, got {version!r}")
     if version > VERSION:
         raise ValueError(f"dataset version {version} is newer than this sfanav reads ({VERSION}); upgrade sfanav")
-    cols = _read_csv_columns(fpath, required=COLUMNS, floats=FLOAT_COLUMNS, ints=("frame",), what="frames table",
-                             nonempty=("timestamp",))
+    cols = _read_csv_columns(fpath, required=COLUMNS, floats=FLOAT_COLUMNS, ints=("frame", STAMP_COLUMN),
+                             what="frames table", nonempty=("timestamp",))
+    ns = cols.get(STAMP_COLUMN)
+    if ns is not None:
+        bad = np.nonzero((ns < 0) | stamps_disagree(cols["timestamp"], ns))[0]
+        if len(bad):
+            i = int(bad[0])
+            raise ValueError(f"frames table {fpath} line {i + 2}: " + (
+                f"stamp_ns {int(ns[i])} is negative" if ns[i] < 0 else
+                f"timestamp {float(cols['timestamp'][i])!r} s and stamp_ns {int(ns[i])} ({int(ns[i]) / 1e9!r} s) "
+                "disagree; they are one time, in seconds and in integer nanoseconds"))
     # x, y, heading (ground truth) and the odometry may be empty: a robot's own runs have no ground truth
     # timestamps must not decrease within one run, camera and condition
     groups: dict[tuple[str, str, str], list[int]] = {}
@@ -656,6 +698,13 @@ def _read_sfanav(root: Path) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
             raise ValueError(
                 f"frames table {fpath} line {i + 2}: timestamp {float(cols['timestamp'][i])!r} is earlier than the "
                 f"previous image of run {run!r}, camera {cam!r}, condition {cond!r}; timestamps must be sorted"
+            )
+        bad = np.nonzero(np.diff(ns[idx]) < 0)[0] if ns is not None else []
+        if len(bad):
+            i = int(idx[bad[0] + 1])
+            raise ValueError(
+                f"frames table {fpath} line {i + 2}: stamp_ns {int(ns[i])} is earlier than the previous image of "
+                f"run {run!r}, camera {cam!r}, condition {cond!r}; timestamps must be sorted"
             )
     seen: dict[tuple[int, str], int] = {}
     for i, (frame, cam) in enumerate(zip(cols["frame"], cols["camera"])):
@@ -679,7 +728,7 @@ def _read_sfanav(root: Path) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
         raise ValueError(f"dataset {root} is incomplete or altered: {mpath.name} says {expected!r} images, "
                          f"{fpath.name} has {len(cols['image'])} rows")
     for k in cols:
-        if k not in COLUMNS:
+        if k not in COLUMNS and k != STAMP_COLUMN:
             cols[k] = _infer(cols[k])
     return cols, meta
 

@@ -78,3 +78,34 @@ def encode_png(image: np.ndarray) -> bytes:
     if not ok:  # pragma: no cover - OpenCV encodes any uint8 image
         raise ValueError(f"could not encode a {img.shape} image as PNG")
     return buf.tobytes()
+
+
+def truncation(data: bytes) -> str | None:
+    """Why the PNG or JPEG file ``data`` is cut short, or None if it is
+    complete or neither format (checked on its structure, without decoding:
+    OpenCV's decoders either fail on a cut file with a message of their own
+    on stderr, or, in some versions, return the decoded part as if whole).
+
+    A JPEG is complete when an end-of-image marker follows its last
+    start-of-scan marker (the coded data cannot hold one), a PNG when its
+    chunks run to an ``IEND`` chunk; bytes after either are allowed.
+    """
+    if data.startswith(b"\xff\xd8\xff"):
+        sos = data.rfind(b"\xff\xda")
+        if sos < 0:
+            return "the JPEG data ends before its image data (truncated?)"
+        if data.rfind(b"\xff\xd9") < sos:
+            return "the JPEG data ends without its end-of-image marker (truncated)"
+        return None
+    if data.startswith(b"\x89PNG\r\n\x1a\n"):
+        pos, n = 8, len(data)
+        while pos + 8 <= n:
+            end = pos + 12 + int.from_bytes(data[pos : pos + 4], "big")
+            kind = data[pos + 4 : pos + 8]
+            if end > n:
+                return f"the PNG data ends inside its {kind.decode('latin-1')!r} chunk (truncated)"
+            if kind == b"IEND":
+                return None
+            pos = end
+        return "the PNG data ends before its IEND chunk (truncated)"
+    return None

@@ -4,9 +4,11 @@ timestamps, read from and written to the messages of the pure-Python
 
 Reading: :func:`decode_image` turns a ``sensor_msgs/Image`` (encodings
 ``rgb8``, ``bgr8``, ``mono8``, ``rgba8``, ``bgra8``, ``mono16`` and their
-OpenCV aliases ``8UC1``, ``8UC3``, ``8UC4``, ``16UC1``) or a
-``sensor_msgs/CompressedImage`` (JPEG, PNG, anything OpenCV decodes) into a
-uint8 RGB or gray array; :func:`pose_of` reads x, y and the heading (the
+OpenCV aliases ``8UC1``, ``8UC3``, ``8UC4``, ``16UC1``; the 8-bit Bayer
+patterns ``bayer_rggb8``, ``bayer_bggr8``, ``bayer_gbrg8``, ``bayer_grbg8``,
+demosaiced) or a ``sensor_msgs/CompressedImage`` (JPEG, PNG, anything
+OpenCV decodes) into a uint8 RGB or gray array; :func:`raw_image_shape`
+checks a raw image without decoding it; :func:`pose_of` reads x, y and the heading (the
 quaternion's yaw) of a ``nav_msgs/Odometry``, ``geometry_msgs/PoseStamped``
 or ``geometry_msgs/PoseWithCovarianceStamped``; :func:`stamp_of` the header
 stamp in nanoseconds.
@@ -26,6 +28,8 @@ import math
 from typing import Any
 
 import numpy as np
+
+from .images import truncation
 
 ROS_EXTRA = 'pip install "sfanav[ros]"'
 
@@ -51,13 +55,21 @@ IMAGE_TYPES = (IMAGE, COMPRESSED_IMAGE)
 POSE_TYPES = (ODOMETRY, POSE_STAMPED, POSE_WITH_COVARIANCE)
 
 
-#: raw encodings: channels, bytes per channel, channel order
+#: raw encodings: channels, bytes per channel, channel order ("gray", "rgb", "bgr", or a Bayer pattern)
 ENCODINGS = {
     "mono8": (1, 1, "gray"), "8UC1": (1, 1, "gray"),
     "mono16": (1, 2, "gray"), "16UC1": (1, 2, "gray"),
     "rgb8": (3, 1, "rgb"), "bgr8": (3, 1, "bgr"), "8UC3": (3, 1, "bgr"),
     "rgba8": (4, 1, "rgb"), "bgra8": (4, 1, "bgr"), "8UC4": (4, 1, "bgr"),
+    "bayer_rggb8": (1, 1, "rggb"), "bayer_bggr8": (1, 1, "bggr"),
+    "bayer_gbrg8": (1, 1, "gbrg"), "bayer_grbg8": (1, 1, "grbg"),
 }
+
+
+#: OpenCV's demosaicing of each Bayer pattern to RGB, as cv_bridge converts them (OpenCV names a
+#: pattern by the second row's second and third pixels, ROS by the first two rows' first two)
+BAYER_TO_RGB = {"rggb": "COLOR_BayerBG2RGB", "bggr": "COLOR_BayerRG2RGB", "gbrg": "COLOR_BayerGR2RGB",
+                "grbg": "COLOR_BayerGB2RGB"}
 
 
 def require_rosbags() -> Any:
@@ -151,17 +163,49 @@ def _to_rgb(img: np.ndarray, order: str) -> np.ndarray:
     return np.ascontiguousarray(img)
 
 
+def raw_image_shape(msg: Any) -> tuple[int, ...]:
+    """The shape of the uint8 image :func:`decode_image` makes of a
+    ``sensor_msgs/Image``, (H, W) or (H, W, 3), checked without decoding:
+    its encoding is supported, its size positive, its rows (``step``) long
+    enough and its data holds them all.
+
+    Raises
+    ------
+    ValueError
+        For an unsupported encoding, an empty image, or a data size that
+        does not match the image's.
+    """
+    enc = str(msg.encoding)
+    if enc not in ENCODINGS:
+        raise ValueError(f"image encoding {enc!r} is not supported; supported: {', '.join(ENCODINGS)}")
+    ch, bps, order = ENCODINGS[enc]
+    h, w, step = int(msg.height), int(msg.width), int(msg.step)
+    row = w * ch * bps
+    size = int(np.asarray(msg.data).size)
+    if h < 1 or w < 1:
+        raise ValueError(f"image of {w}x{h} pixels is empty")
+    if step < row or size < step * h:
+        raise ValueError(f"a {w}x{h} {enc} image needs {row} bytes a row and {row * h} in all; "
+                         f"the message has step {step} and {size} bytes"
+                         + (f", fewer than height x step = {step * h}" if step > row else ""))
+    if order in BAYER_TO_RGB and (h < 2 or w < 2):
+        raise ValueError(f"a {enc} image needs at least 2x2 pixels to demosaic, got {w}x{h}")
+    return (h, w) if ch == 1 and order not in BAYER_TO_RGB else (h, w, 3)
+
+
 def decode_image(msg: Any) -> np.ndarray:
     """The picture of a ``sensor_msgs/Image`` or ``sensor_msgs/CompressedImage``
     as uint8 (H, W, 3) RGB or (H, W) gray, as it is (omnidirectional images
     are not unwarped here). 16-bit images are scaled to 8 bits (/256), an
-    alpha channel is dropped.
+    alpha channel is dropped, Bayer images are demosaiced (OpenCV's
+    bilinear demosaicing, as cv_bridge's).
 
     Raises
     ------
     ValueError
         For an unsupported encoding, a data size that does not match the
-        image's, or compressed data OpenCV cannot decode.
+        image's, or compressed data OpenCV cannot decode or that is cut
+        short (a truncated JPEG or PNG).
     TypeError
         For a message of another type.
 
@@ -176,24 +220,22 @@ def decode_image(msg: Any) -> np.ndarray:
         return decode_compressed(np.asarray(msg.data, np.uint8), str(msg.format))
     if typ != IMAGE:
         raise TypeError(f"a {typ} is not an image; expected {IMAGE} or {COMPRESSED_IMAGE}")
+    raw_image_shape(msg)
     enc = str(msg.encoding)
-    if enc not in ENCODINGS:
-        raise ValueError(f"image encoding {enc!r} is not supported; supported: {', '.join(ENCODINGS)}")
     ch, bps, order = ENCODINGS[enc]
     h, w, step = int(msg.height), int(msg.width), int(msg.step)
     row = w * ch * bps
     data = np.asarray(msg.data, np.uint8).reshape(-1)
-    if h < 1 or w < 1:
-        raise ValueError(f"image of {w}x{h} pixels is empty")
-    if step < row or data.size < step * h:
-        raise ValueError(f"a {w}x{h} {enc} image needs {row} bytes a row and {row * h} in all; "
-                         f"the message has step {step} and {data.size} bytes")
     rows = data[: step * h].reshape(h, step)[:, :row]
     if bps == 2:
         dt = np.dtype(">u2" if msg.is_bigendian else "<u2")
         img = (np.ascontiguousarray(rows).view(dt).reshape(h, w) >> 8).astype(np.uint8)
     else:
         img = rows.reshape(h, w, ch) if ch > 1 else rows.reshape(h, w)
+    if order in BAYER_TO_RGB:
+        import cv2
+
+        return cv2.cvtColor(np.ascontiguousarray(img, np.uint8), getattr(cv2, BAYER_TO_RGB[order]))
     return _to_rgb(np.array(img, np.uint8), order)
 
 
@@ -203,6 +245,9 @@ def decode_compressed(data: np.ndarray, fmt: str = "") -> np.ndarray:
 
     if "compresseddepth" in fmt.lower().replace(" ", ""):
         raise ValueError(f"compressed depth images ({fmt!r}) are not camera images")
+    cut = truncation(np.ascontiguousarray(data, np.uint8).tobytes())
+    if cut is not None:
+        raise ValueError(f"cannot decode the compressed image ({fmt or 'no format given'}, {data.size} bytes): {cut}")
     img = cv2.imdecode(np.ascontiguousarray(data, np.uint8), cv2.IMREAD_UNCHANGED) if data.size else None
     if img is None:
         raise ValueError(f"cannot decode the compressed image ({fmt or 'no format given'}, {data.size} bytes)")

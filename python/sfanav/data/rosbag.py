@@ -14,9 +14,11 @@ empty pose (``outside``), and every gap is reported.
 
 The import streams: a first pass reads the poses and the image timestamps
 (small), a second decodes the images one at a time and writes them with a
-:class:`~sfanav.data.writer.DatasetWriter`, so a bag larger than memory
-imports in bounded memory; the dataset is complete only once its
-``metadata.json`` is written, last (an interrupted import leaves none).
+staged :class:`~sfanav.data.writer.DatasetWriter`, so a bag larger than
+memory imports in bounded memory. The dataset is written into a hidden
+folder beside ``out`` and moved there only when complete: an import that
+fails (a bad image names its message and stamp) or is interrupted leaves
+nothing, and a dataset it would replace (``overwrite``) stays as it was.
 """
 
 from __future__ import annotations
@@ -34,11 +36,13 @@ from .._progress import Log, progress_bar, stderr_log
 from .images import encode_png
 from .ros_messages import (
     COMPRESSED_IMAGE,
+    IMAGE,
     IMAGE_TYPES,
     POSE_TYPES,
     compressed_suffix,
     decode_image,
     pose_of,
+    raw_image_shape,
     require_rosbags,
     stamp_of,
     typestore,
@@ -247,8 +251,10 @@ def _read_track(bag: _Bag, topic: str, what: str, time: str) -> _Track:
 
 
 def _sec(ns: Any) -> str:
-    """A time in ns as seconds for a message."""
-    return repr(float(ns) / 1e9)
+    """A time in ns as seconds for a message, exactly (``1733000000.190123455``, ``1000.5``, ``1000.0``)."""
+    v = int(ns)
+    s, f = divmod(abs(v), 1_000_000_000)
+    return f"{'-' if v < 0 else ''}{s}.{f'{f:09d}'.rstrip('0') or '0'}"
 
 
 def _wrap(a: np.ndarray) -> np.ndarray:
@@ -375,6 +381,7 @@ class _Plan:
     odo: np.ndarray
     report: dict[str, Any]
     notes: list[str]
+    shape: tuple[int, ...] | None = None  # of the raw images; None for compressed ones
 
 
 def _plan(path: Path, run: str, image_topic: str | None, odom_topic: str | None, pose_topic: str | None,
@@ -389,7 +396,12 @@ def _plan(path: Path, run: str, image_topic: str | None, odom_topic: str | None,
         if pose_topic is not None:
             tracks.append(_read_track(b, _check_topic(info, pose_topic, POSE_TYPES, "ground truth"),
                                       "ground truth", time))
-        img_ns = np.array([_stamp(m, rec, time, topic, k) for k, (rec, m) in enumerate(b.messages(topic))], np.int64)
+        stamps: list[int] = []
+        layouts: list[tuple[int, ...] | str | None] = []
+        for k, (rec, m) in enumerate(b.messages(topic)):
+            stamps.append(_stamp(m, rec, time, topic, k))
+            layouts.append(_raw_layout(m))
+        img_ns = np.array(stamps, np.int64)
     bad = np.nonzero(np.diff(img_ns) < 0)[0]
     if len(bad):
         i = int(bad[0])
@@ -407,6 +419,7 @@ def _plan(path: Path, run: str, image_topic: str | None, odom_topic: str | None,
     n = int(keep.sum())
     if n == 0:
         raise ValueError(f"no image of {topic} in {path} lies within the time span of the pose topics")
+    shape = _check_raw_images(path, topic, img_ns, layouts, keep)
     if n < len(keep):
         notes.append(f"{len(keep) - n} of {len(keep)} images left out (no pose at their time)")
     unknown = np.full((len(img_ns), 3), np.nan)
@@ -414,7 +427,35 @@ def _plan(path: Path, run: str, image_topic: str | None, odom_topic: str | None,
               "topics": {"image": topic, "odometry": odom_topic, "ground_truth": pose_topic},
               "images_in_bag": len(img_ns), "images_left_out": len(img_ns) - n, "poses": reports}
     return _Plan(path, run, info.ros, topic, img_ns, keep, values.get("ground truth", unknown),
-                 values.get("odometry", unknown), report, notes)
+                 values.get("odometry", unknown), report, notes, shape)
+
+
+def _raw_layout(msg: Any) -> tuple[int, ...] | str | None:
+    """The decoded shape of a raw image message, or why it does not decode;
+    None for a compressed image (known only once decoded)."""
+    if msg.__msgtype__ != IMAGE:
+        return None
+    try:
+        return raw_image_shape(msg)
+    except ValueError as exc:
+        return str(exc)
+
+
+def _check_raw_images(path: Path, topic: str, img_ns: np.ndarray, layouts: list[Any],
+                      keep: np.ndarray) -> tuple[int, ...] | None:
+    """The first pass's check of the raw images to be written: each decodes
+    (encoding, size, data length) and all share one shape, which is returned
+    (None for compressed images, checked as they are decoded)."""
+    first: tuple[int, ...] | None = None
+    for k in np.nonzero(keep)[0]:
+        v = layouts[k]
+        if isinstance(v, str):
+            raise ValueError(f"{_image_name(path, topic, int(k), img_ns[k])}: {v}")
+        if v is not None and first is None:
+            first = v
+        elif v is not None and v != first:
+            raise ValueError(f"{_image_name(path, topic, int(k), img_ns[k])} has shape {v}, unlike {first} before it")
+    return first
 
 
 def _write_images(plan: _Plan, w: DatasetWriter, frame: int, camera: str, condition: str, shape: list[Any],
@@ -432,14 +473,15 @@ def _write_images(plan: _Plan, w: DatasetWriter, frame: int, camera: str, condit
             try:
                 data, suffix, shp = _image_file(msg)
             except ValueError as exc:
-                raise ValueError(f"image {k} of {plan.topic} in {plan.path}: {exc}") from None
+                raise ValueError(f"{_image_name(plan.path, plan.topic, k, plan.img_ns[k])}: {exc}") from None
             if not shape:
                 shape.append(shp)
             elif shp != shape[0]:
-                raise ValueError(f"image {k} of {plan.topic} in {plan.path} has shape {shp}, unlike {shape[0]} "
-                                 "before it")
-            w.add_encoded(data, suffix, shape=shp, frame=frame, timestamp=plan.img_ns[k] / 1e9, pose=plan.gt[k],
-                          odometry=plan.odo[k], camera=camera, condition=condition, run=plan.run)
+                raise ValueError(f"{_image_name(plan.path, plan.topic, k, plan.img_ns[k])} has shape {shp}, "
+                                 f"unlike {shape[0]} before it")
+            ns = int(plan.img_ns[k])
+            w.add_encoded(data, suffix, shape=shp, frame=frame, timestamp=ns / 1_000_000_000, stamp_ns=ns,
+                          pose=plan.gt[k], odometry=plan.odo[k], camera=camera, condition=condition, run=plan.run)
             frame += 1
             if bar is not None:
                 bar.update(1)
@@ -447,6 +489,11 @@ def _write_images(plan: _Plan, w: DatasetWriter, frame: int, camera: str, condit
             raise ValueError(f"bag {plan.path} changed while it was read ({len(plan.img_ns)} images of "
                              f"{plan.topic}, then {k + 1})")
     return frame
+
+
+def _image_name(path: Path, topic: str, k: int, ns: Any) -> str:
+    """Image message ``k`` of a bag, for an error: its index, topic, bag and stamp (ns)."""
+    return f"image {k} of {topic} in {path} (t={_sec(ns)} s)"
 
 
 def _runs(paths: list[Path], run: Any) -> list[str]:
@@ -489,6 +536,12 @@ def import_bag(bag: Any, out: str | os.PathLike, *, image_topic: str | None = No
     if out.is_dir() and any(out.iterdir()) and not overwrite:
         raise FileExistsError(f"{out} is not empty; pass overwrite=True (--overwrite) to replace it")
     plans = [_plan(p, r, image_topic, odom_topic, pose_topic, time, outside, max_gap) for p, r in zip(paths, runs)]
+    raw = [p for p in plans if p.shape is not None]
+    for p in raw[1:]:
+        if p.shape != raw[0].shape:
+            k = int(np.argmax(p.keep))
+            raise ValueError(f"{_image_name(p.path, p.topic, k, p.img_ns[k])} has shape {p.shape}, unlike "
+                             f"{raw[0].shape} of the images of {raw[0].path}: the runs of one dataset share one size")
     for plan in plans:
         for note in plan.notes:
             log(note if len(plans) == 1 else f"{plan.path.name}: {note}")
@@ -501,7 +554,7 @@ def import_bag(bag: Any, out: str | os.PathLike, *, image_topic: str | None = No
     shape: list[Any] = []
     frame = 0
     try:
-        with DatasetWriter(out, meta, overwrite=overwrite) as w:
+        with DatasetWriter(out, meta, overwrite=overwrite, exact_stamps=True, staged=True) as w:
             for plan in plans:
                 frame = _write_images(plan, w, frame, camera, condition, shape, bar)
     finally:

@@ -19,6 +19,7 @@ from typing import Any
 
 import numpy as np
 
+from .._checks import as_int_array, check_int
 from .ros_messages import (
     COMPRESSED_IMAGE,
     IMAGE,
@@ -34,16 +35,38 @@ from .ros_messages import (
 BAG_SUFFIXES = (".bag", ".mcap")
 
 
+UNITS = ("s", "ns")
+
+
+MAX_SEC = 2**31 - 1
+"""The largest whole second of a stamp: ``rosbags`` writes the seconds of
+ROS 1 and ROS 2 times as int32 (2038-01-19 as a Unix time)."""
+
+
 def stamp_ns(t: Any, what: str = "timestamp") -> int:
-    """A time in seconds as integer nanoseconds (finite, >= 0: ROS times are unsigned)."""
+    """A time in seconds as integer nanoseconds (finite, >= 0: ROS times are
+    unsigned; below 2**31 s). Float seconds hold a Unix time to a few
+    hundred ns only: give exact times as integer ns (:func:`check_stamp_ns`)."""
     try:
         v = float(t)
     except (TypeError, ValueError):
         raise TypeError(f"{what} must be a number of seconds, got {t!r}") from None
     if not math.isfinite(v) or v < 0:
         raise ValueError(f"{what} must be a finite number of seconds >= 0, got {t!r}")
+    if v >= MAX_SEC + 1:
+        raise ValueError(f"{what} must be below 2**31 s (a ROS time's seconds are int32), got {t!r} s; "
+                         "integer nanoseconds need unit='ns'")
     sec = math.floor(v)  # whole seconds apart: v * 1e9 would round Unix times to 256 ns
     return int(sec) * 1_000_000_000 + int(round((v - sec) * 1e9))
+
+
+def check_stamp_ns(t: Any, what: str = "stamp") -> int:
+    """A time given as integer nanoseconds, checked (an integer, >= 0, below
+    2**31 s) and returned as an int, exactly."""
+    ns = check_int(t, what, minimum=0)
+    if ns >= (MAX_SEC + 1) * 1_000_000_000:
+        raise ValueError(f"{what} must be below 2**31 s (a ROS time's seconds are int32), got {ns} ns")
+    return ns
 
 
 class BagWriter:
@@ -59,6 +82,10 @@ class BagWriter:
         Humble).
     overwrite : bool
         Replace an existing bag at ``path`` (refused otherwise).
+    unit : ``"s"`` or ``"ns"``
+        The unit of every stamp and record time given to the ``add_*``
+        methods: float seconds (default; exact to a few hundred ns for a
+        Unix time), or integer nanoseconds (exact: what a ROS header holds).
 
     Raises
     ------
@@ -78,7 +105,10 @@ class BagWriter:
     ...     bag.add_odometry("/odom", 0.1, (1.0, 2.0, 0.5))        # x m, y m, heading rad
     """
 
-    def __init__(self, path: str | os.PathLike, *, overwrite: bool = False):
+    def __init__(self, path: str | os.PathLike, *, overwrite: bool = False, unit: str = "s"):
+        if unit not in UNITS:
+            raise ValueError(f"unit must be 's' (float seconds) or 'ns' (integer nanoseconds), got {unit!r}")
+        self.unit = unit
         require_rosbags()
         from rosbags.rosbag1 import Writer as Writer1
         from rosbags.rosbag2 import StoragePlugin
@@ -133,33 +163,36 @@ class BagWriter:
         self.count += 1
 
     def _stamps(self, stamp: Any, record_time: Any) -> tuple[int, int]:
-        ns = stamp_ns(stamp, "stamp")
-        return ns, ns if record_time is None else stamp_ns(record_time, "record_time")
+        conv = check_stamp_ns if self.unit == "ns" else stamp_ns
+        ns = conv(stamp, "stamp")
+        return ns, ns if record_time is None else conv(record_time, "record_time")
 
-    def add_image(self, topic: str, stamp: float, image: np.ndarray, *, fmt: str = "raw",
-                  encoding: str | None = None, frame_id: str = "camera", record_time: float | None = None) -> None:
+    def add_image(self, topic: str, stamp: float | int, image: np.ndarray, *, fmt: str = "raw",
+                  encoding: str | None = None, frame_id: str = "camera",
+                  record_time: float | int | None = None) -> None:
         """Writes a uint8 RGB (H, W, 3) or gray (H, W) image taken at ``stamp``
-        (s) as a ``sensor_msgs/Image`` (``fmt="raw"``, ``encoding`` ``rgb8``,
-        ``bgr8`` or ``mono8``) or a ``sensor_msgs/CompressedImage``
-        (``fmt="png"`` or ``"jpeg"``). ``record_time`` (s) is when the bag
-        received it (default: ``stamp``)."""
+        (s, or ns with ``unit="ns"``) as a ``sensor_msgs/Image``
+        (``fmt="raw"``, ``encoding`` ``rgb8``, ``bgr8`` or ``mono8``) or a
+        ``sensor_msgs/CompressedImage`` (``fmt="png"`` or ``"jpeg"``). ``record_time`` (same unit) is when
+        the bag received it (default: ``stamp``)."""
         ns, rec = self._stamps(stamp, record_time)
         msg = image_message(self.store, ns, image, fmt=fmt, encoding=encoding, frame_id=frame_id,
                             seq=self._seq.get(topic, 0))
         self._write(topic, IMAGE if fmt == "raw" else COMPRESSED_IMAGE, msg, rec)
 
-    def add_pose(self, topic: str, stamp: float, pose: Any, *, frame_id: str = "map",
-                 record_time: float | None = None) -> None:
+    def add_pose(self, topic: str, stamp: float | int, pose: Any, *, frame_id: str = "map",
+                 record_time: float | int | None = None) -> None:
         """Writes a ``geometry_msgs/PoseStamped`` at ``pose`` = (x m, y m,
-        heading rad), z = 0, at ``stamp`` (s)."""
+        heading rad), z = 0, at ``stamp`` (s, or ns with ``unit="ns"``)."""
         ns, rec = self._stamps(stamp, record_time)
         self._write(topic, POSE_STAMPED, pose_message(self.store, ns, _pose3(pose), frame_id=frame_id,
                                                       seq=self._seq.get(topic, 0)), rec)
 
-    def add_odometry(self, topic: str, stamp: float, pose: Any, *, frame_id: str = "odom",
-                     child_frame_id: str = "base_link", record_time: float | None = None) -> None:
+    def add_odometry(self, topic: str, stamp: float | int, pose: Any, *, frame_id: str = "odom",
+                     child_frame_id: str = "base_link", record_time: float | int | None = None) -> None:
         """Writes a ``nav_msgs/Odometry`` at ``pose`` = (x m, y m, heading
-        rad) at ``stamp`` (s); velocities and covariances zero (unknown)."""
+        rad) at ``stamp`` (s, or ns with ``unit="ns"``); velocities and
+        covariances zero (unknown)."""
         ns, rec = self._stamps(stamp, record_time)
         msg = odometry_message(self.store, ns, _pose3(pose), frame_id=frame_id, child_frame_id=child_frame_id,
                                seq=self._seq.get(topic, 0))
@@ -205,7 +238,7 @@ FUSED_TOPIC = "/sfanav/fused"
 
 
 def write_estimates(path: str | os.PathLike, stamps: Any, xy: Any, fused: Any = None, *, frame_id: str = "map",
-                    child_frame_id: str = "base_link", overwrite: bool = False) -> int:
+                    child_frame_id: str = "base_link", overwrite: bool = False, unit: str = "s") -> int:
     """Writes localization results as a ROS bag that replays in rviz,
     Foxglove or PlotJuggler: every estimate as a
     ``geometry_msgs/PoseStamped`` on ``/sfanav/estimate`` (x, y; orientation
@@ -217,13 +250,19 @@ def write_estimates(path: str | os.PathLike, stamps: Any, xy: Any, fused: Any = 
     Parameters
     ----------
     path : ``NAME.bag`` (ROS 1) or ``NAME.mcap`` (ROS 2)
-    stamps : (N,) seconds, >= 0
+    stamps : (N,) seconds, >= 0, or integer nanoseconds with ``unit="ns"``
         The images' times (the header stamps and the bag's record times).
+        Give a dataset's ``stamps_ns`` where it has them: then every
+        estimate carries exactly its image's header stamp (float seconds
+        hold a Unix time to a few hundred ns only, too coarse for ROS's
+        exact-time synchronisation).
     xy : (N, 2) metres
     fused : (N, 3), optional
         x m, y m, heading rad.
     frame_id : str
         The frame of the positions (default ``map``).
+    unit : ``"s"`` or ``"ns"``
+        The unit of ``stamps``; ``"ns"`` takes integers only.
 
     Returns
     -------
@@ -232,23 +271,33 @@ def write_estimates(path: str | os.PathLike, stamps: Any, xy: Any, fused: Any = 
 
     Examples
     --------
-    >>> write_estimates("estimates.bag", ds.timestamps, xy, fused)   # doctest: +SKIP
+    >>> write_estimates("estimates.bag", ds.stamps_ns, xy, fused, unit="ns")   # doctest: +SKIP
     """
     if Path(path).suffix.lower() not in BAG_SUFFIXES:
         raise ValueError(f"{path}: estimates are written to NAME.bag (ROS 1) or NAME.mcap (ROS 2)")
-    t = np.asarray(stamps, float).reshape(-1)
+    if unit not in UNITS:
+        raise ValueError(f"unit must be 's' (float seconds) or 'ns' (integer nanoseconds), got {unit!r}")
+    if unit == "ns":
+        try:
+            t: Any = as_int_array(np.asarray(stamps).reshape(-1), "stamps")
+        except TypeError as exc:
+            raise TypeError(f"{exc}: unit='ns' takes integer nanoseconds (float seconds: unit='s')") from None
+        stamp_list = [check_stamp_ns(v, "stamp") for v in t.tolist()]
+    else:
+        t = np.asarray(stamps, float).reshape(-1)
+        stamp_list = [stamp_ns(v, "stamp") for v in t]
     P = np.asarray(xy, float)
     if P.ndim != 2 or P.shape[1] != 2 or len(P) != len(t):
         raise ValueError(f"xy must have shape ({len(t)}, 2) (one row per stamp), got {P.shape}")
     F = None if fused is None else np.asarray(fused, float)
     if F is not None and F.shape != (len(t), 3):
         raise ValueError(f"fused must have shape ({len(t)}, 3), got {F.shape}")
-    with BagWriter(path, overwrite=overwrite) as bag:
-        for i in range(len(t)):
+    with BagWriter(path, overwrite=overwrite, unit="ns") as bag:
+        for i, ns in enumerate(stamp_list):
             if np.isfinite(P[i]).all():
-                bag.add_pose(ESTIMATE_TOPIC, t[i], (P[i, 0], P[i, 1], 0.0), frame_id=frame_id)
+                bag.add_pose(ESTIMATE_TOPIC, ns, (P[i, 0], P[i, 1], 0.0), frame_id=frame_id)
             if F is not None and np.isfinite(F[i]).all():
-                bag.add_odometry(FUSED_TOPIC, t[i], F[i], frame_id=frame_id, child_frame_id=child_frame_id)
+                bag.add_odometry(FUSED_TOPIC, ns, F[i], frame_id=frame_id, child_frame_id=child_frame_id)
         count = bag.count
     return count
 

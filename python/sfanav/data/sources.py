@@ -32,8 +32,10 @@ class ImageSource:
     ``xy`` the ground truth (datasets only, else None; NaN where unknown);
     ``odometry`` the odometry poses (N, 3) (datasets only, else None; NaN
     where unknown); ``timestamps`` the images' times in seconds (datasets
-    only, else None; :meth:`times` also covers videos); ``fps`` a video's
-    frame rate; ``n`` the count if known."""
+    only, else None; :meth:`times` also covers videos); ``stamps_ns`` the
+    same times exactly, int64 nanoseconds (datasets with a ``stamp_ns``
+    column, e.g. imported from a bag, else None); ``fps`` a video's frame
+    rate; ``n`` the count if known."""
 
     kind: str
     description: str
@@ -44,6 +46,7 @@ class ImageSource:
     odometry: np.ndarray | None = None
     timestamps: np.ndarray | None = None
     fps: float | None = None
+    stamps_ns: np.ndarray | None = None
 
     def batches(self, batch_size: int = 64) -> Iterator[np.ndarray]:
         return self._batches(check_int(batch_size, "batch_size"))
@@ -105,7 +108,8 @@ def open_images(path: str | os.PathLike, *, run: str | None = None, camera: str 
                 return ds.images(batch_size=bs, gray=gray)
 
             return ImageSource("dataset", f"dataset {p} ({len(ds)} images)", len(ds), ds.frames.copy(),
-                               ds.poses[:, :2].copy(), ds_batches, ds.odometry.copy(), ds.timestamps.astype(float))
+                               ds.poses[:, :2].copy(), ds_batches, ds.odometry.copy(), ds.timestamps.astype(float),
+                               stamps_ns=None if ds.stamps_ns is None else ds.stamps_ns.copy())
         if run is not None:
             raise ValueError(f"--run applies to datasets; {p} is an image folder")
         files = sorted(f for f in p.iterdir() if f.is_file() and f.suffix.lower() in IMAGE_SUFFIXES)

@@ -21,7 +21,8 @@ def _add_localize(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                     "frame,x,y (frame: the dataset's frame id, else the image's index; x, y in metres), or "
                     "a ROS bag (--out NAME.bag for ROS 1, NAME.mcap for ROS 2) that replays in rviz, Foxglove "
                     "or PlotJuggler: geometry_msgs/PoseStamped on /sfanav/estimate and, with --odometry, the "
-                    "fused track as nav_msgs/Odometry on /sfanav/fused, stamped with the images' times. "
+                    "fused track as nav_msgs/Odometry on /sfanav/fused, stamped with the images' times (exactly "
+                    "the header stamps of a dataset sfanav import made). "
                     "Images are converted as the model was trained: panoramas of another size are resized, "
                     "omnidirectional (mirror) images unwarped with --mirror or an estimated mirror, and "
                     "a message says which."),
@@ -112,8 +113,10 @@ def _run_localize(args: argparse.Namespace) -> int:
     if args.odometry:
         fused = fuse(src.odometry, xy, loc.info["ekf_noise"])
     for out in outs:
-        if out in bags:
-            write_estimates(out, src.times(len(xy)), xy, fused, frame_id=args.frame_id, overwrite=True)
+        if out in bags:  # a dataset's exact stamps where it has them: each estimate then carries its image's
+            exact = src.stamps_ns is not None
+            write_estimates(out, src.stamps_ns[: len(xy)] if exact else src.times(len(xy)), xy, fused,
+                            frame_id=args.frame_id, overwrite=True, unit="ns" if exact else "s")
             continue
         write_csv_atomic(out, ["frame", "x", "y"] + (["fused_x", "fused_y", "fused_heading"] if fused is not None else []),
                          ([int(fr), f"{x:.4f}", f"{y:.4f}"] + ([f"{v:.4f}" for v in fused[i]] if fused is not None else [])
