@@ -327,3 +327,102 @@ def corrupt(images: Any, corruption: str | Corruption, *, seed: int = 0, start: 
     :data:`CORRUPTIONS` or a :class:`Corruption`) applied; see
     :meth:`Corruption.__call__`."""
     return get(corruption)(images, seed=seed, start=start)
+
+
+@dataclass(frozen=True)
+class CorruptionModel:
+    """A random corruption per image, drawn from families of corruptions
+    with ranges of strength: what a robot's camera and transport may do to
+    an image, for training that should not depend on it (the readout's
+    augmented copies, the network's invariance partners;
+    docs/robustness.md).
+
+    Attributes
+    ----------
+    families : mapping str -> mapping
+        Per family, a :data:`KINDS` kind and its parameter ranges:
+        ``{"kind": "jpeg", "quality": (30, 95)}``; a range ``(lo, hi)`` is
+        drawn uniformly (integers for ``quality``, ``length`` and
+        ``dead_columns``), a single value is fixed. Each image gets one
+        family, uniformly.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> x = np.full((4, 8, 30, 3), 100, np.uint8)
+    >>> CAMERA.apply(x, seed=0).shape
+    (4, 8, 30, 3)
+    """
+
+    families: Mapping[str, Mapping[str, Any]]
+
+    def __post_init__(self) -> None:
+        if not self.families:
+            raise ValueError("a corruption model needs at least one family")
+        for name, fam in self.families.items():
+            if "kind" not in fam:
+                raise ValueError(f"corruption family {name!r} needs a kind")
+            self._draw(name, np.random.default_rng(0))  # checks the kind and its parameters
+
+    def _draw(self, name: str, rng: np.random.Generator) -> Corruption:
+        fam = dict(self.families[name])
+        kind = fam.pop("kind")
+        params: dict[str, Any] = {}
+        for key, value in fam.items():
+            if isinstance(value, (tuple, list)) and len(value) == 2 and key != "gains":
+                lo, hi = value
+                params[key] = (int(rng.integers(int(lo), int(hi) + 1)) if key in _INTEGER_PARAMS
+                               else float(rng.uniform(float(lo), float(hi))))
+            elif key == "gains" and isinstance(value, (tuple, list)) and len(value) == 2:
+                lo, hi = value  # one gain per channel
+                params[key] = tuple(float(g) for g in rng.uniform(float(lo), float(hi), 3))
+            else:
+                params[key] = value
+        return Corruption(kind, params)
+
+    def draw(self, n: int, *, seed: int = 0, start: int = 0) -> list[Corruption]:
+        """The corruptions of images ``start .. start + n - 1`` (one each;
+        image ``i``'s depends only on ``(seed, i)``)."""
+        names = list(self.families)
+        out = []
+        for i in range(start, start + check_int(n, "n", minimum=0)):
+            rng = _rng(seed, i, 17)
+            out.append(self._draw(names[int(rng.integers(len(names)))], rng))
+        return out
+
+    def apply(self, images: Any, *, seed: int = 0, start: int = 0) -> np.ndarray:
+        """``images`` (N, H, W[, C]) uint8, each with its drawn corruption."""
+        a = as_image_batch(images)
+        if a.dtype != np.uint8:
+            raise TypeError(f"corruptions take 8-bit images (uint8), got {a.dtype}")
+        out = np.empty_like(a)
+        for i, c in enumerate(self.draw(len(a), seed=seed, start=start)):
+            if c.kind == "white-balance" and (a.ndim != 4 or a.shape[3] != 3):
+                out[i] = a[i]
+                continue
+            out[i] = c(a[i : i + 1], seed=seed, start=start + i)[0]
+        return out
+
+    def describe(self) -> str:
+        """One line per family."""
+        return "; ".join(f"{n}: " + ", ".join(f"{k} {v}" for k, v in f.items()) for n, f in self.families.items())
+
+
+_INTEGER_PARAMS = ("quality", "length", "dead_columns")
+
+CAMERA = CorruptionModel({
+    "jpeg": {"kind": "jpeg", "quality": (30, 95)},
+    "noise": {"kind": "gaussian-noise", "sigma": (1.0, 10.0)},
+    "defocus": {"kind": "defocus", "sigma": (0.3, 2.0)},
+    "motion": {"kind": "motion-blur", "length": (3, 10)},
+    "defects": {"kind": "defects", "dead_columns": (1, 3), "hot_fraction": (0.0, 0.004)},
+    "clipping": {"kind": "exposure", "gain": (1.2, 1.8)},
+    "vignetting": {"kind": "vignetting", "strength": (0.1, 0.6)},
+})
+"""The sfanav default's model of a robot camera's corruptions (a family per
+image, uniformly): JPEG at quality 30..95, Gaussian noise of 1..10 grey
+levels, defocus of 0.3..2 px, a turn's motion blur of 3..10 px, 1..3 dead
+columns with up to 0.4 % hot pixels, overexposure x1.2..1.8 (clipping),
+vignetting 0.1..0.6. Exposure, white balance and gamma themselves are left
+to the photometric normalisation (:mod:`sfanav.data.photometric`), which
+removes them exactly but for the clipping."""

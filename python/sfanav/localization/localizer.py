@@ -31,6 +31,8 @@ from .._checks import (
     is_single_image,
 )
 from ..data.image_rows import ImageRows
+from ..data.photometric import PHOTOMETRIC
+from ..data.photometric import normalize as photometric_normalize
 from ..sfa.modelfile import read_model, register_loader, save_model
 from ..sfa.network import Network
 from .error_metrics import euclidean_errors, localization_metrics
@@ -128,6 +130,14 @@ class Localizer:
         signature alone, by marginal likelihood). The sfanav default sets it
         (:func:`sfanav.localization.recipe_for`); it stores the signature of
         every training place (docs/gardens.md).
+    photometric : {"log-contrast"} or None, default None
+        A photometric normalisation applied to every image first, before
+        the rows, the network and the signature
+        (:func:`sfanav.data.photometric.log_contrast`: the log intensities
+        centred per channel and scaled to a fixed contrast, so that exposure,
+        white balance and gamma do not move the features). It must be what
+        the network was trained on (:func:`fit_localizer` takes care of
+        that); the sfanav default sets it (docs/robustness.md).
 
     Attributes
     ----------
@@ -169,7 +179,8 @@ class Localizer:
 
     def __init__(self, network: Network | None, n_outputs: int | None = None, ridge: float = 0.0, degree: int = 2,
                  readout: str | dict[str, Any] = "auto", rows: ImageRows | None = None,
-                 rotation_pooling: int | str | None = "auto", signature: str | None = None) -> None:
+                 rotation_pooling: int | str | None = "auto", signature: str | None = None,
+                 photometric: str | None = None) -> None:
         if network is not None and not isinstance(network, Network):
             raise TypeError(f"network must be a sfanav.Network or None, got {type(network).__name__}")
         if rows is not None and not isinstance(rows, ImageRows):
@@ -182,12 +193,13 @@ class Localizer:
         self.rows = rows
         self.rotation_pooling = rotation_pooling
         self.signature = signature
+        self.photometric = photometric
         self.info: dict[str, Any] = {}
 
     def get_params(self, deep: bool = True) -> dict[str, Any]:
         return {"network": self.network, "n_outputs": self.n_outputs, "ridge": self.ridge, "degree": self.degree,
                 "readout": self.readout, "rows": self.rows, "rotation_pooling": self.rotation_pooling,
-                "signature": self.signature}
+                "signature": self.signature, "photometric": self.photometric}
 
     def __repr__(self) -> str:
         net = "None" if self.network is None else repr(self.network)
@@ -196,6 +208,7 @@ class Localizer:
         rows = "" if self.rows is None or self.rows.identity else f", rows={self.rows.describe()!r}"
         pool = "" if self.rotation_pooling == "auto" else f", rotation_pooling={self.rotation_pooling!r}"
         pool += "" if self.signature is None else f", signature={self.signature!r}"
+        pool += "" if self.photometric is None else f", photometric={self.photometric!r}"
         return (f"<sfanav.Localizer readout={ro!r}, n_outputs={self.n_outputs}{rows}{pool}, {state}, "
                 f"network={net}>")
 
@@ -232,10 +245,27 @@ class Localizer:
         net = self.trained_network()
         a = np.asarray(images)
         one = is_single_image(a, net.input_shape[2])
+        images = self.network_input(a[None] if one else a)
+        return self.transform_rows(images[0] if one else images, rotations=rotations)
+
+    def normalized(self, images: Any) -> Any:
+        """Images (N, H, W[, C]) after the localizer's photometric
+        normalisation (as given without one): what its rows and signature
+        start from."""
+        return photometric_normalize(images, self._check_photometric())
+
+    def network_input(self, images: Any) -> Any:
+        """What the network sees of images (N, H, W[, C]): the photometric
+        normalisation, then the rows (:meth:`transform_rows` takes it)."""
+        a = self.normalized(images)
         if self.rows is not None and not self.rows.identity:
-            images = self.rows(a[None] if one else a)
-            images = images[0] if one else images
-        return self.transform_rows(images, rotations=rotations)
+            a = self.rows(a)
+        return a
+
+    def _check_photometric(self) -> str | None:
+        if self.photometric is not None and self.photometric not in PHOTOMETRIC:
+            raise ValueError(f"photometric must be one of {PHOTOMETRIC} or None, got {self.photometric!r}")
+        return self.photometric
 
     def transform_rows(self, images: Any, *, rotations: bool = False) -> np.ndarray:
         """As :meth:`features` for images the localizer's ``rows`` were
@@ -255,14 +285,15 @@ class Localizer:
         """The appearance signatures the readout reads beside the slow
         features, of images (N, H, W[, C]) as given (before ``rows``):
         (N, q) float32, or (q,) for one image. ValueError if this localizer
-        reads none (``signature=None``)."""
+        reads none (``signature=None``). The signature is of the images after
+        the photometric normalisation, before ``rows``."""
         kind = self._check_signature()
         if kind is None:
             raise ValueError("this Localizer reads no appearance signature (signature=None)")
         net = self.trained_network() if self.network is not None else None
         a = np.asarray(images)
         one = net is not None and is_single_image(a, net.input_shape[2])
-        batch = a[None] if one else a
+        batch = self.normalized(a[None] if one else a)
         width = batch.shape[2] if batch.ndim >= 3 else 0
         G = fourier_signature(batch, max(1, min(SIGNATURE_COEFFICIENTS, width // 2 + 1)))
         return G[0] if one else G
@@ -326,12 +357,25 @@ class Localizer:
         G = self.signatures(images) if self._check_signature() else None
         return self.fit_features(F, Y, signatures=None if G is None else G.reshape(len(F), -1))
 
-    def fit_features(self, features: Any, xy: Any, *, signatures: Any = None) -> "Localizer":
+    def fit_features(self, features: Any, xy: Any, *, signatures: Any = None,
+                     augmented: tuple[Any, Any] | None = None) -> "Localizer":
         """Fits on precomputed features (N, m >= n_outputs), slowest first,
         and positions (N, 2) in metres: what :meth:`features` returns (rotation
         pooled as ``rotation_pooling`` says); with ``signature`` set also the
-        images' :meth:`signatures` (N, q). Returns ``self``."""
+        images' :meth:`signatures` (N, q). Returns ``self``.
+
+        ``augmented``: ``(features, signatures)`` of altered copies of the
+        same N images (e.g. corrupted as a robot's camera may corrupt them,
+        :class:`sfanav.data.corruptions.CorruptionModel`; signatures None
+        without a signature), at the same positions: the readout is fitted
+        on both, each copy next to its original (so that the blocked
+        cross-validation of ``readout="auto"`` never holds out an image
+        while training on its copy), and learns what of the features
+        survives the alteration (docs/robustness.md). The training
+        positions and metrics stay those of the N originals."""
         n, ridge, degree = self._check_params()
+        if augmented is not None:
+            return self._fit_augmented(features, xy, signatures, augmented)
         self.rotation_pooling_ = self._resolve_pooling()
         F = as_matrix(features, "features")
         Y = as_matrix(xy, "xy", n_cols=2)
@@ -379,6 +423,50 @@ class Localizer:
         rng = np.where(rng > 0, rng, max(float(rng.max()), 1.0))
         self.train_metrics_ = localization_metrics(reg.predict(X), Y, coordinate_range=rng)
         return self
+
+    def _fit_augmented(self, features: Any, xy: Any, signatures: Any, augmented: Any) -> "Localizer":
+        if not isinstance(augmented, (tuple, list)) or len(augmented) != 2:
+            raise TypeError("augmented must be a tuple (features, signatures) of the altered copies")
+        F, Y = as_matrix(features, "features"), as_matrix(xy, "xy", n_cols=2)
+        Fa = as_matrix(augmented[0], "augmented features")
+        if Fa.shape != F.shape:
+            raise ValueError(f"augmented features must have the shape of the features {F.shape}, got {Fa.shape}")
+        G = Ga = None
+        if signatures is not None or augmented[1] is not None:
+            if signatures is None or augmented[1] is None:
+                raise ValueError("give signatures for both the images and their augmented copies, or for neither")
+            G, Ga = as_matrix(signatures, "signatures"), as_matrix(augmented[1], "augmented signatures")
+            if Ga.shape != G.shape:
+                raise ValueError(f"augmented signatures must have the shape of the signatures {G.shape}, "
+                                 f"got {Ga.shape}")
+        check_same_length(F, Y, "features", "xy")
+
+        def pairwise(a: np.ndarray, b: np.ndarray) -> np.ndarray:  # a0, b0, a1, b1, ...
+            return np.stack([a, b], axis=1).reshape((-1,) + a.shape[1:])
+
+        self.fit_features(pairwise(F, Fa), pairwise(Y, Y),
+                          signatures=None if G is None else pairwise(G, Ga))
+        self.training_positions_ = np.array(Y, dtype=np.float64)
+        X = F if G is None else np.hstack([F, G])
+        rng = np.ptp(Y, axis=0)
+        rng = np.where(rng > 0, rng, max(float(rng.max()), 1.0))
+        self.train_metrics_ = localization_metrics(self.regression_.predict(X), Y, coordinate_range=rng)
+        self.n_augmented_ = len(F)
+        return self
+
+    def sibling(self, **overrides: Any) -> "Localizer":
+        """A new, unfitted Localizer on the same network that sees images as
+        this one does (rows, photometric normalisation, rotation pooling,
+        signature) and reads them out as it does (readout, n_outputs), with
+        ``overrides`` (constructor parameters) on top: e.g. the same
+        features read out by another readout, or fitted to other positions.
+
+        Examples
+        --------
+        >>> sup = loc.sibling().fit_features(F, xy_truth, signatures=G)   # doctest: +SKIP
+        """
+        params = {**self.get_params(), **overrides}
+        return Localizer(**params)
 
     # ------------------------------------------------------------ inference
     def _check_fitted(self) -> Any:
@@ -452,6 +540,7 @@ class Localizer:
             "rotation_pooling": int(self.rotation_pooling_),
             "readout_param": dict(self.readout) if isinstance(self.readout, dict) else str(self.readout),
             "rows": None if self.rows is None else self.rows.to_dict(),
+            **({} if self.photometric is None else {"photometric": self._check_photometric()}),
             "network": net_state,
             "readout": readout_state(self.readout_spec_, reg),
             # the thesis's readout also as version 1 had it, so older sfanav reads such files
@@ -473,6 +562,9 @@ class Localizer:
         # format version 5: an appearance signature beside the slow features
         if self.n_signature_:
             version = 5
+        # format version 6: a photometric normalisation (older readers would silently skip it)
+        if self.photometric is not None:
+            version = 6
         return save_model(path, "Localizer", state, version=version)
 
     @classmethod
@@ -484,7 +576,8 @@ class Localizer:
             params.setdefault("rotation_pooling", None)  # files before format 4: no pooling
             sig = state.get("signature")  # files before format 5: none
             loc = cls(net, rows=None if rows is None else ImageRows.from_dict(rows), **params,
-                      signature=None if sig is None else sig["kind"])
+                      signature=None if sig is None else sig["kind"], photometric=state.get("photometric"))
+            loc._check_photometric()
             loc.n_signature_ = 0 if sig is None else check_int(sig["n_values"], "signature n_values")
             if sig is not None and (loc._check_signature() is None
                                     or int(sig["n_coefficients"]) != SIGNATURE_COEFFICIENTS):

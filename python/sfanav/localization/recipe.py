@@ -7,12 +7,17 @@ and rotation pooling.
 * **sfanav default** (the ``sfanav-default`` preset): the horizon band
   (elevation -10 .. +20 degrees, :func:`default_rows`), rotation pooling
   over 8 rotations, and the ``"auto"`` readout of the slowest outputs
-  together with the panorama's Fourier signature (:data:`SIGNATURE`).
+  together with the panorama's Fourier signature (:data:`SIGNATURE`);
+  robustness to what a robot's camera does to its images
+  (:data:`ROBUSTNESS`, default :data:`DEFAULT_ROBUSTNESS`): the photometric
+  normalisation and a readout fitted on corrupted copies as well.
 
 :func:`recipe_for` resolves a recipe from what the user named (a preset, a
 config file, explicit overrides); ``sfanav train``,
 :func:`sfanav.localization.train_default` and :class:`sfanav.Localizer` all
-ask it. Why these choices: docs/gardens.md."""
+ask it; :meth:`Recipe.fit_kwargs` turns it into the arguments of
+:func:`sfanav.localization.fit_localizer`. Why these choices:
+docs/gardens.md, docs/robustness.md."""
 
 from __future__ import annotations
 
@@ -21,6 +26,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from .._checks import check_int
+from ..data.corruptions import CAMERA, CorruptionModel
 from ..data.image_rows import ImageRows
 from ..sfa.network import Network
 
@@ -42,6 +48,22 @@ SIGNATURE_COEFFICIENTS = 15
 """Fourier coefficients per image row and channel of the ``"fourier"`` signature (as the Fourier-signature peer)."""
 THESIS_N_OUTPUTS = 8
 """Slow features the thesis's quadratic regression reads."""
+
+ROBUSTNESS = ("none", "light", "full")
+"""How the sfanav default guards against what a robot's camera and image transport do to its images
+(JPEG, noise, blur, exposure, ...; docs/robustness.md):
+
+* ``"none"``: nothing (the thesis; the sfanav default before the corruption study);
+* ``"light"``: the photometric normalisation (``"log-contrast"``: exposure, white balance and gamma do
+  not move the features) and a readout fitted on the run and on a copy of it corrupted as a robot camera
+  may (:data:`sfanav.data.corruptions.CAMERA`); free on clean images;
+* ``"full"``: ``"light"`` and a network trained to ignore those corruptions (each image interleaved with
+  a corrupted copy): holds under every corruption measured, at a cost in precision on flawless images.
+"""
+DEFAULT_ROBUSTNESS = "light"
+"""The sfanav default's robustness (:data:`ROBUSTNESS`)."""
+PHOTOMETRIC = "log-contrast"
+"""The photometric normalisation of robustness ``"light"`` and ``"full"``."""
 
 ROWS = ("band", "all")
 SUPERVISION = ("auto", "ground-truth", "odometry")
@@ -65,6 +87,8 @@ class Recipe:
         As :class:`sfanav.Localizer` takes it; :func:`pooling_for` resolves it.
     signature : "fourier" or None
         The appearance signature read beside the slow features.
+    robustness : one of :data:`ROBUSTNESS`
+        What guards the localizer against camera corruptions.
     """
 
     name: str
@@ -73,6 +97,7 @@ class Recipe:
     n_outputs: int | None
     rotation_pooling: Any = "auto"
     signature: str | None = None
+    robustness: str = "none"
 
     def image_rows(self, camera_elevation: Sequence[float] | None = None) -> ImageRows | None:
         """The :class:`ImageRows` step for panoramas whose rows span
@@ -84,11 +109,32 @@ class Recipe:
 
     def info(self) -> dict[str, Any]:
         """What the model file records about the recipe."""
-        return {"configuration": "sfanav default"} if self.name == "sfanav default" else {}
+        out: dict[str, Any] = {"configuration": "sfanav default"} if self.name == "sfanav default" else {}
+        if self.robustness != "none":
+            out["robustness"] = self.robustness
+        return out
+
+    def robust_kwargs(self, model: CorruptionModel = CAMERA) -> dict[str, Any]:
+        """The :func:`~sfanav.localization.fit_localizer` arguments of the
+        recipe's robustness: ``photometric``, ``readout_augmentation`` and
+        ``invariance`` (corruptions drawn from ``model``)."""
+        r = self.robustness
+        return {"photometric": PHOTOMETRIC if r != "none" else None,
+                "readout_augmentation": model if r != "none" else None,
+                "invariance": model if r == "full" else None}
+
+    def fit_kwargs(self, camera_elevation: Sequence[float] | None = None) -> dict[str, Any]:
+        """Every :func:`~sfanav.localization.fit_localizer` argument the recipe
+        decides (readout, rows for panoramas spanning ``camera_elevation``,
+        n_outputs, rotation pooling, signature and robustness): one place,
+        so that ``sfanav train``, the demo and the experiments train alike."""
+        return {"readout": self.readout, "rows": self.image_rows(camera_elevation), "n_outputs": self.n_outputs,
+                "rotation_pooling": self.rotation_pooling, "signature": self.signature, **self.robust_kwargs()}
 
 
 def recipe_for(preset: str | None = None, *, config: bool = False, readout: Any = None, rows: str | None = None,
-               n_outputs: int | None = None, rotation_pooling: Any = None, signature: Any = "auto") -> Recipe:
+               n_outputs: int | None = None, rotation_pooling: Any = None, signature: Any = "auto",
+               robustness: str | None = None) -> Recipe:
     """The recipe for a network chosen by ``preset`` (a name) or by a config
     file (``config=True``), with the user's explicit choices on top (None:
     the recipe decides). A ``thesis-*`` preset gets the thesis's recipe (all
@@ -98,7 +144,9 @@ def recipe_for(preset: str | None = None, *, config: bool = False, readout: Any 
     readout on all rows. ``signature``: ``"auto"`` reads the Fourier
     signature beside the slow features with the ``"auto"`` readout of the
     sfanav default (:data:`SIGNATURE`), none otherwise; None or
-    ``"fourier"`` as given."""
+    ``"fourier"`` as given. ``robustness`` (:data:`ROBUSTNESS`): None takes
+    :data:`DEFAULT_ROBUSTNESS` for the sfanav default and ``"none"`` for the
+    thesis's recipe and config files."""
     if rows is not None and rows not in ROWS:
         raise ValueError(f"rows must be one of {ROWS}, got {rows!r}")
     if n_outputs is not None:
@@ -113,13 +161,18 @@ def recipe_for(preset: str | None = None, *, config: bool = False, readout: Any 
         signature = SIGNATURE if default and readout == READOUT else None
     elif signature is not None and signature not in SIGNATURES:
         raise ValueError(f"signature must be 'auto', one of {SIGNATURES} or None, got {signature!r}")
-    if default and readout == READOUT and rows == "band" and signature == SIGNATURE:
+    if robustness is None:
+        robustness = DEFAULT_ROBUSTNESS if default else "none"
+    elif robustness not in ROBUSTNESS:
+        raise ValueError(f"robustness must be one of {ROBUSTNESS}, got {robustness!r}")
+    if default and readout == READOUT and rows == "band" and signature == SIGNATURE and robustness == DEFAULT_ROBUSTNESS:
         name = "sfanav default"
-    elif thesis and readout == "quadratic" and rows == "all":
+    elif thesis and readout == "quadratic" and rows == "all" and robustness == "none":
         name = "thesis"
     else:
         name = "custom"
-    return Recipe(name, readout, rows, n_outputs, "auto" if rotation_pooling is None else rotation_pooling, signature)
+    return Recipe(name, readout, rows, n_outputs, "auto" if rotation_pooling is None else rotation_pooling, signature,
+                  robustness)
 
 
 def pooling_for(readout: Any, rotation_pooling: Any, *, has_network: bool = True) -> int:

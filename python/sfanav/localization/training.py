@@ -11,8 +11,10 @@ from typing import Any
 
 import numpy as np
 
-from .._checks import check_n_outputs
+from .._checks import check_int, check_n_outputs
+from ..data.corruptions import CorruptionModel
 from ..data.preprocessing import Preprocessing
+from ..sfa.feedback import closure_partners
 from ..sfa.network import Network, Rotation
 from .localizer import Localizer
 from .recipe import CAMERA_ELEVATION, default_network, recipe_for
@@ -36,6 +38,11 @@ def fit_localizer(
     closure_weights: Any = None,
     network_images: np.ndarray | None = None,
     network_fit: dict[str, Any] | None = None,
+    photometric: str | None = None,
+    readout_augmentation: CorruptionModel | None = None,
+    invariance: CorruptionModel | None = None,
+    invariance_weight: float = 1.0,
+    seed: int = 0,
 ) -> Localizer:
     """Trains ``network`` on ``images`` (the training run, in temporal order)
     under simulated rotation and fits the readout of its slowest outputs to
@@ -66,6 +73,21 @@ def fit_localizer(
     signature) is fitted on ``images`` as the queries will look. Default:
     ``images``.
 
+    ``photometric``: a photometric normalisation of every image before the
+    rows, the network and the signature (``"log-contrast"``, the sfanav
+    default's: :mod:`sfanav.data.photometric`), stored in the localizer.
+
+    ``readout_augmentation``: a :class:`~sfanav.data.corruptions.CorruptionModel`;
+    the readout is then fitted on the run and on a copy of it with one
+    corruption drawn per image (``seed``), at the same positions
+    (:meth:`Localizer.fit_features` ``augmented``). ``invariance``: a
+    corruption model for the network: each training image's simulated
+    rotation is interleaved with that of a corrupted copy of it (of its
+    loop-closure partner where it has one), weight ``invariance_weight``,
+    so that the slow features ignore the corruption (:meth:`Network.fit`
+    ``partners``; one machine only). Both need 8-bit images. What each
+    costs and buys: docs/robustness.md.
+
     ``network_fit``: more keyword arguments of the network's
     :meth:`~sfanav.Network.fit`, e.g. ``{"client": dask_client, "breaks":
     [...]}`` to train it on a Dask cluster (docs/distributed.md).
@@ -83,22 +105,43 @@ def fit_localizer(
         if shape != getattr(images, "shape", None):
             raise ValueError(f"network_images must have the shape of images {getattr(images, 'shape', None)}, "
                              f"got {shape}")
-    if rows is not None and not rows.identity:
-        images = rows(images)
-        network_images = None if network_images is None else rows(network_images)
-    else:
+    if rows is not None and rows.identity:
         rows = None
+    seed = check_int(seed, "seed", minimum=0)
+    for name, model in (("readout_augmentation", readout_augmentation), ("invariance", invariance)):
+        if model is not None:
+            if not isinstance(model, CorruptionModel):
+                raise TypeError(f"{name} must be a sfanav.data.corruptions.CorruptionModel or None, "
+                                f"got {type(model).__name__}")
+            if np.asarray(images).dtype != np.uint8:
+                raise ValueError(f"{name} corrupts the training images as a camera would: it needs 8-bit images "
+                                 f"(uint8), got {np.asarray(images).dtype} (train without image normalisation)")
+    # an unfitted localizer holds how images become the network's input (photometric, rows)
+    loc = Localizer(network, n_outputs=n_outputs, readout=readout, rows=rows, rotation_pooling=rotation_pooling,
+                    signature=signature, photometric=photometric)
+    images = loc.network_input(raw)
+    fit_kw = dict(loop_closures=loop_closures, closure_weights=closure_weights)
+    if invariance is not None:
+        fit_kw = {"partners": invariance_partners(raw if network_images is None else network_images, invariance,
+                                                  loc.network_input, weight=invariance_weight, seed=seed,
+                                                  loop_closures=loop_closures, closure_weights=closure_weights)}
+    network_images = None if network_images is None else loc.network_input(network_images)
     t0 = time.perf_counter()
     network.fit(images if network_images is None else network_images, rotation, progress=progress,
-                loop_closures=loop_closures, closure_weights=closure_weights, **(network_fit or {}))
+                **fit_kw, **(network_fit or {}))
     fit_s = time.perf_counter() - t0
     check_n_outputs(n_outputs, network.n_outputs_)
-    loc = Localizer(network, n_outputs=n_outputs, readout=readout, rows=rows, rotation_pooling=rotation_pooling,
-                    signature=signature)
     t1 = time.perf_counter()
     F = loc.transform_rows(images)
     G = loc.signatures(raw) if signature is not None else None
-    loc.fit_features(F, xy(F) if callable(xy) else xy, signatures=G)
+    Y = xy(F) if callable(xy) else xy
+    if readout_augmentation is None:
+        loc.fit_features(F, Y, signatures=G)
+    else:
+        altered = readout_augmentation.apply(raw, seed=seed + 1)
+        loc.fit_features(F, Y, signatures=G, augmented=(
+            loc.features(altered), loc.signatures(altered) if signature is not None else None))
+        del altered
     readout_s = time.perf_counter() - t1
     loc.info = dict(info or {})
     if prep is not None:
@@ -107,28 +150,54 @@ def fit_localizer(
                      "n_train_images": int(len(images)), "fit_seconds": round(fit_s, 2),
                      "readout_seconds": round(readout_s, 2), "readout": loc.describe_readout(),
                      "loop_closures": int(getattr(network, "n_loop_closures_", 0)),
+                     **({"photometric": photometric} if photometric else {}),
+                     **({"readout_augmentation": readout_augmentation.describe()} if readout_augmentation else {}),
+                     **({"invariance": invariance.describe(), "invariance_weight": float(invariance_weight)}
+                        if invariance else {}),
                      "rotation_pooling": int(loc.rotation_pooling_)})
     if loc.selection_ is not None:
         loc.info["readout_rule"] = loc.selection_.rule
     return loc
 
 
+def invariance_partners(images: np.ndarray, model: CorruptionModel, network_input: Callable[[Any], Any], *,
+                        weight: float = 1.0, seed: int = 0, loop_closures: Any = None,
+                        closure_weights: Any = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The invariance partners of a training run ``images`` (N, H, W[, C])
+    uint8, as :meth:`sfanav.Network.fit` takes them (``partners``): every
+    image's partner is a copy of it with a corruption drawn from ``model``
+    (``seed``), or, where a loop closure names the image, a corrupted copy
+    of its aligned loop-closure partner (the closure's weight times
+    ``weight``); ``network_input`` makes the copies what the network sees
+    (photometric normalisation, rows)."""
+    n = len(images)
+    w = float(weight)
+    if not (np.isfinite(w) and 0 <= w <= 1):
+        raise ValueError(f"invariance_weight must be in [0, 1], got {weight!r}")
+    base = np.array(images, copy=True)
+    weights = np.full(n, w)
+    if loop_closures is not None:
+        current, cw, aligned = closure_partners(images, loop_closures, closure_weights)
+        base[current] = aligned
+        weights[current] = np.asarray(cw) * w
+    partners = network_input(model.apply(base, seed=seed))
+    return np.arange(n), weights, np.ascontiguousarray(partners)
+
+
 def train_default(images: Any, xy: Any, *, camera_elevation: Sequence[float] = CAMERA_ELEVATION,
                   network: Network | None = None, rotation: Rotation | None = None, progress: bool = False,
-                  info: dict[str, Any] | None = None, loop_closures: Any = None, closure_weights: Any = None) -> Any:
+                  info: dict[str, Any] | None = None, loop_closures: Any = None, closure_weights: Any = None,
+                  robustness: str | None = None, seed: int = 0) -> Any:
     """Trains the sfanav default on a training run: ``images`` (N, 40, 350, 3)
-    uint8 or float in temporal order, ``xy`` (N, 2) metres. Returns a fitted
+    uint8 in temporal order, ``xy`` (N, 2) metres. Returns a fitted
     :class:`sfanav.Localizer` (network, rows and readout; ``save`` it as one
     model file). ``network`` replaces the default network (e.g. for other
     image sizes). ``loop_closures``, ``closure_weights``: feedback training,
-    as :meth:`sfanav.Network.fit`."""
-    from .training import (
-        fit_localizer,  # training imports the localizer, which imports this module
-    )
-
-    recipe = recipe_for()
+    as :meth:`sfanav.Network.fit`. ``robustness``: one of
+    :data:`~sfanav.localization.recipe.ROBUSTNESS` (None: the default's);
+    ``seed`` draws its corruptions."""
+    recipe = recipe_for(robustness=robustness)
     net = network if network is not None else default_network()
     return fit_localizer(net, np.asarray(images), np.asarray(xy, float), rotation=rotation or Rotation(5, 1.0),
-                         readout=recipe.readout, rows=recipe.image_rows(camera_elevation), progress=progress,
-                         signature=recipe.signature, loop_closures=loop_closures, closure_weights=closure_weights,
-                         info={**recipe.info(), **(info or {})})
+                         progress=progress, loop_closures=loop_closures, closure_weights=closure_weights,
+                         info={**recipe.info(), **(info or {})}, seed=seed, **recipe.fit_kwargs(camera_elevation))

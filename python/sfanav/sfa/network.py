@@ -38,7 +38,7 @@ from .config import (
     resolve_config,
     spec_to_json,
 )
-from .feedback import closure_partners
+from .feedback import check_partners, closure_partners
 from .modelfile import dumps, register_loader, save_model, state_from_bytes
 from .pairs import check_pairs
 
@@ -320,6 +320,7 @@ class Network:
         pair_layers: Sequence[int] | None = None,
         loop_closures: Any = None,
         closure_weights: Any = None,
+        partners: tuple[Any, Any, Any] | None = None,
         client: Any = None,
         breaks: Any = None,
     ) -> "Network":
@@ -398,6 +399,19 @@ class Network:
             Each closure's weight in [0, 1], mixing its interleaved sequence
             with the plain rotation (None: 1, the thesis; ``"score"``: the
             detector's match confidence).
+        partners : (current, weights, images) or None
+            Interleaving partners given as images rather than as loop
+            closures: image ``current[i]`` (an index into ``images``) is
+            trained on its simulated rotation interleaved with that of
+            ``images[i]`` of this third array (M, H, W[, C], the training
+            images' size and dtype, already aligned), mixed by ``weights[i]``
+            in [0, 1] as ``closure_weights``. What
+            :func:`sfanav.localization.fit_localizer` passes for invariance
+            training: each image's partner is a corrupted copy of it (or of
+            its loop-closure partner), so the slowness objective asks for
+            outputs that ignore the corruption (docs/robustness.md). Not
+            with ``loop_closures`` (build both into one set of partners) nor
+            with ``client``.
         client : dask.distributed.Client, optional
             Train on a Dask cluster (``pip install "sfanav[dask]"``): the
             images (a list of arrays or ``.npy`` paths, one partition each;
@@ -421,6 +435,9 @@ class Network:
         comes out unchanged. The training loop runs in the Rust core
         (``sfa_core::training::fit``) with the GIL released.
         """
+        if partners is not None and (loop_closures is not None or client is not None):
+            raise ValueError("partners cannot be combined with loop_closures or client: give the loop closures' "
+                             "partners among them (sfanav.sfa.feedback.closure_partners), and train on one machine")
         if client is not None or breaks is not None:
             if client is None:
                 raise ValueError("breaks needs client (or call sfanav.sfa.distributed.fit with client=None)")
@@ -439,6 +456,9 @@ class Network:
         if loop_closures is not None:
             images = _image_array(images, "loop_closures")
             closures = closure_partners(images, loop_closures, closure_weights)
+        if partners is not None:
+            images = _image_array(images, "partners")
+            closures = check_partners(partners, images)
         if not isinstance(rotation, Rotation):
             raise TypeError("rotation must be a sfanav.Rotation")
         if pairs is not None:
@@ -510,7 +530,8 @@ class Network:
         self.input_scale_ = _pixel_scale(first)
         self.transition_weight_ = transition_weight
         self.n_pairs_ = 0 if pairs is None else len(pairs[0])
-        self.n_loop_closures_ = 0 if closures is None else len(closures[0])
+        self.n_loop_closures_ = 0 if closures is None or partners is not None else len(closures[0])
+        self.n_partners_ = 0 if partners is None else len(closures[0])
         return self
 
     def _check_scale(self, a: np.ndarray) -> None:
