@@ -25,15 +25,19 @@ from pathlib import Path
 from typing import Any
 
 from .._progress import Log, stderr_log
-from ..data.preprocessing import Preprocessing
+from ..data.corruptions import corrupt
+from ..data.preprocessing import Preprocessing, Preprocessor
 from ..data.sources import load_run
 from ..experiments import ExperimentResult
 from ..localization.evaluation import evaluate, evaluation_rows
-from ..localization.training import fit_localizer
+from ..localization.training import augmented_features, fit_localizer
 from ..sfa.network import Network, Rotation
 
 DEMO_NETWORK = "sfanav-default"
 """Network preset of the demo (350x40 RGB input; the garden is rendered at 600x60 and resized)."""
+
+JPEG_TEST = "jpeg-90"
+"""The corruption of the demo's JPEG rows: the test walk as a ROS camera's image_transport sends it."""
 
 THESIS_NETWORK = "thesis-5.1"
 """Network preset of the demo's thesis-configuration row (Table 5.1, 350x40 RGB)."""
@@ -75,10 +79,10 @@ def run_demo(out: str | Path = "sfanav-demo", *, seed: int = 0, overwrite: bool 
     thesis's 5.1.1 values where it has one). ``quick``: a seconds-long smoke
     run on tiny images with a small network (for tests)."""
     from .. import sim
+    from ..localization import baselines
     from ..localization.error_metrics import align, localization_metrics
     from ..localization.evaluation import coordinate_range
-    from ..localization.localizer import Localizer
-    from ..localization.recipe import SIGNATURE, default_network, default_rows
+    from ..localization.recipe import default_network, recipe_for
     from ..odometry.fusion import fuse, noise_for_localizer
     from ..odometry.self_supervision import fit_localizer_from_odometry
 
@@ -106,17 +110,20 @@ def run_demo(out: str | Path = "sfanav-demo", *, seed: int = 0, overwrite: bool 
     # 2. train without ground truth: the network on the images, the positions from images and odometry
     t0 = time.perf_counter()
     net = _tiny_network() if quick else default_network()
-    rows_sel = None if quick else default_rows(tuple(ds.metadata["camera"].get("elevation_deg", (-30.0, 20.0))))
+    recipe = recipe_for()
+    fit_kw = recipe.fit_kwargs(tuple(ds.metadata["camera"].get("elevation_deg", (-30.0, 20.0))))
+    if quick:
+        fit_kw["rows"] = None  # the tiny network's 8-row panoramas: every row
     prep = Preprocessing.for_network(net)
     train, test = ds.select(run="train"), ds.select(run="test")
     X_train, xy_train = load_run(train, prep, log=log)
     X_test, xy_test = load_run(test, prep, log=log)
     odo_train, odo_test = train.odometry, test.odometry
     rotation = Rotation(step=5)
-    loc = fit_localizer_from_odometry(net, X_train, odo_train, rotation=rotation, rows=rows_sel, prep=prep,
-                                      progress=progress, signature=SIGNATURE,
+    loc = fit_localizer_from_odometry(net, X_train, odo_train, rotation=rotation, prep=prep, progress=progress,
                                       info={"dataset": str(out / "dataset"), "run": "train",
-                                            "network": "tiny" if quick else DEMO_NETWORK})
+                                            "network": "tiny" if quick else DEMO_NETWORK, **recipe.info()},
+                                      **fit_kw)
     timings["train"] = time.perf_counter() - t0
     log(f"trained on {len(X_train)} images and their odometry in {timings['train']:.1f} s (network fit "
         f"{loc.info['fit_seconds']:.1f} s; pose graph: {loc.info['loop closures kept']} loop closures)")
@@ -150,13 +157,29 @@ def run_demo(out: str | Path = "sfanav-demo", *, seed: int = 0, overwrite: bool 
     crange = coordinate_range(xy_test)
     m_fused = localization_metrics(world.apply(fused[:, :2]), xy_test, coordinate_range=crange)
     rows += _compact_rows("no ground truth, fused with odometry", m_fused)
+    # the test walk as a ROS robot's image_transport sends it: JPEG at quality 90, compressed at the camera's size
+    cam = ds.metadata["camera"]
+    native, _ = load_run(test, Preprocessing(int(cam["width"]), int(cam["height"]), False), log=log)
+    X_jpeg = Preprocessor(prep, log=log)(corrupt(native, JPEG_TEST, seed=seed))
+    xy_jpeg = loc.predict(X_jpeg)
+    m_jpeg = localization_metrics(world.apply(xy_jpeg), xy_test, coordinate_range=crange)
+    rows += _compact_rows(f"no ground truth, {JPEG_TEST} test images", m_jpeg)
+    fused_jpeg = fuse(odo_test, xy_jpeg, loc.info["ekf_noise"])
+    m_fj = localization_metrics(world.apply(fused_jpeg[:, :2]), xy_test, coordinate_range=crange)
+    rows += _compact_rows(f"no ground truth, fused with odometry, {JPEG_TEST} test images", m_fj)
+    peers = {"perfect memory": baselines.PerfectMemory(), "Fourier signature": baselines.FourierSignature(
+        min(baselines.FourierSignature().n_coefficients, X_train.shape[2] // 2 + 1))}
+    for name, peer in peers.items():
+        pred = peer.fit(X_train, xy_train).predict(X_jpeg)
+        rows.append({"metric": f"MED (m) {name} [{JPEG_TEST} test images]", "thesis": None,
+                     "sfanav": localization_metrics(pred, xy_test, coordinate_range=crange)["med"]})
     timings["evaluate"] = time.perf_counter() - t0
 
     # 5. reference rows: the same network on ground truth; the thesis's configuration
     t0 = time.perf_counter()
-    sup = Localizer(loc.network, n_outputs=loc.n_outputs, readout=loc.readout, rows=loc.rows,
-                    rotation_pooling=loc.rotation_pooling, signature=loc.signature).fit_features(
-        F_train, xy_train, signatures=G_train)
+    aug = (augmented_features(loc, X_train, fit_kw["readout_augmentation"])
+           if fit_kw["readout_augmentation"] is not None else None)
+    sup = loc.sibling().fit_features(F_train, xy_train, signatures=G_train, augmented=aug)
     sup.info.update({k: v for k, v in loc.info.items() if k in ("dataset", "run", "network", "prep", "rotation",
                                                                  "fit_seconds")})
     sup.info["supervision"] = "ground-truth"

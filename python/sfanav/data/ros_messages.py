@@ -283,12 +283,16 @@ def _pose(store: Any, x: float, y: float, heading: float) -> Any:
                                        orientation=T["geometry_msgs/msg/Quaternion"](x=qx, y=qy, z=qz, w=qw))
 
 
+JPEG_QUALITY = 95
+"""JPEG quality of compressed images written (OpenCV's default; ROS's image_transport publishes 80 to 95)."""
+
+
 def image_message(store: Any, stamp_ns: int, image: np.ndarray, *, fmt: str = "raw", encoding: str | None = None,
-                  frame_id: str = "camera", seq: int = 0) -> Any:
+                  frame_id: str = "camera", seq: int = 0, quality: int = JPEG_QUALITY) -> Any:
     """A ``sensor_msgs/Image`` (``fmt="raw"``; ``encoding`` ``rgb8``
     (default for colour), ``bgr8`` or ``mono8`` (default for gray)) or a
-    ``sensor_msgs/CompressedImage`` (``fmt="png"`` or ``"jpeg"``) of a
-    uint8 RGB (H, W, 3) or gray (H, W) image."""
+    ``sensor_msgs/CompressedImage`` (``fmt="png"`` or ``"jpeg"``, at JPEG
+    ``quality`` 1..100) of a uint8 RGB (H, W, 3) or gray (H, W) image."""
     import cv2
 
     img = np.asarray(image)
@@ -307,8 +311,11 @@ def image_message(store: Any, stamp_ns: int, image: np.ndarray, *, fmt: str = "r
                         data=np.ascontiguousarray(px).reshape(-1))
     if fmt not in ("png", "jpeg"):
         raise ValueError(f"fmt must be 'raw', 'png' or 'jpeg', got {fmt!r}")
+    if isinstance(quality, bool) or not isinstance(quality, (int, np.integer)) or not 1 <= quality <= 100:
+        raise ValueError(f"JPEG quality must be an integer 1..100, got {quality!r}")
     bgr = img if img.ndim == 2 else img[:, :, ::-1]
-    ok, buf = cv2.imencode(".png" if fmt == "png" else ".jpg", np.ascontiguousarray(bgr))
+    params = [] if fmt == "png" else [cv2.IMWRITE_JPEG_QUALITY, int(quality)]
+    ok, buf = cv2.imencode(".png" if fmt == "png" else ".jpg", np.ascontiguousarray(bgr), params)
     if not ok:  # pragma: no cover - OpenCV encodes any uint8 image
         raise ValueError(f"OpenCV could not encode a {fmt} image")
     return T[COMPRESSED_IMAGE](header=header, format=fmt, data=buf.reshape(-1))

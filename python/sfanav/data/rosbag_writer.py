@@ -23,6 +23,7 @@ from .._checks import as_int_array, check_int
 from .ros_messages import (
     COMPRESSED_IMAGE,
     IMAGE,
+    JPEG_QUALITY,
     ODOMETRY,
     POSE_STAMPED,
     image_message,
@@ -169,15 +170,15 @@ class BagWriter:
 
     def add_image(self, topic: str, stamp: float | int, image: np.ndarray, *, fmt: str = "raw",
                   encoding: str | None = None, frame_id: str = "camera",
-                  record_time: float | int | None = None) -> None:
+                  record_time: float | int | None = None, quality: int = JPEG_QUALITY) -> None:
         """Writes a uint8 RGB (H, W, 3) or gray (H, W) image taken at ``stamp``
         (s, or ns with ``unit="ns"``) as a ``sensor_msgs/Image``
         (``fmt="raw"``, ``encoding`` ``rgb8``, ``bgr8`` or ``mono8``) or a
-        ``sensor_msgs/CompressedImage`` (``fmt="png"`` or ``"jpeg"``). ``record_time`` (same unit) is when
-        the bag received it (default: ``stamp``)."""
+        ``sensor_msgs/CompressedImage`` (``fmt="png"`` or ``"jpeg"``, JPEG at ``quality``). ``record_time``
+        (same unit) is when the bag received it (default: ``stamp``)."""
         ns, rec = self._stamps(stamp, record_time)
         msg = image_message(self.store, ns, image, fmt=fmt, encoding=encoding, frame_id=frame_id,
-                            seq=self._seq.get(topic, 0))
+                            seq=self._seq.get(topic, 0), quality=quality)
         self._write(topic, IMAGE if fmt == "raw" else COMPRESSED_IMAGE, msg, rec)
 
     def add_pose(self, topic: str, stamp: float | int, pose: Any, *, frame_id: str = "map",

@@ -25,7 +25,8 @@ from typing import Any
 import numpy as np
 
 # Modules that register experiments (imported on first lookup).
-FAMILIES = ("localization", "odometry", "navigation", "gardens", "gardens_suite", "robustness", "features", "landmarks")
+FAMILIES = ("localization", "odometry", "navigation", "gardens", "gardens_suite", "robustness", "features", "landmarks",
+            "corruptions")
 
 
 @dataclass

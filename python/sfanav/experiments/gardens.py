@@ -56,7 +56,7 @@ from ..data.sources import load_run
 from ..localization import baselines
 from ..localization.error_metrics import localization_metrics
 from ..localization.evaluation import coordinate_range
-from ..localization.localizer import Localizer, pooled_transform
+from ..localization.localizer import pooled_transform
 from ..localization.plots import plot_firing_maps
 from ..localization.protocols import RANDOM_SPLITS, TEST_RUN
 from ..localization.readout_selection import (
@@ -249,12 +249,11 @@ def _default_row(X_tr: np.ndarray, xy_tr: np.ndarray, X_te: np.ndarray, xy_te: n
     m = localization_metrics(loc.predict_features(F_te, signatures=G_te), xy_te, coordinate_range=crange)
     spec = loc.readout_spec_
     rs = random_splits_errors(spec, loc.readout_features(F_te, G_te), xy_te, crange, n_repeats=n_repeats, seed=seed)
-    X_rows = X_tr if loc.rows is None else loc.rows(X_tr)
+    X_rows = loc.network_input(X_tr)
     R = loc.network.transform(X_rows, rotations=True)  # the network's outputs, before rotation pooling
     _, eta_phi = eta_values(R[:, :, :8])
     # ablation: the same network and rows without rotation pooling (readout chosen as for the default)
-    plain = Localizer(loc.network, readout="auto", rows=loc.rows, rotation_pooling=None,
-                      signature=loc.signature).fit(X_tr, xy_tr)
+    plain = loc.sibling(readout="auto", n_outputs=None, rotation_pooling=None).fit(X_tr, xy_tr)
     mp = localization_metrics(plain.predict(X_te), xy_te, coordinate_range=crange)
     row = {"MAE x (%)": m["mae_x_pct"], "MAE y (%)": m["mae_y_pct"], "MAE x (m)": m["mae_x"], "MAE y (m)": m["mae_y"],
            "MED (m)": m["med"], "MAE x (%) (random splits)": rs["mae_x_pct"],
@@ -302,9 +301,7 @@ def _no_ground_truth_row(loc: Any, F_tr: np.ndarray, F_te: np.ndarray, X_tr: np.
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", OdometryMapWarning)
         lp = learn_positions(F_tr, odometry, images=X_tr)
-    free = Localizer(loc.network, n_outputs=loc.n_outputs, readout=loc.readout, rows=loc.rows,
-                     rotation_pooling=loc.rotation_pooling, signature=loc.signature).fit_features(
-        F_tr, lp.positions, signatures=G_tr)
+    free = loc.sibling().fit_features(F_tr, lp.positions, signatures=G_tr)
     world = align(free.predict_features(F_tr, signatures=G_tr), xy_tr)
     m = localization_metrics(world.apply(free.predict_features(F_te, signatures=G_te)), xy_te, coordinate_range=crange)
     target = align(lp.positions, xy_tr)

@@ -6,10 +6,12 @@ inside the area, the thesis-like control, dense trees close around, an open
 lawn with few distant landmarks, strong ground texture, dusk and low-sun
 light, a large and a small yard, ...) is simulated with its own seed; each
 has two training runs (``train-grid``: serpentine lanes along x;
-``train-cross``: the same with crossing lanes along y) and two test runs
+``train-cross``: the same with crossing lanes along y) and three test runs
 (``test-grid``: points between and beyond the training lanes at random
 headings, where a method must generalize instead of recall; ``test-walk``: a
-random walk). For every garden, training run and test run it measures
+random walk; ``test-walk jpeg-90``: the random walk as a ROS camera's
+image_transport sends it, JPEG at quality 90). For every garden, training
+run and test run it measures
 
 * the **sfanav default** (:func:`sfanav.localization.train_default`, exactly
   as ``sfanav train`` without a preset),
@@ -38,6 +40,7 @@ import numpy as np
 
 from .. import sim
 from .._threads import one_blas_thread
+from ..data.corruptions import corrupt
 from ..data.preprocessing import Preprocessing
 from ..data.sources import load_run
 from ..localization import baselines
@@ -50,7 +53,10 @@ from . import ExperimentResult, register
 from .localization import progress_log, simulated, tiny_config
 
 TRAIN_RUNS = ("train-grid", "train-cross")
-TEST_RUNS = ("test-grid", "test-walk")
+CORRUPTED_TESTS = {"test-walk jpeg-90": ("test-walk", "jpeg-90")}
+"""Test runs as a robot's camera sends them: the test walk JPEG-compressed at quality 90 (the models trained on
+the lossless run; the corruption suite, docs/robustness.md, measures the rest)."""
+TEST_RUNS = ("test-grid", "test-walk", *CORRUPTED_TESTS)
 METHODS = ("sfanav default", "thesis config", "perfect memory", "Fourier signature")
 ABLATIONS = ("slow features only", "signature only")
 """The default's two parts on its own network: the slow features' GP readout (the default before the
@@ -123,7 +129,10 @@ def run_garden(out: Path, name: str, seed: int, *, quick: bool, progress: bool,
     cam = ds.metadata["camera"]
     elev = tuple(cam.get("elevation_deg", (-30.0, 20.0)))
     prep = Preprocessing(int(cam["width"]), int(cam["height"]), False, False)
-    tests = {t: load_run(ds.select(run=t), prep) for t in TEST_RUNS}
+    tests = {t: load_run(ds.select(run=t), prep) for t in TEST_RUNS if t not in CORRUPTED_TESTS}
+    for t, (base, corruption) in CORRUPTED_TESTS.items():
+        X_te, xy_te = tests[base]
+        tests[t] = (corrupt(X_te, corruption, seed=seed), xy_te)
     res: dict[str, Any] = {}
     for tr in TRAIN_RUNS:
         X_tr, xy_tr = load_run(ds.select(run=tr), prep)
@@ -135,8 +144,8 @@ def run_garden(out: Path, name: str, seed: int, *, quick: bool, progress: bool,
         loc = models["sfanav default"] = train_default(X_tr, xy_tr, camera_elevation=elev, network=net)
         t_default = time.perf_counter() - t0
         F_tr, G_tr = loc.features(X_tr), loc.signatures(X_tr)
-        slow = Localizer(loc.network, rows=loc.rows, readout={"kind": "gp", "n_outputs": min(12, F_tr.shape[1])}
-                         ).fit_features(F_tr, xy_tr)  # the previous default's readout (its CV chose the GP)
+        slow = loc.sibling(readout={"kind": "gp", "n_outputs": min(12, F_tr.shape[1])}, n_outputs=None,
+                           rotation_pooling="auto", signature=None).fit_features(F_tr, xy_tr)  # the previous default's readout (its CV chose the GP)
         sig = SignatureGPReadout(0, G_tr.shape[1]).fit(G_tr, xy_tr)
         models["slow features only"] = slow
         models["signature only"] = _SignatureOnly(sig, loc)

@@ -39,7 +39,6 @@ from ..data.preprocessing import Preprocessing
 from ..data.sources import load_run
 from ..localization.error_metrics import align, localization_metrics
 from ..localization.evaluation import coordinate_range, evaluate, evaluation_rows
-from ..localization.localizer import Localizer
 from ..localization.training import fit_localizer
 from ..odometry.self_supervision import OdometryMapWarning, learn_positions
 from ..sfa.network import Network, Rotation
@@ -182,8 +181,7 @@ def no_ground_truth_rows(loc: Any, ds: Dataset, data: tuple, *, suffix: str, sup
         except ValueError as exc:
             notes.append(f"No '{tag.strip()}' rows: the training run's odometry cannot fix a metric map ({exc}).")
             continue
-        new = Localizer(loc.network, n_outputs=loc.n_outputs, readout=loc.readout, rows=loc.rows,
-                        rotation_pooling=loc.rotation_pooling)
+        new = loc.sibling(signature=None)
         new.fit_features(F, lp.positions)
         world = align(new.predict_features(F), xy_tr)  # evaluation only
         m = localization_metrics(world.apply(new.predict(X_te)), xy_te, coordinate_range=coordinate_range(xy_te))

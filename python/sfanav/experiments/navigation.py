@@ -233,7 +233,7 @@ def _run_71(kind: str, out: Path, *, quick: bool, seed: int, progress: bool) -> 
     for n, wts, tag in ((2, None, "n = 2"), (n_w, dw, f"n = {n_w} weighted")):
         for d in _descents():
             label = f"{d.name}, sfanav default network, {tag}"
-            navi = nav.Navigator(sc.fresh_noise(), nav.ImageFeatures(dnet, sc.simulator.renderer, dcam, rows=loc.rows),
+            navi = nav.Navigator(sc.fresh_noise(), nav.ImageFeatures(dnet, sc.simulator.renderer, dcam, rows=loc.network_input),
                                  d, n_outputs=n, weights=wts, success_radius=SUCCESS_RADIUS,
                                  max_iterations=QUICK_ITERATIONS if quick else MAX_ITERATIONS)
             s = nav.evaluate_trials(navi, starts[:n_img], targets[:n_img],
@@ -297,11 +297,11 @@ def _run_71(kind: str, out: Path, *, quick: bool, seed: int, progress: bool) -> 
     for n in (2, 8):
         rows.append({"metric": f"position code: RMS of x, y from s1-s{n} (m)", "thesis": None,
                      "sfanav": position_code_error(xs, ys, F, n)})
-    dxs, dys, DF = grid_features(sc, dnet, 0.75 if quick else 0.5, progress, camera=dcam, rows=loc.rows)
+    dxs, dys, DF = grid_features(sc, dnet, 0.75 if quick else 0.5, progress, camera=dcam, rows=loc.network_input)
     for n in (2, n_w):
         rows.append({"metric": f"position code: RMS of x, y from s1-s{n} (m), sfanav default network", "thesis": None,
                      "sfanav": position_code_error(dxs, dys, DF, n)})
-    dtf = nav.ImageFeatures(dnet, sc.simulator.renderer, dcam, rows=loc.rows)(
+    dtf = nav.ImageFeatures(dnet, sc.simulator.renderer, dcam, rows=loc.network_input)(
         np.array([[targets[0][0], targets[0][1], 0.0]]))[0]
     plots.append(str(nav.plot_cost_surface(dxs, dys, DF, dtf, out / f"7.1-{kind}-cost-surface-default-network.png",
                                            ns=(2, n_w), weights=np.concatenate([dw, np.ones(DF.shape[-1] - n_w)]),

@@ -309,8 +309,7 @@ def no_ground_truth_localizer(sc: Scene, out: Path, seed: int, loc: Any, cam: An
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", OdometryMapWarning)
         lp = learn_positions(F, odo, images=imgs)
-    free = Localizer(loc.network, n_outputs=loc.n_outputs, readout=loc.readout, rows=loc.rows,
-                     rotation_pooling=loc.rotation_pooling).fit_features(F, lp.positions)
+    free = loc.sibling(signature=None).fit_features(F, lp.positions)
     truth = sc.trajectory.poses[:, :2]  # evaluation only
     summary = {"loop closures kept": lp.graph.n_inliers if lp.graph is not None else None,
                "training positions median error (m)": float(np.median(np.hypot(*(

@@ -137,9 +137,9 @@ def evaluate(
     net = loc.trained_network()
     n_out = net.n_outputs_
     raw_test, raw_train = test_images, train_images  # the baselines see the panoramas as they are
-    if loc.rows is not None and not loc.rows.identity:  # the network sees the rows the localizer applies
-        test_images = loc.rows(test_images)
-        train_images = None if train_images is None else loc.rows(train_images)
+    # the network sees the images as the localizer hands them on (photometric normalisation, rows)
+    test_images = loc.network_input(test_images)
+    train_images = None if train_images is None else loc.network_input(train_images)
     t0 = time.perf_counter()
     F_test = loc.transform_rows(test_images)  # rotation pooled if the localizer pools
     sfa_ms = 1000.0 * (time.perf_counter() - t0) / len(test_images)

@@ -138,10 +138,7 @@ def fit_localizer(
     if readout_augmentation is None:
         loc.fit_features(F, Y, signatures=G)
     else:
-        altered = readout_augmentation.apply(raw, seed=seed + 1)
-        loc.fit_features(F, Y, signatures=G, augmented=(
-            loc.features(altered), loc.signatures(altered) if signature is not None else None))
-        del altered
+        loc.fit_features(F, Y, signatures=G, augmented=augmented_features(loc, raw, readout_augmentation, seed=seed))
     readout_s = time.perf_counter() - t1
     loc.info = dict(info or {})
     if prep is not None:
@@ -158,6 +155,18 @@ def fit_localizer(
     if loc.selection_ is not None:
         loc.info["readout_rule"] = loc.selection_.rule
     return loc
+
+
+def augmented_features(loc: Localizer, images: np.ndarray, model: CorruptionModel, *,
+                       seed: int = 0) -> tuple[np.ndarray, np.ndarray | None]:
+    """``(features, signatures)`` of ``images`` (N, H, W[, C]) uint8, each
+    with a corruption drawn from ``model`` (``seed + 1``: the draw
+    :func:`fit_localizer` makes for ``readout_augmentation``), as ``loc``
+    (network trained) sees them: what :meth:`Localizer.fit_features` takes
+    as ``augmented``, e.g. to fit the same localizer's readout to other
+    positions of its training run (signatures None if it reads none)."""
+    altered = model.apply(images, seed=seed + 1)
+    return loc.features(altered), (loc.signatures(altered) if loc.signature is not None else None)
 
 
 def invariance_partners(images: np.ndarray, model: CorruptionModel, network_input: Callable[[Any], Any], *,

@@ -93,6 +93,13 @@ def _add_train(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--closure-weights", choices=("uniform", "score"), default="uniform",
                    help="with --loop-closures: weight every closure 1 (uniform, the thesis) or by the detector's "
                         "match confidence (score)")
+    p.add_argument("--robustness", choices=("none", "light", "full"), default=None,
+                   help="guard against what a robot's camera and image transport do to its images (JPEG, noise, "
+                        "blur, exposure, white balance; docs/robustness.md): light = photometric normalisation and "
+                        "a readout fitted on corrupted copies too (default for the sfanav default; free on clean "
+                        "images), full = light and a network trained to ignore the corruptions (holds under all "
+                        "of them, less precise on flawless images; one machine), none = neither (the thesis; "
+                        "default with --preset thesis-*, --config or --normalize)")
     p.add_argument("--normalize", action="store_true",
                    help="normalize every image to zero mean and unit variance (thesis 5.2)")
     p.add_argument("--mirror", default=None, metavar="CX,CY,INNER,OUTER",
@@ -199,6 +206,15 @@ def _train(args: argparse.Namespace, stack: Any) -> int:
     t0 = time.perf_counter()
     if args.jitter_seed and not args.jitter:
         raise UsageError("--jitter-seed needs --jitter")
+    robustness = args.robustness
+    if args.normalize:
+        if robustness not in (None, "none"):
+            raise UsageError(f"--normalize and --robustness {robustness} do not combine: the robustness normalises "
+                             "the images itself (log contrast), and its corrupted copies need the 8-bit images")
+        robustness = "none"
+    if robustness == "full" and args.scheduler is not None:
+        raise UsageError("--robustness full trains the network on one machine (each image interleaved with a "
+                         "corrupted copy); use --robustness light with --scheduler")
     out = new_file(args.out, args.overwrite, "model file")
     if args.landmarks is not None:
         return train_landmarks(args, out)
@@ -217,7 +233,8 @@ def _train(args: argparse.Namespace, stack: Any) -> int:
         raise UsageError("--signature fourier needs the auto readout; the quadratic readout reads slow features only")
     recipe = recipe_for(args.preset, config=args.config is not None, readout=args.readout, rows=args.rows,
                         n_outputs=args.n_outputs, rotation_pooling=args.rotation_pooling,
-                        signature={None: "auto", "none": None}.get(args.signature, args.signature))
+                        signature={None: "auto", "none": None}.get(args.signature, args.signature),
+                        robustness=robustness)
     rows = None
     if recipe.rows == "band":
         elev = (ds.metadata.get("camera") or {}).get("elevation_deg") if isinstance(ds.metadata, dict) else None
@@ -241,7 +258,7 @@ def _train(args: argparse.Namespace, stack: Any) -> int:
     log(f"training on {len(train)} images of {args.dataset}" + (f" (run {run})" if run else "")
          + f" as {prep.describe()} panoramas; network: {net!r}; rows: {rows.describe() if rows else 'all'}; "
          + f"readout: {recipe.readout}" + (f" with the {recipe.signature} signature" if recipe.signature else "")
-         + (" (the sfanav default)" if recipe.name == "sfanav default" else ""))
+         + f"; robustness: {recipe.robustness}" + (" (the sfanav default)" if recipe.name == "sfanav default" else ""))
     preprocessor = Preprocessor(prep, mirror=args.mirror, log=log)
     images, xy = load_run(train, prep, preprocessor=preprocessor, progress=not args.no_progress)
     network_images = None
@@ -273,7 +290,7 @@ def _train(args: argparse.Namespace, stack: Any) -> int:
                   network_fit=network_fit,
                   rotation=Rotation(step=args.step, window=args.window), n_outputs=recipe.n_outputs,
                   readout=recipe.readout, rows=rows, prep=prep, progress=not args.no_progress,
-                  rotation_pooling=recipe.rotation_pooling, signature=recipe.signature,
+                  rotation_pooling=recipe.rotation_pooling, signature=recipe.signature, **recipe.robust_kwargs(),
                   info={"dataset": str(args.dataset), "run": run,
                         "network": args.preset or (str(args.config) if args.config else "sfanav-default"),
                         **recipe.info()})

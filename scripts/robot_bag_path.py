@@ -1,0 +1,147 @@
+#!/usr/bin/env python3
+"""The robot's path end to end, from bags with compressed images: a garden
+simulated, its runs written as ROS bags the way a robot records them, then
+exactly the commands a user runs:
+
+    sfanav import train.bag test.bag --image-topic /camera/image ... --out D
+    sfanav train --dataset D --supervision odometry --out M      (no ground truth)
+    sfanav localize M D --run test --odometry --out est.mcap
+
+for three recordings of the same runs: both bags lossless (``raw``:
+``sensor_msgs/Image`` rgb8), both JPEG (``jpeg``: ``sensor_msgs/CompressedImage``
+at --quality, a robot that records what it sends), and a lossless exploration
+with a JPEG test run (``raw-jpeg``: recorded raw, localized from the
+compressed live stream). The estimates are read back from the ``.mcap``; for
+scoring only they are moved into the world frame by the rigid transform that
+fits the model's estimates of its training run to the ground truth (the bags
+carry it on /ground_truth, which train ignores with --supervision
+odometry). Also checks that every estimate carries exactly its image's
+header stamp (integer ns).
+
+    python3 scripts/robot_bag_path.py --out runs/bagpath     # ~5 min; writes runs/bagpath/bag-path.json
+
+Reports the MED of single images and of the fused track per recording, and
+the ratio of each compressed recording to the lossless one (issue 41: <=
+1.3).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+STAMP0 = 1_733_000_000_123_456_789  # a Unix time with odd nanoseconds
+PERIOD = 100_000_037  # ns between frames (10 Hz, not a round number)
+
+
+def sh(*args: str) -> str:
+    t0 = time.perf_counter()
+    p = subprocess.run(["sfanav", *args], capture_output=True, text=True)
+    if p.returncode != 0:
+        sys.exit(f"sfanav {' '.join(args)} failed ({p.returncode}):\n{p.stderr}")
+    print(f"  sfanav {args[0]}: {time.perf_counter() - t0:.0f} s", flush=True)
+    return p.stdout
+
+
+def write_bag(path: Path, run, fmt: str, quality: int) -> np.ndarray:
+    """One run as a ROS 2 bag (.mcap): camera, wheel odometry and ground truth at each image's stamp."""
+    from sfanav.data import BagWriter
+
+    stamps = STAMP0 + PERIOD * np.arange(len(run), dtype=np.int64)
+    with BagWriter(path, unit="ns") as w:
+        for k, (img, pose, odo) in enumerate(zip(run.images(batch_size=1), run.poses, run.odometry)):
+            ns = int(stamps[k])
+            w.add_image("/camera/image", ns, img[0], fmt=fmt, quality=quality)
+            w.add_odometry("/odom", ns, odo)
+            w.add_pose("/ground_truth", ns, pose)
+    return stamps
+
+
+def read_estimates(path: Path) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """{topic: (stamps ns, xy)} of the estimates bag."""
+    from rosbags.highlevel import AnyReader
+
+    out: dict[str, list] = {}
+    with AnyReader([path]) as r:
+        for conn, _, raw in r.messages():
+            msg = r.deserialize(raw, conn.msgtype)
+            pose = msg.pose.pose if hasattr(msg.pose, "pose") else msg.pose
+            ns = int(msg.header.stamp.sec) * 10**9 + int(msg.header.stamp.nanosec)
+            out.setdefault(conn.topic, []).append((ns, pose.position.x, pose.position.y))
+    return {t: (np.array([v[0] for v in vs], np.int64), np.array([v[1:] for v in vs])) for t, vs in out.items()}
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--out", required=True, type=Path)
+    ap.add_argument("--preset", default="demo")
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--quality", type=int, default=90, help="JPEG quality of the compressed bags (default 90)")
+    args = ap.parse_args()
+    from sfanav.data import Dataset
+    from sfanav.localization.error_metrics import align
+
+    out = args.out
+    out.mkdir(parents=True, exist_ok=True)
+    sim_dir = out / "sim"
+    if not (sim_dir / "metadata.json").exists():
+        sh("simulate", "--preset", args.preset, "--seed", str(args.seed), "--out", str(sim_dir), "--overwrite",
+           "--no-progress")
+    ds = Dataset(sim_dir)
+    runs = {"train": ds.select(run="train"), "test": ds.select(run="test")}
+    results: dict[str, dict] = {}
+    for name, fmts in {"raw": ("raw", "raw"), "jpeg": ("jpeg", "jpeg"), "raw-jpeg": ("raw", "jpeg")}.items():
+        print(f"{name}: train bag {fmts[0]}, test bag {fmts[1]}", flush=True)
+        d = out / name
+        d.mkdir(exist_ok=True)
+        stamps = {}
+        for r, fmt in zip(("train", "test"), fmts):
+            bag = d / f"{r}.mcap"
+            if not bag.exists():
+                stamps[r] = write_bag(bag, runs[r], fmt, args.quality)
+            else:
+                stamps[r] = STAMP0 + PERIOD * np.arange(len(runs[r]), dtype=np.int64)
+        t0 = time.perf_counter()
+        sh("import", str(d / "train.mcap"), str(d / "test.mcap"), "--image-topic", "/camera/image",
+           "--odom-topic", "/odom", "--pose-topic", "/ground_truth", "--run", "train", "test",
+           "--out", str(d / "dataset"), "--overwrite", "--no-progress")
+        sh("train", "--dataset", str(d / "dataset"), "--supervision", "odometry", "--out", str(d / "model.sfa"),
+           "--overwrite", "--no-progress")
+        sh("localize", str(d / "model.sfa"), str(d / "dataset"), "--run", "test", "--odometry",
+           "--out", str(d / "estimates.mcap"), "--overwrite", "--no-progress")
+        sh("localize", str(d / "model.sfa"), str(d / "dataset"), "--run", "train", "--out", str(d / "train.csv"),
+           "--overwrite", "--no-progress")
+        wall = time.perf_counter() - t0
+        est = read_estimates(d / "estimates.mcap")
+        train_csv = np.genfromtxt(d / "train.csv", delimiter=",", names=True)
+        frame = align(np.c_[train_csv["x"], train_csv["y"]], runs["train"].poses[:, :2])
+        truth = runs["test"].poses[:, :2]
+        res = {"wall (s)": wall}
+        for topic, key in (("/sfanav/estimate", "single images"), ("/sfanav/fused", "fused with odometry")):
+            ns, xy = est[topic]
+            res[f"exact stamps ({key})"] = bool(np.array_equal(ns, stamps["test"]))
+            res[f"MED (m) {key}"] = float(np.mean(np.linalg.norm(frame.apply(xy) - truth, axis=1)))
+        results[name] = res
+        print(f"  {name}: " + ", ".join(f"{k} {v:.3f}" if isinstance(v, float) else f"{k} {v}" for k, v in res.items()),
+              flush=True)
+    for name in ("jpeg", "raw-jpeg"):
+        for key in ("single images", "fused with odometry"):
+            results[name][f"ratio to raw ({key})"] = (results[name][f"MED (m) {key}"]
+                                                      / results["raw"][f"MED (m) {key}"])
+    summary = {"preset": args.preset, "seed": args.seed, "jpeg quality": args.quality, "results": results,
+               "target": "ratio to raw <= 1.3",
+               "met": all(results[n][f"ratio to raw ({k})"] <= 1.3 for n in ("jpeg", "raw-jpeg")
+                          for k in ("single images", "fused with odometry"))}
+    (out / "bag-path.json").write_text(json.dumps(summary, indent=1) + "\n")
+    print(json.dumps(summary, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,284 @@
+"""Robustness to a robot camera's corruptions (issue 41): the photometric
+normalisation's invariances, the corruption model, the readout fitted on
+corrupted copies, the network's invariance partners, the recipe's levels and
+the command line."""
+
+import numpy as np
+import pytest
+from clitools import TINY_TOML, assert_one_line_error, run, tiny_dataset
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+import sfanav
+from sfanav.data.corruptions import CAMERA, Corruption, CorruptionModel, corrupt
+from sfanav.data.photometric import LOG_SCALE, log_contrast, normalize
+from sfanav.experiments.localization import tiny_config
+from sfanav.localization.recipe import DEFAULT_ROBUSTNESS, ROBUSTNESS, recipe_for
+from sfanav.localization.training import augmented_features, fit_localizer, invariance_partners
+
+
+def scene(n=4, h=10, w=48, seed=0):
+    rng = np.random.default_rng(seed)
+    base = rng.integers(40, 180, (n, h, w, 3)).astype(np.float64)
+    return np.clip(base, 0, 255).astype(np.uint8)
+
+
+# ---------------------------------------------------------------- photometric normalisation
+def test_log_contrast_removes_exposure_white_balance_and_gamma():
+    x = scene()
+    ref = log_contrast(x)
+    assert ref.dtype == np.float32 and ref.shape == x.shape
+    # every image: zero mean per channel, the fixed contrast
+    assert np.allclose(ref.reshape(4, -1, 3).mean(axis=1), 0, atol=1e-3)
+    assert np.allclose(ref.reshape(4, -1).std(axis=1), LOG_SCALE, rtol=1e-4)
+    for c in (Corruption("exposure", {"gain": 0.6}), Corruption("white-balance", {"gains": (1.15, 1.0, 0.8)}),
+              Corruption("gamma", {"gamma": 1.4})):
+        d = np.abs(log_contrast(c(x)) - ref).mean()
+        raw = np.abs(c(x).astype(float) - x).mean()
+        # in units of the normalised image's std (40): a small fraction of it, where the raw change is large
+        assert d < 0.06 * LOG_SCALE, (c.kind, d)
+        assert raw > 8, c.kind
+
+
+def test_log_contrast_without_rounding_is_exact_for_a_gain():
+    rng = np.random.default_rng(1)
+    x = rng.uniform(50, 200, (2, 6, 20, 3))
+    gain = np.array([1.3, 0.9, 1.1])
+    # exact with a zero offset: log(g I) = log g + log I, and the centring removes log g per channel
+    a = log_contrast(x, offset=1e-9)
+    b = log_contrast(x * gain, offset=1e-9)
+    np.testing.assert_allclose(a, b, atol=1e-3)
+
+
+def test_log_contrast_flat_and_gray_images():
+    flat = np.full((2, 5, 9), 77, np.uint8)
+    np.testing.assert_array_equal(log_contrast(flat), 0)
+    gray = scene()[..., 0]
+    g = log_contrast(gray)
+    assert g.shape == gray.shape and abs(float(g[0].mean())) < 1e-3
+
+
+def test_normalize_dispatch_and_bad_input():
+    x = scene()
+    assert normalize(x, None) is x
+    np.testing.assert_array_equal(normalize(x, "log-contrast"), log_contrast(x))
+    with pytest.raises(ValueError, match="photometric normalisation must be one of"):
+        normalize(x, "histogram")
+    with pytest.raises(ValueError, match="offset and scale"):
+        log_contrast(x, offset=0)
+
+
+@settings(max_examples=20, deadline=None)
+@given(gain=st.floats(0.3, 0.8), seed=st.integers(0, 1000))
+def test_log_contrast_of_a_darker_image_property(gain, seed):
+    x = scene(n=1, seed=seed)
+    y = np.rint(x * gain).astype(np.uint8)  # no clipping below 1
+    assert np.abs(log_contrast(y) - log_contrast(x)).mean() < 0.1 * LOG_SCALE
+
+
+# ---------------------------------------------------------------- the corruption model
+def test_corruption_model_is_deterministic_per_image():
+    x = scene(n=6)
+    a = CAMERA.apply(x, seed=3)
+    np.testing.assert_array_equal(a[2:], CAMERA.apply(x[2:], seed=3, start=2))
+    assert [c.describe() for c in CAMERA.draw(3, seed=3)] == [c.describe() for c in CAMERA.draw(3, seed=3)]
+    assert [c.describe() for c in CAMERA.draw(8, seed=3)] != [c.describe() for c in CAMERA.draw(8, seed=4)]
+    kinds = {c.kind for c in CAMERA.draw(400, seed=0)}
+    assert kinds == {"jpeg", "gaussian-noise", "defocus", "motion-blur", "defects", "exposure", "vignetting"}
+    qualities = [c.param("quality") for c in CAMERA.draw(400, seed=0) if c.kind == "jpeg"]
+    assert all(isinstance(q, int) and 30 <= q <= 95 for q in qualities)
+
+
+def test_corruption_model_bad_input():
+    with pytest.raises(ValueError, match="at least one family"):
+        CorruptionModel({})
+    with pytest.raises(ValueError, match="needs a kind"):
+        CorruptionModel({"a": {"quality": (1, 2)}})
+    with pytest.raises(ValueError, match="quality"):
+        CorruptionModel({"a": {"kind": "jpeg", "quality": (0, 200)}})
+    with pytest.raises(TypeError, match="uint8"):
+        CAMERA.apply(np.zeros((1, 4, 8, 3), np.float32))
+    gray = CorruptionModel({"wb": {"kind": "white-balance", "gains": (0.8, 1.2)}}).apply(scene()[..., 0])
+    np.testing.assert_array_equal(gray, scene()[..., 0])  # no white balance on gray images
+
+
+# ---------------------------------------------------------------- training
+@pytest.fixture(scope="module")
+def run_images():
+    rng = np.random.default_rng(0)
+    # a smooth synthetic run: panoramas whose pattern moves with the position
+    n = 40
+    xy = np.c_[np.linspace(0, 3, n), np.sin(np.linspace(0, 3, n))]
+    cols = np.arange(48)
+    imgs = np.empty((n, 8, 48, 3), np.uint8)
+    for i, (x, y) in enumerate(xy):
+        for r in range(8):
+            v = 120 + 60 * np.sin(2 * np.pi * cols / 48 * (1 + r % 3) + x) + 30 * np.cos(2 * np.pi * cols / 24 + y * r)
+            imgs[i, r] = np.clip(v[:, None] + rng.normal(0, 2, (48, 3)), 0, 255).astype(np.uint8)
+    return imgs, xy
+
+
+def _net():
+    return sfanav.Network(tiny_config(48, 8, 3, out=6))
+
+
+def test_fit_localizer_robustness_light_and_full(run_images):
+    imgs, xy = run_images
+    light = fit_localizer(_net(), imgs, xy, rotation=sfanav.Rotation(4), progress=False,
+                          **recipe_for(robustness="light").fit_kwargs() | {"rows": None})
+    assert light.photometric == "log-contrast" and light.n_augmented_ == len(imgs)
+    assert light.training_positions_.shape == (len(imgs), 2)  # the originals, not the copies
+    assert "readout_augmentation" in light.info and "invariance" not in light.info
+    full = fit_localizer(_net(), imgs, xy, rotation=sfanav.Rotation(4), progress=False,
+                         **recipe_for(robustness="full").fit_kwargs() | {"rows": None})
+    assert full.network.n_partners_ == len(imgs) and full.network.n_loop_closures_ == 0
+    assert full.info["invariance_weight"] == 1.0
+    # the photometric normalisation: an exposure change moves the estimates little
+    dark = corrupt(imgs, "exposure-0.6")
+    for loc in (light, full):
+        shift = np.abs(loc.predict(dark) - loc.predict(imgs)).mean()
+        assert shift < 0.2, shift
+
+
+def test_photometric_localizer_round_trip(run_images, tmp_path):
+    imgs, xy = run_images
+    loc = fit_localizer(_net(), imgs, xy, rotation=sfanav.Rotation(4), progress=False, photometric="log-contrast",
+                        signature="fourier")
+    loc.save(tmp_path / "m.sfa")
+    back = sfanav.load(tmp_path / "m.sfa")
+    assert back.photometric == "log-contrast"
+    np.testing.assert_allclose(back.predict(imgs[:5]), loc.predict(imgs[:5]))
+    from sfanav.sfa.modelfile import read_model
+
+    assert read_model(tmp_path / "m.sfa")[2]["version"] == 6
+    # the network saw the normalised images: features are the network's outputs on them
+    np.testing.assert_allclose(loc.features(imgs[:3]), loc.transform_rows(log_contrast(imgs[:3])))
+    # a sibling sees images as the localizer does
+    sib = loc.sibling(readout={"kind": "knn", "n_outputs": 4, "k": 2}, signature=None)
+    assert sib.photometric == "log-contrast" and sib.network is loc.network and not sib.is_fitted_
+
+
+def test_fit_features_augmented_checks(run_images):
+    imgs, xy = run_images
+    loc = fit_localizer(_net(), imgs, xy, rotation=sfanav.Rotation(4), progress=False)
+    F = loc.features(imgs)
+    sib = loc.sibling()
+    with pytest.raises(ValueError, match="shape of the features"):
+        sib.fit_features(F, xy, augmented=(F[:5], None))
+    with pytest.raises(TypeError, match="tuple"):
+        sib.fit_features(F, xy, augmented=F)
+    with pytest.raises(ValueError, match="for both"):
+        sib.fit_features(F, xy, augmented=(F, np.zeros((len(F), 3))))
+    sib.fit_features(F, xy, augmented=(F + 0.01, None))
+    assert sib.training_positions_.shape == (len(F), 2)
+
+
+def test_robustness_needs_8_bit_images(run_images):
+    imgs, xy = run_images
+    with pytest.raises(ValueError, match="8-bit"):
+        fit_localizer(_net(), imgs.astype(np.float32), xy, rotation=sfanav.Rotation(4), progress=False,
+                      readout_augmentation=CAMERA)
+    with pytest.raises(TypeError, match="CorruptionModel"):
+        fit_localizer(_net(), imgs, xy, rotation=sfanav.Rotation(4), progress=False, invariance="jpeg")
+
+
+def test_invariance_partners_combine_loop_closures(run_images):
+    imgs, _ = run_images
+    ident = CorruptionModel({"none": {"kind": "gamma", "gamma": 1.0}})  # a corruption that changes nothing
+    cur, w, partners = invariance_partners(imgs, ident, lambda a: a, weight=0.5,
+                                           loop_closures=(np.array([1]), np.array([30]), np.array([4])))
+    np.testing.assert_array_equal(cur, np.arange(len(imgs)))
+    assert w[30] == 0.5 and w[0] == 0.5
+    np.testing.assert_array_equal(partners[30], np.roll(imgs[1], 4, axis=1))  # the aligned earlier visit
+    np.testing.assert_array_equal(partners[0], imgs[0])  # itself, "corrupted"
+    with pytest.raises(ValueError, match="invariance_weight"):
+        invariance_partners(imgs, ident, lambda a: a, weight=2.0)
+
+
+def test_partners_equal_loop_closures_with_the_same_images(run_images):
+    imgs, _ = run_images
+    closures = (np.array([2, 5]), np.array([30, 35]), np.array([7, 0]))
+    a = _net().fit(imgs, sfanav.Rotation(4), progress=False, loop_closures=closures)
+    from sfanav.sfa.feedback import closure_partners
+
+    cur, w, P = closure_partners(imgs, closures)
+    b = _net().fit(imgs, sfanav.Rotation(4), progress=False, partners=(np.array(cur), np.array(w), P))
+    np.testing.assert_array_equal(a.transform(imgs), b.transform(imgs))
+    assert b.n_partners_ == 2 and b.n_loop_closures_ == 0
+
+
+@pytest.mark.parametrize("partners, match", [
+    ((np.array([0, 0]), np.ones(2), None), "more than one partner"),
+    ((np.array([0, 99]), np.ones(2), None), "index the 40 training images"),
+    ((np.array([0, 1]), np.array([1.0, 2.0]), None), "weights"),
+    ((np.array([0.5, 1]), np.ones(2), None), "integers"),
+    ((np.array([0, 1]), np.ones(2), "small"), "size and dtype"),
+])
+def test_bad_partners(run_images, partners, match):
+    imgs, _ = run_images
+    cur, w, P = partners
+    P = imgs[:2] if P is None else imgs[:2, :, :10]
+    with pytest.raises(ValueError, match=match):
+        _net().fit(imgs, sfanav.Rotation(4), progress=False, partners=(cur, w, P))
+    with pytest.raises(ValueError, match="cannot be combined"):
+        _net().fit(imgs, sfanav.Rotation(4), progress=False, partners=(np.array([0]), np.ones(1), imgs[:1]),
+                   loop_closures=(np.array([1]), np.array([30]), np.array([0])))
+
+
+def test_augmented_features_are_the_fit_draw(run_images):
+    imgs, xy = run_images
+    loc = fit_localizer(_net(), imgs, xy, rotation=sfanav.Rotation(4), progress=False, readout_augmentation=CAMERA,
+                        seed=2)
+    F, G = augmented_features(loc, imgs, CAMERA, seed=2)
+    assert F.shape == (len(imgs), loc.n_features_in_) and G is None
+    # the same draw as the fit's copies: refitting on them reproduces the readout
+    again = loc.sibling().fit_features(loc.features(imgs), xy, augmented=(F, G))
+    np.testing.assert_allclose(again.predict(imgs[:4]), loc.predict(imgs[:4]), atol=1e-9)
+
+
+# ---------------------------------------------------------------- recipe and command line
+def test_recipe_robustness_levels():
+    assert ROBUSTNESS == ("none", "light", "full") and DEFAULT_ROBUSTNESS == "light"
+    r = recipe_for()
+    assert r.name == "sfanav default" and r.robustness == "light" and r.info()["robustness"] == "light"
+    kw = r.fit_kwargs()
+    assert kw["photometric"] == "log-contrast" and kw["readout_augmentation"] is CAMERA and kw["invariance"] is None
+    assert recipe_for(robustness="full").fit_kwargs()["invariance"] is CAMERA
+    assert recipe_for(robustness="none").name == "custom"
+    t = recipe_for("thesis-5.1")
+    assert t.name == "thesis" and t.robustness == "none" and t.fit_kwargs()["photometric"] is None
+    assert recipe_for(config=True).robustness == "none"
+    with pytest.raises(ValueError, match="robustness must be one of"):
+        recipe_for(robustness="max")
+
+
+@pytest.fixture(scope="module")
+def tiny(tmp_path_factory):
+    root = tmp_path_factory.mktemp("robust-cli")
+    ds, cfg = tiny_dataset(root)
+    return {"root": root, "config": cfg}
+
+
+@pytest.mark.parametrize("level", ["light", "full"])
+def test_train_robustness_from_the_command_line(tiny, tmp_path, capsys, level):
+    code, out, err = run(capsys, "train", "--dataset", tiny["root"] / "data", "--config", tiny["config"],
+                         "--rows", "all", "--robustness", level, "--out", tmp_path / "m.sfa", "--no-progress")
+    assert code == 0, err
+    loc = sfanav.load(tmp_path / "m.sfa")
+    assert loc.photometric == "log-contrast" and loc.info["robustness"] == level
+    assert ("invariance" in loc.info) == (level == "full")
+    code, out, err = run(capsys, "localize", tmp_path / "m.sfa", tiny["root"] / "data", "--run", "test",
+                         "--out", tmp_path / "t.csv", "--no-progress")
+    assert code == 0, err
+
+
+def test_train_robustness_usage_errors(tiny, tmp_path, capsys):
+    base = ["train", "--dataset", tiny["root"] / "data", "--config", tiny["config"], "--out", tmp_path / "m.sfa",
+            "--no-progress"]
+    code, _, err = run(capsys, *base, "--normalize", "--robustness", "light")
+    assert_one_line_error(code, err, "--normalize", "--robustness light")
+    code, _, err = run(capsys, *base, "--robustness", "full", "--scheduler", "tcp://127.0.0.1:1")
+    assert_one_line_error(code, err, "--robustness full", "--scheduler")
+    code, _, err = run(capsys, *base, "--robustness", "max")
+    assert code == 2 and "invalid choice" in err
+    assert TINY_TOML  # the config the fixture wrote
