@@ -83,6 +83,8 @@ def main() -> int:
     ap.add_argument("--preset", default="demo")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--quality", type=int, default=90, help="JPEG quality of the compressed bags (default 90)")
+    ap.add_argument("--train-run", default="train", help="the preset's exploration run (default train)")
+    ap.add_argument("--test-run", default="test", help="the preset's test run (default test)")
     args = ap.parse_args()
     from sfanav.data import Dataset
     from sfanav.localization.error_metrics import align
@@ -94,7 +96,7 @@ def main() -> int:
         sh("simulate", "--preset", args.preset, "--seed", str(args.seed), "--out", str(sim_dir), "--overwrite",
            "--no-progress")
     ds = Dataset(sim_dir)
-    runs = {"train": ds.select(run="train"), "test": ds.select(run="test")}
+    runs = {"train": ds.select(run=args.train_run), "test": ds.select(run=args.test_run)}
     results: dict[str, dict] = {}
     for name, fmts in {"raw": ("raw", "raw"), "jpeg": ("jpeg", "jpeg"), "raw-jpeg": ("raw", "jpeg")}.items():
         print(f"{name}: train bag {fmts[0]}, test bag {fmts[1]}", flush=True)
@@ -134,7 +136,7 @@ def main() -> int:
         for key in ("single images", "fused with odometry"):
             results[name][f"ratio to raw ({key})"] = (results[name][f"MED (m) {key}"]
                                                       / results["raw"][f"MED (m) {key}"])
-    summary = {"preset": args.preset, "seed": args.seed, "jpeg quality": args.quality, "results": results,
+    summary = {"preset": args.preset, "seed": args.seed, "runs": [args.train_run, args.test_run], "jpeg quality": args.quality, "results": results,
                "target": "ratio to raw <= 1.3",
                "met": all(results[n][f"ratio to raw ({k})"] <= 1.3 for n in ("jpeg", "raw-jpeg")
                           for k in ("single images", "fused with odometry"))}

@@ -14,6 +14,8 @@ Candidates (all the sfanav default's network, rows, pooling, signature and reado
 * light: photometric + readout (the default);
 * full: light + the network's invariance partners (CAMERA, weight 1);
 * full-0.5: the same at weight 0.5;
+* full-0.25: the same at weight 0.25;
+* full-24: full with 24 top outputs, all read out (does capacity buy back the precision the invariance costs?);
 * jpeg-invariance: light + invariance partners that are JPEG round trips only (quality 50..95).
 
     for p in suite-inner suite-control suite-dense-trees; do sfanav simulate --preset $p --seed 1 --out runs/cand/$p; done
@@ -56,6 +58,8 @@ CANDIDATES = {
     "light": ({"robustness": "light"}, None),
     "full": ({"robustness": "full"}, None),
     "full-0.5": ({"robustness": "full", "invariance_weight": 0.5}, None),
+    "full-0.25": ({"robustness": "full", "invariance_weight": 0.25}, None),
+    "full-24": ({"robustness": "full", "n_outputs": 24, "network": {"out": 24}}, None),
     "jpeg-invariance": ({"robustness": "light", "invariance": JPEG_ONLY}, None),
 }
 
@@ -72,11 +76,11 @@ def train(name, X, xy, elev):
     opts, pre = CANDIDATES[name]
     opts = dict(opts)
     kw = recipe_for(robustness=opts.pop("robustness")).fit_kwargs(elev)
+    net = default_network(**opts.pop("network", {}))
     kw.update(opts)
     if pre is None:
-        return fit_localizer(default_network(), X, xy, rotation=Rotation(5, 1.0), progress=False, **kw)
-    return _Normalised(pre, fit_localizer(default_network(), pre(X), xy, rotation=Rotation(5, 1.0), progress=False,
-                                          **kw))
+        return fit_localizer(net, X, xy, rotation=Rotation(5, 1.0), progress=False, **kw)
+    return _Normalised(pre, fit_localizer(net, pre(X), xy, rotation=Rotation(5, 1.0), progress=False, **kw))
 
 
 def main():

@@ -214,7 +214,7 @@ def plot_corruptions(results: dict[str, Any], path: Path) -> Path:
             ax.plot(range(len(names)), np.clip(ys, 1e-3, 1e3), color=col, marker=mk, lw=lw, ms=4, label=m)
         ax.set_yscale("log")
         ax.set_ylabel("MED (m)")
-        ax.set_title(f"{g}: corruption applied to the {'test run only' if mode == 'test only' else 'both runs'}",
+        ax.set_title(f"{g}: corruption applied to {'the test run only' if mode == 'test only' else 'both runs'}",
                      fontsize=9)
         ax.set_xticks(range(len(names)))
         ax.set_xticklabels(names, rotation=40, ha="right", fontsize=7)
@@ -242,7 +242,7 @@ def markdown(results: dict[str, Any]) -> str:
             if not table:
                 continue
             methods = [m for m in METHODS if m in table["clean"]]
-            parts.append(f"**{g}, corruption applied to the {'test run only' if mode == 'test only' else 'both runs'}**"
+            parts.append(f"**{g}, corruption applied to {'the test run only' if mode == 'test only' else 'both runs'}**"
                          " (MED, m)\n")
             parts.append("| corruption | " + " | ".join(methods) + " |")
             parts.append("|---" * (len(methods) + 1) + "|")
@@ -256,6 +256,18 @@ def markdown(results: dict[str, Any]) -> str:
                 parts.append(f"| {key} | " + " | ".join(f"{v.get(key, float('nan')):.2f}" for v in s.values()) + " |")
             parts.append("")
     return "\n".join(parts)
+
+
+def results_from_rows(rows: list[dict[str, Any]]) -> dict[str, Any]:
+    """The per-garden tables ``{garden: {mode: {corruption: {method: MED}}}}``
+    back from the experiment's JSON rows (``corruptions.json``), e.g. to redo
+    the Markdown tables of a finished run: ``markdown(results_from_rows(json.load(f)["rows"]))``."""
+    out: dict[str, Any] = {}
+    for r in rows:
+        if r["metric"].startswith("MED (m) [") and "corruption" in r:
+            g = out.setdefault(r["garden"], {"test only": {}, "both runs": {}})
+            g[r["mode"]].setdefault(r["corruption"], {})[r["method"]] = r["sfanav"]
+    return out
 
 
 @register("corruptions", "Corruption suite: JPEG, noise, blur, exposure, ... in the test run and in both runs")
