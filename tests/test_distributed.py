@@ -255,6 +255,22 @@ def test_loop_closures_in_process_equal_fit(weights):
     assert np.max(np.abs(np.abs(plain.transform(IMAGES)) - np.abs(ref.transform(IMAGES)))) > 1e-3
 
 
+def test_partners_in_process_equal_fit():
+    # the invariance training's explicit partners: corrupted copies of every image (here: noisy ones), half weight
+    noisy = np.clip(IMAGES + np.random.default_rng(3).normal(0, 0.05, IMAGES.shape), 0, None).astype(IMAGES.dtype)
+    partners = (np.arange(N), np.full(N, 0.5), noisy)
+    ref = Network(TINY).fit(IMAGES, ROT, cache=False, progress=False, partners=partners)
+    assert ref.n_partners_ == N and ref.n_loop_closures_ == 0
+    for parts in (np.split(IMAGES, CUTS), np.split(IMAGES, [5, 6, 30])):
+        net = distributed_fit(Network(TINY), parts, ROT, partners=partners)
+        assert net.n_partners_ == N and net.n_loop_closures_ == 0
+        assert_same_outputs(ref, net)
+    with pytest.raises(ValueError, match="cannot be combined"):
+        distributed_fit(Network(TINY), IMAGES, ROT, partners=partners, loop_closures=CLOSURES)
+    with pytest.raises(ValueError, match="size and dtype"):
+        distributed_fit(Network(TINY), IMAGES, ROT, partners=(np.arange(2), np.ones(2), noisy[:2, :, :10]))
+
+
 @pytest.mark.parametrize("shifted, layers", [(False, None), (True, None), (True, [2])])
 def test_spatial_pairs_in_process_equal_fit(shifted, layers):
     pairs = PAIRS + ((SHIFTS,) if shifted else ())

@@ -238,12 +238,15 @@ def test_augmented_features_are_the_fit_draw(run_images):
 
 # ---------------------------------------------------------------- recipe and command line
 def test_recipe_robustness_levels():
-    assert ROBUSTNESS == ("none", "light", "full") and DEFAULT_ROBUSTNESS == "light"
+    assert ROBUSTNESS == ("none", "light", "standard", "full") and DEFAULT_ROBUSTNESS == "standard"
     r = recipe_for()
-    assert r.name == "sfanav default" and r.robustness == "light" and r.info()["robustness"] == "light"
+    assert r.name == "sfanav default" and r.robustness == "standard" and r.info()["robustness"] == "standard"
     kw = r.fit_kwargs()
-    assert kw["photometric"] == "log-contrast" and kw["readout_augmentation"] is CAMERA and kw["invariance"] is None
-    assert recipe_for(robustness="full").fit_kwargs()["invariance"] is CAMERA
+    assert kw["photometric"] == "log-contrast" and kw["readout_augmentation"] is CAMERA
+    assert kw["invariance"] is CAMERA and kw["invariance_weight"] == 0.25
+    light = recipe_for(robustness="light").fit_kwargs()
+    assert light["invariance"] is None and light["readout_augmentation"] is CAMERA
+    assert recipe_for(robustness="full").fit_kwargs()["invariance_weight"] == 1.0
     assert recipe_for(robustness="none").name == "custom"
     t = recipe_for("thesis-5.1")
     assert t.name == "thesis" and t.robustness == "none" and t.fit_kwargs()["photometric"] is None
@@ -259,14 +262,14 @@ def tiny(tmp_path_factory):
     return {"root": root, "config": cfg}
 
 
-@pytest.mark.parametrize("level", ["light", "full"])
+@pytest.mark.parametrize("level", ["light", "standard"])
 def test_train_robustness_from_the_command_line(tiny, tmp_path, capsys, level):
     code, out, err = run(capsys, "train", "--dataset", tiny["root"] / "data", "--config", tiny["config"],
                          "--rows", "all", "--robustness", level, "--out", tmp_path / "m.sfa", "--no-progress")
     assert code == 0, err
     loc = sfanav.load(tmp_path / "m.sfa")
     assert loc.photometric == "log-contrast" and loc.info["robustness"] == level
-    assert ("invariance" in loc.info) == (level == "full")
+    assert ("invariance" in loc.info) == (level == "standard")
     code, out, err = run(capsys, "localize", tmp_path / "m.sfa", tiny["root"] / "data", "--run", "test",
                          "--out", tmp_path / "t.csv", "--no-progress")
     assert code == 0, err
@@ -277,8 +280,6 @@ def test_train_robustness_usage_errors(tiny, tmp_path, capsys):
             "--no-progress"]
     code, _, err = run(capsys, *base, "--normalize", "--robustness", "light")
     assert_one_line_error(code, err, "--normalize", "--robustness light")
-    code, _, err = run(capsys, *base, "--robustness", "full", "--scheduler", "tcp://127.0.0.1:1")
-    assert_one_line_error(code, err, "--robustness full", "--scheduler")
     code, _, err = run(capsys, *base, "--robustness", "max")
     assert code == 2 and "invalid choice" in err
     assert TINY_TOML  # the config the fixture wrote

@@ -10,7 +10,8 @@ and rotation pooling.
   together with the panorama's Fourier signature (:data:`SIGNATURE`);
   robustness to what a robot's camera does to its images
   (:data:`ROBUSTNESS`, default :data:`DEFAULT_ROBUSTNESS`): the photometric
-  normalisation and a readout fitted on corrupted copies as well.
+  normalisation, a readout fitted on corrupted copies as well and a network
+  trained to ignore the corruptions.
 
 :func:`recipe_for` resolves a recipe from what the user named (a preset, a
 config file, explicit overrides); ``sfanav train``,
@@ -49,18 +50,23 @@ SIGNATURE_COEFFICIENTS = 15
 THESIS_N_OUTPUTS = 8
 """Slow features the thesis's quadratic regression reads."""
 
-ROBUSTNESS = ("none", "light", "full")
+ROBUSTNESS = ("none", "light", "standard", "full")
 """How the sfanav default guards against what a robot's camera and image transport do to its images
 (JPEG, noise, blur, exposure, ...; docs/robustness.md):
 
 * ``"none"``: nothing (the thesis; the sfanav default before the corruption study);
 * ``"light"``: the photometric normalisation (``"log-contrast"``: exposure, white balance and gamma do
   not move the features) and a readout fitted on the run and on a copy of it corrupted as a robot camera
-  may (:data:`sfanav.data.corruptions.CAMERA`); free on clean images;
-* ``"full"``: ``"light"`` and a network trained to ignore those corruptions (each image interleaved with
-  a corrupted copy): holds under every corruption measured, at a cost in precision on flawless images.
+  may (:data:`sfanav.data.corruptions.CAMERA`);
+* ``"standard"`` (the default): ``"light"`` and a network trained to ignore those corruptions, each
+  image's rotation interleaved with a corrupted copy at weight :data:`INVARIANCE_WEIGHTS` ``["standard"]``;
+* ``"full"``: the same at weight 1: holds under every corruption measured, at a larger cost in
+  precision on flawless images.
 """
-DEFAULT_ROBUSTNESS = "light"
+INVARIANCE_WEIGHTS = {"standard": 0.25, "full": 1.0}
+"""The weight of the invariance partners per robustness level (0.25 chosen on four gardens:
+docs/robustness.md)."""
+DEFAULT_ROBUSTNESS = "standard"
 """The sfanav default's robustness (:data:`ROBUSTNESS`)."""
 PHOTOMETRIC = "log-contrast"
 """The photometric normalisation of robustness ``"light"`` and ``"full"``."""
@@ -116,12 +122,14 @@ class Recipe:
 
     def robust_kwargs(self, model: CorruptionModel = CAMERA) -> dict[str, Any]:
         """The :func:`~sfanav.localization.fit_localizer` arguments of the
-        recipe's robustness: ``photometric``, ``readout_augmentation`` and
-        ``invariance`` (corruptions drawn from ``model``)."""
+        recipe's robustness: ``photometric``, ``readout_augmentation``,
+        ``invariance`` (corruptions drawn from ``model``) and
+        ``invariance_weight``."""
         r = self.robustness
+        weight = INVARIANCE_WEIGHTS.get(r)
         return {"photometric": PHOTOMETRIC if r != "none" else None,
                 "readout_augmentation": model if r != "none" else None,
-                "invariance": model if r == "full" else None}
+                "invariance": model if weight else None, "invariance_weight": weight or 1.0}
 
     def fit_kwargs(self, camera_elevation: Sequence[float] | None = None) -> dict[str, Any]:
         """Every :func:`~sfanav.localization.fit_localizer` argument the recipe

@@ -61,6 +61,7 @@ from .distributed_feedback import (
     closures_by_partition,
     pair_statistics,
     pair_tasks,
+    partners_by_partition,
 )
 from .modelfile import dumps
 
@@ -401,7 +402,7 @@ def fit(network: Any, images: Any, rotation: Any = None, *, client: Any = None, 
         breaks: Any = None, fast: bool = True, transition_weight: float = 1.0, batch_size: int = 16,
         progress: bool = False, gray: bool = False, size: tuple[int, int] | None = None,
         loop_closures: Any = None, closure_weights: Any = None, pairs: Any = None, pair_layers: Any = None,
-        pair_task_images: int = PAIR_TASK_IMAGES,
+        pair_task_images: int = PAIR_TASK_IMAGES, partners: Any = None,
         on_pass: Callable[[dict[str, Any]], None] | None = None) -> Any:
     """Trains ``network`` (every layer, from scratch) on partitioned images,
     on a Dask cluster (``client``) or in this process (``client=None``).
@@ -426,6 +427,11 @@ def fit(network: Any, images: Any, rotation: Any = None, *, client: Any = None, 
     loop_closures, closure_weights : as in :meth:`Network.fit`, with frame
         indices of the whole run. Each closure is trained by the partition
         holding its current image; the driver reads the partner images.
+    partners : explicit interleaving partners ``(current, weights, images)``
+        of frames of the whole run, as in :meth:`Network.fit` (the
+        invariance training of :func:`sfanav.localization.fit_localizer`);
+        each goes to the partition holding its current frame. Not with
+        ``loop_closures``.
     pairs, pair_layers : spatial pairs ``(idx_a, idx_b, weights[, shifts])``
         of frames of the whole run and the (1-based) layers that take them,
         as in :meth:`Network.fit`; trained by pair tasks of at most
@@ -461,6 +467,8 @@ def fit(network: Any, images: Any, rotation: Any = None, *, client: Any = None, 
     pair_task_images = check_int(pair_task_images, "pair_task_images", minimum=2)
     if loop_closures is None and closure_weights is not None:
         raise ValueError("closure_weights needs loop_closures")
+    if partners is not None and loop_closures is not None:
+        raise ValueError("partners cannot be combined with loop_closures: give the loop closures' partners among them")
     if pairs is None and pair_layers is not None:
         raise ValueError("pair_layers needs pairs")
     if client is not None:
@@ -500,6 +508,8 @@ def fit(network: Any, images: Any, rotation: Any = None, *, client: Any = None, 
     if loop_closures is not None:
         closures = closures_by_partition(loop_closures, closure_weights, parts, n_total,
                                          lambda f: _gather(images, parts, f), network.input_shape, period)
+    if partners is not None:
+        closures = partners_by_partition(partners, parts, n_total, first, network.input_shape, period)
     net = Network(network.config)
     runner: Any = (_DaskRunner(client, images if dask_array else None, parts, closures, tasks) if client is not None
                    else _LocalRunner(parts, closures, tasks))
@@ -542,7 +552,9 @@ def fit(network: Any, images: Any, rotation: Any = None, *, client: Any = None, 
     network.input_scale_ = float(max(first.max(), -float(first.min())))  # as Network.fit: the first batch's
     network.transition_weight_ = transition_weight
     network.n_pairs_ = n_pairs
-    network.n_loop_closures_ = sum(len(c) for c in closures if c is not None)
+    n_interleaved = sum(len(c) for c in closures if c is not None)
+    network.n_loop_closures_ = 0 if partners is not None else n_interleaved
+    network.n_partners_ = n_interleaved if partners is not None else 0
     network.n_partitions_ = len(parts)
     return network
 

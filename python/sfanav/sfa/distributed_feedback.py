@@ -31,10 +31,11 @@ from typing import Any
 import numpy as np
 
 from .. import _core
-from .feedback import aligned_partners, check_closures
+from .feedback import aligned_partners, check_closures, check_partners
 from .pairs import check_pairs
 
-__all__ = ["PairTask", "PartitionClosures", "check_frames", "closures_by_partition", "pair_statistics", "pair_tasks"]
+__all__ = ["PairTask", "PartitionClosures", "check_frames", "closures_by_partition", "pair_statistics", "pair_tasks",
+           "partners_by_partition"]
 
 
 @dataclass(frozen=True)
@@ -122,6 +123,37 @@ def closures_by_partition(loop_closures: Any, weights: Any, parts: list[Any], n:
         out.append(PartitionClosures(tuple((cur - part.start).tolist()), tuple(w[sel].tolist()),
                                      np.ascontiguousarray(aligned_partners(frames, shift[sel])),
                                      tuple(src.tolist())))
+    return out
+
+
+def partners_by_partition(partners: Any, parts: list[Any], n: int, frames: np.ndarray, hw: tuple[int, int, int],
+                          period: int) -> list[PartitionClosures | None]:
+    """Per partition (``parts``, in run order, of ``n`` frames in all), its
+    share of explicit interleaving ``partners`` ``(current, weights,
+    images)`` (as :meth:`sfanav.Network.fit` takes them: current indices of
+    the whole run, each with its partner image, of the size and dtype of
+    the run's ``frames``), None where it has none. Raises ValueError /
+    TypeError as :func:`sfanav.sfa.feedback.check_partners`."""
+    current, weights, imgs = check_partners(partners, n, frames.shape[1:], frames.dtype)
+    cur = np.asarray(current, dtype=np.int64)
+    w = np.asarray(weights)
+    starts = np.array([p.start for p in parts], dtype=np.int64)
+    owner = _owner(starts, cur)
+    out: list[PartitionClosures | None] = []
+    for i, part in enumerate(parts):
+        sel = np.flatnonzero(owner == i)
+        if not len(sel):
+            out.append(None)
+            continue
+        sel = sel[np.argsort(cur[sel], kind="stable")]
+        frames = imgs[sel]
+
+        def name(k: int, c: np.ndarray = cur[sel]) -> str:
+            return f"the partner image of frame {int(c[k])} of the run (partition {i})"
+
+        check_frames(frames, hw, period, name)
+        out.append(PartitionClosures(tuple((cur[sel] - part.start).tolist()), tuple(w[sel].tolist()),
+                                     np.ascontiguousarray(frames), tuple(cur[sel].tolist())))
     return out
 
 

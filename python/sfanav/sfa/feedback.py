@@ -107,19 +107,21 @@ def closure_partners(images: np.ndarray, loop_closures: Any,
     return current.tolist(), w.tolist(), partners
 
 
-def check_partners(partners: Any, images: np.ndarray) -> tuple[list[int], list[float], np.ndarray]:
+def check_partners(partners: Any, n: int, image_shape: tuple[int, ...],
+                   dtype: Any) -> tuple[list[int], list[float], np.ndarray]:
     """``(current, weights, partner images)`` as the core takes them, from
     explicit partners ``(current (M,), weights (M,), images (M, H, W[, C]))``
-    of the training run ``images``: current indices into the run, unique;
-    weights finite in [0, 1]; partner images of the run's image size and
-    dtype. TypeError / ValueError naming what is wrong."""
+    of a training run of ``n`` images of ``image_shape`` (H, W[, C]) and
+    ``dtype``: current indices into the run, unique; weights finite in
+    [0, 1]; partner images of the run's image size and dtype. TypeError /
+    ValueError naming what is wrong."""
     if not isinstance(partners, (tuple, list)) or len(partners) != 3:
         raise TypeError("partners must be a tuple (current, weights, images)")
     current = np.asarray(partners[0])
     if current.ndim != 1 or (current.size and current.dtype.kind not in "iu"):
         raise ValueError(f"partners: current must be a 1-D array of integers, got shape {current.shape} and dtype "
                          f"{current.dtype}")
-    m, n = len(current), len(images)
+    m = len(current)
     if m and (current.min() < 0 or current.max() >= n):
         raise ValueError(f"partners: current must index the {n} training images (0..{n - 1})")
     if len(np.unique(current)) != m:
@@ -128,7 +130,7 @@ def check_partners(partners: Any, images: np.ndarray) -> tuple[list[int], list[f
     if w.shape != (m,) or not np.all(np.isfinite(w) & (w >= 0) & (w <= 1)):
         raise ValueError(f"partners: weights must be {m} finite values in [0, 1], got shape {w.shape}")
     imgs = np.asarray(partners[2])
-    if imgs.shape != (m,) + images.shape[1:] or imgs.dtype != images.dtype:
+    if imgs.shape != (m,) + tuple(image_shape) or imgs.dtype != np.dtype(dtype):
         raise ValueError(f"partners: the images must be {m} of the training images' size and dtype "
-                         f"{images.shape[1:]} {images.dtype}, got {imgs.shape} {imgs.dtype}")
+                         f"{tuple(image_shape)} {np.dtype(dtype)}, got {imgs.shape} {imgs.dtype}")
     return current.astype(np.int64).tolist(), w.tolist(), np.ascontiguousarray(imgs)

@@ -410,8 +410,8 @@ class Network:
             training: each image's partner is a corrupted copy of it (or of
             its loop-closure partner), so the slowness objective asks for
             outputs that ignore the corruption (docs/robustness.md). Not
-            with ``loop_closures`` (build both into one set of partners) nor
-            with ``client``.
+            with ``loop_closures`` (build both into one set of partners);
+            with ``client``, each partition trains its own images' partners.
         client : dask.distributed.Client, optional
             Train on a Dask cluster (``pip install "sfanav[dask]"``): the
             images (a list of arrays or ``.npy`` paths, one partition each;
@@ -435,9 +435,9 @@ class Network:
         comes out unchanged. The training loop runs in the Rust core
         (``sfa_core::training::fit``) with the GIL released.
         """
-        if partners is not None and (loop_closures is not None or client is not None):
-            raise ValueError("partners cannot be combined with loop_closures or client: give the loop closures' "
-                             "partners among them (sfanav.sfa.feedback.closure_partners), and train on one machine")
+        if partners is not None and loop_closures is not None:
+            raise ValueError("partners cannot be combined with loop_closures: give the loop closures' partners "
+                             "among them (sfanav.localization.training.invariance_partners does)")
         if client is not None or breaks is not None:
             if client is None:
                 raise ValueError("breaks needs client (or call sfanav.sfa.distributed.fit with client=None)")
@@ -446,7 +446,7 @@ class Network:
             return distributed_fit(self, images, rotation, client=client, breaks=breaks, fast=fast,
                                    transition_weight=transition_weight, batch_size=batch_size, progress=progress,
                                    loop_closures=loop_closures, closure_weights=closure_weights, pairs=pairs,
-                                   pair_layers=pair_layers)
+                                   pair_layers=pair_layers, partners=partners)
         rotation = rotation or Rotation()
         transition_weight = _check_transition_weight(transition_weight)
         shifted = False
@@ -458,7 +458,7 @@ class Network:
             closures = closure_partners(images, loop_closures, closure_weights)
         if partners is not None:
             images = _image_array(images, "partners")
-            closures = check_partners(partners, images)
+            closures = check_partners(partners, len(images), images.shape[1:], images.dtype)
         if not isinstance(rotation, Rotation):
             raise TypeError("rotation must be a sfanav.Rotation")
         if pairs is not None:

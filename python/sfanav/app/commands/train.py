@@ -93,13 +93,14 @@ def _add_train(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--closure-weights", choices=("uniform", "score"), default="uniform",
                    help="with --loop-closures: weight every closure 1 (uniform, the thesis) or by the detector's "
                         "match confidence (score)")
-    p.add_argument("--robustness", choices=("none", "light", "full"), default=None,
+    p.add_argument("--robustness", choices=("none", "light", "standard", "full"), default=None,
                    help="guard against what a robot's camera and image transport do to its images (JPEG, noise, "
                         "blur, exposure, white balance; docs/robustness.md): light = photometric normalisation and "
-                        "a readout fitted on corrupted copies too (default for the sfanav default; free on clean "
-                        "images), full = light and a network trained to ignore the corruptions (holds under all "
-                        "of them, less precise on flawless images; one machine), none = neither (the thesis; "
-                        "default with --preset thesis-*, --config or --normalize)")
+                        "a readout fitted on corrupted copies too; standard = light and a network trained to "
+                        "ignore the corruptions (each image interleaved with a corrupted copy, weight 0.25; the "
+                        "default for the sfanav default); full = the same at weight 1 (holds under all of them, "
+                        "less precise on flawless images); none = neither (the thesis; default with --preset "
+                        "thesis-*, --config or --normalize)")
     p.add_argument("--normalize", action="store_true",
                    help="normalize every image to zero mean and unit variance (thesis 5.2)")
     p.add_argument("--mirror", default=None, metavar="CX,CY,INNER,OUTER",
@@ -212,9 +213,6 @@ def _train(args: argparse.Namespace, stack: Any) -> int:
             raise UsageError(f"--normalize and --robustness {robustness} do not combine: the robustness normalises "
                              "the images itself (log contrast), and its corrupted copies need the 8-bit images")
         robustness = "none"
-    if robustness == "full" and args.scheduler is not None:
-        raise UsageError("--robustness full trains the network on one machine (each image interleaved with a "
-                         "corrupted copy); use --robustness light with --scheduler")
     out = new_file(args.out, args.overwrite, "model file")
     if args.landmarks is not None:
         return train_landmarks(args, out)
