@@ -10,6 +10,7 @@ Candidates (all the sfanav default's network, rows, pooling, signature and reado
 * photometric: the log-contrast normalisation alone;
 * row-gain: every row and channel divided by its mean (a per-row normalisation, which also removes
   vignetting) instead;
+* channel-gain: every channel divided by its image mean (exposure and white balance without the log);
 * readout: the readout fitted on a corrupted copy of the run as well (CAMERA), no normalisation;
 * light: photometric + readout (the default);
 * full: light + the network's invariance partners (CAMERA, weight 1);
@@ -50,10 +51,16 @@ def row_gain(images):
     return a / np.maximum(a.mean(axis=2, keepdims=True), 8.0) * 100.0
 
 
+def channel_gain(images):
+    a = np.asarray(images, np.float32)
+    return a / np.maximum(a.mean(axis=(1, 2), keepdims=True), 4.0) * 100.0
+
+
 CANDIDATES = {
     "none": ({"robustness": "none"}, None),
     "photometric": ({"robustness": "none", "photometric": "log-contrast"}, None),
     "row-gain": ({"robustness": "none"}, row_gain),
+    "channel-gain": ({"robustness": "none"}, channel_gain),
     "readout": ({"robustness": "none", "readout_augmentation": CAMERA}, None),
     "light": ({"robustness": "light"}, None),
     "full": ({"robustness": "full"}, None),

@@ -85,9 +85,12 @@ def _metrics(pred: np.ndarray, xy: np.ndarray, crange: np.ndarray, far: np.ndarr
 
 def _bytes_per_place(loc: Localizer, n_train: int) -> float:
     """Bytes of the readout's arrays that grow with the training run, per
-    training place (0 for a parametric readout)."""
+    training place (0 for a parametric readout). A readout fitted with
+    augmented copies (robustness ``"standard"``) stores each place twice, and
+    both count."""
+    n_fit = n_train + getattr(loc, "n_augmented_", 0)
     state = loc.regression_.get_state()
-    total = sum(v.nbytes for v in state.values() if isinstance(v, np.ndarray) and v.ndim >= 1 and len(v) == n_train)
+    total = sum(v.nbytes for v in state.values() if isinstance(v, np.ndarray) and v.ndim >= 1 and len(v) == n_fit)
     return total / n_train
 
 

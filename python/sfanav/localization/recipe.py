@@ -69,7 +69,7 @@ docs/robustness.md)."""
 DEFAULT_ROBUSTNESS = "standard"
 """The sfanav default's robustness (:data:`ROBUSTNESS`)."""
 PHOTOMETRIC = "log-contrast"
-"""The photometric normalisation of robustness ``"light"`` and ``"full"``."""
+"""The photometric normalisation of every robustness level but ``"none"``."""
 
 ROWS = ("band", "all")
 SUPERVISION = ("auto", "ground-truth", "odometry")
