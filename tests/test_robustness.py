@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 
 import sfanav
 from sfanav.data.corruptions import CAMERA, Corruption, CorruptionModel, corrupt
-from sfanav.data.photometric import LOG_SCALE, log_contrast, normalize
+from sfanav.data.photometric import LOG_SCALE, log_contrast, lowpass_log_contrast, normalize
 from sfanav.experiments.localization import tiny_config
 from sfanav.localization.recipe import DEFAULT_ROBUSTNESS, ROBUSTNESS, recipe_for
 from sfanav.localization.training import augmented_features, fit_localizer, invariance_partners
@@ -56,6 +56,62 @@ def test_log_contrast_flat_and_gray_images():
     gray = scene()[..., 0]
     g = log_contrast(gray)
     assert g.shape == gray.shape and abs(float(g[0].mean())) < 1e-3
+
+
+def test_lowpass_log_contrast_without_lowpass_or_flat_field_is_log_contrast():
+    x = scene()
+    np.testing.assert_allclose(lowpass_log_contrast(x, sigma=0, flat=False), log_contrast(x), atol=1e-4)
+    out = lowpass_log_contrast(x)
+    assert out.dtype == np.float32 and out.shape == x.shape
+    assert np.allclose(out.reshape(4, -1).std(axis=1), LOG_SCALE, rtol=1e-4)
+    # the flat field: every channel's row means have no quadratic profile left over the rows
+    t = np.linspace(-1, 1, x.shape[1])
+    rows = out.mean(axis=2)  # (N, H, C)
+    for k in range(3):
+        assert np.abs(np.polynomial.polynomial.polyfit(t, rows[:, :, k].T, 2)).max() < 1e-2  # of a contrast of 40
+
+
+def test_lowpass_log_contrast_commutes_with_a_rotation_of_the_panorama():
+    # the low-pass wraps around the seam: rotating the panorama (rolling its columns) and normalising is
+    # normalising and rotating, as the network's simulated rotation needs
+    x = scene(w=40)
+    for shift in (1, 7, 39):
+        np.testing.assert_allclose(lowpass_log_contrast(np.roll(x, shift, axis=2)),
+                                   np.roll(lowpass_log_contrast(x), shift, axis=2), atol=1e-2)  # float32 sums
+
+
+@settings(max_examples=20, deadline=None)
+@given(st.floats(0.1, 0.6))
+def test_lowpass_log_contrast_removes_vignetting_that_log_contrast_keeps(strength):
+    x = scene(n=3, h=16, w=60, seed=2)
+    v = Corruption("vignetting", {"strength": strength})
+    moved_flat = np.abs(lowpass_log_contrast(v(x)) - lowpass_log_contrast(x)).mean()
+    moved_plain = np.abs(lowpass_log_contrast(v(x), flat=False) - lowpass_log_contrast(x, flat=False)).mean()
+    assert moved_flat < 0.35 * moved_plain and moved_flat < 0.1 * LOG_SCALE
+
+
+def test_lowpass_log_contrast_takes_away_fine_structure():
+    # JPEG and sensor noise move the low-passed image far less than the plain one (relative to its contrast),
+    # on images with structure at every scale (smooth shapes and a fine texture)
+    from scipy.ndimage import gaussian_filter
+
+    rng = np.random.default_rng(3)
+    smooth = gaussian_filter(rng.normal(size=(3, 16, 60, 3)), (0, 3, 3, 0), mode="wrap")
+    x = np.clip(120 + 60 * smooth / smooth.std() + rng.normal(0, 8, smooth.shape), 0, 255).astype(np.uint8)
+    for c in ("jpeg-50", "noise-10"):
+        lp = np.abs(lowpass_log_contrast(corrupt(x, c, seed=0)) - lowpass_log_contrast(x)).mean()
+        plain = np.abs(log_contrast(corrupt(x, c, seed=0)) - log_contrast(x)).mean()
+        assert lp < 0.5 * plain, (c, lp, plain)
+
+
+def test_lowpass_log_contrast_bad_input():
+    with pytest.raises(ValueError, match="sigma must be finite"):
+        lowpass_log_contrast(scene(), sigma=-1)
+    with pytest.raises(ValueError, match="sigma must be finite"):
+        lowpass_log_contrast(scene(), sigma=float("nan"))
+    with pytest.raises(ValueError, match="offset and scale"):
+        lowpass_log_contrast(scene(), scale=0)
+    np.testing.assert_array_equal(normalize(scene(), "lowpass-log-contrast"), lowpass_log_contrast(scene()))
 
 
 def test_normalize_dispatch_and_bad_input():
@@ -140,22 +196,23 @@ def test_fit_localizer_robustness_light_and_full(run_images):
         assert shift < 0.2, shift
 
 
-def test_photometric_localizer_round_trip(run_images, tmp_path):
+@pytest.mark.parametrize("kind", ["log-contrast", "lowpass-log-contrast"])
+def test_photometric_localizer_round_trip(run_images, tmp_path, kind):
     imgs, xy = run_images
-    loc = fit_localizer(_net(), imgs, xy, rotation=sfanav.Rotation(4), progress=False, photometric="log-contrast",
+    loc = fit_localizer(_net(), imgs, xy, rotation=sfanav.Rotation(4), progress=False, photometric=kind,
                         signature="fourier")
     loc.save(tmp_path / "m.sfa")
     back = sfanav.load(tmp_path / "m.sfa")
-    assert back.photometric == "log-contrast"
+    assert back.photometric == kind
     np.testing.assert_allclose(back.predict(imgs[:5]), loc.predict(imgs[:5]))
     from sfanav.sfa.modelfile import read_model
 
     assert read_model(tmp_path / "m.sfa")[2]["version"] == 6
     # the network saw the normalised images: features are the network's outputs on them
-    np.testing.assert_allclose(loc.features(imgs[:3]), loc.transform_rows(log_contrast(imgs[:3])))
+    np.testing.assert_allclose(loc.features(imgs[:3]), loc.transform_rows(normalize(imgs[:3], kind)))
     # a sibling sees images as the localizer does
     sib = loc.sibling(readout={"kind": "knn", "n_outputs": 4, "k": 2}, signature=None)
-    assert sib.photometric == "log-contrast" and sib.network is loc.network and not sib.is_fitted_
+    assert sib.photometric == kind and sib.network is loc.network and not sib.is_fitted_
 
 
 def test_fit_features_augmented_checks(run_images):

@@ -17,7 +17,13 @@ Candidates (all the sfanav default's network, rows, pooling, signature and reado
 * full-0.5: the same at weight 0.5;
 * full-0.25: the same at weight 0.25;
 * full-24: full with 24 top outputs, all read out (does capacity buy back the precision the invariance costs?);
-* jpeg-invariance: light + invariance partners that are JPEG round trips only (quality 50..95).
+* jpeg-invariance: light + invariance partners that are JPEG round trips only (quality 50..95);
+* lowpass-S: a Gaussian low-pass of sigma S px (at the network's resolution, wrapping around the
+  panorama) before the log-contrast normalisation, with light's readout augmentation (JPEG, noise,
+  defocus and dead pixels live in the fine structure the low-pass takes away);
+* lowpass-S-0.25: the same with standard's invariance partners (weight 0.25);
+* lowpass-S-flat(-0.25): the same, then a quadratic profile over the rows of the rows' means removed
+  per channel (in the log domain: a vignetting is a smooth offset per row).
 
     for p in suite-inner suite-control suite-dense-trees; do sfanav simulate --preset $p --seed 1 --out runs/cand/$p; done
     sfanav simulate --preset demo --out runs/cand/demo
@@ -31,6 +37,7 @@ from pathlib import Path
 
 import numpy as np
 
+import sfanav.localization.localizer as localizer_module
 from sfanav.data import Dataset, Preprocessing, load_run
 from sfanav.data.corruptions import CAMERA, CorruptionModel, corrupt
 from sfanav.data.preprocessing import Preprocessor
@@ -56,6 +63,40 @@ def channel_gain(images):
     return a / np.maximum(a.mean(axis=(1, 2), keepdims=True), 4.0) * 100.0
 
 
+def _lowpass_normalize(images, kind):
+    """log-contrast after a Gaussian low-pass: kind 'lowpass-S' (S in px)."""
+    from scipy.ndimage import gaussian_filter
+
+    from sfanav.data.photometric import log_contrast, normalize
+    if kind is None or not kind.startswith("lowpass-"):
+        return normalize(images, kind)
+    sigma = float(kind.split("-")[1])
+    flat = kind.endswith("-flat")
+    a = np.asarray(images, np.float32)
+    single = a.ndim in (2, 3) and not (a.ndim == 3 and a.shape[-1] > 4)
+    b = a[None] if single else a
+    sig = (sigma, sigma, 0.0)[:b.ndim - 1]
+    modes = ("nearest", "wrap", "nearest")[:b.ndim - 1]
+    out = np.stack([gaussian_filter(im, sig, mode=modes) for im in b])
+    if flat:  # log, minus a quadratic profile over the rows (per channel) of the rows' means, then the contrast
+        h = out.shape[1]
+        t = np.linspace(-1.0, 1.0, h)
+        V = np.stack([np.ones(h), t, t * t], axis=1)
+        P = V @ np.linalg.pinv(V)  # projector onto the quadratic profiles
+        v = np.log(np.maximum(out, 0.0) + 8.0)
+        prof = np.einsum("ij,nj...->ni...", P, v.mean(axis=2)).astype(np.float32)
+        v = v - prof[:, :, None]
+        sd = v.reshape(len(v), -1).std(axis=1).reshape((-1,) + (1,) * (v.ndim - 1))
+        out = (v * (40.0 / np.maximum(sd, 1e-6))).astype(np.float32)
+    else:
+        out = log_contrast(out)
+    return out[0] if single else out
+
+
+localizer_module.photometric_normalize = _lowpass_normalize
+LOWPASS = ("0.7", "1", "1.5", "2", "1-flat", "2-flat")
+localizer_module.PHOTOMETRIC = (*localizer_module.PHOTOMETRIC, *(f"lowpass-{s}" for s in LOWPASS))
+
 CANDIDATES = {
     "none": ({"robustness": "none"}, None),
     "photometric": ({"robustness": "none", "photometric": "log-contrast"}, None),
@@ -68,6 +109,9 @@ CANDIDATES = {
     "full-0.25": ({"robustness": "full", "invariance_weight": 0.25}, None),
     "full-24": ({"robustness": "full", "n_outputs": 24, "network": {"out": 24}}, None),
     "jpeg-invariance": ({"robustness": "light", "invariance": JPEG_ONLY}, None),
+    **{f"lowpass-{s}": ({"robustness": "light", "photometric": f"lowpass-{s}"}, None) for s in LOWPASS},
+    **{f"lowpass-{s}-0.25": ({"robustness": "standard", "photometric": f"lowpass-{s}"}, None)
+       for s in LOWPASS},
 }
 
 
@@ -122,7 +166,7 @@ def main():
             if a.json:
                 Path(a.json).write_text(json.dumps(out, indent=1) + "\n")
     summary = {}
-    for name in a.candidates.split(","):
+    for name in dict.fromkeys(k.split("|")[1] for k in out if k != "summary"):
         cells = [out[f"{g}|{name}"]["MED (m)"] for g in a.gardens.split(",") if f"{g}|{name}" in out]
         base = [out[f"{g}|none"]["MED (m)"]["clean"] for g in a.gardens.split(",") if f"{g}|none" in out]
         if not cells:

@@ -130,12 +130,15 @@ class Localizer:
         signature alone, by marginal likelihood). The sfanav default sets it
         (:func:`sfanav.localization.recipe_for`); it stores the signature of
         every training place (docs/gardens.md).
-    photometric : {"log-contrast"} or None, default None
+    photometric : {"log-contrast", "lowpass-log-contrast"} or None, default None
         A photometric normalisation applied to every image first, before
         the rows, the network and the signature
         (:func:`sfanav.data.photometric.log_contrast`: the log intensities
         centred per channel and scaled to a fixed contrast, so that exposure,
-        white balance and gamma do not move the features). It must be what
+        white balance and gamma do not move the features;
+        :func:`sfanav.data.photometric.lowpass_log_contrast`: the same after
+        a 2 px Gaussian low-pass, with a flat field that removes vignetting).
+        It must be what
         the network was trained on (:func:`fit_localizer` takes care of
         that); the sfanav default sets it (docs/robustness.md).
 
