@@ -358,7 +358,7 @@ def test_cli_default_train_localize_round_trip(tmp_path, capsys):
     assert "on features pooled over 8 rotations" in out
     loc = sfanav.load(model)
     assert loc.readout == "auto" and loc.rows.band == (-10.0, 20.0) and loc.info["configuration"] == "sfanav default"
-    assert loc.photometric == "log-contrast"  # robustness "standard"
+    assert loc.photometric == "lowpass-log-contrast"  # robustness "standard"
     kind, state, manifest = read_model(model)
     assert manifest["version"] == 6 and loc.rotation_pooling_ == 8  # format 6: a signature beside pooled features, photometric
     assert state["readout"]["spec"]["kind"] == "gp-signature" and loc.n_signature_ == 40 * 3 * 15

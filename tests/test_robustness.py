@@ -182,7 +182,7 @@ def test_fit_localizer_robustness_light_and_full(run_images):
     imgs, xy = run_images
     light = fit_localizer(_net(), imgs, xy, rotation=sfanav.Rotation(4), progress=False,
                           **recipe_for(robustness="light").fit_kwargs() | {"rows": None})
-    assert light.photometric == "log-contrast" and light.n_augmented_ == len(imgs)
+    assert light.photometric == "lowpass-log-contrast" and light.n_augmented_ == len(imgs)
     assert light.training_positions_.shape == (len(imgs), 2)  # the originals, not the copies
     assert "readout_augmentation" in light.info and "invariance" not in light.info
     full = fit_localizer(_net(), imgs, xy, rotation=sfanav.Rotation(4), progress=False,
@@ -299,7 +299,7 @@ def test_recipe_robustness_levels():
     r = recipe_for()
     assert r.name == "sfanav default" and r.robustness == "standard" and r.info()["robustness"] == "standard"
     kw = r.fit_kwargs()
-    assert kw["photometric"] == "log-contrast" and kw["readout_augmentation"] is CAMERA
+    assert kw["photometric"] == "lowpass-log-contrast" and kw["readout_augmentation"] is CAMERA
     assert kw["invariance"] is CAMERA and kw["invariance_weight"] == 0.25
     light = recipe_for(robustness="light").fit_kwargs()
     assert light["invariance"] is None and light["readout_augmentation"] is CAMERA
@@ -325,7 +325,7 @@ def test_train_robustness_from_the_command_line(tiny, tmp_path, capsys, level):
                          "--rows", "all", "--robustness", level, "--out", tmp_path / "m.sfa", "--no-progress")
     assert code == 0, err
     loc = sfanav.load(tmp_path / "m.sfa")
-    assert loc.photometric == "log-contrast" and loc.info["robustness"] == level
+    assert loc.photometric == "lowpass-log-contrast" and loc.info["robustness"] == level
     assert ("invariance" in loc.info) == (level == "standard")
     code, out, err = run(capsys, "localize", tmp_path / "m.sfa", tiny["root"] / "data", "--run", "test",
                          "--out", tmp_path / "t.csv", "--no-progress")

@@ -23,7 +23,9 @@ Candidates (all the sfanav default's network, rows, pooling, signature and reado
   defocus and dead pixels live in the fine structure the low-pass takes away);
 * lowpass-S-0.25: the same with standard's invariance partners (weight 0.25);
 * lowpass-S-flat(-0.25): the same, then a quadratic profile over the rows of the rows' means removed
-  per channel (in the log domain: a vignetting is a smooth offset per row).
+  per channel (in the log domain: a vignetting is a smooth offset per row); -0.5, -1: invariance weights;
+* lowpass-2-flat-o2-0.25: with 2 grey levels added before the log instead of 8 (gamma is exact in the
+  log domain without the offset; the low-pass already damps the dark pixels' noise).
 
     for p in suite-inner suite-control suite-dense-trees; do sfanav simulate --preset $p --seed 1 --out runs/cand/$p; done
     sfanav simulate --preset demo --out runs/cand/demo
@@ -70,8 +72,10 @@ def _lowpass_normalize(images, kind):
     from sfanav.data.photometric import log_contrast, normalize
     if kind is None or not kind.startswith("lowpass-"):
         return normalize(images, kind)
-    sigma = float(kind.split("-")[1])
-    flat = kind.endswith("-flat")
+    parts = kind.split("-")
+    sigma = float(parts[1])
+    flat = "flat" in parts
+    offset = next((float(p[1:]) for p in parts if p.startswith("o")), 8.0)
     a = np.asarray(images, np.float32)
     single = a.ndim in (2, 3) and not (a.ndim == 3 and a.shape[-1] > 4)
     b = a[None] if single else a
@@ -83,7 +87,7 @@ def _lowpass_normalize(images, kind):
         t = np.linspace(-1.0, 1.0, h)
         V = np.stack([np.ones(h), t, t * t], axis=1)
         P = V @ np.linalg.pinv(V)  # projector onto the quadratic profiles
-        v = np.log(np.maximum(out, 0.0) + 8.0)
+        v = np.log(np.maximum(out, 0.0) + offset)
         prof = np.einsum("ij,nj...->ni...", P, v.mean(axis=2)).astype(np.float32)
         v = v - prof[:, :, None]
         sd = v.reshape(len(v), -1).std(axis=1).reshape((-1,) + (1,) * (v.ndim - 1))
@@ -94,7 +98,7 @@ def _lowpass_normalize(images, kind):
 
 
 localizer_module.photometric_normalize = _lowpass_normalize
-LOWPASS = ("0.7", "1", "1.5", "2", "1-flat", "2-flat")
+LOWPASS = ("0.7", "1", "1.5", "2", "1-flat", "2-flat", "2-flat-o2")
 localizer_module.PHOTOMETRIC = (*localizer_module.PHOTOMETRIC, *(f"lowpass-{s}" for s in LOWPASS))
 
 CANDIDATES = {
@@ -112,6 +116,8 @@ CANDIDATES = {
     **{f"lowpass-{s}": ({"robustness": "light", "photometric": f"lowpass-{s}"}, None) for s in LOWPASS},
     **{f"lowpass-{s}-0.25": ({"robustness": "standard", "photometric": f"lowpass-{s}"}, None)
        for s in LOWPASS},
+    "lowpass-2-flat-0.5": ({"robustness": "full", "invariance_weight": 0.5, "photometric": "lowpass-2-flat"}, None),
+    "lowpass-2-flat-1": ({"robustness": "full", "photometric": "lowpass-2-flat"}, None),
 }
 
 

@@ -74,7 +74,7 @@ def fit_localizer(
     ``images``.
 
     ``photometric``: a photometric normalisation of every image before the
-    rows, the network and the signature (``"log-contrast"``, the sfanav
+    rows, the network and the signature (``"log-contrast"`` or ``"lowpass-log-contrast"``, the sfanav
     default's: :mod:`sfanav.data.photometric`), stored in the localizer.
 
     ``readout_augmentation``: a :class:`~sfanav.data.corruptions.CorruptionModel`;
