@@ -67,7 +67,10 @@ def test_scheduler_errors_are_one_line(tiny, tmp_path, capsys, monkeypatch):
 def _server(kind):
     """A server on 127.0.0.1 in a thread, yielding its tcp:// address:
     ``silent`` accepts connections and never answers; ``http`` is an HTTP
-    server (another service on the port)."""
+    server (another service on the port), which waits for a request line;
+    ``eager`` answers every connection at once with an HTTP 400 (Dask reads
+    its first 8 bytes as a frame count of exabytes: the issue's "Unable to
+    allocate 3.07 EiB")."""
     if kind == "http":
         class Quiet(http.server.BaseHTTPRequestHandler):
             def log_message(self, *args):
@@ -93,6 +96,8 @@ def _server(kind):
         while not stop.is_set():
             with contextlib.suppress(OSError):
                 held.append(sock.accept()[0])
+                if kind == "eager":
+                    held[-1].sendall(b"HTTP/1.1 400 Bad Request\r\nContent-Length: 0\r\n\r\n")
 
     t = threading.Thread(target=accept, daemon=True)
     t.start()
@@ -106,7 +111,7 @@ def _server(kind):
         sock.close()
 
 
-@pytest.mark.parametrize("kind", ["silent", "http"])
+@pytest.mark.parametrize("kind", ["silent", "http", "eager"])
 def test_a_port_that_is_no_dask_scheduler_fails_within_the_documented_time(tiny, tmp_path, capsys, kind):
     """A port that accepts and never answers hung past 60 s; an HTTP
     server's port gave "out of memory: Unable to allocate 3.07 EiB" and a
