@@ -6,8 +6,10 @@ one ValueError (or TypeError) naming the bag, the message or the frames,
 and leaves no dataset; and what the damage cannot show (bits flipped
 inside an image's pixels: a bag has no checksum) imports as it is."""
 
+import os
 import random
 import shutil
+import threading
 import warnings
 
 import numpy as np
@@ -107,6 +109,19 @@ def test_opencv_prints_nothing_of_its_own_for_a_garbage_image(capfd):
             decode_compressed(np.frombuffer(data, np.uint8), "jpeg")
     out = capfd.readouterr()
     assert out.err == "" and out.out == ""
+    # from several threads at once: the redirection is shared and undone when the last decode ends
+    def decode_many():
+        for _ in range(50):
+            with pytest.raises(ValueError):
+                decode_compressed(np.frombuffer(b"BM" + rng.bytes(300), np.uint8), "bmp")
+
+    threads = [threading.Thread(target=decode_many) for _ in range(4)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    os.write(2, b"stderr is back\n")
+    assert capfd.readouterr().err == "stderr is back\n"
 
 
 # ---------------------------------------------------------------- absurd values, repeated stamps, odd types

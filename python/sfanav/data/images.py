@@ -6,6 +6,7 @@ from __future__ import annotations
 import contextlib
 import os
 import sys
+import threading
 import zlib
 from collections.abc import Iterator
 from pathlib import Path
@@ -24,30 +25,44 @@ def _cv2() -> Any:
     return cv2
 
 
+_QUIET = threading.Lock()
+_quiet_state = {"depth": 0, "saved": -1}
+
+
 @contextlib.contextmanager
 def quiet_codecs() -> Iterator[None]:
     """Silences what OpenCV's image codecs print straight to the process's
     stderr while decoding (libjpeg's "Corrupt JPEG data: ...", libpng's
     "libpng error: ...", OpenCV's own "[ WARN ]" and "[ERROR]" lines): the
     caller reports a failed decode in one line of its own. File descriptor 2
-    points at /dev/null for the duration (Python's pending stderr output is
-    flushed first, so none of it is lost)."""
+    points at /dev/null while any thread is inside (Python's pending stderr
+    output is flushed first; what another thread writes to the process's
+    stderr meanwhile is lost, a decode's few milliseconds); nested and
+    concurrent uses share one redirection, undone when the last one leaves."""
+    with _QUIET:
+        if _quiet_state["depth"] == 0:
+            try:
+                sys.stderr.flush()
+                saved = os.dup(2)
+            except (OSError, ValueError, AttributeError):  # no usable stderr: nothing to silence
+                saved = -1
+            if saved >= 0:
+                null = os.open(os.devnull, os.O_WRONLY)
+                try:
+                    os.dup2(null, 2)
+                finally:
+                    os.close(null)
+            _quiet_state["saved"] = saved
+        _quiet_state["depth"] += 1
     try:
-        sys.stderr.flush()
-        saved = os.dup(2)
-    except (OSError, ValueError, AttributeError):  # no usable stderr: nothing to silence
-        yield
-        return
-    try:
-        null = os.open(os.devnull, os.O_WRONLY)
-        try:
-            os.dup2(null, 2)
-        finally:
-            os.close(null)
         yield
     finally:
-        os.dup2(saved, 2)
-        os.close(saved)
+        with _QUIET:
+            _quiet_state["depth"] -= 1
+            if _quiet_state["depth"] == 0 and _quiet_state["saved"] >= 0:
+                os.dup2(_quiet_state["saved"], 2)
+                os.close(_quiet_state["saved"])
+                _quiet_state["saved"] = -1
 
 
 def read_image(path: str | os.PathLike, gray: bool = False, size: tuple[int, int] | None = None) -> np.ndarray:
