@@ -274,6 +274,9 @@ def test_localize_into_a_folder_it_cannot_write_fails_before_computing(bags, mod
                            "--no-progress")
         assert_one_line_error(code, err, f"cannot write the output {out}: Permission denied")
         assert ".part" not in err
+    with pytest.raises(PermissionError) as exc:  # the library names the bag too, not its temporary folder
+        BagWriter("/sys/est.db3")
+    assert exc.value.filename == "/sys/est.db3" and ".part" not in str(exc.value)
 
 
 @pytest.mark.parametrize("case", ["half a jpeg", "half a png", "yuv422", "truncated raw", "jpeg of another size"])
