@@ -2,7 +2,7 @@
 # The whole test suite: builds sfanav's wheel from this checkout and installs
 # it with the test extras (after checking the Rust formatting), then runs the Rust core's tests, the Python tests,
 # the wheel in a fresh virtual environment without a Rust toolchain, and a
-# bounded fuzzing run of the model loader and the config parser.
+# bounded fuzzing run of the model loader, the config parser and the ROS bag import.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 export PATH="$HOME/.cargo/bin:$PATH"
@@ -43,5 +43,5 @@ echo "== the wheel in a fresh venv, no Rust toolchain on PATH: sfanav demo --qui
     echo "ok: $(basename "$WHEEL") ($(du -k "$WHEEL" | cut -f1) KB) installed and ran without Rust"
 )
 
-echo "== fuzz: model loader and network config parser (60 s each, tests/fuzz)"
+echo "== fuzz: model loader, network config parser and ROS bag import (60 s each, tests/fuzz)"
 "$PY" tests/fuzz/run.py --seconds 60

@@ -43,12 +43,15 @@ def png_bytes(img):
     return cv2.imencode(".png", np.ascontiguousarray(np.asarray(img)[..., ::-1]))[1].tobytes()
 
 
-def write_camera_bag(path, images, *, stamps=None, odom=None, ros=1):
+def write_camera_bag(path, images, *, stamps=None, odom=None, ros=1, odom_x=None, compression=None,
+                     storage="mcap"):
     """A bag written with rosbags itself (not sfanav's BagWriter): ``images``
     ((msgtype, fields) each) on /cam, stamped ``stamps`` (ns; default
     STAMP0 + k * PERIOD), and a /odom (PoseStamped) at ``odom`` (ns;
-    default at the images' stamps and one period before and after them).
-    ``ros``: 1 (a .bag) or 2 (a folder with MCAP storage)."""
+    default at the images' stamps and one period before and after them),
+    message k at x = ``odom_x[k]`` (default k * 0.1 m).
+    ``ros``: 1 (a .bag) or 2 (a folder with ``storage`` ``"mcap"`` or
+    ``"sqlite3"``). ``compression``: ``"bz2"`` or ``"lz4"`` chunks (ROS 1 only)."""
     from rosbags.rosbag1 import Writer as Writer1
     from rosbags.rosbag2 import StoragePlugin
     from rosbags.rosbag2 import Writer as Writer2
@@ -65,7 +68,9 @@ def write_camera_bag(path, images, *, stamps=None, odom=None, ros=1):
         return T["std_msgs/msg/Header"](stamp=t, frame_id="camera")
 
     odo_ns = [stamps[0] - PERIOD] + stamps + [stamps[-1] + PERIOD] if odom is None else [int(s) for s in odom]
-    writer = Writer1(path) if ros == 1 else Writer2(path, version=9, storage_plugin=StoragePlugin.MCAP)
+    writer = Writer1(path) if ros == 1 else Writer2(path, version=9, storage_plugin=StoragePlugin[storage.upper()])
+    if compression is not None:
+        writer.set_compression(Writer1.CompressionFormat[compression.upper()])
     with writer as w:
         conns = {}
         for topic, typ in (("/cam", images[0][0]), ("/odom", "geometry_msgs/msg/PoseStamped")):
@@ -74,7 +79,8 @@ def write_camera_bag(path, images, *, stamps=None, odom=None, ros=1):
         for ns, kind, k in sorted(events):
             if kind == 1:
                 pose = T["geometry_msgs/msg/Pose"](
-                    position=T["geometry_msgs/msg/Point"](x=k * 0.1, y=0.0, z=0.0),
+                    position=T["geometry_msgs/msg/Point"](x=k * 0.1 if odom_x is None else float(odom_x[k]), y=0.0,
+                                                          z=0.0),
                     orientation=T["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0))
                 msg = T["geometry_msgs/msg/PoseStamped"](header=header(k, ns), pose=pose)
                 w.write(conns["/odom"], ns, ser(msg, "geometry_msgs/msg/PoseStamped"))

@@ -5,14 +5,15 @@ loop and the command, not the quality of the localizer)."""
 import csv
 import json
 import shutil
+import warnings
 
 import numpy as np
 import pytest
 import sfanav
 from sfanav import sim
 from sfanav.app.cli import main
-from sfanav.navigation import Mission, image_goal, navigate
-from clitools import run
+from sfanav.navigation import Mission, check_goal_in_map, image_goal, navigate
+from clitools import assert_one_line_error, run
 
 TINY = {"input": {"width": 60, "height": 8, "channels": 3}, "network": {"precision": "mixed"},
         "layers": [{"rf": [6, 4], "stride": [3, 4], "out": 8}, {"rf": "full", "out": 10}]}
@@ -124,6 +125,40 @@ def test_cli_navigate_bad_input(trained, tmp_path, capsys, args, words):
                        tmp_path / "o", "--no-progress")
     assert code == 2, err
     assert words in err and "Traceback" not in err
+
+
+@pytest.mark.parametrize("target", ["--target=1e6,1e6", "--target=-1e300,1e300", "--target=30,0"])
+def test_cli_navigate_refuses_a_target_outside_the_map(trained, tmp_path, capsys, target):
+    """A target 1414 km away (or 1e300 m) is refused as a far --start is,
+    in one line without overflow warnings, before the robot moves; the map
+    is the box around the exploration run, widened by a quarter of its side."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # an overflow warning would fail here
+        code, _, err = run(capsys, "navigate", trained["model"], trained["root"] / "data", "--start=-2,-2", target,
+                           "--out", tmp_path / "o", "--no-progress")
+    assert_one_line_error(code, err, f"--target ({', '.join(f'{float(v):.6g}' for v in target[9:].split(','))}) "
+                                     "is outside the map: the exploration run spans x ")
+    assert len(err) < 300 and not (tmp_path / "o").exists()
+    explore = sfanav.load(trained["model"]).training_positions_
+    lo, hi = explore.min(0), explore.max(0)
+    margin = max(1.0, 0.25 * float((hi - lo).max()))
+    check_goal_in_map(hi + 0.9 * margin, explore)  # just inside
+    with pytest.raises(ValueError, match="goal .* is outside the map"):
+        check_goal_in_map(hi + 1.1 * margin, explore)
+
+
+def test_navigate_refuses_a_goal_outside_the_map(trained):
+    loc = sfanav.load(trained["model"])
+    world = sim.World.load(trained["ds"].root / "world.json")
+    with pytest.raises(ValueError, match=r"goal \(1e\+06, 1e\+06\) is outside the map"):
+        navigate(loc, world, sim.PanoramicCamera(60, 8), (-2.0, -2.0), (1e6, 1e6), max_iterations=1)
+
+
+@pytest.mark.parametrize("value", ["-5", "0", "x"])
+def test_cli_navigate_max_stops_states_its_real_bound(trained, tmp_path, capsys, value):
+    code, _, err = run(capsys, "navigate", trained["model"], trained["root"] / "data", "--start=-2,-2",
+                       "--target", "1,1", "--max-stops", value, "--out", tmp_path / "o")
+    assert_one_line_error(code, err, f"--max-stops: expected an integer >= 1, got '{value}'")
 
 
 def test_cli_navigate_needs_a_simulated_world(trained, tmp_path, capsys):

@@ -235,6 +235,50 @@ def test_localize_into_a_bag_needs_image_times(bags, model, tmp_path, capsys):
     assert_one_line_error(code, err, "same file twice")
 
 
+@pytest.mark.parametrize("name", ["est.txt", "est", "est.bag2", "est.db"])
+def test_localize_refuses_an_out_name_it_writes_no_format_for(bags, model, tmp_path, capsys, name):
+    """--out est.db3 once wrote a CSV under a ROS 2 bag's name (exit 0); .db3
+    is a bag now, and a name of no format --out knows is refused before any
+    image is read, naming the formats."""
+    code, _, err = run(capsys, "localize", model, bags["train"], "--out", tmp_path / name, "--no-progress")
+    assert_one_line_error(code, err, f"--out {tmp_path / name}: localize writes NAME.csv (frame,x,y), NAME.bag "
+                                     "(ROS 1 bag), NAME.mcap or NAME.db3 (ROS 2 bag, MCAP or SQLite)")
+    assert sorted(p.name for p in tmp_path.iterdir()) == []
+
+
+def test_localize_into_a_folder_it_cannot_write_fails_before_computing(bags, model, tmp_path, capsys, monkeypatch):
+    """A folder that cannot be written (here /sys, which even root cannot
+    write into) fails at once, naming the file asked for, not a temporary
+    ``.part`` one, and before any image is localized."""
+    import tempfile
+
+    from sfanav.localization.localizer import Localizer
+
+    try:
+        fd, p = tempfile.mkstemp(dir="/sys")
+    except OSError:
+        pass
+    else:  # pragma: no cover - a machine where /sys is writable
+        import os
+
+        os.close(fd)
+        os.unlink(p)
+        pytest.skip("/sys is writable here")
+
+    def never(*a, **k):
+        raise AssertionError("localized before finding that the output cannot be written")
+
+    monkeypatch.setattr(Localizer, "predict", never)
+    for out in ("/sys/est.csv", "/sys/est.bag", "/sys/est.db3"):
+        code, _, err = run(capsys, "localize", model, bags["sim"].root, "--run", "test", "--out", out,
+                           "--no-progress")
+        assert_one_line_error(code, err, f"cannot write the output {out}: Permission denied")
+        assert ".part" not in err
+    with pytest.raises(PermissionError) as exc:  # the library names the bag too, not its temporary folder
+        BagWriter("/sys/est.db3")
+    assert exc.value.filename == "/sys/est.db3" and ".part" not in str(exc.value)
+
+
 @pytest.mark.parametrize("case", ["half a jpeg", "half a png", "yuv422", "truncated raw", "jpeg of another size"])
 def test_a_bad_image_is_one_line_and_an_existing_dataset_survives(tmp_path, capsys, case):
     images, words = BAD_IMAGES[case]
@@ -255,7 +299,7 @@ def test_a_bad_image_is_one_line_and_an_existing_dataset_survives(tmp_path, caps
 @pytest.mark.parametrize("ros", [1, 2])
 def test_estimates_carry_their_images_exact_header_stamps(bags, model, tmp_path, capsys, ros):
     """A robot's bag with Unix header stamps (odd nanoseconds, not exact as
-    float seconds) -> sfanav import -> localize --out est.bag / est.mcap:
+    float seconds) -> sfanav import -> localize --out est.bag / est.mcap / est.db3:
     every estimate's header stamp equals its image's, as integers, so
     ROS's exact-time synchronisation pairs them."""
     from rosbags.highlevel import AnyReader
@@ -269,7 +313,7 @@ def test_estimates_carry_their_images_exact_header_stamps(bags, model, tmp_path,
                        "--no-progress")
     assert code == 0, err
     assert Dataset(ds).stamps_ns.tolist() == stamps
-    for name in ("est.bag", "est.mcap"):
+    for name in ("est.bag", "est.mcap", "est.db3"):  # .db3: a ROS 2 bag in one SQLite file
         code, _, err = run(capsys, "localize", model, ds, "--odometry", "--out", tmp_path / name, "--out",
                            tmp_path / f"{name}.csv", "--no-progress")
         assert code == 0, err

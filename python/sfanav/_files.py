@@ -27,13 +27,19 @@ def write_bytes_atomic(path: str | os.PathLike, data: bytes, *, overwrite: bool 
         If ``path`` exists and ``overwrite`` is false.
     FileNotFoundError
         If the parent directory does not exist.
+    OSError
+        If the folder cannot be written (it names ``path``, not the
+        temporary file).
     """
     p = Path(path)
     if not p.parent.is_dir():
         raise FileNotFoundError(f"the folder {p.parent} for {p.name} does not exist")
     if p.exists() and not overwrite:
         raise FileExistsError(f"{p} exists; pass overwrite=True to replace it")
-    fd, tmp = tempfile.mkstemp(prefix=f".{p.name}.", suffix=".part", dir=p.parent)
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{p.name}.", suffix=".part", dir=p.parent)
+    except OSError as exc:  # name the file asked for, not the temporary one
+        raise type(exc)(exc.errno, exc.strerror, str(p)) from None
     try:
         with os.fdopen(fd, "wb") as f:
             f.write(data)
@@ -45,6 +51,20 @@ def write_bytes_atomic(path: str | os.PathLike, data: bytes, *, overwrite: bool 
             os.unlink(tmp)
         raise
     return p
+
+
+def check_writable(path: str | os.PathLike) -> None:
+    """Checks, before any work, that a file can be created beside ``path``
+    (the folder exists and is writable: a probe file is made and removed),
+    so that a command fails at once, not after computing what it would
+    write. Raises the OSError, naming ``path``."""
+    p = Path(path)
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{p.name}.", suffix=".probe", dir=p.parent)
+    except OSError as exc:
+        raise type(exc)(exc.errno, exc.strerror, str(p)) from None
+    os.close(fd)
+    os.unlink(tmp)
 
 
 def write_csv_atomic(path: str | os.PathLike, header: Sequence[str], rows: Iterable[Sequence[Any]], *,

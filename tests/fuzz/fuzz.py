@@ -1,17 +1,21 @@
 #!/usr/bin/env python3
-"""Coverage-guided fuzzing (atheris / libFuzzer) of the model loader and the
-network config parser, with the structure-aware mutations of
-``mutations.py``.
+"""Coverage-guided fuzzing (atheris / libFuzzer) of the model loader, the
+network config parser and the ROS bag import, with the structure-aware
+mutations of ``mutations.py``.
 
     python3 tests/fuzz/fuzz.py model  SCRATCH_DIR tests/fuzz/corpus/model  -max_total_time=60
     python3 tests/fuzz/fuzz.py config SCRATCH_DIR tests/fuzz/corpus/config -max_total_time=60
+    python3 tests/fuzz/fuzz.py bag    SCRATCH_DIR tests/fuzz/corpus/bag    -max_total_time=60
 
 The first corpus directory receives the new inputs libFuzzer finds (give a
 scratch directory so that the committed corpus stays as it is); a crash is
 written as ``crash-*`` under ``-artifact_prefix``. The contract under test:
 ``sfanav.load`` of any bytes raises at most a ValueError (and a loaded model
 transforms without anything but a ValueError), and ``sfanav.Network`` of
-any JSON object raises at most a ValueError or a TypeError; never another
+any JSON object raises at most a ValueError or a TypeError; importing any
+bytes as a ROS bag (``sfanav.Dataset.from_bag``, ROS 1, MCAP or SQLite by the
+file's first bytes, and ``bag_info``) raises at most a ValueError or a
+TypeError and leaves no file behind when it fails; never another
 exception, an abort, a hang or an allocation beyond the address-space limit
 set below (an unchecked allocation would show as a MemoryError or a crash).
 """
@@ -29,15 +33,24 @@ from pathlib import Path
 import atheris
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from mutations import mutate_config, mutate_model
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # tests/: bagrecords
+from mutations import mutate_bag, mutate_config, mutate_model
 
-with atheris.instrument_imports(include=["sfanav"]):
+with atheris.instrument_imports(include=["sfanav", "rosbags"]):
     import numpy as np
+    import rosbags.highlevel
+    import rosbags.rosbag1
+    import rosbags.rosbag2  # noqa: F401
     import sfanav
+    from sfanav.data import bag_info
 
 ADDRESS_SPACE = 6 * 2**30  # bytes: an unchecked allocation fails instead of swapping
 warnings.simplefilter("ignore")
-_PATH = Path(tempfile.mkdtemp(prefix="sfanav-fuzz-")) / "input.sfa"
+_DIR = Path(tempfile.mkdtemp(prefix="sfanav-fuzz-"))
+_PATH = _DIR / "input.sfa"
+_BAGS = _DIR / "bags"
+_BAGS.mkdir()
+BAG_KINDS = ((b"#ROSBAG V2.0", "input.bag"), (b"\x89MCAP", "input.mcap"), (b"SQLite format 3", "input.db3"))
 
 
 def exercise(obj: object) -> None:
@@ -78,6 +91,22 @@ def config_one(data: bytes) -> None:
         pass
 
 
+def bag_one(data: bytes) -> None:
+    name = next((n for magic, n in BAG_KINDS if data.startswith(magic)), "input.bag")
+    for p in _BAGS.iterdir():
+        p.unlink()
+    path = _BAGS / name
+    path.write_bytes(data)
+    out = _DIR / "dataset"
+    try:
+        bag_info(path).describe()
+        sfanav.Dataset.from_bag(path, out, odom_topic="/odom", overwrite=True, log=lambda m: None)
+    except (ValueError, TypeError):
+        left = sorted(p.name for p in _DIR.iterdir() if p.name not in ("bags", "input.sfa", "dataset"))
+        if left:
+            raise AssertionError(f"a failed import left {left} behind") from None
+
+
 def _mutator(structured):
     def mutate(data: bytes, max_size: int, seed: int) -> bytes:
         if random.Random(seed).random() < 0.85:
@@ -92,7 +121,7 @@ def _mutator(structured):
     return mutate
 
 
-TARGETS = {"model": (model_one, mutate_model), "config": (config_one, mutate_config)}
+TARGETS = {"model": (model_one, mutate_model), "config": (config_one, mutate_config), "bag": (bag_one, mutate_bag)}
 
 
 def main() -> None:

@@ -3,7 +3,12 @@ manifest or arrays (or a config) the way a hostile or careless editor
 would, then recompute every checksum, so that the result passes the
 integrity checks and exercises the validation behind them. Fields are
 often changed in pairs (a node's ``n_features`` with its first stage's
-``input_dim``, say): the crashes the checksums hid needed two."""
+``input_dim``, say): the crashes the checksums hid needed two.
+
+Bags are damaged the way disks, networks and killed recorders damage
+them: cut short, bits flipped, and, in a ROS 1 bag's compressed chunks,
+the compressed stream damaged or the records inside it damaged and
+compressed again (``bagrecords``)."""
 
 from __future__ import annotations
 
@@ -15,6 +20,7 @@ import zipfile
 from typing import Any
 
 import numpy as np
+from bagrecords import chunks, damage_chunk
 
 INTERESTING_INTS = [0, 1, 2, 3, -1, -3, 7, 255, 1000, 2**16, 2**20, 2**31 - 1, 2**32 + 1, 2**40, 2**63 - 1,
                     2**63, 2**64 - 1, 2**64, 10**30]
@@ -176,4 +182,36 @@ def mutate_config(data: bytes, seed: int) -> bytes | None:
     try:
         return json.dumps(cfg).encode()
     except (ValueError, TypeError):
+        return None
+
+
+def mutate_bag(data: bytes, seed: int) -> bytes | None:
+    """A damaged bag: cut at a random place (often near the end, as a
+    killed recorder leaves it), 1 to 16 bits flipped, or a compressed
+    chunk's stream or its records damaged (ROS 1). None for empty data."""
+    if not data:
+        return None
+    rng = random.Random(seed)
+    kind = rng.random()
+    found = chunks(data) if kind < 0.4 else []
+    if found:
+        chunk = rng.choice(found)
+        offsets = [rng.randrange(2**31) for _ in range(rng.choice([1, 1, 2, 4, 16]))]
+        damaged = _damaged_chunk(data, chunk, offsets, rng.random() < 0.5)
+        if damaged is not None:
+            return damaged
+    if kind < 0.7:
+        out = bytearray(data)
+        for _ in range(rng.choice([1, 1, 2, 4, 16])):
+            out[rng.randrange(len(out))] ^= 1 << rng.randrange(8)
+        return bytes(out)
+    cut = len(data) - rng.randrange(1, 64) if rng.random() < 0.5 else rng.randrange(len(data))
+    return data[: max(cut, 0)]
+
+
+def _damaged_chunk(data: bytes, chunk: Any, offsets: list[int], before_compression: bool) -> bytes | None:
+    """``damage_chunk``, or None for a chunk already too damaged to decompress."""
+    try:
+        return damage_chunk(data, chunk, offsets, before_compression=before_compression)
+    except Exception:  # noqa: BLE001 - bz2, lz4 and struct fail each in their own way
         return None

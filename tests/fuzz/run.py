@@ -1,5 +1,6 @@
 #!/usr/bin/env python3
-"""Runs both fuzz targets for a bounded time (the CI step): each starts from
+"""Runs the fuzz targets (model loader, config parser, ROS bag import) for
+a bounded time each (the CI step): each starts from
 the committed corpus, writes what it finds to a scratch directory, and a
 crash, a timeout or an out-of-memory fails the run with the input's path.
 
@@ -16,7 +17,7 @@ import tempfile
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
-TARGETS = {"model": 200_000, "config": 20_000}  # target -> largest input (bytes)
+TARGETS = {"model": 200_000, "config": 20_000, "bag": 64_000}  # target -> largest input (bytes)
 
 
 def main() -> int:

@@ -25,21 +25,25 @@ def size(text: str) -> tuple[int, int]:
     return w, h
 
 
-def nonneg_int(text: str) -> int:
+def _int_at_least(text: str, low: int) -> int:
+    """An integer >= ``low``; the error states that bound, whatever the value."""
     try:
         v = int(text)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
-    if v < 0:
-        raise argparse.ArgumentTypeError(f"expected an integer >= 0, got {text!r}")
+        raise argparse.ArgumentTypeError(f"expected an integer >= {low}, got {text!r}") from None
+    if v < low:
+        raise argparse.ArgumentTypeError(f"expected an integer >= {low}, got {text!r}")
     return v
+
+
+def nonneg_int(text: str) -> int:
+    """An integer >= 0."""
+    return _int_at_least(text, 0)
 
 
 def pos_int(text: str) -> int:
-    v = nonneg_int(text)
-    if v < 1:
-        raise argparse.ArgumentTypeError(f"expected an integer >= 1, got {text!r}")
-    return v
+    """An integer >= 1 (``-5`` and ``0`` alike: "expected an integer >= 1")."""
+    return _int_at_least(text, 1)
 
 
 def pos_float(text: str) -> float:

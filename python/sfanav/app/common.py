@@ -31,15 +31,23 @@ def existing_path(text: str, what: str) -> "Path":
 
 def new_file(text: str, overwrite: bool, what: str = "output") -> "Path":
     """``text`` as the path of a file to write (its folder made): a
-    UsageError if it exists without ``overwrite`` or is a directory."""
+    UsageError if it exists without ``overwrite`` or is a directory, or if
+    its folder cannot be written (checked now, before the command works
+    for minutes to fill it)."""
     from pathlib import Path
+
+    from .._files import check_writable
 
     p = Path(text)
     if p.exists() and not overwrite:
         raise UsageError(f"{what} {p} exists; pass --overwrite to replace it")
     if p.exists() and p.is_dir():
         raise UsageError(f"{what} {p} is a directory")
-    p.parent.mkdir(parents=True, exist_ok=True)
+    try:
+        p.parent.mkdir(parents=True, exist_ok=True)
+        check_writable(p)
+    except OSError as exc:
+        raise UsageError(f"cannot write the {what} {p}: {exc.strerror or exc}") from None
     return p
 
 

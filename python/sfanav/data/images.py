@@ -3,7 +3,12 @@ converted to gray or resized on read."""
 
 from __future__ import annotations
 
+import contextlib
 import os
+import sys
+import threading
+import zlib
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -20,6 +25,46 @@ def _cv2() -> Any:
     return cv2
 
 
+_QUIET = threading.Lock()
+_quiet_state = {"depth": 0, "saved": -1}
+
+
+@contextlib.contextmanager
+def quiet_codecs() -> Iterator[None]:
+    """Silences what OpenCV's image codecs print straight to the process's
+    stderr while decoding (libjpeg's "Corrupt JPEG data: ...", libpng's
+    "libpng error: ...", OpenCV's own "[ WARN ]" and "[ERROR]" lines): the
+    caller reports a failed decode in one line of its own. File descriptor 2
+    points at /dev/null while any thread is inside (Python's pending stderr
+    output is flushed first; what another thread writes to the process's
+    stderr meanwhile is lost, a decode's few milliseconds); nested and
+    concurrent uses share one redirection, undone when the last one leaves."""
+    with _QUIET:
+        if _quiet_state["depth"] == 0:
+            try:
+                sys.stderr.flush()
+                saved = os.dup(2)
+            except (OSError, ValueError, AttributeError):  # no usable stderr: nothing to silence
+                saved = -1
+            if saved >= 0:
+                null = os.open(os.devnull, os.O_WRONLY)
+                try:
+                    os.dup2(null, 2)
+                finally:
+                    os.close(null)
+            _quiet_state["saved"] = saved
+        _quiet_state["depth"] += 1
+    try:
+        yield
+    finally:
+        with _QUIET:
+            _quiet_state["depth"] -= 1
+            if _quiet_state["depth"] == 0 and _quiet_state["saved"] >= 0:
+                os.dup2(_quiet_state["saved"], 2)
+                os.close(_quiet_state["saved"])
+                _quiet_state["saved"] = -1
+
+
 def read_image(path: str | os.PathLike, gray: bool = False, size: tuple[int, int] | None = None) -> np.ndarray:
     """Reads an image as uint8 RGB (H, W, 3) or gray (H, W).
 
@@ -34,7 +79,8 @@ def read_image(path: str | os.PathLike, gray: bool = False, size: tuple[int, int
     path = Path(path)
     if not path.exists():
         raise FileNotFoundError(f"image file {path} does not exist")
-    img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    with quiet_codecs():
+        img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
     if img is None:
         raise ValueError(f"cannot read image {path} (not an image OpenCV can decode)")
     if img.dtype != np.uint8:
@@ -109,3 +155,25 @@ def truncation(data: bytes) -> str | None:
             pos = end
         return "the PNG data ends before its IEND chunk (truncated)"
     return None
+
+
+def damage(data: bytes) -> str | None:
+    """Why the PNG or JPEG file ``data`` cannot be whole: cut short
+    (:func:`truncation`), or, for a PNG, a chunk whose CRC-32 does not match
+    its bytes (a bit flipped in storage or transfer); None otherwise.
+    Checked before OpenCV sees the data, whose PNG decoder prints libpng's
+    complaints on stderr. A JPEG has no checksum: bits flipped inside its
+    coded data decode to a wrong picture, unnoticed."""
+    cut = truncation(data)
+    if cut is not None or not data.startswith(b"\x89PNG\r\n\x1a\n"):
+        return cut
+    pos = 8
+    while True:  # truncation() found the chunks to run whole up to IEND
+        length = int.from_bytes(data[pos : pos + 4], "big")
+        end = pos + 12 + length
+        kind = data[pos + 4 : pos + 8]
+        if zlib.crc32(data[pos + 4 : end - 4]) != int.from_bytes(data[end - 4 : end], "big"):
+            return f"the PNG's {kind.decode('latin-1')!r} chunk at byte {pos} fails its CRC-32 (damaged data)"
+        if kind == b"IEND":
+            return None
+        pos = end

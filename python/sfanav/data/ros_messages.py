@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from .images import truncation
+from .images import damage, quiet_codecs
 
 ROS_EXTRA = 'pip install "sfanav[ros]"'
 
@@ -152,6 +152,30 @@ def pose_of(msg: Any) -> tuple[float, float, float]:
     return float(p.x), float(p.y), yaw_from_quaternion(float(q.x), float(q.y), float(q.z), float(q.w))
 
 
+def field_problem(msg: Any) -> str | None:
+    """Why a deserialized message lacks what sfanav reads of its type (None
+    if nothing is amiss): a bag carries its own definition of each type,
+    and a damaged or foreign one can drop or retype a field (a
+    ``Quaternion`` without ``z``, a ``stamp`` whose ``sec`` is text). Read
+    here: the header stamp of the image and pose types, the pose of the
+    pose types, an image's size, encoding or format and data."""
+    try:
+        typ = msg.__msgtype__
+        if typ in IMAGE_TYPES or typ in POSE_TYPES:
+            stamp_of(msg)
+        if typ in POSE_TYPES:
+            pose_of(msg)
+        elif typ == IMAGE:
+            str(msg.encoding), int(msg.height), int(msg.width), int(msg.step), bool(msg.is_bigendian)
+            np.asarray(msg.data).reshape(-1).view(np.uint8)
+        elif typ == COMPRESSED_IMAGE:
+            str(msg.format)
+            np.asarray(msg.data).reshape(-1).view(np.uint8)
+    except (AttributeError, TypeError, ValueError, OverflowError) as exc:
+        return " ".join(str(exc).split()) or type(exc).__name__
+    return None
+
+
 def _to_rgb(img: np.ndarray, order: str) -> np.ndarray:
     """uint8 (H, W) gray or (H, W, 3|4) in ``order`` ("rgb" or "bgr") as gray or RGB."""
     if img.ndim == 2:
@@ -245,10 +269,13 @@ def decode_compressed(data: np.ndarray, fmt: str = "") -> np.ndarray:
 
     if "compresseddepth" in fmt.lower().replace(" ", ""):
         raise ValueError(f"compressed depth images ({fmt!r}) are not camera images")
-    cut = truncation(np.ascontiguousarray(data, np.uint8).tobytes())
+    cut = damage(np.ascontiguousarray(data, np.uint8).tobytes())
     if cut is not None:
         raise ValueError(f"cannot decode the compressed image ({fmt or 'no format given'}, {data.size} bytes): {cut}")
-    img = cv2.imdecode(np.ascontiguousarray(data, np.uint8), cv2.IMREAD_UNCHANGED) if data.size else None
+    img = None
+    if data.size:
+        with quiet_codecs():
+            img = cv2.imdecode(np.ascontiguousarray(data, np.uint8), cv2.IMREAD_UNCHANGED)
     if img is None:
         raise ValueError(f"cannot decode the compressed image ({fmt or 'no format given'}, {data.size} bytes)")
     if img.dtype != np.uint8:

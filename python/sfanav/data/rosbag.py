@@ -23,6 +23,7 @@ nothing, and a dataset it would replace (``overwrite``) stays as it was.
 
 from __future__ import annotations
 
+import contextlib
 import math
 import os
 from collections.abc import Iterator
@@ -41,13 +42,14 @@ from .ros_messages import (
     POSE_TYPES,
     compressed_suffix,
     decode_image,
+    field_problem,
     pose_of,
     raw_image_shape,
     require_rosbags,
     stamp_of,
     typestore,
 )
-from .schema import check_name
+from .schema import check_name, format_stamp_ns
 from .writer import DatasetWriter
 
 TIME_SOURCES = ("header", "bag")
@@ -57,6 +59,13 @@ OUTSIDE = ("error", "drop", "empty")
 
 
 MAX_LISTED_GAPS = 100
+
+
+MAX_POSITION = 1e9
+"""Largest |x| or |y| (m) a pose message may hold: far beyond any frame a
+robot uses (UTM and Earth-centred coordinates stay below 1e7 m), and small
+enough that interpolating between two poses cannot overflow. A larger
+value is a corrupt or unset message, refused with its stamp and value."""
 
 
 @dataclass(frozen=True)
@@ -103,25 +112,30 @@ class BagInfo:
         return ", ".join(f"{t.name} ({t.msgtype}, {t.count})" for t in self.topics) or "none"
 
 
-def _bag_errors() -> tuple[type[BaseException], ...]:
-    from rosbags.highlevel import AnyReaderError
-    from rosbags.rosbag1 import ReaderError as ReaderError1
-    from rosbags.rosbag2 import ReaderError as ReaderError2
-    from rosbags.serde import SerdeError
-    from rosbags.typesys import TypesysError
-
-    return AnyReaderError, ReaderError1, ReaderError2, SerdeError, TypesysError
-
-
 def _unreadable(path: Path, exc: BaseException) -> ValueError:
-    msg = " ".join(str(a) for a in exc.args) or type(exc).__name__
-    return ValueError(f"cannot read the bag {path}: {msg} (truncated, still being recorded, or not a bag? "
-                      "rosbag reindex / ros2 bag reindex repairs an unfinished recording)")
+    return ValueError(f"cannot read the bag {path}: {_reason(exc)} (truncated, damaged, still being recorded, or "
+                      "not a bag? rosbag reindex / ros2 bag reindex repairs an unfinished recording)")
+
+
+def _reason(exc: BaseException) -> str:
+    """What went wrong, in one line: the exception's text (its type's name
+    for a text-less one; an allocation a corrupt length asked for is said so)."""
+    msg = " ".join(" ".join(str(a) for a in exc.args).split())
+    if isinstance(exc, MemoryError):
+        return f"a length in the bag asks for more memory than there is{': ' + msg if msg else ''}"
+    return msg or type(exc).__name__
 
 
 class _Bag:
     """An open bag (``rosbags.highlevel.AnyReader``) whose failures are
-    ValueErrors naming the bag."""
+    ValueErrors naming the bag.
+
+    Any exception the reader raises while parsing the file (its own errors,
+    ``OSError`` "Invalid data stream" of a damaged bz2 chunk, ``RuntimeError``
+    "LZ4F_decompress failed" of an lz4 one, ``struct.error``, ``sqlite3``'s
+    errors, a ``MemoryError`` from a corrupt length, ...) is the file's
+    fault, so every one becomes ``cannot read the bag NAME: ...``; only
+    KeyboardInterrupt and the like pass through."""
 
     def __init__(self, path: str | os.PathLike):
         require_rosbags()
@@ -130,21 +144,25 @@ class _Bag:
         self.path = Path(path)
         if not self.path.exists():
             raise FileNotFoundError(f"no bag at {self.path}")
-        self.errors = _bag_errors()
         try:
             self.reader = AnyReader([self.path], default_typestore=typestore(2))
-        except self.errors as exc:
+        except Exception as exc:  # noqa: BLE001 - the reader failing on the file's bytes: see the class
             raise _unreadable(self.path, exc) from None
 
     def __enter__(self) -> "_Bag":
         try:
             self.reader.open()
-        except self.errors as exc:
+        except Exception as exc:  # noqa: BLE001 - see the class
+            self._close()
             raise _unreadable(self.path, exc) from None
         return self
 
     def __exit__(self, *exc: Any) -> None:
-        self.reader.close()
+        self._close()
+
+    def _close(self) -> None:
+        with contextlib.suppress(Exception):  # closing a damaged or half-opened bag: nothing to save
+            self.reader.close()
 
     def info(self) -> BagInfo:
         r = self.reader
@@ -156,20 +174,27 @@ class _Bag:
     def messages(self, topic: str) -> Iterator[tuple[int, Any]]:
         """(time the bag recorded it in ns, message) of every message of ``topic``, in bag order."""
         conns = [c for c in self.reader.connections if c.topic == topic]
-        it = self.reader.messages(connections=conns)
         k = 0
+        try:
+            it = self.reader.messages(connections=conns)
+        except Exception as exc:  # noqa: BLE001 - see the class
+            raise _unreadable(self.path, exc) from None
         while True:
             try:
                 conn, ns, raw = next(it)
             except StopIteration:
                 return
-            except self.errors as exc:
+            except Exception as exc:  # noqa: BLE001 - see the class
                 raise _unreadable(self.path, exc) from None
             try:
                 msg = self.reader.deserialize(raw, conn.msgtype)
-            except self.errors as exc:
+            except Exception as exc:  # noqa: BLE001 - the message's bytes do not make its type
                 raise ValueError(f"bag {self.path}: message {k} of {topic} is not a valid {conn.msgtype}: "
-                                 f"{' '.join(str(a) for a in exc.args)}") from None
+                                 f"{_reason(exc)}") from None
+            problem = field_problem(msg)
+            if problem is not None:
+                raise ValueError(f"bag {self.path}: message {k} of {topic} is not a {conn.msgtype} as ROS defines "
+                                 f"it (the bag's own definition differs?): {problem}")
             yield int(ns), msg
             k += 1
 
@@ -231,12 +256,16 @@ def _read_track(bag: _Bag, topic: str, what: str, time: str) -> _Track:
     ns: list[int] = []
     poses: list[tuple[float, float, float]] = []
     for k, (rec, msg) in enumerate(bag.messages(topic)):
-        ns.append(_stamp(msg, rec, time, topic, k))
+        t = _stamp(msg, rec, time, topic, k)
         x, y, h = pose_of(msg)
-        if not (math.isfinite(x) and math.isfinite(y)):
-            raise ValueError(f"message {k} of {topic} ({what}) has a position that is not finite ({x}, {y})")
+        if not (math.isfinite(x) and math.isfinite(y)) or max(abs(x), abs(y)) > MAX_POSITION:
+            raise ValueError(f"message {k} of {topic} ({what}, t={_sec(t)} s) has the position x={x!r}, y={y!r} m: "
+                             + ("not finite" if not (math.isfinite(x) and math.isfinite(y)) else
+                                f"beyond {MAX_POSITION:g} m from the origin, not a position (a corrupt message?)"))
         if what == "odometry" and not math.isfinite(h):
-            raise ValueError(f"message {k} of {topic} (odometry) has no orientation (a zero quaternion)")
+            raise ValueError(f"message {k} of {topic} (odometry, t={_sec(t)} s) has no orientation (a zero or "
+                             "non-finite quaternion)")
+        ns.append(t)
         poses.append((x, y, h))
     t = np.array(ns, np.int64)
     if len(t) < 2:
@@ -252,9 +281,7 @@ def _read_track(bag: _Bag, topic: str, what: str, time: str) -> _Track:
 
 def _sec(ns: Any) -> str:
     """A time in ns as seconds for a message, exactly (``1733000000.190123455``, ``1000.5``, ``1000.0``)."""
-    v = int(ns)
-    s, f = divmod(abs(v), 1_000_000_000)
-    return f"{'-' if v < 0 else ''}{s}.{f'{f:09d}'.rstrip('0') or '0'}"
+    return format_stamp_ns(ns)
 
 
 def _wrap(a: np.ndarray) -> np.ndarray:
@@ -402,12 +429,7 @@ def _plan(path: Path, run: str, image_topic: str | None, odom_topic: str | None,
             stamps.append(_stamp(m, rec, time, topic, k))
             layouts.append(_raw_layout(m))
         img_ns = np.array(stamps, np.int64)
-    bad = np.nonzero(np.diff(img_ns) < 0)[0]
-    if len(bad):
-        i = int(bad[0])
-        raise ValueError(f"image topic {topic}: timestamps must not decrease; image {i + 1} "
-                         f"(t={_sec(img_ns[i + 1])} s) comes after image {i} (t={_sec(img_ns[i])} s)"
-                         + ("; with time='bag' (--time bag) the bag's own order is used" if time == "header" else ""))
+    _check_image_order(topic, img_ns, time)
     keep = np.ones(len(img_ns), bool)
     values: dict[str, np.ndarray] = {}
     reports: dict[str, Any] = {}
@@ -428,6 +450,23 @@ def _plan(path: Path, run: str, image_topic: str | None, odom_topic: str | None,
               "images_in_bag": len(img_ns), "images_left_out": len(img_ns) - n, "poses": reports}
     return _Plan(path, run, info.ros, topic, img_ns, keep, values.get("ground truth", unknown),
                  values.get("odometry", unknown), report, notes, shape)
+
+
+def _check_image_order(topic: str, img_ns: np.ndarray, time: str) -> None:
+    """Image stamps must increase strictly: two frames with one stamp are
+    refused here, naming both with their exact stamps, because a dataset
+    whose run repeats a stamp would import but not train from odometry
+    (``sfanav train`` needs the frames' times to increase)."""
+    bad = np.nonzero(np.diff(img_ns) <= 0)[0]
+    if not len(bad):
+        return
+    i = int(bad[0])
+    a, b = int(img_ns[i]), int(img_ns[i + 1])
+    how = (f"images {i} and {i + 1} have the same stamp t={_sec(a)} s ({a} ns)" if a == b else
+           f"image {i + 1} (t={_sec(b)} s) is earlier than image {i} (t={_sec(a)} s)")
+    more = f"; {len(bad)} such pairs in all" if len(bad) > 1 else ""
+    hint = "; with time='bag' (--time bag) the times the bag recorded them are used" if time == "header" else ""
+    raise ValueError(f"image topic {topic}: timestamps must increase strictly; {how}{more}{hint}")
 
 
 def _raw_layout(msg: Any) -> tuple[int, ...] | str | None:

@@ -33,7 +33,10 @@ from .ros_messages import (
     typestore,
 )
 
-BAG_SUFFIXES = (".bag", ".mcap")
+BAG_SUFFIXES = (".bag", ".mcap", ".db3")
+"""The bag files :class:`BagWriter` writes: ROS 1 ``.bag``, ROS 2 ``.mcap``
+(MCAP storage) and ``.db3`` (SQLite storage, one file without its
+``metadata.yaml``, as ``ros2 bag`` and ``rosbags`` open it)."""
 
 
 UNITS = ("s", "ns")
@@ -77,7 +80,9 @@ class BagWriter:
     ----------
     path : path
         ``NAME.bag``: a ROS 1 bag. ``NAME.mcap``: a ROS 2 bag in one MCAP
-        file (Foxglove and ``ros2 bag play`` open it). A name without
+        file (Foxglove and ``ros2 bag play`` open it). ``NAME.db3``: a ROS 2
+        bag in one SQLite file (``ros2 bag``'s default storage up to
+        Humble; the file alone, without a ``metadata.yaml``). A name without
         suffix: a ROS 2 bag folder (``metadata.yaml`` and an SQLite
         ``.db3`` file, what ``ros2 bag record`` writes by default up to ROS 2
         Humble).
@@ -118,7 +123,8 @@ class BagWriter:
         self.path = Path(path)
         suffix = self.path.suffix.lower()
         if suffix not in BAG_SUFFIXES + ("",):
-            raise ValueError(f"{self.path}: a bag is NAME.bag (ROS 1), NAME.mcap (ROS 2) or a folder NAME (ROS 2)")
+            raise ValueError(f"{self.path}: a bag is NAME.bag (ROS 1), NAME.mcap or NAME.db3 (ROS 2) or a folder "
+                             "NAME (ROS 2)")
         if not self.path.parent.is_dir():
             raise FileNotFoundError(f"the folder {self.path.parent} for {self.path.name} does not exist")
         if self.path.exists() and not overwrite:
@@ -129,7 +135,10 @@ class BagWriter:
         self.store = typestore(self.ros)
         self._tmp = self.path.parent / f".{self.path.name}.part"
         _remove(self._tmp)
-        self._tmp.mkdir()
+        try:
+            self._tmp.mkdir()
+        except OSError as exc:  # name the bag asked for, not the temporary folder
+            raise type(exc)(exc.errno, exc.strerror, str(self.path)) from None
         self._inner = self._tmp / (self.path.name if self.ros == 1 else self.path.stem)
         if self.ros == 1:
             self._writer: Any = Writer1(self._inner)
@@ -206,7 +215,8 @@ class BagWriter:
         self._open = False
         try:
             self._writer.close()
-            src = self._inner / f"{self._inner.name}.mcap" if self.path.suffix.lower() == ".mcap" else self._inner
+            suffix = self.path.suffix.lower()
+            src = self._inner / f"{self._inner.name}{suffix}" if suffix in (".mcap", ".db3") else self._inner
             if self.path.exists():
                 _remove(self.path)
             os.replace(src, self.path)
@@ -250,7 +260,7 @@ def write_estimates(path: str | os.PathLike, stamps: Any, xy: Any, fused: Any = 
 
     Parameters
     ----------
-    path : ``NAME.bag`` (ROS 1) or ``NAME.mcap`` (ROS 2)
+    path : ``NAME.bag`` (ROS 1), ``NAME.mcap`` or ``NAME.db3`` (ROS 2, MCAP or SQLite storage)
     stamps : (N,) seconds, >= 0, or integer nanoseconds with ``unit="ns"``
         The images' times (the header stamps and the bag's record times).
         Give a dataset's ``stamps_ns`` where it has them: then every
@@ -275,7 +285,7 @@ def write_estimates(path: str | os.PathLike, stamps: Any, xy: Any, fused: Any = 
     >>> write_estimates("estimates.bag", ds.stamps_ns, xy, fused, unit="ns")   # doctest: +SKIP
     """
     if Path(path).suffix.lower() not in BAG_SUFFIXES:
-        raise ValueError(f"{path}: estimates are written to NAME.bag (ROS 1) or NAME.mcap (ROS 2)")
+        raise ValueError(f"{path}: estimates are written to NAME.bag (ROS 1), NAME.mcap or NAME.db3 (ROS 2)")
     if unit not in UNITS:
         raise ValueError(f"unit must be 's' (float seconds) or 'ns' (integer nanoseconds), got {unit!r}")
     if unit == "ns":

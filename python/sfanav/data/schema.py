@@ -86,6 +86,15 @@ def format_float(v: float) -> str:
     return "" if not math.isfinite(v) else repr(float(v))
 
 
+def format_stamp_ns(ns: Any) -> str:
+    """A time in integer ns as exact seconds for a message: every digit
+    kept, trailing zeros dropped (``1733000000.190123455``, ``1000.5``,
+    ``1000.0``), so that two stamps 1 ns apart print apart."""
+    v = int(ns)
+    s, f = divmod(abs(v), 1_000_000_000)
+    return f"{'-' if v < 0 else ''}{s}.{f'{f:09d}'.rstrip('0') or '0'}"
+
+
 def columns_of(exact_stamps: bool) -> tuple[str, ...]:
     """The standard columns of ``frames.csv`` in order, with ``stamp_ns``
     after ``timestamp`` if there are exact stamps."""

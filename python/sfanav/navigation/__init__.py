@@ -30,7 +30,7 @@ from .features import (
 )
 from .geodesic import GeodesicField
 from .gradient import PlaneGradient, difference_quotient, plane_gradient
-from .mission import Mission, image_goal, navigate
+from .mission import Mission, check_goal_in_map, image_goal, navigate
 from .navigator import NavigationResult, Navigator
 from .planning import (
     GridMap,
@@ -44,4 +44,4 @@ from .planning import (
 from .plots import plot_cost_surface, plot_trajectories
 from .trials import TrialSummary, evaluate_trials, sample_trials
 
-__all__ = ["Mission", "image_goal", "navigate", "GridMap", "CoordinateFeatures", "Descent", "GeodesicField", "ImageFeatures", "MapTracker", "MetricDescent", "MetricFeatures", "NavigationResult", "Navigator", "PlaneGradient", "PointSimulator", "RobustDescent", "RunGraphFeatures", "ScaledCost", "SlowFeatureCost", "StepInfo", "ThesisDescent", "TrialSummary", "astar", "beta_weights", "difference_quotient", "evaluate_trials", "fit_coordinate_sfa", "halfplane_optimal", "occupancy_grid", "path_length", "plane_gradient", "plot_cost_surface", "plot_trajectories", "run_spread", "sample_trials", "shortest_path", "travel_time"]
+__all__ = ["Mission", "check_goal_in_map", "image_goal", "navigate", "GridMap", "CoordinateFeatures", "Descent", "GeodesicField", "ImageFeatures", "MapTracker", "MetricDescent", "MetricFeatures", "NavigationResult", "Navigator", "PlaneGradient", "PointSimulator", "RobustDescent", "RunGraphFeatures", "ScaledCost", "SlowFeatureCost", "StepInfo", "ThesisDescent", "TrialSummary", "astar", "beta_weights", "difference_quotient", "evaluate_trials", "fit_coordinate_sfa", "halfplane_optimal", "occupancy_grid", "path_length", "plane_gradient", "plot_cost_surface", "plot_trajectories", "run_spread", "sample_trials", "shortest_path", "travel_time"]

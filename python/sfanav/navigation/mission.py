@@ -86,6 +86,41 @@ def image_goal(localizer: Any, image: Any) -> np.ndarray:
     return xy[0]
 
 
+MAP_MARGIN = 0.25
+"""How far beyond the exploration run a goal may lie, as a fraction of the
+larger side of the box around the run's positions (at least
+``MIN_MAP_MARGIN`` m): the localizer knows the places the run saw, and
+nothing far outside them."""
+
+
+MIN_MAP_MARGIN = 1.0
+
+
+def check_goal_in_map(goal: Any, exploration: Any, what: str = "goal") -> np.ndarray:
+    """``goal`` (x, y) as an array, checked to lie in the map: the box around
+    the exploration run's positions (N, 2), widened on every side by
+    ``MAP_MARGIN`` of its larger side (at least ``MIN_MAP_MARGIN`` m).
+
+    Raises
+    ------
+    ValueError
+        For a goal that is not two finite numbers, or one outside the map
+        (the message gives the map's extent), named ``what``.
+    """
+    g = as_vector2(goal, what)
+    P = np.asarray(exploration, float).reshape(-1, 2)
+    P = P[np.isfinite(P).all(axis=1)]
+    if not len(P):
+        return g
+    lo, hi = P.min(axis=0), P.max(axis=0)
+    margin = max(MIN_MAP_MARGIN, MAP_MARGIN * float((hi - lo).max()))
+    if ((g < lo - margin) | (g > hi + margin)).any():
+        raise ValueError(f"{what} ({g[0]:.6g}, {g[1]:.6g}) is outside the map: the exploration run spans "
+                         f"x {lo[0]:.2f}..{hi[0]:.2f} m, y {lo[1]:.2f}..{hi[1]:.2f} m, and a goal may lie up to "
+                         f"{margin:.2f} m beyond it")
+    return g
+
+
 def navigate(localizer: Any, world: Any, camera: Any, start: Any, goal: Any, *, exploration: Any = None,
              heading: float = 0.0, world_goal: Any = None, robot: Any = None, geodesic: bool = True,
              success_radius: float = 0.5, max_iterations: int = 400, seed: int = 0) -> Mission:
@@ -133,7 +168,9 @@ def navigate(localizer: Any, world: Any, camera: Any, start: Any, goal: Any, *, 
     ------
     ValueError
         A start or goal that is not two finite numbers, a start inside an
-        obstacle, a localizer that is not fitted, no exploration positions.
+        obstacle, a goal outside the map (:func:`check_goal_in_map`, when
+        the exploration positions are known), a localizer that is not
+        fitted, no exploration positions.
     """
     from ..sim.robot import Robot, Simulator
 
@@ -151,6 +188,9 @@ def navigate(localizer: Any, world: Any, camera: Any, start: Any, goal: Any, *, 
             raise ValueError("the localizer does not store the positions it was fitted to (a model file written "
                              "before sfanav stored them): pass exploration=, e.g. its estimates of its training "
                              "images, or geodesic=False")
+    known = exploration if exploration is not None else getattr(localizer, "training_positions_", None)
+    if known is not None:
+        check_goal_in_map(g, known)
     field = GeodesicField(np.asarray(exploration, float)) if geodesic else None
     sim = Simulator(world, camera, robot, seed=int(seed))
     feats = MetricFeatures(localizer, sim.renderer, camera)

@@ -11,6 +11,23 @@ from ..registry import command
 from .landmarks import evaluate_landmarks_command, is_landmark_model, localize_landmarks
 
 
+OUT_FORMATS = "NAME.csv (frame,x,y), NAME.bag (ROS 1 bag), NAME.mcap or NAME.db3 (ROS 2 bag, MCAP or SQLite)"
+"""The files ``localize --out`` writes, told apart by their suffix."""
+
+
+def _check_out_names(outs: list, landmarks: bool) -> None:
+    """Refuses an --out whose suffix names no format localize writes (a
+    CSV under a bag's name would mislead whatever opens it)."""
+    from ...data.rosbag_writer import BAG_SUFFIXES
+
+    known = (".csv",) if landmarks else (".csv",) + BAG_SUFFIXES
+    for o in outs:
+        if o.suffix.lower() not in known:
+            raise UsageError(f"--out {o}: localize writes " + (
+                "one CSV for a landmark model (NAME.csv)" if landmarks else OUT_FORMATS)
+                + f", told apart by the name's suffix; {o.suffix or 'no suffix'} is none of them")
+
+
 @command("localize")
 def _add_localize(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p = sub.add_parser(
@@ -19,7 +36,8 @@ def _add_localize(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
         description=wrap("Localize every image of INPUT with a trained model: a dataset directory, a folder of "
                     "images (png, jpg, ...; sorted by name) or a video file. Writes a CSV with columns "
                     "frame,x,y (frame: the dataset's frame id, else the image's index; x, y in metres), or "
-                    "a ROS bag (--out NAME.bag for ROS 1, NAME.mcap for ROS 2) that replays in rviz, Foxglove "
+                    "a ROS bag (--out NAME.bag for ROS 1, NAME.mcap or NAME.db3 for ROS 2 with MCAP or SQLite "
+                    "storage) that replays in rviz, Foxglove "
                     "or PlotJuggler: geometry_msgs/PoseStamped on /sfanav/estimate and, with --odometry, the "
                     "fused track as nav_msgs/Odometry on /sfanav/fused, stamped with the images' times (exactly "
                     "the header stamps of a dataset sfanav import made). "
@@ -33,8 +51,8 @@ def _add_localize(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("model", metavar="MODEL", help="model file from sfanav train")
     p.add_argument("input", metavar="INPUT", help="dataset directory, image folder or video file")
     p.add_argument("--out", required=True, action="append", metavar="CSV|BAG",
-                   help="file to write: a CSV (frame,x,y), or a ROS bag, NAME.bag (ROS 1) or NAME.mcap (ROS 2) "
-                        "(needs pip install \"sfanav[ros]\"); give --out twice for both")
+                   help=f"file to write, by its name: {OUT_FORMATS} (a bag needs pip install \"sfanav[ros]\"); "
+                        "give --out twice for two")
     p.add_argument("--frame-id", default="map", metavar="FRAME",
                    help="frame_id of the poses in a bag (default map)")
     p.add_argument("--run", dest="run_name", default=None, metavar="RUN", help="only this run of a dataset (default: all images)")
@@ -73,10 +91,12 @@ def _run_localize(args: argparse.Namespace) -> int:
     if is_landmark_model(loc):
         if len(args.out) != 1 or Path(args.out[0]).suffix.lower() in BAG_SUFFIXES:
             raise UsageError(f"{args.model} is a landmark model: it writes one CSV (--out FILE.csv), not bags")
+        _check_out_names([Path(args.out[0])], landmarks=True)
         return localize_landmarks(args, loc, new_file(args.out[0], args.overwrite, "CSV"))
     if args.rotations and loc.rotation_pooling_ > 1:
         raise UsageError(f"{args.model} averages its features over {loc.rotation_pooling_} rotations already "
                           "(rotation pooling): --rotations applies to models without it")
+    _check_out_names([Path(o) for o in args.out], landmarks=False)
     outs = [new_file(o, args.overwrite, "output") for o in args.out]
     if len({o.resolve() for o in outs}) != len(outs):
         raise UsageError("--out names the same file twice")

@@ -64,7 +64,7 @@ def _run_navigate(args: argparse.Namespace) -> int:
     from ...data.sources import load_run
     from ...localization.error_metrics import align
     from ...localization.recipe import CAMERA_ELEVATION
-    from ...navigation.mission import image_goal, navigate
+    from ...navigation.mission import check_goal_in_map, image_goal, navigate
     from ...navigation.plots import plot_trajectories
     from ...sim.cameras import PanoramicCamera
     from ...sim.robot import OdometryNoise, Robot
@@ -108,13 +108,6 @@ def _run_navigate(args: argparse.Namespace) -> int:
     else:
         X, xy_true = load_run(explore, prep, preprocessor=conform, progress=not args.no_progress)
         exploration, field_from = loc.predict(X), "the model's estimates of its images"
-    odometry_frame = loc.info.get("supervision") == "odometry"
-    to_world = None
-    if odometry_frame and np.isfinite(xy_true).all():
-        to_world = align(exploration, xy_true)  # evaluation only: where success is measured
-        log("the model was trained without ground truth: its map is the training run's odometry frame; for "
-             f"evaluation only, targets are moved into the world by the rigid fit on the training run "
-             f"(rms {to_world.rmse:.3f} m)")
     world_goal = None
     if args.target is not None:
         if len(args.target) != 2:
@@ -135,6 +128,17 @@ def _run_navigate(args: argparse.Namespace) -> int:
         img = read_image(existing_path(args.target_image, "target image"), gray=prep.gray)
         map_goal = image_goal(loc, conform(img[None])[0])
         what = f"the image {args.target_image}"
+    try:  # before anything else is said or done: a goal far out would overflow when moved into the world
+        check_goal_in_map(map_goal, exploration, "--target" if args.target is not None else f"{what}, placed at")
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+    odometry_frame = loc.info.get("supervision") == "odometry"
+    to_world = None
+    if odometry_frame and np.isfinite(xy_true).all():
+        to_world = align(exploration, xy_true)  # evaluation only: where success is measured
+        log("the model was trained without ground truth: its map is the training run's odometry frame; for "
+             f"evaluation only, targets are moved into the world by the rigid fit on the training run "
+             f"(rms {to_world.rmse:.3f} m)")
     if world_goal is None:
         world_goal = to_world.apply(map_goal[None])[0] if to_world is not None else map_goal
     start = np.array(args.start[:2], float)

@@ -9,6 +9,7 @@ from .. import arguments as arg
 from ..common import existing_path, log, new_file, wrap
 from ..failures import UsageError
 from ..registry import command
+from ..scheduler import connect_scheduler
 from .landmarks import add_train_arguments, train_landmarks
 
 
@@ -142,41 +143,38 @@ def _network_from_args(args: argparse.Namespace) -> "Any":
     return Network(config)
 
 
-SCHEDULER_TIMEOUT = 5.0
-"""Seconds to wait for the Dask scheduler of ``--scheduler``."""
-
-
-def _connect(address: str) -> Any:
-    """A ``dask.distributed.Client`` of the scheduler at ``address``; a
-    UsageError when Dask is missing or the scheduler does not answer within
-    SCHEDULER_TIMEOUT seconds."""
-    try:
-        from distributed import Client
-        from distributed.comm.addressing import parse_address
-        from distributed.comm.registry import get_backend
-    except ImportError:
-        raise UsageError('--scheduler needs Dask: pip install "sfanav[dask]"') from None
-    try:
-        get_backend(parse_address(address)[0])
-    except (ValueError, TypeError) as exc:
-        raise UsageError(f"--scheduler {address} is not a Dask scheduler address: {exc}") from None
-    try:
-        client = Client(address, timeout=SCHEDULER_TIMEOUT, set_as_default=False)
-    except (OSError, TimeoutError, ValueError, TypeError) as exc:
-        msg = " ".join(str(exc).split()) or type(exc).__name__
-        raise UsageError(f"cannot reach the Dask scheduler at {address}: {msg}") from None
-    n = len(client.scheduler_info().get("workers", {}))
-    if n == 0:
-        client.close()
-        raise UsageError(f"the Dask scheduler at {address} has no workers")
-    log(f"training the network on the Dask scheduler at {address} ({n} worker(s))")
-    return client
-
-
 def _run_breaks(runs: Any) -> list[int] | None:
     """Frames where the run column changes (None when it never does)."""
     b = [i for i in range(1, len(runs)) if runs[i] != runs[i - 1]]
     return b or None
+
+
+def _run_times(ds: Any) -> Any:
+    """The training run's times (s) for learning positions from odometry,
+    which needs them to increase strictly: exact differences of the
+    dataset's ``stamp_ns`` from its first image where it has them (float
+    Unix seconds cannot tell two stamps 100 ns apart), else its timestamps;
+    None if some are unknown. Frames whose stamps do not increase are a
+    UsageError naming both frames and their exact stamps (sfanav import
+    refuses such bags, so a dataset it made never has them)."""
+    import numpy as np
+
+    from ...data.schema import format_stamp_ns
+
+    ns = ds.stamps_ns
+    if ns is None:
+        t = ds.timestamps
+        return t if np.isfinite(t).all() else None
+    back = np.flatnonzero(np.diff(ns) <= 0)
+    if len(back):
+        k = int(back[0])
+        a, b = int(ns[k]), int(ns[k + 1])
+        fa, fb = int(ds.frames[k]), int(ds.frames[k + 1])
+        how = (f"frames {fa} and {fb} have the same stamp t={format_stamp_ns(a)} s ({a} ns)" if a == b else
+               f"frame {fb} (t={format_stamp_ns(b)} s) is earlier than frame {fa} (t={format_stamp_ns(a)} s)")
+        raise UsageError(f"{ds.root}: {how}; learning positions from odometry needs the frames' times to increase "
+                         "strictly" + (f" ({len(back)} such pairs in all)" if len(back) > 1 else ""))
+    return (ns - ns[0]) / 1e9
 
 
 def _run_train(args: argparse.Namespace) -> int:
@@ -224,7 +222,9 @@ def _train(args: argparse.Namespace, stack: Any) -> int:
     net = _network_from_args(args)
     client = None
     if args.scheduler is not None:
-        client = _connect(args.scheduler)
+        client = connect_scheduler(args.scheduler)
+        log(f"training the network on the Dask scheduler at {args.scheduler} "
+            f"({len(client.scheduler_info().get('workers', {}))} worker(s))")
         stack.callback(client.close)
     check_n_outputs(args.n_outputs, net.n_outputs_, name="--n-outputs")
     if args.signature == "fourier" and args.readout == "quadratic":
@@ -248,6 +248,7 @@ def _train(args: argparse.Namespace, stack: Any) -> int:
     odometry = train.odometry
     supervision = supervision_for(args.supervision, has_ground_truth=bool(np.isfinite(train.poses[:, :2]).all()),
                                   has_odometry=bool(np.isfinite(odometry).all()))
+    times = _run_times(train) if supervision == "odometry" else None  # checked before any training
     if args.loop_closures is None and args.closure_weights != "uniform":
         raise UsageError("--closure-weights needs --loop-closures")
     if args.loop_closures == "gt" and supervision != "ground-truth":
@@ -295,9 +296,8 @@ def _train(args: argparse.Namespace, stack: Any) -> int:
     if supervision == "odometry":
         log("fitting the readout to positions learned from the run's odometry (no ground truth); estimates are "
              "metres in the odometry's frame")
-        stamps = train.timestamps
         loc = fit_localizer_from_odometry(net, images, odometry, method=args.metric_map,
-                                          timestamps=stamps if np.isfinite(stamps).all() else None, **fit_kw)
+                                          timestamps=times, **fit_kw)
         if args.metric_map == "pose-graph":
             log(f"pose graph: {loc.info['loop closures kept']} of {loc.info['loop closures']} loop closures kept, "
                  f"odometry heading drift {loc.info['odometry heading drift (deg per m)']:.3f} deg/m corrected")
