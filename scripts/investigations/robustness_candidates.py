@@ -12,12 +12,14 @@ Candidates (all the sfanav default's network, rows, pooling, signature and reado
   vignetting) instead;
 * channel-gain: every channel divided by its image mean (exposure and white balance without the log);
 * readout: the readout fitted on a corrupted copy of the run as well (CAMERA), no normalisation;
-* light: photometric + readout (the default);
+* light: photometric + readout (log-contrast, as measured; the level "light" now uses lowpass-log-contrast);
 * full: light + the network's invariance partners (CAMERA, weight 1);
 * full-0.5: the same at weight 0.5;
 * full-0.25: the same at weight 0.25;
 * full-24: full with 24 top outputs, all read out (does capacity buy back the precision the invariance costs?);
 * jpeg-invariance: light + invariance partners that are JPEG round trips only (quality 50..95);
+* lowpass-2-flat-0.25: the sfanav default, robustness "standard" (the library's lowpass-log-contrast is
+  lowpass-2-flat here: equal to 1e-4); lowpass-2-flat-1: robustness "full"; lowpass-2-flat: "light";
 * lowpass-S: a Gaussian low-pass of sigma S px (at the network's resolution, wrapping around the
   panorama) before the log-contrast normalisation, with light's readout augmentation (JPEG, noise,
   defocus and dead pixels live in the fine structure the low-pass takes away);
@@ -107,12 +109,13 @@ CANDIDATES = {
     "row-gain": ({"robustness": "none"}, row_gain),
     "channel-gain": ({"robustness": "none"}, channel_gain),
     "readout": ({"robustness": "none", "readout_augmentation": CAMERA}, None),
-    "light": ({"robustness": "light"}, None),
-    "full": ({"robustness": "full"}, None),
-    "full-0.5": ({"robustness": "full", "invariance_weight": 0.5}, None),
-    "full-0.25": ({"robustness": "full", "invariance_weight": 0.25}, None),
-    "full-24": ({"robustness": "full", "n_outputs": 24, "network": {"out": 24}}, None),
-    "jpeg-invariance": ({"robustness": "light", "invariance": JPEG_ONLY}, None),
+    # measured with the first photometric normalisation (log-contrast), pinned so that a rerun is the same
+    "light": ({"robustness": "light", "photometric": "log-contrast"}, None),
+    "full": ({"robustness": "full", "photometric": "log-contrast"}, None),
+    "full-0.5": ({"robustness": "full", "invariance_weight": 0.5, "photometric": "log-contrast"}, None),
+    "full-0.25": ({"robustness": "full", "invariance_weight": 0.25, "photometric": "log-contrast"}, None),
+    "full-24": ({"robustness": "full", "n_outputs": 24, "network": {"out": 24}, "photometric": "log-contrast"}, None),
+    "jpeg-invariance": ({"robustness": "light", "invariance": JPEG_ONLY, "photometric": "log-contrast"}, None),
     **{f"lowpass-{s}": ({"robustness": "light", "photometric": f"lowpass-{s}"}, None) for s in LOWPASS},
     **{f"lowpass-{s}-0.25": ({"robustness": "standard", "photometric": f"lowpass-{s}"}, None)
        for s in LOWPASS},
@@ -140,14 +143,38 @@ def train(name, X, xy, elev):
     return _Normalised(pre, fit_localizer(net, pre(X), xy, rotation=Rotation(5, 1.0), progress=False, **kw))
 
 
+def markdown(out):
+    """The candidates' table of docs/robustness.md from the JSON (no training)."""
+    gardens = [g for g in GARDENS if any(k.startswith(g + "|") for k in out)]
+    names = list(dict.fromkeys(k.split("|")[1] for k in out if k != "summary"))
+    head = " / ".join(gardens)
+    lines = [f"| candidate | clean MED (m): {head} | clean / none (geometric mean) | worst ratio to own clean: {head} "
+             f"| JPEG 90 ratio: {head} |", "|---|---|---|---|---|"]
+    for n in names:
+        cells = [out.get(f"{g}|{n}", {}).get("MED (m)") for g in gardens]
+        base = [out.get(f"{g}|none", {}).get("MED (m)") for g in gardens]
+        if any(c is None for c in cells):
+            continue
+        cost = np.exp(np.mean([np.log(c["clean"] / b["clean"]) for c, b in zip(cells, base)]))
+        worst = [max(v for k, v in c.items() if k != "clean") / c["clean"] for c in cells]
+        lines.append(f"| {n} | " + " / ".join(f"{c['clean']:.3f}" for c in cells) + f" | {cost:.2f} | "
+                     + " / ".join(f"{w:.1f}" for w in worst) + " | "
+                     + " / ".join(f"{c['jpeg-90'] / c['clean']:.2f}" for c in cells) + " |")
+    return "\n".join(lines)
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("root", help="folder with one simulated dataset per garden (named as the preset)")
     ap.add_argument("--candidates", default=",".join(CANDIDATES))
     ap.add_argument("--gardens", default=",".join(GARDENS))
     ap.add_argument("--json")
+    ap.add_argument("--markdown", action="store_true", help="print the docs' table from --json and stop")
     a = ap.parse_args()
     out = json.loads(Path(a.json).read_text()) if a.json and Path(a.json).exists() else {}
+    if a.markdown:
+        print(markdown(out))
+        return
     prep = Preprocessing.for_network(default_network())
     for g in a.gardens.split(","):
         ds = Dataset(Path(a.root) / g)
