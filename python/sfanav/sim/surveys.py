@@ -312,7 +312,9 @@ def crossing(area: Sequence[float], lane_spacing: float = 1.2, spacing: float = 
              turn_radius: float | None = None, heading: str = "travel", speed: float = 0.4, world: Any = None,
              rng: np.random.Generator | int | None = None) -> T.Trajectory:
     """A crossing grid: a serpentine along x, then from its end one along y,
-    so every lane of the second pass crosses every lane of the first.
+    so every lane of the second pass crosses every lane of the first. The
+    lanes end on the outermost lanes of the other pass (where the lanes
+    are centred with room to spare, they are that much shorter).
 
     Parameters and errors as :func:`serpentine`.
 
@@ -329,8 +331,10 @@ def crossing(area: Sequence[float], lane_spacing: float = 1.2, spacing: float = 
     """
     hx, hy = _inner(area, margin)
     ls = check_positive_float(lane_spacing, "lane_spacing")
-    vx, lx = _serpentine_vertices(hx, hy, ls, "x")
-    vy, ly = _serpentine_vertices(hx, hy, ls, "y", first=max(lx) + 1)
+    # every lane ends on the outermost lane of the other pass: the passes join at a corner
+    ax, ay = float(np.abs(_levels(hx, ls)).max()), float(np.abs(_levels(hy, ls)).max())
+    vx, lx = _serpentine_vertices(ax, ay, ls, "x")
+    vy, ly = _serpentine_vertices(ax, ay, ls, "y", first=max(lx) + 1)
     ex, ey = vx[-1]
     # mirrored so that the y pass starts on the side where the x pass ended and runs away from its last lane
     sx, sy = (1.0 if ex < 0 else -1.0), (1.0 if ey < 0 else -1.0)
