@@ -17,6 +17,9 @@ stamp_ns       optional: the same time exactly, integer nanoseconds (int64; the
 x, y           ground-truth position of the camera that took the image (m); empty if unknown
 heading        ground-truth heading (rad, counter-clockwise from +x); empty if unknown
 odom_x, ...    wheel-odometry estimate of the same (m, m, rad); empty if unknown
+gyro_heading   optional (after the image column): the heading integrated from a
+               yaw gyro (rad, continuous, cumulative from the run's start;
+               :attr:`Dataset.gyro`)
 camera         camera name (``center``, ``left``, ``right``)
 condition      lighting or recording condition
 image          image path relative to the dataset directory
@@ -54,6 +57,7 @@ from .schema import (
     COLUMNS,
     FLOAT_COLUMNS,
     FORMAT,
+    GYRO_COLUMN,
     INSECT_ENTRIES,
     INSECT_METADATA,
     INT64_MAX,
@@ -70,7 +74,7 @@ def write_dataset(path: str | os.PathLike, images: Iterable[np.ndarray], poses: 
                   timestamps: Any = None, odometry: Any = None, cameras: Any = None, conditions: Any = None,
                   runs: Any = None, frames: Any = None, extra: dict[str, Any] | None = None,
                   metadata: dict[str, Any] | None = None, overwrite: bool = False,
-                  progress: bool = False, stamps_ns: Any = None) -> "Dataset":
+                  progress: bool = False, stamps_ns: Any = None, gyro: Any = None) -> "Dataset":
     """Writes an sfanav dataset from arrays and returns it opened.
 
     Parameters
@@ -86,6 +90,9 @@ def write_dataset(path: str | os.PathLike, images: Iterable[np.ndarray], poses: 
         ``default``, ``0``
     frames : (N,) int, default 0 .. N-1
     extra : dict of name to (N,) extra columns
+    gyro : (N,) float, optional
+        The heading integrated from a yaw gyro (rad, continuous; the
+        ``gyro_heading`` column, :attr:`Dataset.gyro`).
     """
     P = np.asarray(poses, float)
     if P.ndim != 2 or P.shape[1] != 3:
@@ -119,6 +126,13 @@ def write_dataset(path: str | os.PathLike, images: Iterable[np.ndarray], poses: 
     rns = col(runs, "0", "runs")
     frs = col(frames, None, "frames") if frames is not None else np.arange(n)
     ext = {k: col(v, None, f"extra column {k!r}") for k, v in (extra or {}).items()}
+    if gyro is not None:
+        if GYRO_COLUMN in ext:
+            raise ValueError(f"give the gyro as gyro= or as extra[{GYRO_COLUMN!r}], not both")
+        g = np.asarray(gyro)
+        if g.dtype.kind not in "iuf" or g.shape != (n,):
+            raise ValueError(f"gyro must be {n} numbers (rad, one per pose), got shape {g.shape} dtype {g.dtype}")
+        ext[GYRO_COLUMN] = g.astype(float)
     it = iter(images)
     with DatasetWriter(path, metadata, overwrite=overwrite, extra_columns=list(ext), exact_stamps=ns is not None) as w:
         bar = progress_bar(progress, n, "writing")
@@ -237,6 +251,20 @@ class Dataset:
         column: e.g. the header stamps of a ROS bag's images); None for a
         dataset without it (simulated ones, and all written before it existed)."""
         return self.columns.get(STAMP_COLUMN)
+
+    @property
+    def gyro(self) -> np.ndarray | None:
+        """(N,) float: the heading integrated from a yaw gyro (rad, continuous,
+        cumulative from each run's start; the ``gyro_heading`` column): the
+        gyro's turn between two frames of a run is the difference of their
+        values. None for a dataset without a gyro.
+
+        Examples
+        --------
+        >>> ds = Dataset("survey")                     # doctest: +SKIP
+        >>> turns = np.diff(ds.select(run="train").gyro)  # doctest: +SKIP
+        """
+        return self.columns.get(GYRO_COLUMN)
 
     @property
     def frames(self) -> np.ndarray:
@@ -674,8 +702,13 @@ def _read_sfanav(root: Path) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
         raise ValueError(f"{mpath}: version must be a positive integer, got {version!r}")
     if version > VERSION:
         raise ValueError(f"dataset version {version} is newer than this sfanav reads ({VERSION}); upgrade sfanav")
-    cols = _read_csv_columns(fpath, required=COLUMNS, floats=FLOAT_COLUMNS, ints=("frame", STAMP_COLUMN),
-                             what="frames table", nonempty=("timestamp",))
+    cols = _read_csv_columns(fpath, required=COLUMNS, floats=FLOAT_COLUMNS + (GYRO_COLUMN,),
+                             ints=("frame", STAMP_COLUMN), what="frames table", nonempty=("timestamp",))
+    gyro = cols.get(GYRO_COLUMN)
+    if gyro is not None and not np.isfinite(gyro).all():
+        i = int(np.nonzero(~np.isfinite(gyro))[0][0])
+        raise ValueError(f"frames table {fpath} line {i + 2}: column {GYRO_COLUMN!r} is empty; the gyro's heading "
+                         "(rad) must be given in every row")
     ns = cols.get(STAMP_COLUMN)
     if ns is not None:
         bad = np.nonzero((ns < 0) | stamps_disagree(cols["timestamp"], ns))[0]
@@ -728,7 +761,7 @@ def _read_sfanav(root: Path) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
         raise ValueError(f"dataset {root} is incomplete or altered: {mpath.name} says {expected!r} images, "
                          f"{fpath.name} has {len(cols['image'])} rows")
     for k in cols:
-        if k not in COLUMNS and k != STAMP_COLUMN:
+        if k not in COLUMNS and k not in (STAMP_COLUMN, GYRO_COLUMN):
             cols[k] = _infer(cols[k])
     return cols, meta
 

@@ -12,7 +12,15 @@ off), so what must match the source exactly (the stamps of the estimates
 ``sfanav localize`` writes into a bag) uses ``stamp_ns``. The two agree to
 within :data:`STAMP_TOLERANCE_S`. Datasets without the column (all before
 it existed, simulated ones) still load; readers that predate it read it as
-an extra integer column, so the format's version stays 1."""
+an extra integer column, so the format's version stays 1.
+
+Gyro: the optional column ``gyro_heading`` (rad) is the robot's heading
+integrated from a yaw gyro (an IMU), continuous (not wrapped) and, like the
+odometry, cumulative from the run's start: the gyro's turn between two
+frames of a run is the difference of their values, whichever frames are
+kept (a per-frame rate or increment would change meaning when frames are
+selected or dropped). Every value must be finite. The cameras of one robot
+pose share it. Older readers read it as an extra column."""
 
 from __future__ import annotations
 
@@ -39,6 +47,14 @@ STR_COLUMNS = ("run", "camera", "condition", "image")
 
 STAMP_COLUMN = "stamp_ns"
 """The optional column of exact times: int64 nanoseconds, written right after ``timestamp``."""
+
+
+GYRO_COLUMN = "gyro_heading"
+"""The optional column of the gyro-integrated heading: float rad, continuous."""
+
+
+GYRO_UNITS = {GYRO_COLUMN: "rad"}
+"""Added to ``UNITS`` in the metadata of a dataset with a gyro column."""
 
 
 OPTIONAL_COLUMNS = (STAMP_COLUMN,)

@@ -28,6 +28,8 @@ from .images import write_image
 from .schema import (
     COLUMNS,
     FORMAT,
+    GYRO_COLUMN,
+    GYRO_UNITS,
     INT64_MAX,
     OPTIONAL_COLUMNS,
     STAMP_UNITS,
@@ -52,7 +54,9 @@ class DatasetWriter:
     overwrite : bool
         Replace an existing dataset at ``path`` (refused otherwise).
     extra_columns : sequence of str
-        Names of extra per-image columns given to :meth:`add`.
+        Names of extra per-image columns given to :meth:`add`. The optional
+        gyro column ``gyro_heading`` (rad, cumulative) is one of them; its
+        values must then be finite numbers.
     exact_stamps : bool
         The dataset has the column ``stamp_ns``: every row's time as an
         integer count of nanoseconds (given to :meth:`add` as ``stamp_ns``,
@@ -204,6 +208,12 @@ class DatasetWriter:
         unknown = set(extra) - set(self.extra)
         if unknown:
             raise ValueError(f"unknown extra columns {sorted(unknown)}; declare them in extra_columns")
+        if GYRO_COLUMN in self.extra:
+            g = extra.get(GYRO_COLUMN)
+            if isinstance(g, (bool, np.bool_)) or not isinstance(g, (int, float, np.integer, np.floating)) \
+                    or not math.isfinite(g):
+                raise ValueError(f"{GYRO_COLUMN} (the gyro's heading, rad) must be a finite number in every row, "
+                                 f"got {g!r}")
         return key, camera, condition, run, (t, ns)
 
     def _write_row(self, key: tuple[int, str], run: str, t: tuple[float, int | None], pose: Sequence[float],
@@ -220,7 +230,9 @@ class DatasetWriter:
         if self._file.closed:
             return
         self._file.close()
-        units = {**UNITS, **STAMP_UNITS} if self.exact_stamps else UNITS
+        units = {**UNITS, **STAMP_UNITS} if self.exact_stamps else dict(UNITS)
+        if GYRO_COLUMN in self.extra:
+            units = {**units, **GYRO_UNITS}
         meta = {"format": FORMAT, "version": VERSION, "units": units, "n_images": self.count,
                 "image_shapes": self._shapes, **self.metadata}
         try:

@@ -7,8 +7,11 @@
   conditions, light and season; ``transient.py``: objects that come and go
   with the seasons (``World.generate(transient=...)``).
 * :class:`Robot`, :class:`OdometryNoise`, :func:`simulate_odometry`,
-  :class:`Simulator` (``robot.py``): kinematics, camera mounts, odometry,
+  :class:`GyroNoise`, :func:`simulate_gyro`, :class:`Simulator`
+  (``robot.py``): kinematics, camera mounts, odometry, a yaw gyro,
   closed-loop stepping.
+* ``surveys``: surveys as robot mowers drive them (serpentine, perimeter
+  then serpentine, spiral, crossing grid, random bounce).
 * ``trajectories``: grid exploration, random lines, border loop, line
   segments, random walks, velocity regions.
 * :class:`UnevenGround`, :class:`HeightField`, :class:`Attitude`
@@ -16,7 +19,7 @@
 * ``presets``: the thesis's scenes; :func:`simulate` writes a dataset.
 """
 
-from . import presets, trajectories
+from . import presets, surveys, trajectories
 from .cameras import (
     OmniCamera,
     PanoramicCamera,
@@ -28,9 +31,11 @@ from .conditions import SEASONS, Lighting, Season, season_of_year
 from .presets import PRESETS, simulate
 from .render import Renderer
 from .robot import (
+    GyroNoise,
     OdometryNoise,
     Robot,
     Simulator,
+    simulate_gyro,
     simulate_odometry,
     unicycle_step,
     wrap_angle,
@@ -59,6 +64,9 @@ __all__ = [
     "OdometryNoise",
     "Simulator",
     "simulate_odometry",
+    "GyroNoise",
+    "simulate_gyro",
+    "surveys",
     "unicycle_step",
     "wrap_angle",
     "Trajectory",

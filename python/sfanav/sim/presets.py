@@ -16,13 +16,15 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
+from . import surveys as S
 from . import trajectories as T
 from .cameras import OmniCamera, PanoramicCamera
 from .conditions import SEASONS, Lighting, Season, season_of_year
 from .render import Renderer
-from .robot import Robot
+from .robot import GyroNoise, OdometryNoise, Robot
 from .terrain import HeightField, UnevenGround
 from .world import World
+from ..data.schema import GYRO_COLUMN
 
 LightFn = Callable[[float], Lighting]  # progress in [0, 1] -> lighting
 
@@ -573,6 +575,52 @@ for _name, (_desc, _world, _runs) in SUITE_GARDENS.items():
                 _world, lambda: PanoramicCamera(350, 40), _runs))
 
 
+# Issue 42: a 30x30 m garden surveyed as robot mowers drive it, with a mower's odometry and a gyro.
+#: the mower's wheel odometry of issue 42: 2 % distance noise, 0.5 deg heading noise per frame (plus 1 % of
+#: the frame's turn), 0.1 deg/m systematic heading drift, no wheel slip
+MOWER_ODOMETRY = OdometryNoise.mower(distance_fraction=0.02, heading_deg=0.5, drift_deg_per_m=0.1,
+                                     turn_fraction=0.01)
+#: 24 lanes across the 29 m inside the 0.5 m margin of a 30 m garden
+MOWER_LANE_SPACING = 29.0 / 23.0
+#: frames along the path (m)
+MOWER_FRAME_SPACING = 1.2
+
+
+def _mower_runs(rng: np.random.Generator) -> list[RunSpec]:
+    ls, sp = MOWER_LANE_SPACING, MOWER_FRAME_SPACING
+
+    def pattern(name: str, lanes: float = ls, heading: str = "travel") -> RunSpec:
+        label = name if heading == "travel" else f"{name}-random-heading"
+        return RunSpec(label, lambda w, r: S.survey(name, w.area, lanes, sp, n_frames=600, heading=heading,
+                                                    world=w if name == "random" else None, rng=r))
+
+    def test_grid(w: World, r: np.random.Generator) -> T.Trajectory:
+        g = T.grid_points(w.area, 14, 14, margin=2.0)
+        P = g.poses.copy()
+        P[:, 2] = r.uniform(-np.pi, np.pi, len(P))
+        return T.Trajectory(P, g.times)
+
+    # the crossing's lanes are twice as far apart (12 + 12 lanes), so that every run is ~600 frames
+    return [pattern("serpentine"), pattern("perimeter-serpentine"), pattern("spiral"), pattern("crossing", 2 * ls),
+            pattern("random"), pattern("serpentine", heading="random"),
+            RunSpec("test-walk", lambda w, r: T.random_walk(w.area, 300, 0.5, margin=0.5, rng=r, world=w)),
+            RunSpec("test-grid", test_grid)]
+
+
+_add(Preset(
+    "mower-survey", "- (issue 42, docs/simulator.md)",
+    "30x30 m garden (40 objects) surveyed as robot mowers drive it, the robot facing where it drives, frames "
+    "1.2 m apart along the path: serpentine (24 lanes, 594 frames), perimeter lap then serpentine, inward "
+    "spiral, crossing grid (12 + 12 lanes), random bounce (600), the serpentine with panoramas at random "
+    "headings; test walk (300, 0.5 m) and 14x14 test grid at random headings; mower odometry (2 % distance, "
+    "0.5 deg per frame, 0.1 deg/m drift) and a gyro column gyro_heading; 350x40 RGB panoramas",
+    _garden((30.0, 30.0), 40, depth=12.0),
+    lambda: PanoramicCamera(350, 40),
+    _mower_runs,
+    robot=lambda: Robot(noise=MOWER_ODOMETRY, gyro=GyroNoise()),
+))
+
+
 def describe() -> str:
     """One line per preset: name, thesis section, description."""
     width = max(len(n) for n in PRESETS)
@@ -597,6 +645,12 @@ def _jitter_stream(seed: int) -> np.random.Generator:
     """The random stream of a preset seed's pose jitter: the seed's fifth
     child sequence, independent of the four of :func:`random_streams`."""
     return np.random.default_rng(np.random.SeedSequence(int(seed), spawn_key=(4,)))
+
+
+def _gyro_stream(seed: int) -> np.random.Generator:
+    """The random stream of a preset seed's gyro noise: the seed's seventh
+    child sequence, independent of the others."""
+    return np.random.default_rng(np.random.SeedSequence(int(seed), spawn_key=(6,)))
 
 
 def _terrain_stream(seed: int) -> np.random.Generator:
@@ -633,7 +687,7 @@ def simulate(preset: str, out: str | os.PathLike, seed: int = 0, *, max_frames: 
     seed : int
         Seeds the world, the trajectories, the lighting conditions, the
         odometry noise, the pose jitter and the uneven ground: same seed,
-        same dataset.
+        same dataset (the gyro noise of a robot with a gyro too).
     max_frames : int, optional
         Keep only the first frames of every run (quick looks, tests).
     camera : PanoramicCamera or OmniCamera, optional
@@ -650,7 +704,9 @@ def simulate(preset: str, out: str | os.PathLike, seed: int = 0, *, max_frames: 
         A preset with uneven ground (``Preset.terrain``) adds the columns
         ``roll_deg``, ``pitch_deg`` and ``camera_dz_m`` (the robot's
         attitude per frame, :class:`~sfanav.sim.terrain.Attitude`) and
-        records the ground's recipe in the metadata (``terrain``).
+        records the ground's recipe in the metadata (``terrain``). A
+        preset whose robot has a gyro (``mower-survey``) adds the column
+        ``gyro_heading`` (:attr:`~sfanav.Dataset.gyro`).
     """
     from ..data.dataset import Dataset
     from ..data.writer import DatasetWriter
@@ -676,7 +732,9 @@ def simulate(preset: str, out: str | os.PathLike, seed: int = 0, *, max_frames: 
     heights = None if flat else preset_terrain(preset, seed)
     total = sum(len(t) * len(r.conditions) * len(robot.cameras) for t, r in zip(trajs, runs))
     attitude_cols = set(ATTITUDE_COLUMNS) if heights is not None else set()
-    extra_cols = sorted({k for t in trajs for k in t.extra} | attitude_cols)
+    gyro_cols = {GYRO_COLUMN} if robot.gyro is not None else set()
+    extra_cols = sorted({k for t in trajs for k in t.extra} | attitude_cols | gyro_cols)
+    s_gyro = _gyro_stream(seed)
     meta = {
         "source": "sfanav.sim",
         "preset": p.name,
@@ -707,7 +765,7 @@ def simulate(preset: str, out: str | os.PathLike, seed: int = 0, *, max_frames: 
                     "changing": True, "start": light(0.0).to_dict(), "end": light(1.0).to_dict()}
                 drive = tr if r.jitter is None else T.jitter(whole, *r.jitter, rng=s_jit)[: len(tr)]
                 frame = _record(w, renderer, robot, cam, drive, run=r.name, condition=cond, lighting=light,
-                                frame0=frame, rng=s_odo, bar=bar, heights=heights)
+                                frame0=frame, rng=s_odo, bar=bar, heights=heights, gyro_rng=s_gyro)
             meta["runs"][r.name] = info
         w.metadata.update(meta)
         world.save(Path(out) / "world.json")
@@ -722,14 +780,17 @@ ATTITUDE_COLUMNS = ("roll_deg", "pitch_deg", "camera_dz_m")
 
 def _record(w: Any, renderer: Renderer, robot: Robot, cam: Any, tr: T.Trajectory, *, run: str, condition: str,
             lighting: Lighting | LightFn, frame0: int, rng: np.random.Generator, bar: Any,
-            heights: HeightField | None = None) -> int:
+            heights: HeightField | None = None, gyro_rng: np.random.Generator | None = None) -> int:
     cam_poses = robot.camera_poses(tr.poses)
     odo = robot.camera_poses(robot.odometry(tr.poses, rng))
+    gyro = robot.gyro_headings(tr.poses, tr.times, gyro_rng) if robot.gyro is not None else None
     n = len(tr)
     attitudes = heights.attitudes(tr.poses) if heights is not None else None  # the robot's, shared by its cameras
     for k in range(n):
         light = lighting if isinstance(lighting, Lighting) else lighting(k / max(n - 1, 1))
         extra = {c: v[k].item() for c, v in tr.extra.items()}
+        if gyro is not None:
+            extra[GYRO_COLUMN] = float(gyro[k])
         att = None
         if attitudes is not None:
             att = attitudes[k]

@@ -7,7 +7,10 @@ Odometry follows the rotate-translate-rotate motion model: each step between
 two poses is a first rotation, a straight translation and a second rotation;
 each part is corrupted by noise whose variance grows with the distance
 travelled or the angle turned, plus a systematic scale error, a systematic
-heading drift per metre (unequal wheel diameters) and occasional wheel slip.
+heading drift per metre (unequal wheel diameters) and occasional wheel slip;
+optionally per-step terms as a mower's odometry is usually specified (a
+distance error proportional to the step, a heading error of ``a + b * |turn|``
+per step: :meth:`OdometryNoise.mower`).
 Integrated from a known start pose (as in thesis 5.3.2, where the robot starts
 at its base station) dead reckoning drifts without bound, mostly through
 heading errors, as in the thesis's figure 5.24. With all noise terms zero it
@@ -78,6 +81,26 @@ class OdometryNoise:
         m: mean extra distance the encoders report at a slip (exponential).
     slip_heading_sigma : float
         rad: heading error at a slip.
+    distance_fraction : float
+        Per step: the distance error's standard deviation is this fraction
+        of the step's length (``0.02``: 2 %). Default 0 (off).
+    step_heading_sigma : float
+        rad per step: heading error of every step that moves or turns, the
+        ``a`` of ``sigma = a + b * |turn|``. Default 0 (off).
+    turn_fraction : float
+        rad per rad: the ``b`` of ``sigma = a + b * |turn|``, the heading
+        error growing linearly with the step's turn. Default 0 (off).
+
+    The per-step terms (the last three) depend on how far apart the frames
+    are; the others are per metre or per radian. With the per-step terms at
+    0 (the default) the model and its random draws are exactly those of
+    the earlier versions, so seeded datasets stay as they were.
+
+    Examples
+    --------
+    >>> noise = OdometryNoise.mower(distance_fraction=0.02, heading_deg=0.5, drift_deg_per_m=0.1)
+    >>> round(float(np.degrees(noise.heading_drift)), 3)
+    0.1
     """
 
     distance_sigma: float = 0.01
@@ -88,9 +111,14 @@ class OdometryNoise:
     slip_rate: float = 0.01
     slip_distance: float = 0.05
     slip_heading_sigma: float = 0.02
+    distance_fraction: float = 0.0
+    step_heading_sigma: float = 0.0
+    turn_fraction: float = 0.0
 
     def __post_init__(self) -> None:
         for k, v in asdict(self).items():
+            if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, float, np.integer, np.floating)):
+                raise TypeError(f"OdometryNoise.{k} must be a number, got {v!r}")
             if not np.isfinite(v):
                 raise ValueError(f"OdometryNoise.{k} must be finite, got {v}")
             if k not in ("scale_error", "heading_drift") and v < 0:
@@ -100,6 +128,50 @@ class OdometryNoise:
     def none(cls) -> "OdometryNoise":
         """Perfect odometry (reproduces the true poses)."""
         return cls(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+
+    @classmethod
+    def mower(cls, distance_fraction: float = 0.02, heading_deg: float = 0.5, drift_deg_per_m: float = 0.1, *,
+              turn_fraction: float = 0.01, slip_rate: float = 0.0, slip_distance: float = 0.5,
+              slip_heading_deg: float = 0.0) -> "OdometryNoise":
+        """A lawn mower's wheel odometry, specified per frame (issue 42).
+
+        Parameters
+        ----------
+        distance_fraction : float
+            Standard deviation of each step's distance error as a fraction
+            of the step (0.02: 2 %).
+        heading_deg : float
+            Standard deviation of each step's heading error (degrees), the
+            ``a`` of ``sigma = a + b * |turn|``.
+        drift_deg_per_m : float
+            Systematic heading drift (degrees per metre; 0.05-0.3 is typical
+            of unequal wheels and tyre wear; positive: the odometry believes
+            the robot turned left).
+        turn_fraction : float
+            The ``b`` of ``sigma = a + b * |turn|`` (radians per radian).
+        slip_rate : float
+            Wheel-slip events per metre (Poisson); 0: none.
+        slip_distance : float
+            Mean extra distance (m, exponential) the encoders count at a slip
+            (the wheels spin).
+        slip_heading_deg : float
+            Standard deviation of the heading error at a slip (degrees).
+
+        Returns
+        -------
+        OdometryNoise
+            Every other term (the per-metre random walks, the scale error) 0.
+
+        Raises
+        ------
+        ValueError
+            A negative or non-finite value (the drift may be negative).
+        """
+        return cls(distance_sigma=0.0, scale_error=0.0, heading_sigma=0.0, turn_sigma=0.0,
+                   heading_drift=float(np.radians(drift_deg_per_m)), slip_rate=slip_rate,
+                   slip_distance=slip_distance, slip_heading_sigma=float(np.radians(slip_heading_deg)),
+                   distance_fraction=distance_fraction, step_heading_sigma=float(np.radians(heading_deg)),
+                   turn_fraction=turn_fraction)
 
     def to_dict(self) -> dict[str, float]:
         return asdict(self)
@@ -148,6 +220,12 @@ def simulate_odometry(poses: Any, noise: OdometryNoise | None = None,
     rot1_o = rot1 + noise.turn_sigma * np.sqrt(np.abs(rot1)) * z[1]
     rot2_o = (rot2 + noise.turn_sigma * np.sqrt(np.abs(rot2)) * z[2]
               + noise.heading_sigma * np.sqrt(m) * z[3] + noise.heading_drift * m)
+    if noise.distance_fraction > 0 or noise.step_heading_sigma > 0 or noise.turn_fraction > 0:
+        # per-step terms, drawn only when set (the earlier draws stay as they were)
+        zs = rng.standard_normal((2, n - 1))
+        active = moving | (np.abs(dth) > 1e-12)
+        trans_o = trans_o + noise.distance_fraction * m * zs[0]
+        rot2_o = rot2_o + np.where(active, noise.step_heading_sigma + noise.turn_fraction * np.abs(dth), 0.0) * zs[1]
     if noise.slip_rate > 0:
         k = rng.poisson(noise.slip_rate * m)
         slips = np.nonzero(k)[0]
@@ -160,6 +238,117 @@ def simulate_odometry(poses: Any, noise: OdometryNoise | None = None,
     out[1:, 1] = P[0, 1] + np.cumsum(trans_o * np.sin(move_dir))
     out[:, 2] = th
     return out
+
+
+@dataclass(frozen=True)
+class GyroNoise:
+    """Error model of a yaw gyro (the z axis of a mower's IMU), integrated
+    between frames.
+
+    Attributes
+    ----------
+    angle_random_walk : float
+        rad / sqrt(s): white rate noise; the integrated heading's error
+        grows as ``angle_random_walk * sqrt(t)``.
+    bias : float
+        rad / s: constant rate bias left after calibration (the integrated
+        heading drifts by ``bias * t``).
+    scale_error : float
+        Systematic fraction: the gyro reports ``(1 + scale_error)`` times
+        every turn.
+
+    The defaults are those of a cheap MEMS gyro after a standstill
+    calibration: 0.01 deg/sqrt(s), a bias of 0.005 deg/s (18 deg/h) and
+    0.2 % scale error.
+
+    Examples
+    --------
+    >>> GyroNoise().bias > 0
+    True
+    """
+
+    angle_random_walk: float = float(np.radians(0.01))
+    bias: float = float(np.radians(0.005))
+    scale_error: float = 0.002
+
+    def __post_init__(self) -> None:
+        for k, v in asdict(self).items():
+            if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, float, np.integer, np.floating)):
+                raise TypeError(f"GyroNoise.{k} must be a number, got {v!r}")
+            if not np.isfinite(v):
+                raise ValueError(f"GyroNoise.{k} must be finite, got {v}")
+        if self.angle_random_walk < 0:
+            raise ValueError(f"GyroNoise.angle_random_walk must be >= 0, got {self.angle_random_walk}")
+
+    @classmethod
+    def none(cls) -> "GyroNoise":
+        """A perfect gyro (reproduces the true headings)."""
+        return cls(0.0, 0.0, 0.0)
+
+    def to_dict(self) -> dict[str, float]:
+        return asdict(self)
+
+
+def simulate_gyro(poses: Any, times: Any, noise: GyroNoise | None = None,
+                  rng: np.random.Generator | int | None = None) -> np.ndarray:
+    """The heading integrated from a noisy yaw gyro along true ``poses``.
+
+    Between consecutive frames the gyro measures the true turn (the wrapped
+    heading change: a turn of more than 180 degrees between two frames
+    reads as the shorter one) times ``1 + scale_error``, plus ``bias * dt``
+    and ``angle_random_walk * sqrt(dt) * N(0, 1)``, ``dt`` the time between
+    the frames. The result is continuous (not wrapped) and starts at the
+    true first heading, as the odometry does: the gyro's turn between
+    frames ``i`` and ``j`` is ``out[j] - out[i]``.
+
+    Parameters
+    ----------
+    poses : array (N, 3)
+        True (x m, y m, heading rad).
+    times : array (N,)
+        Seconds, non-decreasing.
+    noise : GyroNoise
+        Default ``GyroNoise()``.
+    rng : numpy Generator or int seed
+
+    Returns
+    -------
+    ndarray (N,): the gyro's heading (rad).
+
+    Raises
+    ------
+    ValueError
+        Bad poses, ``times`` of another length, not finite or decreasing.
+
+    Examples
+    --------
+    >>> P = np.array([[0, 0, 0.0], [1, 0, 0.5], [2, 0, 1.0]])
+    >>> simulate_gyro(P, [0, 1, 2], GyroNoise.none()).round(3).tolist()
+    [0.0, 0.5, 1.0]
+    """
+    P = check_poses(poses)
+    noise = GyroNoise() if noise is None else noise
+    if not isinstance(noise, GyroNoise):
+        raise TypeError(f"noise must be a GyroNoise, got {type(noise).__name__}")
+    try:
+        t = np.asarray(times, dtype=float)
+    except (TypeError, ValueError):
+        raise TypeError("times must be an array of seconds") from None
+    if t.shape != (len(P),):
+        raise ValueError(f"times must have shape ({len(P)},) (one per pose), got {t.shape}")
+    if not np.isfinite(t).all():
+        raise ValueError("times must be finite")
+    dt = np.diff(t)
+    if np.any(dt < 0):
+        raise ValueError(f"times must not decrease (at index {int(np.nonzero(dt < 0)[0][0]) + 1})")
+    rng = np.random.default_rng(rng)
+    if len(P) == 0:
+        return np.empty(0)
+    turn = wrap_angle(np.diff(P[:, 2]))
+    meas = turn * (1 + noise.scale_error) + noise.bias * dt
+    if noise.angle_random_walk > 0:
+        meas = meas + noise.angle_random_walk * np.sqrt(dt) * rng.standard_normal(len(dt))
+    return P[0, 2] + np.concatenate([[0.0], np.cumsum(meas)])
 
 
 @dataclass
@@ -175,13 +364,21 @@ class Robot:
         Side length of the robot (m); trajectories keep half of it clear of
         borders and obstacles.
     noise : OdometryNoise
+    gyro : GyroNoise, optional
+        A yaw gyro (an IMU): datasets simulated with this robot get the
+        column ``gyro_heading`` (:func:`simulate_gyro`). None (default): no gyro.
     """
 
     cameras: dict[str, tuple[float, float]] = field(default_factory=lambda: {"center": (0.0, 0.0)})
     size: float = 0.7
     noise: OdometryNoise = field(default_factory=OdometryNoise)
+    gyro: GyroNoise | None = None
 
     def __post_init__(self) -> None:
+        if not isinstance(self.noise, OdometryNoise):
+            raise TypeError(f"noise must be an OdometryNoise, got {type(self.noise).__name__}")
+        if self.gyro is not None and not isinstance(self.gyro, GyroNoise):
+            raise TypeError(f"gyro must be a GyroNoise or None, got {type(self.gyro).__name__}")
         if not self.cameras:
             raise ValueError("a robot needs at least one camera")
         cams = {}
@@ -221,9 +418,24 @@ class Robot:
         """Dead-reckoned robot poses along ``poses`` (see :func:`simulate_odometry`)."""
         return simulate_odometry(poses, self.noise, rng)
 
+    def gyro_headings(self, poses: Any, times: Any, rng: np.random.Generator | int | None = None) -> np.ndarray:
+        """The gyro's heading (N,) along robot ``poses`` (see :func:`simulate_gyro`).
+
+        Raises
+        ------
+        ValueError
+            The robot has no gyro (``gyro`` is None).
+        """
+        if self.gyro is None:
+            raise ValueError("this robot has no gyro; give Robot(gyro=GyroNoise())")
+        return simulate_gyro(poses, times, self.gyro, rng)
+
     def to_dict(self) -> dict[str, Any]:
-        return {"cameras": {k: list(v) for k, v in self.cameras.items()}, "size": self.size,
-                "odometry_noise": self.noise.to_dict()}
+        out = {"cameras": {k: list(v) for k, v in self.cameras.items()}, "size": self.size,
+               "odometry_noise": self.noise.to_dict()}
+        if self.gyro is not None:
+            out["gyro_noise"] = self.gyro.to_dict()
+        return out
 
 
 class Simulator:
