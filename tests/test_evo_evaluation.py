@@ -295,3 +295,26 @@ def test_cli_writes_tum_estimates_and_ground_truth_that_evo_reads(tiny, tmp_path
     code, _, err = run(capsys, "localize", tiny["model"], tiny["root"] / "data", "--run", "test",
                        "--out", tmp_path / "x.tum", "--tum-track", "fused", "--no-progress")
     assert code == 2 and "--odometry" in err
+
+
+def test_cli_fused_track_as_tum_with_headings_matches_evo(tiny, tmp_path, capsys):
+    from clitools import run
+
+    test = tiny["ds"].select(run="test")
+    code, out, err = run(capsys, "localize", tiny["model"], tiny["root"] / "data", "--run", "test", "--odometry",
+                         "--out", tmp_path / "f.tum", "--out-ground-truth", tmp_path / "g.tum", "--no-progress")
+    assert code == 0, err
+    est = file_interface.read_tum_trajectory_file(str(tmp_path / "f.tum"))
+    gt = file_interface.read_tum_trajectory_file(str(tmp_path / "g.tum"))
+    # beside the fused track (headings) the truth carries its heading
+    yaw = np.array([np.arctan2(T[1, 0], T[0, 0]) for T in gt.poses_se3])
+    np.testing.assert_allclose(np.angle(np.exp(1j * (yaw - test.poses[:, 2]))), 0, atol=1e-12)
+    assert not all(np.allclose(T[:3, :3], np.eye(3)) for T in est.poses_se3)
+    fused = out.split("fused: ")[1]
+    m = metrics.RPE(metrics.PoseRelation.translation_part, delta=1, delta_unit=metrics.Unit.frames)
+    m.process_data((gt, est))
+    assert f"RPE rmse {m.get_statistic(metrics.StatisticsType.rmse):.3f} m" in fused
+    est.align(gt, correct_scale=False)
+    m = metrics.APE(metrics.PoseRelation.translation_part)
+    m.process_data((gt, est))
+    assert f"APE rmse {m.get_statistic(metrics.StatisticsType.rmse):.3f} m" in fused

@@ -233,7 +233,9 @@ def _run_localize(args: argparse.Namespace) -> int:
         msg += f", fused {med(fused[:, :2], src.xy):.3f} m)" if fused is not None else ")"
     print(msg)
     if src.xy is not None and np.isfinite(src.xy).all() and len(xy) > 1:
-        print(_ape_rpe_line(xy, fused, src.xy))
+        true_h = gt_heading if gt_heading is not None else (
+            _true_heading(args) if fused is not None and src.kind == "dataset" else None)
+        print(_ape_rpe_line(xy, fused, src.xy, true_h))
     return 0
 
 
@@ -248,19 +250,22 @@ def _true_heading(args: argparse.Namespace):  # type: ignore[no-untyped-def]
     return h if np.isfinite(h).all() else None
 
 
-def _ape_rpe_line(xy, fused, truth) -> str:  # type: ignore[no-untyped-def]
-    """evo's APE and RPE (translation, after the rigid alignment on this run) of the estimates and the fused track."""
+def _ape_rpe_line(xy, fused, truth, true_heading) -> str:  # type: ignore[no-untyped-def]
+    """evo's APE and RPE (translation, after the rigid alignment on this run) of the estimates (identity
+    rotations) and the fused track (with its heading and the true heading where known), as evo computes them on
+    the TUM files localize writes."""
     from ...localization.trajectory_metrics import trajectory_errors
 
-    def one(name: str, est) -> str:  # type: ignore[no-untyped-def]
+    def one(name: str, est, h=None) -> str:  # type: ignore[no-untyped-def]
         try:
-            e = trajectory_errors(est, truth)
+            e = trajectory_errors(est, truth, estimate_heading=h, reference_heading=None if h is None else true_heading)
         except ValueError as exc:  # e.g. all estimates at one point: no alignment
             return f"{name}: none ({exc})"
         return (f"{name}: APE rmse {e['ape_rmse']:.3f} m (mean {e['ape_mean']:.3f}, median {e['ape_median']:.3f}, "
                 f"max {e['ape_max']:.3f}), RPE rmse {e['rpe_rmse']:.3f} m per frame")
 
-    parts = [one("estimates", xy)] + ([one("fused", fused[:, :2])] if fused is not None else [])
+    parts = [one("estimates", xy)] + ([one("fused", fused[:, :2], None if true_heading is None else fused[:, 2])]
+                                      if fused is not None else [])
     return ("evo's trajectory errors (translation, each track rigidly aligned to the truth on this run): "
             + "; ".join(parts))
 
