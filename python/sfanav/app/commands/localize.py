@@ -11,7 +11,8 @@ from ..registry import command
 from .landmarks import evaluate_landmarks_command, is_landmark_model, localize_landmarks
 
 
-OUT_FORMATS = "NAME.csv (frame,x,y), NAME.bag (ROS 1 bag), NAME.mcap or NAME.db3 (ROS 2 bag, MCAP or SQLite)"
+OUT_FORMATS = ("NAME.csv (frame,x,y), NAME.tum (TUM trajectory: timestamp x y z qx qy qz qw, as evo reads it), "
+               "NAME.bag (ROS 1 bag), NAME.mcap or NAME.db3 (ROS 2 bag, MCAP or SQLite)")
 """The files ``localize --out`` writes, told apart by their suffix."""
 
 
@@ -20,12 +21,38 @@ def _check_out_names(outs: list, landmarks: bool) -> None:
     CSV under a bag's name would mislead whatever opens it)."""
     from ...data.rosbag_writer import BAG_SUFFIXES
 
-    known = (".csv",) if landmarks else (".csv",) + BAG_SUFFIXES
+    known = (".csv",) if landmarks else (".csv", TUM_SUFFIX) + BAG_SUFFIXES
     for o in outs:
         if o.suffix.lower() not in known:
             raise UsageError(f"--out {o}: localize writes " + (
                 "one CSV for a landmark model (NAME.csv)" if landmarks else OUT_FORMATS)
                 + f", told apart by the name's suffix; {o.suffix or 'no suffix'} is none of them")
+
+
+TUM_SUFFIX = ".tum"
+"""The suffix of the TUM trajectory files localize writes (--out, --out-ground-truth)."""
+
+
+def _tum_stamps(src, n: int):  # type: ignore[no-untyped-def]
+    """The stamps of a TUM file: (stamps, unit), a dataset's exact int64 ns where it has them."""
+    if src.stamps_ns is not None:
+        return src.stamps_ns[:n], "ns"
+    return src.times(n), "s"
+
+
+def _check_tum_times(src, what: str) -> None:  # type: ignore[no-untyped-def]
+    """Refuses, before any work, a TUM file whose images have no times or
+    times that do not increase (several runs of a dataset)."""
+    import numpy as np
+
+    if src.timestamps is None and src.fps is None:
+        raise UsageError(f"{what} needs the images' times: the input is an image folder without them; localize "
+                         "a dataset or a video, or write a CSV")
+    t = src.stamps_ns if src.stamps_ns is not None else src.timestamps
+    if t is not None and len(t) > 1 and not (np.diff(t) > 0).all():
+        i = int(np.flatnonzero(np.diff(t) <= 0)[0])
+        raise UsageError(f"{what}: a trajectory's times must increase, but image {i + 1} is not later than image "
+                         f"{i} (a dataset with several runs? choose one with --run)")
 
 
 @command("localize")
@@ -36,6 +63,10 @@ def _add_localize(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
         description=wrap("Localize every image of INPUT with a trained model: a dataset directory, a folder of "
                     "images (png, jpg, ...; sorted by name) or a video file. Writes a CSV with columns "
                     "frame,x,y (frame: the dataset's frame id, else the image's index; x, y in metres), or "
+                    "a TUM trajectory (--out NAME.tum: timestamp x y z qx qy qz qw per line, seconds with nine "
+                    "decimals, z = 0, the identity rotation for single-image estimates, the heading's for the fused "
+                    "track; evo_ape / evo_rpe read it; --out-ground-truth NAME.tum writes the dataset's truth "
+                    "beside it), or "
                     "a ROS bag (--out NAME.bag for ROS 1, NAME.mcap or NAME.db3 for ROS 2 with MCAP or SQLite "
                     "storage) that replays in rviz, Foxglove "
                     "or PlotJuggler: geometry_msgs/PoseStamped on /sfanav/estimate and, with --odometry, the "
@@ -45,14 +76,23 @@ def _add_localize(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                     "omnidirectional (mirror) images unwarped with --mirror or an estimated mirror, and "
                     "a message says which."),
         epilog="example:\n  sfanav localize garden.sfa garden --run test --out test.csv\n"
-               "  sfanav localize robot.sfa run2 --odometry --out estimates.bag --out estimates.csv",
+               "  sfanav localize robot.sfa run2 --odometry --out estimates.bag --out estimates.csv\n"
+               "  sfanav localize garden.sfa garden --run test --out est.tum --out-ground-truth gt.tum\n"
+               "  evo_ape tum gt.tum est.tum -a",
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("model", metavar="MODEL", help="model file from sfanav train")
     p.add_argument("input", metavar="INPUT", help="dataset directory, image folder or video file")
-    p.add_argument("--out", required=True, action="append", metavar="CSV|BAG",
+    p.add_argument("--out", required=True, action="append", metavar="CSV|TUM|BAG",
                    help=f"file to write, by its name: {OUT_FORMATS} (a bag needs pip install \"sfanav[ros]\"); "
                         "give --out twice for two")
+    p.add_argument("--out-ground-truth", default=None, metavar="NAME.tum",
+                   help="also write the dataset's ground truth as a TUM file with the same stamps (for evo: "
+                        "evo_ape tum NAME.tum EST.tum -a); its rotations match the TUM estimate's: the true "
+                        "heading beside a fused track, the identity beside single-image estimates")
+    p.add_argument("--tum-track", choices=("estimates", "fused"), default=None,
+                   help="what --out NAME.tum holds: the single-image estimates (identity rotations) or the fused "
+                        "track (with its heading; needs --odometry). Default: fused with --odometry, else estimates")
     p.add_argument("--frame-id", default="map", metavar="FRAME",
                    help="frame_id of the poses in a bag (default map)")
     p.add_argument("--run", dest="run_name", default=None, metavar="RUN", help="only this run of a dataset (default: all images)")
@@ -84,11 +124,15 @@ def _run_localize(args: argparse.Namespace) -> int:
     from ...data.ros_messages import require_rosbags
     from ...data.rosbag_writer import BAG_SUFFIXES, write_estimates
     from ...data.sources import open_images
+    from ...data.tum import write_tum
     from ...localization.error_metrics import med
     from ...odometry.fusion import fuse
 
     loc = load_localizer(args.model, landmarks=True)
     if is_landmark_model(loc):
+        if args.out_ground_truth is not None or args.tum_track is not None:
+            raise UsageError(f"{args.model} is a landmark model: it writes one CSV (--out FILE.csv); "
+                             "--out-ground-truth and --tum-track apply to SFA models")
         if len(args.out) != 1 or Path(args.out[0]).suffix.lower() in BAG_SUFFIXES:
             raise UsageError(f"{args.model} is a landmark model: it writes one CSV (--out FILE.csv), not bags")
         _check_out_names([Path(args.out[0])], landmarks=True)
@@ -101,12 +145,39 @@ def _run_localize(args: argparse.Namespace) -> int:
     if len({o.resolve() for o in outs}) != len(outs):
         raise UsageError("--out names the same file twice")
     bags = [o for o in outs if o.suffix.lower() in BAG_SUFFIXES]
+    tums = [o for o in outs if o.suffix.lower() == TUM_SUFFIX]
+    gt_out = None
+    if args.out_ground_truth is not None:
+        if Path(args.out_ground_truth).suffix.lower() != TUM_SUFFIX:
+            raise UsageError(f"--out-ground-truth {args.out_ground_truth}: it writes a TUM file (NAME{TUM_SUFFIX}), "
+                             f"{Path(args.out_ground_truth).suffix or 'no suffix'} is not one")
+        gt_out = new_file(args.out_ground_truth, args.overwrite, "ground-truth file")
+        if gt_out.resolve() in {o.resolve() for o in outs}:
+            raise UsageError("--out-ground-truth names a file that --out names too")
+    if args.tum_track is not None and not tums:
+        raise UsageError(f"--tum-track chooses what --out NAME{TUM_SUFFIX} holds; no --out names a TUM file")
+    if args.tum_track == "fused" and not args.odometry:
+        raise UsageError("--tum-track fused writes the fused track: it needs --odometry")
+    track = args.tum_track or ("fused" if args.odometry else "estimates")
     if bags:
         require_rosbags()
     src = open_images(args.input, run=args.run_name, camera=args.camera)
     if bags and src.timestamps is None and src.fps is None:
         raise UsageError(f"a bag needs the images' times: {args.input} is an image folder without them; localize "
                          "a dataset (sfanav import makes one from a bag) or a video, or write a CSV")
+    if tums:
+        _check_tum_times(src, f"--out {tums[0]}")
+    gt_heading = None
+    if gt_out is not None:
+        _check_tum_times(src, f"--out-ground-truth {gt_out}")
+        if src.kind != "dataset" or src.xy is None or not np.isfinite(src.xy).all():
+            raise UsageError(f"--out-ground-truth needs a dataset with ground-truth x, y for every image; "
+                             f"{args.input} has " + ("none" if src.xy is None or not np.isfinite(src.xy).any()
+                                                    else "them for some images only"))
+        if track == "fused":  # beside a fused track (poses with headings), the truth with its heading
+            gt_heading = _true_heading(args)
+            if gt_heading is None:
+                log(f"{args.input} has no ground-truth heading for every image: {gt_out} gets the identity rotation")
     if args.odometry:
         if src.odometry is None or not np.isfinite(src.odometry).all():
             raise UsageError(f"--odometry needs a dataset with odometry (odom_x, odom_y, odom_heading) for every "
@@ -133,6 +204,13 @@ def _run_localize(args: argparse.Namespace) -> int:
     if args.odometry:
         fused = fuse(src.odometry, xy, loc.info["ekf_noise"])
     for out in outs:
+        if out in tums:
+            stamps, unit = _tum_stamps(src, len(xy))
+            if track == "fused":
+                write_tum(out, stamps, fused[:, :2], fused[:, 2], unit=unit)
+            else:
+                write_tum(out, stamps, xy, unit=unit)
+            continue
         if out in bags:  # a dataset's exact stamps where it has them: each estimate then carries its image's
             exact = src.stamps_ns is not None
             write_estimates(out, src.stamps_ns[: len(xy)] if exact else src.times(len(xy)), xy, fused,
@@ -141,15 +219,55 @@ def _run_localize(args: argparse.Namespace) -> int:
         write_csv_atomic(out, ["frame", "x", "y"] + (["fused_x", "fused_y", "fused_heading"] if fused is not None else []),
                          ([int(fr), f"{x:.4f}", f"{y:.4f}"] + ([f"{v:.4f}" for v in fused[i]] if fused is not None else [])
                           for i, (fr, (x, y)) in enumerate(zip(frames, xy))))
+    if gt_out is not None:
+        stamps, unit = _tum_stamps(src, len(xy))
+        write_tum(gt_out, stamps, src.xy[: len(xy)], gt_heading, unit=unit)
+    written = outs + ([gt_out] if gt_out is not None else [])
     msg = (f"wrote {len(xy)} positions" + (" and the fused track" if fused is not None else "")
-           + f" to {' and '.join(str(o) for o in outs)}")
+           + (" and the ground truth" if gt_out is not None else "")
+           + f" to {' and '.join(str(o) for o in written)}")
     if loc.info.get("supervision") == "odometry":
         msg += " (metres in the training run's odometry frame)"
     elif src.xy is not None and np.isfinite(src.xy).all():
         msg += f" (MED from the dataset's ground truth: {med(xy, src.xy):.3f} m"
         msg += f", fused {med(fused[:, :2], src.xy):.3f} m)" if fused is not None else ")"
     print(msg)
+    if src.xy is not None and np.isfinite(src.xy).all() and len(xy) > 1:
+        true_h = gt_heading if gt_heading is not None else (
+            _true_heading(args) if fused is not None and src.kind == "dataset" else None)
+        print(_ape_rpe_line(xy, fused, src.xy, true_h))
     return 0
+
+
+def _true_heading(args: argparse.Namespace):  # type: ignore[no-untyped-def]
+    """The ground-truth headings (rad) of the localized images, None if some are unknown."""
+    import numpy as np
+
+    from ...data.dataset import Dataset
+    from ...data.sources import select_run
+
+    h = select_run(Dataset(args.input), args.run_name, args.camera).poses[:, 2]
+    return h if np.isfinite(h).all() else None
+
+
+def _ape_rpe_line(xy, fused, truth, true_heading) -> str:  # type: ignore[no-untyped-def]
+    """evo's APE and RPE (translation, after the rigid alignment on this run) of the estimates (identity
+    rotations) and the fused track (with its heading and the true heading where known), as evo computes them on
+    the TUM files localize writes."""
+    from ...localization.trajectory_metrics import trajectory_errors
+
+    def one(name: str, est, h=None) -> str:  # type: ignore[no-untyped-def]
+        try:
+            e = trajectory_errors(est, truth, estimate_heading=h, reference_heading=None if h is None else true_heading)
+        except ValueError as exc:  # e.g. all estimates at one point: no alignment
+            return f"{name}: none ({exc})"
+        return (f"{name}: APE rmse {e['ape_rmse']:.3f} m (mean {e['ape_mean']:.3f}, median {e['ape_median']:.3f}, "
+                f"max {e['ape_max']:.3f}), RPE rmse {e['rpe_rmse']:.3f} m per frame")
+
+    parts = [one("estimates", xy)] + ([one("fused", fused[:, :2], None if true_heading is None else fused[:, 2])]
+                                      if fused is not None else [])
+    return ("evo's trajectory errors (translation, each track rigidly aligned to the truth on this run): "
+            + "; ".join(parts))
 
 
 @command("evaluate")
