@@ -131,7 +131,9 @@ def _run_localize(args: argparse.Namespace) -> int:
     frames = src.frames if src.frames is not None else np.arange(len(xy))
     fused = None
     if args.odometry:
-        fused = fuse(src.odometry, xy, loc.info["ekf_noise"])
+        fused, ekf = fuse(src.odometry, xy, loc.info["ekf_noise"], return_filter=True)
+        log(f"fused track: {ekf.n_reinitializations_} re-initialisation(s) from the single-image estimates, "
+            f"{int(ekf.jumps_.sum())} odometry jump(s)")
     for out in outs:
         if out in bags:  # a dataset's exact stamps where it has them: each estimate then carries its image's
             exact = src.stamps_ns is not None
@@ -141,7 +143,8 @@ def _run_localize(args: argparse.Namespace) -> int:
         write_csv_atomic(out, ["frame", "x", "y"] + (["fused_x", "fused_y", "fused_heading"] if fused is not None else []),
                          ([int(fr), f"{x:.4f}", f"{y:.4f}"] + ([f"{v:.4f}" for v in fused[i]] if fused is not None else [])
                           for i, (fr, (x, y)) in enumerate(zip(frames, xy))))
-    msg = (f"wrote {len(xy)} positions" + (" and the fused track" if fused is not None else "")
+    msg = (f"wrote {len(xy)} positions" + (f" and the fused track ({ekf.n_reinitializations_} re-initialisations)"
+                                            if fused is not None else "")
            + f" to {' and '.join(str(o) for o in outs)}")
     if loc.info.get("supervision") == "odometry":
         msg += " (metres in the training run's odometry frame)"
