@@ -67,7 +67,8 @@ def test_cli_localize_with_odometry(tmp_path, capsys):
     out = tmp_path / "e.csv"
     assert cli.main(["localize", str(model), str(ds.root), "--run", "test", "--odometry", "--out", str(out),
                      "--no-progress"]) == 0
-    assert "fused" in capsys.readouterr().out
+    printed = capsys.readouterr().out
+    assert "fused" in printed and "re-initialisations)" in printed
     rows = list(csv.DictReader(open(out)))
     assert list(rows[0]) == ["frame", "x", "y", "fused_x", "fused_y", "fused_heading"]
     assert len(rows) == int((ds.runs == "test").sum())

@@ -28,8 +28,22 @@ Gating (beyond the thesis): a measurement whose squared Mahalanobis
 distance ``y^T S^-1 y`` of the innovation exceeds the chi-square quantile of
 ``gate_probability`` (2 degrees of freedom: ``-2 ln(1 - p)``) is skipped, as
 is any row of NaN (a missing estimate). After ``max_consecutive_gated``
-skipped measurements in a row the next one is accepted anyway, so a filter
-that has drifted away can recover.
+skipped measurements in a row the next one is accepted anyway.
+
+Divergence and recovery (beyond the thesis; :mod:`sfanav.odometry.recovery`):
+the single-image estimates are a global localizer, so a filter that has
+lost the robot (kidnapped, wheel slip, a jump in the data) re-initialises
+from them. An estimate is *inconsistent* when its squared Mahalanobis
+distance exceeds the chi-square quantile of ``divergence_probability``;
+``reinit_after`` inconsistent estimates in a row (and, optionally, the sum
+of the last ``nis_window`` accepted normalised innovations squared above its
+chi-square quantile of ``nis_probability``) re-initialise the state at the
+pose a rigid fit of those frames' odometry to their estimates gives, with
+the covariance ``diag(reinit_std)^2``. An odometry step spanning more than
+``gap_factor`` nominal steps (dropped frames) has its noise variance scaled
+by that many steps; a step longer than ``jump_factor`` nominal steps is a
+jump: its displacement gets a position standard deviation of its own length,
+so the next estimate places the robot.
 
 The filter is :class:`filterpy.kalman.ExtendedKalmanFilter` with the CTRV
 prediction.
@@ -51,10 +65,12 @@ from .._checks import (
     check_finite,
     check_int,
     check_nonneg_float,
+    check_positive_float,
     check_same_length,
 )
 from .._progress import progress_bar
 from .dead_reckoning import arc_factor, as_poses, dead_reckon, increments, wrap_angle
+from .recovery import FilterEvent, pose_from_window, step_anomalies
 
 
 def ctrv_motion(pose: np.ndarray, u: np.ndarray) -> np.ndarray:
@@ -143,6 +159,34 @@ class OdometryEKF:
         docstring); e.g. 0.999. None: every estimate is used (thesis).
     max_consecutive_gated : int, default 20
         After this many gated estimates in a row the next one is accepted.
+    reinit_after : int or None, default 4
+        Re-initialise after this many inconsistent estimates in a row
+        (frames with estimates; missing ones neither count nor break the
+        run). None: never (the filter before recovery existed).
+    divergence_probability : float, default 0.999
+        An estimate is inconsistent when its squared Mahalanobis distance
+        exceeds the chi-square quantile (2 dof) of this probability
+        (independent of the gate: it counts when gating is off too).
+    nis_window : int or None, default None
+        Windowed innovation test: re-initialise when the sum of the last
+        ``nis_window`` accepted (consistent) normalised innovations squared
+        exceeds the chi-square quantile (``2 nis_window`` dof) of
+        ``nis_probability``; catches a filter that is biased without being
+        gated. None: off (a measurement noise chosen too small would fire it).
+    nis_probability : float, default 1 - 1e-6
+    reinit_std : (float or None, float), default (None, 0.2)
+        Standard deviation of the position (metres, each axis; None: twice
+        ``measurement_noise``) and heading (radians) after a
+        re-initialisation. The heading comes from the rigid fit when the
+        frames span at least 5 ``measurement_noise`` metres, else it is
+        kept and its standard deviation doubled.
+    gap_factor : float or None, default 3
+        A step spanning more than this many nominal steps (by ``stamps``,
+        else by its distance against the run's median step) has its
+        odometry noise variance multiplied by that many. None: off.
+    jump_factor : float or None, default 8
+        A step longer than this many nominal steps is a jump (see
+        :func:`sfanav.odometry.recovery.step_anomalies`). None: off.
 
     Attributes (after :meth:`run`)
     ----------
@@ -161,6 +205,24 @@ class OdometryEKF:
     log_likelihood_ : float
         Sum of the innovations' Gaussian log-likelihoods over the accepted
         updates (for tuning the noise without ground truth).
+    reinitialized_ : ndarray of bool (N,)
+        True where the filter re-initialised from the estimates.
+    n_reinitializations_ : int
+    jumps_ : ndarray of bool (N,)
+        True at frames reached by a jump step.
+    events_ : list of FilterEvent
+        Re-initialisations, jumps and gaps in frame order.
+
+    Example
+    -------
+    >>> t = np.arange(40.0)
+    >>> truth = np.c_[t, np.zeros(40), np.zeros(40)]
+    >>> truth[20:, 1] += 20.0                          # kidnapped: carried 20 m sideways
+    >>> odometry = np.c_[t, np.zeros(40), np.zeros(40)]   # the wheels saw nothing
+    >>> ekf = OdometryEKF(0.02, 0.01, 0.2, gate_probability=0.999)
+    >>> poses = ekf.run(odometry, truth[:, :2], truth[0])
+    >>> ekf.n_reinitializations_, bool(abs(poses[-1, 1] - 20) < 0.5)
+    (1, True)
     """
 
     def __init__(
@@ -174,6 +236,13 @@ class OdometryEKF:
         process_floor: float = 1e-9,
         gate_probability: float | None = None,
         max_consecutive_gated: int = 20,
+        reinit_after: int | None = 4,
+        divergence_probability: float = 0.999,
+        nis_window: int | None = None,
+        nis_probability: float = 1 - 1e-6,
+        reinit_std: tuple[float | None, float] = (None, 0.2),
+        gap_factor: float | None = 3.0,
+        jump_factor: float | None = 8.0,
     ) -> None:
         self.distance_noise = distance_noise
         self.heading_noise = heading_noise
@@ -183,9 +252,17 @@ class OdometryEKF:
         self.process_floor = process_floor
         self.gate_probability = gate_probability
         self.max_consecutive_gated = max_consecutive_gated
+        self.reinit_after = reinit_after
+        self.divergence_probability = divergence_probability
+        self.nis_window = nis_window
+        self.nis_probability = nis_probability
+        self.reinit_std = reinit_std
+        self.gap_factor = gap_factor
+        self.jump_factor = jump_factor
 
     _PARAMS = ("distance_noise", "heading_noise", "measurement_noise", "turn_noise", "initial_std", "process_floor",
-               "gate_probability", "max_consecutive_gated")
+               "gate_probability", "max_consecutive_gated", "reinit_after", "divergence_probability", "nis_window",
+               "nis_probability", "reinit_std", "gap_factor", "jump_factor")
 
     def get_params(self, deep: bool = True) -> dict[str, Any]:
         return {k: getattr(self, k) for k in self._PARAMS}
@@ -226,7 +303,28 @@ class OdometryEKF:
         P0 = np.diag([init[0] ** 2, init[0] ** 2, init[1] ** 2]) + floor * np.eye(3)
         return sd, sh, sr, st, P0, floor, gate, mcg
 
-    def run(self, odometry: Any, measurements: Any, start_pose: Any) -> np.ndarray:
+    def _check_recovery(self, sr: float) -> dict[str, Any]:
+        """The recovery parameters, validated (ValueError/TypeError naming the bad one)."""
+        from scipy.stats import chi2
+
+        ra = None if self.reinit_after is None else check_int(self.reinit_after, "reinit_after", minimum=1)
+        dp = float(self.divergence_probability)
+        if not 0 < dp < 1:
+            raise ValueError(f"divergence_probability must be in (0, 1), got {self.divergence_probability!r}")
+        nw = None if self.nis_window is None else check_int(self.nis_window, "nis_window", minimum=2)
+        npb = float(self.nis_probability)
+        if not 0 < npb < 1:
+            raise ValueError(f"nis_probability must be in (0, 1), got {self.nis_probability!r}")
+        rs = self.reinit_std
+        if not isinstance(rs, (tuple, list)) or len(rs) != 2:
+            raise ValueError(f"reinit_std must be (position std [m] or None, heading std [rad]), got {rs!r}")
+        ps = 2.0 * sr if rs[0] is None else check_positive_float(rs[0], "reinit_std[0]")
+        hs = check_positive_float(rs[1], "reinit_std[1]")
+        return {"reinit_after": ra, "divergence": _chi2_2dof(dp), "nis_window": nw,
+                "nis_bound": None if nw is None else float(chi2.ppf(npb, 2 * nw)),
+                "position_std": ps, "heading_std": hs}
+
+    def run(self, odometry: Any, measurements: Any, start_pose: Any, stamps: Any = None) -> np.ndarray:
         """Filters one run.
 
         Parameters
@@ -240,6 +338,9 @@ class OdometryEKF:
             rows of NaN are missing estimates (prediction only).
         start_pose : array (3,)
             Known start pose ``(x [m], y [m], theta [rad])`` of the first sample.
+        stamps : array (N,), optional
+            Frame times in seconds, increasing: steps over dropped frames are
+            found by their duration (without: by their length).
 
         Returns
         -------
@@ -258,9 +359,13 @@ class OdometryEKF:
             raise ValueError(f"start_pose must be (x [m], y [m], heading [rad]), got shape {s0.shape}")
         check_finite(s0, "start_pose")
         sd, sh, sr, st, P0, floor, gate, mcg = self._check()
+        rec = self._check_recovery(sr)
         U = increments(P) if len(P) > 1 else np.zeros((0, 2))
-        M = np.diag([sd**2, sh**2])
+        if stamps is not None and len(np.ravel(np.asarray(stamps))) != len(P):
+            raise ValueError(f"stamps must have one time per frame ({len(P)}), got {len(np.ravel(np.asarray(stamps)))}")
+        scale, jump = step_anomalies(U, stamps, gap_factor=self.gap_factor, jump_factor=self.jump_factor)
         R = sr**2 * np.eye(2)
+        min_spread = 5.0 * sr
 
         ekf = _ctrv_filter_class()(dim_x=3, dim_z=2)
         ekf.x = s0.reshape(3, 1).copy()
@@ -277,18 +382,31 @@ class OdometryEKF:
         poses = np.empty((N, 3))
         covs = np.empty((N, 3, 3))
         gated = np.zeros(N, bool)
+        reinit = np.zeros(N, bool)
+        jumped = np.zeros(N, bool)
+        events: list[FilterEvent] = []
         maha = np.full(N, np.nan)
         loglik = 0.0
         streak = 0
         n_missing = 0
+        bad_run: list[int] = []  # frames of the current run of inconsistent estimates
+        nis: list[tuple[int, float]] = []  # (frame, NIS) of the recent accepted estimates
         for k in range(N):
             if k > 0:
                 u = U[k - 1]
                 x = ekf.x[:, 0]
                 F, V = ctrv_jacobians(x, u)
                 ekf.F = F
-                Mk = M if st == 0 else np.diag([sd**2, sh**2 + st**2 * abs(u[1])])
-                ekf.Q = V @ Mk @ V.T + floor * np.eye(3)
+                Mk = np.diag([sd**2, sh**2 + st**2 * abs(u[1])]) * scale[k - 1]
+                Q = V @ Mk @ V.T + floor * np.eye(3)
+                if scale[k - 1] > 1:
+                    events.append(FilterEvent(k, "gap", float(scale[k - 1])))
+                if jump[k - 1]:  # the displacement is unknown within its own length
+                    Q[:2, :2] += u[0] ** 2 * np.eye(2)
+                    jumped[k] = True
+                    events.append(FilterEvent(k, "jump", float(abs(u[0]))))
+                    bad_run, nis = [], []  # the odometry across a jump does not tie frames together
+                ekf.Q = Q
                 ekf.predict(u=u)  # x = ctrv_motion(x, u), P = F P F^T + Q
             z = Z[k]
             if np.isnan(z).any():
@@ -298,7 +416,21 @@ class OdometryEKF:
                 S = ekf.P[:2, :2] + R
                 m2 = float(y @ np.linalg.solve(S, y))
                 maha[k] = np.sqrt(m2)
-                if gate is not None and m2 > gate and streak < mcg:
+                bad_run = bad_run + [k] if m2 > rec["divergence"] else []
+                trigger, window = None, []
+                if rec["reinit_after"] is not None and len(bad_run) >= rec["reinit_after"]:
+                    trigger, window = "divergence", bad_run
+                elif rec["nis_window"] is not None and m2 <= rec["divergence"]:
+                    nis = (nis + [(k, m2)])[-rec["nis_window"]:]
+                    if len(nis) == rec["nis_window"] and sum(v for _, v in nis) > rec["nis_bound"]:
+                        trigger, window = "innovation", [j for j, _ in nis]
+                if trigger is not None:
+                    old = ekf.x[:2, 0].copy()
+                    self._reinitialize(ekf, P, Z, window, rec, min_spread, floor)
+                    reinit[k] = True
+                    events.append(FilterEvent(k, trigger, float(np.hypot(*(ekf.x[:2, 0] - old)))))
+                    bad_run, nis, streak = [], [], 0
+                elif gate is not None and m2 > gate and streak < mcg:
                     gated[k] = True
                     streak += 1
                 else:
@@ -315,7 +447,31 @@ class OdometryEKF:
         self.n_missing_ = n_missing
         self.mahalanobis_ = maha
         self.log_likelihood_ = float(loglik)
+        self.reinitialized_ = reinit
+        self.n_reinitializations_ = int(reinit.sum())
+        self.jumps_ = jumped
+        self.events_ = events
         return poses
+
+    @staticmethod
+    def _reinitialize(ekf: Any, P: np.ndarray, Z: np.ndarray, window: list[int], rec: dict[str, Any],
+                      min_spread: float, floor: float) -> None:
+        """Moves the filter to the pose of the window's estimates (the last
+        frame of ``window`` is the current one) with the re-initialisation
+        covariance."""
+        W = np.asarray(window)
+        pose, known = pose_from_window(P[W], Z[W], min_spread=min_spread)
+        hs = rec["heading_std"]
+        if not known:  # heading kept: the estimates moved to the current frame by the odometry in that heading
+            th = float(ekf.x[2, 0])
+            a = th - P[W[-1], 2]
+            rot = np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]])
+            moved = Z[W] + (P[W[-1], :2] - P[W, :2]) @ rot.T
+            pose = np.array([*np.median(moved, axis=0), th])
+            hs = 2.0 * hs
+        ps = rec["position_std"]
+        ekf.x = pose.reshape(3, 1)
+        ekf.P = np.diag([ps**2, ps**2, hs**2]) + floor * np.eye(3)
 
     @staticmethod
     def dead_reckoning(odometry: Any, start_pose: Any) -> np.ndarray:

@@ -137,18 +137,35 @@ def noise_for_localizer(localizer: Any, features: Any, targets: Any, odometry: A
 
 
 def fuse(odometry: Any, estimates: Any, noise: Mapping[str, float], *, start_pose: Any = None,
-         gate_probability: float | None = GATE_PROBABILITY) -> np.ndarray:
+         gate_probability: float | None = GATE_PROBABILITY, stamps: Any = None, recovery: bool = True,
+         return_filter: bool = False) -> Any:
     """The fused track (N, 3): x, y in the estimates' frame (metres) and
     heading (radians), from a run's odometry (N, 3) and single-image
     estimates (N, 2; NaN rows missing) with the EKF noise ``noise`` (as
     :func:`noise_from_run` returns). ``start_pose`` defaults to
-    :func:`start_pose_from_estimates`; outlying estimates are gated."""
+    :func:`start_pose_from_estimates`; outlying estimates are gated.
+
+    ``stamps`` (N,), frame times in seconds, find steps over dropped frames
+    by their duration. ``recovery`` (default True): the filter re-initialises
+    from the estimates when it has lost the robot, scales the noise of
+    steps over dropped frames and treats jumps as unknown displacements
+    (:class:`OdometryEKF` defaults); False: none of that. With
+    ``return_filter`` returns ``(poses, ekf)``, the fitted
+    :class:`OdometryEKF` (``n_reinitializations_``, ``events_``).
+
+    Example
+    -------
+    >>> poses, ekf = fuse(odometry, estimates, noise, return_filter=True)  # doctest: +SKIP
+    >>> print(f"{ekf.n_reinitializations_} re-initialisations")             # doctest: +SKIP
+    """
     unknown = set(noise) - set(NOISE_KEYS) - {"turn_noise"}
     if unknown or not set(NOISE_KEYS) <= set(noise):
         raise ValueError(f"noise must give {', '.join(NOISE_KEYS)} (and optionally turn_noise), got {sorted(noise)}")
     P = as_poses(odometry, "odometry")
     Z = _estimates(estimates, P)
     s0 = start_pose_from_estimates(P, Z) if start_pose is None else start_pose
+    off = {} if recovery else {"reinit_after": None, "gap_factor": None, "jump_factor": None}
     ekf = OdometryEKF(**{k: float(noise[k]) for k in NOISE_KEYS}, turn_noise=float(noise.get("turn_noise", 0.0)),
-                      gate_probability=gate_probability)
-    return ekf.run(P, Z, s0)
+                      gate_probability=gate_probability, **off)
+    poses = ekf.run(P, Z, s0, stamps=stamps)
+    return (poses, ekf) if return_filter else poses

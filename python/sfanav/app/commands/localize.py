@@ -202,7 +202,9 @@ def _run_localize(args: argparse.Namespace) -> int:
     frames = src.frames if src.frames is not None else np.arange(len(xy))
     fused = None
     if args.odometry:
-        fused = fuse(src.odometry, xy, loc.info["ekf_noise"])
+        fused, ekf = fuse(src.odometry, xy, loc.info["ekf_noise"], return_filter=True)
+        log(f"fused track: {ekf.n_reinitializations_} re-initialisation(s) from the single-image estimates, "
+            f"{int(ekf.jumps_.sum())} odometry jump(s)")
     for out in outs:
         if out in tums:
             stamps, unit = _tum_stamps(src, len(xy))
@@ -223,7 +225,8 @@ def _run_localize(args: argparse.Namespace) -> int:
         stamps, unit = _tum_stamps(src, len(xy))
         write_tum(gt_out, stamps, src.xy[: len(xy)], gt_heading, unit=unit)
     written = outs + ([gt_out] if gt_out is not None else [])
-    msg = (f"wrote {len(xy)} positions" + (" and the fused track" if fused is not None else "")
+    msg = (f"wrote {len(xy)} positions" + (f" and the fused track ({ekf.n_reinitializations_} re-initialisations)"
+                                            if fused is not None else "")
            + (" and the ground truth" if gt_out is not None else "")
            + f" to {' and '.join(str(o) for o in written)}")
     if loc.info.get("supervision") == "odometry":
