@@ -2,8 +2,8 @@
 frames, robust loop-closure factors, Levenberg-Marquardt in batch and iSAM2
 run by run.
 
-The graph has one :class:`gtsam.Pose2` variable per frame and, by default,
-one more: the odometry's systematic heading drift rate ``b`` (rad/m,
+The graph has one :class:`gtsam.Pose2` variable per frame and, with
+``drift="joint"``, one more: the odometry's systematic heading drift rate ``b`` (rad/m,
 positive when the odometry believes it turned left), which every odometry
 factor shares.
 
@@ -11,10 +11,15 @@ factor shares.
   frame k as the odometry reports it, its heading change corrected by
   ``-b d_k`` (d_k the step's length). Its noise grows with distance and
   turn, from the same random-walk model as the hand-written solver
-  (:func:`odometry_sigmas`). With ``drift="none"`` or ``"iterate"`` it is a
-  plain :class:`gtsam.BetweenFactorPose2`; with ``drift="joint"`` (default)
-  a :class:`gtsam.CustomFactor` on (pose k, pose k+1, b), because GTSAM has
-  no between factor whose measurement depends on a third variable.
+  (:func:`odometry_sigmas`). With ``drift="iterate"`` (the batch default:
+  solve, re-estimate b from the odometry factors' heading residuals,
+  correct, re-solve) or ``"none"`` it is a plain
+  :class:`gtsam.BetweenFactorPose2`; with ``drift="joint"`` (the
+  incremental solver's, where re-solving is not an option) b is a variable
+  of the graph and the factor a :class:`gtsam.CustomFactor` on (pose k,
+  pose k+1, b), because GTSAM has no between factor whose measurement
+  depends on a third variable. Both find the same map; "iterate" is 4-7x
+  faster (the custom factor calls Python at every linearisation).
 * **Loop closures** (:class:`RelativePoses`) are
   :class:`gtsam.BetweenFactorPose2` with a robust kernel (Cauchy or Huber).
   A heading-only closure (the panorama compass) has a position standard
@@ -278,7 +283,10 @@ def _odometry_drift_factor(gtsam: Any, k: int, step: np.ndarray, d: float, noise
         rel = a.between(c, H1, H2)
         e = np.array([rel.x() - tx, rel.y() - ty, wrap_angle(rel.theta() - dth + b * d)])
         if H is not None:
-            H[0], H[1], H[2] = H1, H2, np.array([[0.0], [0.0], [d]])
+            # the relative pose's translation moves by R(theta_rel) times a perturbation of its tangent space
+            ct, st = np.cos(rel.theta()), np.sin(rel.theta())
+            D = np.array([[ct, -st, 0.0], [st, ct, 0.0], [0.0, 0.0, 1.0]])
+            H[0], H[1], H[2] = D @ H1, D @ H2, np.array([[0.0], [0.0], [d]])
         return e
 
     return gtsam.CustomFactor(noise, [k, k + 1, _DRIFT_KEY], error)
@@ -390,9 +398,14 @@ class _Builder:
         return graph
 
 
-def _poses_of(values: Any, n: int) -> np.ndarray:
+def _poses_of(values: Any, odometry: np.ndarray) -> np.ndarray:
+    """The frames' poses (N, 3), headings on the branch of the odometry's
+    unwrapped headings (as the hand-written solver's)."""
+    n = len(odometry)
     out = np.array([[p.x(), p.y(), p.theta()] for p in (values.atPose2(k) for k in range(n))])
-    out[:, 2] = np.unwrap(out[:, 2])
+    ref = np.unwrap(odometry[:, 2])
+    corr = np.unwrap(wrap_angle(out[:, 2] - ref))  # the correction grows smoothly along the run
+    out[:, 2] = ref + corr - 2 * np.pi * np.round(corr[0] / (2 * np.pi))
     return out
 
 
@@ -420,7 +433,7 @@ def _drift_update(poses: np.ndarray, P: np.ndarray, sig: np.ndarray, b: float) -
 
 
 def solve_pose_graph(odometry: Any, closures: RelativePoses | None = None, *, odometry_noise: Any = None,
-                     drift: str = "joint", robust: str = "cauchy", robust_scale: float = 3.0,
+                     drift: str = "iterate", robust: str = "cauchy", robust_scale: float = 3.0,
                      max_iterations: int = 100, drift_iterations: int = 10) -> GraphResult:
     """Solves a run's pose graph by Levenberg-Marquardt (batch).
 
@@ -429,11 +442,12 @@ def solve_pose_graph(odometry: Any, closures: RelativePoses | None = None, *, od
     odometry : array (N, 3)
         Odometry poses x, y (m), heading (rad) of consecutive frames.
     closures : RelativePoses, optional
-        Loop closures; none: dead reckoning (with ``drift="joint"`` the
-        drift rate stays at its prior's 0).
+        Loop closures; none: dead reckoning (the drift rate stays 0: with
+        ``drift="joint"`` by its prior, with "iterate" because the
+        odometry factors then have no residual).
     odometry_noise : mapping or sfanav.sim.OdometryNoise, optional
         Noise model of the odometry factors (:func:`odometry_sigmas`).
-    drift : {"joint", "iterate", "none"}, default "joint"
+    drift : {"iterate", "joint", "none"}, default "iterate"
         ``"joint"``: the drift rate is a variable of the graph;
         ``"iterate"``: solve, re-estimate the rate from the odometry
         factors' heading residuals, correct the odometry, re-solve (at most
@@ -482,7 +496,7 @@ def solve_pose_graph(odometry: Any, closures: RelativePoses | None = None, *, od
         opt = gtsam.LevenbergMarquardtOptimizer(graph, init, params)
         values = opt.optimize()
         its += opt.iterations()
-        poses = _poses_of(values, n)
+        poses = _poses_of(values, P)
         if drift == "joint":
             b = float(values.atVector(_DRIFT_KEY)[0])
         elif drift == "iterate":
@@ -584,7 +598,7 @@ class IncrementalPoseGraph:
     @property
     def poses_(self) -> np.ndarray:
         """Current estimate (N, 3) of the frames added and updated."""
-        return _poses_of(self.isam.calculateEstimate(), self.n_frames_)
+        return _poses_of(self.isam.calculateEstimate(), self._odo)
 
     @property
     def drift_rate_(self) -> float:
