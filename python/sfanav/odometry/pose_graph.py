@@ -360,11 +360,40 @@ def refine_positions(features: np.ndarray, odometry: np.ndarray, headings: np.nd
     return P, accepted, chi, sigma
 
 
+SOLVERS = ("hand-written", "gtsam")
+"""The back ends of :func:`fit_pose_graph`."""
+
+
+def _solve_gtsam(P: np.ndarray, pairs: PlacePairs, rel: np.ndarray, sigma: float, odometry_noise: Any,
+                 robust: float, extra: Any) -> tuple[np.ndarray, np.ndarray, float, np.ndarray]:
+    """Positions, headings, drift rate and the pairs' robust weights from the
+    GTSAM back end (``extra``: further closures, appended after the pairs)."""
+    from .pose_graph_gtsam import RelativePoses, solve_pose_graph
+
+    closures = RelativePoses.from_headings(pairs.past, pairs.current, rel, sigma)
+    if extra is not None:
+        if not isinstance(extra, RelativePoses):
+            raise TypeError(f"relative_poses must be a RelativePoses, got {type(extra).__name__}")
+        closures = _concat(closures, extra)
+    res = solve_pose_graph(P, closures, odometry_noise=odometry_noise, robust="cauchy", robust_scale=robust)
+    return res.poses[:, :2], res.poses[:, 2], res.drift_rate, res.weights[: len(pairs)]
+
+
+def _concat(a: Any, b: Any) -> Any:
+    """Two RelativePoses as one (covariances throughout)."""
+    from .pose_graph_gtsam import RelativePoses
+
+    cov = np.array([a.covariance_of(k) for k in range(len(a))] + [b.covariance_of(k) for k in range(len(b))])
+    return RelativePoses(np.r_[a.i, b.i], np.r_[a.j, b.j], np.r_[a.dx, b.dx], np.r_[a.dy, b.dy],
+                         np.r_[a.dtheta, b.dtheta], covariance=cov.reshape(-1, 3, 3))
+
+
 def fit_pose_graph(images: Any, features: Any, odometry: Any, *, odometry_noise: Any = None,
                    compass_sigma_deg: float = DEFAULT_COMPASS_SIGMA_DEG, n_neighbors: int = 3,
                    min_travel: float = 5.0, n_outputs: int = 8, iterations: int = 8,
                    robust: float = 3.0, refine: int = 2, refine_readout: Mapping[str, Any] | None = None,
-                   offset_sigma: float | None = None, heading_sigma_deg: float = 1.0) -> PoseGraph:
+                   offset_sigma: float | None = None, heading_sigma_deg: float = 1.0,
+                   solver: str = "hand-written", relative_poses: Any = None) -> PoseGraph:
     """Solves the pose graph of one run from its panoramas, slow features and
     odometry (see the module docstring).
 
@@ -405,6 +434,18 @@ def fit_pose_graph(images: Any, features: Any, odometry: Any, *, odometry_noise:
     heading_sigma_deg : float, default 1
         Uncertainty of the solved headings (degrees): the lateral error of
         an odometry step is this times its length.
+    solver : {"hand-written", "gtsam"}, default "hand-written"
+        The back end of steps 3-4: ``"hand-written"`` solves the headings
+        by sparse least squares and integrates the positions; ``"gtsam"``
+        solves the poses by Levenberg-Marquardt on a GTSAM pose graph
+        (:func:`sfanav.odometry.pose_graph_gtsam.solve_pose_graph`: the
+        pairs as heading-only closures with a Cauchy kernel of scale
+        ``robust``, the drift rate a variable of the graph; needs the
+        ``gtsam`` extra). The refinement is the same for both.
+    relative_poses : RelativePoses, optional
+        Further closures with a measured relative position
+        (:class:`sfanav.odometry.pose_graph_gtsam.RelativePoses`), added to
+        the compass's; only with ``solver="gtsam"``.
 
     Returns
     -------
@@ -416,7 +457,8 @@ def fit_pose_graph(images: Any, features: Any, odometry: Any, *, odometry_noise:
     ------
     ValueError
         Mismatched lengths, non-finite values, images that are not
-        panoramas.
+        panoramas, an unknown solver, ``relative_poses`` with the
+        hand-written solver. ImportError: ``solver="gtsam"`` without gtsam.
     """
     P = as_poses(odometry, "odometry")
     F = as_matrix(features, "features")
@@ -428,16 +470,23 @@ def fit_pose_graph(images: Any, features: Any, odometry: Any, *, odometry_noise:
     iterations = check_int(iterations, "iterations", minimum=1)
     robust = check_positive_float(robust, "robust")
     noise = _heading_noise(odometry_noise)
+    if solver not in SOLVERS:
+        raise ValueError(f"solver must be one of {SOLVERS}, got {solver!r}")
+    if relative_poses is not None and solver != "gtsam":
+        raise ValueError("relative_poses (closures with a relative position) need solver='gtsam'")
     pairs = place_pairs(F, P, n_neighbors=n_neighbors, min_travel=min_travel, n_outputs=n_outputs)
-    if len(pairs) == 0:
+    if len(pairs) == 0 and relative_poses is None:
         th = np.unwrap(P[:, 2])
         return PoseGraph(np.c_[P[:, :2], th], 0.0, pairs, np.zeros(0), np.zeros(0))
     rounds = check_int(refine, "refine", minimum=0)
     offset_sigma = None if offset_sigma is None else check_positive_float(offset_sigma, "offset_sigma")
     heading_sigma = np.radians(check_positive_float(heading_sigma_deg, "heading_sigma_deg"))
     rel = relative_headings(R, pairs.current, pairs.past)
-    theta, drift, w = _solve_headings(P, pairs, rel, noise, sigma, iterations, robust)
-    xy = integrate(P, theta)
+    if solver == "gtsam":
+        xy, theta, drift, w = _solve_gtsam(P, pairs, rel, sigma, odometry_noise, robust, relative_poses)
+    else:
+        theta, drift, w = _solve_headings(P, pairs, rel, noise, sigma, iterations, robust)
+        xy = integrate(P, theta)
     kept = PlacePairs(pairs.current[w >= 0.5], pairs.past[w >= 0.5], pairs.distance[w >= 0.5])
     xy, done, chi, osig = refine_positions(F, P, theta, xy, kept, noise=noise,
                                            readout=refine_readout or REFINE_READOUT, rounds=rounds,
