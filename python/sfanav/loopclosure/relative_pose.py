@@ -58,7 +58,7 @@ DEFAULT_RATIOS = (0.02, 0.05, 0.1, 0.15, 0.22, 0.3, 0.4)
 """Ratios ``nu = d / R`` (distance between the frames over the assumed
 distance of the landmarks) that the warping tries."""
 
-DEFAULT_TEMPERATURE = 16.0
+DEFAULT_TEMPERATURE = 48.0
 """Inflation of the pseudo-posterior's temperature over independent pixel
 noise (neighbouring pixels are correlated); calibrated on the measurement in
 docs/relative-pose.md."""
