@@ -176,3 +176,12 @@ def test_bad_input():
 def test_empty_pairs():
     rp = relative_poses(np.random.default_rng(0).random((2, 4, 32)), np.zeros(0, int), np.zeros(0, int))
     assert isinstance(rp, RelativePoses) and len(rp) == 0 and rp.covariance.shape == (0, 3, 3)
+
+
+def test_heading_agrees_with_the_panorama_compass(scene):
+    from sfanav.odometry.pose_graph import relative_headings
+
+    X, _, i, j = scene
+    rp = relative_poses(X, i, j)
+    compass = relative_headings(X, j, i)  # heading of current (j) minus past (i)
+    np.testing.assert_allclose(_wrapdeg(rp.dtheta - compass), 0, atol=4.0)
