@@ -25,7 +25,7 @@ ap.add_argument("--gray", action="store_true")
 ap.add_argument("--rows", type=int, default=None, help="compare only the top ROWS rows (default all)")
 ap.add_argument("--gardens", default="suite-inner:1.0,suite-large-inner:1.5,suite-open-lawn:1.0")
 ap.add_argument("--seed", type=int, default=0)
-ap.add_argument("--triangulate", type=int, default=25,
+ap.add_argument("--triangulate", type=int, default=60,
                 help="frames per garden whose lateral offset to the next lane is triangulated from bearings alone")
 a = ap.parse_args()
 
@@ -110,12 +110,12 @@ for spec in a.gardens.split(","):
         Ltrue = L.reshape(-1, 4).mean(1)
         e = np.abs(Lhat - Ltrue)
         tri_rows.append(f"| {name} | {spacing} m | {len(e)} | {np.median(e):.2f} / {np.percentile(e, 90):.2f} | "
-                        f"{np.mean(e):.2f} | {np.mean(e < 0.25):.2f} |")
+                        f"{np.mean(e):.2f} | {np.mean(Lhat - Ltrue):+.2f} | {np.mean(e < 0.25):.2f} |")
 print()
 print("Lateral offset to the next lane triangulated from the baseline directions to 4 frames of that lane "
       "(0.5 and 1 m before and after), along-lane distances from the (here true) odometry:")
-print("| garden | lane spacing | frames | lateral error median / p90 (m) | mean (m) | share within 0.25 m |")
-print("|---|---|---|---|---|---|")
+print("| garden | lane spacing | frames | lateral error median / p90 (m) | mean (m) | mean signed (m) | share within 0.25 m |")
+print("|---|---|---|---|---|---|---|")
 print("\n".join(tri_rows))
 z = np.concatenate(allz) if allz else np.zeros(0)
 if len(z):
