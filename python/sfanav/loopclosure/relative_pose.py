@@ -181,13 +181,13 @@ def _warp_pair(a: np.ndarray, b: np.ndarray, cols: np.ndarray, alphas: np.ndarra
     n_s = len(shifts)
     rowbase = np.arange(W) * W
     S = np.empty((A, N, n_s))
-    for s0 in range(0, A, 16):
-        c = cols[s0 : s0 + 16, :, None, :] + shifts[None, None, :, None]  # (a, N, S, W)
+    for a0 in range(0, A, 16):
+        c = cols[a0 : a0 + 16, :, None, :] + shifts[None, None, :, None]  # (a, N, S, W)
         f = np.floor(c)
         t = c - f
         f = f.astype(np.int64) % W
         d = flat[rowbase + f] * (1 - t) + flat[rowbase + (f + 1) % W] * t
-        S[s0 : s0 + 16] = d.mean(axis=3)
+        S[a0 : a0 + 16] = d.mean(axis=3)
     smin = float(S.min())
     contrast = float(1.0 - smin / max(float(np.median(S)), 1e-300))
     tau = max(temperature * smin / (W * K), 1e-9 * float(np.median(S)), 1e-300)
@@ -324,7 +324,9 @@ def relative_poses(images: Any, i_idx: Any, j_idx: Any, *, distance: Any = None,
         The relative headings tried: within this many degrees of the
         panorama compass's (the circular cross-correlation's best shift;
         parallax moves the true one by a few degrees), or every column
-        shift with None (slower).
+        shift with None (slower). The window also bounds ``sigma_dtheta``
+        (a featureless scene then reports about ``max_turn_deg / sqrt(3)``
+        rather than ``inf``; ``sigma_bearing`` still tells).
 
     Returns
     -------
