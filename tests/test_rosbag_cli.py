@@ -241,7 +241,8 @@ def test_localize_refuses_an_out_name_it_writes_no_format_for(bags, model, tmp_p
     is a bag now, and a name of no format --out knows is refused before any
     image is read, naming the formats."""
     code, _, err = run(capsys, "localize", model, bags["train"], "--out", tmp_path / name, "--no-progress")
-    assert_one_line_error(code, err, f"--out {tmp_path / name}: localize writes NAME.csv (frame,x,y), NAME.bag "
+    assert_one_line_error(code, err, f"--out {tmp_path / name}: localize writes NAME.csv (frame,x,y), NAME.tum "
+                                     "(TUM trajectory: timestamp x y z qx qy qz qw, as evo reads it), NAME.bag "
                                      "(ROS 1 bag), NAME.mcap or NAME.db3 (ROS 2 bag, MCAP or SQLite)")
     assert sorted(p.name for p in tmp_path.iterdir()) == []
 

@@ -132,8 +132,9 @@ def check_timestamps(timestamps: Any, n: int) -> np.ndarray:
     back = np.flatnonzero(np.diff(t) <= 0)
     if len(back):
         k = int(back[0])
-        raise ValueError(f"timestamps must increase (frames in temporal order): frame {k + 1} at {t[k + 1]!r} s "
-                         f"does not come after frame {k} at {t[k]!r} s")
+        # full precision (17 significant digits): two Unix times 1 us apart print apart
+        raise ValueError(f"timestamps must increase (frames in temporal order): frame {k + 1} at {t[k + 1]:.17g} s "
+                         f"does not come after frame {k} at {t[k]:.17g} s")
     return t
 
 
