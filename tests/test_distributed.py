@@ -411,7 +411,7 @@ def test_dask_closures_and_pairs(client, tmp_path):
 def _slow_block(path, lo, hi, log):
     """A Dask array block read slowly, logging every read (the kill test)."""
     with open(log, "a") as f:
-        f.write(f"{lo}\n")
+        f.write(f"{lo} {os.getpid()}\n")
     time.sleep(0.4)
     return np.load(path)[lo:hi]
 
@@ -429,9 +429,20 @@ def test_killed_worker_is_retried_without_double_counting(client, reference, tmp
     pids = client.run(os.getpid)
     killed = []
 
+    by_pid = {pid: addr for addr, pid in pids.items()}
+
     def killer():
         deadline = time.time() + 60
         while time.time() < deadline and not killed:
+            # a worker that logged a block read is reading it now (0.4 s): the log does not depend on how fast
+            # the scheduler answers on a loaded machine
+            lines = log.read_text().split("\n") if log.exists() else []
+            for line in lines:
+                parts = line.split()
+                if len(parts) == 2 and int(parts[1]) in by_pid:
+                    os.kill(int(parts[1]), signal.SIGKILL)
+                    killed.append(by_pid[int(parts[1])])
+                    return
             for addr, keys in client.processing().items():
                 # a partition task, or a block read that one waits for
                 if any("sfanav-partition" in str(k) or "_slow_block" in str(k) for k in keys) and addr in pids:
