@@ -32,7 +32,7 @@ image's draw). Rows per garden, mode and corruption: the MED (m) of
 
 Summary rows give each sfanav row's worst ratio to its own clean MED and to
 the best peer's MED on the same images, and the cost on clean images against
-robustness ``"none"``; the targets (issue 41) are the default's: at most
+robustness ``"none"``; the targets (docs/robustness.md) are the default's: at most
 1.2x its clean MED and 0.9x the best peer's on every corruption, at most
 5 % cost on clean images. Mode (b) trains the sfanav rows on the
 supervised path only (and the thesis configuration) in the first garden, to

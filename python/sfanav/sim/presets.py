@@ -575,8 +575,8 @@ for _name, (_desc, _world, _runs) in SUITE_GARDENS.items():
                 _world, lambda: PanoramicCamera(350, 40), _runs))
 
 
-# Issue 42: a 30x30 m garden surveyed as robot mowers drive it, with a mower's odometry and a gyro.
-#: the mower's wheel odometry of issue 42: 2 % distance noise, 0.5 deg heading noise per frame (plus 1 % of
+# A 30x30 m garden surveyed as robot mowers drive it, with a mower's odometry and a gyro.
+#: the mower's wheel odometry: 2 % distance noise, 0.5 deg heading noise per frame (plus 1 % of
 #: the frame's turn), 0.1 deg/m systematic heading drift, no wheel slip
 MOWER_ODOMETRY = OdometryNoise.mower(distance_fraction=0.02, heading_deg=0.5, drift_deg_per_m=0.1,
                                      turn_fraction=0.01)
@@ -608,7 +608,7 @@ def _mower_runs(rng: np.random.Generator) -> list[RunSpec]:
 
 
 _add(Preset(
-    "mower-survey", "- (issue 42, docs/simulator.md)",
+    "mower-survey", "- (docs/simulator.md)",
     "30x30 m garden (40 objects) surveyed as robot mowers drive it, the robot facing where it drives, frames "
     "1.2 m apart along the path: serpentine (24 lanes, 594 frames), perimeter lap then serpentine, inward "
     "spiral, crossing grid (12 + 12 lanes), random bounce (600), the serpentine with panoramas at random "

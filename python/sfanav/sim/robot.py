@@ -133,7 +133,7 @@ class OdometryNoise:
     def mower(cls, distance_fraction: float = 0.02, heading_deg: float = 0.5, drift_deg_per_m: float = 0.1, *,
               turn_fraction: float = 0.01, slip_rate: float = 0.0, slip_distance: float = 0.5,
               slip_heading_deg: float = 0.0) -> "OdometryNoise":
-        """A lawn mower's wheel odometry, specified per frame (issue 42).
+        """A lawn mower's wheel odometry, specified per frame.
 
         Parameters
         ----------

@@ -1,4 +1,4 @@
-"""Surveys as robot lawn mowers drive them (issue 42).
+"""Surveys as robot lawn mowers drive them.
 
 Every generator returns a :class:`~sfanav.sim.trajectories.Trajectory` of
 frames ``spacing`` metres apart along the driven path (measured along the
