@@ -8,6 +8,7 @@ import pytest
 from sfanav.localization import align
 from sfanav.odometry import OdometryEKF, fit_pose_graph, learn_positions
 from sfanav.odometry.gyro import DEFAULT_GYRO_NOISE, fuse_gyro, fuse_turns
+from sfanav.odometry.self_supervision import fit_localizer_from_odometry
 from sfanav.sim import GyroNoise, OdometryNoise, simulate_gyro, simulate_odometry
 from sfanav.sim.cameras import bearings
 
@@ -131,3 +132,5 @@ def test_bad_gyro_raises_clear_errors(run):
         OdometryEKF().run(odo, T[:, :2], T[0], gyro=bad)
     with pytest.raises(ValueError, match="gyro has 10 headings"):
         learn_positions(features, odo, images=images, gyro=gyro[:10], n_outputs=2)
+    with pytest.raises(ValueError, match="frame 5"):  # before any network is trained (there is none here)
+        fit_localizer_from_odometry(None, images, odo, gyro=bad)
