@@ -77,7 +77,7 @@ def test_pair_closures_measure_relative_poses_with_honest_sigmas(scene):
     X, F, odo, T = scene
     g = fit_pose_graph(X, F, odo, refine=0, min_travel=3.0, n_outputs=4, solver="gtsam")
     i, j = g.pairs.past, g.pairs.current
-    C = pair_relative_poses(X, F, g.poses[:, :2], i, j, g.relative_heading, np.radians(5))
+    C = pair_relative_poses(X, F, g.poses[:, :2], i, j, g.relative_heading, np.radians(5), use_gradient=True)
     assert isinstance(C, RelativePoses) and len(C) == len(i)
     full = C.covariance[:, 0, 0] < HEADING_ONLY_SIGMA**2 / 2
     assert full.sum() > len(C) / 2
@@ -89,6 +89,11 @@ def test_pair_closures_measure_relative_poses_with_honest_sigmas(scene):
     assert np.median(e) < 0.6 and np.median(e / sd) < 2.0, (np.median(e), np.median(e / sd))
     # heading-only pairs keep the compass's heading
     np.testing.assert_allclose(C.dtheta[~full], g.relative_heading[~full])
+    # the map's own distance alone (the default): the same bearings, the map's lengths
+    M = pair_relative_poses(X, F, g.poses[:, :2], i, j, g.relative_heading, np.radians(5))
+    both = (M.covariance[:, 0, 0] < HEADING_ONLY_SIGMA**2 / 2) & full
+    np.testing.assert_allclose(np.hypot(M.dx, M.dy)[both], np.hypot(*(g.poses[j, :2] - g.poses[i, :2]).T)[both],
+                               rtol=1e-6, atol=1e-3)
 
 
 def test_local_gradients_recover_a_linear_field():

@@ -31,10 +31,10 @@ from sfanav.odometry import fit_pose_graph
 from sfanav.odometry.gyro import fuse_gyro
 
 VARIANTS = {"hand-written": {}, "gtsam heading-only": {"solver": "gtsam"},
-            "gtsam relative-pose": {"solver": "gtsam", "pair_closures": "relative-pose"},
-            "gtsam relative-pose, map distance": {"solver": "gtsam", "pair_closures": "relative-pose",
-                                                  "pair_options": {"use_gradient": False}}}
-DEFAULT_VARIANTS = ["hand-written", "gtsam heading-only", "gtsam relative-pose"]
+            "gtsam relative-pose (map distance, the default)": {"solver": "gtsam", "pair_closures": "relative-pose"},
+            "gtsam relative-pose (gradient + map distance)": {"solver": "gtsam", "pair_closures": "relative-pose",
+                                                              "pair_options": {"use_gradient": True}}}
+DEFAULT_VARIANTS = list(VARIANTS)
 
 
 def errors(P: np.ndarray, T: np.ndarray) -> dict[str, float]:
@@ -72,7 +72,7 @@ def main() -> None:
     ap.add_argument("--out", type=Path, required=True)
     ap.add_argument("--runs", nargs="*", default=["serpentine", "crossing"])
     ap.add_argument("--variants", nargs="*", default=DEFAULT_VARIANTS, choices=list(VARIANTS))
-    ap.add_argument("--refined", nargs="*", default=["hand-written", "gtsam relative-pose + gyro"])
+    ap.add_argument("--refined", nargs="*", default=["hand-written", "gtsam relative-pose (map distance, the default) + gyro"])
     a = ap.parse_args()
     out: dict = {"command": "scripts/investigations/mower_pose_graph_closures.py", "runs": {}}
     for run in a.runs:
