@@ -464,9 +464,12 @@ def fit_pose_graph(images: Any, features: Any, odometry: Any, *, odometry_noise:
         (``solver="gtsam"`` only) relative poses measured from the two
         panoramas after a first heading-only solve
         (:func:`sfanav.odometry.pair_closures.pair_relative_poses`: the
-        baseline's direction, the distance from the slow features' local
-        gradient and the first map; pairs with an uninformative bearing
-        stay heading-only), solved again with the Cauchy kernel.
+        relative heading and the baseline's direction from the panoramas,
+        the distance from the first map, optionally with the slow
+        features' local gradient; pairs with an uninformative bearing stay
+        heading-only), solved again with the Cauchy kernel. Measured in
+        docs/odometry.md (mower survey: 0.39 to 0.07 m on a crossing
+        pattern, 0.48 to 0.39 m on a serpentine; minutes for ~1000 pairs).
     pair_options : mapping, optional
         Keywords of :func:`~sfanav.odometry.pair_closures.pair_relative_poses`
         (``map_distance_sigma``, ``use_gradient``, ``n_neighbors``,
