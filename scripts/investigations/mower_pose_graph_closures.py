@@ -72,7 +72,8 @@ def main() -> None:
     ap.add_argument("--out", type=Path, required=True)
     ap.add_argument("--runs", nargs="*", default=["serpentine", "crossing"])
     ap.add_argument("--variants", nargs="*", default=DEFAULT_VARIANTS, choices=list(VARIANTS))
-    ap.add_argument("--refined", nargs="*", default=["hand-written", "gtsam relative-pose (map distance, the default) + gyro"])
+    ap.add_argument("--refined", nargs="*",
+                    default=["hand-written", "gtsam relative-pose (map distance, the default) + gyro"])
     a = ap.parse_args()
     out: dict = {"command": "scripts/investigations/mower_pose_graph_closures.py", "runs": {}}
     for run in a.runs:
