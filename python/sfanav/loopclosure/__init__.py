@@ -10,6 +10,9 @@ order of several recordings of one route (thesis 6.2).
 * :func:`closure_precision_recall` (``evaluation``): precision, recall and
   average precision against ground truth;
 * :func:`plot_closures` (``plots``): closures on the trajectory;
+* :func:`relative_poses` (``relative_pose``): the relative heading, the
+  baseline's direction and (given a distance) the offset of two panoramas
+  with a covariance (:class:`RelativePoses`), :func:`gradient_offsets`;
 * ``conditions``: position correspondences between recordings and the
   place-major order of long-term training.
 
@@ -39,8 +42,9 @@ from .detectors import (
 from .evaluation import ClosureQuality, closure_precision_recall
 from .factory import DETECTORS, make_detector
 from .plots import plot_closures, plot_precision_recall
+from .relative_pose import RelativePoses, gradient_offsets, relative_poses
 
 __all__ = ["BagOfWordsDetector", "ClosureQuality", "DETECTORS", "FourierDetector", "GroundTruthDetector", "LoopClosureDetector",
-           "LoopClosures", "align", "arc_fraction", "closure_precision_recall", "correspondences",
-           "find_loop_closures", "fourier_signatures", "interleave", "make_detector", "panorama_rows", "place_major_order", "plot_closures",
-           "plot_precision_recall", "suppress"]
+           "LoopClosures", "RelativePoses", "align", "arc_fraction", "closure_precision_recall", "correspondences",
+           "find_loop_closures", "fourier_signatures", "gradient_offsets", "interleave", "make_detector", "panorama_rows", "place_major_order", "plot_closures",
+           "plot_precision_recall", "relative_poses", "suppress"]

@@ -324,7 +324,8 @@ class OdometryEKF:
                 "nis_bound": None if nw is None else float(chi2.ppf(npb, 2 * nw)),
                 "position_std": ps, "heading_std": hs}
 
-    def run(self, odometry: Any, measurements: Any, start_pose: Any, stamps: Any = None) -> np.ndarray:
+    def run(self, odometry: Any, measurements: Any, start_pose: Any, stamps: Any = None, *, gyro: Any = None,
+            gyro_noise: Any = None) -> np.ndarray:
         """Filters one run.
 
         Parameters
@@ -341,6 +342,14 @@ class OdometryEKF:
         stamps : array (N,), optional
             Frame times in seconds, increasing: steps over dropped frames are
             found by their duration (without: by their length).
+        gyro : array (N,), optional
+            A yaw gyro's integrated heading (rad, :attr:`sfanav.Dataset.gyro`):
+            each step's turn in the prediction is the inverse-variance
+            fusion of the odometry's (variance ``heading_noise**2 +
+            turn_noise**2 |dtheta|``) and the gyro's, with the fused
+            variance (:func:`sfanav.odometry.gyro.fuse_turns`).
+        gyro_noise : mapping, optional
+            The gyro's noise model (:data:`sfanav.odometry.gyro.DEFAULT_GYRO_NOISE`).
 
         Returns
         -------
@@ -361,6 +370,13 @@ class OdometryEKF:
         sd, sh, sr, st, P0, floor, gate, mcg = self._check()
         rec = self._check_recovery(sr)
         U = increments(P) if len(P) > 1 else np.zeros((0, 2))
+        turn_var = sh**2 + st**2 * np.abs(U[:, 1])
+        if gyro is not None:
+            from .gyro import as_gyro, fuse_turns
+
+            U = U.copy()
+            U[:, 1], turn_var, _ = fuse_turns(U[:, 1], turn_var + 1e-14, np.diff(as_gyro(gyro, len(P))), np.abs(U[:, 0]),
+                                              gyro_noise)
         if stamps is not None and len(np.ravel(np.asarray(stamps))) != len(P):
             raise ValueError(f"stamps must have one time per frame ({len(P)}), got {len(np.ravel(np.asarray(stamps)))}")
         scale, jump = step_anomalies(U, stamps, gap_factor=self.gap_factor, jump_factor=self.jump_factor)
@@ -397,7 +413,7 @@ class OdometryEKF:
                 x = ekf.x[:, 0]
                 F, V = ctrv_jacobians(x, u)
                 ekf.F = F
-                Mk = np.diag([sd**2, sh**2 + st**2 * abs(u[1])]) * scale[k - 1]
+                Mk = np.diag([sd**2, turn_var[k - 1]]) * scale[k - 1]
                 Q = V @ Mk @ V.T + floor * np.eye(3)
                 if scale[k - 1] > 1:
                     events.append(FilterEvent(k, "gap", float(scale[k - 1])))

@@ -138,7 +138,7 @@ def noise_for_localizer(localizer: Any, features: Any, targets: Any, odometry: A
 
 def fuse(odometry: Any, estimates: Any, noise: Mapping[str, float], *, start_pose: Any = None,
          gate_probability: float | None = GATE_PROBABILITY, stamps: Any = None, recovery: bool = True,
-         return_filter: bool = False) -> Any:
+         return_filter: bool = False, gyro: Any = None) -> Any:
     """The fused track (N, 3): x, y in the estimates' frame (metres) and
     heading (radians), from a run's odometry (N, 3) and single-image
     estimates (N, 2; NaN rows missing) with the EKF noise ``noise`` (as
@@ -151,7 +151,9 @@ def fuse(odometry: Any, estimates: Any, noise: Mapping[str, float], *, start_pos
     steps over dropped frames and treats jumps as unknown displacements
     (:class:`OdometryEKF` defaults); False: none of that. With
     ``return_filter`` returns ``(poses, ekf)``, the fitted
-    :class:`OdometryEKF` (``n_reinitializations_``, ``events_``).
+    :class:`OdometryEKF` (``n_reinitializations_``, ``events_``). ``gyro``
+    (N,), a yaw gyro's integrated heading (rad), is fused into the
+    prediction's turns (:meth:`OdometryEKF.run`).
 
     Example
     -------
@@ -167,5 +169,5 @@ def fuse(odometry: Any, estimates: Any, noise: Mapping[str, float], *, start_pos
     off = {} if recovery else {"reinit_after": None, "gap_factor": None, "jump_factor": None}
     ekf = OdometryEKF(**{k: float(noise[k]) for k in NOISE_KEYS}, turn_noise=float(noise.get("turn_noise", 0.0)),
                       gate_probability=gate_probability, **off)
-    poses = ekf.run(P, Z, s0, stamps=stamps)
+    poses = ekf.run(P, Z, s0, stamps=stamps, gyro=gyro)
     return (poses, ekf) if return_filter else poses

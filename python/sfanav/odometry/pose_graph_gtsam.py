@@ -214,7 +214,7 @@ def odometry_noise_model(odometry_noise: Any = None) -> dict[str, float]:
     return out
 
 
-def odometry_sigmas(odometry: Any, odometry_noise: Any = None) -> np.ndarray:
+def odometry_sigmas(odometry: Any, odometry_noise: Any = None, heading_sigma: Any = None) -> np.ndarray:
     """Standard deviations (N - 1, 3) of each odometry step: along the step
     (m), across it (m) and of its heading change (rad).
 
@@ -233,6 +233,10 @@ def odometry_sigmas(odometry: Any, odometry_noise: Any = None) -> np.ndarray:
     slip_h = nz["slip_rate"] * nz["slip_heading_sigma"] ** 2
     slip_d = 2.0 * nz["slip_rate"] * nz["slip_distance"] ** 2
     sh = np.sqrt((nz["heading_sigma"] ** 2 + slip_h) * d + nz["turn_sigma"] ** 2 * np.abs(dth) + 1e-10)
+    if heading_sigma is not None:
+        sh = as_real_array(heading_sigma, "heading_sigma").astype(np.float64).reshape(-1)
+        if sh.shape != d.shape or not np.all(np.isfinite(sh)) or np.any(sh <= 0):
+            raise ValueError(f"heading_sigma must hold {len(d)} positive finite step sigmas, got shape {sh.shape}")
     sa = np.sqrt((nz["distance_sigma"] ** 2 + slip_d) * d + 1e-10)
     sl = np.sqrt(nz["distance_sigma"] ** 2 * d + (0.5 * d * sh) ** 2 + 1e-10)
     return np.c_[sa, sl, sh]
@@ -356,14 +360,16 @@ def _check_closures(closures: RelativePoses | None, n: int) -> RelativePoses:
 class _Builder:
     """Factors of one run (shared by the batch and incremental solvers)."""
 
-    def __init__(self, gtsam: Any, noise: Any, drift: str, robust: str, scale: float):
+    def __init__(self, gtsam: Any, noise: Any, drift: str, robust: str, scale: float,
+                 heading_sigma: np.ndarray | None = None):
         self.g, self.noise, self.drift, self.robust, self.scale = gtsam, noise, drift, robust, scale
+        self.heading_sigma = heading_sigma  # per-step override of the whole run (batch only)
 
     def odometry(self, P: np.ndarray, first: int, b: float) -> tuple[Any, list[float]]:
         """Factors between frames first..first+len(P)-1 (P their odometry)."""
         g = self.g
         graph = g.NonlinearFactorGraph()
-        sig = odometry_sigmas(P, self.noise)
+        sig = odometry_sigmas(P, self.noise, self.heading_sigma)
         step, cov = _step_covariances(P, sig)
         d = np.hypot(*np.diff(P[:, :2], axis=0).T)
         for k in range(len(step)):
@@ -434,7 +440,8 @@ def _drift_update(poses: np.ndarray, P: np.ndarray, sig: np.ndarray, b: float) -
 
 def solve_pose_graph(odometry: Any, closures: RelativePoses | None = None, *, odometry_noise: Any = None,
                      drift: str = "iterate", robust: str = "cauchy", robust_scale: float = 3.0,
-                     max_iterations: int = 100, drift_iterations: int = 10) -> GraphResult:
+                     max_iterations: int = 100, drift_iterations: int = 10,
+                     heading_sigma: Any = None) -> GraphResult:
     """Solves a run's pose graph by Levenberg-Marquardt (batch).
 
     Parameters
@@ -459,6 +466,10 @@ def solve_pose_graph(odometry: Any, closures: RelativePoses | None = None, *, od
         The kernel's scale in standard deviations of a closure.
     max_iterations : int, default 100
         Levenberg-Marquardt iterations per solve.
+    heading_sigma : array (N - 1,), optional
+        Standard deviations (rad) of the odometry's heading changes, in
+        place of the noise model's (a gyro fused in:
+        :func:`sfanav.odometry.gyro.fuse_gyro`).
 
     Returns
     -------
@@ -478,7 +489,8 @@ def solve_pose_graph(odometry: Any, closures: RelativePoses | None = None, *, od
     C = _check_closures(closures, n)
     max_it = check_int(max_iterations, "max_iterations", minimum=1)
     rounds = check_int(drift_iterations, "drift_iterations", minimum=1) if drift == "iterate" else 1
-    build = _Builder(gtsam, odometry_noise, drift, robust, scale)
+    sig = odometry_sigmas(P, odometry_noise, heading_sigma)  # validates heading_sigma
+    build = _Builder(gtsam, odometry_noise, drift, robust, scale, None if heading_sigma is None else sig[:, 2])
     init = gtsam.Values()
     for k in range(n):
         init.insert(k, gtsam.Pose2(*P[k]))
@@ -486,7 +498,6 @@ def solve_pose_graph(odometry: Any, closures: RelativePoses | None = None, *, od
         init.insert(_DRIFT_KEY, np.zeros(1))
     fixed = build.closures(C)
     fixed.push_back(build.priors(P[0]))
-    sig = odometry_sigmas(P, odometry_noise)
     b, its = 0.0, 0
     for _ in range(rounds):
         graph, _ = build.odometry(P, 0, b)

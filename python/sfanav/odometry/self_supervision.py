@@ -142,7 +142,7 @@ def learn_positions(features: Any, odometry: Any, *, images: Any = None, method:
                     learner: MetricLearner | None = None, segmentation: Mapping[str, Any] | None = None,
                     odometry_noise: Any = None, pose_graph: Mapping[str, Any] | None = None,
                     timestamps: Any = None, random_state: int | None = 0,
-                    progress: bool = False) -> LearnedPositions:
+                    progress: bool = False, gyro: Any = None) -> LearnedPositions:
     """Learns the positions of a training run's frames from its slow
     features, odometry and (for the pose graph) panoramas, without ground
     truth.
@@ -173,6 +173,10 @@ def learn_positions(features: Any, odometry: Any, *, images: Any = None, method:
     timestamps : array (N,), optional
         The frames' times (s), checked to increase (the frames must be in
         temporal order).
+    gyro : array (N,), optional
+        A yaw gyro's integrated heading (rad, :attr:`sfanav.Dataset.gyro`):
+        fused with the odometry's turns (:func:`sfanav.odometry.gyro.fuse_gyro`)
+        by the pose graph, and before the metric learner reads the odometry.
 
     Returns
     -------
@@ -211,14 +215,21 @@ def learn_positions(features: Any, odometry: Any, *, images: Any = None, method:
     lines = segment_lines(P, **dict(segmentation or {}))
     notes = []
     if method == "pose-graph":
-        graph = fit_pose_graph(images, F, P, odometry_noise=odometry_noise, n_outputs=n_outputs,
-                               **dict(pose_graph or {}))
+        kw = dict(pose_graph or {})
+        if gyro is not None:
+            kw["gyro"] = gyro
+        graph = fit_pose_graph(images, F, P, odometry_noise=odometry_noise, n_outputs=n_outputs, **kw)
         if graph.n_inliers < MIN_LOOP_CLOSURES:
             notes.append(f"only {graph.n_inliers} loop closures: the run barely passes a place twice, so the "
                          "odometry's heading drift is not corrected")
         for n in notes:
             warnings.warn(n, OdometryMapWarning, stacklevel=2)
         return LearnedPositions(graph.poses[:, :2].copy(), method, lines, graph=graph, warnings=notes)
+    if gyro is not None:  # the metric learner reads the odometry with the gyro's turns
+        from .gyro import fuse_gyro
+
+        P = fuse_gyro(P, gyro, odometry_noise=odometry_noise).odometry
+        lines = segment_lines(P, **dict(segmentation or {}))
     if lines.n_lines < 2:
         raise ValueError(f"the odometry has {lines.n_lines} straight line segment(s); learning a metric map needs "
                          "at least 2 (drive straight lanes in several directions)")
@@ -254,7 +265,7 @@ def learn_positions(features: Any, odometry: Any, *, images: Any = None, method:
 def fit_localizer_from_odometry(network: Any, images: Any, odometry: Any, *, n_metric_outputs: int = 8,
                                 method: str = "auto", pose_graph: Mapping[str, Any] | None = None,
                                 learner: MetricLearner | None = None, segmentation: Mapping[str, Any] | None = None,
-                                odometry_noise: Any = None, timestamps: Any = None,
+                                odometry_noise: Any = None, timestamps: Any = None, gyro: Any = None,
                                 info: dict[str, Any] | None = None, **fit_kwargs: Any) -> Any:
     """Trains a :class:`~sfanav.Localizer` on a run's images and odometry
     alone: the network on the images (simulated rotation), the metric map on
@@ -269,7 +280,8 @@ def fit_localizer_from_odometry(network: Any, images: Any, odometry: Any, *, n_m
     rows, prep, progress, rotation_pooling). The localizer's ``info`` records
     ``"supervision": "odometry"``, the frame and the map's lines;
     ``timestamps`` (N,), if given, are checked to increase before anything
-    is trained;
+    is trained; ``gyro`` (N,), a yaw gyro's integrated heading (rad), is
+    passed to :func:`learn_positions`;
     ``learned_positions_`` holds the :class:`LearnedPositions`. Raises as
     :func:`learn_positions`.
     """
@@ -278,13 +290,17 @@ def fit_localizer_from_odometry(network: Any, images: Any, odometry: Any, *, n_m
         raise ValueError(f"images has {len(images)} frames but odometry has {len(P)} poses; they must match")
     if timestamps is not None:
         check_timestamps(timestamps, len(P))  # before the network's training, not after it
+    if gyro is not None:
+        from .gyro import as_gyro
+
+        gyro = as_gyro(gyro, len(P))  # before the network's training too
     learned: list[LearnedPositions] = []
 
     def positions(features: np.ndarray) -> np.ndarray:
         learned.append(learn_positions(features, P, images=images, method=method, pose_graph=pose_graph,
                                        n_outputs=n_metric_outputs, learner=learner,
                                        segmentation=segmentation, odometry_noise=odometry_noise,
-                                       progress=bool(fit_kwargs.get("progress", False))))
+                                       progress=bool(fit_kwargs.get("progress", False)), gyro=gyro))
         return learned[-1].positions
 
     loc = fit_localizer(network, images, positions, info=info, **fit_kwargs)

@@ -296,8 +296,12 @@ def _train(args: argparse.Namespace, stack: Any) -> int:
     if supervision == "odometry":
         log("fitting the readout to positions learned from the run's odometry (no ground truth); estimates are "
              "metres in the odometry's frame")
+        gyro = train.gyro
+        if gyro is not None:
+            log("the run has a gyro (gyro_heading): its turns are fused with the odometry's")
         loc = fit_localizer_from_odometry(net, images, odometry, method=args.metric_map,
-                                          timestamps=times, **fit_kw)
+                                          timestamps=times, gyro=gyro, **fit_kw)
+        loc.info["gyro"] = gyro is not None
         if args.metric_map == "pose-graph":
             log(f"pose graph: {loc.info['loop closures kept']} of {loc.info['loop closures']} loop closures kept, "
                  f"odometry heading drift {loc.info['odometry heading drift (deg per m)']:.3f} deg/m corrected")

@@ -1,0 +1,130 @@
+"""Relative-pose closures of the pose graph's place pairs
+(sfanav.odometry.pair_closures, fit_pose_graph(pair_closures="relative-pose")):
+on a tiny rendered serpentine they improve on heading-only closures; the
+local gradient; bad input."""
+
+import numpy as np
+import pytest
+
+gtsam = pytest.importorskip("gtsam")
+
+from sfanav import sim  # noqa: E402
+from sfanav.localization import align  # noqa: E402
+from sfanav.loopclosure import RelativePoses as Measured  # noqa: E402
+from sfanav.loopclosure import relative_poses  # noqa: E402
+from sfanav.odometry import fit_pose_graph  # noqa: E402
+from sfanav.odometry.pair_closures import local_gradients, pair_relative_poses  # noqa: E402
+from sfanav.odometry.pose_graph_gtsam import HEADING_ONLY_SIGMA, RelativePoses  # noqa: E402
+
+
+def lanes(n_lanes=5, per_lane=8):
+    """A serpentine of 1 m steps on lanes 1 m apart (headings 0 / pi)."""
+    out = []
+    for k in range(n_lanes):
+        x = np.arange(per_lane) - (per_lane - 1) / 2
+        x = x if k % 2 == 0 else x[::-1]
+        out.append(np.c_[x, np.full(per_lane, k - (n_lanes - 1) / 2), np.full(per_lane, np.pi * (k % 2))])
+    return np.concatenate(out)
+
+
+def odometry(T, rng, distance=0.03, heading_deg=1.0, drift_deg=0.5):
+    """Each true step (in the frame of its start) scaled by a random
+    distance error and turned by the accumulated heading error."""
+    d = np.hypot(*np.diff(T[:, :2], axis=0).T)
+    turn = np.angle(np.exp(1j * np.diff(T[:, 2])))
+    th = T[0, 2] + np.r_[0.0, np.cumsum(turn + np.radians(heading_deg) * rng.standard_normal(len(d))
+                                        + np.radians(drift_deg) * d)]
+    dxy = np.diff(T[:, :2], axis=0) * (1 + distance * rng.standard_normal(len(d)))[:, None]
+    c, s = np.cos(T[:-1, 2]), np.sin(T[:-1, 2])
+    lx, ly = c * dxy[:, 0] + s * dxy[:, 1], -s * dxy[:, 0] + c * dxy[:, 1]
+    cn, sn = np.cos(th[:-1]), np.sin(th[:-1])
+    xy = T[0, :2] + np.r_[np.zeros((1, 2)), np.cumsum(np.c_[cn * lx - sn * ly, sn * lx + cn * ly], axis=0)]
+    return np.c_[xy, th]
+
+
+def mean_error(P, T):
+    return float(np.mean(np.hypot(*(align(P, T).apply(P) - T).T)))
+
+
+@pytest.fixture(scope="module")
+def scene():
+    """40 rendered 120x16 gray panoramas of a serpentine in a garden with
+    objects inside, smooth features of the true position, a drifting
+    odometry."""
+    T = lanes()
+    w = sim.World.generate(3, area=(10, 10), n_objects=20, depth=8.0, inner={"tree": 1, "bush": 2, "pole": 2})
+    r, cam = sim.Renderer(w), sim.PanoramicCamera(120, 16, rgb=False)
+    X = np.array([r.render(cam, p) for p in T])
+    rng = np.random.default_rng(1)
+    F = np.c_[T[:, :2] / 3.0, T[:, :2] / 2.0 + 0.05 * T[:, :2] ** 2] + 0.01 * rng.standard_normal((len(T), 4))
+    return X, F, odometry(T, rng), T
+
+
+def test_relative_pose_closures_improve_on_heading_only(scene):
+    X, F, odo, T = scene
+    kw = dict(refine=0, min_travel=3.0, n_outputs=4, solver="gtsam")
+    heading = fit_pose_graph(X, F, odo, **kw)
+    full = fit_pose_graph(X, F, odo, pair_closures="relative-pose", **kw)
+    e0, e1 = mean_error(heading.poses[:, :2], T[:, :2]), mean_error(full.poses[:, :2], T[:, :2])
+    assert e1 < 0.85 * e0, (e0, e1)
+    assert len(full.weights) == len(full.pairs) and full.n_inliers > 0.8 * len(full.pairs)
+    # the hand-written path is unchanged by the option's existence
+    hw = fit_pose_graph(X, F, odo, refine=0, min_travel=3.0, n_outputs=4)
+    assert mean_error(hw.poses[:, :2], T[:, :2]) == pytest.approx(e0, abs=0.02)
+
+
+def test_pair_closures_measure_relative_poses_with_honest_sigmas(scene):
+    X, F, odo, T = scene
+    g = fit_pose_graph(X, F, odo, refine=0, min_travel=3.0, n_outputs=4, solver="gtsam")
+    i, j = g.pairs.past, g.pairs.current
+    C = pair_relative_poses(X, F, g.poses[:, :2], i, j, g.relative_heading, np.radians(5), use_gradient=True)
+    assert isinstance(C, RelativePoses) and len(C) == len(i)
+    full = C.covariance[:, 0, 0] < HEADING_ONLY_SIGMA**2 / 2
+    assert full.sum() > len(C) / 2
+    c, s = np.cos(T[i, 2]), np.sin(T[i, 2])
+    d = T[j, :2] - T[i, :2]
+    tx, ty = c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1]
+    e = np.hypot(C.dx - tx, C.dy - ty)[full]
+    sd = np.sqrt(C.covariance[full, 0, 0] + C.covariance[full, 1, 1])
+    assert np.median(e) < 0.6 and np.median(e / sd) < 2.0, (np.median(e), np.median(e / sd))
+    # heading-only pairs keep the compass's heading
+    np.testing.assert_allclose(C.dtheta[~full], g.relative_heading[~full])
+    # the map's own distance alone (the default): the same bearings, the map's lengths
+    M = pair_relative_poses(X, F, g.poses[:, :2], i, j, g.relative_heading, np.radians(5))
+    both = (M.covariance[:, 0, 0] < HEADING_ONLY_SIGMA**2 / 2) & full
+    np.testing.assert_allclose(np.hypot(M.dx, M.dy)[both], np.hypot(*(g.poses[j, :2] - g.poses[i, :2]).T)[both],
+                               rtol=1e-6, atol=1e-3)
+
+
+def test_local_gradients_recover_a_linear_field():
+    rng = np.random.default_rng(0)
+    X = rng.uniform(-3, 3, (60, 2))
+    G = np.array([[1.0, 0.5], [-0.3, 2.0], [0.0, 1.0]])
+    F = X @ G.T + 0.2
+    out = local_gradients(F, X, [0, 5, 9], n_neighbors=10)
+    np.testing.assert_allclose(out, np.broadcast_to(G, (3, 3, 2)), atol=1e-9)
+    line = np.c_[np.arange(20.0), np.zeros(20)]
+    assert np.isnan(local_gradients(line @ G[:, :2].T, line, [3], n_neighbors=5)).all()
+
+
+def test_exported_from_loopclosure():
+    assert callable(relative_poses) and Measured.__name__ == "RelativePoses"
+
+
+def test_bad_input_raises_clear_errors(scene):
+    X, F, odo, T = scene
+    with pytest.raises(ValueError, match="needs solver='gtsam'"):
+        fit_pose_graph(X, F, odo, pair_closures="relative-pose")
+    with pytest.raises(ValueError, match="pair_closures"):
+        fit_pose_graph(X, F, odo, pair_closures="bearing", solver="gtsam")
+    xy = odo[:, :2]
+    with pytest.raises(ValueError, match="one length"):
+        pair_relative_poses(X, F, xy, [0, 1], [20, 21], [0.0], 0.1)
+    with pytest.raises(ValueError, match="positions"):
+        pair_relative_poses(X, F, xy[:5], [0], [20], [0.0], 0.1)
+    with pytest.raises(ValueError, match="map_distance_sigma"):
+        pair_relative_poses(X, F, xy, [0], [20], [0.0], 0.1, map_distance_sigma=0.0)
+    with pytest.raises(ValueError, match="compass_sigma"):
+        pair_relative_poses(X, F, xy, [0], [20], [0.0], -1.0)
+    with pytest.raises(ValueError, match="positions"):
+        local_gradients(F, xy[:, :1], [0])
