@@ -206,3 +206,24 @@ def test_the_signature_scale_does_not_matter(factor):
     b = SignatureGPReadout(4, 20).fit(np.hstack([slow, factor * sig]), xy)
     np.testing.assert_allclose(b.predict(np.hstack([slow[:9], factor * sig[:9]])), a.predict(np.hstack([slow[:9], sig[:9]])),
                                atol=1e-3)
+
+
+def test_a_fit_with_kept_hyperparameters_equals_the_learned_fit_on_the_same_data():
+    """Refitting with the hyperparameters of a fit on the same data reproduces
+    its posterior (the random-split protocol's shortcut); a resample keeps
+    the kernel and only refits the posterior; mismatched shapes are refused."""
+    rng = np.random.default_rng(3)
+    xy, slow, sig = _place_data(200, rng, 0.02, 0.01)
+    F = np.hstack([slow, sig])
+    a = SignatureGPReadout(4, 20).fit(F, xy)
+    b = SignatureGPReadout(4, 20).fit(F, xy, hyperparameters_from=a)
+    np.testing.assert_allclose(b.predict(F[:20]), a.predict(F[:20]), rtol=1e-9, atol=1e-9)
+    assert np.isclose(b.log_marginal_likelihood_, a.log_marginal_likelihood_, rtol=1e-6)
+    c = SignatureGPReadout(4, 20).fit(F[::2], xy[::2], hyperparameters_from=a)
+    np.testing.assert_array_equal(c.length_scale_, a.length_scale_)
+    assert c.noise_ == a.noise_ and c.signature_scale_ == a.signature_scale_
+    assert np.hypot(*(c.predict(F[1::2]) - xy[1::2]).T).mean() < 0.1
+    with pytest.raises(ValueError, match="reads 4 slow features"):
+        SignatureGPReadout(3, 20).fit(F, xy, hyperparameters_from=a)
+    with pytest.raises(TypeError, match="fitted SignatureGPReadout"):
+        SignatureGPReadout(4, 20).fit(F, xy, hyperparameters_from=SignatureGPReadout(4, 20))

@@ -155,10 +155,30 @@ class SignatureGPReadout:
         return np.exp(th[:m]), float(np.exp(th[m])), float(np.exp(th[m + 1])), float(-best.fun)
 
     # ------------------------------------------------------------ fit / predict
-    def fit(self, features: Any, xy: Any) -> "SignatureGPReadout":
-        """Fits on features (N, >= n_outputs + n_signature) and positions (N, 2)."""
+    def fit(self, features: Any, xy: Any, *, hyperparameters_from: "SignatureGPReadout | None" = None
+            ) -> "SignatureGPReadout":
+        """Fits on features (N, >= n_outputs + n_signature) and positions (N, 2).
+
+        ``hyperparameters_from``: a fitted readout of the same shape whose
+        kernel hyperparameters (``length_scale_``, ``signature_scale_``,
+        ``noise_``) are kept instead of learned: only the posterior is
+        fitted, one Cholesky factorisation instead of an optimisation (as
+        scikit-learn's ``GaussianProcessRegressor(optimizer=None)``). For
+        repeated fits on resamples of one run, such as random splits.
+        """
         S, G = self._split(features)
-        return self._fit_prepared(S, self._distances(G, as_matrix(xy, "xy")))
+        fixed = None
+        if hyperparameters_from is not None:
+            if not isinstance(hyperparameters_from, SignatureGPReadout) or not hasattr(hyperparameters_from, "dual_"):
+                raise TypeError("hyperparameters_from must be a fitted SignatureGPReadout")
+            if (hyperparameters_from.n_outputs, hyperparameters_from.n_signature) != (self.n_outputs,
+                                                                                      self.n_signature):
+                raise ValueError(f"hyperparameters_from reads {hyperparameters_from.n_outputs} slow features and "
+                                 f"{hyperparameters_from.n_signature} signature values; this readout "
+                                 f"{self.n_outputs} and {self.n_signature}")
+            fixed = (np.array(hyperparameters_from.length_scale_, float),
+                     float(hyperparameters_from.signature_scale_), float(hyperparameters_from.noise_))
+        return self._fit_prepared(S, self._distances(G, as_matrix(xy, "xy")), fixed=fixed)
 
     @classmethod
     def fit_nested(cls, features: Any, xy: Any, n_outputs: int, n_signature: int,
@@ -184,7 +204,8 @@ class SignatureGPReadout:
         unit = float(np.median(dg)) if dg.size else 0.0
         return {"G": G, "Y": Y, "keep": keep, "D": self._l1(G[keep], G[keep]), "unit": unit if unit > 0 else 1.0}
 
-    def _fit_prepared(self, S: np.ndarray, prep: dict[str, Any]) -> "SignatureGPReadout":
+    def _fit_prepared(self, S: np.ndarray, prep: dict[str, Any],
+                      fixed: tuple[np.ndarray, float, float] | None = None) -> "SignatureGPReadout":
         G, Y, keep, D = prep["G"], prep["Y"], prep["keep"], prep["D"]
         self.distance_unit_ = prep["unit"]
         self.mean_ = S.mean(axis=0)
@@ -197,7 +218,11 @@ class SignatureGPReadout:
         y_sd = np.where(y_sd > 0, y_sd, 1.0)
         Yf = (Y[fit_idx] - y_mean) / y_sd
         Dg = D[np.ix_(fit_pos, fit_pos)] / self.distance_unit_
-        ls, lg, tau, lml = self._learn(Ss[fit_idx], Dg, Yf)
+        if fixed is None:
+            ls, lg, tau, lml = self._learn(Ss[fit_idx], Dg, Yf)
+        else:
+            ls, lg, tau = fixed
+            lml = float(-self._neg_lml(np.r_[np.log(ls), np.log(lg), np.log(tau)], Ss[fit_idx], Dg, Yf)[0])
         self.length_scale_, self.signature_scale_, self.noise_, self.log_marginal_likelihood_ = ls, lg, tau, lml
         self.X_, self.G_ = Ss[keep] / ls, G[keep].astype(np.float32)
         K = np.exp(-0.5 * self._sq_dists(self.X_, self.X_) - D / (self.distance_unit_ * lg))
