@@ -131,7 +131,7 @@ def _top_stage(state: dict[str, Any]) -> int:
     k = stages.pop() - 1
     if any(node["stages"][k]["stats"] is None for node in state["nodes"][-1]):
         raise ValueError("this network was saved without its training statistics, so it cannot be updated: "
-                         "train it again and save it with include_statistics=True (sfanav train keeps them)")
+                         "train it again and save it with include_statistics=True")
     return k
 
 
