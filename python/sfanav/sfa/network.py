@@ -534,6 +534,27 @@ class Network:
         self.n_partners_ = 0 if partners is None else len(closures[0])
         return self
 
+    def partial_fit(self, images: Any, policy: Any = None) -> "Network":
+        """Adds one run (N, H, W[, C]: the training panoramas' size, channels
+        and pixel scale) to this fitted network without retraining it: the
+        run's statistics join the stored ones as a recording of its own and
+        the stages the policy names are solved again (default: the top
+        layer's final stage, exact; :mod:`sfanav.sfa.updates`). Needs the
+        training statistics (a network fitted in this process, or loaded
+        from a file saved with ``include_statistics=True``). Returns
+        ``self``; ValueError for a run that does not match (``self`` is
+        then unchanged).
+
+        Examples
+        --------
+        >>> net.fit(week1, rotation).partial_fit(week2)   # doctest: +SKIP
+        """
+        from .updates import NetworkUpdater
+
+        new = NetworkUpdater(self, policy).partial_fit(images).solve()
+        self._net = new._net
+        return self
+
     def _check_scale(self, a: np.ndarray) -> None:
         """Warns when the pixel values are on another scale than in training
         (0..255 against 0..1, say): the features would change silently."""

@@ -7,6 +7,7 @@ with :func:`sfanav.app.registry.command`."""
 from . import simulate  # noqa: F401
 from . import bag_import  # noqa: F401
 from . import train  # noqa: F401
+from . import update  # noqa: F401
 from . import localize  # noqa: F401
 from . import navigate  # noqa: F401
 from . import groundtruth  # noqa: F401
