@@ -306,11 +306,9 @@ def test_tiny_realistic_garden_default_beats_the_thesis_configuration():
 
 def test_cli_train_uses_the_default_without_a_preset_and_the_thesis_with_one(tmp_path, monkeypatch, capsys):
     """Which configuration ``sfanav train`` builds: captured at fit_localizer
-    (no training here)."""
-    import sfanav.app.demo  # noqa: F401  modules that bind fit_localizer at import: before the patch, not during it
-    import sfanav.experiments.localization  # noqa: F401
+    as the training recipe (sfanav.pipeline) calls it (no training here)."""
+    from sfanav import pipeline
     from sfanav.app import cli
-    from sfanav.localization import training as workflow
 
     ds = sim.simulate("realistic-garden", tmp_path / "d", 0, max_frames=6, camera=sim.PanoramicCamera(70, 8),
                       progress=False)
@@ -323,7 +321,7 @@ def test_cli_train_uses_the_default_without_a_preset_and_the_thesis_with_one(tmp
         seen.update(kw, network=network, shape=images.shape)
         raise Stop
 
-    monkeypatch.setattr(workflow, "fit_localizer", fake)
+    monkeypatch.setattr(pipeline, "fit_localizer", fake)
     with pytest.raises(Stop):
         cli.main(["train", "--dataset", str(ds.root), "--out", str(tmp_path / "m.sfa"), "--no-progress"])
     assert seen["readout"] == "auto" and seen["n_outputs"] is None

@@ -197,9 +197,7 @@ def _train(args: argparse.Namespace, stack: Any) -> int:
     from ...data.preprocessing import Preprocessing, Preprocessor
     from ...data.sources import load_run, select_run
     from ...localization.recipe import CAMERA_ELEVATION, recipe_for, supervision_for
-    from ...localization.training import fit_localizer
-    from ...odometry.fusion import noise_for_localizer
-    from ...odometry.self_supervision import fit_localizer_from_odometry
+    from ...pipeline import train_localizer
     from ...sfa.network import Rotation
 
     t0 = time.perf_counter()
@@ -233,7 +231,7 @@ def _train(args: argparse.Namespace, stack: Any) -> int:
                         n_outputs=args.n_outputs, rotation_pooling=args.rotation_pooling,
                         signature={None: "auto", "none": None}.get(args.signature, args.signature),
                         robustness=robustness)
-    rows = None
+    rows, elev = None, None
     if recipe.rows == "band":
         elev = (ds.metadata.get("camera") or {}).get("elevation_deg") if isinstance(ds.metadata, dict) else None
         if elev is None:
@@ -241,7 +239,7 @@ def _train(args: argparse.Namespace, stack: Any) -> int:
             log(f"the dataset does not say its rows' elevations: assuming {elev[0]:g}..{elev[1]:g} deg "
                  "(the simulator's) for the horizon band; --rows all uses every row")
         try:
-            rows = recipe.image_rows(elev)
+            rows = recipe.image_rows(elev)  # checked before the images are read
         except ValueError as exc:
             raise UsageError(f"horizon band: {exc}") from None
     prep = Preprocessing.for_network(net, window=args.window, normalize=args.normalize)
@@ -285,48 +283,35 @@ def _train(args: argparse.Namespace, stack: Any) -> int:
         if breaks:
             log(f"{len(breaks) + 1} runs: each is its own recording for the network (no derivative pair across "
                 "a run change)")
-    fit_kw = dict(loop_closures=closures, closure_weights=weights, network_images=network_images,
-                  network_fit=network_fit,
-                  rotation=Rotation(step=args.step, window=args.window), n_outputs=recipe.n_outputs,
-                  readout=recipe.readout, rows=rows, prep=prep, progress=not args.no_progress,
-                  rotation_pooling=recipe.rotation_pooling, signature=recipe.signature, **recipe.robust_kwargs(),
-                  info={"dataset": str(args.dataset), "run": run,
-                        "network": args.preset or (str(args.config) if args.config else "sfanav-default"),
-                        **recipe.info()})
     if supervision == "odometry":
         log("fitting the readout to positions learned from the run's odometry (no ground truth); estimates are "
              "metres in the odometry's frame")
-        gyro = train.gyro
-        if gyro is not None:
+        if train.gyro is not None:
             log("the run has a gyro (gyro_heading): its turns are fused with the odometry's")
-        loc = fit_localizer_from_odometry(net, images, odometry, method=args.metric_map,
-                                          timestamps=times, gyro=gyro, **fit_kw)
-        loc.info["gyro"] = gyro is not None
-        if args.metric_map == "pose-graph":
-            log(f"pose graph: {loc.info['loop closures kept']} of {loc.info['loop closures']} loop closures kept, "
-                 f"odometry heading drift {loc.info['odometry heading drift (deg per m)']:.3f} deg/m corrected")
-        else:
-            log(f"metric map from {loc.info['lines']} straight lines ({loc.info['points on lines']} frames), "
-                 f"rms to the odometry on the first {loc.info['rms to odometry on the first line (m)']:.3f} m")
-    else:
-        loc = fit_localizer(net, images, xy, **fit_kw)
-        loc.info["supervision"] = "ground-truth"
+    loc = train_localizer(images, xy=xy, odometry=odometry, timestamps=times, gyro=train.gyro,
+                          supervision=supervision, network=net, recipe=recipe, camera_elevation=elev,
+                          rotation=Rotation(step=args.step, window=args.window), prep=prep,
+                          metric_map=args.metric_map, loop_closures=closures, closure_weights=weights,
+                          network_images=network_images, network_fit=network_fit,
+                          info={"dataset": str(args.dataset), "run": run,
+                                "network": args.preset or (str(args.config) if args.config else "sfanav-default")},
+                          progress=not args.no_progress, log=log)
+    if supervision == "odometry" and args.metric_map == "pose-graph":
+        log(f"pose graph: {loc.info['loop closures kept']} of {loc.info['loop closures']} loop closures kept, "
+             f"odometry heading drift {loc.info['odometry heading drift (deg per m)']:.3f} deg/m corrected")
+    elif supervision == "odometry":
+        log(f"metric map from {loc.info['lines']} straight lines ({loc.info['points on lines']} frames), "
+             f"rms to the odometry on the first {loc.info['rms to odometry on the first line (m)']:.3f} m")
     if preprocessor.mirror_used is not None:
         loc.info["mirror"] = list(preprocessor.mirror_used)  # localize and evaluate reuse it
         if network_images is not None:
             loc.info["centre_jitter_px"] = args.jitter  # the network's training only
             loc.info["centre_jitter_seed"] = args.jitter_seed
-    if np.isfinite(odometry).all():
-        try:
-            feats = loc.readout_features(loc.features(images),
-                                         loc.signatures(images) if loc.n_signature_ else None)
-            loc.info["ekf_noise"] = noise_for_localizer(loc, feats, loc.training_positions_, odometry)
-            log("EKF noise for localize --odometry, from the training run's held-out estimates and odometry "
-                 "(the fused track nearest the positions the readout was fitted to"
-                 + (", learned without ground truth" if supervision == "odometry" else "") + "): "
-                 + ", ".join(f"{k} {v:g}" for k, v in loc.info["ekf_noise"].items()))
-        except ValueError as exc:
-            log(f"no EKF noise stored (localize --odometry will not be available): {exc}")
+    if "ekf_noise" in loc.info:
+        log("EKF noise for localize --odometry, from the training run's held-out estimates and odometry "
+             "(the fused track nearest the positions the readout was fitted to"
+             + (", learned without ground truth" if supervision == "odometry" else "") + "): "
+             + ", ".join(f"{k} {v:g}" for k, v in loc.info["ekf_noise"].items()))
     loc.save(out)
     m = loc.train_metrics_
     pool = f" on features pooled over {loc.rotation_pooling_} rotations" if loc.rotation_pooling_ > 1 else ""

@@ -1,0 +1,147 @@
+"""The product's training recipe applied to one run: images (and odometry,
+and ground truth where the run has it) in, a trained
+:class:`sfanav.Localizer` with its filter noise out.
+
+:func:`train_localizer` is what ``sfanav train`` does, and the one place
+the demo, the garden suites and the experiments train the sfanav default
+(or the thesis's configuration, through ``recipe``): the network under
+simulated rotation, the readout fitted to ground truth or, without it, to
+the positions learned from the run's images and odometry (pose graph), and
+the EKF noise for fusing odometry, chosen on the training run's held-out
+estimates. What each step does and why: docs/localization.md,
+docs/odometry.md, docs/robustness.md.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+
+from ._progress import Log, quiet_log
+from .localization.recipe import CAMERA_ELEVATION, Recipe, default_network, recipe_for, supervision_for
+from .localization.training import fit_localizer
+from .odometry.fusion import noise_for_localizer
+from .odometry.self_supervision import fit_localizer_from_odometry
+from .sfa.network import Network, Rotation
+
+METRIC_MAPS = ("pose-graph", "metric-learning")
+"""How positions are learned without ground truth (``sfanav train --metric-map``)."""
+ROTATION_STEP = 5
+"""The simulated rotation's step in pixels (the thesis's)."""
+
+
+def _all_finite(a: Any, n_cols: int) -> bool:
+    if a is None:
+        return False
+    A = np.asarray(a, dtype=float)
+    return A.ndim == 2 and A.shape[1] >= n_cols and bool(np.isfinite(A[:, :n_cols]).all())
+
+
+def train_localizer(images: Any, *, xy: Any = None, odometry: Any = None, timestamps: Any = None, gyro: Any = None,
+                    supervision: str = "auto", network: Network | None = None, recipe: Recipe | None = None,
+                    camera_elevation: Sequence[float] | None = None, rotation: Rotation | None = None,
+                    prep: Any = None, metric_map: str = "pose-graph", loop_closures: Any = None,
+                    closure_weights: Any = None, network_images: Any = None,
+                    network_fit: Mapping[str, Any] | None = None, filter_noise: bool = True,
+                    info: Mapping[str, Any] | None = None, seed: int = 0, progress: bool = False,
+                    log: Log = quiet_log) -> Any:
+    """Trains a localizer on one run as ``sfanav train`` does.
+
+    Parameters
+    ----------
+    images : array (N, H, W[, C])
+        The run's panoramas in temporal order, in the network's input format
+        (:func:`sfanav.data.load_run`).
+    xy : array (N, 2) or None
+        Ground-truth positions (metres), if the run has them for every frame.
+    odometry : array (N, 3) or None
+        Wheel odometry (x m, y m, heading rad) of every frame, if the run has it.
+    timestamps : array (N,) or None
+        Frame times (s), strictly increasing; checked before any training
+        when positions are learned from the odometry.
+    gyro : array (N,) or None
+        A yaw gyro's integrated heading (rad), fused with the odometry's turns.
+    supervision : "auto", "ground-truth" or "odometry"
+        What the readout is fitted to; ``"auto"``: ground truth where the run
+        has it, else positions learned from its images and odometry
+        (:func:`sfanav.localization.recipe.supervision_for`).
+    network : Network or None
+        The unfitted network (default: the sfanav default's).
+    recipe : Recipe or None
+        Readout, rows, pooling, signature and robustness
+        (:func:`sfanav.localization.recipe.recipe_for`; default: the sfanav
+        default's).
+    camera_elevation : (float, float) or None
+        Elevations (degrees) of the panoramas' lowest and highest rows, for
+        the horizon band (default: the simulator's, -30..20).
+    rotation : Rotation or None
+        The simulated rotation (default: a 5 px step, the whole panorama).
+    prep : Preprocessing or None
+        Recorded in the model so that ``localize`` prepares images alike.
+    metric_map : "pose-graph" or "metric-learning"
+        How positions are learned without ground truth.
+    loop_closures, closure_weights, network_images, network_fit
+        Feedback training, jittered network images and distributed fitting,
+        as :func:`sfanav.localization.fit_localizer`.
+    filter_noise : bool
+        With odometry for every frame, choose and store the EKF noise in
+        ``info["ekf_noise"]`` (:func:`sfanav.odometry.noise_for_localizer`);
+        a run on which it cannot be chosen is logged, not an error.
+    info : mapping or None
+        Extra entries for the model's ``info``.
+    seed : int
+        Seed of the robustness's corrupted copies.
+    log : callable
+        Receives one line per notable event (default: quiet).
+
+    Returns
+    -------
+    Localizer
+        Fitted; ``info["supervision"]`` says what its readout was fitted to
+        (estimates of an ``"odometry"`` model are metres in the training
+        run's odometry frame).
+
+    Raises
+    ------
+    ValueError
+        When the run lacks what the supervision needs, shapes disagree, the
+        horizon band does not fit the camera, or the times do not increase.
+
+    Example
+    -------
+    >>> from sfanav.data import Dataset, Preprocessing, load_run      # doctest: +SKIP
+    >>> run = Dataset("garden").select(run="train")                    # doctest: +SKIP
+    >>> X, _ = load_run(run, Preprocessing(350, 40, False))            # doctest: +SKIP
+    >>> loc = train_localizer(X, odometry=run.odometry)                # doctest: +SKIP
+    >>> loc.save("garden.sfa")                                         # doctest: +SKIP
+    """
+    if metric_map not in METRIC_MAPS:
+        raise ValueError(f"metric_map must be one of {METRIC_MAPS}, got {metric_map!r}")
+    recipe = recipe if recipe is not None else recipe_for()
+    net = network if network is not None else default_network()
+    has_odometry = _all_finite(odometry, 3)
+    supervision = supervision_for(supervision, has_ground_truth=_all_finite(xy, 2), has_odometry=has_odometry)
+    try:
+        fit_kw = recipe.fit_kwargs(CAMERA_ELEVATION if camera_elevation is None else camera_elevation)
+    except ValueError as exc:
+        raise ValueError(f"horizon band: {exc}") from None
+    fit_kw.update(rotation=rotation or Rotation(step=ROTATION_STEP), prep=prep, progress=progress,
+                  loop_closures=loop_closures, closure_weights=closure_weights, network_images=network_images,
+                  network_fit=dict(network_fit or {}), info={**dict(info or {}), **recipe.info()},
+                  seed=seed)
+    if supervision == "odometry":
+        loc = fit_localizer_from_odometry(net, images, odometry, method=metric_map, timestamps=timestamps,
+                                          gyro=gyro, **fit_kw)
+        loc.info["gyro"] = gyro is not None
+    else:
+        loc = fit_localizer(net, images, np.asarray(xy, float)[:, :2], **fit_kw)
+        loc.info["supervision"] = "ground-truth"
+    if filter_noise and has_odometry:
+        try:
+            feats = loc.readout_features(loc.features(images), loc.signatures(images) if loc.n_signature_ else None)
+            loc.info["ekf_noise"] = noise_for_localizer(loc, feats, loc.training_positions_, odometry)
+        except ValueError as exc:
+            log(f"no EKF noise stored (fusing odometry will not be available): {exc}")
+    return loc
