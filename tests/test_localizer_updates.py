@@ -189,3 +189,63 @@ def test_bad_runs_are_refused_and_change_nothing(quad):
         LocalizerUpdater("model.sfanav")
     with pytest.raises(ValueError, match="readout memory inputs"):
         ReadoutMemory(np.zeros((3, 4)), np.zeros((3, 2)))
+
+
+# ---------------------------------------------------------------- sfanav train --updatable, sfanav update
+
+
+def _dataset(path, images, xy):
+    from sfanav.data.dataset import write_dataset
+
+    u8 = np.round(np.asarray(images) * 255).astype(np.uint8)
+    return write_dataset(path, list(u8), np.c_[xy, np.zeros(len(xy))])
+
+
+def test_cli_update_of_a_localizer(tmp_path, capsys):
+    import json
+
+    import sfanav
+    from clitools import assert_one_line_error, run
+
+    (tmp_path / "tiny.json").write_text(json.dumps(TINY))
+    _dataset(tmp_path / "a", A, YA)
+    _dataset(tmp_path / "b", B, YB)
+    model = tmp_path / "loc.sfanav"
+    common = ["--config", tmp_path / "tiny.json", "--readout", "quadratic", "--n-outputs", "5", "--step", "10",
+              "--no-progress"]
+    code, out, err = run(capsys, "train", "--dataset", tmp_path / "a", "--out", model, "--updatable", *common)
+    assert code == 0, err
+    original = model.read_bytes()
+    loc = sfanav.load(model)
+    assert len(loc.readout_memory_) == len(A) and loc.info["source_image"] == [60, 8, 3]
+    code, out, err = run(capsys, "update", model, "--dataset", tmp_path / "b", "--out", tmp_path / "new.sfanav",
+                         "--no-progress")
+    assert code == 0, err
+    assert "refitted on 70 views" in out and "bytes of readout memory" in out
+    assert model.read_bytes() == original
+    new = sfanav.load(tmp_path / "new.sfanav")
+    Xb = np.round(B * 255).astype(np.uint8)
+    ref = LocalizerUpdater(loc).partial_fit(Xb, YB).localizer_
+    Xc = np.round(C * 255).astype(np.uint8)
+    _close(new.predict(Xc), ref.predict(Xc), 1e-12)
+    assert new.info["n_train_images"] == len(A) + len(B)
+    # runs that do not match, a run without ground truth, a model without memory: one line, MODEL unchanged
+    _dataset(tmp_path / "gray", B[..., 0], YB)
+    _dataset(tmp_path / "narrow", B[:, :, :50], YB)
+    _dataset(tmp_path / "nogt", B, YB)
+    frames = tmp_path / "nogt" / "frames.csv"  # x, y blanked: no ground truth
+    rows = [r.split(",") for r in frames.read_text().splitlines()]
+    frames.write_text("\n".join(",".join(r if i == 0 else r[:3] + ["", ""] + r[5:]) for i, r in enumerate(rows))
+                      + "\n")
+    for bad, words in ((tmp_path / "gray", ("channel", "does not match")),
+                       (tmp_path / "narrow", ("50x8", "does not match")),
+                       (tmp_path / "nogt", ("ground-truth",))):
+        code, out, err = run(capsys, "update", model, "--dataset", bad, "--out", tmp_path / "bad.sfanav")
+        assert_one_line_error(code, err, *words)
+        assert not (tmp_path / "bad.sfanav").exists() and model.read_bytes() == original
+    code, out, err = run(capsys, "train", "--dataset", tmp_path / "a", "--out", tmp_path / "plain.sfanav", *common)
+    assert code == 0, err
+    code, out, err = run(capsys, "update", tmp_path / "plain.sfanav", "--dataset", tmp_path / "b",
+                         "--out", tmp_path / "bad.sfanav")
+    assert_one_line_error(code, err, "--updatable")
+    assert not (tmp_path / "bad.sfanav").exists()
