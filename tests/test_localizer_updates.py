@@ -249,3 +249,18 @@ def test_cli_update_of_a_localizer(tmp_path, capsys):
                          "--out", tmp_path / "bad.sfanav")
     assert_one_line_error(code, err, "--updatable")
     assert not (tmp_path / "bad.sfanav").exists()
+
+
+def test_readout_augmentation_copies_are_kept_and_extended():
+    from sfanav.data.corruptions import CAMERA
+
+    u8 = [np.round(x * 255).astype(np.uint8) for x in (A, B, C)]
+    loc = fit_localizer(Network(TINY), u8[0], YA, rotation=ROT, progress=False, readout="quadratic", n_outputs=5,
+                        readout_augmentation=CAMERA, readout_memory=1000)
+    mem = loc.readout_memory_
+    assert mem.augmented is not None and mem.augmented[0].shape == mem.inputs.shape
+    with pytest.raises(ValueError, match="corrupted copies"):
+        LocalizerUpdater(loc)
+    new = LocalizerUpdater(loc, augmentation=CAMERA).partial_fit(u8[1], YB).localizer_
+    assert new.readout_memory_.augmented[0].shape == new.readout_memory_.inputs.shape == (70,) + mem.inputs.shape[1:]
+    assert np.isfinite(new.predict(u8[2])).all() and new.n_augmented_ == 70
