@@ -44,7 +44,8 @@ def train_localizer(images: Any, *, xy: Any = None, odometry: Any = None, timest
                     camera_elevation: Sequence[float] | None = None, rotation: Rotation | None = None,
                     prep: Any = None, metric_map: str = "pose-graph", loop_closures: Any = None,
                     closure_weights: Any = None, network_images: Any = None,
-                    network_fit: Mapping[str, Any] | None = None, filter_noise: bool = True,
+                    network_fit: Mapping[str, Any] | None = None, readout_memory: int | None = None,
+                    filter_noise: bool = True,
                     info: Mapping[str, Any] | None = None, seed: int = 0, progress: bool = False,
                     log: Log = quiet_log) -> Any:
     """Trains a localizer on one run as ``sfanav train`` does.
@@ -85,6 +86,10 @@ def train_localizer(images: Any, *, xy: Any = None, odometry: Any = None, timest
     loop_closures, closure_weights, network_images, network_fit
         Feedback training, jittered network images and distributed fitting,
         as :func:`sfanav.localization.fit_localizer`.
+    readout_memory : int or None
+        Keep what :meth:`sfanav.Localizer.partial_fit` needs to add later runs:
+        the network's statistics and at most this many training views
+        (docs/updates.md). Ground-truth supervision only.
     filter_noise : bool
         With odometry for every frame, choose and store the EKF noise in
         ``info["ekf_noise"]`` (:func:`sfanav.odometry.noise_for_localizer`);
@@ -132,11 +137,14 @@ def train_localizer(images: Any, *, xy: Any = None, odometry: Any = None, timest
                   network_fit=dict(network_fit or {}), info={**dict(info or {}), **recipe.info()},
                   seed=seed)
     if supervision == "odometry":
+        if readout_memory is not None:
+            raise ValueError("readout_memory needs ground-truth supervision: a run without ground truth cannot "
+                             "join a map yet")
         loc = fit_localizer_from_odometry(net, images, odometry, method=metric_map, timestamps=timestamps,
                                           gyro=gyro, **fit_kw)
         loc.info["gyro"] = gyro is not None
     else:
-        loc = fit_localizer(net, images, np.asarray(xy, float)[:, :2], **fit_kw)
+        loc = fit_localizer(net, images, np.asarray(xy, float)[:, :2], readout_memory=readout_memory, **fit_kw)
         loc.info["supervision"] = "ground-truth"
     if filter_noise and has_odometry:
         try:

@@ -198,6 +198,7 @@ class Localizer:
         self.signature = signature
         self.photometric = photometric
         self.info: dict[str, Any] = {}
+        self.readout_memory_: Any = None
 
     def get_params(self, deep: bool = True) -> dict[str, Any]:
         return {"network": self.network, "n_outputs": self.n_outputs, "ridge": self.ridge, "degree": self.degree,
@@ -359,6 +360,26 @@ class Localizer:
             F = F[None]
         G = self.signatures(images) if self._check_signature() else None
         return self.fit_features(F, Y, signatures=None if G is None else G.reshape(len(F), -1))
+
+    def partial_fit(self, images: Any, xy: Any = None, **kwargs: Any) -> "Localizer":
+        """Adds a run to this fitted, updatable localizer (one with a
+        ``readout_memory_``, :func:`sfanav.localization.updates.remember`):
+        images (N, H, W[, C]) and their positions ``xy`` (N, 2) metres; the
+        network's top stage is re-solved and the readout refitted
+        (:class:`sfanav.localization.updates.LocalizerUpdater`, ``kwargs``
+        its options). Returns ``self``; ValueError for a run that does not
+        match or has no positions (``self`` is then unchanged).
+
+        Examples
+        --------
+        >>> loc.partial_fit(week2_images, week2_xy)   # doctest: +SKIP
+        """
+        from .updates import LocalizerUpdater
+
+        up = LocalizerUpdater(self, **kwargs).partial_fit(images, xy)
+        new = up.solve() if up.n_pending_ else up.localizer_
+        self.__dict__.update(new.__dict__)
+        return self
 
     def fit_features(self, features: Any, xy: Any, *, signatures: Any = None,
                      augmented: tuple[Any, Any] | None = None) -> "Localizer":
@@ -533,7 +554,8 @@ class Localizer:
             # The network's own save() defines its state: write it and read it back.
             with tempfile.TemporaryDirectory(prefix="sfanav-") as tmp:
                 tmp_path = Path(tmp) / "network.sfa"
-                self.network.save(tmp_path)
+                # an updatable localizer (with a readout memory) keeps the statistics its network's update needs
+                self.network.save(tmp_path, include_statistics=self.readout_memory_ is not None)
                 kind, net_state, _ = read_model(tmp_path)
         state = {
             "params": {"n_outputs": None if self.n_outputs is None else int(self.n_outputs),
@@ -554,6 +576,8 @@ class Localizer:
             "train_metrics": dict(self.train_metrics_),
             "info": dict(self.info or {}),
             **({} if self.training_positions_ is None else {"training_positions": self.training_positions_}),
+            # optional (older readers ignore it: they load the model, but cannot update it)
+            **({} if self.readout_memory_ is None else {"readout_memory": self.readout_memory_.get_state()}),
         }
         # format version 2: a GP, kernel ridge or kNN readout (older readers cannot rebuild it)
         kind = self.readout_spec_["kind"]
@@ -602,6 +626,10 @@ class Localizer:
             loc.info = dict(state.get("info") or {})
             tp = state.get("training_positions")  # absent in files written before they were stored
             loc.training_positions_ = None if tp is None else as_matrix(tp, "training_positions", n_cols=2)
+            if state.get("readout_memory") is not None:  # absent unless the localizer was made updatable
+                from .updates import ReadoutMemory
+
+                loc.readout_memory_ = ReadoutMemory.from_state(state["readout_memory"])
         except (KeyError, TypeError) as exc:
             raise ValueError(f"invalid Localizer model state: {exc}") from None
         if net is not None and net.is_fitted_ and loc.n_features_in_ != net.n_outputs_:

@@ -43,6 +43,7 @@ def fit_localizer(
     invariance: CorruptionModel | None = None,
     invariance_weight: float = 1.0,
     seed: int = 0,
+    readout_memory: int | None = None,
 ) -> Localizer:
     """Trains ``network`` on ``images`` (the training run, in temporal order)
     under simulated rotation and fits the readout of its slowest outputs to
@@ -87,6 +88,11 @@ def fit_localizer(
     so that the slow features ignore the corruption (:meth:`Network.fit`
     ``partners``; one machine only). Both need 8-bit images. What each
     costs and buys: docs/robustness.md.
+
+    ``readout_memory``: keep at most this many evenly spaced training views
+    for later updates (:func:`sfanav.localization.updates.remember`: the
+    localizer can then take new runs with ``partial_fit``, and its model
+    file keeps the network's training statistics). None: not updatable.
 
     ``network_fit``: more keyword arguments of the network's
     :meth:`~sfanav.Network.fit`, e.g. ``{"client": dask_client, "breaks":
@@ -140,6 +146,10 @@ def fit_localizer(
     else:
         loc.fit_features(F, Y, signatures=G, augmented=augmented_features(loc, raw, readout_augmentation, seed=seed))
     readout_s = time.perf_counter() - t1
+    if readout_memory is not None:
+        from .updates import remember
+
+        remember(loc, raw, Y, max_views=readout_memory, augmentation=readout_augmentation, seed=seed)
     loc.info = dict(info or {})
     if prep is not None:
         loc.info["preprocessing"] = prep.to_dict()

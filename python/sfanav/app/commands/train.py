@@ -121,6 +121,10 @@ def _add_train(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                         "dataset's run column starts a new recording, and everything else (reading, readout) "
                         "runs here. The result equals training without it up to rounding "
                         "(docs/distributed.md)")
+    p.add_argument("--updatable", nargs="?", type=arg.pos_int, const=3000, default=None, metavar="N",
+                   help="keep what sfanav update needs to add later runs: the network's training statistics and a "
+                        "readout memory of at most N evenly spaced training views (default 3000; docs/updates.md "
+                        "says what it costs)")
     p.add_argument("--overwrite", action="store_true", help="replace an existing model file")
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
     add_train_arguments(p)
@@ -283,6 +287,9 @@ def _train(args: argparse.Namespace, stack: Any) -> int:
         if breaks:
             log(f"{len(breaks) + 1} runs: each is its own recording for the network (no derivative pair across "
                 "a run change)")
+    if args.updatable is not None and supervision == "odometry":
+        raise UsageError("--updatable needs ground-truth supervision: runs without ground truth cannot join a map "
+                         "yet")
     if supervision == "odometry":
         log("fitting the readout to positions learned from the run's odometry (no ground truth); estimates are "
              "metres in the odometry's frame")
@@ -292,7 +299,7 @@ def _train(args: argparse.Namespace, stack: Any) -> int:
                           supervision=supervision, network=net, recipe=recipe, camera_elevation=elev,
                           rotation=Rotation(step=args.step, window=args.window), prep=prep,
                           metric_map=args.metric_map, loop_closures=closures, closure_weights=weights,
-                          network_images=network_images, network_fit=network_fit,
+                          network_images=network_images, network_fit=network_fit, readout_memory=args.updatable,
                           info={"dataset": str(args.dataset), "run": run,
                                 "network": args.preset or (str(args.config) if args.config else "sfanav-default")},
                           progress=not args.no_progress, log=log)
@@ -302,6 +309,13 @@ def _train(args: argparse.Namespace, stack: Any) -> int:
     elif supervision == "odometry":
         log(f"metric map from {loc.info['lines']} straight lines ({loc.info['points on lines']} frames), "
              f"rms to the odometry on the first {loc.info['rms to odometry on the first line (m)']:.3f} m")
+    if args.updatable is not None:  # what sfanav update checks a new run against
+        first = np.asarray(next(iter(train.images(indices=np.arange(1)))))
+        loc.info["source_image"] = [int(first.shape[1]), int(first.shape[0]),
+                                    1 if first.ndim == 2 else int(first.shape[2])]
+        cam_elev = (ds.metadata.get("camera") or {}).get("elevation_deg") if isinstance(ds.metadata, dict) else None
+        if cam_elev is not None:
+            loc.info["camera_elevation_deg"] = [float(v) for v in cam_elev]
     if preprocessor.mirror_used is not None:
         loc.info["mirror"] = list(preprocessor.mirror_used)  # localize and evaluate reuse it
         if network_images is not None:

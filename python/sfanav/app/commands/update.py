@@ -4,6 +4,7 @@ layer's slow features re-solved from the stored statistics plus the run's)."""
 from __future__ import annotations
 
 import argparse
+from typing import Any
 
 from ..common import existing_path, log, new_file, wrap
 from ..failures import UsageError
@@ -14,24 +15,31 @@ from ..registry import command
 def _add_update(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p = sub.add_parser(
         "update",
-        help="add a new run to a trained network without retraining it",
+        help="add a new run to a trained network or localizer without retraining it",
         description=wrap("Add the images of a new run to a network model file saved with its training statistics "
                          "(Network.save(..., include_statistics=True)): the run is streamed through the frozen "
                          "lower layers, its statistics are added to the stored ones as a recording of its own, and "
                          "the top layer's slow features are solved again, exactly as if that stage had been trained "
                          "on all the runs. MODEL is left as it was; NEW is written atomically. A run whose images "
-                         "do not match the model (size, channels, pixel scale) is refused. See docs/updates.md."),
+                         "do not match the model (size, channels, pixel scale) is refused. A localizer model file "
+                         "(sfanav train --updatable) is updated the same way and its readout refitted on the old "
+                         "runs' views it keeps and the new run's (ground-truth x, y needed). See docs/updates.md."),
         epilog="example:\n  sfanav update net.sfanav --dataset week2 --out net-week2.sfanav",
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    p.add_argument("model", metavar="MODEL", help="network model file with training statistics")
+    p.add_argument("model", metavar="MODEL",
+                   help="network model file with training statistics, or updatable localizer model file")
     p.add_argument("--dataset", required=True, metavar="RUN", help="dataset folder holding the new run")
     p.add_argument("--run", dest="run_name", default=None, metavar="NAME", help="run of the dataset (default: all)")
     p.add_argument("--camera", default=None, metavar="NAME", help="camera to use if the dataset has several")
     p.add_argument("--out", required=True, metavar="NEW", help="the updated model file")
     p.add_argument("--overwrite", action="store_true", help="replace NEW if it exists")
     p.add_argument("--drop-statistics", action="store_true",
-                   help="write NEW without its training statistics (smaller; it cannot be updated again)")
+                   help="write NEW without its training statistics (and a localizer without its readout memory: "
+                        "smaller; it cannot be updated again)")
+    p.add_argument("--mirror", default=None, metavar="CX,CY,INNER,OUTER",
+                   help="mirror of omnidirectional images (default: the localizer's)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(run=_run_update)
     return p
 
@@ -41,6 +49,7 @@ def _run_update(args: argparse.Namespace) -> int:
 
     from ...data.dataset import Dataset
     from ...data.sources import select_run
+    from ...localization.localizer import Localizer
     from ...sfa.modelfile import load
     from ...sfa.network import Network
     from ...sfa.updates import NetworkUpdater, statistics_bytes
@@ -50,9 +59,11 @@ def _run_update(args: argparse.Namespace) -> int:
     if out.resolve() == model.resolve():
         raise UsageError("--out must differ from MODEL: an update leaves the model it starts from as it was")
     net = load(model)
+    if isinstance(net, Localizer):
+        return _update_localizer(args, model, out, net)
     if not isinstance(net, Network):
-        raise UsageError(f"{model} holds a {type(net).__name__}; sfanav update adds runs to network model files "
-                         "(a localizer's readout cannot be updated yet)")
+        raise UsageError(f"{model} holds a {type(net).__name__}; sfanav update adds runs to network and localizer "
+                         "model files")
     updater = NetworkUpdater(net)  # refuses a model without statistics before the run is read
     ds = select_run(Dataset(existing_path(args.dataset, "dataset")), args.run_name, args.camera)
     h, _, c = net.input_shape
@@ -71,3 +82,72 @@ def _run_update(args: argparse.Namespace) -> int:
     print(f"updated with {len(images)} images; training statistics "
           + ("dropped" if args.drop_statistics else f"kept ({stats} bytes)") + f"; wrote {out}")
     return 0
+
+
+def _update_localizer(args: argparse.Namespace, model: "Any", out: "Any", loc: "Any") -> int:
+    """A localizer model file updated with the run (ground truth needed)."""
+    import numpy as np
+
+    from ...data.corruptions import CAMERA
+    from ...data.dataset import Dataset
+    from ...data.preprocessing import Preprocessing
+    from ...data.sources import load_run, select_run
+    from ...localization.updates import LocalizerUpdater, drop_readout_memory, readout_memory_bytes
+    from ..common import mirror_of
+
+    if loc.network is None:
+        raise UsageError(f"{model} is a features-only localizer (no network): it cannot read a run's images")
+    mem = loc.readout_memory_
+    if mem is None:
+        raise UsageError(f"{model} keeps no readout memory, so its readout cannot be refitted after an update: "
+                         "train it with sfanav train --updatable")
+    augmentation = None
+    if mem.augmented is not None:
+        if loc.info.get("readout_augmentation") != CAMERA.describe():
+            raise UsageError(f"{model}'s readout was fitted on corrupted copies of a model this sfanav does not know")
+        augmentation = CAMERA
+    try:
+        updater = LocalizerUpdater(loc, augmentation=augmentation)  # refuses a network without statistics
+    except ValueError as exc:
+        raise UsageError(f"{model}: {exc}") from None
+    ds = select_run(Dataset(existing_path(args.dataset, "dataset")), args.run_name, args.camera)
+    _check_source(ds, loc, model)
+    xy_ok = bool(np.isfinite(ds.poses[:, :2]).all())
+    if not xy_ok:
+        raise UsageError(f"{args.dataset} has no ground-truth x, y for every image: a run joins a localizer's map "
+                         "with its positions (runs without them are not supported yet)")
+    images, xy = load_run(ds, Preprocessing.of_model(loc), mirror=mirror_of(args, loc), log=log,
+                          progress=not args.no_progress)
+    log(f"adding {len(images)} images of {args.dataset} to {model} (readout memory: {len(mem)} views)")
+    try:
+        new = updater.partial_fit(images, xy).localizer_
+    except ValueError as exc:
+        raise UsageError(f"the run does not match {model}: {exc}") from None
+    if args.drop_statistics:
+        drop_readout_memory(new)
+    sizes = readout_memory_bytes(new)
+    new.save(out)  # atomic (a temporary file renamed)
+    kept = ("dropped" if args.drop_statistics else
+            f"kept ({sizes['readout_memory']} bytes of readout memory, {len(new.readout_memory_)} views; "
+            f"{sizes['network_statistics']} bytes of network statistics)")
+    print(f"updated with {len(images)} images; readout {new.describe_readout()} refitted on "
+          f"{new.info['updates'][-1]['readout_views']} views; update data {kept}; wrote {out}")
+    return 0
+
+
+def _check_source(ds: "Any", loc: "Any", model: "Any") -> None:
+    """UsageError if the run's images or camera differ from the training
+    run's as the model recorded them (size, channels, row elevations)."""
+    import numpy as np
+
+    src = (loc.info or {}).get("source_image")
+    first = np.asarray(next(iter(ds.images(indices=np.arange(1)))))
+    shape = [int(first.shape[1]), int(first.shape[0]), 1 if first.ndim == 2 else int(first.shape[2])]
+    if src is not None and list(src) != shape:
+        raise UsageError(f"the run's images are {shape[0]}x{shape[1]} with {shape[2]} channel(s), but {model} was "
+                         f"trained on {src[0]}x{src[1]} images with {src[2]}: the run does not match the model")
+    elev = (ds.metadata.get("camera") or {}).get("elevation_deg") if isinstance(ds.metadata, dict) else None
+    want = (loc.info or {}).get("camera_elevation_deg")
+    if want is not None and elev is not None and not np.allclose(np.asarray(elev, float), np.asarray(want, float)):
+        raise UsageError(f"the run's camera sees elevations {elev} deg, but {model} was trained on a camera seeing "
+                         f"{want} deg: the run does not match the model")

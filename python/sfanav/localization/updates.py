@@ -1,0 +1,417 @@
+"""Online updates of a trained :class:`~sfanav.Localizer`: a new run added to
+the map (network and readout) without retraining from scratch.
+
+An update re-solves the network's top stage (the slow features) from its
+stored statistics plus the new run's (:mod:`sfanav.sfa.updates`, exact with
+the stages below frozen) and then refits the readout on the slow features
+of the old and the new runs. Re-solving the top stage changes the old
+views' slow features, so the localizer keeps a **readout memory**
+(:class:`ReadoutMemory`): for an evenly spaced, bounded subset of its
+training views (default at most :data:`MAX_VIEWS`), their inputs to the
+re-solved stage (the frozen stages' outputs, under each pooled rotation),
+their appearance signatures if the readout reads them, and their
+positions. The new slow features of those views are recomputed from it
+exactly (the frozen stages give the same inputs as in training).
+
+* :func:`remember` gives a fitted localizer its memory (from its training
+  run); :func:`~sfanav.localization.fit_localizer` does it with
+  ``readout_memory=N``.
+* :class:`LocalizerUpdater` adds runs (``partial_fit(images, xy)``) under an
+  :class:`~sfanav.sfa.updates.UpdatePolicy`; ``localizer_`` is the result.
+* :func:`readout_memory_bytes` / :func:`drop_readout_memory`: what the memory
+  and the network statistics cost in the model file, and a copy without
+  them (no longer updatable).
+
+A localizer with a readout memory saves its network with the training
+statistics (what the network update needs). Runs need positions (ground
+truth) for now: a run without them is refused. docs/updates.md has the
+derivation, the tests and the measurements.
+
+Examples
+--------
+>>> loc = fit_localizer(net, X_a, xy_a, readout="quadratic", readout_memory=3000)  # doctest: +SKIP
+>>> new = LocalizerUpdater(loc).partial_fit(X_b, xy_b).localizer_                  # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+import copy
+import sys
+from typing import Any
+
+import numpy as np
+
+from .. import _core
+from .._checks import NotFittedError, as_matrix, check_int, check_same_length
+from ..data.corruptions import CorruptionModel
+from ..sfa.modelfile import state_from_bytes
+from ..sfa.updates import NetworkUpdater, UpdatePolicy, statistics_bytes
+from .localizer import Localizer, pooling_step
+
+__all__ = ["MAX_VIEWS", "ReadoutMemory", "remember", "top_stage_inputs", "top_stage_features",
+           "LocalizerUpdater", "readout_memory_bytes", "drop_readout_memory"]
+
+MAX_VIEWS = 3000
+"""Default bound on the views a readout memory keeps."""
+
+
+def _even(n: int, m: int) -> np.ndarray:
+    """Indices of ``min(n, m)`` evenly spaced items of ``n`` (all if n <= m)."""
+    if n <= m:
+        return np.arange(n)
+    return np.unique(np.round(np.linspace(0, n - 1, m)).astype(int))
+
+
+class ReadoutMemory:
+    """What a localizer's readout needs of its old training views to be
+    refitted after the network's top stage is re-solved.
+
+    Parameters
+    ----------
+    inputs : array (n, K, k)
+        Each view's input to the re-solved stage (the frozen stages'
+        outputs, float64) under the K rotations its features are pooled
+        over (K = 1 without pooling).
+    positions : array (n, 2)
+        The positions (metres) the readout was fitted to.
+    signatures : array (n, q) or None
+        The views' appearance signatures, if the readout reads them.
+    augmented : tuple (inputs, signatures) or None
+        The same of the views' corrupted copies, if the readout was fitted
+        on such copies as well (``readout_augmentation``).
+    max_views : int, default :data:`MAX_VIEWS`
+        The bound: :meth:`extended` keeps an evenly spaced subset.
+    n_seen : int or None
+        Views the memory was drawn from (default n).
+
+    ``nbytes`` is what it adds to the model file (its arrays). ValueError
+    for arrays that disagree in length or shape.
+    """
+
+    def __init__(self, inputs: Any, positions: Any, signatures: Any = None, augmented: Any = None, *,
+                 max_views: int = MAX_VIEWS, n_seen: int | None = None) -> None:
+        Z = np.asarray(inputs, dtype=np.float64)
+        if Z.ndim != 3 or not np.isfinite(Z).all():
+            raise ValueError(f"readout memory inputs must be a finite (n, K, k) array, got shape {Z.shape}")
+        Y = as_matrix(positions, "readout memory positions", n_cols=2)
+        check_same_length(Z, Y, "readout memory inputs", "positions")
+        G = None if signatures is None else as_matrix(signatures, "readout memory signatures")
+        if G is not None:
+            check_same_length(Z, G, "readout memory inputs", "signatures")
+        A = None
+        if augmented is not None:
+            Za = np.asarray(augmented[0], dtype=np.float64)
+            Ga = None if augmented[1] is None else as_matrix(augmented[1], "augmented signatures")
+            if Za.shape != Z.shape or (Ga is None) != (G is None) or (Ga is not None and Ga.shape != G.shape):
+                raise ValueError("the augmented copies in a readout memory must have the shapes of the views")
+            A = (Za, Ga)
+        self.inputs, self.positions, self.signatures, self.augmented = Z, Y, G, A
+        self.max_views = check_int(max_views, "max_views")
+        self.n_seen = len(Z) if n_seen is None else check_int(n_seen, "n_seen", minimum=0)
+
+    def __len__(self) -> int:
+        return len(self.inputs)
+
+    def __repr__(self) -> str:
+        return (f"<ReadoutMemory {len(self)} views of {self.n_seen} (max {self.max_views}), "
+                f"{self.nbytes} bytes>")
+
+    @property
+    def nbytes(self) -> int:
+        arrays = [self.inputs, self.positions, self.signatures]
+        if self.augmented is not None:
+            arrays += list(self.augmented)
+        return int(sum(a.nbytes for a in arrays if a is not None))
+
+    def subset(self, idx: Any) -> "ReadoutMemory":
+        """The views ``idx`` (same bound, same ``n_seen``)."""
+        idx = np.asarray(idx)
+        aug = None if self.augmented is None else (
+            self.augmented[0][idx], None if self.augmented[1] is None else self.augmented[1][idx])
+        return ReadoutMemory(self.inputs[idx], self.positions[idx],
+                             None if self.signatures is None else self.signatures[idx], aug,
+                             max_views=self.max_views, n_seen=self.n_seen)
+
+    def extended(self, other: "ReadoutMemory") -> "ReadoutMemory":
+        """This memory followed by ``other``'s views, thinned to an evenly
+        spaced subset of at most ``max_views``; ``n_seen`` adds up."""
+        if other.inputs.shape[1:] != self.inputs.shape[1:] or (other.signatures is None) != (self.signatures is None) \
+                or (other.augmented is None) != (self.augmented is None):
+            raise ValueError("the views to add do not match the readout memory (stage inputs, signatures, copies)")
+
+        def cat(a: Any, b: Any) -> Any:
+            return None if a is None else np.concatenate([a, b])
+
+        aug = None
+        if self.augmented is not None:
+            aug = (cat(self.augmented[0], other.augmented[0]), cat(self.augmented[1], other.augmented[1]))
+        both = ReadoutMemory(cat(self.inputs, other.inputs), cat(self.positions, other.positions),
+                             cat(self.signatures, other.signatures), aug, max_views=self.max_views,
+                             n_seen=self.n_seen + other.n_seen)
+        return both.subset(_even(len(both), self.max_views))
+
+    def get_state(self) -> dict[str, Any]:
+        """The memory as a model-file state (arrays; no pickle)."""
+        out: dict[str, Any] = {"inputs": self.inputs, "positions": self.positions, "max_views": self.max_views,
+                               "n_seen": self.n_seen}
+        if self.signatures is not None:
+            out["signatures"] = self.signatures
+        if self.augmented is not None:
+            out["augmented_inputs"] = self.augmented[0]
+            if self.augmented[1] is not None:
+                out["augmented_signatures"] = self.augmented[1]
+        return out
+
+    @classmethod
+    def from_state(cls, state: dict[str, Any]) -> "ReadoutMemory":
+        try:
+            aug = None
+            if "augmented_inputs" in state:
+                aug = (state["augmented_inputs"], state.get("augmented_signatures"))
+            return cls(state["inputs"], state["positions"], state.get("signatures"), aug,
+                       max_views=state["max_views"], n_seen=state["n_seen"])
+        except (KeyError, TypeError) as exc:
+            raise ValueError(f"invalid readout memory state: {exc}") from None
+
+
+# ---------------------------------------------------------------- the split at the re-solved stage
+def _split_network(network: Any) -> tuple[Any, Any]:
+    """``(below, top)``: a core network whose output is the input of the
+    top layer's final stage (that stage replaced by an identity), and the
+    final stage alone as a core node. ValueError if the top layer has other
+    than one node with a reduction stage."""
+    state = state_from_bytes(network.to_bytes(include_statistics=False), "Network")
+    nodes = state["nodes"]
+    if len(nodes[-1]) != 1 or len(nodes[-1][0]["stages"]) != 2:
+        raise ValueError("a readout memory needs a network whose top layer is one node with a reduction stage "
+                         "(the thesis's and the sfanav default's networks)")
+    top = nodes[-1][0]
+    k = int(top["stages"][0]["solution"]["n_out"])
+    spec = copy.deepcopy(network.config_)
+    spec["layers"][-1] = dict(spec["layers"][-1], n_out=k, degree=1)
+    identity = {"degree": 1, "input_dim": k, "n_out": k, "stats": None,
+                "solution": {"delta": np.zeros(k), "dropped": np.zeros(0), "mean": np.zeros(k), "n_out": k,
+                             "projection": np.eye(k).ravel(), "rank": k}}
+    below_top = dict(copy.deepcopy(top), n_components=k, degree=1)
+    below_top["stages"][1] = identity
+    below = _core.Network.from_states(spec, nodes[:-1] + [[below_top]], len(nodes))
+    final = {"n_components": top["n_components"], "degree": top["degree"], "reduce_to": None, "tol": top["tol"],
+             "mixed_precision": top["mixed_precision"], "n_features": k, "training_stage": 0,
+             "stages": [top["stages"][1]]}
+    return below, _core.SfaNode.from_state(final)
+
+
+def top_stage_inputs(localizer: Localizer, images: Any) -> np.ndarray:
+    """The inputs of the network's top stage for images (N, H, W[, C]) as the
+    localizer sees them (photometric normalisation, rows, the K pooled
+    rotations): (N, K, k) float64, K = 1 without rotation pooling (the
+    window at rotation 0, as :meth:`Localizer.features`)."""
+    net = localizer.trained_network()
+    a = np.ascontiguousarray(localizer.network_input(np.asarray(images)))
+    below, _ = _split_network(net)
+    K = localizer.rotation_pooling_
+    if K == 1:
+        v = net.input_shape[1]
+        if a.shape[2] < v:
+            raise ValueError(f"images of {a.shape[2]} px are narrower than the network input ({v} px)")
+        Z = below.transform(np.ascontiguousarray(a[:, :, :v]))
+        return np.asarray(Z, dtype=np.float64)[:, None, :]
+    return np.asarray(below.transform_rotations(a, pooling_step(net, a.shape[2], K)), dtype=np.float64)
+
+
+def top_stage_features(network: Any, inputs: Any) -> np.ndarray:
+    """The slow features of views from their top-stage inputs (N, K, k):
+    the network's final stage applied to each rotation, averaged over the K
+    rotations: (N, n_outputs). Equals :meth:`Localizer.features` of the
+    images the inputs came from (to rounding)."""
+    Z = np.asarray(inputs, dtype=np.float64)
+    _, top = _split_network(network)
+    n, K, k = Z.shape
+    Y = np.asarray(top.transform(np.ascontiguousarray(Z.reshape(n * K, k))))
+    return Y.reshape(n, K, -1).mean(axis=1)
+
+
+def _memory_of(localizer: Localizer, images: Any, xy: Any, augmentation: CorruptionModel | None, seed: int,
+               max_views: int) -> ReadoutMemory:
+    """A readout memory of the evenly spaced views of a run (all kept, then
+    thinned by the caller)."""
+    a = np.asarray(images)
+    Y = as_matrix(xy, "xy", n_cols=2)
+    check_same_length(a, Y, "images", "xy")
+    idx = _even(len(a), max_views)
+    a, Y = a[idx], Y[idx]
+    sig = localizer.n_signature_ > 0
+    aug = None
+    if augmentation is not None:
+        altered = augmentation.apply(a, seed=seed + 1)  # the draw fit_localizer makes for readout_augmentation
+        aug = (top_stage_inputs(localizer, altered), localizer.signatures(altered) if sig else None)
+    return ReadoutMemory(top_stage_inputs(localizer, a), Y, localizer.signatures(a) if sig else None, aug,
+                         max_views=max_views, n_seen=len(np.asarray(images)))
+
+
+def remember(localizer: Localizer, images: Any, xy: Any, *, max_views: int = MAX_VIEWS,
+             augmentation: CorruptionModel | None = None, seed: int = 0) -> Localizer:
+    """Gives a fitted localizer the readout memory of its training run:
+    ``images`` (N, H, W[, C]) as given to ``fit`` and the positions ``xy``
+    (N, 2) its readout was fitted to; at most ``max_views`` evenly spaced
+    views are kept. ``augmentation``: the corruption model of the readout's
+    ``readout_augmentation`` (with the same ``seed``), if it was fitted on
+    corrupted copies. Sets and returns ``localizer`` (``readout_memory_``);
+    it is saved with the model file, together with the network's training
+    statistics.
+
+    NotFittedError for an unfitted localizer, ValueError for one without a
+    network or whose network cannot be split at its top stage.
+    """
+    if not isinstance(localizer, Localizer):
+        raise TypeError(f"localizer must be a sfanav.Localizer, got {type(localizer).__name__}")
+    if not localizer.is_fitted_:
+        raise NotFittedError("this Localizer is not fitted; fit it before giving it a readout memory")
+    if augmentation is not None and not isinstance(augmentation, CorruptionModel):
+        raise TypeError(f"augmentation must be a CorruptionModel or None, got {type(augmentation).__name__}")
+    localizer.readout_memory_ = _memory_of(localizer, images, xy, augmentation, seed,
+                                           check_int(max_views, "max_views"))
+    return localizer
+
+
+def readout_memory_bytes(localizer: Localizer) -> dict[str, int]:
+    """What keeping a localizer updatable costs in its model file (bytes):
+    ``{"readout_memory": ..., "network_statistics": ...}``."""
+    mem = getattr(localizer, "readout_memory_", None)
+    net = localizer.trained_network()
+    return {"readout_memory": 0 if mem is None else mem.nbytes,
+            "network_statistics": statistics_bytes(net) if mem is not None else 0}
+
+
+def drop_readout_memory(localizer: Localizer) -> Localizer:
+    """``localizer`` without its readout memory (its model file then keeps
+    no network statistics either: smaller, no longer updatable). Returns
+    it."""
+    localizer.readout_memory_ = None
+    return localizer
+
+
+class LocalizerUpdater:
+    """Adds runs to a fitted :class:`~sfanav.Localizer` (scikit-learn's
+    ``partial_fit``): the network's top stage re-solved from its statistics
+    plus the runs' (:class:`~sfanav.sfa.updates.NetworkUpdater`), then the
+    readout refitted, same kind and settings (a GP's hyperparameters learned
+    again), on the readout memory's views (slow features recomputed from
+    their stored stage inputs) and the new runs' views.
+
+    Parameters
+    ----------
+    localizer : Localizer
+        Fitted, with a network holding its training statistics and a
+        readout memory (:func:`remember`, ``fit_localizer(...,
+        readout_memory=N)``, or a model file saved from such a localizer).
+        Not modified: updates make new localizers.
+    policy : UpdatePolicy, default ``UpdatePolicy()``
+        When to solve (``every``); ``resolve="top"``.
+    augmentation : CorruptionModel or None
+        Needed when the readout memory holds corrupted copies (a readout
+        fitted with ``readout_augmentation``): the new runs get copies drawn
+        from it as well (``seed``).
+    seed : int, default 0
+
+    Attributes
+    ----------
+    localizer_ : Localizer
+        The localizer as of the last solve, with the grown readout memory.
+    n_images_, n_pending_, n_solves_ : int
+        Images added, added since the last solve, solves.
+
+    Raises TypeError / NotFittedError / ValueError for a localizer that
+    cannot be updated (no memory, no statistics), naming what is missing.
+    """
+
+    def __init__(self, localizer: Localizer, policy: UpdatePolicy | None = None, *,
+                 augmentation: CorruptionModel | None = None, seed: int = 0) -> None:
+        if not isinstance(localizer, Localizer):
+            raise TypeError(f"localizer must be a sfanav.Localizer, got {type(localizer).__name__}")
+        if not localizer.is_fitted_:
+            raise NotFittedError("this Localizer is not fitted; fit it before updating it")
+        mem = getattr(localizer, "readout_memory_", None)
+        if mem is None:
+            raise ValueError("this localizer has no readout memory, so its readout cannot be refitted after an "
+                             "update: train it with readout_memory (sfanav train --updatable)")
+        if mem.augmented is not None and augmentation is None:
+            raise ValueError("this localizer's readout was fitted on corrupted copies as well: pass the corruption "
+                             "model (augmentation=) so that the new runs get copies too")
+        if augmentation is not None and not isinstance(augmentation, CorruptionModel):
+            raise TypeError(f"augmentation must be a CorruptionModel or None, got {type(augmentation).__name__}")
+        self.policy = UpdatePolicy() if policy is None else policy
+        if not isinstance(self.policy, UpdatePolicy):
+            raise TypeError(f"policy must be an UpdatePolicy, got {type(self.policy).__name__}")
+        # the network solves when this updater says so
+        self._net = NetworkUpdater(localizer.trained_network(), UpdatePolicy(self.policy.resolve, every=sys.maxsize))
+        self.augmentation = augmentation if mem.augmented is not None else None
+        self.seed = check_int(seed, "seed", minimum=0)
+        self.localizer_ = localizer
+        self._pending: ReadoutMemory | None = None
+        self.n_images_ = self.n_pending_ = self.n_solves_ = 0
+
+    def partial_fit(self, images: Any, xy: Any = None) -> "LocalizerUpdater":
+        """Adds one run: images (N, H, W[, C]) as the localizer takes them
+        and their positions ``xy`` (N, 2) metres in the map's frame; solves
+        if the policy says so. Returns ``self``. ValueError for a run that
+        does not match the model or comes without positions (nothing is
+        changed then)."""
+        loc = self.localizer_
+        if xy is None:
+            raise ValueError("this run has no positions: a run joins the map with its ground-truth positions for "
+                             "now (positions learned from odometry and loop closures are not supported yet)")
+        a = np.asarray(images)
+        Y = as_matrix(xy, "xy", n_cols=2)
+        check_same_length(a, Y, "images", "xy")
+        net_images = self._net.check_run(loc.network_input(a))
+        mem = loc.readout_memory_
+        new = _memory_of(loc, a, Y, self.augmentation, self.seed, max_views=len(a))
+        new.max_views = mem.max_views
+        self._net.partial_fit(net_images)
+        self._pending = new if self._pending is None else _concat(self._pending, new)
+        self.n_images_ += len(a)
+        self.n_pending_ += len(a)
+        every = self.policy.every
+        if every is None or self.n_pending_ >= every:
+            self.solve()
+        return self
+
+    def solve(self) -> Localizer:
+        """Re-solves the network's top stage and refits the readout on the
+        memory's and the pending runs' views; returns the new localizer
+        (also ``localizer_``)."""
+        old = self.localizer_
+        net = self._net.solve()
+        mem = old.readout_memory_
+        views = mem if self._pending is None else _concat(mem, self._pending)
+        F = top_stage_features(net, views.inputs)
+        aug = None
+        if views.augmented is not None:
+            aug = (top_stage_features(net, views.augmented[0]), views.augmented[1])
+        # the fitted readout's kind and settings (not "auto": no new selection), the fitted pooling
+        new = old.sibling(network=net, readout=dict(old.readout_spec_), n_outputs=old.n_outputs_,
+                          rotation_pooling=old.rotation_pooling_)
+        new.fit_features(F, views.positions, signatures=views.signatures, augmented=aug)
+        # the parameters as the user gave them
+        new.readout, new.n_outputs, new.rotation_pooling = old.readout, old.n_outputs, old.rotation_pooling
+        new.info = dict(old.info or {})
+        n_added = 0 if self._pending is None else self._pending.n_seen
+        new.info["n_train_images"] = int(new.info.get("n_train_images", mem.n_seen)) + n_added
+        new.info["updates"] = list(new.info.get("updates", [])) + [{"n_images": int(n_added),
+                                                                     "readout_views": int(len(views))}]
+        new.readout_memory_ = mem if self._pending is None else mem.extended(self._pending)
+        self.localizer_ = new
+        self._pending = None
+        self.n_pending_ = 0
+        self.n_solves_ += 1
+        return new
+
+
+def _concat(a: ReadoutMemory, b: ReadoutMemory) -> ReadoutMemory:
+    """Every view of ``a`` then ``b`` (no thinning; ``a``'s bound)."""
+    wide = a.subset(np.arange(len(a)))
+    wide.max_views = sys.maxsize
+    out = wide.extended(b)
+    out.max_views = a.max_views
+    return out

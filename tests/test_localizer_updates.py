@@ -1,0 +1,266 @@
+"""Online updates of a trained localizer (sfanav.localization.updates): with
+the network's lower stages frozen and a readout memory holding every old
+view, adding run B to a localizer trained on run A equals retraining the
+top stage and the readout on A + B (outputs to 1e-9 for deterministic
+readouts); the memory stays bounded, survives the model file, and bad runs
+are refused leaving the localizer as it was."""
+
+import numpy as np
+import pytest
+from sfanav import Localizer, Network, Rotation
+from sfanav.localization.training import fit_localizer
+from sfanav.localization.updates import (
+    LocalizerUpdater,
+    ReadoutMemory,
+    drop_readout_memory,
+    readout_memory_bytes,
+    remember,
+    top_stage_features,
+    top_stage_inputs,
+)
+from sfanav.sfa.updates import NetworkUpdater, UpdatePolicy
+
+TINY = {
+    "input": {"width": 60, "height": 8, "channels": 3},
+    "network": {"precision": "double"},
+    "layers": [{"rf": [6, 4], "stride": [3, 4], "out": 6}, {"rf": "full", "out": 5}],
+}
+ROT = Rotation(step=10)
+KERNEL = {"kind": "kernel", "n_outputs": 5, "gamma": 0.5, "alpha": 1e-3}
+
+
+def _run(n, seed):
+    """Smooth periodic panoramas along a random walk, and the walk's (x, y)."""
+    rng = np.random.default_rng(seed)
+    x = np.arange(60) * 2 * np.pi / 60
+    y = np.arange(8)[:, None]
+    walk = np.cumsum(rng.normal(0, 0.3, (n, 6)), axis=0)
+    out = np.empty((n, 8, 60, 3))
+    for i in range(n):
+        p = walk[i]
+        for c in range(3):
+            out[i, :, :, c] = (np.sin(x + p[0] + 0.3 * y) + 0.5 * np.cos(2 * x + p[1] * (1 + c))
+                               + 0.3 * np.sin(3 * x + p[2] * y) + 0.1 * rng.standard_normal((8, 60)))
+    return np.clip((out + 2.5) / 5.0, 0.0, 1.0), walk[:, :2].copy()
+
+
+(A, YA), (B, YB), (C, YC) = _run(40, 1), _run(30, 2), _run(12, 3)
+
+
+def _trained(**kw):
+    net = Network(TINY)
+    return fit_localizer(net, A, YA, rotation=ROT, progress=False, readout_memory=1000, **kw)
+
+
+def _retrained(loc, **kw):
+    """The reference: the top stage trained on A and B (each its own
+    recording), then the readout fitted on A + B's features."""
+    net = NetworkUpdater(loc.network).partial_fit(B).network_
+    ref = Localizer(net, **kw)
+    return ref.fit(np.concatenate([A, B]), np.concatenate([YA, YB]))
+
+
+def _close(a, b, tol=1e-9):
+    a, b = np.asarray(a, float), np.asarray(b, float)
+    assert float(np.abs(a - b).max()) <= tol * max(1.0, float(np.abs(b).max()))
+
+
+@pytest.fixture(scope="module")
+def quad():
+    return _trained(readout="quadratic", n_outputs=5)
+
+
+@pytest.fixture(scope="module")
+def pooled():
+    return _trained(readout=KERNEL, rotation_pooling=3)
+
+
+def test_stage_inputs_give_the_features(quad, pooled):
+    for loc in (quad, pooled):
+        Z = top_stage_inputs(loc, C)
+        assert Z.shape == (len(C), loc.rotation_pooling_ if loc.rotation_pooling_ > 1 else 1, Z.shape[2])
+        _close(top_stage_features(loc.network, Z), loc.features(C), 1e-12)
+    assert pooled.readout_memory_.inputs.shape[1] == 3
+
+
+def test_update_equals_retraining_quadratic(quad):
+    up = LocalizerUpdater(quad).partial_fit(B, YB)
+    ref = _retrained(quad, readout="quadratic", n_outputs=5)
+    new = up.localizer_
+    _close(new.predict(C), ref.predict(C))
+    _close(new.training_positions_, np.concatenate([YA, YB]))
+    assert new.readout_memory_.n_seen == len(A) + len(B) and len(new.readout_memory_) == len(A) + len(B)
+    assert new.info["n_train_images"] == len(A) + len(B) and new.info["updates"][-1]["n_images"] == len(B)
+    assert quad.readout_memory_.n_seen == len(A)  # the original is not modified
+
+
+def test_update_equals_retraining_pooled_kernel(pooled):
+    new = LocalizerUpdater(pooled).partial_fit(B, YB).localizer_
+    ref = _retrained(pooled, readout=KERNEL, rotation_pooling=3)
+    assert new.rotation_pooling_ == 3 and new.readout == KERNEL
+    _close(new.predict(C), ref.predict(C))
+
+
+def test_update_with_signature_gp_matches_loosely():
+    loc = _trained(readout={"kind": "gp-signature", "n_outputs": 5}, signature="fourier", rotation_pooling=3)
+    new = LocalizerUpdater(loc).partial_fit(B, YB).localizer_
+    ref = _retrained(loc, readout={"kind": "gp-signature", "n_outputs": 5}, signature="fourier", rotation_pooling=3)
+    err = np.linalg.norm(new.predict(C) - ref.predict(C), axis=1)
+    assert err.max() < 1e-4 * max(1.0, float(np.ptp(YA)))
+
+
+def test_one_solve_for_two_runs_equals_two_solves(quad):
+    half = len(B) // 2
+    two = LocalizerUpdater(quad).partial_fit(B[:half], YB[:half]).partial_fit(B[half:], YB[half:]).localizer_
+    up = LocalizerUpdater(quad, UpdatePolicy(every=10 * len(B)))
+    up.partial_fit(B[:half], YB[:half]).partial_fit(B[half:], YB[half:])
+    assert up.n_solves_ == 0 and up.n_pending_ == len(B)
+    one = up.solve()
+    _close(one.predict(C), two.predict(C))
+
+
+def test_memory_is_bounded_and_evenly_spaced():
+    loc = fit_localizer(Network(TINY), A, YA, rotation=ROT, progress=False, readout="quadratic", n_outputs=5,
+                        readout_memory=16)
+    mem = loc.readout_memory_
+    assert len(mem) == 16 and mem.n_seen == len(A)
+    _close(mem.positions[[0, -1]], YA[[0, -1]])
+    assert mem.nbytes == mem.inputs.nbytes + mem.positions.nbytes
+    new = LocalizerUpdater(loc).partial_fit(B, YB).localizer_
+    assert len(new.readout_memory_) == 16 and new.readout_memory_.n_seen == len(A) + len(B)
+    sizes = readout_memory_bytes(new)
+    assert sizes["readout_memory"] == new.readout_memory_.nbytes and sizes["network_statistics"] > 0
+
+
+def test_model_file_round_trip(quad, tmp_path):
+    path = quad.save(tmp_path / "loc.sfanav")
+    import sfanav
+
+    back = sfanav.load(path)
+    assert isinstance(back.readout_memory_, ReadoutMemory)
+    _close(back.readout_memory_.inputs, quad.readout_memory_.inputs, 0)
+    a = LocalizerUpdater(back).partial_fit(B, YB).localizer_
+    b = LocalizerUpdater(quad).partial_fit(B, YB).localizer_
+    _close(a.predict(C), b.predict(C), 1e-12)
+    # without the memory: a smaller file with no statistics, loadable, not updatable
+    plain = sfanav.load(path)
+    small = drop_readout_memory(plain).save(tmp_path / "plain.sfanav")
+    assert small.stat().st_size < path.stat().st_size / 2
+    old = sfanav.load(small)
+    assert old.readout_memory_ is None
+    _close(old.predict(C), quad.predict(C), 1e-12)
+    with pytest.raises(ValueError, match="no readout memory"):
+        LocalizerUpdater(old)
+    with pytest.raises(ValueError, match="without its training statistics"):
+        LocalizerUpdater(remember(old, A, YA))
+
+
+def test_partial_fit_on_the_localizer(quad):
+    loc = sfanav_copy(quad)
+    loc.partial_fit(B, YB)
+    ref = LocalizerUpdater(quad).partial_fit(B, YB).localizer_
+    _close(loc.predict(C), ref.predict(C), 1e-12)
+
+
+def sfanav_copy(loc):
+    import tempfile
+    from pathlib import Path
+
+    import sfanav
+
+    with tempfile.TemporaryDirectory() as tmp:
+        return sfanav.load(loc.save(Path(tmp) / "m.sfanav"))
+
+
+def test_bad_runs_are_refused_and_change_nothing(quad):
+    loc = sfanav_copy(quad)
+    before = loc.predict(C)
+    with pytest.raises(ValueError, match="no positions"):
+        loc.partial_fit(B)
+    with pytest.raises(ValueError, match="60x8"):
+        loc.partial_fit(B[:, :, :50], YB)
+    with pytest.raises(ValueError, match="same length|rows|length"):
+        loc.partial_fit(B, YB[:-1])
+    with pytest.raises(ValueError, match="channel"):
+        loc.partial_fit(B[..., :1], YB)
+    _close(loc.predict(C), before, 0)
+    assert loc.readout_memory_.n_seen == len(A)
+    with pytest.raises(TypeError):
+        LocalizerUpdater("model.sfanav")
+    with pytest.raises(ValueError, match="readout memory inputs"):
+        ReadoutMemory(np.zeros((3, 4)), np.zeros((3, 2)))
+
+
+# ---------------------------------------------------------------- sfanav train --updatable, sfanav update
+
+
+def _dataset(path, images, xy):
+    from sfanav.data.dataset import write_dataset
+
+    u8 = np.round(np.asarray(images) * 255).astype(np.uint8)
+    return write_dataset(path, list(u8), np.c_[xy, np.zeros(len(xy))])
+
+
+def test_cli_update_of_a_localizer(tmp_path, capsys):
+    import json
+
+    import sfanav
+    from clitools import assert_one_line_error, run
+
+    (tmp_path / "tiny.json").write_text(json.dumps(TINY))
+    _dataset(tmp_path / "a", A, YA)
+    _dataset(tmp_path / "b", B, YB)
+    model = tmp_path / "loc.sfanav"
+    common = ["--config", tmp_path / "tiny.json", "--readout", "quadratic", "--n-outputs", "5", "--step", "10",
+              "--no-progress"]
+    code, out, err = run(capsys, "train", "--dataset", tmp_path / "a", "--out", model, "--updatable", *common)
+    assert code == 0, err
+    original = model.read_bytes()
+    loc = sfanav.load(model)
+    assert len(loc.readout_memory_) == len(A) and loc.info["source_image"] == [60, 8, 3]
+    code, out, err = run(capsys, "update", model, "--dataset", tmp_path / "b", "--out", tmp_path / "new.sfanav",
+                         "--no-progress")
+    assert code == 0, err
+    assert "refitted on 70 views" in out and "bytes of readout memory" in out
+    assert model.read_bytes() == original
+    new = sfanav.load(tmp_path / "new.sfanav")
+    Xb = np.round(B * 255).astype(np.uint8)
+    ref = LocalizerUpdater(loc).partial_fit(Xb, YB).localizer_
+    Xc = np.round(C * 255).astype(np.uint8)
+    _close(new.predict(Xc), ref.predict(Xc), 1e-12)
+    assert new.info["n_train_images"] == len(A) + len(B)
+    # runs that do not match, a run without ground truth, a model without memory: one line, MODEL unchanged
+    _dataset(tmp_path / "gray", B[..., 0], YB)
+    _dataset(tmp_path / "narrow", B[:, :, :50], YB)
+    _dataset(tmp_path / "nogt", B, YB)
+    frames = tmp_path / "nogt" / "frames.csv"  # x, y blanked: no ground truth
+    rows = [r.split(",") for r in frames.read_text().splitlines()]
+    frames.write_text("\n".join(",".join(r if i == 0 else r[:3] + ["", ""] + r[5:]) for i, r in enumerate(rows))
+                      + "\n")
+    for bad, words in ((tmp_path / "gray", ("channel", "does not match")),
+                       (tmp_path / "narrow", ("50x8", "does not match")),
+                       (tmp_path / "nogt", ("ground-truth",))):
+        code, out, err = run(capsys, "update", model, "--dataset", bad, "--out", tmp_path / "bad.sfanav")
+        assert_one_line_error(code, err, *words)
+        assert not (tmp_path / "bad.sfanav").exists() and model.read_bytes() == original
+    code, out, err = run(capsys, "train", "--dataset", tmp_path / "a", "--out", tmp_path / "plain.sfanav", *common)
+    assert code == 0, err
+    code, out, err = run(capsys, "update", tmp_path / "plain.sfanav", "--dataset", tmp_path / "b",
+                         "--out", tmp_path / "bad.sfanav")
+    assert_one_line_error(code, err, "--updatable")
+    assert not (tmp_path / "bad.sfanav").exists()
+
+
+def test_readout_augmentation_copies_are_kept_and_extended():
+    from sfanav.data.corruptions import CAMERA
+
+    u8 = [np.round(x * 255).astype(np.uint8) for x in (A, B, C)]
+    loc = fit_localizer(Network(TINY), u8[0], YA, rotation=ROT, progress=False, readout="quadratic", n_outputs=5,
+                        readout_augmentation=CAMERA, readout_memory=1000)
+    mem = loc.readout_memory_
+    assert mem.augmented is not None and mem.augmented[0].shape == mem.inputs.shape
+    with pytest.raises(ValueError, match="corrupted copies"):
+        LocalizerUpdater(loc)
+    new = LocalizerUpdater(loc, augmentation=CAMERA).partial_fit(u8[1], YB).localizer_
+    assert new.readout_memory_.augmented[0].shape == new.readout_memory_.inputs.shape == (70,) + mem.inputs.shape[1:]
+    assert np.isfinite(new.predict(u8[2])).all() and new.n_augmented_ == 70
