@@ -126,7 +126,7 @@ def _run_localize(args: argparse.Namespace) -> int:
     from ...data.sources import open_images
     from ...data.tum import write_tum
     from ...localization.error_metrics import med
-    from ...odometry.fusion import fuse
+    from ...odometry.streaming import StreamingLocalizer
 
     loc = load_localizer(args.model, landmarks=True)
     if is_landmark_model(loc):
@@ -190,21 +190,40 @@ def _run_localize(args: argparse.Namespace) -> int:
     log(f"localizing {src.description} with {args.model} ({prep.describe()} panoramas)")
     bar = progress_bar(not args.no_progress, src.n, "localize")
     preds = []
+    live = None
+    if args.odometry:  # the streaming localizer over the recording: what a live robot runs, the same numbers
+        live = StreamingLocalizer(loc, loc.info["ekf_noise"], mirror=mirror_of(args, loc), log=log,
+                                  rotations=args.rotations, max_pending=max(100, args.batch_size))
+        stamps = _stream_stamps(src)
+    i = 0
     for batch in src.batches(args.batch_size):
-        preds.append(loc.predict(conform(batch), rotations=args.rotations))
+        if live is None:
+            preds.append(loc.predict(conform(batch), rotations=args.rotations))
+        else:
+            n = len(batch)
+            preds += live.push_images(stamps[i:i + n], batch)
+            for j in range(i, i + n):
+                preds += live.push_odometry(stamps[j], src.odometry[j])
+            i += n
         if bar is not None:
             bar.update(len(batch))
+    if live is not None:
+        preds += live.flush()
     if bar is not None:
         bar.close()
     if not preds:
         raise UsageError(f"{args.input} has no images (an empty or unreadable video?)")
-    xy = np.concatenate(preds)
-    frames = src.frames if src.frames is not None else np.arange(len(xy))
     fused = None
-    if args.odometry:
-        fused, ekf = fuse(src.odometry, xy, loc.info["ekf_noise"], return_filter=True)
-        log(f"fused track: {ekf.n_reinitializations_} re-initialisation(s) from the single-image estimates, "
-            f"{int(ekf.jumps_.sum())} odometry jump(s)")
+    if live is None:
+        xy = np.concatenate(preds)
+    else:
+        xy = np.array([e.estimate for e in preds])
+        if live.init_error_ is not None:
+            raise UsageError(f"--odometry: no start pose from the first images' estimates: {live.init_error_}")
+        fused = np.array([e.pose for e in preds])
+        log(f"fused track: {live.n_reinitializations_} re-initialisation(s) from the single-image estimates, "
+            f"{live.n_jumps_} odometry jump(s)")
+    frames = src.frames if src.frames is not None else np.arange(len(xy))
     for out in outs:
         if out in tums:
             stamps, unit = _tum_stamps(src, len(xy))
@@ -225,7 +244,7 @@ def _run_localize(args: argparse.Namespace) -> int:
         stamps, unit = _tum_stamps(src, len(xy))
         write_tum(gt_out, stamps, src.xy[: len(xy)], gt_heading, unit=unit)
     written = outs + ([gt_out] if gt_out is not None else [])
-    msg = (f"wrote {len(xy)} positions" + (f" and the fused track ({ekf.n_reinitializations_} re-initialisations)"
+    msg = (f"wrote {len(xy)} positions" + (f" and the fused track ({live.n_reinitializations_} re-initialisations)"
                                             if fused is not None else "")
            + (" and the ground truth" if gt_out is not None else "")
            + f" to {' and '.join(str(o) for o in written)}")
@@ -240,6 +259,17 @@ def _run_localize(args: argparse.Namespace) -> int:
             _true_heading(args) if fused is not None and src.kind == "dataset" else None)
         print(_ape_rpe_line(xy, fused, src.xy, true_h))
     return 0
+
+
+def _stream_stamps(src):  # type: ignore[no-untyped-def]
+    """Integer stamps (ns) ordering a recording's frames for the streaming localizer: the dataset's where they
+    increase, else the frame indices (the fused track depends on the order only)."""
+    import numpy as np
+
+    s = src.stamps_ns
+    if s is not None and len(s) >= src.n and (np.diff(np.asarray(s[: src.n], dtype=np.int64)) > 0).all():
+        return [int(v) for v in s[: src.n]]
+    return list(range(src.n))
 
 
 def _true_heading(args: argparse.Namespace):  # type: ignore[no-untyped-def]
