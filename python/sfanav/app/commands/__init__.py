@@ -8,6 +8,7 @@ from . import simulate  # noqa: F401
 from . import bag_import  # noqa: F401
 from . import train  # noqa: F401
 from . import localize  # noqa: F401
+from . import ros_node  # noqa: F401
 from . import navigate  # noqa: F401
 from . import groundtruth  # noqa: F401
 from . import features  # noqa: F401
