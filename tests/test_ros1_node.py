@@ -158,7 +158,7 @@ def test_the_node_localizes_a_played_bag_like_the_batch(ros, recorded, tmp_path)
         play = subprocess.run(["rosbag", "play", "-q", str(recorded["bag"])], env=env, capture_output=True,
                               text=True, timeout=120)
         assert play.returncode == 0, play.stderr
-        time.sleep(3.0)
+        time.sleep(1.5)  # the last messages reach the node and the recorder
     finally:
         _stop(rec)
         _stop(node)
@@ -217,3 +217,19 @@ def test_a_camera_of_another_size_stops_the_node_with_one_line(ros, recorded, tm
     last = [ln for ln in err.splitlines() if ln.strip()][-1]
     assert last.startswith("sfanav ros-node: error:") and "120x16" in last and "60x8" in last, err
     assert "Traceback" not in err
+
+
+def test_the_launch_file_starts_the_node(ros, recorded):
+    env = {**ros["env"], "ROS_PACKAGE_PATH": str(Path(__file__).resolve().parents[1] / "ros"),
+           "SFANAV_PYTHON": sys.executable}
+    launch = subprocess.Popen(["roslaunch", "--wait", "sfanav_ros", "sfanav.launch", f"model:={recorded['model']}",
+                               "image_topic:=/cam3", "odom_topic:=/odom3", "silence:=0.5"], env=env,
+                              stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, start_new_session=True)
+    try:
+        _wait(lambda: _subscribed(ros["master"], "/cam3", "/sfanav") and _subscribed(ros["master"], "/odom3", "/sfanav"),
+              "the launched node's subscriptions", 60)
+        time.sleep(1.5)
+    finally:
+        _stop(launch)
+    log = launch.stdout.read()
+    assert "/cam3 is silent" in log and "/odom3 is silent" in log and "Traceback" not in log, log
