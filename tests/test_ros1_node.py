@@ -233,3 +233,38 @@ def test_the_launch_file_starts_the_node(ros, recorded):
         _stop(launch)
     log = launch.stdout.read()
     assert "/cam3 is silent" in log and "/odom3 is silent" in log and "Traceback" not in log, log
+
+
+def test_undecodable_messages_and_stamps_that_jump_back_are_logged_not_fatal(ros, recorded, tmp_path):
+    from bagtools import raw_image, truncated
+    from rosbags.rosbag1 import Writer
+    from sfanav.data.ros_messages import typestore
+
+    store = typestore(1)
+    T = store.types
+    img = np.zeros((8, 60, 3), np.uint8)
+    sent = [(STAMP0, raw_image(img)), (STAMP0 + PERIOD, truncated(raw_image(img), 100)),
+            (STAMP0 - 5 * PERIOD, raw_image(img))]  # a broken image, then a stamp 0.3 s back
+    bag = tmp_path / "broken.bag"
+    with Writer(bag) as w:
+        conn = w.add_connection("/cam4", "sensor_msgs/msg/Image", typestore=store)
+        for k, (ns, (typ, fields)) in enumerate(sent):
+            t = T["builtin_interfaces/msg/Time"](sec=ns // 10**9, nanosec=ns % 10**9)
+            msg = T[typ](header=T["std_msgs/msg/Header"](seq=k, stamp=t, frame_id="camera"), **fields)
+            w.write(conn, STAMP0 + k * PERIOD, store.serialize_ros1(msg, typ))
+    node = subprocess.Popen([sys.executable, "-m", "sfanav", "ros-node", str(recorded["model"]),
+                             "_image_topic:=/cam4", "_odom_topic:=/odom4", "_silence:=60"], env=ros["env"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    try:
+        _wait(lambda: _subscribed(ros["master"], "/cam4", "/sfanav"), "the node's subscription", 60)
+        time.sleep(0.5)
+        subprocess.run(["rosbag", "play", "-q", str(bag)], env=ros["env"], capture_output=True, timeout=60)
+        time.sleep(1.0)
+        alive = node.poll() is None
+    finally:
+        _stop(node)
+    log = node.stdout.read() + node.stderr.read()
+    assert alive and "Traceback" not in log, log
+    assert f"/cam4: message at stamp {STAMP0 + PERIOD} ns skipped:" in log, log
+    assert f"/cam4: the stamp jumps back from {STAMP0 + PERIOD} ns to {STAMP0 - 5 * PERIOD} ns" in log, log
+    assert "dropped {'late': 1}" in log, log
