@@ -185,3 +185,23 @@ def test_buffers_stay_bounded(tiny):
     for k in range(6):  # images after every odometry: they wait, the oldest beyond max_pending dropped
         live.push_image(BASE + 1000 + k, tiny["images"][k])
     assert live.dropped_["no_odometry"] == 2
+
+
+def test_batch_localize_of_a_run_that_never_moves_is_one_usage_error(tiny, tmp_path, capsys):
+    import shutil
+
+    from clitools import assert_one_line_error, run
+
+    ds = tmp_path / "still"
+    shutil.copytree(tiny["root"] / "data", ds)
+    rows = list(csv.DictReader(open(ds / "frames.csv")))
+    for r in rows:
+        r["odom_x"], r["odom_y"], r["odom_heading"] = "1.0", "2.0", "0.0"
+    with open(ds / "frames.csv", "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=list(rows[0]))
+        w.writeheader()
+        w.writerows(rows)
+    code, _, err = run(capsys, "localize", tiny["model"], ds, "--run", "test", "--odometry", "--out",
+                       tmp_path / "e.csv", "--no-progress")
+    assert_one_line_error(code, err.splitlines()[-1], "no start pose", "do not move")
+    assert not (tmp_path / "e.csv").exists()

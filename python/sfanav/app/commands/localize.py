@@ -218,8 +218,9 @@ def _run_localize(args: argparse.Namespace) -> int:
         xy = np.concatenate(preds)
     else:
         xy = np.array([e.estimate for e in preds])
-        if live.init_error_ is not None:
-            raise UsageError(f"--odometry: no start pose from the first images' estimates: {live.init_error_}")
+        if live.init_error_ is not None or any(e.pose is None for e in preds):
+            raise UsageError("--odometry: no start pose from the first images' estimates: " + (
+                live.init_error_ or f"the first {live.start_frames} frames do not move in the odometry"))
         fused = np.array([e.pose for e in preds])
         log(f"fused track: {live.n_reinitializations_} re-initialisation(s) from the single-image estimates, "
             f"{live.n_jumps_} odometry jump(s)")
