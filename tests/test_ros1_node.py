@@ -142,8 +142,14 @@ def test_the_node_localizes_a_played_bag_like_the_batch(ros, recorded, tmp_path)
     from rosbags.highlevel import AnyReader
 
     env, master = ros["env"], ros["master"]
+    try:
+        import rerun  # noqa: F401
+        rrd = tmp_path / "live.rrd"  # the live view too
+    except ImportError:
+        rrd = None
     node = subprocess.Popen([sys.executable, "-m", "sfanav", "ros-node", str(recorded["model"]),
-                             "_image_topic:=/cam", "_odom_topic:=/odom", "_silence:=60"],
+                             "_image_topic:=/cam", "_odom_topic:=/odom", "_silence:=60"]
+                            + ([f"_rerun:={rrd}"] if rrd is not None else []),
                             env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             start_new_session=True)
     out = tmp_path / "out.bag"
@@ -193,6 +199,13 @@ def test_the_node_localizes_a_played_bag_like_the_batch(ros, recorded, tmp_path)
     assert np.all(np.isfinite(f0.pose.covariance)) and f0.pose.covariance[0] > 0
     tf0 = got["/tf"][stamps[0]]
     assert (tf0.header.frame_id, tf0.child_frame_id) == ("map", "odom")
+    if rrd is not None:  # the live view: every image, estimate and fused position at its exact stamp
+        from test_live_view import _entities
+
+        t = _entities(rrd)
+        for e in ("/camera/image", "/world/estimate", "/world/fused", "/world/fused/ellipse"):
+            ns = [int(v.value) if hasattr(v, "value") else int(v) for v in t[e].column("stamp").cast("int64").to_pylist()]
+            assert sorted(ns) == stamps, e
 
 
 def test_a_camera_of_another_size_stops_the_node_with_one_line(ros, recorded, tmp_path):

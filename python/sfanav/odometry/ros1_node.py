@@ -24,7 +24,10 @@ Topics (``~`` is the node's private namespace; every name is a parameter)
   correction that takes the odometry's pose of ``~base_frame`` to the fused
   one) unless ``~publish_tf`` is false.
 
-Other parameters: ``~window`` (s, the reordering window, default 0),
+Other parameters: ``~rerun`` (a Rerun recording ``NAME.rrd``, ``viewer`` or
+``rerun+http://HOST:PORT/proxy``: the live view of
+:class:`~sfanav.odometry.live_view.RerunView`; default none),
+``~window`` (s, the reordering window, default 0),
 ``~silence`` (s: a topic without messages this long is logged, default 2),
 ``~resize`` (false: a camera whose panoramas differ in size from the
 model's stops the node with one line; true: they are resized), the filter's
@@ -130,6 +133,16 @@ class Ros1Node:
         self.live = StreamingLocalizer(localizer, noise or None, window_ns=int(round(float(p("~window", 0.0)) * 1e9)),
                                        log=lambda m: rospy.loginfo(f"sfanav: {m}"))
         self.r2 = float(self.live.noise["measurement_noise"]) ** 2
+        self.view = None
+        if p("~rerun", ""):
+            from .live_view import RerunView
+
+            try:
+                self.view = RerunView(p("~rerun"))
+            except (ImportError, ValueError) as exc:
+                raise ValueError(f"~rerun: {exc}") from None
+            if getattr(localizer, "training_positions_", None) is not None:
+                self.view.log_map(localizer.training_positions_)
         self.pub_estimate = rospy.Publisher(p("~estimate_topic", "/sfanav/estimate"), PoseWithCovarianceStamped,
                                             queue_size=100)
         self.pub_fused = rospy.Publisher(p("~fused_topic", "/sfanav/fused"), Odometry, queue_size=100)
@@ -179,6 +192,8 @@ class Ros1Node:
             self.rospy.signal_shutdown(self.fatal)
             return
         with self.lock:
+            if self.view is not None:
+                self.view.log_image(img, stamp_ns=ns)
             try:
                 out = self.live.push_image(ns, img)
             except ValueError as exc:
@@ -205,6 +220,8 @@ class Ros1Node:
             m.pose.pose.orientation.w = 1.0
             m.pose.covariance = covariance_6x6(np.diag([self.r2, self.r2, 1e6]))
             self.pub_estimate.publish(m)
+            if self.view is not None:
+                self.view.log(e)
             if e.pose is None:
                 continue
             o = self.msg["odom"]()
@@ -238,6 +255,8 @@ class Ros1Node:
         while not self.rospy.is_shutdown():
             self._check_silence()
             time.sleep(0.2)
+        if self.view is not None:
+            self.view.close()
         if self.fatal is not None:
             raise ValueError(self.fatal)
         d = dict(self.live.dropped_)

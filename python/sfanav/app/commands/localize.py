@@ -105,6 +105,10 @@ def _add_localize(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                    help="fuse the estimates with the run's odometry (EKF, CTRV; a dataset with odom_x, odom_y, "
                         "odom_heading): adds columns fused_x, fused_y, fused_heading; the noise comes from the "
                         "model's training run, the start pose from the first estimates")
+    p.add_argument("--rerun", default=None, metavar="NAME.rrd|viewer",
+                   help="also log the images, estimates, fused track with covariance ellipses, the learned map and "
+                        "the ground truth to a Rerun recording (NAME.rrd), a spawned viewer (viewer) or a running "
+                        "one (rerun+http://HOST:PORT/proxy); needs pip install rerun-sdk")
     p.add_argument("--batch-size", type=arg.pos_int, default=64, metavar="N", help="images per batch (default 64)")
     p.add_argument("--overwrite", action="store_true", help="replace an existing CSV")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -188,6 +192,7 @@ def _run_localize(args: argparse.Namespace) -> int:
     prep = Preprocessing.of_model(loc)
     conform = Preprocessor(prep, mirror=mirror_of(args, loc), log=log)
     log(f"localizing {src.description} with {args.model} ({prep.describe()} panoramas)")
+    view = _open_view(args.rerun, args.overwrite) if args.rerun else None
     bar = progress_bar(not args.no_progress, src.n, "localize")
     preds = []
     live = None
@@ -197,14 +202,16 @@ def _run_localize(args: argparse.Namespace) -> int:
         stamps = _stream_stamps(src)
     i = 0
     for batch in src.batches(args.batch_size):
+        n = len(batch)
         if live is None:
             preds.append(loc.predict(conform(batch), rotations=args.rotations))
         else:
-            n = len(batch)
             preds += live.push_images(stamps[i:i + n], batch)
             for j in range(i, i + n):
                 preds += live.push_odometry(stamps[j], src.odometry[j])
-            i += n
+        if view is not None:
+            _log_batch(view, src, batch, i, preds if live is not None else preds[-1])
+        i += n
         if bar is not None:
             bar.update(len(batch))
     if live is not None:
@@ -225,6 +232,13 @@ def _run_localize(args: argparse.Namespace) -> int:
         log(f"fused track: {live.n_reinitializations_} re-initialisation(s) from the single-image estimates, "
             f"{live.n_jumps_} odometry jump(s)")
     frames = src.frames if src.frames is not None else np.arange(len(xy))
+    if view is not None:
+        if live is not None:  # the last batch's estimates, emitted at flush
+            _log_batch(view, src, None, i, preds)
+        if loc.training_positions_ is not None:
+            view.log_map(loc.training_positions_)
+        view.close()
+        log(f"logged {view.n_logged_} estimates to Rerun ({view.target})")
     for out in outs:
         if out in tums:
             stamps, unit = _tum_stamps(src, len(xy))
@@ -260,6 +274,44 @@ def _run_localize(args: argparse.Namespace) -> int:
             _true_heading(args) if fused is not None and src.kind == "dataset" else None)
         print(_ape_rpe_line(xy, fused, src.xy, true_h))
     return 0
+
+
+def _open_view(target: str, overwrite: bool):  # type: ignore[no-untyped-def]
+    """The Rerun view of --rerun (a one-line error without rerun-sdk or for a bad target)."""
+    from pathlib import Path
+
+    from ...odometry.live_view import RerunView
+
+    if Path(target).suffix.lower() == ".rrd":
+        new_file(target, overwrite, "Rerun recording")
+    try:
+        return RerunView(target)
+    except (ImportError, ValueError) as exc:
+        raise UsageError(f"--rerun: {exc}") from None
+
+
+def _log_batch(view, src, batch, start: int, estimates) -> None:  # type: ignore[no-untyped-def]
+    """Logs a batch's images (frames start..) and ground truth, and the estimates not logged yet: the streaming
+    localizer's LiveEstimates (all emitted so far) or a batch's (n, 2) array."""
+    import numpy as np
+
+    from ...odometry.streaming import LiveEstimate
+
+    exact = src.stamps_ns is not None
+    if batch is not None:
+        for k, img in enumerate(batch):
+            f = start + k
+            view.log_image(img, stamp_ns=int(src.stamps_ns[f]) if exact else None, frame=f)
+            if src.xy is not None and np.isfinite(src.xy[f]).all():
+                view.log_truth(src.xy[f], stamp_ns=int(src.stamps_ns[f]) if exact else None, frame=f)
+    if isinstance(estimates, np.ndarray):
+        for k, xy in enumerate(estimates):
+            f = start + k
+            view.log(LiveEstimate(int(src.stamps_ns[f]) if exact else f, xy, np.full(3, np.nan), None, None, None),
+                     frame=f, stamp=exact)
+        return
+    for f in range(view.n_logged_, len(estimates)):
+        view.log(estimates[f], frame=f, stamp=exact)
 
 
 def _stream_stamps(src):  # type: ignore[no-untyped-def]
