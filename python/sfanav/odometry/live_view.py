@@ -38,7 +38,7 @@ def require_rerun() -> Any:
     try:
         import rerun
     except ImportError:
-        raise ImportError('the live view needs Rerun: pip install rerun-sdk') from None
+        raise ImportError('the live view needs Rerun: pip install "sfanav[rerun]" (or rerun-sdk)') from None
     return rerun
 
 
