@@ -205,3 +205,14 @@ def test_batch_localize_of_a_run_that_never_moves_is_one_usage_error(tiny, tmp_p
                        tmp_path / "e.csv", "--no-progress")
     assert_one_line_error(code, err.splitlines()[-1], "no start pose", "do not move")
     assert not (tmp_path / "e.csv").exists()
+
+
+def test_step_anomalies_against_a_given_nominal_step():
+    steps = np.array([[1.0, 0.0], [5.0, 0.0], [30.0, 0.0]])
+    scale, jump = step_anomalies(steps, nominal=1.0)
+    assert scale.tolist() == [1.0, 5.0, 30.0] and jump.tolist() == [False, False, True]
+    scale, jump = step_anomalies(steps)  # the median of these three steps instead: 5 m
+    assert scale.tolist() == [1.0, 1.0, 6.0] and jump.tolist() == [False, False, False]
+    assert not step_anomalies(steps, nominal=0.0)[1].any()
+    with pytest.raises(ValueError, match="nominal"):
+        step_anomalies(steps, nominal=-1.0)
