@@ -114,6 +114,44 @@ def _chi2_2dof(p: float) -> float:
 _H = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
 
 
+def _hjac(x: Any) -> np.ndarray:
+    return _H
+
+
+def _hx(x: Any) -> np.ndarray:
+    return _H @ x
+
+
+@dataclass(frozen=True)
+class FilterStep:
+    """The filter's account of one frame (:meth:`OdometryEKF.step`).
+
+    Attributes
+    ----------
+    pose : ndarray (3,)
+        Fused pose ``(x [m], y [m], theta [rad])``, heading wrapped.
+    covariance : ndarray (3, 3)
+        Its posterior covariance (m^2, m rad, rad^2).
+    mahalanobis : float
+        Mahalanobis distance of the estimate's innovation (NaN: no estimate).
+    gated, reinitialized, jumped : bool
+        The estimate was gated; the filter re-initialised from the recent
+        estimates; the step leading here was a jump.
+    events : tuple of FilterEvent
+        This frame's events, ``frame`` counting the frames since :meth:`OdometryEKF.start`.
+    """
+
+    pose: np.ndarray
+    covariance: np.ndarray
+    mahalanobis: float
+    gated: bool
+    reinitialized: bool
+    jumped: bool
+    events: tuple
+
+
+
+
 _FILTER_CLASS: Any = None
 
 
@@ -367,8 +405,8 @@ class OdometryEKF:
         if s0.shape != (3,):
             raise ValueError(f"start_pose must be (x [m], y [m], heading [rad]), got shape {s0.shape}")
         check_finite(s0, "start_pose")
-        sd, sh, sr, st, P0, floor, gate, mcg = self._check()
-        rec = self._check_recovery(sr)
+        sd, sh, sr, st, *_ = self._check()
+        self._check_recovery(sr)
         U = increments(P) if len(P) > 1 else np.zeros((0, 2))
         turn_var = sh**2 + st**2 * np.abs(U[:, 1])
         if gyro is not None:
@@ -380,109 +418,167 @@ class OdometryEKF:
         if stamps is not None and len(np.ravel(np.asarray(stamps))) != len(P):
             raise ValueError(f"stamps must have one time per frame ({len(P)}), got {len(np.ravel(np.asarray(stamps)))}")
         scale, jump = step_anomalies(U, stamps, gap_factor=self.gap_factor, jump_factor=self.jump_factor)
-        R = sr**2 * np.eye(2)
-        min_spread = 5.0 * sr
-
-        ekf = _ctrv_filter_class()(dim_x=3, dim_z=2)
-        ekf.x = s0.reshape(3, 1).copy()
-        ekf.P = P0.copy()
-        ekf.R = R
-
-        def hjac(x):
-            return _H
-
-        def hx(x):
-            return _H @ x
-
+        self.start(s0)
         N = len(P)
         poses = np.empty((N, 3))
         covs = np.empty((N, 3, 3))
         gated = np.zeros(N, bool)
         reinit = np.zeros(N, bool)
         jumped = np.zeros(N, bool)
-        events: list[FilterEvent] = []
         maha = np.full(N, np.nan)
-        loglik = 0.0
-        streak = 0
-        n_missing = 0
-        bad_run: list[int] = []  # frames of the current run of inconsistent estimates
-        nis: list[tuple[int, float]] = []  # (frame, NIS) of the recent accepted estimates
+        events: list[FilterEvent] = []
         for k in range(N):
-            if k > 0:
-                u = U[k - 1]
-                x = ekf.x[:, 0]
-                F, V = ctrv_jacobians(x, u)
-                ekf.F = F
-                Mk = np.diag([sd**2, turn_var[k - 1]]) * scale[k - 1]
-                Q = V @ Mk @ V.T + floor * np.eye(3)
-                if scale[k - 1] > 1:
-                    events.append(FilterEvent(k, "gap", float(scale[k - 1])))
-                if jump[k - 1]:  # the displacement is unknown within its own length
-                    Q[:2, :2] += u[0] ** 2 * np.eye(2)
-                    jumped[k] = True
-                    events.append(FilterEvent(k, "jump", float(abs(u[0]))))
-                    bad_run, nis = [], []  # the odometry across a jump does not tie frames together
-                ekf.Q = Q
-                ekf.predict(u=u)  # x = ctrv_motion(x, u), P = F P F^T + Q
-            z = Z[k]
-            if np.isnan(z).any():
-                n_missing += 1
-            else:
-                y = z - ekf.x[:2, 0]
-                S = ekf.P[:2, :2] + R
-                m2 = float(y @ np.linalg.solve(S, y))
-                maha[k] = np.sqrt(m2)
-                bad_run = bad_run + [k] if m2 > rec["divergence"] else []
-                trigger, window = None, []
-                if rec["reinit_after"] is not None and len(bad_run) >= rec["reinit_after"]:
-                    trigger, window = "divergence", bad_run
-                elif rec["nis_window"] is not None and m2 <= rec["divergence"]:
-                    nis = (nis + [(k, m2)])[-rec["nis_window"]:]
-                    if len(nis) == rec["nis_window"] and sum(v for _, v in nis) > rec["nis_bound"]:
-                        trigger, window = "innovation", [j for j, _ in nis]
-                if trigger is not None:
-                    old = ekf.x[:2, 0].copy()
-                    self._reinitialize(ekf, P, Z, window, rec, min_spread, floor)
-                    reinit[k] = True
-                    events.append(FilterEvent(k, trigger, float(np.hypot(*(ekf.x[:2, 0] - old)))))
-                    bad_run, nis, streak = [], [], 0
-                elif gate is not None and m2 > gate and streak < mcg:
-                    gated[k] = True
-                    streak += 1
-                else:
-                    streak = 0
-                    ekf.update(z.reshape(2, 1), hjac, hx)
-                    loglik += -0.5 * (m2 + np.log(np.linalg.det(S)) + 2 * np.log(2 * np.pi))
-            ekf.x[2, 0] = wrap_angle(ekf.x[2, 0])
-            poses[k] = ekf.x[:, 0]
-            covs[k] = ekf.P
+            st_k = self._advance(P[k], Z[k], *((U[k - 1], turn_var[k - 1], scale[k - 1], bool(jump[k - 1]))
+                                               if k > 0 else (None, 0.0, 1.0, False)))
+            poses[k], covs[k], maha[k] = st_k.pose, st_k.covariance, st_k.mahalanobis
+            gated[k], reinit[k], jumped[k] = st_k.gated, st_k.reinitialized, st_k.jumped
+            events.extend(st_k.events)
         self.poses_ = poses
         self.covariances_ = covs
         self.gated_ = gated
         self.n_gated_ = int(gated.sum())
-        self.n_missing_ = n_missing
+        self.n_missing_ = self._live["n_missing"]
         self.mahalanobis_ = maha
-        self.log_likelihood_ = float(loglik)
+        self.log_likelihood_ = float(self._live["loglik"])
         self.reinitialized_ = reinit
         self.n_reinitializations_ = int(reinit.sum())
         self.jumps_ = jumped
         self.events_ = events
         return poses
 
+    def start(self, start_pose: Any) -> "OdometryEKF":
+        """Starts filtering online at ``start_pose`` (3,) ``(x [m], y [m],
+        theta [rad])``, the pose of the first frame given to :meth:`step`.
+        Validates the parameters (ValueError/TypeError naming a bad one).
+        :meth:`run` is this and one :meth:`step` per frame."""
+        s0 = as_real_array(start_pose, "start_pose").astype(np.float64).ravel()
+        if s0.shape != (3,):
+            raise ValueError(f"start_pose must be (x [m], y [m], heading [rad]), got shape {s0.shape}")
+        check_finite(s0, "start_pose")
+        sd, sh, sr, st, P0, floor, gate, mcg = self._check()
+        rec = self._check_recovery(sr)
+        ekf = _ctrv_filter_class()(dim_x=3, dim_z=2)
+        ekf.x = s0.reshape(3, 1).copy()
+        ekf.P = P0.copy()
+        ekf.R = sr**2 * np.eye(2)
+        self._live = {"ekf": ekf, "sd": sd, "sh": sh, "st": st, "floor": floor, "gate": gate, "mcg": mcg,
+                      "rec": rec, "min_spread": 5.0 * sr, "k": 0, "last": None, "streak": 0, "n_missing": 0,
+                      "loglik": 0.0, "bad_run": [], "nis": [], "recent": {}}
+        return self
+
+    def step(self, odometry_pose: Any, measurement: Any, *, scale: float = 1.0, jump: bool = False) -> "FilterStep":
+        """One frame online (after :meth:`start`): the prediction by the
+        odometry increment from the previous frame's odometry pose to
+        ``odometry_pose`` (3,) (none on the first frame), then the update by
+        ``measurement`` (2,) metres (NaN: none). ``scale`` (>= 1) multiplies
+        the step's odometry noise variance (a gap) and ``jump`` treats its
+        displacement as unknown (:func:`sfanav.odometry.recovery.step_anomalies`
+        decides both in :meth:`run`). Returns the frame's :class:`FilterStep`:
+        the numbers :meth:`run` gives for the frames so far with those scales
+        and jumps. Memory stays bounded however many frames are stepped.
+
+        Example
+        -------
+        >>> ekf = OdometryEKF(0.02, 0.01, 0.2).start((0.0, 0.0, 0.0))
+        >>> r = ekf.step((0.0, 0.0, 0.0), (0.1, 0.0))
+        >>> r = ekf.step((1.0, 0.0, 0.0), (1.0, 0.0))
+        >>> r.pose.shape, r.covariance.shape
+        ((3,), (3, 3))
+        """
+        if getattr(self, "_live", None) is None:
+            raise ValueError("step needs start(start_pose) first")
+        p = as_real_array(odometry_pose, "odometry_pose").astype(np.float64).ravel()
+        if p.shape != (3,) or not np.isfinite(p).all():
+            raise ValueError(f"odometry_pose must be a finite (x [m], y [m], heading [rad]), got {odometry_pose!r}")
+        z = as_real_array(measurement, "measurement").astype(np.float64).ravel()
+        if z.shape != (2,) or np.isinf(z).any():
+            raise ValueError(f"measurement must be (x, y) in metres or NaN (none), got {measurement!r}")
+        sc = float(scale)
+        if not (np.isfinite(sc) and sc >= 1):
+            raise ValueError(f"scale must be a number >= 1 (nominal steps), got {scale!r}")
+        lv = self._live
+        u, tv = None, 0.0
+        if lv["last"] is not None:
+            u = increments(np.stack([lv["last"], p]))[0]
+            tv = lv["sh"] ** 2 + lv["st"] ** 2 * abs(float(u[1]))
+        return self._advance(p, z, u, tv, sc, bool(jump))
+
+    def _advance(self, pose: np.ndarray, z: np.ndarray, u: Any, turn_var: float, scale: float,
+                 jump: bool) -> "FilterStep":
+        """Predicts by the increment u (None on the first frame) and updates by z: the recursion of :meth:`run`."""
+        lv = self._live
+        ekf, rec, floor = lv["ekf"], lv["rec"], lv["floor"]
+        k = lv["k"]
+        events: list[FilterEvent] = []
+        jumped = gated = reinit = False
+        maha = np.nan
+        if u is not None:
+            x = ekf.x[:, 0]
+            F, V = ctrv_jacobians(x, u)
+            ekf.F = F
+            Mk = np.diag([lv["sd"] ** 2, turn_var]) * scale
+            Q = V @ Mk @ V.T + floor * np.eye(3)
+            if scale > 1:
+                events.append(FilterEvent(k, "gap", float(scale)))
+            if jump:  # the displacement is unknown within its own length
+                Q[:2, :2] += u[0] ** 2 * np.eye(2)
+                jumped = True
+                events.append(FilterEvent(k, "jump", float(abs(u[0]))))
+                lv["bad_run"], lv["nis"] = [], []  # the odometry across a jump does not tie frames together
+            ekf.Q = Q
+            ekf.predict(u=u)  # x = ctrv_motion(x, u), P = F P F^T + Q
+        if np.isnan(z).any():
+            lv["n_missing"] += 1
+        else:
+            lv["recent"][k] = (pose, z)
+            R = ekf.R
+            y = z - ekf.x[:2, 0]
+            S = ekf.P[:2, :2] + R
+            m2 = float(y @ np.linalg.solve(S, y))
+            maha = np.sqrt(m2)
+            lv["bad_run"] = lv["bad_run"] + [k] if m2 > rec["divergence"] else []
+            trigger, window = None, []
+            if rec["reinit_after"] is not None and len(lv["bad_run"]) >= rec["reinit_after"]:
+                trigger, window = "divergence", lv["bad_run"]
+            elif rec["nis_window"] is not None and m2 <= rec["divergence"]:
+                lv["nis"] = (lv["nis"] + [(k, m2)])[-rec["nis_window"]:]
+                if len(lv["nis"]) == rec["nis_window"] and sum(v for _, v in lv["nis"]) > rec["nis_bound"]:
+                    trigger, window = "innovation", [j for j, _ in lv["nis"]]
+            if trigger is not None:
+                old = ekf.x[:2, 0].copy()
+                Pw = np.array([lv["recent"][j][0] for j in window])
+                Zw = np.array([lv["recent"][j][1] for j in window])
+                self._reinitialize(ekf, Pw, Zw, rec, lv["min_spread"], floor)
+                reinit = True
+                events.append(FilterEvent(k, trigger, float(np.hypot(*(ekf.x[:2, 0] - old)))))
+                lv["bad_run"], lv["nis"], lv["streak"] = [], [], 0
+            elif lv["gate"] is not None and m2 > lv["gate"] and lv["streak"] < lv["mcg"]:
+                gated = True
+                lv["streak"] += 1
+            else:
+                lv["streak"] = 0
+                ekf.update(z.reshape(2, 1), _hjac, _hx)
+                lv["loglik"] += -0.5 * (m2 + np.log(np.linalg.det(S)) + 2 * np.log(2 * np.pi))
+        keep = set(lv["bad_run"]) | {j for j, _ in lv["nis"]}  # the frames a re-initialisation may fit
+        for j in [j for j in lv["recent"] if j not in keep]:
+            del lv["recent"][j]
+        ekf.x[2, 0] = wrap_angle(ekf.x[2, 0])
+        lv["k"], lv["last"] = k + 1, pose
+        return FilterStep(ekf.x[:, 0].copy(), ekf.P.copy(), float(maha), gated, reinit, jumped, tuple(events))
+
     @staticmethod
-    def _reinitialize(ekf: Any, P: np.ndarray, Z: np.ndarray, window: list[int], rec: dict[str, Any],
-                      min_spread: float, floor: float) -> None:
-        """Moves the filter to the pose of the window's estimates (the last
-        frame of ``window`` is the current one) with the re-initialisation
-        covariance."""
-        W = np.asarray(window)
-        pose, known = pose_from_window(P[W], Z[W], min_spread=min_spread)
+    def _reinitialize(ekf: Any, Pw: np.ndarray, Zw: np.ndarray, rec: dict[str, Any], min_spread: float,
+                      floor: float) -> None:
+        """Moves the filter to the pose of the window's odometry poses Pw (n, 3)
+        and estimates Zw (n, 2) (the last row is the current frame) with the
+        re-initialisation covariance."""
+        pose, known = pose_from_window(Pw, Zw, min_spread=min_spread)
         hs = rec["heading_std"]
         if not known:  # heading kept: the estimates moved to the current frame by the odometry in that heading
             th = float(ekf.x[2, 0])
-            a = th - P[W[-1], 2]
+            a = th - Pw[-1, 2]
             rot = np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]])
-            moved = Z[W] + (P[W[-1], :2] - P[W, :2]) @ rot.T
+            moved = Zw + (Pw[-1, :2] - Pw[:, :2]) @ rot.T
             pose = np.array([*np.median(moved, axis=0), th])
             hs = 2.0 * hs
         ps = rec["position_std"]

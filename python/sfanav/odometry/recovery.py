@@ -55,7 +55,7 @@ class FilterEvent:
 
 
 def step_anomalies(steps: Any, stamps: Any = None, *, gap_factor: float | None = 3.0,
-                   jump_factor: float | None = 8.0) -> tuple[np.ndarray, np.ndarray]:
+                   jump_factor: float | None = 8.0, nominal: float | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Scale and jump flag of each odometry step.
 
     Parameters
@@ -77,6 +77,11 @@ def step_anomalies(steps: Any, stamps: Any = None, *, gap_factor: float | None =
         of its duration (the median moving step, times its span in nominal
         steps when stamps are given) is a jump: no robot drives that far in
         that time (a kidnap, a teleport in the data). None: no jumps.
+    nominal : float, optional
+        The nominal step distance in metres (>= 0; 0: no jumps, and without
+        stamps no gaps) instead of the median moving step of ``steps``: an
+        online filter fixes it from the steps seen so far and checks each
+        new step against it.
 
     Returns
     -------
@@ -102,8 +107,12 @@ def step_anomalies(steps: Any, stamps: Any = None, *, gap_factor: float | None =
     if n == 0:
         return scale, jump
     d = np.abs(U[:, 0])
-    moving = d[d > 1e-9]
-    nominal = float(np.median(moving)) if len(moving) else 0.0
+    if nominal is None:
+        moving = d[d > 1e-9]
+        nominal = float(np.median(moving)) if len(moving) else 0.0
+    elif not (np.isfinite(nominal) and nominal >= 0):
+        raise ValueError(f"nominal must be a distance >= 0 (metres), got {nominal!r}")
+    nominal = float(nominal)
     if stamps is not None:
         t = as_real_array(stamps, "stamps").astype(np.float64).ravel()
         if len(t) != n + 1:

@@ -9,6 +9,7 @@ from . import bag_import  # noqa: F401
 from . import train  # noqa: F401
 from . import update  # noqa: F401
 from . import localize  # noqa: F401
+from . import ros_node  # noqa: F401
 from . import navigate  # noqa: F401
 from . import groundtruth  # noqa: F401
 from . import features  # noqa: F401

@@ -105,6 +105,10 @@ def _add_localize(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                    help="fuse the estimates with the run's odometry (EKF, CTRV; a dataset with odom_x, odom_y, "
                         "odom_heading): adds columns fused_x, fused_y, fused_heading; the noise comes from the "
                         "model's training run, the start pose from the first estimates")
+    p.add_argument("--rerun", default=None, metavar="NAME.rrd|viewer",
+                   help="also log the images, estimates, fused track with covariance ellipses, the learned map and "
+                        "the ground truth to a Rerun recording (NAME.rrd), a spawned viewer (viewer) or a running "
+                        "one (rerun+http://HOST:PORT/proxy); needs pip install rerun-sdk")
     p.add_argument("--batch-size", type=arg.pos_int, default=64, metavar="N", help="images per batch (default 64)")
     p.add_argument("--overwrite", action="store_true", help="replace an existing CSV")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -126,7 +130,7 @@ def _run_localize(args: argparse.Namespace) -> int:
     from ...data.sources import open_images
     from ...data.tum import write_tum
     from ...localization.error_metrics import med
-    from ...odometry.fusion import fuse
+    from ...odometry.streaming import StreamingLocalizer
 
     loc = load_localizer(args.model, landmarks=True)
     if is_landmark_model(loc):
@@ -188,23 +192,53 @@ def _run_localize(args: argparse.Namespace) -> int:
     prep = Preprocessing.of_model(loc)
     conform = Preprocessor(prep, mirror=mirror_of(args, loc), log=log)
     log(f"localizing {src.description} with {args.model} ({prep.describe()} panoramas)")
+    view = _open_view(args.rerun, args.overwrite) if args.rerun else None
     bar = progress_bar(not args.no_progress, src.n, "localize")
     preds = []
+    live = None
+    if args.odometry:  # the streaming localizer over the recording: what a live robot runs, the same numbers
+        live = StreamingLocalizer(loc, loc.info["ekf_noise"], mirror=mirror_of(args, loc), log=log,
+                                  rotations=args.rotations, max_pending=max(100, args.batch_size))
+        stamps = _stream_stamps(src)
+    i = 0
     for batch in src.batches(args.batch_size):
-        preds.append(loc.predict(conform(batch), rotations=args.rotations))
+        n = len(batch)
+        if live is None:
+            preds.append(loc.predict(conform(batch), rotations=args.rotations))
+        else:
+            preds += live.push_images(stamps[i:i + n], batch)
+            for j in range(i, i + n):
+                preds += live.push_odometry(stamps[j], src.odometry[j])
+        if view is not None:
+            _log_batch(view, src, batch, i, preds if live is not None else preds[-1])
+        i += n
         if bar is not None:
             bar.update(len(batch))
+    if live is not None:
+        preds += live.flush()
     if bar is not None:
         bar.close()
     if not preds:
         raise UsageError(f"{args.input} has no images (an empty or unreadable video?)")
-    xy = np.concatenate(preds)
-    frames = src.frames if src.frames is not None else np.arange(len(xy))
     fused = None
-    if args.odometry:
-        fused, ekf = fuse(src.odometry, xy, loc.info["ekf_noise"], return_filter=True)
-        log(f"fused track: {ekf.n_reinitializations_} re-initialisation(s) from the single-image estimates, "
-            f"{int(ekf.jumps_.sum())} odometry jump(s)")
+    if live is None:
+        xy = np.concatenate(preds)
+    else:
+        xy = np.array([e.estimate for e in preds])
+        if live.init_error_ is not None or any(e.pose is None for e in preds):
+            raise UsageError("--odometry: no start pose from the first images' estimates: " + (
+                live.init_error_ or f"the first {live.start_frames} frames do not move in the odometry"))
+        fused = np.array([e.pose for e in preds])
+        log(f"fused track: {live.n_reinitializations_} re-initialisation(s) from the single-image estimates, "
+            f"{live.n_jumps_} odometry jump(s)")
+    frames = src.frames if src.frames is not None else np.arange(len(xy))
+    if view is not None:
+        if live is not None:  # the last batch's estimates, emitted at flush
+            _log_batch(view, src, None, i, preds)
+        if loc.training_positions_ is not None:
+            view.log_map(loc.training_positions_)
+        view.close()
+        log(f"logged {view.n_logged_} estimates to Rerun ({view.target})")
     for out in outs:
         if out in tums:
             stamps, unit = _tum_stamps(src, len(xy))
@@ -225,7 +259,7 @@ def _run_localize(args: argparse.Namespace) -> int:
         stamps, unit = _tum_stamps(src, len(xy))
         write_tum(gt_out, stamps, src.xy[: len(xy)], gt_heading, unit=unit)
     written = outs + ([gt_out] if gt_out is not None else [])
-    msg = (f"wrote {len(xy)} positions" + (f" and the fused track ({ekf.n_reinitializations_} re-initialisations)"
+    msg = (f"wrote {len(xy)} positions" + (f" and the fused track ({live.n_reinitializations_} re-initialisations)"
                                             if fused is not None else "")
            + (" and the ground truth" if gt_out is not None else "")
            + f" to {' and '.join(str(o) for o in written)}")
@@ -240,6 +274,55 @@ def _run_localize(args: argparse.Namespace) -> int:
             _true_heading(args) if fused is not None and src.kind == "dataset" else None)
         print(_ape_rpe_line(xy, fused, src.xy, true_h))
     return 0
+
+
+def _open_view(target: str, overwrite: bool):  # type: ignore[no-untyped-def]
+    """The Rerun view of --rerun (a one-line error without rerun-sdk or for a bad target)."""
+    from pathlib import Path
+
+    from ...odometry.live_view import RerunView
+
+    if Path(target).suffix.lower() == ".rrd":
+        new_file(target, overwrite, "Rerun recording")
+    try:
+        return RerunView(target)
+    except (ImportError, ValueError) as exc:
+        raise UsageError(f"--rerun: {exc}") from None
+
+
+def _log_batch(view, src, batch, start: int, estimates) -> None:  # type: ignore[no-untyped-def]
+    """Logs a batch's images (frames start..) and ground truth, and the estimates not logged yet: the streaming
+    localizer's LiveEstimates (all emitted so far) or a batch's (n, 2) array."""
+    import numpy as np
+
+    from ...odometry.streaming import LiveEstimate
+
+    exact = src.stamps_ns is not None
+    if batch is not None:
+        for k, img in enumerate(batch):
+            f = start + k
+            view.log_image(img, stamp_ns=int(src.stamps_ns[f]) if exact else None, frame=f)
+            if src.xy is not None and np.isfinite(src.xy[f]).all():
+                view.log_truth(src.xy[f], stamp_ns=int(src.stamps_ns[f]) if exact else None, frame=f)
+    if isinstance(estimates, np.ndarray):
+        for k, xy in enumerate(estimates):
+            f = start + k
+            view.log(LiveEstimate(int(src.stamps_ns[f]) if exact else f, xy, np.full(3, np.nan), None, None, None),
+                     frame=f, stamp=exact)
+        return
+    for f in range(view.n_logged_, len(estimates)):
+        view.log(estimates[f], frame=f, stamp=exact)
+
+
+def _stream_stamps(src):  # type: ignore[no-untyped-def]
+    """Integer stamps (ns) ordering a recording's frames for the streaming localizer: the dataset's where they
+    increase, else the frame indices (the fused track depends on the order only)."""
+    import numpy as np
+
+    s = src.stamps_ns
+    if s is not None and len(s) >= src.n and (np.diff(np.asarray(s[: src.n], dtype=np.int64)) > 0).all():
+        return [int(v) for v in s[: src.n]]
+    return list(range(src.n))
 
 
 def _true_heading(args: argparse.Namespace):  # type: ignore[no-untyped-def]
