@@ -17,8 +17,8 @@ from collections import Counter
 from pathlib import Path
 
 PKG = Path(__file__).resolve().parents[1] / "python" / "sfanav"
-STAGES = ["data", "features", "groundtruth", "sim", "loopclosure", "sfa", "localization", "landmarks", "odometry", "navigation",
-          "experiments", "app"]
+STAGES = ["data", "features", "groundtruth", "sim", "loopclosure", "sfa", "localization", "landmarks", "odometry", "pipeline",
+          "navigation", "experiments", "app"]
 LABEL = {
     "data": "data<br/>images, datasets, unwarping",
     "features": "features<br/>local features over the seasons, robustness prediction",
@@ -29,6 +29,7 @@ LABEL = {
     "localization": "localization<br/>slow features -> position",
     "landmarks": "landmarks<br/>marker views -> stacked position",
     "odometry": "odometry<br/>metric map, EKF, loop closures",
+    "pipeline": "pipeline<br/>the training recipe applied to a run",
     "navigation": "navigation<br/>cost, gradient, descents",
     "experiments": "experiments<br/>thesis reruns",
     "app": "app<br/>sfanav command, demo",

@@ -18,6 +18,14 @@ echo "== building the wheel and the sdist (scripts/build_wheel.sh)"
 ./scripts/build_wheel.sh "$WORK/dist"
 WHEEL="$(ls "$WORK"/dist/sfanav-*-abi3-*x86_64*.whl)"
 
+echo "== ROS 1 from Debian's packages (the live node's tests run against a real roscore)"
+ROS_DEBS="ros-core python3-rospy python3-rosbag python3-sensor-msgs python3-nav-msgs python3-geometry-msgs python3-tf2-msgs"
+if ! command -v roscore >/dev/null || ! command -v rosbag >/dev/null; then
+    SUDO=""; [ "$(id -u)" -ne 0 ] && SUDO="sudo"
+    $SUDO apt-get update -qq && DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --no-install-recommends $ROS_DEBS >/dev/null
+fi
+export SFANAV_REQUIRE_ROS=1   # tests/test_ros1_node.py fails instead of skipping when ROS is missing
+
 echo "== installing the wheel with test extras"
 "$PY" -m pip install --quiet --disable-pip-version-check "${WHEEL}[test]"
 "$PY" -m pip install --quiet --disable-pip-version-check --force-reinstall --no-deps "$WHEEL"

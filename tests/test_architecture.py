@@ -14,12 +14,13 @@ PKG = Path(sfanav.__file__).parent
 
 # Stages in pipeline order: a module may import its own stage and the ones
 # before it, never one after it. The private helpers (_checks, _progress,
-# _plotting, _threads, _core, _compat) come first; the package root
+# _plotting, _threads, _core, _compat) come first; sfanav.pipeline (the training
+# recipe applied to a run) composes the stages up to odometry; the package root
 # re-exports the stages; app and experiments sit on top.
 ORDER = ["_private", "data", "features", "groundtruth", "sim", "loopclosure", "sfa", "localization", "landmarks", "odometry",
-         "navigation", "_root", "experiments", "app"]
+         "pipeline", "navigation", "_root", "experiments", "app"]
 LIBRARY = {"_private", "data", "features", "groundtruth", "sim", "loopclosure", "sfa", "localization", "landmarks", "odometry",
-           "navigation", "_root"}
+           "pipeline", "navigation", "_root"}
 
 
 def _module_name(path: Path) -> str:
