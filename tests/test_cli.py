@@ -1,6 +1,7 @@
 """The ``sfanav`` command: train, localize, evaluate, demo and experiment on a
 tiny simulated dataset with a tiny network, help texts and error paths."""
 
+import importlib.util
 import csv
 import json
 
@@ -168,6 +169,23 @@ def test_demo_quick(tmp_path, capsys):
     assert sfanav.load(tmp_path / "demo" / "model-ground-truth.sfa").info["supervision"] == "ground-truth"
     head = (tmp_path / "demo" / "test-estimates.csv").read_text().splitlines()[0]
     assert head == "frame,x,y,fused_x,fused_y,fused_heading"
+    # the fused track came from the streaming localizer (image by image): the batch filter over the same
+    # estimates gives the same track
+    from sfanav.data import Dataset
+    from sfanav.odometry.fusion import fuse
+
+    rows = np.loadtxt(tmp_path / "demo" / "test-estimates.csv", delimiter=",", skiprows=1)
+    odo = Dataset(tmp_path / "demo" / "dataset").select(run="test").odometry
+    batch = fuse(odo, rows[:, 1:3], sfanav.load(tmp_path / "demo" / "model.sfa").info["ekf_noise"])
+    np.testing.assert_allclose(rows[:, 3:5], batch[:, :2], atol=2e-3)
+    # the Rerun recording holds the whole walk
+    if importlib.util.find_spec("rerun") is not None:
+        from test_live_view import _entities
+
+        t = _entities(tmp_path / "demo" / "demo.rrd")
+        for e in ("/camera/image", "/world/estimate", "/world/fused", "/world/fused/ellipse", "/world/truth"):
+            assert sorted(t[e].column("frame").to_pylist()) == list(range(len(rows))), e
+        assert ("/world/map", "static") in t
     code, _, err = run(capsys, "demo", "--quick", "--out", tmp_path / "demo", "--no-progress")
     assert_one_line_error(code, err, "--overwrite")
 

@@ -31,6 +31,7 @@ from ..data.sources import load_run
 from ..experiments import ExperimentResult
 from ..localization.evaluation import evaluate, evaluation_rows
 from ..localization.training import augmented_features, fit_localizer
+from ..odometry.streaming import StreamingLocalizer
 from ..sfa.network import Network, Rotation
 
 DEMO_NETWORK = "sfanav-default"
@@ -55,7 +56,7 @@ THESIS_5_1_1: dict[str, Any] = {
 """The thesis's section 5.1.1 figures (simulator: 30x30 grid, Table 5.1 network), by row name."""
 
 
-_OUTPUTS = ("dataset", "model.sfa", "model-ground-truth.sfa", "test-estimates.csv", "report.md", "demo.json", "firing_maps.png",
+_OUTPUTS = ("dataset", "demo.rrd", "model.sfa", "model-ground-truth.sfa", "test-estimates.csv", "report.md", "demo.json", "firing_maps.png",
             "trajectory.png", "error_vs_n.png", "eta.png")
 
 
@@ -73,18 +74,54 @@ def _compact_rows(label: str, m: dict[str, float]) -> list[dict[str, Any]]:
             {"metric": f"MAE y (%) [{label}]", "thesis": None, "sfanav": m["mae_y_pct"]}]
 
 
+def _write_recording(path: Path, loc: Any, world: Any, estimates: list[Any], images: Any, xy_true: Any,
+                     log: Log) -> Path | None:
+    """The test walk as a Rerun recording (``path``, .rrd): its images, the
+    single-image estimates, the fused track with 2-sigma ellipses, the
+    learned map and the ground truth, all moved into the world frame by the
+    evaluation's rigid alignment ``world``. None (and a log line) without
+    rerun-sdk."""
+    import types
+
+    import numpy as np
+
+    try:
+        from ..odometry.live_view import RerunView
+
+        view = RerunView(path)
+    except ImportError as exc:
+        log(f"no Rerun recording: {exc}")
+        return None
+    R = world.rotation
+    turn = float(np.arctan2(R[1, 0], R[0, 0]))
+    view.log_map(world.apply(loc.training_positions_))
+    for k, (e, image) in enumerate(zip(estimates, images)):
+        pose = np.r_[world.apply(e.pose[None, :2])[0], e.pose[2] + turn]
+        cov = np.array(e.covariance, float)
+        cov[:2, :2] = R @ cov[:2, :2] @ R.T
+        cov[:2, 2] = R @ cov[:2, 2]
+        cov[2, :2] = cov[:2, 2]
+        view.log(types.SimpleNamespace(stamp_ns=e.stamp_ns, estimate=world.apply(e.estimate[None])[0], pose=pose,
+                                       covariance=cov), frame=k, image=image)
+        view.log_truth(xy_true[k], stamp_ns=e.stamp_ns, frame=k)
+    view.close()
+    return path
+
+
 def run_demo(out: str | Path = "sfanav-demo", *, seed: int = 0, overwrite: bool = False, quick: bool = False,
              progress: bool = True, log: Log = stderr_log) -> ExperimentResult:
     """Runs the demo into ``out`` and returns its table (rows with the
     thesis's 5.1.1 values where it has one). ``quick``: a seconds-long smoke
     run on tiny images with a small network (for tests)."""
+    import numpy as np
+
     from .. import sim
     from ..localization import baselines
     from ..localization.error_metrics import align, localization_metrics
     from ..localization.evaluation import coordinate_range
-    from ..localization.recipe import default_network, recipe_for
-    from ..odometry.fusion import fuse, noise_for_localizer
-    from ..odometry.self_supervision import fit_localizer_from_odometry
+    from ..localization.recipe import CAMERA_ELEVATION, default_network, recipe_for
+    from ..odometry.fusion import fuse
+    from ..pipeline import ROTATION_STEP, train_localizer
 
     t_start = time.perf_counter()
     out = Path(out)
@@ -110,35 +147,41 @@ def run_demo(out: str | Path = "sfanav-demo", *, seed: int = 0, overwrite: bool 
     # 2. train without ground truth: the network on the images, the positions from images and odometry
     t0 = time.perf_counter()
     net = _tiny_network() if quick else default_network()
-    recipe = recipe_for()
-    fit_kw = recipe.fit_kwargs(tuple(ds.metadata["camera"].get("elevation_deg", (-30.0, 20.0))))
-    if quick:
-        fit_kw["rows"] = None  # the tiny network's 8-row panoramas: every row
+    recipe = recipe_for(rows="all") if quick else recipe_for()  # the tiny network's 8-row panoramas: every row
+    elevation = tuple(ds.metadata["camera"].get("elevation_deg", CAMERA_ELEVATION))
     prep = Preprocessing.for_network(net)
     train, test = ds.select(run="train"), ds.select(run="test")
     X_train, xy_train = load_run(train, prep, log=log)
     X_test, xy_test = load_run(test, prep, log=log)
     odo_train, odo_test = train.odometry, test.odometry
-    rotation = Rotation(step=5)
-    loc = fit_localizer_from_odometry(net, X_train, odo_train, rotation=rotation, prep=prep, progress=progress,
-                                      info={"dataset": str(out / "dataset"), "run": "train",
-                                            "network": "tiny" if quick else DEMO_NETWORK, **recipe.info()},
-                                      **fit_kw)
+    # the product's training, exactly as sfanav train runs it: no ground truth (only the images and odometry)
+    loc = train_localizer(X_train, odometry=odo_train, supervision="odometry", network=net, recipe=recipe,
+                          camera_elevation=elevation, prep=prep, progress=progress, log=log,
+                          info={"dataset": str(out / "dataset"), "run": "train",
+                                "network": "tiny" if quick else DEMO_NETWORK})
+    rotation = Rotation(step=ROTATION_STEP)
     timings["train"] = time.perf_counter() - t0
     log(f"trained on {len(X_train)} images and their odometry in {timings['train']:.1f} s (network fit "
-        f"{loc.info['fit_seconds']:.1f} s; pose graph: {loc.info['loop closures kept']} loop closures)")
-    # EKF noise from the training run's held-out estimates (no ground truth), as sfanav train stores it
-    t0 = time.perf_counter()
-    F_train, G_train = loc.features(X_train), loc.signatures(X_train)
-    loc.info["ekf_noise"] = noise_for_localizer(loc, loc.readout_features(F_train, G_train), loc.training_positions_,
-                                                odo_train)
+        f"{loc.info['fit_seconds']:.1f} s, EKF noise chosen on the training run; pose graph: "
+        f"{loc.info['loop closures kept']} loop closures)")
     loc.save(out / "model.sfa")
-    timings["ekf noise"] = time.perf_counter() - t0
 
-    # 3. localize the test walk: single images, and fused with its odometry
+    # 3. localize the test walk as the robot does: image by image with its odometry (the streaming localizer,
+    # what sfanav localize --odometry and the ROS node run): single-image estimates and the fused track
     t0 = time.perf_counter()
-    xy_est = loc.predict(X_test)
-    fused = fuse(odo_test, xy_est, loc.info["ekf_noise"])
+    live = StreamingLocalizer(loc, loc.info["ekf_noise"], log=log)
+    stamps = ([int(v) for v in test.stamps_ns] if test.stamps_ns is not None
+              else [int(round(1e9 * t)) for t in test.timestamps])
+    estimates = []
+    for k in range(len(X_test)):
+        estimates += live.push_image(stamps[k], X_test[k])
+        estimates += live.push_odometry(stamps[k], odo_test[k])
+    estimates += live.flush()
+    if len(estimates) != len(X_test) or any(e.pose is None for e in estimates):
+        raise RuntimeError(f"the streaming localizer emitted {len(estimates)} fused poses for {len(X_test)} "
+                           f"images (dropped: {dict(live.dropped_)}; {live.init_error_ or ''})")
+    xy_est = np.array([e.estimate for e in estimates])
+    fused = np.array([e.pose for e in estimates])
     with open(out / "test-estimates.csv", "w", newline="") as f:
         w = csv.writer(f)
         w.writerow(["frame", "x", "y", "fused_x", "fused_y", "fused_heading"])
@@ -174,11 +217,13 @@ def run_demo(out: str | Path = "sfanav-demo", *, seed: int = 0, overwrite: bool 
         rows.append({"metric": f"MED (m) {name} [{JPEG_TEST} test images]", "thesis": None,
                      "sfanav": localization_metrics(pred, xy_test, coordinate_range=crange)["med"]})
     timings["evaluate"] = time.perf_counter() - t0
+    recording = _write_recording(out / "demo.rrd", loc, world, estimates, X_test, xy_test, log)
 
     # 5. reference rows: the same network on ground truth; the thesis's configuration
     t0 = time.perf_counter()
-    aug = (augmented_features(loc, X_train, fit_kw["readout_augmentation"])
-           if fit_kw["readout_augmentation"] is not None else None)
+    augmentation = recipe.robust_kwargs()["readout_augmentation"]
+    aug = augmented_features(loc, X_train, augmentation) if augmentation is not None else None
+    F_train, G_train = loc.features(X_train), loc.signatures(X_train)
     sup = loc.sibling().fit_features(F_train, xy_train, signatures=G_train, augmented=aug)
     sup.info.update({k: v for k, v in loc.info.items() if k in ("dataset", "run", "network", "prep", "rotation",
                                                                  "fit_seconds")})
@@ -225,5 +270,7 @@ def run_demo(out: str | Path = "sfanav-demo", *, seed: int = 0, overwrite: bool 
     result.write_json(out / "demo.json")
     (out / "timings.json").write_text(json.dumps({k: round(v, 2) for k, v in timings.items()} | {"wall": round(wall, 2)}, indent=2) + "\n")
     log(f"wrote {out / 'dataset'}, {out / 'model.sfa'} (no ground truth), {out / 'model-ground-truth.sfa'}, "
-        f"{out / 'test-estimates.csv'}, {ev.report} and {len(ev.plots)} plots; wall time {wall:.0f} s")
+        f"{out / 'test-estimates.csv'}, {ev.report}, {len(ev.plots)} plots"
+        + (f" and the Rerun recording {recording} (rerun {recording})" if recording else "")
+        + f"; wall time {wall:.0f} s")
     return result
