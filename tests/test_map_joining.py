@@ -15,7 +15,7 @@ from sfanav.localization.updates import LocalizerUpdater
 
 gtsam = pytest.importorskip("gtsam")
 
-from sfanav.odometry.map_joining import join_run, map_closures  # noqa: E402
+from sfanav.odometry.map_joining import drift_corrected, join_run, map_closures  # noqa: E402
 
 CONFIG = {"input": {"width": 60, "height": 8, "channels": 3}, "network": {"precision": "double"},
           "layers": [{"rf": [6, 4], "stride": [3, 4], "out": 10}, {"rf": "full", "out": 10}]}
@@ -85,6 +85,25 @@ def test_a_run_without_ground_truth_lands_in_the_map_frame(garden):
     assert abs(np.angle(np.exp(1j * (joined.alignment[0] + 1.1)))) < drifted
     info = joined.info()
     assert info["map closures kept"] == joined.n_kept and info["solver"] == "lm"
+
+
+def test_a_strong_systematic_drift_is_found_and_corrected(garden):
+    XB, YB, OB = garden["train-cross"]
+    joined = join_run(garden["model"], XB, disguise(OB, drift_deg_per_m=2.0))
+    assert np.median(_err(joined.positions, YB)) < 0.12
+    base = join_run(garden["model"], XB, disguise(OB, drift_deg_per_m=0.0))
+    # the added 2 deg/m found, beside whatever drift the simulated odometry has of its own (measured 2.0)
+    assert np.degrees(joined.drift_rate - base.drift_rate) == pytest.approx(2.0, abs=0.15)
+
+
+def test_drift_correction_undoes_a_drift():
+    rng = np.random.default_rng(1)
+    odo = np.cumsum(np.c_[rng.uniform(0.1, 0.3, (50, 2)), rng.normal(0, 0.2, 50)], axis=0)
+    odo = disguise(odo, 0.0, (0.0, 0.0), 0.0, 0.0)  # a consistent odometry: steps along its headings
+    bent = disguise(odo, 0.3, (1.0, 2.0), 1.5, 0.0)
+    straight = disguise(odo, 0.3, (1.0, 2.0), 0.0, 0.0)
+    np.testing.assert_allclose(drift_corrected(bent, np.radians(1.5)), straight, atol=1e-9)
+    np.testing.assert_allclose(drift_corrected(bent, 0.0), bent, atol=1e-12)
 
 
 def test_isam2_joins_as_levenberg_marquardt_does(garden):

@@ -16,9 +16,11 @@ drifting) in that frame:
    metres RMS of their mean) gets a candidate closure: "this frame is at the
    neighbours' mean position", standard deviation the spread (at least
    ``min_sigma``).
-2. **Alignment.** The rigid motion from the odometry frame to the map frame
-   that most candidates agree with (RANSAC on pairs of candidates at least
-   ``min_baseline`` metres apart, inliers within ``inlier_m``, refitted by
+2. **Alignment.** The odometry's systematic heading drift rate (over a grid,
+   :data:`DRIFT_SEARCH_DEG`) and the rigid motion from the corrected
+   odometry's frame to the map frame that most candidates agree with
+   (RANSAC on pairs of candidates at least ``min_baseline`` metres apart,
+   inliers within ``inlier_m``, refitted by
    least squares on the inliers). Fewer than ``min_closures`` inliers or
    than ``min_fraction`` of the candidates (chance agreement in a small
    garden is a few tens of per cent), or
@@ -52,7 +54,7 @@ Example
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -65,7 +67,11 @@ from .dead_reckoning import as_poses, wrap_angle
 from .pose_graph import place_pairs, relative_headings
 from .pose_graph_gtsam import odometry_sigmas, require_gtsam, robust_weights
 
-__all__ = ["MapClosures", "JoinedRun", "map_closures", "join_run", "SOLVERS"]
+__all__ = ["MapClosures", "JoinedRun", "map_closures", "drift_corrected", "join_run", "SOLVERS",
+           "DRIFT_SEARCH_DEG"]
+
+DRIFT_SEARCH_DEG = tuple(np.round(np.arange(-3.0, 3.01, 0.1), 2))
+"""Systematic heading drift rates (deg per m) the initial alignment tries."""
 
 SOLVERS = ("lm", "isam2")
 """The back ends of :func:`join_run`."""
@@ -111,8 +117,12 @@ class JoinedRun:
         Each candidate's residual at the solution: distance (m) between the
         frame's position and the closure's.
     alignment : (float, ndarray (2,))
-        The initial rigid motion from the odometry frame to the map frame:
-        rotation (rad) and translation (m).
+        The initial rigid motion from the odometry frame (corrected by
+        ``drift_rate``) to the map frame: rotation (rad) and translation (m).
+    drift_rate : float
+        The odometry's systematic heading drift (rad/m, positive: it
+        believes it turned left) found with the alignment; the graph reads
+        the odometry corrected by it (:func:`drift_corrected`).
     n_ransac_inliers : int
         Candidates the initial alignment agreed with.
     n_compass : int
@@ -134,7 +144,7 @@ class JoinedRun:
     odometry_chi: float
     solver: str
     seconds: float = 0.0
-    extra: dict[str, Any] = field(default_factory=dict)
+    drift_rate: float = 0.0
 
     @property
     def positions(self) -> np.ndarray:
@@ -152,7 +162,8 @@ class JoinedRun:
         return {"supervision": "odometry joined to the map", "solver": self.solver,
                 "map closures": len(self.closures), "map closures kept": self.n_kept,
                 "map closure residual median (m)": float(np.median(self.residuals[kept])) if kept.any() else None,
-                "alignment inliers": int(self.n_ransac_inliers), "compass closures": int(self.n_compass),
+                "alignment inliers": int(self.n_ransac_inliers),
+                "odometry heading drift (deg per m)": float(np.degrees(self.drift_rate)), "compass closures": int(self.n_compass),
                 "odometry residual (sd)": float(self.odometry_chi), "seconds": float(self.seconds)}
 
 
@@ -218,31 +229,73 @@ def _apply(theta: float, t: np.ndarray, xy: np.ndarray) -> np.ndarray:
     return xy @ np.array([[c, s], [-s, c]]) + t
 
 
-def _ransac(odo_xy: np.ndarray, target: np.ndarray, *, inlier_m: float, min_baseline: float, trials: int,
-            rng: np.random.Generator) -> tuple[float, np.ndarray, np.ndarray]:
-    """The rigid motion odometry -> map most candidates agree with, refitted
-    on its inliers: (rotation, translation, inlier mask)."""
-    m = len(odo_xy)
-    best = np.zeros(m, bool)
-    best_model = (0.0, np.zeros(2))
+def drift_corrected(odometry: Any, drift_rate: float) -> np.ndarray:
+    """The odometry (N, 3) re-integrated with every step's heading change
+    corrected by ``-drift_rate * d`` (d the step's length in metres,
+    ``drift_rate`` in rad/m, positive when the odometry believes it turned
+    left): the first pose kept, each step's length and direction relative
+    to its pose kept."""
+    P = as_poses(odometry, "odometry")
+    d = np.hypot(*np.diff(P[:, :2], axis=0).T)
+    dxy = np.diff(P[:, :2], axis=0)
+    c, s = np.cos(P[:-1, 2]), np.sin(P[:-1, 2])
+    lx, ly = c * dxy[:, 0] + s * dxy[:, 1], -s * dxy[:, 0] + c * dxy[:, 1]
+    h = P[0, 2] + np.concatenate([[0.0], np.cumsum(wrap_angle(np.diff(P[:, 2])) - float(drift_rate) * d)])
+    ch, sh = np.cos(h[:-1]), np.sin(h[:-1])
+    xy = P[0, :2] + np.concatenate([np.zeros((1, 2)), np.cumsum(np.c_[ch * lx - sh * ly, sh * lx + ch * ly], 0)])
+    return np.c_[xy, h]
+
+
+def _hypotheses(odo_xy: np.ndarray, target: np.ndarray, pairs: np.ndarray,
+                inlier_m: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Rigid motions (rotation (T,), translation (T, 2)) taking each pair of
+    candidates' odometry positions onto their map positions (the two-point
+    closed form), and their inlier counts (T,)."""
+    a, b = odo_xy[pairs[:, 0]], odo_xy[pairs[:, 1]]
+    p, q = target[pairs[:, 0]], target[pairs[:, 1]]
+    u, v = b - a, q - p
+    th = np.arctan2(v[:, 1], v[:, 0]) - np.arctan2(u[:, 1], u[:, 0])
+    c, s = np.cos(th), np.sin(th)
+    ma, mp = 0.5 * (a + b), 0.5 * (p + q)
+    t = mp - np.c_[c * ma[:, 0] - s * ma[:, 1], s * ma[:, 0] + c * ma[:, 1]]
+    X = odo_xy[None, :, 0] * c[:, None] - odo_xy[None, :, 1] * s[:, None] + t[:, 0:1]
+    Y = odo_xy[None, :, 0] * s[:, None] + odo_xy[None, :, 1] * c[:, None] + t[:, 1:2]
+    counts = ((X - target[None, :, 0]) ** 2 + (Y - target[None, :, 1]) ** 2 <= inlier_m ** 2).sum(axis=1)
+    return th, t, counts
+
+
+def _ransac(odometry: np.ndarray, frames: np.ndarray, target: np.ndarray, *, inlier_m: float, min_baseline: float,
+            trials: int, drift_rates: np.ndarray,
+            rng: np.random.Generator) -> tuple[float, float, np.ndarray, np.ndarray]:
+    """The drift rate and rigid motion (odometry corrected by that rate ->
+    map) most candidates agree with, refitted on its inliers: (drift rate,
+    rotation, translation, inlier mask)."""
+    m = len(frames)
     if m < 2:
-        return best_model[0], best_model[1], best
-    for _ in range(trials):
-        i, j = rng.choice(m, 2, replace=False)
-        if np.hypot(*(odo_xy[i] - odo_xy[j])) < min_baseline:
+        return 0.0, 0.0, np.zeros(2), np.zeros(m, bool)
+    pairs = rng.integers(0, m, size=(trials, 2))
+    best = (-1, 0.0, 0.0, np.zeros(2))
+    for b in drift_rates:  # the smallest |rate| first: it wins ties
+        xy = drift_corrected(odometry, b)[frames, :2]
+        ok = np.hypot(*(xy[pairs[:, 0]] - xy[pairs[:, 1]]).T) >= max(min_baseline, 1e-9)
+        if not ok.any():
             continue
-        th, t = _rigid(odo_xy[[i, j]], target[[i, j]])
-        inl = np.hypot(*(_apply(th, t, odo_xy) - target).T) <= inlier_m
-        if inl.sum() > best.sum():
-            best, best_model = inl, (th, t)
-    if best.sum() >= 2:
-        for _ in range(3):  # refit on the inliers, then take the inliers of the refit
-            th, t = _rigid(odo_xy[best], target[best])
-            inl = np.hypot(*(_apply(th, t, odo_xy) - target).T) <= inlier_m
-            if inl.sum() < 2:
-                break
-            best, best_model = inl, (th, t)
-    return best_model[0], best_model[1], best
+        th, t, counts = _hypotheses(xy, target, pairs[ok], inlier_m)
+        k = int(np.argmax(counts))
+        if counts[k] > best[0]:
+            best = (int(counts[k]), float(b), float(th[k]), t[k])
+    _, b, th, t = best
+    xy = drift_corrected(odometry, b)[frames, :2]
+    inl = np.hypot(*(_apply(th, t, xy) - target).T) <= inlier_m
+    for _ in range(3):  # refit on the inliers, then take the inliers of the refit
+        if inl.sum() < 2:
+            break
+        th2, t2 = _rigid(xy[inl], target[inl])
+        inl2 = np.hypot(*(_apply(th2, t2, xy) - target).T) <= inlier_m
+        if inl2.sum() < inl.sum():
+            break
+        th, t, inl = th2, t2, inl2
+    return b, th, t, inl
 
 
 def _local_steps(P: np.ndarray, sig: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -265,7 +318,8 @@ def _local_steps(P: np.ndarray, sig: np.ndarray) -> tuple[np.ndarray, np.ndarray
 def join_run(localizer: Localizer, images: Any, odometry: Any, *, features: Any = None,
              odometry_noise: Any = None, n_outputs: int = 8, n_neighbors: int = 3, max_spread: float = 0.75,
              min_sigma: float = 0.25, inlier_m: float = 1.5, min_baseline: float = 2.0,
-             min_closures: int = 10, min_fraction: float = 0.4, ransac_trials: int = 300, robust_scale: float = 3.0, compass: bool = True,
+             min_closures: int = 10, min_fraction: float = 0.4, ransac_trials: int = 300,
+             drift_search_deg: Any = DRIFT_SEARCH_DEG, robust_scale: float = 3.0, compass: bool = True,
              compass_sigma_deg: float = 5.0, min_travel: float = 5.0, solver: str = "lm", chunk: int = 50,
              random_state: int = 0) -> JoinedRun:
     """Places a run without ground truth in a localizer's map frame (see
@@ -289,8 +343,11 @@ def join_run(localizer: Localizer, images: Any, odometry: Any, *, features: Any 
         Map closures (:func:`map_closures`).
     inlier_m, min_baseline, ransac_trials, random_state
         The initial alignment: inlier distance (m), shortest odometry
-        distance (m) between the two candidates of a hypothesis, hypotheses,
-        seed.
+        distance (m) between the two candidates of a hypothesis, hypotheses
+        per drift rate, seed.
+    drift_search_deg : sequence of float, default :data:`DRIFT_SEARCH_DEG`
+        The odometry's systematic heading drift rates (deg/m) the alignment
+        tries; the one most candidates agree with corrects the odometry.
     min_closures : int, default 10
         Fewest candidates agreeing with the alignment for the run to join.
     min_fraction : float, default 0.4
@@ -350,8 +407,13 @@ def join_run(localizer: Localizer, images: Any, odometry: Any, *, features: Any 
     C = map_closures(F, V, Y, n_neighbors=n_neighbors, max_spread=max_spread, min_sigma=min_sigma,
                      n_outputs=n_outputs)
     rng = np.random.default_rng(random_state)
-    theta0, t0xy, inl = _ransac(P[C.frame, :2], C.position, inlier_m=inlier_m, min_baseline=min_baseline,
-                                trials=check_int(ransac_trials, "ransac_trials"), rng=rng)
+    rates = np.radians(np.asarray(drift_search_deg, np.float64).ravel())
+    if not len(rates) or not np.isfinite(rates).all():
+        raise ValueError("drift_search_deg must hold finite drift rates (deg per m)")
+    rates = rates[np.argsort(np.abs(rates), kind="stable")]
+    drift, theta0, t0xy, inl = _ransac(P, C.frame, C.position, inlier_m=inlier_m, min_baseline=min_baseline,
+                                       trials=check_int(ransac_trials, "ransac_trials"), drift_rates=rates, rng=rng)
+    P = drift_corrected(P, drift)  # the odometry the graph reads
     if inl.sum() < max(min_closures, min_fraction * len(C)):
         raise ValueError(f"no closures to the map found: {len(C)} of the run's {len(P)} frames resemble a place of "
                          f"the map, and only {int(inl.sum())} of them agree on one placement of the run "
@@ -432,7 +494,7 @@ def join_run(localizer: Localizer, images: Any, odometry: Any, *, features: Any 
     w = robust_weights(res / C.sigma, "cauchy", scale)
     chi = _odometry_chi(poses, steps, cov)
     return JoinedRun(poses, C, w, res, (theta0, t0xy), int(inl.sum()), n_compass, chi, solver,
-                     time.perf_counter() - t0)
+                     time.perf_counter() - t0, drift_rate=drift)
 
 
 def _odometry_chi(poses: np.ndarray, steps: np.ndarray, cov: np.ndarray) -> float:
