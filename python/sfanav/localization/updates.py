@@ -23,9 +23,10 @@ exactly (the frozen stages give the same inputs as in training).
   them (no longer updatable).
 
 A localizer with a readout memory saves its network with the training
-statistics (what the network update needs). Runs need positions (ground
-truth) for now: a run without them is refused. docs/updates.md has the
-derivation, the tests and the measurements.
+statistics (what the network update needs). Runs need positions: ground
+truth, or for a run with odometry only the positions
+:func:`sfanav.odometry.map_joining.join_run` learns in the map's frame.
+docs/updates.md has the derivation, the tests and the measurements.
 
 Examples
 --------
@@ -359,8 +360,8 @@ class LocalizerUpdater:
         changed then)."""
         loc = self.localizer_
         if xy is None:
-            raise ValueError("this run has no positions: a run joins the map with its ground-truth positions for "
-                             "now (positions learned from odometry and loop closures are not supported yet)")
+            raise ValueError("this run has no positions: give its ground-truth positions, or, for a run with odometry "
+                             "only, the positions sfanav.odometry.map_joining.join_run learns in the map's frame")
         a = np.asarray(images)
         Y = as_matrix(xy, "xy", n_cols=2)
         check_same_length(a, Y, "images", "xy")

@@ -23,7 +23,9 @@ def _add_update(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                          "on all the runs. MODEL is left as it was; NEW is written atomically. A run whose images "
                          "do not match the model (size, channels, pixel scale) is refused. A localizer model file "
                          "(sfanav train --updatable) is updated the same way and its readout refitted on the old "
-                         "runs' views it keeps and the new run's (ground-truth x, y needed). See docs/updates.md."),
+                         "runs' views it keeps and the new run's: at the run's ground-truth x, y, or, for a run without them, at "
+                         "positions in the map's frame learned from the run's odometry and loop closures between "
+                         "its images and the map's views (a pose graph on GTSAM). See docs/updates.md."),
         epilog="example:\n  sfanav update net.sfanav --dataset week2 --out net-week2.sfanav",
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
@@ -113,16 +115,22 @@ def _update_localizer(args: argparse.Namespace, model: "Any", out: "Any", loc: "
     ds = select_run(Dataset(existing_path(args.dataset, "dataset")), args.run_name, args.camera)
     _check_source(ds, loc, model)
     xy_ok = bool(np.isfinite(ds.poses[:, :2]).all())
-    if not xy_ok:
-        raise UsageError(f"{args.dataset} has no ground-truth x, y for every image: a run joins a localizer's map "
-                         "with its positions (runs without them are not supported yet)")
+    if not xy_ok and not ds.has_odometry:
+        raise UsageError(f"{args.dataset} has neither ground-truth x, y nor odometry for every image: a run joins a "
+                         "localizer's map with its positions, or with its odometry and loop closures to the map")
     images, xy = load_run(ds, Preprocessing.of_model(loc), mirror=mirror_of(args, loc), log=log,
                           progress=not args.no_progress)
+    joined = None
+    if not xy_ok:
+        joined = _joined_positions(args, model, loc, images, ds.odometry)
+        xy = joined.positions
     log(f"adding {len(images)} images of {args.dataset} to {model} (readout memory: {len(mem)} views)")
     try:
         new = updater.partial_fit(images, xy).localizer_
     except ValueError as exc:
         raise UsageError(f"the run does not match {model}: {exc}") from None
+    if joined is not None:
+        new.info["updates"][-1]["joined"] = joined.info()
     if args.drop_statistics:
         drop_readout_memory(new)
     sizes = readout_memory_bytes(new)
@@ -151,3 +159,25 @@ def _check_source(ds: "Any", loc: "Any", model: "Any") -> None:
     if want is not None and elev is not None and not np.allclose(np.asarray(elev, float), np.asarray(want, float)):
         raise UsageError(f"the run's camera sees elevations {elev} deg, but {model} was trained on a camera seeing "
                          f"{want} deg: the run does not match the model")
+
+
+def _joined_positions(args: argparse.Namespace, model: "Any", loc: "Any", images: "Any", odometry: "Any") -> "Any":
+    """The run joined to the map frame from its odometry and closures to
+    the map (sfanav.odometry.map_joining); UsageError if it cannot join."""
+    import numpy as np
+
+    from ...odometry.map_joining import join_run
+
+    log(f"{args.dataset} has no ground-truth x, y: joining it to {model}'s map through its odometry and loop "
+        "closures to the map's views (pose graph, GTSAM)")
+    try:
+        joined = join_run(loc, images, odometry)
+    except ImportError as exc:
+        raise UsageError(f"joining a run without ground truth needs GTSAM: {exc}") from None
+    except ValueError as exc:
+        raise UsageError(f"{args.dataset} cannot join {model}'s map: {exc}") from None
+    kept = joined.weights >= 0.5
+    log(f"joined: {joined.n_kept} of {len(joined.closures)} closures to the map kept (median residual "
+        f"{float(np.median(joined.residuals[kept])):.3f} m), {joined.n_compass} compass closures within the run, "
+        f"odometry residual {joined.odometry_chi:.2f} sd, {joined.seconds:.1f} s")
+    return joined
