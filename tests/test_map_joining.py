@@ -207,7 +207,7 @@ def test_cli_update_joins_a_run_with_odometry_only(garden, tmp_path, capsys):
     code, out, err = run(capsys, "update", model, "--dataset", b, "--run", "train-cross",
                          "--out", tmp_path / "new.sfanav", "--no-progress")
     assert code == 0, err
-    assert "no ground-truth x, y: joining it" in err and "closures to the map kept" in err
+    assert "no ground-truth x, y: joining" in err and "closures to the map kept" in err
     assert model.read_bytes() == original
     new = sfanav.load(tmp_path / "new.sfanav")
     assert new.info["updates"][-1]["joined"]["map closures kept"] >= 10
@@ -223,3 +223,20 @@ def test_cli_update_joins_a_run_with_odometry_only(garden, tmp_path, capsys):
                          "--out", tmp_path / "bad.sfanav")
     assert_one_line_error(code, err, "neither ground-truth", "odometry")
     assert not (tmp_path / "bad.sfanav").exists() and model.read_bytes() == original
+
+
+def test_a_model_trained_without_ground_truth_is_updatable_and_joins_a_run(garden):
+    """The training recipe without ground truth keeps a readout memory of the
+    learned positions (the model's odometry frame); a second run joins it."""
+    from sfanav.localization.recipe import recipe_for
+    from sfanav.pipeline import train_localizer
+
+    XA, _, OA = garden["train-grid"]
+    loc = train_localizer(XA, odometry=OA, network=Network(CONFIG), recipe=recipe_for(config=True, readout="quadratic",
+                                                                                    robustness="none"),
+                          rotation=Rotation(step=4), readout_memory=3000)
+    assert loc.info["supervision"] == "odometry" and loc.readout_memory_ is not None
+    np.testing.assert_allclose(loc.readout_memory_.positions, loc.training_positions_, atol=1e-9)
+    XB, _, OB = garden["train-cross"]
+    joined = join_run(loc, XB, OB)
+    assert joined.poses.shape == (len(XB), 3) and len(joined.closures) > 0

@@ -89,7 +89,8 @@ def train_localizer(images: Any, *, xy: Any = None, odometry: Any = None, timest
     readout_memory : int or None
         Keep what :meth:`sfanav.Localizer.partial_fit` needs to add later runs:
         the network's statistics and at most this many training views
-        (docs/updates.md). Ground-truth supervision only.
+        (docs/updates.md); without ground truth the memory holds the learned
+        positions (the model's odometry frame).
     filter_noise : bool
         With odometry for every frame, choose and store the EKF noise in
         ``info["ekf_noise"]`` (:func:`sfanav.odometry.noise_for_localizer`);
@@ -137,11 +138,8 @@ def train_localizer(images: Any, *, xy: Any = None, odometry: Any = None, timest
                   network_fit=dict(network_fit or {}), info={**dict(info or {}), **recipe.info()},
                   seed=seed)
     if supervision == "odometry":
-        if readout_memory is not None:
-            raise ValueError("readout_memory needs ground-truth supervision: a run without ground truth cannot "
-                             "join a map yet")
         loc = fit_localizer_from_odometry(net, images, odometry, method=metric_map, timestamps=timestamps,
-                                          gyro=gyro, **fit_kw)
+                                          gyro=gyro, readout_memory=readout_memory, **fit_kw)
         loc.info["gyro"] = gyro is not None
     else:
         loc = fit_localizer(net, images, np.asarray(xy, float)[:, :2], readout_memory=readout_memory, **fit_kw)

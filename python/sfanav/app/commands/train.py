@@ -287,9 +287,6 @@ def _train(args: argparse.Namespace, stack: Any) -> int:
         if breaks:
             log(f"{len(breaks) + 1} runs: each is its own recording for the network (no derivative pair across "
                 "a run change)")
-    if args.updatable is not None and supervision == "odometry":
-        raise UsageError("--updatable needs ground-truth supervision: runs without ground truth cannot join a map "
-                         "yet")
     if supervision == "odometry":
         log("fitting the readout to positions learned from the run's odometry (no ground truth); estimates are "
              "metres in the odometry's frame")

@@ -121,7 +121,12 @@ def _update_localizer(args: argparse.Namespace, model: "Any", out: "Any", loc: "
     images, xy = load_run(ds, Preprocessing.of_model(loc), mirror=mirror_of(args, loc), log=log,
                           progress=not args.no_progress)
     joined = None
-    if not xy_ok:
+    frame_of_odometry = loc.info.get("supervision") == "odometry"
+    if frame_of_odometry and not ds.has_odometry:
+        raise UsageError(f"{model} was trained without ground truth (its map is in its training run's odometry "
+                         f"frame): a new run joins it through its odometry, and {args.dataset} has none for every "
+                         "image")
+    if not xy_ok or frame_of_odometry:  # ground truth is another frame than such a map's: join instead
         joined = _joined_positions(args, model, loc, images, ds.odometry)
         xy = joined.positions
     log(f"adding {len(images)} images of {args.dataset} to {model} (readout memory: {len(mem)} views)")
@@ -168,8 +173,10 @@ def _joined_positions(args: argparse.Namespace, model: "Any", loc: "Any", images
 
     from ...odometry.map_joining import join_run
 
-    log(f"{args.dataset} has no ground-truth x, y: joining it to {model}'s map through its odometry and loop "
-        "closures to the map's views (pose graph, GTSAM)")
+    why = ("its map is in its training run's odometry frame" if loc.info.get("supervision") == "odometry"
+           else f"{args.dataset} has no ground-truth x, y")
+    log(f"{why}: joining {args.dataset} to {model}'s map through its odometry and loop closures to the map's views "
+        "(pose graph, GTSAM)")
     try:
         joined = join_run(loc, images, odometry)
     except ImportError as exc:
