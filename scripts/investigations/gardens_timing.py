@@ -19,7 +19,7 @@ import numpy as np
 
 from sfanav.data import Dataset
 from sfanav.experiments.gardens import LOOP_CLOSURES, WIDER, WIDEST, network_variant
-from sfanav.odometry import find_loop_closures, interleave
+from sfanav.loopclosure import find_loop_closures, interleave
 from sfanav.sfa import Rotation
 from sfanav.data import Preprocessing, load_run
 

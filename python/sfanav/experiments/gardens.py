@@ -27,7 +27,7 @@ network, the horizon band, the ``"auto"`` readout) is one more row,
 choice's cross-validation compared kernel ridge and kNN.
 
 A *training variant* ``loop closures`` (thesis 6.2.1 with image-based loop
-closures, :mod:`sfanav.odometry.loop_closures`) is trained on all rows beside the row
+closures, :func:`sfanav.loopclosure.find_loop_closures`) is trained on all rows beside the row
 variants. Further training variants (``TRAIN_VARIANTS``, run with
 ``scripts/investigations/gardens_subset.py``): node capacity, ``transition weight <w>``
 (``Network.fit(transition_weight=)``) and ``spatial pairs ...`` (supervised
@@ -392,7 +392,7 @@ def run_scene(out: Path, preset: str, seed: int, *, quick: bool, progress: bool,
             extra = {"spatial pairs": len(pa)}
             log(f"{tag} seed {seed} {tname}: {len(pa)} spatial pairs")
         if lc_opts:
-            from ..odometry.loop_closures import find_loop_closures, interleave
+            from ..loopclosure import find_loop_closures, interleave
 
             lc = find_loop_closures(X_tr, odo_tr, **lc_opts)
             seq = interleave(A_tr, lc)

@@ -14,7 +14,7 @@ import numpy as np
 from .._checks import check_int, check_n_outputs
 from ..data.corruptions import CorruptionModel
 from ..data.preprocessing import Preprocessing
-from ..sfa.feedback import closure_partners
+from ..loopclosure.partners import closure_partners
 from ..sfa.network import Network, Rotation
 from .localizer import Localizer
 
