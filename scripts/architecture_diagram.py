@@ -28,7 +28,7 @@ LABEL = {
     "sfa": "sfa<br/>SFA node, network -> slow features",
     "localization": "localization<br/>slow features -> position",
     "landmarks": "landmarks<br/>marker views -> stacked position",
-    "odometry": "odometry<br/>metric map, EKF, loop closures",
+    "odometry": "odometry<br/>metric map, pose graph, EKF",
     "pipeline": "pipeline<br/>the training recipe applied to a run",
     "navigation": "navigation<br/>cost, gradient, descents",
     "experiments": "experiments<br/>thesis reruns",

@@ -14,7 +14,7 @@ PKG = Path(sfanav.__file__).parent
 
 # Stages in pipeline order: a module may import its own stage and the ones
 # before it, never one after it. The private helpers (_checks, _progress,
-# _plotting, _threads, _core, _compat) come first; sfanav.pipeline (the training
+# _plotting, _threads, _core) come first; sfanav.pipeline (the training
 # recipe applied to a run) composes the stages up to odometry; the package root
 # re-exports the stages; app and experiments sit on top.
 ORDER = ["_private", "data", "features", "groundtruth", "sim", "loopclosure", "sfa", "localization", "landmarks", "odometry",
@@ -155,21 +155,15 @@ def test_each_stage_imports_on_its_own(stage):
     subprocess.run([sys.executable, "-c", code], check=True)
 
 
-def test_old_import_paths_still_work_with_a_warning():
-    code = ("import warnings; warnings.simplefilter('error', DeprecationWarning)\n"
-            "try:\n    import sfanav.metric\nexcept DeprecationWarning as w:\n    print(w)\n")
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
-    assert "sfanav.metric moved to sfanav.odometry" in out
-    code = ("import warnings; warnings.simplefilter('ignore')\n"
-            "from sfanav.workflow import Conformer, fit_localizer\n"
-            "from sfanav.metrics import med\n"
-            "import sfanav\n"
-            "from sfanav.data.preprocessing import Preprocessor\n"
-            "from sfanav.localization import fit_localizer as f2\n"
-            "assert Conformer is Preprocessor and fit_localizer is f2 and sfanav.metrics.med is med\n"
-            "print('ok')")
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
-    assert out.strip() == "ok"
+@pytest.mark.parametrize("old", ["metric", "workflow", "network", "defaults"])
+def test_the_flat_layouts_module_paths_are_gone(old):
+    """Each name has one home: the flat layout's modules (sfanav.metric,
+    sfanav.workflow, ...) neither import nor resolve as attributes."""
+    import sfanav
+
+    assert not hasattr(sfanav, old)
+    with pytest.raises(ModuleNotFoundError):
+        __import__(f"sfanav.{old}")
 
 
 def test_modules_stay_readable_in_size():

@@ -260,7 +260,7 @@ def test_tiny_realistic_garden_local_readout_beats_the_thesis_readout():
 
 
 def test_loop_closures_found_aligned_and_interleaved():
-    from sfanav.odometry import find_loop_closures, interleave
+    from sfanav.loopclosure import find_loop_closures, interleave
 
     rng = np.random.default_rng(0)
     n, H, W = 20, 6, 64

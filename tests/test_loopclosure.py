@@ -112,12 +112,12 @@ def test_a_revisit_that_looks_identical_is_a_closure_not_an_error():
     np.testing.assert_array_equal(X[cand.past[revisit]], X[cand.current[revisit]])
     np.testing.assert_allclose(cand.score[revisit], 1.0, atol=1e-5)
 
-def test_odometry_gate_and_the_old_path():
+def test_odometry_gate_and_find_loop_closures():
     imgs, xy, _ = _loop_run()
     far = xy + np.array([[5.0, 0.0]]) * (np.arange(len(xy)) >= 60)[:, None]  # odometry says: never back
     gated = FourierDetector(min_gap=20, max_odometry_distance=1.0).detect(imgs, odometry=far)
     assert np.all((gated.past >= 60) == (gated.current >= 60))  # only each lap's own end closes with its start
-    old = sfanav.odometry.find_loop_closures(imgs, min_gap=20)
+    old = sfanav.loopclosure.find_loop_closures(imgs, min_gap=20)
     new = FourierDetector(min_gap=20).detect(imgs)
     np.testing.assert_array_equal(old.current, new.current)
 

@@ -256,7 +256,7 @@ def test_partners_equal_loop_closures_with_the_same_images(run_images):
     imgs, _ = run_images
     closures = (np.array([2, 5]), np.array([30, 35]), np.array([7, 0]))
     a = _net().fit(imgs, sfanav.Rotation(4), progress=False, loop_closures=closures)
-    from sfanav.sfa.feedback import closure_partners
+    from sfanav.loopclosure.partners import closure_partners
 
     cur, w, P = closure_partners(imgs, closures)
     b = _net().fit(imgs, sfanav.Rotation(4), progress=False, partners=(np.array(cur), np.array(w), P))

@@ -21,9 +21,7 @@ imported by ``import sfanav``. The numerics run in a Rust core
 
 from __future__ import annotations
 
-from typing import Any
-
-from . import _compat, data, groundtruth, landmarks, localization, loopclosure, navigation, odometry, sfa, sim
+from . import data, groundtruth, landmarks, localization, loopclosure, navigation, odometry, sfa, sim
 from ._core import __version__
 from ._resources import get_memory_limit, get_num_threads, set_memory_limit, set_num_threads
 from .data import Dataset, DatasetWriter, Unwarper, estimate_mirror, write_dataset
@@ -87,6 +85,7 @@ __all__ = [
     "load",
     "make_detector",
     "localization",
+    "loopclosure",
     "navigation",
     "odometry",
     "set_memory_limit",
@@ -97,13 +96,3 @@ __all__ = [
     "write_dataset",
 ]
 
-_compat.install()
-
-
-def __getattr__(name: str) -> Any:
-    # sfanav.metric, sfanav.workflow, ... of the flat layout (one release)
-    if f"{__name__}.{name}" in _compat.MOVED:
-        import importlib
-
-        return importlib.import_module(f"{__name__}.{name}")
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -4,7 +4,7 @@ at most 2x the thesis configuration).
 
     PYTHONPATH=python python3 scripts/investigations/gardens_timing.py DATASET_DIR [--run train] [--repeats 2] [--only "thesis config" "sfanav default"]
 
-"sfanav default" is the whole default training (sfanav.localization.train_default:
+"sfanav default" is the whole default training (sfanav.pipeline.train_localizer:
 horizon band, the sfanav-default network, the "auto" readout's
 cross-validation and fit); "thesis config" the network plus its quadratic
 regression (a least-squares fit, milliseconds).
@@ -19,7 +19,7 @@ import numpy as np
 
 from sfanav.data import Dataset
 from sfanav.experiments.gardens import LOOP_CLOSURES, WIDER, WIDEST, network_variant
-from sfanav.odometry import find_loop_closures, interleave
+from sfanav.loopclosure import find_loop_closures, interleave
 from sfanav.sfa import Rotation
 from sfanav.data import Preprocessing, load_run
 
@@ -41,14 +41,14 @@ def main() -> None:
                                      "loop closures": [], "sfanav default": []}
     if a.only:
         times = {k: v for k, v in times.items() if k in a.only}
-    from sfanav.localization import train_default
+    from sfanav.pipeline import train_localizer
     from sfanav.localization import QuadraticRegression
 
     for _ in range(a.repeats):
         for name in times:
             t0 = time.perf_counter()
             if name == "sfanav default":
-                loc = train_default(X, xy, camera_elevation=elev)
+                loc = train_localizer(X, xy=xy, camera_elevation=elev)
                 times[name].append(time.perf_counter() - t0)
                 print(f"{name}: {times[name][-1]:.1f} s (network {loc.info['fit_seconds']:.1f} s, readout "
                       f"{loc.info['readout_seconds']:.1f} s: {loc.describe_readout()})", flush=True)

@@ -23,7 +23,8 @@ from pathlib import Path
 
 from threadpoolctl import threadpool_limits
 
-from sfanav import analysis
+from sfanav.localization.plots import plot_firing_maps
+from sfanav.sfa.diagnostics import eta_values, orientation_angles
 from sfanav.data import Dataset
 from sfanav.experiments.gardens import THESIS_SPEC, random_splits_errors
 from sfanav.localization import localization_metrics
@@ -87,11 +88,11 @@ def main() -> None:
         fit_s = time.perf_counter() - t0
         F_tr, F_te = net.transform(X_tr), net.transform(X_te)
         R = net.transform(X_tr, rotations=True)
-        _, eta_phi = analysis.eta_values(R[:, :, :8])
+        _, eta_phi = eta_values(R[:, :, :8])
         p = out / f"firing-maps-{v.replace(' ', '_').replace('=', '')}.png"
-        analysis.plot_firing_maps(R, xy_tr, p, which=(0, 1, 2, 3),
-                                  angles=analysis.orientation_angles(R.shape[1], step=5, width=X_tr.shape[2]),
-                                  title=f"{ds.metadata.get('preset')}: {v}")
+        plot_firing_maps(R, xy_tr, p, which=(0, 1, 2, 3),
+                         angles=orientation_angles(R.shape[1], step=5, width=X_tr.shape[2]),
+                         title=f"{ds.metadata.get('preset')}: {v}")
         row = {"training (s)": fit_s, "max eta_phi": float(eta_phi.max()),
                "n pairs": 0 if pairs is None else len(pairs[0])}
         for name, kinds in (("quadratic (thesis)", None), ("kNN", ("knn",)), ("kernel ridge", ("kernel",))):

@@ -5,7 +5,7 @@ with relative-pose closures (sfanav.odometry.pair_closures), each without
 and with the run's gyro (sfanav.odometry.gyro), on the serpentine and the
 crossing runs of the ``mower-survey`` preset.
 
-The slow features are those of the sfanav default (``train_default``) fitted
+The slow features are those of the sfanav default (``train_localizer``) fitted
 once per run and cached (``CACHE/RUN.npz``); every pose-graph variant reuses
 them. Every variant runs without the readout refinement (``refine=0``: the
 back ends and closures alone, seconds each) and, for those named by
@@ -50,7 +50,7 @@ def run_data(dataset: Path, cache: Path, run: str) -> dict[str, np.ndarray]:
         from sfanav.data.dataset import Dataset
         from sfanav.data.preprocessing import Preprocessing
         from sfanav.data.sources import load_run
-        from sfanav.localization.training import train_default
+        from sfanav.pipeline import train_localizer
 
         ds = Dataset(dataset)
         cam = ds.metadata["camera"]
@@ -58,7 +58,7 @@ def run_data(dataset: Path, cache: Path, run: str) -> dict[str, np.ndarray]:
         tr = ds.select(run=run)
         X, xy = load_run(tr, prep)
         t0 = time.perf_counter()
-        loc = train_default(X, xy, camera_elevation=tuple(cam.get("elevation_deg", (-30.0, 20.0))))
+        loc = train_localizer(X, xy=xy, camera_elevation=tuple(cam.get("elevation_deg", (-30.0, 20.0))))
         cache.mkdir(parents=True, exist_ok=True)
         np.savez(path, X=X, F=loc.features(X), odometry=tr.odometry, truth=tr.poses, gyro=tr.gyro,
                  fit_seconds=time.perf_counter() - t0)

@@ -42,14 +42,14 @@ def garden_run(seed: int, out: Path):
     from sfanav.data.preprocessing import Preprocessing
     from sfanav.data.sources import load_run
     from sfanav.experiments.localization import simulated
-    from sfanav.localization.training import train_default
+    from sfanav.pipeline import train_localizer
 
     ds = simulated(out, "realistic-garden", seed, quick=False, progress=True)
     cam = ds.metadata["camera"]
     prep = Preprocessing(int(cam["width"]), int(cam["height"]), False, False)
     tr = ds.select(run="train")
     X, xy = load_run(tr, prep)
-    loc = train_default(X, xy, camera_elevation=tuple(cam.get("elevation_deg", (-30.0, 20.0))))
+    loc = train_localizer(X, xy=xy, camera_elevation=tuple(cam.get("elevation_deg", (-30.0, 20.0))))
     return X, loc.features(X), tr.odometry, xy
 
 

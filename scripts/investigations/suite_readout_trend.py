@@ -10,7 +10,7 @@ from sfanav.data import Preprocessing, load_run
 from sfanav.experiments import gardens_suite as gs
 from sfanav.experiments.localization import simulated
 from sfanav.localization.recipe import default_network, recipe_for
-from sfanav.localization.training import train_default
+from sfanav.pipeline import train_localizer
 from sfanav.localization.signature_readout import SignatureGPReadout
 from sfanav.localization.evaluation import coordinate_range
 from sklearn.linear_model import RidgeCV
@@ -24,7 +24,7 @@ for g in sys.argv[1:]:
     prep = Preprocessing(int(cam["width"]), int(cam["height"]), False, False)
     tests = {t: load_run(ds.select(run=t), prep) for t in gs.TEST_RUNS}
     X, xy = load_run(ds.select(run="train-grid"), prep)
-    loc = train_default(X, xy, camera_elevation=elev)
+    loc = train_localizer(X, xy=xy, camera_elevation=elev)
     F, G = loc.features(X), loc.signatures(X)
     m = 12; q = G.shape[1]
     Z = np.hstack([F[:, :m], G])

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from sfanav import baselines, sim
+from sfanav.localization import baselines
 from sfanav.data import Preprocessing, load_run
 from sfanav.experiments import gardens_suite as gs
 from sfanav.experiments.localization import simulated

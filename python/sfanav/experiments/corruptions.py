@@ -55,8 +55,8 @@ from ..localization import baselines
 from ..localization.error_metrics import align, localization_metrics
 from ..localization.localizer import Localizer
 from ..localization.recipe import default_network, recipe_for
-from ..localization.training import fit_localizer
-from ..sfa.network import Network, Rotation
+from ..pipeline import train_localizer
+from ..sfa.network import Network
 from . import ExperimentResult, register
 from .localization import progress_log, simulated, tiny_config
 
@@ -93,8 +93,6 @@ def _train(methods: tuple[str, ...], X: np.ndarray, xy: np.ndarray, odometry: np
            elev: tuple[float, float], *, quick: bool, seed: int) -> tuple[dict[str, Any], dict[str, float]]:
     """The models of ``methods`` trained on one run (images as the network
     takes them, uint8) and their training times (s)."""
-    from ..odometry.self_supervision import fit_localizer_from_odometry
-
     h, w, c = X.shape[1:]
 
     def net(out: int = 12) -> Network:
@@ -107,22 +105,19 @@ def _train(methods: tuple[str, ...], X: np.ndarray, xy: np.ndarray, odometry: np
         if m in SFANAV:
             robustness = {"sfanav robustness light": "light", "sfanav robustness full": "full",
                           "sfanav robustness none": "none"}.get(m)  # None: the default's
-            kw = recipe_for(robustness=robustness).fit_kwargs(elev)
-            if quick:
-                kw["rows"] = None
+            recipe = recipe_for(robustness=robustness, rows="all" if quick else None)  # quick: 8-row images
             if m == "sfanav default, no ground truth":
                 if odometry is None:
                     continue
-                loc = fit_localizer_from_odometry(net(), X, odometry, rotation=Rotation(5), progress=False,
-                                                  seed=seed, **kw)
+                loc = train_localizer(X, odometry=odometry, supervision="odometry", network=net(), recipe=recipe,
+                                      camera_elevation=elev, filter_noise=False, seed=seed)
                 models[m] = _Aligned(loc, X, xy)
             else:
-                models[m] = fit_localizer(net(), X, xy, rotation=Rotation(5), progress=False, seed=seed, **kw)
+                models[m] = train_localizer(X, xy=xy, network=net(), recipe=recipe, camera_elevation=elev, seed=seed)
         elif m == "thesis configuration":
             tnet = Network(tiny_config(w, h, c, out=8)) if quick else Network.from_preset("thesis-5.1",
                                                                                           precision="mixed")
-            models[m] = fit_localizer(tnet, X, xy, rotation=Rotation(5), n_outputs=8, readout="quadratic",
-                                      progress=False)
+            models[m] = train_localizer(X, xy=xy, network=tnet, recipe=recipe_for("thesis-5.1"))
         elif m == "perfect memory":
             models[m] = baselines.PerfectMemory().fit(X, xy)
         else:

@@ -23,11 +23,11 @@ training run only) the localization error is measured:
 The **sfanav default** (:mod:`sfanav.localization.recipe`: the ``sfanav-default``
 network, the horizon band, the ``"auto"`` readout) is one more row,
 ``sfanav default``, trained and read out by the library's own
-:func:`sfanav.localization.train_default`; its row also records how the readout
+:func:`sfanav.pipeline.train_localizer`; its row also records how the readout
 choice's cross-validation compared kernel ridge and kNN.
 
 A *training variant* ``loop closures`` (thesis 6.2.1 with image-based loop
-closures, :mod:`sfanav.odometry.loop_closures`) is trained on all rows beside the row
+closures, :func:`sfanav.loopclosure.find_loop_closures`) is trained on all rows beside the row
 variants. Further training variants (``TRAIN_VARIANTS``, run with
 ``scripts/investigations/gardens_subset.py``): node capacity, ``transition weight <w>``
 (``Network.fit(transition_weight=)``) and ``spatial pairs ...`` (supervised
@@ -233,17 +233,17 @@ def _default_row(X_tr: np.ndarray, xy_tr: np.ndarray, X_te: np.ndarray, xy_te: n
                  elev: tuple[float, float], *, quick: bool, seed: int, n_repeats: int, log: Any,
                  tag: str, odometry: np.ndarray | None = None
                  ) -> tuple[dict[str, Any], dict[str, Any], dict[str, Any] | None]:
-    """The sfanav default, trained by :func:`sfanav.localization.train_default`
+    """The sfanav default, trained by :func:`sfanav.pipeline.train_localizer`
     exactly as ``sfanav train`` does without a preset, measured as the
     other rows; the same network and rows without rotation pooling (the
     pooling's ablation row); and, given the training run's ``odometry``,
     the same network with its readout fitted without ground truth."""
     from ..localization.recipe import default_network
-    from ..localization.training import train_default
+    from ..pipeline import train_localizer
 
     shape = X_tr.shape[1:] if X_tr.ndim == 4 else X_tr.shape[1:] + (1,)
     net = Network(tiny_config(shape[1], shape[0], shape[2], out=12)) if quick else default_network()
-    loc = train_default(X_tr, xy_tr, camera_elevation=elev, network=net)
+    loc = train_localizer(X_tr, xy=xy_tr, camera_elevation=elev, network=net)
     F_tr, F_te = loc.features(X_tr), loc.features(X_te)
     G_tr, G_te = (loc.signatures(X_tr), loc.signatures(X_te)) if loc.n_signature_ else (None, None)
     m = localization_metrics(loc.predict_features(F_te, signatures=G_te), xy_te, coordinate_range=crange)
@@ -392,7 +392,7 @@ def run_scene(out: Path, preset: str, seed: int, *, quick: bool, progress: bool,
             extra = {"spatial pairs": len(pa)}
             log(f"{tag} seed {seed} {tname}: {len(pa)} spatial pairs")
         if lc_opts:
-            from ..odometry.loop_closures import find_loop_closures, interleave
+            from ..loopclosure import find_loop_closures, interleave
 
             lc = find_loop_closures(X_tr, odo_tr, **lc_opts)
             seq = interleave(A_tr, lc)
@@ -537,7 +537,7 @@ def _exp_gardens(out: Path, *, quick: bool, seed: int, progress: bool) -> Experi
         "by odometry, accepted if as alike as a frame 2 steps away), aligned by circular cross-correlation; "
         "training time includes finding them. 'capacity: wider layers': Table 5.1 with 20 / 24 / 24 instead of "
         "14 / 16 / 16 outputs in layers 1-3; 'widest': 28 / 32 / 32; '+' combines"
-        + ". 'sfanav default': the library's default (sfanav.localization.train_default: network sfanav-default = "
+        + ". 'sfanav default': the library's default (sfanav.pipeline.train_localizer: network sfanav-default = "
         "Table 5.1 with 20 / 24 / 24 outputs in layers 1-3 and 12 top outputs, horizon band, readout 'auto' = "
         "a GP (ARD kernel, marginal likelihood) on 12 outputs unless kernel ridge or kNN is >10 % better by blocked CV "
         "on the training run (10 folds of interleaved 10-image blocks))"

@@ -13,7 +13,7 @@ random walk; ``test-walk jpeg-90``: the random walk as a ROS camera's
 image_transport sends it, JPEG at quality 90). For every garden, training
 run and test run it measures
 
-* the **sfanav default** (:func:`sfanav.localization.train_default`, exactly
+* the **sfanav default** (:func:`sfanav.pipeline.train_localizer`, exactly
   as ``sfanav train`` without a preset),
 * the **thesis configuration** (Table 5.1 network, all rows, quadratic
   regression of the 8 slowest outputs),
@@ -120,7 +120,7 @@ def run_garden(out: Path, name: str, seed: int, *, quick: bool, progress: bool,
     from scipy.spatial import cKDTree
 
     from ..localization.recipe import default_network
-    from ..localization.training import train_default
+    from ..pipeline import train_localizer
 
     log = progress_log(progress)
     preset = f"suite-{name}"
@@ -144,7 +144,7 @@ def run_garden(out: Path, name: str, seed: int, *, quick: bool, progress: bool,
         t0 = time.perf_counter()
         shape = X_tr.shape[1:]
         net = Network(tiny_config(shape[1], shape[0], shape[2], out=12)) if quick else default_network()
-        loc = models["sfanav default"] = train_default(X_tr, xy_tr, camera_elevation=elev, network=net)
+        loc = models["sfanav default"] = train_localizer(X_tr, xy=xy_tr, camera_elevation=elev, network=net)
         t_default = time.perf_counter() - t0
         F_tr, G_tr = loc.features(X_tr), loc.signatures(X_tr)
         slow = loc.sibling(readout={"kind": "gp", "n_outputs": min(12, F_tr.shape[1])}, n_outputs=None,

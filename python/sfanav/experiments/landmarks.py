@@ -29,8 +29,9 @@ from ..localization.error_metrics import localization_metrics
 from ..localization.evaluation import coordinate_range
 from ..localization.plots import plot_trajectory
 from ..localization.readouts import make_readout
-from ..localization.training import fit_localizer, train_default
-from ..sfa.network import Network, Rotation
+from ..localization.recipe import recipe_for
+from ..pipeline import train_localizer
+from ..sfa.network import Network
 from ..sim.presets import LANDMARK_MARKERS
 from . import ExperimentResult, register
 from .localization import progress_log, simulated, tiny_config
@@ -121,11 +122,11 @@ def _whole_image(kind: str, quick: bool, P_tr: np.ndarray, xy_tr: np.ndarray, P_
     t0 = time.perf_counter()
     if kind == "thesis configuration":
         net = Network(tiny_config(P_tr.shape[2], P_tr.shape[1], 3)) if quick else Network.from_preset("thesis-5.2")
-        loc = fit_localizer(net, P_tr, xy_tr, rotation=Rotation(step=5), n_outputs=8, readout="quadratic",
-                            progress=progress)
+        loc = train_localizer(P_tr, xy=xy_tr, network=net, recipe=recipe_for("thesis-5.2"), progress=progress)
     else:
         net = Network(tiny_config(P_tr.shape[2], P_tr.shape[1], 3)) if quick else None
-        loc = train_default(P_tr, xy_tr, camera_elevation=PANORAMA_ELEVATION, network=net, progress=progress)
+        loc = train_localizer(P_tr, xy=xy_tr, camera_elevation=PANORAMA_ELEVATION, network=net,
+                              progress=progress)
     fit_s = time.perf_counter() - t0
     pred = loc.predict(P_te)
     return loc, localization_metrics(pred, xy_te, coordinate_range=coordinate_range(xy_te)), fit_s

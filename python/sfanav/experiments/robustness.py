@@ -20,6 +20,7 @@ Euclidean distance (MED) on the separate test walk.
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from pathlib import Path
 from typing import Any
@@ -33,9 +34,9 @@ from ..localization import baselines
 from ..localization.error_metrics import localization_metrics
 from ..localization.evaluation import coordinate_range
 from ..localization.plots import plot_firing_maps, plot_trajectory
-from ..localization.recipe import default_network, recipe_for
-from ..localization.training import fit_localizer
+from ..localization.recipe import Recipe, default_network, recipe_for
 from ..loopclosure import LoopClosures, align, closure_precision_recall, make_detector, plot_closures
+from ..pipeline import train_localizer
 from ..sfa.network import Network, Rotation
 from . import ExperimentResult, register
 from .localization import progress_log, simulated, tiny_config
@@ -67,19 +68,18 @@ def _dataset(out: Path, variant: str, seed: int, quick: bool, progress: bool) ->
     return simulated(out, preset, seed, quick=False, progress=progress)
 
 
-def _config(name: str, quick: bool) -> tuple[Any, Preprocessing, dict[str, Any]]:
-    """(network factory, preprocessing, fit_localizer keywords) of a configuration."""
+def _config(name: str, quick: bool) -> tuple[Any, Preprocessing, Recipe]:
+    """(network factory, preprocessing, training recipe) of a configuration:
+    the thesis's (all rows, quadratic regression of 8 outputs, no pooling),
+    or the sfanav default's network, horizon band, readout and signature
+    without its robustness (photometric normalisation, corrupted copies)."""
+    thesis = Recipe("custom", dict(THESIS_SPEC), "all", 8, None, None, "none")
     if quick:
-        prep = Preprocessing(60, 8, False)
-        return (lambda: Network(tiny_config(60, 8, 3, out=8))), prep, {"n_outputs": 8, "readout": dict(THESIS_SPEC),
-                                                                       "rotation_pooling": None}
+        return (lambda: Network(tiny_config(60, 8, 3, out=8))), Preprocessing(60, 8, False), thesis
     if name == "thesis config":
-        return ((lambda: Network.from_preset("thesis-5.2", precision="mixed")), Preprocessing(600, 60, False),
-                {"n_outputs": 8, "readout": dict(THESIS_SPEC), "rotation_pooling": None})
-    recipe = recipe_for()
+        return (lambda: Network.from_preset("thesis-5.2", precision="mixed")), Preprocessing(600, 60, False), thesis
     # "sfanav default, normalised": each panorama at zero mean and unit variance (thesis 5.2's preprocessing)
-    return (default_network, Preprocessing(350, 40, False, name.endswith("normalised")),
-            {"readout": recipe.readout, "signature": recipe.signature})
+    return default_network, Preprocessing(350, 40, False, name.endswith("normalised")), recipe_for(robustness="none")
 
 
 def _images(ds: Any, prep: Preprocessing, log: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -105,16 +105,16 @@ def _detect(kind: str, X: np.ndarray, xy: np.ndarray, quick: bool = False) -> tu
     return cand.select(det.accepted_), cand
 
 
-def _train(make_net: Any, X: np.ndarray, xy: np.ndarray, kw: dict[str, Any], rows: Any,
+def _train(make_net: Any, X: np.ndarray, xy: np.ndarray, recipe: Recipe, elev: tuple[float, float],
            closures: Any = None, weights: Any = None, rotate: bool = True) -> tuple[Any, float]:
     """Fits a localizer under simulated rotation (5 px, whole panorama), or
     with ``rotate=False`` on the images as they come (one view each, no
     rotation invariance: the long-term model of 6.2.2)."""
     t0 = time.perf_counter()
     rotation = Rotation(5, 1.0) if rotate else Rotation(X.shape[2], 1.0)
-    kw = kw if rotate else {**kw, "rotation_pooling": None}
-    loc = fit_localizer(make_net(), X, xy, rotation=rotation, rows=rows, progress=False,
-                        loop_closures=closures, closure_weights=weights, **kw)
+    recipe = recipe if rotate else dataclasses.replace(recipe, rotation_pooling=None)
+    loc = train_localizer(X, xy=xy, network=make_net(), recipe=recipe, camera_elevation=elev, rotation=rotation,
+                          loop_closures=closures, closure_weights=weights)
     return loc, time.perf_counter() - t0
 
 
@@ -146,12 +146,11 @@ def run_621(out: Path, variant: str, *, quick: bool, seed: int, progress: bool,
     candidates: dict[str, LoopClosures] = {}
     configs = (tuple(c for c in configs if c in CONFIGS) or CONFIGS[:1]) if quick else configs
     for config in configs:  # quick: the tiny network in every configuration
-        make_net, prep, kw = _config(config, quick)
+        make_net, prep, recipe = _config(config, quick)
         X_tr, xy_tr, X_te, xy_te = _images(ds, prep, log)
-        rows_step = None if config == "thesis config" or quick else recipe_for().image_rows(
-            tuple(ds.metadata["camera"].get("elevation_deg", (-30.0, 20.0))))
+        elev = tuple(ds.metadata["camera"].get("elevation_deg", (-30.0, 20.0)))
         tag = f" [{config}]"
-        std, t_std = _train(make_net, X_tr, xy_tr, kw, rows_step)
+        std, t_std = _train(make_net, X_tr, xy_tr, recipe, elev)
         m_std = _med(std, X_te, xy_te)
         log(f"{name} {config}: standard MED {m_std['med']:.3f} m ({t_std:.0f} s)")
         rows.append({"metric": f"MED (m) standard{tag}", "thesis": thesis.get("standard") if config == "thesis config"
@@ -168,7 +167,7 @@ def run_621(out: Path, variant: str, *, quick: bool, seed: int, progress: bool,
             pr = closure_precision_recall(lc, xy_tr, max_distance=GT_DISTANCE, min_gap=GT_GAP)
             variants = [("", None)] + ([(" weighted", "score")] if weighted and kind == "bow" else [])
             for suffix, weights in variants:
-                fb, t_fb = _train(make_net, X_tr, xy_tr, kw, rows_step, closures=lc, weights=weights)
+                fb, t_fb = _train(make_net, X_tr, xy_tr, recipe, elev, closures=lc, weights=weights)
                 m_fb = _med(fb, X_te, xy_te)
                 label = f"feedback {kind}{suffix}"
                 fits[label] = fb
@@ -285,7 +284,7 @@ def run_622(out: Path, *, quick: bool, seed: int, progress: bool, permutations: 
     plots: list[str] = []
     n_sets = min(max_sets, len(conds) - 1)
     for config in configs:
-        make_net, prep, kw = _config(config, quick)
+        make_net, prep, recipe = _config(config, quick)
         sets, keys = [], []
         for c in conds:
             rec = ds.select(condition=c)
@@ -293,8 +292,7 @@ def run_622(out: Path, *, quick: bool, seed: int, progress: bool, permutations: 
             sets.append((X, xy))
             keys.append(xy if by == "position" else arc_fraction(rec.odometry))
         places = [correspondences(keys[0], k) for k in keys]
-        rows_step = None if config == "thesis config" or quick else recipe_for().image_rows(
-            tuple(ds.metadata["camera"].get("elevation_deg", (-30.0, 20.0))))
+        elev = tuple(ds.metadata["camera"].get("elevation_deg", (-30.0, 20.0)))
         med = np.full((permutations, n_sets), np.nan)
         pm = np.full((permutations, n_sets), np.nan)
         held = np.full((permutations, n_sets), np.nan)  # every k tested on the permutation's last recording
@@ -305,7 +303,7 @@ def run_622(out: Path, *, quick: bool, seed: int, progress: bool, permutations: 
                 order = place_major_order([places[s] for s in train])
                 X = np.concatenate([sets[s][0] for s in train])[order]
                 xy = np.concatenate([sets[s][1] for s in train])[order]
-                loc, t = _train(make_net, X, xy, kw, rows_step, rotate=rotate)
+                loc, t = _train(make_net, X, xy, recipe, elev, rotate=rotate)
                 X_te, xy_te = sets[test]
                 med[p, k - 1] = _med(loc, X_te, xy_te)["med"]
                 held[p, k - 1] = med[p, k - 1] if test == perm[-1] else _med(loc, *sets[perm[-1]])["med"]

@@ -7,8 +7,8 @@
   their blocked cross-validated choice
   (:mod:`~sfanav.localization.readout_selection`);
 * :mod:`~sfanav.localization.recipe`: the training recipes (the thesis's and
-  the sfanav default) in one place; :func:`fit_localizer`,
-  :func:`train_default`;
+  the sfanav default) in one place; :func:`fit_localizer` (the recipe
+  applied to a run: :func:`sfanav.pipeline.train_localizer`);
 * evaluation: error metrics (:mod:`~sfanav.localization.error_metrics`),
   protocols (:mod:`~sfanav.localization.protocols`), :func:`evaluate`, the
   baselines a user might pick instead (:class:`PerfectMemory`,
@@ -73,6 +73,6 @@ from .recipe import (
 )
 from .report import write_report
 from .signature_readout import SignatureGPReadout
-from .training import fit_localizer, train_default
+from .training import fit_localizer
 
-__all__ = ["cross_val_predict", "AUTO_BLOCK", "AUTO_FOLDS", "AUTO_TOLERANCE", "Alignment", "BAND", "ErrorCurve", "Evaluation", "FourierSignature", "GPReadout", "KNNReadout", "KernelRidgeReadout", "Localizer", "NETWORK_PRESET", "PerfectMemory", "QuadraticRegression", "RANDOM_SPLITS", "READOUT", "Recipe", "ReadoutSelection", "SignatureGPReadout", "fourier_signature", "SIGNATURE", "RegressionResult", "TEST_RUN", "align", "auto_candidates", "benchmark", "block_folds", "default_candidates", "default_network", "default_rows", "error_vs_n", "euclidean_errors", "evaluate", "evaluate_random_splits", "evaluate_test_run", "evaluation_rows", "fit_localizer", "localization_metrics", "mae", "mae_percent", "make_readout", "med", "plot_error_vs_n", "plot_firing_maps", "plot_trajectory", "pooled_transform", "pooling_step", "readout_from_state", "pooling_for", "readout_state", "recipe_for", "select_auto_readout", "select_readout", "train_default", "write_report"]
+__all__ = ["cross_val_predict", "AUTO_BLOCK", "AUTO_FOLDS", "AUTO_TOLERANCE", "Alignment", "BAND", "ErrorCurve", "Evaluation", "FourierSignature", "GPReadout", "KNNReadout", "KernelRidgeReadout", "Localizer", "NETWORK_PRESET", "PerfectMemory", "QuadraticRegression", "RANDOM_SPLITS", "READOUT", "Recipe", "ReadoutSelection", "SignatureGPReadout", "fourier_signature", "SIGNATURE", "RegressionResult", "TEST_RUN", "align", "auto_candidates", "benchmark", "block_folds", "default_candidates", "default_network", "default_rows", "error_vs_n", "euclidean_errors", "evaluate", "evaluate_random_splits", "evaluate_test_run", "evaluation_rows", "fit_localizer", "localization_metrics", "mae", "mae_percent", "make_readout", "med", "plot_error_vs_n", "plot_firing_maps", "plot_trajectory", "pooled_transform", "pooling_step", "readout_from_state", "pooling_for", "readout_state", "recipe_for", "select_auto_readout", "select_readout", "write_report"]

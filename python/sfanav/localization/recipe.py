@@ -15,7 +15,7 @@ and rotation pooling.
 
 :func:`recipe_for` resolves a recipe from what the user named (a preset, a
 config file, explicit overrides); ``sfanav train``,
-:func:`sfanav.localization.train_default` and :class:`sfanav.Localizer` all
+:func:`sfanav.pipeline.train_localizer` and :class:`sfanav.Localizer` all
 ask it; :meth:`Recipe.fit_kwargs` turns it into the arguments of
 :func:`sfanav.localization.fit_localizer`. Why these choices:
 docs/gardens.md, docs/robustness.md."""

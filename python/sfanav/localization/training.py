@@ -6,7 +6,7 @@ that carries how it was made."""
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -14,10 +14,9 @@ import numpy as np
 from .._checks import check_int, check_n_outputs
 from ..data.corruptions import CorruptionModel
 from ..data.preprocessing import Preprocessing
-from ..sfa.feedback import closure_partners
+from ..loopclosure.partners import closure_partners
 from ..sfa.network import Network, Rotation
 from .localizer import Localizer
-from .recipe import CAMERA_ELEVATION, default_network, recipe_for
 
 
 def fit_localizer(
@@ -202,21 +201,3 @@ def invariance_partners(images: np.ndarray, model: CorruptionModel, network_inpu
     partners = network_input(model.apply(base, seed=seed))
     return np.arange(n), weights, np.ascontiguousarray(partners)
 
-
-def train_default(images: Any, xy: Any, *, camera_elevation: Sequence[float] = CAMERA_ELEVATION,
-                  network: Network | None = None, rotation: Rotation | None = None, progress: bool = False,
-                  info: dict[str, Any] | None = None, loop_closures: Any = None, closure_weights: Any = None,
-                  robustness: str | None = None, seed: int = 0) -> Any:
-    """Trains the sfanav default on a training run: ``images`` (N, 40, 350, 3)
-    uint8 in temporal order, ``xy`` (N, 2) metres. Returns a fitted
-    :class:`sfanav.Localizer` (network, rows and readout; ``save`` it as one
-    model file). ``network`` replaces the default network (e.g. for other
-    image sizes). ``loop_closures``, ``closure_weights``: feedback training,
-    as :meth:`sfanav.Network.fit`. ``robustness``: one of
-    :data:`~sfanav.localization.recipe.ROBUSTNESS` (None: the default's);
-    ``seed`` draws its corruptions."""
-    recipe = recipe_for(robustness=robustness)
-    net = network if network is not None else default_network()
-    return fit_localizer(net, np.asarray(images), np.asarray(xy, float), rotation=rotation or Rotation(5, 1.0),
-                         progress=progress, loop_closures=loop_closures, closure_weights=closure_weights,
-                         info={**recipe.info(), **(info or {})}, seed=seed, **recipe.fit_kwargs(camera_elevation))

@@ -17,7 +17,8 @@ order of several recordings of one route (thesis 6.2).
   place-major order of long-term training.
 
 Closures feed :meth:`sfanav.Network.fit` (``loop_closures=...``), which
-interleaves each earlier image in the current one's simulated rotation.
+interleaves each earlier image in the current one's simulated rotation;
+``partners`` turns them into what it trains on (:func:`closure_partners`).
 
 >>> import numpy as np
 >>> xy = np.c_[np.r_[np.arange(10.0), np.arange(10.0)[::-1]], np.zeros(20)]
@@ -41,10 +42,11 @@ from .detectors import (
 )
 from .evaluation import ClosureQuality, closure_precision_recall
 from .factory import DETECTORS, make_detector
+from .partners import closure_partners
 from .plots import plot_closures, plot_precision_recall
 from .relative_pose import RelativePoses, gradient_offsets, relative_poses
 
 __all__ = ["BagOfWordsDetector", "ClosureQuality", "DETECTORS", "FourierDetector", "GroundTruthDetector", "LoopClosureDetector",
-           "LoopClosures", "RelativePoses", "align", "arc_fraction", "closure_precision_recall", "correspondences",
+           "LoopClosures", "RelativePoses", "align", "arc_fraction", "closure_partners", "closure_precision_recall", "correspondences",
            "find_loop_closures", "fourier_signatures", "gradient_offsets", "interleave", "make_detector", "panorama_rows", "place_major_order", "plot_closures",
            "plot_precision_recall", "relative_poses", "suppress"]

@@ -7,7 +7,8 @@ receptive-field network trained under simulated rotation (3.3-3.4, 5.1):
   mergeable covariance / derivative-covariance accumulator), :func:`expand`;
 * :class:`Network` with its presets (``sfanav/sfa/presets/*.toml``) and
   :class:`Rotation`; :func:`spatial_pairs` for graph-based training (:mod:`~sfanav.sfa.pairs`);
-  loop-closure feedback (:mod:`~sfanav.sfa.feedback`, ``Network.fit(loop_closures=...)``);
+  loop-closure feedback (``Network.fit(loop_closures=...)``: the closures' partners from
+  :mod:`sfanav.loopclosure.partners`, explicit partners checked in :mod:`~sfanav.sfa.feedback`);
 * :mod:`~sfanav.sfa.diagnostics`: delta and eta values of the outputs;
 * :mod:`~sfanav.sfa.modelfile`: versioned, checksummed, pickle-free model
   files and :func:`load`.

@@ -31,7 +31,8 @@ from typing import Any
 import numpy as np
 
 from .. import _core
-from .feedback import aligned_partners, check_closures, check_partners
+from ..loopclosure.partners import aligned_partners, check_closures
+from .feedback import check_partners
 from .pairs import check_pairs
 
 __all__ = ["PairTask", "PartitionClosures", "check_frames", "closures_by_partition", "pair_statistics", "pair_tasks",
@@ -104,26 +105,13 @@ def closures_by_partition(loop_closures: Any, weights: Any, parts: list[Any], n:
     frame and partition."""
     past, current, shift, w = check_closures(loop_closures, n, weights)
     starts = np.array([p.start for p in parts], dtype=np.int64)
-    owner = _owner(starts, current)
-    out: list[PartitionClosures | None] = []
-    for i, part in enumerate(parts):
-        sel = np.flatnonzero(owner == i)
-        if not len(sel):
-            out.append(None)
-            continue
-        sel = sel[np.argsort(current[sel], kind="stable")]
-        frames = np.asarray(gather(past[sel]))
-        src, cur = past[sel], current[sel]
 
-        def name(k: int, src: np.ndarray = src, cur: np.ndarray = cur) -> str:
-            return (f"the loop-closure partner frame {int(src[k])} of the run (partition "
-                    f"{int(_owner(starts, src[k:k + 1])[0])}, partner of frame {int(cur[k])})")
+    def name(j: int, i: int) -> str:
+        return (f"the loop-closure partner frame {int(past[j])} of the run (partition "
+                f"{int(_owner(starts, past[j:j + 1])[0])}, partner of frame {int(current[j])})")
 
-        check_frames(frames, hw, period, name)
-        out.append(PartitionClosures(tuple((cur - part.start).tolist()), tuple(w[sel].tolist()),
-                                     np.ascontiguousarray(aligned_partners(frames, shift[sel])),
-                                     tuple(src.tolist())))
-    return out
+    return _by_partition(current, w, past, parts, hw, period, lambda sel: np.asarray(gather(past[sel])), name,
+                         shift=shift)
 
 
 def partners_by_partition(partners: Any, parts: list[Any], n: int, frames: np.ndarray, hw: tuple[int, int, int],
@@ -136,24 +124,39 @@ def partners_by_partition(partners: Any, parts: list[Any], n: int, frames: np.nd
     TypeError as :func:`sfanav.sfa.feedback.check_partners`."""
     current, weights, imgs = check_partners(partners, n, frames.shape[1:], frames.dtype)
     cur = np.asarray(current, dtype=np.int64)
-    w = np.asarray(weights)
+
+    def name(j: int, i: int) -> str:
+        return f"the partner image of frame {int(cur[j])} of the run (partition {i})"
+
+    return _by_partition(cur, np.asarray(weights), cur, parts, hw, period, lambda sel: imgs[sel], name)
+
+
+def _by_partition(current: np.ndarray, weights: np.ndarray, sources: np.ndarray, parts: list[Any],
+                  hw: tuple[int, int, int], period: int, images_of: Callable[[np.ndarray], np.ndarray],
+                  name: Callable[[int, int], str], *, shift: np.ndarray | None = None
+                  ) -> list[PartitionClosures | None]:
+    """The one split of partners (M,) over ``parts``: each partition gets
+    those whose ``current`` frame it holds, in run order, with their
+    ``weights``, partner images ``images_of(selection)`` (checked against
+    the run's size ``hw`` and ``period``; errors name partner ``j`` of
+    partition ``i`` by ``name(j, i)``; rolled by ``shift`` to the current
+    orientation where given) and ``sources`` (frames of the run, for
+    messages); None where it has none."""
     starts = np.array([p.start for p in parts], dtype=np.int64)
-    owner = _owner(starts, cur)
+    owner = _owner(starts, current)
     out: list[PartitionClosures | None] = []
     for i, part in enumerate(parts):
         sel = np.flatnonzero(owner == i)
         if not len(sel):
             out.append(None)
             continue
-        sel = sel[np.argsort(cur[sel], kind="stable")]
-        frames = imgs[sel]
-
-        def name(k: int, c: np.ndarray = cur[sel]) -> str:
-            return f"the partner image of frame {int(c[k])} of the run (partition {i})"
-
-        check_frames(frames, hw, period, name)
-        out.append(PartitionClosures(tuple((cur[sel] - part.start).tolist()), tuple(w[sel].tolist()),
-                                     np.ascontiguousarray(frames), tuple(cur[sel].tolist())))
+        sel = sel[np.argsort(current[sel], kind="stable")]
+        frames = images_of(sel)
+        check_frames(frames, hw, period, lambda k, sel=sel, i=i: name(int(sel[k]), i))
+        if shift is not None:
+            frames = aligned_partners(frames, shift[sel])
+        out.append(PartitionClosures(tuple((current[sel] - part.start).tolist()), tuple(weights[sel].tolist()),
+                                     np.ascontiguousarray(frames), tuple(sources[sel].tolist())))
     return out
 
 

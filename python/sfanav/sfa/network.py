@@ -38,7 +38,8 @@ from .config import (
     resolve_config,
     spec_to_json,
 )
-from .feedback import check_partners, closure_partners
+from ..loopclosure.partners import closure_partners
+from .feedback import check_partners
 from .modelfile import dumps, register_loader, save_model, state_from_bytes
 from .pairs import check_pairs
 
