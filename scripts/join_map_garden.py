@@ -9,9 +9,12 @@ model updated with B at its joined positions, the model updated with B at
 its true positions, and a retrain of network and readout on A + B with
 ground truth. docs/updates.md quotes it.
 
-    PYTHONPATH=python python scripts/join_map_garden.py [DIR]
+    PYTHONPATH=python python scripts/join_map_garden.py [DIR] \
+        [--json docs/results/investigations/join-map-garden.json]
 """
 
+import argparse
+import json
 import subprocess
 import sys
 import time
@@ -56,12 +59,18 @@ def disguise(odo, theta=1.1, t=(7.0, -3.0), drift_deg_per_m=0.5, noise_deg=0.2, 
     return out
 
 
+def stats(a, b):
+    e = np.hypot(*(np.asarray(a) - np.asarray(b)).T)
+    return {"median_m": float(np.median(e)), "p90_m": float(np.percentile(e, 90)), "max_m": float(e.max())}
+
+
 def errors(a, b):
     e = np.hypot(*(np.asarray(a) - np.asarray(b)).T)
     return f"median {np.median(e):.3f} m, p90 {np.percentile(e, 90):.3f} m, max {e.max():.3f} m"
 
 
-def main(root: Path) -> None:
+def main(root: Path, json_out: Path | None = None) -> None:
+    results = []
     if not root.exists():
         subprocess.run([sys.executable, "-m", "sfanav", "simulate", "--preset", "suite-small-dense", "--out", str(root),
                         "--size", "120x16", "--no-progress"], check=True)
@@ -84,10 +93,15 @@ def main(root: Path) -> None:
             O = disguise(odo["train-cross"], drift_deg_per_m=drift)
             raw = align(O[:, :2], YB).apply(O[:, :2])
             print(f"  B's odometry, {drift} deg/m drift, best rigidly aligned to the truth: {errors(raw, YB)}")
+            results.append({"readout": name, "what": "odometry alone, rigidly aligned to the truth",
+                            "drift_deg_per_m": drift, **stats(raw, YB)})
             for solver in ("lm", "isam2"):
                 j = join_run(stale, XB, O, solver=solver)
                 print(f"  joined ({solver}): {errors(j.positions, YB)}; {j.n_kept} of {len(j.closures)} map "
                       f"closures kept, {j.n_compass} compass closures, {j.seconds:.2f} s")
+                results.append({"readout": name, "what": f"joined ({solver})", "drift_deg_per_m": drift,
+                                **stats(j.positions, YB), "kept": int(j.n_kept), "closures": len(j.closures),
+                                "seconds": j.seconds})
                 if solver == "lm" and drift == DRIFTS[0]:
                     joined = j
         t = time.perf_counter()
@@ -104,7 +118,17 @@ def main(root: Path) -> None:
             m = [loc.score(X, Y) for loc in (stale, updated, truth, retrain)]
             print(f"  {test}: MED stale {m[0]:.3f} m, updated (B joined) {m[1]:.3f} m, updated (B's truth) "
                   f"{m[2]:.3f} m, retrain A+B with ground truth {m[3]:.3f} m")
+            results.append({"readout": name, "what": "MED", "test": test, "stale": m[0], "updated_joined": m[1],
+                            "updated_truth": m[2], "retrain": m[3]})
+    if json_out is not None:
+        json_out.parent.mkdir(parents=True, exist_ok=True)
+        json_out.write_text(json.dumps({"command": "scripts/join_map_garden.py", "garden": "suite-small-dense seed 0, "
+                                        "120x16 RGB", "rows": results}, indent=1) + "\n")
 
 
 if __name__ == "__main__":
-    main(Path(sys.argv[1]) if len(sys.argv) > 1 else Path("/tmp/sfanav-join-garden"))
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("root", nargs="?", type=Path, default=Path("/tmp/sfanav-join-garden"))
+    ap.add_argument("--json", type=Path, default=None)
+    a = ap.parse_args()
+    main(a.root, a.json)

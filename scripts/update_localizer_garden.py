@@ -3,9 +3,12 @@
 (sfanav.localization.updates), and a retrain of network and readout on both
 runs; MED on the garden's test grid and test walk. docs/updates.md quotes it.
 
-    PYTHONPATH=python python scripts/update_localizer_garden.py [DIR]
+    PYTHONPATH=python python scripts/update_localizer_garden.py [DIR] \
+        [--json docs/results/investigations/update-localizer-garden.json]
 """
 
+import argparse
+import json
 import subprocess
 import sys
 import time
@@ -27,7 +30,8 @@ READOUTS = {"quadratic": dict(readout="quadratic", n_outputs=8),
             "gp (pooled 8)": dict(readout={"kind": "gp", "n_outputs": 12}, rotation_pooling=8)}
 
 
-def main(root: Path) -> None:
+def main(root: Path, json_out: Path | None = None) -> None:
+    results = []
     if not root.exists():
         subprocess.run([sys.executable, "-m", "sfanav", "simulate", "--preset", "suite-small-dense", "--out", str(root),
                         "--size", "120x16", "--no-progress"], check=True)
@@ -56,7 +60,18 @@ def main(root: Path) -> None:
             X, Y = run[test]
             meds = [m.score(X, Y) for m in (stale, updated, retrain)]
             print(f"  {test}: MED stale {meds[0]:.3f} m, updated {meds[1]:.3f} m, retrain {meds[2]:.3f} m")
+            results.append({"readout": name, "test": test, "stale": meds[0], "updated": meds[1], "retrain": meds[2],
+                            "seconds_train_a": t_stale, "seconds_update": t_update, "seconds_retrain": t_retrain,
+                            **{f"bytes_{k}": int(v) for k, v in sizes.items()}})
+    if json_out is not None:
+        json_out.parent.mkdir(parents=True, exist_ok=True)
+        json_out.write_text(json.dumps({"command": "scripts/update_localizer_garden.py", "garden": "suite-small-dense "
+                                        "seed 0, 120x16 RGB", "rows": results}, indent=1) + "\n")
 
 
 if __name__ == "__main__":
-    main(Path(sys.argv[1]) if len(sys.argv) > 1 else Path("/tmp/sfanav-update-garden"))
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("root", nargs="?", type=Path, default=Path("/tmp/sfanav-update-garden"))
+    ap.add_argument("--json", type=Path, default=None)
+    a = ap.parse_args()
+    main(a.root, a.json)
