@@ -37,8 +37,8 @@ default ``rows``) and ``key=`` (the field that names a row, default
 Numbers: by default 3 decimals below 100 (3 significant digits below 0.01), 1
 decimal from 100, integers as they are, None as ``-``, booleans yes/no. A row
 with a ``flag`` (e.g. a regression that extrapolates outside its training
-positions) gets a dagger after each of its values and the flag as a footnote
-under the region; an experiment withholds an absurd figure by writing None.
+positions) gets a dagger after its ``sfanav`` value and the flag as a
+footnote under the region; an experiment withholds an absurd figure by writing None.
 
 Usage::
 
@@ -219,7 +219,7 @@ class _Context:
         except (ValueError, TypeError) as e:
             raise RenderError(f"{self.where}: cannot format {row.get(column)!r} with {fmt!r} ({e})") from None
         flag = row.get("flag")
-        if flag and column != self.key:
+        if flag and column == "sfanav":
             note = f"{DAGGER} {row.get(self.key)}: {flag}"
             if note not in self.flags:
                 self.flags.append(note)
