@@ -33,6 +33,8 @@ Without a template, options on the first line make a plain table::
 patterns, repeatable; default every row), ``rows=`` (path of the list of rows,
 default ``rows``) and ``key=`` (the field that names a row, default
 ``metric``) apply to both forms; a template also takes ``rows=`` and ``key=``.
+``cap=N`` prints numbers beyond +-N (and NaN, infinity) as ``> N``: an error
+of kilometres is no figure.
 
 Numbers: by default 3 decimals below 100 (3 significant digits below 0.01), 1
 decimal from 100, integers as they are, None as ``-``, booleans yes/no. A row
@@ -132,8 +134,8 @@ def _parse_open(text: str, where: str) -> tuple[str, dict[str, list[str]], list[
     options: dict[str, list[str]] = {}
     for w in words[1:]:
         k, eq, v = w.partition("=")
-        if not eq or k not in ("columns", "metrics", "rows", "key"):
-            raise RenderError(f"{where}: unknown option {w!r} (known: columns=, metrics=, rows=, key=)")
+        if not eq or k not in ("columns", "metrics", "rows", "key", "cap"):
+            raise RenderError(f"{where}: unknown option {w!r} (known: columns=, metrics=, rows=, key=, cap=)")
         options.setdefault(k, []).append(v)
     template = [ln for ln in rest.split("\n")]
     while template and not template[-1].strip():
@@ -202,6 +204,19 @@ class _Context:
         rows = _walk(self.data, rows_path, self.where) if rows_path else self.data
         self.rows = rows if isinstance(rows, list) else None
         self.flags: list[str] = []
+        cap = (region.options.get("cap") or [None])[-1]
+        try:
+            self.cap = None if cap is None else float(cap)
+        except ValueError:
+            raise RenderError(f"{self.where}: cap must be a number, got {cap!r}") from None
+
+    def fmt(self, v: Any, fmt: str) -> str:
+        if self.cap is not None and isinstance(v, (int, float)) and not isinstance(v, bool) and not abs(v) <= self.cap:
+            return f"> {self.cap:g}"
+        try:
+            return format_number(v, fmt)
+        except (ValueError, TypeError) as e:
+            raise RenderError(f"{self.where}: cannot format {v!r} with {fmt!r} ({e})") from None
 
     def row(self, name: str) -> dict:
         if self.rows is None:
@@ -214,10 +229,7 @@ class _Context:
     def cell(self, row: dict, column: str, fmt: str) -> str:
         if column not in row and column != "flag":
             raise RenderError(f"{self.where}: row {row.get(self.key)!r} has no column {column!r}")
-        try:
-            text = format_number(row.get(column), fmt)
-        except (ValueError, TypeError) as e:
-            raise RenderError(f"{self.where}: cannot format {row.get(column)!r} with {fmt!r} ({e})") from None
+        text = self.fmt(row.get(column), fmt)
         flag = row.get("flag")
         if flag and column == "sfanav":
             note = f"{DAGGER} {row.get(self.key)}: {flag}"
@@ -232,12 +244,7 @@ class _Context:
             raise RenderError(f"{self.where}: bad placeholder {{{spec}}} (NAME;COLUMN;FORMAT)")
         name, column, fmt = name.strip(), column.strip(), fmt.strip()
         if name.startswith("@"):
-            try:
-                return format_number(_walk(self.data, name[1:], self.where), fmt)
-            except (ValueError, TypeError) as e:
-                if isinstance(e, RenderError):
-                    raise
-                raise RenderError(f"{self.where}: cannot format {name!r} with {fmt!r} ({e})") from None
+            return self.fmt(_walk(self.data, name[1:], self.where), fmt)
         return self.cell(self.row(name), column or "sfanav", fmt)
 
 

@@ -158,3 +158,11 @@ def test_format_number():
     f = rd.format_number
     assert [f(None), f(True), f(12), f(0.0812), f(0.00123), f(513.1), f(2.5, ".2f")] == \
         ["-", "yes", "12", "0.081", "0.00123", "513.1", "2.50"]
+
+
+def test_cap_prints_no_absurd_figure(tmp_path):
+    rows = ROWS + [{"metric": "MED (m) far", "thesis": None, "sfanav": 4.5e13}]
+    md = "<!-- results res/x.json cap=100\n| {MED (m) far} | {MED (m)} |\n-->\n<!-- /results -->\n"
+    doc = _tree(tmp_path, rows, md)
+    (reg,) = rd.find_regions(doc)
+    assert rd.render(tmp_path, reg) == ["| > 100 | 0.123 |"]
