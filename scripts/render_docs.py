@@ -150,8 +150,12 @@ def find_regions(path: Path) -> list[Region]:
     lines = path.read_text(encoding="utf-8").split("\n")
     regions = []
     i = 0
+    fence = None  # regions inside fenced code blocks are examples, not regions
     while i < len(lines):
-        if not lines[i].lstrip().startswith(OPEN):
+        s = lines[i].lstrip()
+        if s.startswith(("```", "~~~")):
+            fence = None if fence and s.startswith(fence) else (fence or s[:3])
+        if fence or not s.startswith(OPEN):
             i += 1
             continue
         where = f"{path}:{i + 1}"

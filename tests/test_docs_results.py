@@ -166,3 +166,9 @@ def test_cap_prints_no_absurd_figure(tmp_path):
     doc = _tree(tmp_path, rows, md)
     (reg,) = rd.find_regions(doc)
     assert rd.render(tmp_path, reg) == ["| > 100 | 0.123 |"]
+
+
+def test_regions_in_code_fences_are_examples(tmp_path):
+    md = "```markdown\n<!-- results res/missing.json -->\n<!-- /results -->\n```\n"
+    doc = _tree(tmp_path, ROWS, md)
+    assert rd.find_regions(doc) == [] and rd.process([doc], tmp_path, write=False) == ([], [])
