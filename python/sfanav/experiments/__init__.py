@@ -113,7 +113,8 @@ def format_value(v: Any) -> str:
 
 def format_rows(rows: Sequence[Mapping[str, Any]], targets: Mapping[str, bool] | None = None) -> str:
     """Rows ``{"metric", "thesis", "sfanav"}`` as an aligned text table, then
-    the targets with ``met`` / ``NOT met``."""
+    the targets with ``met`` / ``NOT met``, then each row's ``flag`` (a figure
+    to distrust or withheld: :mod:`sfanav.experiments.flags`)."""
     cells = [("metric", "thesis", "sfanav")] + [
         (str(r["metric"]), format_value(r.get("thesis")), format_value(r.get("sfanav"))) for r in rows]
     w = [max(len(c[i]) for c in cells) for i in range(3)]
@@ -121,6 +122,9 @@ def format_rows(rows: Sequence[Mapping[str, Any]], targets: Mapping[str, bool] |
     lines.insert(1, "-" * (sum(w) + 4))
     for name, ok in (targets or {}).items():
         lines.append(f"target: {name}: {'met' if ok else 'NOT met'}")
+    for r in rows:
+        if r.get("flag"):
+            lines.append(f"flag: {r['metric']}: {r['flag']}")
     return "\n".join(lines)
 
 

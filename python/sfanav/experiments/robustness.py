@@ -39,6 +39,7 @@ from ..loopclosure import LoopClosures, align, closure_precision_recall, make_de
 from ..pipeline import train_localizer
 from ..sfa.network import Network, Rotation
 from . import ExperimentResult, register
+from .flags import area_diagonal, flag_row
 from .localization import progress_log, simulated, tiny_config
 
 #: thesis 6.2.1: mean Euclidean deviation (m) of the standard and the feedback model
@@ -281,6 +282,7 @@ def run_622(out: Path, *, quick: bool, seed: int, progress: bool, permutations: 
     conds = sorted(set(ds.conditions.tolist()), key=lambda c: int(c.lstrip("c")) if c.lstrip("c").isdigit() else c)
     rng = np.random.default_rng(seed)
     curves: dict[str, np.ndarray] = {}
+    extrapolated: dict[str, np.ndarray] = {}  # estimates the readout extrapolated, per permutation and sets
     plots: list[str] = []
     n_sets = min(max_sets, len(conds) - 1)
     for config in configs:
@@ -296,6 +298,8 @@ def run_622(out: Path, *, quick: bool, seed: int, progress: bool, permutations: 
         med = np.full((permutations, n_sets), np.nan)
         pm = np.full((permutations, n_sets), np.nan)
         held = np.full((permutations, n_sets), np.nan)  # every k tested on the permutation's last recording
+        ext = np.zeros((permutations, n_sets), dtype=np.int64)
+        ext_held = np.zeros((permutations, n_sets), dtype=np.int64)
         for p in range(permutations):
             perm = np.random.default_rng([seed, p]).permutation(len(conds)) if p else rng.permutation(len(conds))
             for k in range(1, n_sets + 1):
@@ -306,7 +310,10 @@ def run_622(out: Path, *, quick: bool, seed: int, progress: bool, permutations: 
                 loc, t = _train(make_net, X, xy, recipe, elev, rotate=rotate)
                 X_te, xy_te = sets[test]
                 med[p, k - 1] = _med(loc, X_te, xy_te)["med"]
+                ext[p, k - 1] = getattr(loc.regression_, "n_extrapolated_", 0)
                 held[p, k - 1] = med[p, k - 1] if test == perm[-1] else _med(loc, *sets[perm[-1]])["med"]
+                ext_held[p, k - 1] = (ext[p, k - 1] if test == perm[-1]
+                                      else getattr(loc.regression_, "n_extrapolated_", 0) - ext[p, k - 1])
                 if config == configs[0]:
                     peer = baselines.PerfectMemory().fit(X, xy)
                     pm[p, k - 1] = localization_metrics(peer.predict(X_te), xy_te)["med"]
@@ -323,9 +330,10 @@ def run_622(out: Path, *, quick: bool, seed: int, progress: bool, permutations: 
                                                       "features 1-4 on the next set")))
         curves[config] = med
         curves[config + HELD_OUT] = held
+        extrapolated[config], extrapolated[config + HELD_OUT] = ext, ext_held
         if config == configs[0]:
             curves["perfect memory"] = pm
-    rows = curve_rows(curves, preset)
+    rows = curve_rows(curves, preset, extrapolated=extrapolated, diagonal=area_diagonal(sets[0][1]))
     path = plot_curves(curves, out / f"{name}-error-vs-sets.png", name, thesis.get(9))
     key_name = "ground-truth position" if by == "position" else "the odometry's arc fraction of the loop"
     notes = (f"Scene: sim preset {preset} (seed {seed}): {len(conds)} recordings of one {len(sets[0][1])}-frame loop "
@@ -345,14 +353,20 @@ def run_622(out: Path, *, quick: bool, seed: int, progress: bool, permutations: 
                             details={"curves": {k: v.tolist() for k, v in curves.items()}})
 
 
-def curve_rows(curves: dict[str, Any], preset: str = "thesis-6.2.2-conditions") -> list[dict[str, Any]]:
+def curve_rows(curves: dict[str, Any], preset: str = "thesis-6.2.2-conditions", *,
+               extrapolated: dict[str, Any] | None = None, diagonal: float | None = None) -> list[dict[str, Any]]:
     """The 6.2.2 result rows of error curves: ``curves[name]`` (permutations,
     sets) MED in metres on the next unseen recording, one curve per
     configuration and ``"perfect memory"``. Mean and median over the
     permutations with 1 and with the most sets, the thesis's figures beside
     the thesis configuration, and whether the mean error falls
-    monotonically with the number of sets."""
+    monotonically with the number of sets. ``extrapolated[name]``
+    (permutations, sets): estimates the readout extrapolated, and
+    ``diagonal``: the area's diagonal (m); rows with either reason get a
+    flag (:func:`sfanav.experiments.flags.flag_row`), absurd figures are
+    withheld."""
     thesis = THESIS_622[preset]
+    extrapolated = extrapolated or {}
     rows: list[dict[str, Any]] = []
     for config, med in curves.items():
         med = np.asarray(med, dtype=np.float64)
@@ -364,10 +378,13 @@ def curve_rows(curves: dict[str, Any], preset: str = "thesis-6.2.2-conditions") 
             continue
         for k in (1, n_sets):
             sets = f"{k} training set{'s' if k > 1 else ''}"
-            rows.append({"metric": f"MED (m), {sets} [{config}]", "thesis": thesis.get(k) if config == CONFIGS[0]
-                         else None, "sfanav": float(mean[k - 1]), "configuration": config})
-            rows.append({"metric": f"median over permutations of MED (m), {sets} [{config}]", "thesis": None,
-                         "sfanav": float(median[k - 1]), "configuration": config})
+            n_ext = int(np.sum(extrapolated[config][:, k - 1])) if config in extrapolated else 0
+            rows.append(flag_row({"metric": f"MED (m), {sets} [{config}]", "thesis": thesis.get(k)
+                                  if config == CONFIGS[0] else None, "sfanav": float(mean[k - 1]),
+                                  "configuration": config}, extrapolated=n_ext, diagonal=diagonal))
+            rows.append(flag_row({"metric": f"median over permutations of MED (m), {sets} [{config}]",
+                                  "thesis": None, "sfanav": float(median[k - 1]), "configuration": config},
+                                 extrapolated=n_ext, diagonal=diagonal))
         rows.append({"metric": f"error falls monotonically with the number of sets (mean) [{config}]",
                      "thesis": None, "sfanav": bool(np.all(np.diff(mean) <= 0))})
     return rows

@@ -17,6 +17,7 @@ from .._checks import (
 )
 from ..sfa.node import expand, expanded_dim
 from .error_metrics import euclidean_errors
+from .extrapolation import MARGIN, count_extrapolated, training_bounds, warn_extrapolated
 
 
 def fit_weights(E: np.ndarray, y: np.ndarray, ridge: float) -> tuple[np.ndarray, np.ndarray, int]:
@@ -63,7 +64,18 @@ class QuadraticRegression:
         Feature columns seen in :meth:`fit` (>= ``n_outputs_``).
     rank_ : int
         Rank of the centred design matrix.
+    target_bounds_ : ndarray of shape (2, n_targets)
+        Bounding box of the training targets (minimum, maximum per axis).
+    n_extrapolated_ : int
+        Estimates :meth:`predict` returned farther than
+        ``extrapolation_margin`` times the box's diagonal outside it, since
+        fit (the first such call warns with
+        :class:`~sfanav.localization.extrapolation.ExtrapolationWarning`).
+
+    Class attribute ``extrapolation_margin`` (default 0.5) sets that margin.
     """
+
+    extrapolation_margin: float = MARGIN
 
     def __init__(self, n_outputs: int | None = 8, ridge: float = 0.0, degree: int = 2) -> None:
         self.n_outputs = n_outputs
@@ -107,6 +119,8 @@ class QuadraticRegression:
         self.n_outputs_ = n
         self.n_features_in_ = F.shape[1]
         self.n_targets_ = Y.shape[1]
+        self.target_bounds_ = training_bounds(Y)
+        self.n_extrapolated_ = 0
         return self
 
     def _check_fitted(self) -> None:
@@ -116,7 +130,15 @@ class QuadraticRegression:
     def predict(self, features: Any) -> np.ndarray:
         """Estimated targets (N, d) from features (N, m >= n_outputs_)."""
         self._check_fitted()
-        return self._design(features, self.n_outputs_) @ self.coef_ + self.intercept_
+        P = self._design(features, self.n_outputs_) @ self.coef_ + self.intercept_
+        bounds = getattr(self, "target_bounds_", None)
+        if bounds is not None:
+            n = count_extrapolated(P, bounds, self.extrapolation_margin)
+            if n:
+                if not getattr(self, "n_extrapolated_", 0):
+                    warn_extrapolated(n, len(P), bounds, self.extrapolation_margin, "QuadraticRegression")
+                self.n_extrapolated_ = getattr(self, "n_extrapolated_", 0) + n
+        return P
 
     def score(self, features: Any, xy: Any) -> float:
         """Mean Euclidean distance (MED, metres) of the estimates from ``xy``.
@@ -132,6 +154,7 @@ class QuadraticRegression:
             "intercept": self.intercept_,
             "rank": self.rank_,
             "n_features_in": self.n_features_in_,
+            **({"target_bounds": self.target_bounds_} if hasattr(self, "target_bounds_") else {}),
         }
 
     @classmethod
@@ -143,8 +166,14 @@ class QuadraticRegression:
             reg.rank_ = int(state["rank"])
             reg.n_outputs_ = int(state["params"]["n_outputs"])
             reg.n_features_in_ = int(state["n_features_in"])
+            if "target_bounds" in state:  # absent in models saved before the extrapolation check
+                reg.target_bounds_ = np.asarray(state["target_bounds"], dtype=np.float64)
+                reg.n_extrapolated_ = 0
         except (KeyError, TypeError) as exc:
             raise ValueError(f"invalid QuadraticRegression state: {exc}") from None
+        bounds = getattr(reg, "target_bounds_", None)
+        if bounds is not None and bounds.shape != (2, reg.intercept_.shape[-1]):
+            raise ValueError(f"invalid QuadraticRegression state: target_bounds has shape {bounds.shape}")
         want = expanded_dim(reg.n_outputs_, reg.degree)
         if reg.coef_.ndim != 2 or reg.coef_.shape[0] != want or reg.intercept_.shape != (reg.coef_.shape[1],):
             raise ValueError(
