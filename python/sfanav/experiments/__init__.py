@@ -26,7 +26,7 @@ import numpy as np
 
 # Modules that register experiments (imported on first lookup).
 FAMILIES = ("localization", "odometry", "navigation", "gardens", "gardens_suite", "robustness", "features", "landmarks",
-            "corruptions")
+            "corruptions", "updates")
 
 
 @dataclass

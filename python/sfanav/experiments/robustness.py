@@ -107,16 +107,35 @@ def _detect(kind: str, X: np.ndarray, xy: np.ndarray, quick: bool = False) -> tu
 
 
 def _train(make_net: Any, X: np.ndarray, xy: np.ndarray, recipe: Recipe, elev: tuple[float, float],
-           closures: Any = None, weights: Any = None, rotate: bool = True) -> tuple[Any, float]:
+           closures: Any = None, weights: Any = None, rotate: bool = True,
+           readout_memory: int | None = None) -> tuple[Any, float]:
     """Fits a localizer under simulated rotation (5 px, whole panorama), or
     with ``rotate=False`` on the images as they come (one view each, no
-    rotation invariance: the long-term model of 6.2.2)."""
+    rotation invariance: the long-term model of 6.2.2); ``readout_memory``:
+    made updatable (:func:`sfanav.pipeline.train_localizer`)."""
     t0 = time.perf_counter()
     rotation = Rotation(5, 1.0) if rotate else Rotation(X.shape[2], 1.0)
     recipe = recipe if rotate else dataclasses.replace(recipe, rotation_pooling=None)
     loc = train_localizer(X, xy=xy, network=make_net(), recipe=recipe, camera_elevation=elev, rotation=rotation,
-                          loop_closures=closures, closure_weights=weights)
+                          loop_closures=closures, closure_weights=weights, readout_memory=readout_memory)
     return loc, time.perf_counter() - t0
+
+
+def long_term_configuration(config: str, quick: bool) -> tuple[Any, Preprocessing, Recipe]:
+    """(network factory, preprocessing, recipe) of one of :data:`CONFIGS` as
+    6.2.2 trains it (``quick``: the tiny network on 60x8 panoramas)."""
+    if config not in CONFIGS_621:
+        raise ValueError(f"config must be one of {CONFIGS_621}, got {config!r}")
+    return _config(config, quick)
+
+
+def train_long_term(make_net: Any, X: np.ndarray, xy: np.ndarray, recipe: Recipe, elev: tuple[float, float], *,
+                    readout_memory: int | None = None) -> tuple[Any, float]:
+    """6.2.2's training of one configuration on images X (N, H, W[, C]) at
+    positions xy (N, 2) m: the images as they come (no simulated rotation,
+    no rotation pooling). Returns (localizer, seconds). ``readout_memory``
+    keeps what an update needs (:class:`sfanav.localization.updates.LocalizerUpdater`)."""
+    return _train(make_net, X, xy, recipe, elev, rotate=False, readout_memory=readout_memory)
 
 
 def _med(loc: Any, X: np.ndarray, xy: np.ndarray) -> dict[str, float]:
@@ -256,7 +275,7 @@ THESIS_622 = {"thesis-6.2.2-conditions": {1: None, 9: 0.35}, "thesis-6.2.2-seaso
 
 def run_622(out: Path, *, quick: bool, seed: int, progress: bool, permutations: int = 10,
             configs: tuple[str, ...] = CONFIGS, max_sets: int = 9, by: str = "position", rotate: bool = False,
-            preset: str = "thesis-6.2.2-conditions") -> ExperimentResult:
+            preset: str = "thesis-6.2.2-conditions", orders: list[list[int]] | None = None) -> ExperimentResult:
     """Train on 1..``max_sets`` recordings in different light, place-major
     (every recording's image of a place, then the next place), and measure
     on the next unseen recording; ``permutations`` random orders of the 10
@@ -265,7 +284,10 @@ def run_622(out: Path, *, quick: bool, seed: int, progress: bool, permutations: 
     memory with the views of all training recordings is the peer.
     ``rotate``: train under simulated rotation (default False: the thesis's
     long-term model sees the loop's images as they come, so its features
-    may code the heading, which the route fixes at every place)."""
+    may code the heading, which the route fixes at every place).
+    ``orders``: explicit orders of the recordings (each a permutation of
+    the indices of the sorted conditions) instead of random ones
+    (``permutations`` is then their number)."""
     from ..loopclosure.conditions import arc_fraction, correspondences, place_major_order
 
     if by not in ("position", "arc"):
@@ -281,8 +303,14 @@ def run_622(out: Path, *, quick: bool, seed: int, progress: bool, permutations: 
         ds = simulated(out, preset, seed, quick=False, progress=progress)
     conds = sorted(set(ds.conditions.tolist()), key=lambda c: int(c.lstrip("c")) if c.lstrip("c").isdigit() else c)
     rng = np.random.default_rng(seed)
+    if orders is not None:
+        if not orders or any(sorted(int(i) for i in o) != list(range(len(conds))) for o in orders):
+            raise ValueError(f"orders must be permutations of range({len(conds)}), one per permutation")
+        permutations = len(orders)
     curves: dict[str, np.ndarray] = {}
     extrapolated: dict[str, np.ndarray] = {}  # estimates the readout extrapolated, per permutation and sets
+    seconds: dict[str, np.ndarray] = {}  # training seconds, per permutation and sets
+    perms: dict[str, list[list[int]]] = {}  # the recordings' order of every permutation (indices into conditions)
     plots: list[str] = []
     n_sets = min(max_sets, len(conds) - 1)
     for config in configs:
@@ -300,14 +328,19 @@ def run_622(out: Path, *, quick: bool, seed: int, progress: bool, permutations: 
         held = np.full((permutations, n_sets), np.nan)  # every k tested on the permutation's last recording
         ext = np.zeros((permutations, n_sets), dtype=np.int64)
         ext_held = np.zeros((permutations, n_sets), dtype=np.int64)
+        secs = np.full((permutations, n_sets), np.nan)
+        perms[config] = []
         for p in range(permutations):
-            perm = np.random.default_rng([seed, p]).permutation(len(conds)) if p else rng.permutation(len(conds))
+            perm = (np.asarray(orders[p]) if orders is not None else
+                    np.random.default_rng([seed, p]).permutation(len(conds)) if p else rng.permutation(len(conds)))
+            perms[config].append(perm.tolist())
             for k in range(1, n_sets + 1):
                 train, test = perm[:k], perm[k]
                 order = place_major_order([places[s] for s in train])
                 X = np.concatenate([sets[s][0] for s in train])[order]
                 xy = np.concatenate([sets[s][1] for s in train])[order]
                 loc, t = _train(make_net, X, xy, recipe, elev, rotate=rotate)
+                secs[p, k - 1] = t
                 X_te, xy_te = sets[test]
                 med[p, k - 1] = _med(loc, X_te, xy_te)["med"]
                 ext[p, k - 1] = getattr(loc.regression_, "n_extrapolated_", 0)
@@ -329,6 +362,7 @@ def run_622(out: Path, *, quick: bool, seed: int, progress: bool, permutations: 
                                                       which=(0, 1, 2, 3), title=f"{name} [{config}], {k} sets: slow "
                                                       "features 1-4 on the next set")))
         curves[config] = med
+        seconds[config] = secs
         curves[config + HELD_OUT] = held
         extrapolated[config], extrapolated[config + HELD_OUT] = ext, ext_held
         if config == configs[0]:
@@ -350,7 +384,9 @@ def run_622(out: Path, *, quick: bool, seed: int, progress: bool, permutations: 
              + ("Fig. 6.18a beside: 9 sets 0.35 m." if name == "6.2.2" else
                 "Beside: the thesis's real recordings over three months (Fig. 6.20a): 1 set 6.13 m, 9 sets 0.66 m."))
     return ExperimentResult(name, rows, [str(path)] + plots, notes,
-                            details={"curves": {k: v.tolist() for k, v in curves.items()}})
+                            details={"curves": {k: v.tolist() for k, v in curves.items()},
+                                     "seconds": {k: v.tolist() for k, v in seconds.items()},
+                                     "permutations": perms, "conditions": conds, "dataset": ds})
 
 
 def curve_rows(curves: dict[str, Any], preset: str = "thesis-6.2.2-conditions", *,
