@@ -42,7 +42,6 @@ import time
 from pathlib import Path
 
 
-
 def rss_mb() -> float:
     """Resident memory of this process now (MB; Linux /proc, else the peak)."""
     try:
