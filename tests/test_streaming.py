@@ -109,6 +109,25 @@ def test_the_start_frames_wait_then_every_image_is_emitted_at_once(tiny):
     assert emitted == [0, 0, 0, 0, 5, 1, 1, 1] and live.initialized_
 
 
+def test_on_estimate_reports_each_single_image_estimate_at_once(tiny):
+    """on_estimate fires when an image's estimate is computed, also for the
+    start frames the fused poses wait for, with the values the LiveEstimate
+    carries later; a processed stamp pushed again is not reported twice."""
+    seen = []
+    live = StreamingLocalizer(tiny["loc"], start_frames=5, on_estimate=lambda t, z: seen.append((t, z)))
+    out = []
+    for k in range(8):
+        live.push_odometry(tiny["stamps"][k], tiny["odometry"][k])
+        out += live.push_image(tiny["stamps"][k], tiny["images"][k])
+        assert [t for t, _ in seen] == tiny["stamps"][: k + 1]  # at once, before the fused pose of the start frames
+    out += live.push_image(tiny["stamps"][7], tiny["images"][7])  # a processed stamp again: dropped, not reported
+    assert len(seen) == 8 and live.dropped_["duplicate"] + live.dropped_["late"] == 1
+    for e, (t, z) in zip(out, seen):
+        assert e.stamp_ns == t and np.array_equal(e.estimate, z)
+    with pytest.raises(TypeError, match="on_estimate"):
+        StreamingLocalizer(tiny["loc"], on_estimate=3)
+
+
 def test_late_and_duplicate_events_are_dropped_and_counted(tiny):
     s, img, P = tiny["stamps"], tiny["images"], tiny["odometry"]
     live = StreamingLocalizer(tiny["loc"], start_frames=3)

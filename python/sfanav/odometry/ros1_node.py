@@ -131,7 +131,8 @@ class Ros1Node:
                 noise[k] = float(p("~" + k))
         self.prep = Preprocessing.of_model(localizer)
         self.live = StreamingLocalizer(localizer, noise or None, window_ns=int(round(float(p("~window", 0.0)) * 1e9)),
-                                       log=lambda m: rospy.loginfo(f"sfanav: {m}"))
+                                       log=lambda m: rospy.loginfo(f"sfanav: {m}"),
+                                       on_estimate=self._publish_estimate)
         self.r2 = float(self.live.noise["measurement_noise"]) ** 2
         self.view = None
         if p("~rerun", ""):
@@ -211,15 +212,21 @@ class Ros1Node:
             self.rospy.logwarn(f"sfanav: {self.odom_topic}: message at stamp {ns} ns skipped: {exc}")
 
     # ------------------------------------------------------------- publishing
+    def _publish_estimate(self, stamp_ns: int, estimate: np.ndarray) -> None:
+        """The single-image estimate, published as soon as it is computed
+        (the streaming localizer's ``on_estimate``): no wait for the odometry
+        or, at the start, for the filter's first images."""
+        m = self.msg["pose"]()
+        m.header.stamp = self.rospy.Time(stamp_ns // 1_000_000_000, stamp_ns % 1_000_000_000)
+        m.header.frame_id = self.map_frame
+        m.pose.pose.position.x, m.pose.pose.position.y = float(estimate[0]), float(estimate[1])
+        m.pose.pose.orientation.w = 1.0
+        m.pose.covariance = covariance_6x6(np.diag([self.r2, self.r2, 1e6]))
+        self.pub_estimate.publish(m)
+
     def _publish(self, estimates: list) -> None:
         for e in estimates:
             stamp = self.rospy.Time(e.stamp_ns // 1_000_000_000, e.stamp_ns % 1_000_000_000)
-            m = self.msg["pose"]()
-            m.header.stamp, m.header.frame_id = stamp, self.map_frame
-            m.pose.pose.position.x, m.pose.pose.position.y = float(e.estimate[0]), float(e.estimate[1])
-            m.pose.pose.orientation.w = 1.0
-            m.pose.covariance = covariance_6x6(np.diag([self.r2, self.r2, 1e6]))
-            self.pub_estimate.publish(m)
             if self.view is not None:
                 self.view.log(e)
             if e.pose is None:

@@ -128,6 +128,13 @@ class StreamingLocalizer:
         images to the model (omnidirectional mirror; where its one line goes).
     rotations : bool, default False
         :meth:`sfanav.Localizer.predict` averaged over rotations.
+    on_estimate : callable, optional
+        Called as ``on_estimate(stamp_ns, estimate)`` (estimate: ndarray (2,),
+        metres, map frame) as soon as an image's single-image estimate is
+        computed, in the order the images come: before its
+        :class:`LiveEstimate`, which waits for the odometry after the image
+        and, at the start, for the first ``start_frames`` images. A live
+        node publishes the single-image estimate from it without that delay.
 
     Attributes
     ----------
@@ -163,7 +170,8 @@ class StreamingLocalizer:
                  start_frames: int = START_FRAMES, max_pending: int = 100, max_odometry: int = 1000,
                  gate_probability: float | None = GATE_PROBABILITY, recovery: bool = True,
                  image_shape: Iterable[int] | None = None, mirror: Any = None,
-                 log: Callable[[str], None] | None = None, rotations: bool = False) -> None:
+                 log: Callable[[str], None] | None = None, rotations: bool = False,
+                 on_estimate: Callable[[int, np.ndarray], None] | None = None) -> None:
         if noise is None:
             noise = getattr(localizer, "info", {}).get("ekf_noise")
             if noise is None:
@@ -181,6 +189,9 @@ class StreamingLocalizer:
         self.max_pending = check_int(max_pending, "max_pending", minimum=1)
         self.max_odometry = check_int(max_odometry, "max_odometry", minimum=2)
         self.rotations = bool(rotations)
+        if on_estimate is not None and not callable(on_estimate):
+            raise TypeError(f"on_estimate must be callable or None, got {type(on_estimate).__name__}")
+        self.on_estimate = on_estimate
         self.image_shape = None if image_shape is None else tuple(int(v) for v in image_shape)
         off = {} if recovery else {"reinit_after": None, "gap_factor": None, "jump_factor": None}
         self.filter = OdometryEKF(**{k: float(noise[k]) for k in NOISE_KEYS},
@@ -231,7 +242,10 @@ class StreamingLocalizer:
             xy = np.atleast_2d(self.localizer.predict(self._conform(imgs[keep]), rotations=self.rotations))
             self.n_images_ += len(keep)
             for i, z in zip(keep, xy):
-                self._add(stamps[i], 1, np.asarray(z, dtype=np.float64))
+                z = np.asarray(z, dtype=np.float64)
+                if self.on_estimate is not None and stamps[i] != self._last[1]:  # not a processed stamp again
+                    self.on_estimate(stamps[i], z.copy())
+                self._add(stamps[i], 1, z)
             out = self._release()
         return out
 
