@@ -39,6 +39,7 @@ from ..loopclosure import LoopClosures, align, closure_precision_recall, make_de
 from ..pipeline import train_localizer
 from ..sfa.network import Network, Rotation
 from . import ExperimentResult, register
+from .product_rows import scene_rows
 from .localization import progress_log, simulated, tiny_config
 
 #: thesis 6.2.1: mean Euclidean deviation (m) of the standard and the feedback model
@@ -156,6 +157,8 @@ def run_621(out: Path, variant: str, *, quick: bool, seed: int, progress: bool,
         rows.append({"metric": f"MED (m) standard{tag}", "thesis": thesis.get("standard") if config == "thesis config"
                      else None, "sfanav": m_std["med"], "configuration": config})
         fits = {"standard": std}
+        if config == "thesis config":
+            thesis_pred = std.predict(X_te)
         for kind in detectors:
             if kind not in found:
                 t0 = time.perf_counter()
@@ -214,6 +217,9 @@ def run_621(out: Path, variant: str, *, quick: bool, seed: int, progress: bool,
                                              title=f"{name} [{config}], {label}: MED "
                                                    f"{_med(loc, X_te, xy_te)['med']:.2f} m")))
         details[config] = fits
+    product = scene_rows(ds, quick=quick, thesis=[thesis_pred] if "thesis config" in configs else None, seed=seed,
+                         progress=progress, log=log)
+    rows += product.rows
     notes.append(
         f"Scene: sim preset thesis-6.2.1-{variant} (seed {seed}), omnidirectional 500x500 images unwarped to "
         "600x60 (thesis configuration; the thesis used 600x55, which Table 5.2's 12-px receptive fields do not "
@@ -222,6 +228,7 @@ def run_621(out: Path, variant: str, *, quick: bool, seed: int, progress: bool,
         "average). Feedback: each closure's current image trained on its rotation interleaved with the aligned "
         "partner's (Network.fit(loop_closures=...)). MED on the 1090-frame test walk; the peers are fitted on the "
         "same training images.")
+    notes.append(product.note + " 'thesis configuration' rows: the thesis configuration's standard model.")
     return ExperimentResult(name, rows, plots, "\n".join(notes), details=details)
 
 
