@@ -66,6 +66,11 @@ def test_621_bow_and_622_quick(tmp_path):
     assert "MED (m), 3 training sets [thesis config, last recording held out]" in rows
     assert any("6.2.2-trajectory-thesis-config" in p for p in res.plots)  # Fig. 6.18b
     assert "without simulated rotation" in res.notes
+    # the product rows on the first permutation's split: no single run's odometry in the joined training set
+    for m in ("MED (m) thesis configuration", "MED (m) sfanav default [ground truth]", "MED (m) peer perfect memory",
+              "MED (m) peer Fourier signature", "MED ratio sfanav default [ground truth] / best peer"):
+        assert math.isfinite(rows[m]["sfanav"]), m
+    assert not any("no ground truth" in m or "fused" in m for m in rows)
 
 
 def test_622_seasons_quick(tmp_path):

@@ -313,6 +313,10 @@ def product_rows(train: ProductRun, tests: Sequence[ProductRun], *, thesis: Sequ
     return ProductResult(rows, note, models, meds)
 
 
+QUICK_TRAIN_FRAMES = 80
+"""At most this many training frames in the ``--quick`` product rows (every k-th frame of the run)."""
+
+
 def quick_network() -> Network:
     """The tiny network of the experiments' ``--quick`` product rows: 60x8
     RGB, two layers (seconds to train; numbers not meaningful)."""
@@ -323,16 +327,39 @@ def quick_network() -> Network:
     })
 
 
+def configuration(quick: bool) -> tuple[Callable[[], Network], Recipe | None]:
+    """(network factory, recipe) of the product rows: the sfanav default's
+    (None: :func:`sfanav.pipeline.train_localizer`'s default recipe), or for
+    ``quick`` the tiny :func:`quick_network` on all its 8 rows without the
+    Fourier signature beside the slow features (the readout's selection,
+    with the signature's hundreds of dimensions, would take minutes)."""
+    if quick:
+        return quick_network, recipe_for(rows="all", signature=None)
+    return default_network, None
+
+
+def quick_subsample(run: ProductRun, limit: int = QUICK_TRAIN_FRAMES) -> ProductRun:
+    """Every k-th frame of ``run`` (images, positions and odometry alike),
+    at most ``limit`` frames: a quick run's training set."""
+    step = -(-len(run.xy) // limit)
+    if step <= 1:
+        return run
+    return ProductRun(run.images[::step], run.xy[::step], None if run.odometry is None else run.odometry[::step],
+                      run.label)
+
+
 def scene_rows(dataset: Any, *, quick: bool, thesis: Sequence[Any] | None = None, tests: Sequence[str] = ("test",),
                labels: Sequence[str] | None = None, peer_queries: int | None = 1000, seed: int = 0,
                progress: bool = False, log: Log = quiet_log) -> ProductResult:
     """:func:`product_rows` on a simulated dataset's ``train`` run and its
     ``tests`` runs: the sfanav default network (350x40 RGB; ``quick``: the
     tiny :func:`quick_network` on all its 8 rows) on the panoramas resized to
-    its input, the horizon band placed by the dataset's camera elevation."""
-    net = quick_network if quick else default_network
+    its input, the horizon band placed by the dataset's camera elevation;
+    ``quick``: :func:`configuration` and :func:`quick_subsample`."""
+    net, recipe = configuration(quick)
     train, runs = product_runs(dataset, net(), tests=tests, labels=labels, log=log)
+    train = quick_subsample(train) if quick else train
     elevation = tuple(dataset.metadata.get("camera", {}).get("elevation_deg", CAMERA_ELEVATION))
-    return product_rows(train, runs, thesis=thesis, network=net, recipe=recipe_for(rows="all") if quick else None,
+    return product_rows(train, runs, thesis=thesis, network=net, recipe=recipe,
                         camera_elevation=elevation, peer_queries=peer_queries, seed=seed, progress=progress,
                         log=log)

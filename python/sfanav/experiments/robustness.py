@@ -39,7 +39,8 @@ from ..loopclosure import LoopClosures, align, closure_precision_recall, make_de
 from ..pipeline import train_localizer
 from ..sfa.network import Network, Rotation
 from . import ExperimentResult, register
-from .product_rows import scene_rows
+from .product_rows import ProductRun, product_rows, quick_subsample, scene_rows
+from .product_rows import configuration as product_configuration
 from .localization import progress_log, simulated, tiny_config
 
 #: thesis 6.2.1: mean Euclidean deviation (m) of the standard and the feedback model
@@ -320,6 +321,8 @@ def run_622(out: Path, *, quick: bool, seed: int, progress: bool, permutations: 
                 log(f"6.2.2 {config} permutation {p} {k} sets: MED {med[p, k - 1]:.3f} m ({t:.0f} s), "
                     f"on the held-out last recording {held[p, k - 1]:.3f} m"
                     + (f", perfect memory {pm[p, k - 1]:.3f} m" if config == configs[0] else ""))
+                if p == 0 and k == n_sets and config == configs[0]:  # the product rows' split
+                    split = (train, order, test, loc.predict(X_te))
                 if p == 0 and k == n_sets:  # Fig. 6.18b: the trajectory on the unseen set, and the firing maps
                     slug = config.replace(",", "").replace(" ", "-")
                     plots.append(str(plot_trajectory(xy_te, loc.predict(X_te), out / f"{name}-trajectory-{slug}.png",
@@ -332,7 +335,9 @@ def run_622(out: Path, *, quick: bool, seed: int, progress: bool, permutations: 
         curves[config + HELD_OUT] = held
         if config == configs[0]:
             curves["perfect memory"] = pm
-    rows = curve_rows(curves, preset)
+    product = _product_622(ds, conds, *split, thesis_config=configs[0] == CONFIGS[0], quick=quick, seed=seed,
+                           progress=progress, log=log)
+    rows = curve_rows(curves, preset) + product.rows
     path = plot_curves(curves, out / f"{name}-error-vs-sets.png", name, thesis.get(9))
     key_name = "ground-truth position" if by == "position" else "the odometry's arc fraction of the loop"
     notes = (f"Scene: sim preset {preset} (seed {seed}): {len(conds)} recordings of one {len(sets[0][1])}-frame loop "
@@ -347,9 +352,31 @@ def run_622(out: Path, *, quick: bool, seed: int, progress: bool, permutations: 
              f"{permutations} random permutations "
              "(thesis: 10). "
              + ("Fig. 6.18a beside: 9 sets 0.35 m." if name == "6.2.2" else
-                "Beside: the thesis's real recordings over three months (Fig. 6.20a): 1 set 6.13 m, 9 sets 0.66 m."))
+                "Beside: the thesis's real recordings over three months (Fig. 6.20a): 1 set 6.13 m, 9 sets 0.66 m.")
+             + f"\nProduct rows on the first permutation's split ({n_sets} training recordings in place-major "
+             "order, the next recording as test): " + product.note
+             + " The training set joins several recordings, so no single run's odometry: no '[no ground truth]' "
+             "or fused rows here; 'thesis configuration': the first configuration's model on that split.")
     return ExperimentResult(name, rows, [str(path)] + plots, notes,
                             details={"curves": {k: v.tolist() for k, v in curves.items()}})
+
+
+def _product_622(ds: Any, conds: list[str], train: Any, order: Any, test: int, thesis_pred: Any, *,
+                 thesis_config: bool, quick: bool, seed: int, progress: bool, log: Any) -> Any:
+    """The product rows on one 6.2.2 split: the recordings ``train`` in
+    place-major ``order`` (as the thesis configuration saw them), tested on
+    recording ``test``; ``thesis_pred`` the thesis configuration's estimates
+    there (left out unless ``thesis_config``)."""
+    make_net, recipe = product_configuration(quick)
+    prep = Preprocessing.for_network(make_net())
+    recs = [load_run(ds.select(condition=conds[s]), prep, log=log) for s in train]
+    run = ProductRun(np.concatenate([r[0] for r in recs])[order], np.concatenate([r[1] for r in recs])[order])
+    rec = ds.select(condition=conds[test])
+    X_te, xy_te = load_run(rec, prep, log=log)
+    elev = tuple(ds.metadata["camera"].get("elevation_deg", (-30.0, 20.0)))
+    return product_rows(quick_subsample(run) if quick else run, [ProductRun(X_te, xy_te, rec.odometry)],
+                        thesis=[thesis_pred] if thesis_config else None, network=make_net, recipe=recipe,
+                        camera_elevation=elev, seed=seed, progress=progress, log=log)
 
 
 def curve_rows(curves: dict[str, Any], preset: str = "thesis-6.2.2-conditions") -> list[dict[str, Any]]:
