@@ -87,3 +87,13 @@ def test_bad_input(runs):
     odo = test.odometry.copy()
     odo[3] = np.nan
     assert not ProductRun(test.images, test.xy, odo).has_odometry
+
+
+def test_odometry_that_fixes_no_map_leaves_out_the_no_ground_truth_rows(runs):
+    train, (test,) = runs
+    still = np.tile(train.odometry[:1], (len(train.xy), 1))  # the odometry never moves
+    res = product_rows(ProductRun(train.images, train.xy, still), [test], network=quick_network,
+                       recipe=recipe_for(rows="all", robustness="none", signature=None), peer_queries=10)
+    rows = _rows(res)
+    assert not any("no ground truth" in k for k in rows) and "fixes no map" in res.note
+    assert "MED (m) sfanav default [ground truth]" in rows

@@ -9,7 +9,8 @@ Every localization experiment reports, on its own training and test runs:
   fitted to ground truth;
 * ``sfanav default [no ground truth]``: the same recipe with
   ``supervision="odometry"`` (positions learned from the training run's
-  images and odometry), only where the training run has odometry; its
+  images and odometry), only where the training run has odometry that
+  fixes a map (else the note says why); its
   estimates are in the training run's odometry frame and are moved into the
   world frame for scoring only, by the rigid transform fitted on the
   training run (as ``sfanav demo`` and :func:`sfanav.localization.evaluate`
@@ -230,11 +231,17 @@ def product_rows(train: ProductRun, tests: Sequence[ProductRun], *, thesis: Sequ
     models["ground truth"] = train_localizer(train.images, xy=train.xy, odometry=train.odometry,
                                              supervision="ground-truth", **{**kw, "network": make()})
     frames = {"ground truth": None}
+    missing = ""
     if train.has_odometry:
-        ngt = train_localizer(train.images, odometry=train.odometry, supervision="odometry",
-                              **{**kw, "network": make()})
-        models["no ground truth"] = ngt
-        frames["no ground truth"] = align(ngt.predict(train.images), train.xy)  # scoring only
+        try:
+            ngt = train_localizer(train.images, odometry=train.odometry, supervision="odometry",
+                                  **{**kw, "network": make()})
+        except ValueError as exc:  # the run's odometry fixes no metric map (too short, never straight, ...)
+            missing = f"no '[no ground truth]' rows: the training run's odometry fixes no map ({exc}); "
+            log(missing)
+        else:
+            models["no ground truth"] = ngt
+            frames["no ground truth"] = align(ngt.predict(train.images), train.xy)  # scoring only
     noise = next((m.info["ekf_noise"] for k, m in reversed(list(models.items())) if "ekf_noise" in m.info), None)
     peers = {name: model.fit(train.images, train.xy) for name, model in (
         ("perfect memory", baselines.PerfectMemory()),
@@ -302,8 +309,8 @@ def product_rows(train: ProductRun, tests: Sequence[ProductRun], *, thesis: Sequ
         "ground truth; "
         + ("'[no ground truth]' the same recipe fitted to the positions learned from the training run's images and "
            "odometry (pose graph), its estimates moved into the world frame for scoring only by the rigid "
-           "transform fitted on the training run; " if train.has_odometry else
-           "no '[no ground truth]' rows: the training run has no odometry; ")
+           "transform fitted on the training run; " if "no ground truth" in models else
+           missing or "no '[no ground truth]' rows: the training run has no odometry; ")
         + ("'..., fused]' the single-image estimates fused with the test run's odometry (EKF, noise chosen on the "
            "training run by the recipe); " if fused_any else "no fused rows: no test run has odometry; ")
         + f"'peer ...' perfect memory and the Fourier signature store the same training views with their "
