@@ -16,6 +16,20 @@ BASELINES = [f"{m} {b}" for b in ("perfect memory", "Fourier signature")
              for m in ("MED (m)", "MAE x (%)", "MAE y (%)", "bytes per place", "query ms")]
 
 
+def product(label=""):
+    """The product rows every localization experiment prints (its scenes have odometry in every run)."""
+    tag = f", {label}" if label else ""
+    configs = ["thesis configuration" + (f" [{label}]" if label else "")]
+    configs += [f"sfanav default [{s}{tag}]" for s in ("ground truth", "ground truth, fused", "no ground truth",
+                                                        "no ground truth, fused")]
+    configs += [f"peer {p}" + (f" [{label}]" if label else "") for p in ("perfect memory", "Fourier signature")]
+    names = [f"{m} {c}" for c in configs for m in ("MED (m)", "MAE x (%)", "MAE y (%)")]
+    names += [f"MED ratio sfanav default [{s}{tag}] / best peer" for s in ("ground truth", "no ground truth",
+                                                                            "no ground truth, fused")]
+    names += ["MED ratio sfanav default [no ground truth] / [ground truth]" + (f" [{label}]" if label else "")]
+    return names
+
+
 def check(result, out, required):
     assert result.experiment in {r["experiment"] for r in [json.loads((out / f"{result.experiment}.json").read_text())]}
     names = [r["metric"] for r in result.rows]
@@ -43,7 +57,9 @@ def test_registered():
 @pytest.mark.parametrize("name", ["5.1.1", "5.1.2"])
 def test_5_1_x_quick(name, tmp_path):
     res = experiments.run(name, tmp_path, quick=True, progress=False)
-    rows = check(res, tmp_path, BASE + BASELINES)
+    rows = check(res, tmp_path, BASE + BASELINES + product())
+    assert rows["MED (m) thesis configuration"]["sfanav"] == rows["MED (m)"]["sfanav"]
+    assert rows["MED (m) sfanav default [no ground truth]"]["supervision"] == "no ground truth"
     if name == "5.1.1":
         assert rows["MAE x (%) (random splits)"]["thesis"] == 1.83
         assert rows["max eta_phi (outputs 1-8)"]["thesis"] == 0.17
@@ -65,7 +81,8 @@ def test_5_1_3_quick(tmp_path):
                 for m in ("max eta_phi (outputs 1-8)", "MED (m)", "MAE x (%)", "MAE y (%)")]
     required += [f"{m} window 50 % cubic individual" for m in ("max eta_phi (outputs 1-8)", "MED (m)")]
     required += ["Spearman rho (window, max eta_phi)", "eta_phi grows as the window shrinks"] + BASELINES
-    rows = check(res, tmp_path, required)
+    rows = check(res, tmp_path, required + product())
+    assert rows["MED (m) thesis configuration"]["sfanav"] == rows["MED (m) window 100 %"]["sfanav"]
     assert rows["eta_phi grows as the window shrinks"]["thesis"] == "yes"
     assert (tmp_path / "5.1.3-windows.png").exists()
 
@@ -73,6 +90,7 @@ def test_5_1_3_quick(tmp_path):
 def test_5_2_quick(tmp_path, monkeypatch):
     res = experiments.run("5.2", tmp_path, quick=True, progress=False)
     required = [f"{n} {run}" for run in ("indoor I", "indoor II") for n in BASE + BASELINES]
+    required += product("indoor I") + product("indoor II")
     rows = check(res, tmp_path, required)
     assert rows["MED (m) indoor I"]["thesis"] == 0.21 and rows["MED (m) indoor II"]["thesis"] == 0.13
     # the dataset is simulated once and reused

@@ -33,6 +33,16 @@ ROWS_5_3_2 = ["SFA MED (m)", "odometry MED (m)", "EKF MED (m)", "EKF improvement
               "test MED perfect memory (m)", "test MED Fourier signature (m)"]
 
 
+PRODUCT = [f"{m} {c}" for m in ("MED (m)", "MAE x (%)", "MAE y (%)") for c in (
+    "thesis configuration", "sfanav default [ground truth]", "sfanav default [ground truth, fused]",
+    "sfanav default [no ground truth]", "sfanav default [no ground truth, fused]", "peer perfect memory",
+    "peer Fourier signature")] + [
+    "MED ratio sfanav default [ground truth] / best peer", "MED ratio sfanav default [no ground truth] / best peer",
+    "MED ratio sfanav default [no ground truth, fused] / best peer",
+    "MED ratio sfanav default [no ground truth] / [ground truth]"]
+"""The product rows beside the thesis configuration and the peers (the scenes have odometry in every run)."""
+
+
 @pytest.fixture(scope="module")
 def out(tmp_path_factory):
     return tmp_path_factory.mktemp("odometry-experiments")
@@ -64,7 +74,8 @@ def test_5_3_1_quick(name, out):
     res = experiments.run(name, out, quick=True, progress=False)
     d = json.loads((out / f"{name}.json").read_text())
     assert d["experiment"] == name and len(d["rows"]) == len(res.rows)
-    rows = check(d, out, ROWS_5_3_1)
+    rows = check(d, out, ROWS_5_3_1 + PRODUCT)
+    assert rows["MED (m) thesis configuration"]["sfanav"] == pytest.approx(rows["test MED unsupervised (m)"]["sfanav"])
     assert rows["lines"]["sfanav"] >= 2
     assert rows["test MED unsupervised (m)"]["thesis"] == (0.36 if name == "5.3.1-sim" else 0.14)
     assert rows["target: unsupervised test MED within 1.3x of supervised"]["sfanav"] in ("met", "NOT met")
@@ -79,7 +90,8 @@ def test_5_3_2_cli_quick(out):
                         "--no-progress"], capture_output=True, text=True, env=env, timeout=600)
     assert p.returncode == 0, p.stderr
     assert "EKF MED (m)" in p.stdout and "odometry MED (m)" in p.stdout
-    rows = check(json.loads((out / "5.3.2.json").read_text()), out, ROWS_5_3_2)
+    rows = check(json.loads((out / "5.3.2.json").read_text()), out, ROWS_5_3_2 + PRODUCT)
+    assert rows["MED (m) thesis configuration"]["sfanav"] == pytest.approx(rows["EKF MED (m)"]["sfanav"])
     assert rows["EKF MED (m)"]["thesis"] == 0.11 and rows["odometry MED (m)"]["thesis"] == 0.31
     assert rows["EKF MED (m)"]["sfanav"] > 0
     assert (out / "5.3.2" / "fusion.png").exists()

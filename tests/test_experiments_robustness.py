@@ -20,6 +20,22 @@ def _rows(result, out):
     return {r["metric"]: r for r in result.rows}
 
 
+PRODUCT = [f"{m} {c}" for m in ("MED (m)", "MAE x (%)", "MAE y (%)") for c in (
+    "thesis configuration", "sfanav default [ground truth]", "sfanav default [ground truth, fused]",
+    "sfanav default [no ground truth]", "sfanav default [no ground truth, fused]", "peer perfect memory",
+    "peer Fourier signature")] + [
+    "MED ratio sfanav default [ground truth] / best peer", "MED ratio sfanav default [no ground truth] / best peer",
+    "MED ratio sfanav default [no ground truth, fused] / best peer",
+    "MED ratio sfanav default [no ground truth] / [ground truth]"]
+"""The product rows beside the thesis configuration and the peers (the scenes have odometry in every run)."""
+
+
+def _product(rows):
+    missing = [m for m in PRODUCT if m not in rows]
+    assert not missing, missing
+    assert all(isinstance(rows[m]["sfanav"], float) for m in PRODUCT)
+
+
 def test_registered():
     assert {"6.2.1-static", "6.2.1-light", "6.2.1-dynamic", "6.2.1-bow", "6.2.2", "6.2.2-seasons"} <= set(
         experiments.names())
@@ -32,12 +48,15 @@ def test_621_light_quick(tmp_path):
     assert rows["MED (m) feedback gt [thesis config]"]["thesis"] == 0.46
     assert rows["loop closures (gt)"]["sfanav"] > 0  # the quick run's closures are far apart, but there
     assert "MED (m) perfect memory" in rows and "MED (m) feedback gt [sfanav default]" in rows
+    _product(rows)
+    assert rows["MED (m) thesis configuration"]["sfanav"] == rows["MED (m) standard [thesis config]"]["sfanav"]
 
 
 def test_621_bow_and_622_quick(tmp_path):
     rows = _rows(experiments.run("6.2.1-bow", tmp_path, quick=True, progress=False), tmp_path)
     assert rows["average precision at 0.1 m, all candidates (bow)"]["thesis"] == 0.52
     assert "MED (m) feedback bow weighted [thesis config]" in rows
+    _product(rows)
     res = experiments.run("6.2.2", tmp_path, quick=True, progress=False)
     rows = _rows(res, tmp_path)
     assert "MED (m), 1 training set [thesis config]" in rows
@@ -47,6 +66,11 @@ def test_621_bow_and_622_quick(tmp_path):
     assert "MED (m), 3 training sets [thesis config, last recording held out]" in rows
     assert any("6.2.2-trajectory-thesis-config" in p for p in res.plots)  # Fig. 6.18b
     assert "without simulated rotation" in res.notes
+    # the product rows on the first permutation's split: no single run's odometry in the joined training set
+    for m in ("MED (m) thesis configuration", "MED (m) sfanav default [ground truth]", "MED (m) peer perfect memory",
+              "MED (m) peer Fourier signature", "MED ratio sfanav default [ground truth] / best peer"):
+        assert math.isfinite(rows[m]["sfanav"]), m
+    assert not any("no ground truth" in m or "fused" in m for m in rows)
 
 
 def test_622_seasons_quick(tmp_path):

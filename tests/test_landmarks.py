@@ -301,3 +301,13 @@ def test_experiment_5_4_quick(tmp_path):
     assert "stacked MED <= 0.21 m" in res.targets and "QUICK" in res.notes
     assert json.loads((tmp_path / "5.4.json").read_text())["experiment"] == "5.4"
     assert any(p.endswith("visibility.png") for p in res.plots)
+    # the product rows beside the stacked landmark model (the thesis's method here) and the peers
+    # (the quick garden's 4 m lanes are too short for the odometry's straight lines: no map without ground truth,
+    # which the notes say)
+    for config in ("thesis configuration", "sfanav default [ground truth]", "sfanav default [ground truth, fused]",
+                   "peer perfect memory", "peer Fourier signature"):
+        for m in ("MED (m)", "MAE x (%)", "MAE y (%)"):
+            assert math.isfinite(rows[f"{m} {config}"]["sfanav"]), (m, config)
+    assert rows["MED (m) thesis configuration"]["sfanav"] == rows["MED (m) stacked"]["sfanav"]
+    assert math.isfinite(rows["MED ratio sfanav default [ground truth, fused] / best peer"]["sfanav"])
+    assert "MED (m) sfanav default [no ground truth]" in rows or "fixes no map" in res.notes

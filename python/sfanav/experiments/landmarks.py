@@ -35,6 +35,8 @@ from ..sfa.network import Network
 from ..sim.presets import LANDMARK_MARKERS
 from . import ExperimentResult, register
 from .localization import progress_log, simulated, tiny_config
+from .product_rows import ProductRun, product_rows, quick_subsample
+from .product_rows import configuration as product_configuration
 
 PRESET = "thesis-5.4-landmarks"
 PRESET_OCCLUSION = "thesis-5.4-occlusion"
@@ -79,10 +81,11 @@ def _quick_runs(occluded: bool) -> tuple[dict[str, Any], sim.OmniCamera, sim.Wor
     runs = {"train": sim.trajectories.grid(world.area, spacing=1.2, step=0.5, margin=0.4),
             "test": sim.trajectories.random_walk(world.area, 20, 0.3, margin=0.4, rng=np.random.default_rng(1),
                                                  world=world)}
-    out = {}
-    for name, tr in runs.items():
+    out: dict[str, Any] = {"odometry": {}}
+    for k, (name, tr) in enumerate(runs.items()):
         imgs = np.stack([ren.render(cam, pose) for pose in tr.poses])
         out[name] = (lambda a=imgs: [a], tr.poses[:, :2].copy())
+        out["odometry"][name] = sim.simulate_odometry(tr.poses, rng=k)
     return out, cam, world
 
 
@@ -90,10 +93,11 @@ def _dataset_runs(out: Path, preset: str, seed: int, progress: bool) -> tuple[di
     ds = simulated(out, preset, seed, quick=False, progress=progress)
     cam = sim.camera_from_dict(ds.metadata["camera"])
     world = sim.World.load(ds.root / "world.json")
-    runs = {}
+    runs: dict[str, Any] = {"odometry": {}}
     for name in ("train", "test"):
         part = ds.select(run=name)
         runs[name] = (lambda p=part: p.images(batch_size=32), part.poses[:, :2].copy())
+        runs["odometry"][name] = part.odometry
     return runs, cam, world
 
 
@@ -199,6 +203,14 @@ def exp_5_4(out: Path, *, quick: bool, seed: int, progress: bool) -> ExperimentR
         plots.append(str(plot_trajectory(data["xy_te"], wl.predict(data["P_te"][key]),
                                          out / f"5.4-whole-{key}-trajectory.png", connect=False, error_lines=True,
                                          title=f"whole image, {kind}: MED {m['med']:.2f} m")))
+    # the product rows on the sfanav default's panoramas, beside the stacked landmark model (the thesis's method)
+    make_net, recipe = product_configuration(quick)
+    train = ProductRun(data["P_tr"]["default"], data["xy_tr"], runs["odometry"]["train"])
+    product = product_rows(quick_subsample(train) if quick else train,
+                           [ProductRun(data["P_te"]["default"], data["xy_te"], runs["odometry"]["test"])],
+                           thesis=[ev.predictions], network=make_net, recipe=recipe,
+                           camera_elevation=PANORAMA_ELEVATION, seed=seed, progress=progress, log=log)
+    rows += product.rows
     # the occlusion variant
     if quick:
         runs_o, cam_o, world_o = _quick_runs(True)
@@ -237,7 +249,9 @@ def exp_5_4(out: Path, *, quick: bool, seed: int, progress: bool) -> ExperimentR
         f"{PANORAMA_ELEVATION[0]:g}..{PANORAMA_ELEVATION[1]:g} deg). Occlusion: the scene covers marker 136 where "
         "x <= 0 and y <= 0 and marker 144 where x >= 0 and y >= 0, in training and test (the thesis excluded the "
         "views from training; its test detection rates show the occlusion there too). Peers answer at most 1000 "
-        "test frames, evenly spaced.")
+        "test frames, evenly spaced.\n" + product.note + " 'thesis configuration' rows: the stacked landmark "
+        "model (the thesis's method in 5.4); the product rows read the sfanav default's panoramas unwarped from "
+        "the same frames" + (" (quick: odometry simulated along the rendered poses)." if quick else "."))
     details = {"landmarks": loc, "landmarks_occlusion": loc_o, "evaluation": ev, "evaluation_occlusion": ev_o,
                "whole_image": whole}
     return ExperimentResult("5.4", rows, plots=plots, notes=notes, targets=targets, details=details)

@@ -43,6 +43,7 @@ from ..localization.training import fit_localizer
 from ..odometry.self_supervision import OdometryMapWarning, learn_positions
 from ..sfa.network import Network, Rotation
 from . import ExperimentResult, register
+from .product_rows import scene_rows
 
 ETA = "max eta_phi (outputs 1-8)"
 
@@ -260,6 +261,9 @@ def exp_5_1_1(out: Path, *, quick: bool, seed: int, progress: bool) -> Experimen
     rows.append({"metric": "training (s)", "thesis": None, "sfanav": info["network_s"]})
     rows.append({"metric": "readout [sfanav default]", "thesis": None, "sfanav": dinfo["readout"],
                  "configuration": "sfanav default"})
+    product = scene_rows(ds, quick=quick, thesis=[ev.predictions], seed=seed, progress=progress,
+                         log=progress_log(progress))
+    rows += product.rows
     notes = (
         f"Scene: sim preset {preset} (seed {seed}): {info['n_train']} training / {info['n_test']} test panoramas "
         f"({info['prep']}) on regular grids walked as serpentines. Network: "
@@ -276,7 +280,7 @@ def exp_5_1_1(out: Path, *, quick: bool, seed: int, progress: bool) -> Experimen
         f"readout chosen by blocked CV on the training grid: {dinfo['readout']}, {dinfo['readout_rule']}); "
         f"training {dinfo['network_s']:.0f} s (thesis configuration {info['network_s']:.0f} s, double precision), "
         f"readout selection {dinfo['readout_s']:.0f} s. Its random-split rows use the same readout.\n"
-        + ngt_note
+        + ngt_note + "\n" + product.note
     )
     return ExperimentResult("5.1.1", rows, _plots(ev) + _plots(dev), notes)
 
@@ -309,6 +313,9 @@ def exp_5_1_2(out: Path, *, quick: bool, seed: int, progress: bool) -> Experimen
     ngt_rows, ngt_note = no_ground_truth_rows(info["localizer"], ds, data, suffix="",
                                               supervised_med=ev.metrics["med"])
     rows += ngt_rows
+    product = scene_rows(ds, quick=quick, thesis=[ev.predictions], peer_queries=400, seed=seed, progress=progress,
+                         log=progress_log(progress))
+    rows += product.rows
     notes = (
         f"Scene: sim preset {preset} (seed {seed}), a 5x7 m area in a simulated garden (the thesis recorded a "
         f"real 5x7 m asphalt area outdoors): {info['n_train']} training images along a grid with crossings and "
@@ -321,7 +328,7 @@ def exp_5_1_2(out: Path, *, quick: bool, seed: int, progress: bool) -> Experimen
         "The thesis's 5.1.2 figures are on the honest protocol (regression on the training run, error on the "
         "test run), as the plain rows here. The baselines store all training views and answer "
         f"{ev.baseline_queries} evenly spaced test images (perfect memory compares each query with every stored "
-        "view under all 600 shifts).\n" + ngt_note
+        "view under all 600 shifts).\n" + ngt_note + "\n" + product.note
     )
     return ExperimentResult("5.1.2", rows, _plots(ev), notes)
 
@@ -402,6 +409,7 @@ def exp_5_1_3(out: Path, *, quick: bool, seed: int, progress: bool) -> Experimen
         if w == 100:
             rows += [r for r in evaluation_rows(ev) if "baseline" in r]
             plots += [str(p) for _, p in ev.plots]
+            thesis_pred = ev.predictions
     # the thesis's modified network: 50 % window, cubic expansion, individual nodes
     V = int(round(W * 0.5))
     net = window_network(V, H, 3, degree=3, shared=False, out=8)
@@ -429,6 +437,8 @@ def exp_5_1_3(out: Path, *, quick: bool, seed: int, progress: bool) -> Experimen
          "sfanav": "yes" if lo <= mod_med <= hi else ("better" if mod_med < lo else "no")},
     ]
     plots.insert(0, str(_plot_windows(list(WINDOWS), etas, meds, ev.eta_phi, mod_med, out / "5.1.3-windows.png")))
+    product = scene_rows(ds, quick=quick, thesis=[thesis_pred], seed=seed, progress=progress, log=log)
+    rows += product.rows
     notes = (
         f"Scene: sim preset {preset} (seed {seed}) rendered at {W}x{H} RGB, a reduced resolution as the thesis "
         "used for these models, with a width that makes every window a multiple of the 5 px stride. The "
@@ -439,7 +449,9 @@ def exp_5_1_3(out: Path, *, quick: bool, seed: int, progress: bool) -> Experimen
         "and individual nodes (naive training path). Rotation 5 px. Errors: regression fitted on the training "
         "grid, error on the test grid (test-run protocol only). Baselines on the full panoramas. Training "
         "times (s): " + ", ".join(f"{w} %: {t:.0f}" for w, t in zip(WINDOWS, fits))
-        + f"; modified: {info['fit_s']:.0f}."
+        + f"; modified: {info['fit_s']:.0f}.\n" + product.note
+        + f" 'thesis configuration' rows: the 100 % window. The scene is rendered at {W}x{H}; the product rows read "
+        "it resized to the sfanav default's input, as sfanav train would."
     )
     return ExperimentResult("5.1.3", rows, plots, notes)
 
@@ -468,6 +480,9 @@ def exp_5_2(out: Path, *, quick: bool, seed: int, progress: bool) -> ExperimentR
         ngt_rows, ngt_note = no_ground_truth_rows(info["localizer"], ds, data, suffix=f" [{label}]",
                                                   supervised_med=ev.metrics["med"])
         rows += ngt_rows
+        product = scene_rows(ds, quick=quick, thesis=[ev.predictions], labels=[label], seed=seed, progress=progress,
+                             log=progress_log(progress))
+        rows += product.rows
         plots += _plots(ev)
         infos[label] = info
     notes = (
@@ -483,7 +498,9 @@ def exp_5_2(out: Path, *, quick: bool, seed: int, progress: bool) -> ExperimentR
         + "; rotation 5 px, 100 % window. Regression on the 8 slowest outputs, fitted on the training run; MED "
         "on the test walk (the thesis's protocol here). The thesis compared with monocular SLAM (I: LSD-SLAM "
         "median 0.12-0.18 m, ORB-SLAM 0.23-0.45 m; II: ORB 0.78 m, LSD 0.44 m); sfanav compares with perfect "
-        "memory and the Fourier signature instead.\n" + ngt_note
+        "memory and the Fourier signature instead.\n" + ngt_note + "\n" + product.note
+        + " The thesis's scenes are gray (409x40); the sfanav default is RGB: the product rows read the gray "
+        "panoramas resized to its input and repeated into three channels."
     )
     return ExperimentResult("5.2", rows, plots, notes)
 

@@ -335,6 +335,20 @@ def peer_rows(out: Path, variant: str, seed: int, *, quick: bool, progress: bool
     return rows
 
 
+def product(out: Path, variant: str, seed: int, thesis: Any, *, quick: bool, progress: bool) -> Any:
+    """The product rows (:func:`sfanav.experiments.product_rows.scene_rows`)
+    on the scene's ``train`` and ``test`` runs, beside ``thesis`` (the thesis
+    configuration's test estimates, world frame)."""
+    from .product_rows import scene_rows
+
+    spec = SCENES[variant]
+    camera = sim.PanoramicCamera(*QUICK_CAMERA, rgb=not spec["gray"]) if quick else None
+    ds = simulated(out, spec["preset"], seed, quick=quick, camera=camera,
+                   max_frames=QUICK_FRAMES[variant] if quick else None, progress=progress)
+    return scene_rows(ds, quick=quick, thesis=[thesis], peer_queries=PEER_QUERIES, seed=seed, progress=progress,
+                      log=progress_log(progress))
+
+
 def fusion_rows(out: Path, seed: int, tr: dict[str, Any], te: dict[str, Any], n_out: int, *, quick: bool,
                 progress: bool) -> list[dict[str, Any]]:
     """Beyond the thesis, the product's path on the 5.3.2 scene with nothing
@@ -483,18 +497,29 @@ def _notes_5_3_1(variant: str, data: dict[str, Any], res: Any, seed: int, quick:
             "docs/odometry.md.")
 
 
+_PRODUCT_5_3_1 = ("'thesis configuration' rows: the unsupervised metric map (the headline rows' learner) on the "
+                  "test walk, aligned as above. ")
+_GRAY_NOTE = (" The scene is gray; the sfanav default is RGB: the product rows read the gray panoramas resized to "
+              "its input and repeated into three channels.")
+
+
 @register("5.3.1-sim", "unsupervised metric learning, simulated garden: 10 random lines >= 8 m, random init; "
                       "ML cost with the odometry between lines (thesis cost 5.1 beside)")
 def exp_5_3_1_sim(out: Path, *, quick: bool, seed: int, progress: bool) -> ExperimentResult:
     res, data, extra, plots = _run_5_3_1(out, "sim", seed, quick=quick, progress=progress)
-    return ExperimentResult("5.3.1-sim", _rows_5_3_1(res, extra), plots, _notes_5_3_1("sim", data, res, seed, quick))
+    prod = product(out, "sim", seed, res.details["test_estimates"], quick=quick, progress=progress)
+    return ExperimentResult("5.3.1-sim", _rows_5_3_1(res, extra) + prod.rows, plots,
+                            _notes_5_3_1("sim", data, res, seed, quick) + "\n" + _PRODUCT_5_3_1 + prod.note)
 
 
 @register("5.3.1-real", "unsupervised metric learning, indoor-style scene with noisy odometry: lines from odometry; "
                        "ML cost with the odometry between lines (thesis cost 5.5 beside)")
 def exp_5_3_1_real(out: Path, *, quick: bool, seed: int, progress: bool) -> ExperimentResult:
     res, data, extra, plots = _run_5_3_1(out, "real", seed, quick=quick, progress=progress)
-    return ExperimentResult("5.3.1-real", _rows_5_3_1(res, extra), plots, _notes_5_3_1("real", data, res, seed, quick))
+    prod = product(out, "real", seed, res.details["test_estimates"], quick=quick, progress=progress)
+    return ExperimentResult("5.3.1-real", _rows_5_3_1(res, extra) + prod.rows, plots,
+                            _notes_5_3_1("real", data, res, seed, quick) + "\n" + _PRODUCT_5_3_1 + prod.note
+                            + _GRAY_NOTE)
 
 
 @register("5.3.2", "EKF fusion of the unsupervised SFA estimates (5.3.1-real) with odometry; known start pose")
@@ -547,7 +572,8 @@ def exp_5_3_2(out: Path, *, quick: bool, seed: int, progress: bool) -> Experimen
     thesis_ok = {"EKF at least 20 % better than SFA alone": THESIS["5.3.2"]["EKF improvement over SFA alone (%)"] >= 20,
                  "EKF better than odometry alone": THESIS["5.3.2"]["EKF MED (m)"] < THESIS["5.3.2"]["odometry MED (m)"]}
     thesis_ok.update({f"{k} (thesis gradient descent map)": v for k, v in list(thesis_ok.items())})
-    rows = _convert(res.rows + extra) + _target_rows(res.targets, thesis_ok)
+    prod = product(out, "real", seed, res.details["ekf_poses"][:, :2], quick=quick, progress=progress)
+    rows = _convert(res.rows + extra) + _target_rows(res.targets, thesis_ok) + prod.rows
     plots = [str(p) for p in res.figures.values()]
     info = data["info"]
     fr = info["frames"]
@@ -574,5 +600,7 @@ def exp_5_3_2(out: Path, *, quick: bool, seed: int, progress: bool) -> Experimen
         f"{PEER_QUERIES} evenly spaced test images. "
         + ("A quick smoke run: tiny images and network, numbers not meaningful." if quick else
            f"Network: {info['network']}, trained in {info['fit_s']:.0f} s (reused from 5.3.1-real when cached).")
+        + "\n'thesis configuration' rows: the thesis's fusion (the unsupervised map's estimates, EKF from the true "
+        "start pose, noise by grid search on the test walk: the 'EKF MED (m)' row). " + prod.note + _GRAY_NOTE
     )
     return ExperimentResult("5.3.2", rows, plots, notes)

@@ -40,6 +40,8 @@ from ..pipeline import train_localizer
 from ..sfa.network import Network, Rotation
 from . import ExperimentResult, register
 from .flags import area_diagonal, flag_row
+from .product_rows import ProductRun, product_rows, quick_subsample, scene_rows
+from .product_rows import configuration as product_configuration
 from .localization import progress_log, simulated, tiny_config
 
 #: thesis 6.2.1: mean Euclidean deviation (m) of the standard and the feedback model
@@ -176,6 +178,8 @@ def run_621(out: Path, variant: str, *, quick: bool, seed: int, progress: bool,
         rows.append({"metric": f"MED (m) standard{tag}", "thesis": thesis.get("standard") if config == "thesis config"
                      else None, "sfanav": m_std["med"], "configuration": config})
         fits = {"standard": std}
+        if config == "thesis config":
+            thesis_pred = std.predict(X_te)
         for kind in detectors:
             if kind not in found:
                 t0 = time.perf_counter()
@@ -234,6 +238,9 @@ def run_621(out: Path, variant: str, *, quick: bool, seed: int, progress: bool,
                                              title=f"{name} [{config}], {label}: MED "
                                                    f"{_med(loc, X_te, xy_te)['med']:.2f} m")))
         details[config] = fits
+    product = scene_rows(ds, quick=quick, thesis=[thesis_pred] if "thesis config" in configs else None, seed=seed,
+                         progress=progress, log=log)
+    rows += product.rows
     notes.append(
         f"Scene: sim preset thesis-6.2.1-{variant} (seed {seed}), omnidirectional 500x500 images unwarped to "
         "600x60 (thesis configuration; the thesis used 600x55, which Table 5.2's 12-px receptive fields do not "
@@ -242,6 +249,7 @@ def run_621(out: Path, variant: str, *, quick: bool, seed: int, progress: bool,
         "average). Feedback: each closure's current image trained on its rotation interleaved with the aligned "
         "partner's (Network.fit(loop_closures=...)). MED on the 1090-frame test walk; the peers are fitted on the "
         "same training images.")
+    notes.append(product.note + " 'thesis configuration' rows: the thesis configuration's standard model.")
     return ExperimentResult(name, rows, plots, "\n".join(notes), details=details)
 
 
@@ -353,6 +361,8 @@ def run_622(out: Path, *, quick: bool, seed: int, progress: bool, permutations: 
                 log(f"6.2.2 {config} permutation {p} {k} sets: MED {med[p, k - 1]:.3f} m ({t:.0f} s), "
                     f"on the held-out last recording {held[p, k - 1]:.3f} m"
                     + (f", perfect memory {pm[p, k - 1]:.3f} m" if config == configs[0] else ""))
+                if p == 0 and k == n_sets and config == configs[0]:  # the product rows' split
+                    split = (train, order, test, loc.predict(X_te))
                 if p == 0 and k == n_sets:  # Fig. 6.18b: the trajectory on the unseen set, and the firing maps
                     slug = config.replace(",", "").replace(" ", "-")
                     plots.append(str(plot_trajectory(xy_te, loc.predict(X_te), out / f"{name}-trajectory-{slug}.png",
@@ -367,7 +377,9 @@ def run_622(out: Path, *, quick: bool, seed: int, progress: bool, permutations: 
         extrapolated[config], extrapolated[config + HELD_OUT] = ext, ext_held
         if config == configs[0]:
             curves["perfect memory"] = pm
-    rows = curve_rows(curves, preset, extrapolated=extrapolated, diagonal=area_diagonal(sets[0][1]))
+    product = _product_622(ds, conds, *split, thesis_config=configs[0] == CONFIGS[0], quick=quick, seed=seed,
+                           progress=progress, log=log)
+    rows = curve_rows(curves, preset, extrapolated=extrapolated, diagonal=area_diagonal(sets[0][1])) + product.rows
     path = plot_curves(curves, out / f"{name}-error-vs-sets.png", name, thesis.get(9))
     key_name = "ground-truth position" if by == "position" else "the odometry's arc fraction of the loop"
     notes = (f"Scene: sim preset {preset} (seed {seed}): {len(conds)} recordings of one {len(sets[0][1])}-frame loop "
@@ -382,11 +394,33 @@ def run_622(out: Path, *, quick: bool, seed: int, progress: bool, permutations: 
              f"{permutations} random permutations "
              "(thesis: 10). "
              + ("Fig. 6.18a beside: 9 sets 0.35 m." if name == "6.2.2" else
-                "Beside: the thesis's real recordings over three months (Fig. 6.20a): 1 set 6.13 m, 9 sets 0.66 m."))
+                "Beside: the thesis's real recordings over three months (Fig. 6.20a): 1 set 6.13 m, 9 sets 0.66 m.")
+             + f"\nProduct rows on the first permutation's split ({n_sets} training recordings in place-major "
+             "order, the next recording as test): " + product.note
+             + " The training set joins several recordings, so no single run's odometry: no '[no ground truth]' "
+             "or fused rows here; 'thesis configuration': the first configuration's model on that split.")
     return ExperimentResult(name, rows, [str(path)] + plots, notes,
                             details={"curves": {k: v.tolist() for k, v in curves.items()},
                                      "seconds": {k: v.tolist() for k, v in seconds.items()},
                                      "permutations": perms, "conditions": conds, "dataset": ds})
+
+
+def _product_622(ds: Any, conds: list[str], train: Any, order: Any, test: int, thesis_pred: Any, *,
+                 thesis_config: bool, quick: bool, seed: int, progress: bool, log: Any) -> Any:
+    """The product rows on one 6.2.2 split: the recordings ``train`` in
+    place-major ``order`` (as the thesis configuration saw them), tested on
+    recording ``test``; ``thesis_pred`` the thesis configuration's estimates
+    there (left out unless ``thesis_config``)."""
+    make_net, recipe = product_configuration(quick)
+    prep = Preprocessing.for_network(make_net())
+    recs = [load_run(ds.select(condition=conds[s]), prep, log=log) for s in train]
+    run = ProductRun(np.concatenate([r[0] for r in recs])[order], np.concatenate([r[1] for r in recs])[order])
+    rec = ds.select(condition=conds[test])
+    X_te, xy_te = load_run(rec, prep, log=log)
+    elev = tuple(ds.metadata["camera"].get("elevation_deg", (-30.0, 20.0)))
+    return product_rows(quick_subsample(run) if quick else run, [ProductRun(X_te, xy_te, rec.odometry)],
+                        thesis=[thesis_pred] if thesis_config else None, network=make_net, recipe=recipe,
+                        camera_elevation=elev, seed=seed, progress=progress, log=log)
 
 
 def curve_rows(curves: dict[str, Any], preset: str = "thesis-6.2.2-conditions", *,

@@ -1,0 +1,372 @@
+"""The product path beside the thesis configuration and the peers, on one split.
+
+Every localization experiment reports, on its own training and test runs:
+
+* ``thesis configuration``: the estimates of the thesis's configuration as
+  the experiment trains it (passed in, scored here alike);
+* ``sfanav default [ground truth]``: :func:`sfanav.pipeline.train_localizer`
+  (the one training recipe, what ``sfanav train`` runs) with the readout
+  fitted to ground truth;
+* ``sfanav default [no ground truth]``: the same recipe with
+  ``supervision="odometry"`` (positions learned from the training run's
+  images and odometry), only where the training run has odometry that
+  fixes a map (else the note says why); its
+  estimates are in the training run's odometry frame and are moved into the
+  world frame for scoring only, by the rigid transform fitted on the
+  training run (as ``sfanav demo`` and :func:`sfanav.localization.evaluate`
+  do);
+* ``..., fused]``: where the test run has odometry, the single-image
+  estimates fused with it (:func:`sfanav.odometry.fuse`) with the EKF noise
+  the recipe chose on the training run (the no-ground-truth model's for
+  both; the supervised model's own where there is no such model);
+* ``peer perfect memory`` and ``peer Fourier signature``
+  (:mod:`sfanav.localization.baselines`), storing the training run's views
+  and ground-truth positions;
+* ratios: ``MED ratio sfanav default [ground truth] / best peer``, the same
+  for the other sfanav rows, and ``MED ratio sfanav default [no ground
+  truth] / [ground truth]``.
+
+The sfanav rows and the peers see the same images: the run in the default
+network's input format (:func:`product_runs` loads a dataset's runs so,
+gray panoramas repeated into three channels for the RGB network, as ``sfanav
+train`` would resize them through
+:meth:`sfanav.data.Preprocessing.for_network`). Why and what was measured:
+docs/experiments.md.
+
+Example
+-------
+>>> train, tests = product_runs(dataset, default_network())            # doctest: +SKIP
+>>> res = product_rows(train, tests, camera_elevation=(-30, 20))       # doctest: +SKIP
+>>> print(format_rows(res.rows))                                       # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from .._checks import as_images, as_matrix, check_same_length
+from .._progress import Log, quiet_log
+from ..localization import baselines
+from ..localization.error_metrics import align, localization_metrics
+from ..localization.evaluation import coordinate_range
+from ..localization.recipe import CAMERA_ELEVATION, Recipe, default_network, recipe_for
+from ..sfa.network import Network
+
+THESIS = "thesis configuration"
+DEFAULT = "sfanav default"
+PEERS = ("perfect memory", "Fourier signature")
+MEASURES = (("MED (m)", "med"), ("MAE x (%)", "mae_x_pct"), ("MAE y (%)", "mae_y_pct"))
+"""The measures every configuration gets: row prefix, key of
+:func:`sfanav.localization.error_metrics.localization_metrics`."""
+
+
+@dataclass
+class ProductRun:
+    """One run of a scene as the product rows take it.
+
+    Attributes
+    ----------
+    images : array (N, H, W[, C])
+        Panoramas in the sfanav network's input format, in temporal order.
+    xy : array (N, 2)
+        Ground-truth positions (m): the training run's for the supervised
+        model, the peers and the frame alignment; the test run's for scoring.
+    odometry : array (N, 3) or None
+        Wheel odometry (x m, y m, heading rad); None (or any NaN) means the
+        run has none.
+    label : str
+        Names a test run in the row names (``""`` for a scene's only test run).
+    """
+
+    images: Any
+    xy: Any
+    odometry: Any = None
+    label: str = ""
+
+    def __post_init__(self) -> None:
+        self.images = as_images(self.images, "images")
+        self.xy = as_matrix(self.xy, "xy", n_cols=2)
+        check_same_length(self.images, self.xy, "images", "xy")
+        if self.odometry is not None:
+            odo = np.asarray(self.odometry, dtype=float)
+            if odo.ndim != 2 or odo.shape[1] < 3 or len(odo) != len(self.images):
+                raise ValueError(f"odometry must have shape ({len(self.images)}, 3), got {odo.shape}")
+            self.odometry = odo[:, :3] if np.isfinite(odo[:, :3]).all() else None
+
+    @property
+    def has_odometry(self) -> bool:
+        return self.odometry is not None
+
+
+@dataclass
+class ProductResult:
+    """What :func:`product_rows` returns.
+
+    Attributes
+    ----------
+    rows : list of dict
+        ``{"metric", "thesis": None, "sfanav", "configuration", ...}``.
+    note : str
+        A paragraph for the experiment's notes (what each row is).
+    models : dict
+        ``"ground truth"`` / ``"no ground truth"``: the trained localizers.
+    meds : dict
+        Row name without the measure (``"sfanav default [ground truth]"``)
+        -> MED (m), per test run.
+    """
+
+    rows: list[dict[str, Any]]
+    note: str
+    models: dict[str, Any] = field(default_factory=dict)
+    meds: dict[str, float] = field(default_factory=dict)
+
+
+def product_runs(dataset: Any, network: Network, *, train: str = "train", tests: Sequence[str] = ("test",),
+                 labels: Sequence[str] | None = None, log: Log = quiet_log) -> tuple[ProductRun, list[ProductRun]]:
+    """A dataset's training run and test runs (selected by ``run=``) in
+    ``network``'s input format, with their ground truth and odometry.
+    Panoramas are resized to the network's input
+    (:meth:`sfanav.data.Preprocessing.for_network`); gray panoramas for an
+    RGB network are read gray and repeated into three channels. ``labels``
+    name the test runs in the rows (default: ``""`` for one test run, else
+    the run names)."""
+    from ..data.preprocessing import Preprocessing
+    from ..data.sources import load_run
+
+    prep = Preprocessing.for_network(network)
+    h, w, c = network.input_shape
+    gray_source = not bool(dataset.metadata.get("camera", {}).get("rgb", True))
+    if gray_source and c == 3:
+        prep = Preprocessing(prep.width, prep.height, True, prep.normalize)
+    if labels is None:
+        labels = [""] if len(tests) == 1 else list(tests)
+    if len(labels) != len(tests):
+        raise ValueError(f"{len(tests)} test runs but {len(labels)} labels")
+
+    def one(run: str, label: str) -> ProductRun:
+        part = dataset.select(run=run)
+        X, xy = load_run(part, prep, log=log)
+        if X.ndim == 3 and c == 3:
+            X = np.repeat(X[..., None], 3, axis=3)
+        return ProductRun(X, xy, part.odometry, label)
+
+    return one(train, ""), [one(t, lab) for t, lab in zip(tests, labels)]
+
+
+def _name(config: str, qualifiers: Sequence[str], label: str) -> str:
+    q = [s for s in (*qualifiers, label) if s]
+    return f"{config} [{', '.join(q)}]" if q else config
+
+
+def _peer_queries(n: int, limit: int | None) -> np.ndarray:
+    if limit is None or n <= limit:
+        return np.arange(n)
+    return np.unique(np.linspace(0, n - 1, int(limit)).round().astype(int))
+
+
+def product_rows(train: ProductRun, tests: Sequence[ProductRun], *, thesis: Sequence[Any] | None = None,
+                 network: Callable[[], Network] | None = None, recipe: Recipe | None = None,
+                 camera_elevation: Sequence[float] | None = None, peer_queries: int | None = 1000,
+                 seed: int = 0, progress: bool = False, log: Log = quiet_log) -> ProductResult:
+    """Trains the sfanav default on ``train`` (with ground truth and, where
+    the run has odometry, without), scores it on every test run beside the
+    thesis configuration's estimates and the peers, and returns the rows.
+
+    Parameters
+    ----------
+    train : ProductRun
+        The training run (images in ``network``'s input format).
+    tests : sequence of ProductRun
+        Test runs (same image format); their ``label`` names their rows and
+        must be unique.
+    thesis : sequence of arrays (N_i, 2) or None
+        The thesis configuration's estimates (m, world frame) on each test run.
+    network : callable returning an unfitted Network, or None
+        Called once per model (default :func:`default_network`, 350x40 RGB).
+    recipe : Recipe or None
+        As :func:`sfanav.pipeline.train_localizer` takes it (None: the
+        default's; a tiny quick network on 8-row panoramas needs
+        ``recipe_for(rows="all")``).
+    camera_elevation : (float, float) or None
+        Elevations (deg) of the panoramas' lowest and highest rows.
+    peer_queries : int or None
+        The peers answer at most this many evenly spaced test images; the
+        ratios to the best peer compare on those images.
+    seed, progress, log
+        As :func:`~sfanav.pipeline.train_localizer`.
+
+    Returns
+    -------
+    ProductResult
+
+    Raises
+    ------
+    ValueError
+        When test images differ in shape from the training images, labels
+        repeat, or ``thesis`` does not match ``tests``.
+    """
+    from ..odometry.fusion import fuse
+    from ..pipeline import train_localizer
+
+    tests = list(tests)
+    if not tests:
+        raise ValueError("product_rows needs at least one test run")
+    if len({t.label for t in tests}) != len(tests):
+        raise ValueError(f"test run labels must be unique, got {[t.label for t in tests]}")
+    for t in tests:
+        if t.images.shape[1:] != train.images.shape[1:]:
+            raise ValueError(f"test images {t.label!r} have shape {t.images.shape[1:]}, training images "
+                             f"{train.images.shape[1:]}")
+    if thesis is not None:
+        thesis = [as_matrix(p, "thesis estimates", n_cols=2) for p in thesis]
+        if len(thesis) != len(tests) or any(len(p) != len(t.xy) for p, t in zip(thesis, tests)):
+            raise ValueError("thesis must give one (N, 2) array of estimates per test run, N its frames")
+    make = network or default_network
+    kw = dict(network=None, recipe=recipe, camera_elevation=camera_elevation, seed=seed, progress=progress, log=log)
+    models: dict[str, Any] = {}
+    models["ground truth"] = train_localizer(train.images, xy=train.xy, odometry=train.odometry,
+                                             supervision="ground-truth", **{**kw, "network": make()})
+    frames = {"ground truth": None}
+    missing = ""
+    if train.has_odometry:
+        try:
+            ngt = train_localizer(train.images, odometry=train.odometry, supervision="odometry",
+                                  **{**kw, "network": make()})
+        except ValueError as exc:  # the run's odometry fixes no metric map (too short, never straight, ...)
+            missing = f"no '[no ground truth]' rows: the training run's odometry fixes no map ({exc}); "
+            log(missing)
+        else:
+            models["no ground truth"] = ngt
+            frames["no ground truth"] = align(ngt.predict(train.images), train.xy)  # scoring only
+    noise = next((m.info["ekf_noise"] for k, m in reversed(list(models.items())) if "ekf_noise" in m.info), None)
+    peers = {name: model.fit(train.images, train.xy) for name, model in (
+        ("perfect memory", baselines.PerfectMemory()),
+        ("Fourier signature", baselines.FourierSignature(
+            min(baselines.FourierSignature().n_coefficients, train.images.shape[2] // 2 + 1))))}
+
+    rows: list[dict[str, Any]] = []
+    meds: dict[str, float] = {}
+
+    def add(name: str, config: str, pred: np.ndarray, xy: np.ndarray, crange: np.ndarray, **extra: Any) -> None:
+        m = localization_metrics(pred, xy, coordinate_range=crange)
+        for label, key in MEASURES:
+            rows.append({"metric": f"{label} {name}", "thesis": None, "sfanav": m[key], "configuration": config,
+                         **extra})
+        meds[name] = m["med"]
+
+    for i, t in enumerate(tests):
+        crange = coordinate_range(t.xy)
+        q = _peer_queries(len(t.xy), peer_queries)
+        errors: dict[str, np.ndarray] = {}
+        if thesis is not None:
+            add(_name(THESIS, (), t.label), THESIS, thesis[i], t.xy, crange)
+        for sup, loc in models.items():
+            est = loc.predict(t.images)
+            world = frames[sup]
+            scored = world.apply(est) if world is not None else est
+            name = _name(DEFAULT, (sup,), t.label)
+            add(name, DEFAULT, scored, t.xy, crange, supervision=sup)
+            errors[name] = np.hypot(*(scored - t.xy).T)
+            if t.has_odometry and noise is not None:
+                fused = fuse(t.odometry, est, noise)[:, :2]
+                fused = world.apply(fused) if world is not None else fused
+                name = _name(DEFAULT, (sup, "fused"), t.label)
+                add(name, DEFAULT, fused, t.xy, crange, supervision=sup)
+                errors[name] = np.hypot(*(fused - t.xy).T)
+        peer_meds = {}
+        for pname, peer in peers.items():
+            pred = peer.predict(t.images[q])
+            m = localization_metrics(pred, t.xy[q], coordinate_range=crange)
+            name = _name("peer " + pname, (), t.label)
+            for label, key in MEASURES:
+                rows.append({"metric": f"{label} {name}", "thesis": None, "sfanav": m[key], "baseline": pname,
+                             "configuration": "peer"})
+            meds[name] = peer_meds[pname] = m["med"]
+        best = min(peer_meds, key=peer_meds.get)
+        for name, err in errors.items():
+            rows.append({"metric": f"MED ratio {name} / best peer", "thesis": None,
+                         "sfanav": float(err[q].mean() / peer_meds[best]) if peer_meds[best] > 0 else float("inf"),
+                         "configuration": DEFAULT, "best peer": best})
+        for fused in ((), ("fused",)):
+            a, b = _name(DEFAULT, ("no ground truth", *fused), t.label), _name(DEFAULT, ("ground truth", *fused),
+                                                                                t.label)
+            if a in meds and b in meds:
+                qual = ", ".join(s for s in (*fused, t.label) if s)
+                rows.append({"metric": "MED ratio sfanav default [no ground truth] / [ground truth]"
+                             + (f" [{qual}]" if qual else ""), "thesis": None,
+                             "sfanav": meds[a] / meds[b] if meds[b] > 0 else float("inf"), "configuration": DEFAULT})
+        log(f"product rows{' ' + t.label if t.label else ''}: "
+            + ", ".join(f"{k} {v:.3f} m" for k, v in meds.items() if k in errors or k.startswith("peer ")))
+    fused_any = any(t.has_odometry for t in tests) and noise is not None
+    note = (
+        "Product rows (same split; images "
+        f"{'x'.join(str(s) for s in train.images.shape[1:])}, the sfanav network's input): 'sfanav default "
+        "[ground truth]' is sfanav.pipeline.train_localizer (what sfanav train runs) with the readout fitted to "
+        "ground truth; "
+        + ("'[no ground truth]' the same recipe fitted to the positions learned from the training run's images and "
+           "odometry (pose graph), its estimates moved into the world frame for scoring only by the rigid "
+           "transform fitted on the training run; " if "no ground truth" in models else
+           missing or "no '[no ground truth]' rows: the training run has no odometry; ")
+        + ("'..., fused]' the single-image estimates fused with the test run's odometry (EKF, noise chosen on the "
+           "training run by the recipe); " if fused_any else "no fused rows: no test run has odometry; ")
+        + f"'peer ...' perfect memory and the Fourier signature store the same training views with their "
+        f"ground-truth positions and answer at most {peer_queries or 'all'} evenly spaced test images; 'MED ratio "
+        "... / best peer' compares on those images."
+    )
+    return ProductResult(rows, note, models, meds)
+
+
+QUICK_TRAIN_FRAMES = 80
+"""At most this many training frames in the ``--quick`` product rows (every k-th frame of the run)."""
+
+
+def quick_network() -> Network:
+    """The tiny network of the experiments' ``--quick`` product rows: 60x8
+    RGB, two layers (seconds to train; numbers not meaningful)."""
+    return Network({
+        "input": {"width": 60, "height": 8, "channels": 3},
+        "network": {"precision": "mixed"},
+        "layers": [{"rf": [6, 4], "stride": [3, 4], "out": 8}, {"rf": "full", "out": 8}],
+    })
+
+
+def configuration(quick: bool) -> tuple[Callable[[], Network], Recipe | None]:
+    """(network factory, recipe) of the product rows: the sfanav default's
+    (None: :func:`sfanav.pipeline.train_localizer`'s default recipe), or for
+    ``quick`` the tiny :func:`quick_network` on all its 8 rows without the
+    Fourier signature beside the slow features (the readout's selection,
+    with the signature's hundreds of dimensions, would take minutes)."""
+    if quick:
+        return quick_network, recipe_for(rows="all", signature=None)
+    return default_network, None
+
+
+def quick_subsample(run: ProductRun, limit: int = QUICK_TRAIN_FRAMES) -> ProductRun:
+    """Every k-th frame of ``run`` (images, positions and odometry alike),
+    at most ``limit`` frames: a quick run's training set."""
+    step = -(-len(run.xy) // limit)
+    if step <= 1:
+        return run
+    return ProductRun(run.images[::step], run.xy[::step], None if run.odometry is None else run.odometry[::step],
+                      run.label)
+
+
+def scene_rows(dataset: Any, *, quick: bool, thesis: Sequence[Any] | None = None, tests: Sequence[str] = ("test",),
+               labels: Sequence[str] | None = None, peer_queries: int | None = 1000, seed: int = 0,
+               progress: bool = False, log: Log = quiet_log) -> ProductResult:
+    """:func:`product_rows` on a simulated dataset's ``train`` run and its
+    ``tests`` runs: the sfanav default network (350x40 RGB; ``quick``: the
+    tiny :func:`quick_network` on all its 8 rows) on the panoramas resized to
+    its input, the horizon band placed by the dataset's camera elevation;
+    ``quick``: :func:`configuration` and :func:`quick_subsample`."""
+    net, recipe = configuration(quick)
+    train, runs = product_runs(dataset, net(), tests=tests, labels=labels, log=log)
+    train = quick_subsample(train) if quick else train
+    elevation = tuple(dataset.metadata.get("camera", {}).get("elevation_deg", CAMERA_ELEVATION))
+    return product_rows(train, runs, thesis=thesis, network=net, recipe=recipe,
+                        camera_elevation=elevation, peer_queries=peer_queries, seed=seed, progress=progress,
+                        log=log)
