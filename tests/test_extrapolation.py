@@ -93,3 +93,23 @@ def test_flag_row_withholds_absurd_figures():
     table = format_rows([out])
     assert "4.5e" not in table.split("flag:")[0] and table.splitlines()[-1].startswith("flag: MED (m), 1 training")
     assert area_diagonal([[0, 0], [3, 4], [1, 1]]) == 5.0
+
+
+def test_cross_validation_inside_the_library_does_not_warn():
+    """Held-out blocks at a run's edge lie outside their folds' box by
+    construction: the library's own CV and resampling loops are quiet."""
+    import warnings
+
+    from sfanav.localization.extrapolation import ExtrapolationWarning, quiet_extrapolation
+    from sfanav.localization.readout_selection import cross_val_predict
+
+    rng = np.random.default_rng(0)
+    xy = np.c_[np.linspace(0, 10, 60), np.zeros(60)]  # a straight run: the first and last blocks are outside
+    F = np.c_[xy[:, 0], xy[:, 0] ** 3 / 10, rng.normal(size=(60, 6))]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", ExtrapolationWarning)
+        cross_val_predict({"kind": "quadratic", "n_outputs": 8, "ridge": 0.0}, F, xy, block=10)
+        with quiet_extrapolation():
+            warnings.warn("x", ExtrapolationWarning)
+    with pytest.warns(ExtrapolationWarning):
+        warnings.warn("shown again outside the context", ExtrapolationWarning)

@@ -9,7 +9,9 @@ with when some lie farther than a margin (a fraction of the box's diagonal).
 
 from __future__ import annotations
 
+import contextlib
 import warnings
+from collections.abc import Iterator
 
 import numpy as np
 
@@ -68,3 +70,21 @@ def warn_extrapolated(n: int, total: int, bounds: object, margin: float, who: st
     warnings.warn(f"{who}: {n} of {total} estimates lie more than {margin:g} x the diagonal outside the training "
                   f"positions {box}; the regression extrapolates and those estimates are not positions",
                   ExtrapolationWarning, stacklevel=3)
+
+
+@contextlib.contextmanager
+def quiet_extrapolation() -> Iterator[None]:
+    """A context in which :class:`ExtrapolationWarning` is not shown: for
+    the library's own cross-validation and resampling loops, whose held-out
+    folds lie outside their training folds' box by construction (a fold at
+    the run's edge) and which report errors, not positions; the counts
+    (``n_extrapolated_``) are still kept.
+
+    Example
+    -------
+    >>> with quiet_extrapolation():
+    ...     pass
+    """
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ExtrapolationWarning)
+        yield
