@@ -50,7 +50,7 @@ from ..sfa.updates import NetworkUpdater, UpdatePolicy, statistics_bytes
 from .localizer import Localizer, pooling_step
 
 __all__ = ["MAX_VIEWS", "ReadoutMemory", "remember", "top_stage_inputs", "top_stage_features",
-           "LocalizerUpdater", "readout_memory_bytes", "drop_readout_memory"]
+           "LocalizerUpdater", "readout_memory_bytes", "drop_readout_memory", "updatable_memory"]
 
 MAX_VIEWS = 3000
 """Default bound on the views a readout memory keeps."""
@@ -292,6 +292,21 @@ def drop_readout_memory(localizer: Localizer) -> Localizer:
     return localizer
 
 
+def updatable_memory(localizer: Any, why: str) -> "ReadoutMemory":
+    """The readout memory of a fitted, updatable :class:`Localizer`.
+    TypeError for another object, NotFittedError for an unfitted one,
+    ValueError naming ``why`` the memory is needed when it has none."""
+    if not isinstance(localizer, Localizer):
+        raise TypeError(f"localizer must be a sfanav.Localizer, got {type(localizer).__name__}")
+    if not localizer.is_fitted_:
+        raise NotFittedError("this Localizer is not fitted; fit it before updating it or joining a run to it")
+    mem = getattr(localizer, "readout_memory_", None)
+    if mem is None:
+        raise ValueError(f"this localizer keeps no readout memory (its map's views), so {why}: train it with "
+                         "readout_memory (sfanav train --updatable)")
+    return mem
+
+
 class LocalizerUpdater:
     """Adds runs to a fitted :class:`~sfanav.Localizer` (scikit-learn's
     ``partial_fit``): the network's top stage re-solved from its statistics
@@ -328,14 +343,7 @@ class LocalizerUpdater:
 
     def __init__(self, localizer: Localizer, policy: UpdatePolicy | None = None, *,
                  augmentation: CorruptionModel | None = None, seed: int = 0) -> None:
-        if not isinstance(localizer, Localizer):
-            raise TypeError(f"localizer must be a sfanav.Localizer, got {type(localizer).__name__}")
-        if not localizer.is_fitted_:
-            raise NotFittedError("this Localizer is not fitted; fit it before updating it")
-        mem = getattr(localizer, "readout_memory_", None)
-        if mem is None:
-            raise ValueError("this localizer has no readout memory, so its readout cannot be refitted after an "
-                             "update: train it with readout_memory (sfanav train --updatable)")
+        mem = updatable_memory(localizer, "its readout cannot be refitted after an update")
         if mem.augmented is not None and augmentation is None:
             raise ValueError("this localizer's readout was fitted on corrupted copies as well: pass the corruption "
                              "model (augmentation=) so that the new runs get copies too")

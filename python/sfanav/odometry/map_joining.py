@@ -59,10 +59,10 @@ from typing import Any
 
 import numpy as np
 
-from .._checks import NotFittedError, check_int, check_nonneg_float, check_positive_float
+from .._checks import check_int, check_nonneg_float, check_positive_float
 from ..localization.error_metrics import align
 from ..localization.localizer import Localizer
-from ..localization.updates import top_stage_features
+from ..localization.updates import top_stage_features, updatable_memory
 from .dead_reckoning import as_poses, wrap_angle
 from .pose_graph import place_pairs, relative_headings
 from .pose_graph_gtsam import odometry_sigmas, require_gtsam, robust_weights
@@ -170,14 +170,7 @@ class JoinedRun:
 def _memory_features(localizer: Localizer) -> tuple[np.ndarray, np.ndarray]:
     """The memory views' slow features under the localizer's network and
     their positions."""
-    if not isinstance(localizer, Localizer):
-        raise TypeError(f"localizer must be a sfanav.Localizer, got {type(localizer).__name__}")
-    if not localizer.is_fitted_:
-        raise NotFittedError("this Localizer is not fitted; a run can only join the map of a fitted localizer")
-    mem = getattr(localizer, "readout_memory_", None)
-    if mem is None:
-        raise ValueError("this localizer keeps no readout memory (its map's views): a run without ground truth "
-                         "cannot be joined to it; train it with readout_memory (sfanav train --updatable)")
+    mem = updatable_memory(localizer, "a run without ground truth cannot be joined to it")
     return top_stage_features(localizer.trained_network(), mem.inputs), mem.positions
 
 
