@@ -204,8 +204,12 @@ class _Context:
         self.where = f"{region.file}:{region.line}: JSON {region.json_path}"
         self.data = _load(root, region)
         self.key = (region.options.get("key") or ["metric"])[-1]
-        rows_path = (region.options.get("rows") or ["rows"])[-1]
-        rows = _walk(self.data, rows_path, self.where) if rows_path else self.data
+        given = region.options.get("rows")
+        rows_path = (given or ["rows"])[-1]
+        if not given and isinstance(self.data, dict) and "rows" not in self.data:
+            rows = None  # a file of values, not rows: only {@path} placeholders can read it
+        else:
+            rows = _walk(self.data, rows_path, self.where) if rows_path else self.data
         self.rows = rows if isinstance(rows, list) else None
         self.flags: list[str] = []
         cap = (region.options.get("cap") or [None])[-1]
