@@ -266,7 +266,12 @@ def main(argv=None) -> int:
                 bpp = int(np.prod(X.shape[1:])) * X.dtype.itemsize + 16
                 cache_est = (pm_cache_per_place or 0) * n
                 if real or cache_est <= a.max_pm_bytes:
-                    Xp, yp = (Xn, yn) if real else tiles(X, xy, n, a.seed, span)
+                    if real:
+                        Xp, yp = Xn, yn
+                    else:  # filled chunk by chunk: no int16 copy of the whole tiled map
+                        Xp, yp = np.empty((n,) + X.shape[1:], X.dtype), np.empty((n, 2))
+                        for s in range(0, n, 2000):
+                            Xp[s:s + 2000], yp[s:s + 2000] = tiles(X, xy, n, a.seed, span, s, min(n, s + 2000))
                     pm = PerfectMemory().fit(Xp, yp)
                     del Xp
                     pm_cache_per_place = pm.cache_bytes_ / n
