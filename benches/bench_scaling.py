@@ -24,9 +24,10 @@ once. For every size n of ``--sizes``:
   spectra stay under ``--max-pm-bytes``; above it its query time is
   extrapolated linearly from the measured sizes >= 1000 (marked
   ``"extrapolated": true``) and its bytes computed. sfanav at tiled sizes is
-  the model trained on all rendered frames: its network has a fixed size and
-  its readout keeps at most 3000 training views (``SignatureGPReadout``'s
-  ``max_train``), so a larger garden would not make it bigger.
+  the model of the largest rendered size in ``--sizes``: its network has a
+  fixed size and its readout keeps at most 3000 training views
+  (``SignatureGPReadout``'s ``max_train``), so a larger garden would make it
+  bigger only up to that cap (not measured here).
 
 Query time: ``predict`` of one image (the sfanav default pools 8 rotations),
 median of ``--calls`` calls after 2 warm-up calls (at most ``--cell-seconds``
