@@ -22,7 +22,7 @@ echo "== ROS 1 from Debian's packages (the live node's tests run against a real 
 ROS_DEBS="ros-core python3-rospy python3-rosbag python3-sensor-msgs python3-nav-msgs python3-geometry-msgs python3-tf2-msgs"
 if ! command -v roscore >/dev/null || ! command -v rosbag >/dev/null; then
     SUDO=""; [ "$(id -u)" -ne 0 ] && SUDO="sudo"
-    $SUDO apt-get update -qq && DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --no-install-recommends $ROS_DEBS >/dev/null
+    $SUDO apt-get update -qq && DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq $ROS_DEBS >/dev/null
 fi
 export SFANAV_REQUIRE_ROS=1   # tests/test_ros1_node.py fails instead of skipping when ROS is missing
 
