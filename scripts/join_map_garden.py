@@ -29,6 +29,7 @@ from sfanav.localization.error_metrics import align
 from sfanav.localization.training import fit_localizer
 from sfanav.localization.updates import LocalizerUpdater
 from sfanav.odometry.map_joining import join_run
+from sfanav.sim import reframed_odometry
 
 CONFIG = {"input": {"width": 120, "height": 16, "channels": 3}, "network": {"precision": "double"},
           "layers": [{"rf": [8, 8], "stride": [4, 4], "out": 12}, {"rf": [5, 3], "stride": [3, 1], "out": 12},
@@ -40,23 +41,9 @@ DRIFTS = (0.5, 2.0)  # deg per m added to the odometry's heading
 
 
 def disguise(odo, theta=1.1, t=(7.0, -3.0), drift_deg_per_m=0.5, noise_deg=0.2, seed=0):
-    """The odometry re-integrated from (t, theta), with a heading drift (deg
-    per m) and a heading random walk (deg per step) added."""
-    rng = np.random.default_rng(seed)
-    d = np.hypot(*np.diff(odo[:, :2], axis=0).T)
-    c, s = np.cos(odo[:-1, 2]), np.sin(odo[:-1, 2])
-    dxy = np.diff(odo[:, :2], axis=0)
-    local = np.c_[c * dxy[:, 0] + s * dxy[:, 1], -s * dxy[:, 0] + c * dxy[:, 1]]
-    dth = (np.diff(np.unwrap(odo[:, 2])) + np.radians(drift_deg_per_m) * d
-           + np.radians(noise_deg) * rng.standard_normal(len(d)))
-    h = theta + np.concatenate([[0.0], np.cumsum(dth)])
-    out = np.zeros_like(odo)
-    out[0] = (t[0], t[1], theta)
-    for k in range(len(d)):
-        ch, sh = np.cos(h[k]), np.sin(h[k])
-        out[k + 1, :2] = out[k, :2] + [ch * local[k, 0] - sh * local[k, 1], sh * local[k, 0] + ch * local[k, 1]]
-    out[:, 2] = h
-    return out
+    """The run's odometry as a second drive reports it (sfanav.sim.reframed_odometry)."""
+    return reframed_odometry(odo, (t[0], t[1], theta), drift_deg_per_m=drift_deg_per_m, heading_noise_deg=noise_deg,
+                             seed=seed)
 
 
 def stats(a, b):

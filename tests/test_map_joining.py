@@ -12,6 +12,7 @@ from sfanav.data.preprocessing import Preprocessing
 from sfanav.data.sources import load_run, select_run
 from sfanav.localization.training import fit_localizer
 from sfanav.localization.updates import LocalizerUpdater
+from sfanav.sim import reframed_odometry
 
 gtsam = pytest.importorskip("gtsam")
 
@@ -22,24 +23,9 @@ CONFIG = {"input": {"width": 60, "height": 8, "channels": 3}, "network": {"preci
 
 
 def disguise(odo, theta=1.1, t=(7.0, -3.0), drift_deg_per_m=0.5, noise_deg=0.2, seed=0):
-    """The odometry re-integrated from (t, theta) in a frame of its own,
-    with a systematic heading drift (deg per m) and a heading random walk
-    (deg per step) added: what a second run's odometry looks like to the
-    map."""
-    rng = np.random.default_rng(seed)
-    d = np.hypot(*np.diff(odo[:, :2], axis=0).T)
-    c, s = np.cos(odo[:-1, 2]), np.sin(odo[:-1, 2])
-    dxy = np.diff(odo[:, :2], axis=0)
-    local = np.c_[c * dxy[:, 0] + s * dxy[:, 1], -s * dxy[:, 0] + c * dxy[:, 1]]
-    dth = np.diff(np.unwrap(odo[:, 2])) + np.radians(drift_deg_per_m) * d + np.radians(noise_deg) * rng.standard_normal(len(d))
-    h = theta + np.concatenate([[0.0], np.cumsum(dth)])
-    out = np.zeros_like(odo)
-    out[0] = (t[0], t[1], theta)
-    for k in range(len(d)):
-        ch, sh = np.cos(h[k]), np.sin(h[k])
-        out[k + 1, :2] = out[k, :2] + [ch * local[k, 0] - sh * local[k, 1], sh * local[k, 0] + ch * local[k, 1]]
-    out[:, 2] = h
-    return out
+    """The run's odometry as a second drive reports it (sfanav.sim.reframed_odometry)."""
+    return reframed_odometry(odo, (t[0], t[1], theta), drift_deg_per_m=drift_deg_per_m, heading_noise_deg=noise_deg,
+                             seed=seed)
 
 
 @pytest.fixture(scope="module")
@@ -240,3 +226,22 @@ def test_a_model_trained_without_ground_truth_is_updatable_and_joins_a_run(garde
     XB, _, OB = garden["train-cross"]
     joined = join_run(loc, XB, OB)
     assert joined.poses.shape == (len(XB), 3) and len(joined.closures) > 0
+
+
+def test_reframed_odometry_keeps_steps_and_turns():
+    """Re-integrated from another start without drift or noise, the odometry
+    is the same path moved rigidly; a drift bends it; bad input is refused."""
+    rng = np.random.default_rng(3)
+    h = np.cumsum(rng.normal(0, 0.2, 40))
+    xy = np.cumsum(np.c_[np.cos(h), np.sin(h)] * 0.5, axis=0)
+    odo = np.c_[xy, h]
+    out = sim.reframed_odometry(odo, (2.0, -1.0, 0.7), drift_deg_per_m=0.0, heading_noise_deg=0.0)
+    a = 0.7 - h[0]
+    R = np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]])
+    np.testing.assert_allclose(out[:, :2], (xy - xy[0]) @ R.T + [2.0, -1.0], atol=1e-9)
+    np.testing.assert_allclose(out[:, 2], h + a, atol=1e-9)
+    bent = sim.reframed_odometry(odo, (2.0, -1.0, 0.7), drift_deg_per_m=2.0, heading_noise_deg=0.0)
+    d = np.hypot(*np.diff(xy, axis=0).T)
+    np.testing.assert_allclose(bent[-1, 2] - out[-1, 2], np.radians(2.0) * d.sum(), atol=1e-9)
+    with pytest.raises(ValueError, match="shape"):
+        sim.reframed_odometry(odo[:, :2])

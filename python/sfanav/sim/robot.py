@@ -505,3 +505,40 @@ class Simulator:
         """One image per camera at the current pose and time."""
         poses = self.robot.camera_poses(self.pose[None, :])
         return {name: self.renderer.render(self.camera, p[0], self.time, lighting) for name, p in poses.items()}
+
+
+def reframed_odometry(odometry: Any, start: Any = (7.0, -3.0, 1.1), *, drift_deg_per_m: float = 0.5,
+                      heading_noise_deg: float = 0.2, seed: int = 0) -> np.ndarray:
+    """A run's odometry (N, 3: x m, y m, heading rad) as the odometry of
+    another drive along the same path would report it: re-integrated from
+    the pose ``start`` (x m, y m, heading rad) of a frame of its own, each
+    step keeping its length and its turn, plus a systematic heading drift
+    (``drift_deg_per_m`` degrees per metre) and a heading random walk
+    (``heading_noise_deg`` degrees per step, seeded). What a second run looks
+    like to a map it must join (:func:`sfanav.odometry.map_joining.join_run`).
+
+    Example
+    -------
+    >>> odo = np.c_[np.arange(5.0), np.zeros(5), np.zeros(5)]
+    >>> out = reframed_odometry(odo, (0.0, 0.0, np.pi / 2), drift_deg_per_m=0, heading_noise_deg=0)
+    >>> bool(np.allclose(out[-1], [0.0, 4.0, np.pi / 2]))
+    True
+    """
+    odo = np.asarray(odometry, dtype=np.float64)
+    if odo.ndim != 2 or odo.shape[1] != 3 or len(odo) < 1 or not np.isfinite(odo).all():
+        raise ValueError(f"odometry must be finite poses of shape (N, 3), got shape {odo.shape}")
+    x0, y0, theta = (float(v) for v in start)
+    rng = np.random.default_rng(seed)
+    dxy = np.diff(odo[:, :2], axis=0)
+    d = np.hypot(*dxy.T)
+    c, s = np.cos(odo[:-1, 2]), np.sin(odo[:-1, 2])
+    local = np.c_[c * dxy[:, 0] + s * dxy[:, 1], -s * dxy[:, 0] + c * dxy[:, 1]]
+    dth = (np.diff(np.unwrap(odo[:, 2])) + np.radians(drift_deg_per_m) * d
+           + np.radians(heading_noise_deg) * rng.standard_normal(len(d)))
+    h = theta + np.concatenate([[0.0], np.cumsum(dth)])
+    ch, sh = np.cos(h[:-1]), np.sin(h[:-1])
+    steps = np.c_[ch * local[:, 0] - sh * local[:, 1], sh * local[:, 0] + ch * local[:, 1]]
+    out = np.empty_like(odo)
+    out[:, :2] = np.vstack([[x0, y0], [x0, y0] + np.cumsum(steps, axis=0)])
+    out[:, 2] = h
+    return out
