@@ -91,3 +91,22 @@ def delta_mdp_to_sfanav_factor(t: int) -> float:
     """
     p = t - 1
     return (p - 1) * t / (p * (t - 1))
+
+
+def rendered_garden(root: Path, small: bool, seed: int, max_frames: int | None, tag: object):
+    """The ``thesis-6.2.1-static`` garden rendered at 60x8 (``small``) or
+    350x40 under ``root`` (cached: reused when present; ``tag`` names the
+    folder beside the size and seed) and the preprocessing of the sfanav
+    default's long-term recipe: ``(dataset, prep)``."""
+    from sfanav import Dataset, sim
+    from sfanav.experiments.robustness import long_term_configuration
+
+    camera = sim.PanoramicCamera(60, 8) if small else sim.PanoramicCamera(350, 40)
+    path = Path(root) / f"garden-{camera.width}x{camera.height}-seed{seed}-{tag}"
+    if (path / "metadata.json").exists():
+        ds = Dataset(path)
+    else:
+        ds = sim.simulate("thesis-6.2.1-static", path, seed, max_frames=max_frames, camera=camera, overwrite=True,
+                          progress=False)
+    _, prep, _ = long_term_configuration("sfanav default", small)
+    return ds, prep

@@ -63,23 +63,16 @@ from pathlib import Path
 
 import numpy as np
 
+from _benchlib import rendered_garden  # shared with the other benches (benches/ is the script's folder)
+
 APPROACHES = ("sfanav default", "perfect memory", "Fourier signature")
 
 
 def garden(root: Path, small: bool, seed: int, max_frames: int | None):
     """(train images, train xy, test images, test xy, camera elevations, prep) of the rendered garden."""
-    from sfanav import Dataset, sim
     from sfanav.data.sources import load_run
-    from sfanav.experiments.robustness import long_term_configuration
 
-    camera = sim.PanoramicCamera(60, 8) if small else sim.PanoramicCamera(350, 40)
-    path = root / f"garden-{camera.width}x{camera.height}-seed{seed}-{max_frames or 'all'}"
-    if (path / "metadata.json").exists():
-        ds = Dataset(path)
-    else:
-        ds = sim.simulate("thesis-6.2.1-static", path, seed, max_frames=max_frames, camera=camera, overwrite=True,
-                          progress=False)
-    _, prep, _ = long_term_configuration("sfanav default", small)
+    ds, prep = rendered_garden(root, small, seed, max_frames, max_frames or "all")
     X, xy = load_run(ds.select(run="train"), prep)
     Xt, xyt = load_run(ds.select(run="test"), prep)
     return X, xy, Xt, xyt, tuple(ds.metadata["camera"].get("elevation_deg", (-30.0, 20.0)))

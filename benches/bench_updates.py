@@ -41,6 +41,8 @@ import tempfile
 import time
 from pathlib import Path
 
+from _benchlib import rendered_garden  # shared with the other benches (benches/ is the script's folder)
+
 
 def rss_mb() -> float:
     """Resident memory of this process now (MB; Linux /proc, else the peak)."""
@@ -67,18 +69,9 @@ def best(f, repeats: int):
 
 def garden(root: Path, n: int, small: bool, seed: int):
     """The first ``n`` frames of the garden's training run: (images, xy, camera elevations)."""
-    from sfanav import Dataset, sim
     from sfanav.data.sources import load_run
-    from sfanav.experiments.robustness import long_term_configuration
 
-    camera = sim.PanoramicCamera(60, 8) if small else sim.PanoramicCamera(350, 40)
-    path = root / f"garden-{camera.width}x{camera.height}-seed{seed}-{n}"
-    if (path / "metadata.json").exists():
-        ds = Dataset(path)
-    else:
-        ds = sim.simulate("thesis-6.2.1-static", path, seed, max_frames=n, camera=camera, overwrite=True,
-                          progress=False)
-    _, prep, _ = long_term_configuration("sfanav default", small)
+    ds, prep = rendered_garden(root, small, seed, n, n)
     X, xy = load_run(ds.select(run="train"), prep)
     if len(X) < n:
         raise SystemExit(f"the garden's training run has {len(X)} frames, fewer than the {n} asked for")

@@ -381,8 +381,7 @@ class LocalizerUpdater:
         self._pending = new if self._pending is None else _concat(self._pending, new)
         self.n_images_ += len(a)
         self.n_pending_ += len(a)
-        every = self.policy.every
-        if every is None or self.n_pending_ >= every:
+        if self.policy.due(self.n_pending_):
             self.solve()
         return self
 

@@ -85,6 +85,11 @@ class UpdatePolicy:
         if self.every is not None:
             check_int(self.every, "every")
 
+    def due(self, n_pending: int) -> bool:
+        """Whether ``n_pending`` images added since the last solve call for
+        one now (after every run without ``every``)."""
+        return self.every is None or n_pending >= self.every
+
 
 def _network_state(network: Any) -> dict[str, Any]:
     """The network's model-file state with every statistic (a deep copy)."""
@@ -233,8 +238,7 @@ class NetworkUpdater:
         # so no derivative pair joins two runs.
         self.n_images_ += len(a)
         self.n_pending_ += len(a)
-        every = self.policy.every
-        if every is None or self.n_pending_ >= every:
+        if self.policy.due(self.n_pending_):
             self.solve()
         return self
 
