@@ -27,6 +27,10 @@ the memory is bounded by ``--memory-views``).
     python3 benches/bench_updates.py --small               # tiny network, 60x8, 200 + 3 x 20 frames (~20 s)
     python3 benches/bench_updates.py --json out.json
 
+Also the MED on ``--test`` frames of the garden's test walk: the base model, the
+update (with its kernel as the default policy decides, and learned again)
+and the retrain.
+
 Prints seconds and the ratios; quote the ratios (docs/updates-measured.md).
 """
 
@@ -40,6 +44,8 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+
+import numpy as np
 
 from _benchlib import rendered_garden  # shared with the other benches (benches/ is the script's folder)
 
@@ -67,15 +73,24 @@ def best(f, repeats: int):
     return out, min(ts)
 
 
-def garden(root: Path, n: int, small: bool, seed: int):
-    """The first ``n`` frames of the garden's training run: (images, xy, camera elevations)."""
+def garden(root: Path, n: int, small: bool, seed: int, n_test: int):
+    """The first ``n`` frames of the garden's training run and ``n_test``
+    evenly spaced frames of its test walk: (images, xy, test images, test
+    xy, camera elevations)."""
     from sfanav.data.sources import load_run
 
     ds, prep = rendered_garden(root, small, seed, n, n)
     X, xy = load_run(ds.select(run="train"), prep)
     if len(X) < n:
         raise SystemExit(f"the garden's training run has {len(X)} frames, fewer than the {n} asked for")
-    return X[:n], xy[:n], tuple(ds.metadata["camera"].get("elevation_deg", (-30.0, 20.0)))
+    T, txy = load_run(ds.select(run="test"), prep)
+    k = np.unique(np.linspace(0, len(T) - 1, min(n_test, len(T))).round().astype(int))
+    return X[:n], xy[:n], T[k], txy[k], tuple(ds.metadata["camera"].get("elevation_deg", (-30.0, 20.0)))
+
+
+def med(loc, T, txy) -> float:
+    """Median localization error (m) of ``loc`` on the test images."""
+    return float(np.median(np.hypot(*(loc.predict(T) - txy).T)))
 
 
 def main(argv=None) -> int:
@@ -90,12 +105,15 @@ def main(argv=None) -> int:
     p.add_argument("--data", type=Path, default=Path(tempfile.gettempdir()) / "sfanav-bench-updates",
                    help="where the simulated garden is kept (default %(default)s)")
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--test", type=int, default=None, help="test-walk frames the MEDs are measured on "
+                                                            "(default 300; --small 60)")
     p.add_argument("--json", type=Path, default=None, help="also write every number and ratio here")
     a = p.parse_args(argv)
     base = a.base or (200 if a.small else 1000)
     run = a.run or (20 if a.small else 100)
     runs = a.runs or (3 if a.small else 4)
     views = a.memory_views or (200 if a.small else 1000)
+    n_test = a.test or (60 if a.small else 300)
     if min(base, run, runs, views, a.repeats) < 1:
         p.error("--base, --run, --runs, --memory-views and --repeats must be positive")
 
@@ -107,7 +125,7 @@ def main(argv=None) -> int:
 
     make_net, _, recipe = long_term_configuration("sfanav default", a.small)
     t0 = time.perf_counter()
-    X, xy, elev = garden(a.data, base + runs * run, a.small, a.seed)
+    X, xy, T, txy, elev = garden(a.data, base + runs * run, a.small, a.seed, n_test)
     print(f"garden: {len(X)} frames {X.shape[2]}x{X.shape[1]} ({time.perf_counter() - t0:.0f} s to load or simulate); "
           f"base {base}, {runs} runs of {run} ({100 * run / base:.0f} % of the base)", flush=True)
     rot = Rotation(5)
@@ -123,18 +141,32 @@ def main(argv=None) -> int:
     _, t_upd_net = best(lambda: NetworkUpdater(loc.trained_network()).partial_fit(net_in[base:]), a.repeats)
     _, t_re_net = best(lambda: make_net().fit(net_in, rot, progress=False), a.repeats)
     updated, t_upd_loc = best(lambda: LocalizerUpdater(loc).partial_fit(XB, yB).localizer_, a.repeats)
-    _, t_re_loc = best(lambda: train(base + run), a.repeats)
+    relearned, t_upd_learn = best(lambda: LocalizerUpdater(loc, kernel="learn").partial_fit(XB, yB).localizer_,
+                                  a.repeats)
+    retrained, t_re_loc = best(lambda: train(base + run), a.repeats)
+    kernel = updated.info["updates"][-1]["kernel"]
+    meds = {"base": med(loc, T, txy), f"update (kernel {kernel})": med(updated, T, txy),
+            "update (kernel learned)": med(relearned, T, txy), "retrain": med(retrained, T, txy)}
     res = {"command": "benches/bench_updates.py " + " ".join(argv if argv is not None else sys.argv[1:]),
            "small": a.small, "image": [int(X.shape[2]), int(X.shape[1])], "base": base, "run": run, "runs": runs,
            "memory_views": views, "repeats": a.repeats,
            "seconds": {"train_base": t_base, "update_network": t_upd_net, "retrain_network": t_re_net,
-                       "update_localizer": t_upd_loc, "retrain_localizer": t_re_loc},
+                       "update_localizer": t_upd_loc, "update_localizer_kernel_learned": t_upd_learn,
+                       "retrain_localizer": t_re_loc},
+           "test_frames": int(len(T)), "med_m": meds,
            "ratios": {"network update / retrain": t_upd_net / t_re_net,
                       "localizer update / retrain": t_upd_loc / t_re_loc,
+                      "localizer update, kernel learned / retrain": t_upd_learn / t_re_loc,
+                      "MED update / retrain": meds[f"update (kernel {kernel})"] / meds["retrain"],
+                      "MED update, kernel learned / retrain": meds["update (kernel learned)"] / meds["retrain"],
                       "readout refit share of the localizer update": max(0.0, t_upd_loc - t_upd_net) / t_upd_loc}}
     print(f"\nupdate with {run} frames against retrain on {base + run} (best of {a.repeats}):")
     print(f"  network   {t_upd_net:8.2f} s / {t_re_net:8.2f} s = {t_upd_net / t_re_net:.3f}  (target <= 0.10)")
-    print(f"  localizer {t_upd_loc:8.2f} s / {t_re_loc:8.2f} s = {t_upd_loc / t_re_loc:.3f}  (target <= 0.10)")
+    print(f"  localizer {t_upd_loc:8.2f} s / {t_re_loc:8.2f} s = {t_upd_loc / t_re_loc:.3f}  (target <= 0.10; "
+          f"kernel {kernel})")
+    print(f"  localizer {t_upd_learn:8.2f} s / {t_re_loc:8.2f} s = {t_upd_learn / t_re_loc:.3f}  (kernel learned again)")
+    print(f"\nMED on {len(T)} frames of the test walk (m): "
+          + ", ".join(f"{k} {v:.3f}" for k, v in meds.items()))
 
     steps = []
     with tempfile.TemporaryDirectory() as tmp:

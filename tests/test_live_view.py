@@ -80,3 +80,29 @@ def test_localize_writes_a_recording_that_reads_back(tmp_path, capsys):
     assert code == 0, err
     t = _entities(tmp_path / "plain.rrd")
     assert sorted(t["/world/estimate"].column("frame").to_pylist()) == list(range(40)) and "/world/fused" not in t
+
+
+def test_a_recording_carries_the_default_layout(tmp_path):
+    """The camera view above the map view, the map view showing the past on
+    both timelines, and the ellipse overridden to the present only."""
+    pytest.importorskip("rerun")
+    from rerun.chunk import RrdReader
+
+    from sfanav.odometry.live_view import RerunView
+
+    view = RerunView(tmp_path / "r.rrd")
+    view.log_map(np.zeros((3, 2)))
+    view.close()
+    reader = RrdReader(tmp_path / "r.rrd")
+    (store,) = reader.blueprints()
+    assert store.application_id == "sfanav"
+    origins, names, overridden = set(), set(), []
+    for ch in reader.stream(store=store).to_chunks():
+        b = ch.to_record_batch()
+        if "ViewBlueprint:space_origin" in b.schema.names:
+            origins.update(str(v) for v in b.column("ViewBlueprint:space_origin").to_pylist()[0])
+            names.update(str(v) for v in b.column("ViewBlueprint:display_name").to_pylist()[0])
+        if ch.entity_path.endswith("overrides/world/fused/ellipse/visualizers"):
+            overridden.append(b.column("VisibleTimeRanges:ranges").to_pylist()[0])
+    assert {o.strip("/") for o in origins} == {"camera", "world"} and names == {"camera", "map and tracks"}
+    assert len(overridden) == 1 and len(overridden[0]) == 2

@@ -101,12 +101,44 @@ def test_update_equals_retraining_pooled_kernel(pooled):
     _close(new.predict(C), ref.predict(C))
 
 
-def test_update_with_signature_gp_matches_loosely():
-    loc = _trained(readout={"kind": "gp-signature", "n_outputs": 5}, signature="fourier", rotation_pooling=3)
-    new = LocalizerUpdater(loc).partial_fit(B, YB).localizer_
-    ref = _retrained(loc, readout={"kind": "gp-signature", "n_outputs": 5}, signature="fourier", rotation_pooling=3)
+SIG_GP = {"kind": "gp-signature", "n_outputs": 5}
+
+
+@pytest.fixture(scope="module")
+def sig_gp():
+    return _trained(readout=SIG_GP, signature="fourier", rotation_pooling=3)
+
+
+def test_update_with_signature_gp_learning_its_kernel_matches_loosely(sig_gp):
+    new = LocalizerUpdater(sig_gp, kernel="learn").partial_fit(B, YB).localizer_
+    ref = _retrained(sig_gp, readout=SIG_GP, signature="fourier", rotation_pooling=3)
     err = np.linalg.norm(new.predict(C) - ref.predict(C), axis=1)
     assert err.max() < 1e-4 * max(1.0, float(np.ptp(YA)))
+    assert new.info["updates"][-1]["kernel"] == "learned"
+
+
+def test_update_keeping_the_kernel_equals_a_retrain_with_that_kernel(sig_gp):
+    new = LocalizerUpdater(sig_gp, kernel="keep").partial_fit(B, YB).localizer_
+    kept = {**SIG_GP, **sig_gp.regression_.hyperparameters()}
+    ref = _retrained(sig_gp, readout=kept, signature="fourier", rotation_pooling=3)
+    _close(new.predict(C), ref.predict(C), 1e-8)
+    np.testing.assert_array_equal(new.regression_.length_scale_, sig_gp.regression_.length_scale_)
+    assert new.regression_.noise_ == sig_gp.regression_.noise_
+    assert new.info["updates"][-1]["kernel"] == "kept" and new.info["readout_kernel_images"] == len(A)
+    # the kernel learned again differs: keeping it is a choice, not a no-op
+    relearned = LocalizerUpdater(sig_gp, kernel="learn").partial_fit(B, YB).localizer_
+    assert not np.allclose(relearned.regression_.length_scale_, sig_gp.regression_.length_scale_)
+
+
+def test_auto_learns_the_kernel_again_when_the_images_doubled(sig_gp):
+    half = LocalizerUpdater(sig_gp).partial_fit(B[:10], YB[:10]).localizer_  # 50 images seen, kernel on 40
+    assert half.info["updates"][-1]["kernel"] == "kept" and half.info["readout_kernel_images"] == len(A)
+    more = LocalizerUpdater(half).partial_fit(B[10:], YB[10:]).localizer_  # 70 seen: still < 80
+    assert more.info["updates"][-1]["kernel"] == "kept"
+    doubled = LocalizerUpdater(more).partial_fit(C, YC).localizer_  # 82 seen >= 2 x 40
+    assert doubled.info["updates"][-1]["kernel"] == "learned" and doubled.info["readout_kernel_images"] == 82
+    with pytest.raises(ValueError, match="kernel must be one of auto, keep, learn"):
+        LocalizerUpdater(sig_gp, kernel="fixed")
 
 
 def test_one_solve_for_two_runs_equals_two_solves(quad):

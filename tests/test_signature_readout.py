@@ -227,3 +227,14 @@ def test_a_fit_with_kept_hyperparameters_equals_the_learned_fit_on_the_same_data
         SignatureGPReadout(3, 20).fit(F, xy, hyperparameters_from=a)
     with pytest.raises(TypeError, match="fitted SignatureGPReadout"):
         SignatureGPReadout(4, 20).fit(F, xy, hyperparameters_from=SignatureGPReadout(4, 20))
+    # the same kernel given as constructor parameters (what a model's spec carries)
+    d = SignatureGPReadout(4, 20, **a.hyperparameters()).fit(F, xy)
+    np.testing.assert_allclose(d.predict(F[:20]), a.predict(F[:20]), rtol=1e-9, atol=1e-9)
+    with pytest.raises(ValueError, match="length_scale, signature_scale and noise"):
+        SignatureGPReadout(4, 20, length_scale=[1.0] * 4, noise=0.1)
+    with pytest.raises(ValueError, match="length_scale must be 4 positive"):
+        SignatureGPReadout(4, 20, length_scale=[1.0] * 3, signature_scale=1.0, noise=0.1)
+    with pytest.raises(ValueError, match="noise must be a positive finite"):
+        SignatureGPReadout(4, 20, length_scale=[1.0] * 4, signature_scale=1.0, noise=float("nan"))
+    with pytest.raises(sfanav.NotFittedError):
+        SignatureGPReadout(4, 20).hyperparameters()

@@ -61,6 +61,13 @@ class SignatureGPReadout:
         (each step of the optimiser is cubic in their number).
     max_train : int, default 3000
         Evenly spaced training samples the posterior mean uses.
+    length_scale, signature_scale, noise : optional
+        Fixed kernel hyperparameters (all three or none): ``length_scale``
+        (n_outputs,) in standard deviations of the slow features,
+        ``signature_scale`` in median signature distances, ``noise`` (noise /
+        signal variance). Given, :meth:`fit` only solves the posterior (one
+        Cholesky factorisation) instead of learning them; an updated
+        localizer keeps its readout's kernel this way.
 
     Fitted attributes: ``length_scale_`` (n_outputs,), ``signature_scale_``
     (``l_g``, in units of ``distance_unit_``, the median L1 distance between
@@ -78,11 +85,34 @@ class SignatureGPReadout:
     True
     """
 
-    def __init__(self, n_outputs: int = 12, n_signature: int = 1, max_fit: int = 800, max_train: int = 3000) -> None:
+    def __init__(self, n_outputs: int = 12, n_signature: int = 1, max_fit: int = 800, max_train: int = 3000,
+                 length_scale: Any = None, signature_scale: float | None = None, noise: float | None = None) -> None:
         self.n_outputs = check_int(n_outputs, "n_outputs", minimum=0)
         self.n_signature = check_int(n_signature, "n_signature", minimum=1)
         self.max_fit = check_int(max_fit, "max_fit", minimum=3)
         self.max_train = check_int(max_train, "max_train", minimum=3)
+        given = [v is not None for v in (length_scale, signature_scale, noise)]
+        if any(given) and not all(given):
+            raise ValueError("give length_scale, signature_scale and noise (fixed hyperparameters) or none (learned)")
+        self.length_scale = self.signature_scale = self.noise = None
+        if all(given):
+            ls = np.asarray(length_scale, float).reshape(-1)
+            if ls.shape != (self.n_outputs,) or not np.all(np.isfinite(ls)) or np.any(ls <= 0):
+                raise ValueError(f"length_scale must be {self.n_outputs} positive finite numbers, got {length_scale!r}")
+            for name, v in (("signature_scale", signature_scale), ("noise", noise)):
+                if not (np.isfinite(float(v)) and float(v) > 0):  # type: ignore[arg-type]
+                    raise ValueError(f"{name} must be a positive finite number, got {v!r}")
+            self.length_scale = [float(v) for v in ls]
+            self.signature_scale, self.noise = float(signature_scale), float(noise)  # type: ignore[arg-type]
+
+    def hyperparameters(self) -> dict[str, Any]:
+        """The fitted kernel as constructor parameters (``length_scale``,
+        ``signature_scale``, ``noise``): ``SignatureGPReadout(m, q,
+        **r.hyperparameters())`` fits with this readout's kernel."""
+        if not hasattr(self, "dual_"):
+            raise NotFittedError("this SignatureGPReadout is not fitted; call fit first")
+        return {"length_scale": [float(v) for v in self.length_scale_],
+                "signature_scale": float(self.signature_scale_), "noise": float(self.noise_)}
 
     def __repr__(self) -> str:
         return f"SignatureGPReadout(n_outputs={self.n_outputs}, n_signature={self.n_signature})"
@@ -178,6 +208,8 @@ class SignatureGPReadout:
                                  f"{self.n_outputs} and {self.n_signature}")
             fixed = (np.array(hyperparameters_from.length_scale_, float),
                      float(hyperparameters_from.signature_scale_), float(hyperparameters_from.noise_))
+        elif self.length_scale is not None:
+            fixed = (np.array(self.length_scale, float), float(self.signature_scale), float(self.noise))
         return self._fit_prepared(S, self._distances(G, as_matrix(xy, "xy")), fixed=fixed)
 
     @classmethod

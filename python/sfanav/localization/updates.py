@@ -311,9 +311,9 @@ class LocalizerUpdater:
     """Adds runs to a fitted :class:`~sfanav.Localizer` (scikit-learn's
     ``partial_fit``): the network's top stage re-solved from its statistics
     plus the runs' (:class:`~sfanav.sfa.updates.NetworkUpdater`), then the
-    readout refitted, same kind and settings (a GP's hyperparameters learned
-    again), on the readout memory's views (slow features recomputed from
-    their stored stage inputs) and the new runs' views.
+    readout refitted, same kind and settings, on the readout memory's views
+    (slow features recomputed from their stored stage inputs) and the new
+    runs' views.
 
     Parameters
     ----------
@@ -329,6 +329,18 @@ class LocalizerUpdater:
         fitted with ``readout_augmentation``): the new runs get copies drawn
         from it as well (``seed``).
     seed : int, default 0
+    kernel : {"auto", "keep", "learn"}, default "auto"
+        A Gaussian-process readout's kernel hyperparameters (length scales,
+        noise): ``"keep"`` fits the posterior on all views with the fitted
+        kernel (one Cholesky factorisation: the update's cost stays a small
+        fraction of a retrain); ``"learn"`` learns them again by maximum
+        likelihood, as training does (most of a retrain's readout cost);
+        ``"auto"`` learns them when the map has seen at least twice the
+        images the kernel was learned on (``info["readout_kernel_images"]``),
+        and keeps them otherwise, so relearning happens at geometrically
+        spaced sizes and its cost per added image stays bounded. Other
+        readouts are refitted as trained in every case. Measured in
+        docs/updates-measured.md.
 
     Attributes
     ----------
@@ -342,8 +354,11 @@ class LocalizerUpdater:
     """
 
     def __init__(self, localizer: Localizer, policy: UpdatePolicy | None = None, *,
-                 augmentation: CorruptionModel | None = None, seed: int = 0) -> None:
+                 augmentation: CorruptionModel | None = None, seed: int = 0, kernel: str = "auto") -> None:
         mem = updatable_memory(localizer, "its readout cannot be refitted after an update")
+        if kernel not in KERNEL:
+            raise ValueError(f"kernel must be one of {', '.join(KERNEL)}, got {kernel!r}")
+        self.kernel = kernel
         if mem.augmented is not None and augmentation is None:
             raise ValueError("this localizer's readout was fitted on corrupted copies as well: pass the corruption "
                              "model (augmentation=) so that the new runs get copies too")
@@ -398,8 +413,11 @@ class LocalizerUpdater:
         if views.augmented is not None:
             aug = (top_stage_features(net, views.augmented[0]), views.augmented[1])
         # the fitted readout's kind and settings (not "auto": no new selection), the fitted pooling
-        new = old.sibling(network=net, readout=dict(old.readout_spec_), n_outputs=old.n_outputs_,
-                          rotation_pooling=old.rotation_pooling_)
+        n_seen = views.n_seen
+        learned_on = int((old.info or {}).get("readout_kernel_images", mem.n_seen))
+        learn = self.kernel == "learn" or (self.kernel == "auto" and n_seen >= 2 * learned_on)
+        new = old.sibling(network=net, readout=readout_spec_for_update(old, "learn" if learn else "keep"),
+                          n_outputs=old.n_outputs_, rotation_pooling=old.rotation_pooling_)
         new.fit_features(F, views.positions, signatures=views.signatures, augmented=aug)
         # the parameters as the user gave them
         new.readout, new.n_outputs, new.rotation_pooling = old.readout, old.n_outputs, old.rotation_pooling
@@ -407,13 +425,37 @@ class LocalizerUpdater:
         n_added = 0 if self._pending is None else self._pending.n_seen
         new.info["n_train_images"] = int(new.info.get("n_train_images", mem.n_seen)) + n_added
         new.info["updates"] = list(new.info.get("updates", [])) + [{"n_images": int(n_added),
-                                                                     "readout_views": int(len(views))}]
+                                                                     "readout_views": int(len(views)),
+                                                                     "kernel": "learned" if learn else "kept"}]
+        new.info["readout_kernel_images"] = int(n_seen if learn else learned_on)
         new.readout_memory_ = mem if self._pending is None else mem.extended(self._pending)
         self.localizer_ = new
         self._pending = None
         self.n_pending_ = 0
         self.n_solves_ += 1
         return new
+
+
+KERNEL = ("auto", "keep", "learn")
+"""What an update does with a Gaussian-process readout's kernel."""
+
+_GP_HYPERPARAMETERS = {"gp": ("length_scale", "noise"), "gp-signature": ("length_scale", "signature_scale", "noise")}
+
+
+def readout_spec_for_update(localizer: Localizer, kernel: str = "keep") -> dict[str, Any]:
+    """The readout spec an update refits ``localizer``'s readout with: its
+    fitted spec, and for a Gaussian-process readout (``gp``,
+    ``gp-signature``) its fitted kernel hyperparameters fixed (``kernel=
+    "keep"``) or left to be learned (``"learn"``)."""
+    spec = dict(localizer.readout_spec_)
+    names = _GP_HYPERPARAMETERS.get(spec.get("kind"), ())
+    for name in names:
+        spec.pop(name, None)
+    if names and kernel == "keep":
+        reg = localizer.regression_
+        spec.update({name: ([float(v) for v in np.ravel(getattr(reg, name + "_"))] if name == "length_scale"
+                            else float(getattr(reg, name + "_"))) for name in names})
+    return spec
 
 
 def _concat(a: ReadoutMemory, b: ReadoutMemory) -> ReadoutMemory:

@@ -18,6 +18,11 @@ core does not import Rerun. Entities (2D, metres, map frame):
 Timelines: ``stamp`` (the image's stamp, nanoseconds since the Unix epoch,
 when known) and ``frame`` (the image's index). Reading one back:
 ``docs/live.md``.
+
+Layout: every recording carries a default layout (:func:`default_blueprint`):
+the camera image above, the map below with the tracks so far (estimates,
+fused, truth up to the time cursor) and the present ellipse. A viewer opens
+it as it is; the user can rearrange it.
 """
 
 from __future__ import annotations
@@ -60,6 +65,34 @@ def covariance_ellipse(center: Any, cov: Any, *, sigma: float = ELLIPSE_SIGMA, n
     return np.asarray(center, float) + sigma * (unit * np.sqrt(np.clip(w, 0, None))) @ V.T
 
 
+TIMELINES = ("stamp", "frame")
+"""The timelines every view logs to (``stamp`` only when stamps are times)."""
+
+
+def default_blueprint(*, panels: bool = True) -> Any:
+    """The layout a recording opens with: ``camera`` (the image) above
+    ``world`` (the map, the estimates, fused positions and truth from the
+    start up to the time cursor, and the present covariance ellipse only),
+    following the newest image on the ``frame`` timeline. ``panels=False``
+    collapses the viewer's side and time panels (for pictures).
+
+    Returns a ``rerun.blueprint.Blueprint``. Raises ImportError (with the
+    install line) without ``rerun-sdk``.
+    """
+    require_rerun()
+    import rerun.blueprint as rrb
+
+    B = rrb.TimeRangeBoundary
+    past = [rrb.VisibleTimeRange(t, start=B.infinite(), end=B.cursor_relative()) for t in TIMELINES]
+    now = [rrb.VisibleTimeRange(t, start=B.cursor_relative(), end=B.cursor_relative()) for t in TIMELINES]
+    world = rrb.Spatial2DView(
+        origin="world", name="map and tracks", time_ranges=past,
+        overrides={"world/fused/ellipse": [rrb.VisibleTimeRanges(now)]})
+    camera = rrb.Spatial2DView(origin="camera", name="camera")
+    time = rrb.TimePanel(timeline="frame", play_state="following", state=None if panels else "collapsed")
+    return rrb.Blueprint(rrb.Vertical(camera, world, row_shares=[1, 4]), time, collapse_panels=not panels)
+
+
 class RerunView:
     """Logs localization to Rerun.
 
@@ -96,6 +129,7 @@ class RerunView:
             self.rec.save(t)
         else:
             raise ValueError(f"a Rerun target is NAME.rrd, 'viewer' or rerun+http://HOST:PORT/proxy, got {t!r}")
+        self.rec.send_blueprint(default_blueprint())
         self.target = t
         self.n_logged_ = 0
 

@@ -41,6 +41,10 @@ def _add_update(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                         "smaller; it cannot be updated again)")
     p.add_argument("--mirror", default=None, metavar="CX,CY,INNER,OUTER",
                    help="mirror of omnidirectional images (default: the localizer's)")
+    p.add_argument("--kernel", choices=("auto", "keep", "learn"), default="auto",
+                   help="a Gaussian-process readout's kernel: keep the fitted one and refit the posterior (fast), "
+                        "learn it again as training does, or (auto, default) learn it again once the model has "
+                        "seen twice the images it was learned on")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(run=_run_update)
     return p
@@ -109,7 +113,8 @@ def _update_localizer(args: argparse.Namespace, model: "Any", out: "Any", loc: "
             raise UsageError(f"{model}'s readout was fitted on corrupted copies of a model this sfanav does not know")
         augmentation = CAMERA
     try:
-        updater = LocalizerUpdater(loc, augmentation=augmentation)  # refuses a network without statistics
+        # refuses a network without statistics
+        updater = LocalizerUpdater(loc, augmentation=augmentation, kernel=args.kernel)
     except ValueError as exc:
         raise UsageError(f"{model}: {exc}") from None
     ds = select_run(Dataset(existing_path(args.dataset, "dataset")), args.run_name, args.camera)
