@@ -238,3 +238,16 @@ def test_a_fit_with_kept_hyperparameters_equals_the_learned_fit_on_the_same_data
         SignatureGPReadout(4, 20, length_scale=[1.0] * 4, signature_scale=1.0, noise=float("nan"))
     with pytest.raises(sfanav.NotFittedError):
         SignatureGPReadout(4, 20).hyperparameters()
+
+
+def test_training_predictions_are_the_posterior_mean_at_the_training_samples():
+    """Computed from the fit (Y - noise * dual) they equal predict() on the
+    training features (up to the float32 signatures predict reads); None
+    when max_train thinned the samples and after a model-file round trip."""
+    rng = np.random.default_rng(5)
+    xy, slow, sig = _place_data(150, rng, 0.02, 0.01)
+    F = np.hstack([slow, sig])
+    r = SignatureGPReadout(4, 20).fit(F, xy)
+    np.testing.assert_allclose(r.training_predictions_, r.predict(F), atol=1e-6)
+    assert SignatureGPReadout(4, 20, max_train=100).fit(F, xy).training_predictions_ is None
+    assert SignatureGPReadout.from_state(r.get_state()).training_predictions_ is None

@@ -76,6 +76,15 @@ def pooled_transform(network: Network, images: Any, k: int) -> np.ndarray:
     return network.transform(a, rotations=True, step=pooling_step(network, width, k)).mean(axis=-2)
 
 
+
+def _training_predictions(readout: Any, X: np.ndarray) -> np.ndarray:
+    """The readout's estimates at the samples it was just fitted on: its
+    ``training_predictions_`` where it has them for all of ``X`` (a GP's
+    posterior mean from the fit, no second distance pass), else
+    ``predict(X)``."""
+    P = getattr(readout, "training_predictions_", None)
+    return P if P is not None and len(P) == len(X) else readout.predict(X)
+
 class Localizer:
     """Absolute position from one panoramic image: slow features of a trained
     :class:`sfanav.Network`, then a readout of the slowest ones to metric
@@ -445,7 +454,7 @@ class Localizer:
         self.training_positions_ = np.array(Y, dtype=np.float64)
         rng = np.ptp(Y, axis=0)  # a straight training run has no range across it: use the other axis's
         rng = np.where(rng > 0, rng, max(float(rng.max()), 1.0))
-        self.train_metrics_ = localization_metrics(reg.predict(X), Y, coordinate_range=rng)
+        self.train_metrics_ = localization_metrics(_training_predictions(reg, X), Y, coordinate_range=rng)
         return self
 
     def _fit_augmented(self, features: Any, xy: Any, signatures: Any, augmented: Any) -> "Localizer":
@@ -474,7 +483,9 @@ class Localizer:
         X = F if G is None else np.hstack([F, G])
         rng = np.ptp(Y, axis=0)
         rng = np.where(rng > 0, rng, max(float(rng.max()), 1.0))
-        self.train_metrics_ = localization_metrics(self.regression_.predict(X), Y, coordinate_range=rng)
+        both = getattr(self.regression_, "training_predictions_", None)  # originals at the even places
+        P = both[0::2] if both is not None and len(both) == 2 * len(F) else self.regression_.predict(X)
+        self.train_metrics_ = localization_metrics(P, Y, coordinate_range=rng)
         self.n_augmented_ = len(F)
         return self
 

@@ -23,11 +23,13 @@ Why a product of these two kernels, and what it measured: docs/gardens-suite.md.
 
 from __future__ import annotations
 
+from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
 import numpy as np
 
 from .._checks import NotFittedError, as_matrix, check_int, check_same_length
+from .._resources import get_num_threads
 
 try:  # loaded before any threadpool limit (see readouts.py)
     from scipy.linalg import cho_factor, cho_solve
@@ -69,7 +71,9 @@ class SignatureGPReadout:
         Cholesky factorisation) instead of learning them; an updated
         localizer keeps its readout's kernel this way.
 
-    Fitted attributes: ``length_scale_`` (n_outputs,), ``signature_scale_``
+    Fitted attributes: ``training_predictions_`` ((N, 2): the posterior
+    mean at the N training samples, computed from the fit; None when
+    ``max_train`` thinned them, and after loading), ``length_scale_`` (n_outputs,), ``signature_scale_``
     (``l_g``, in units of ``distance_unit_``, the median L1 distance between
     training signatures), ``noise_`` (noise / signal variance),
     ``log_marginal_likelihood_``.
@@ -133,10 +137,24 @@ class SignatureGPReadout:
         d2 = (A**2).sum(axis=1)[:, None] + (B**2).sum(axis=1)[None, :] - 2.0 * A @ B.T
         return np.maximum(d2, 0.0)
 
-    def _l1(self, A: np.ndarray, B: np.ndarray, chunk: int = 256) -> np.ndarray:
+    def _l1(self, A: np.ndarray, B: np.ndarray, chunk: int = 128) -> np.ndarray:
+        """L1 distances (len(A), len(B)), blocks of rows on the Rust core's
+        worker threads (:func:`sfanav.get_num_threads`; SciPy's cdist
+        releases the GIL): the signature distances are most of a fit's and
+        an update's time."""
         out = np.empty((len(A), len(B)))
-        for s in range(0, len(A), chunk):
+
+        def block(s: int) -> None:
             out[s : s + chunk] = cdist(A[s : s + chunk], B, "cityblock")
+
+        starts = range(0, len(A), chunk)
+        workers = min(get_num_threads(), len(starts))
+        if workers <= 1:
+            for s in starts:
+                block(s)
+        else:
+            with ThreadPoolExecutor(workers) as pool:
+                list(pool.map(block, starts))
         return out
 
     # ------------------------------------------------------------ likelihood
@@ -262,6 +280,9 @@ class SignatureGPReadout:
         self.y_mean_ = Y[keep].mean(axis=0)
         self.dual_ = cho_solve(cho_factor(K, overwrite_a=True, check_finite=False), Y[keep] - self.y_mean_,
                                check_finite=False)
+        # K dual = (K + tau I) dual - tau dual = Y - mean - tau dual: the posterior mean at the training
+        # samples without a second pass over their signature distances (when every sample was kept)
+        self.training_predictions_ = (Y - max(tau, 1e-10) * self.dual_) if len(keep) == len(Y) else None
         return self
 
     def predict(self, features: Any, chunk: int = 1024) -> np.ndarray:
@@ -298,6 +319,7 @@ class SignatureGPReadout:
         r.length_scale_ = np.asarray(state["length_scale"], float)
         r.signature_scale_, r.distance_unit_ = float(state["signature_scale"]), float(state["distance_unit"])
         r.noise_, r.log_marginal_likelihood_ = float(state["noise"]), None
+        r.training_predictions_ = None
         m, q = r.n_outputs, r.n_signature
         if (r.X_.shape[1:] != (m,) or r.G_.shape != (len(r.X_), q) or r.dual_.ndim != 2
                 or len(r.dual_) != len(r.X_) or r.mean_.shape != (m,) or r.scale_.shape != (m,)
