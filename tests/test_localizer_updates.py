@@ -84,7 +84,7 @@ def test_stage_inputs_give_the_features(quad, pooled):
 
 
 def test_update_equals_retraining_quadratic(quad):
-    up = LocalizerUpdater(quad).partial_fit(B, YB)
+    up = LocalizerUpdater(quad, cross_pairs=False).partial_fit(B, YB)
     ref = _retrained(quad, readout="quadratic", n_outputs=5)
     new = up.localizer_
     _close(new.predict(C), ref.predict(C))
@@ -95,7 +95,7 @@ def test_update_equals_retraining_quadratic(quad):
 
 
 def test_update_equals_retraining_pooled_kernel(pooled):
-    new = LocalizerUpdater(pooled).partial_fit(B, YB).localizer_
+    new = LocalizerUpdater(pooled, cross_pairs=False).partial_fit(B, YB).localizer_
     ref = _retrained(pooled, readout=KERNEL, rotation_pooling=3)
     assert new.rotation_pooling_ == 3 and new.readout == KERNEL
     _close(new.predict(C), ref.predict(C))
@@ -110,7 +110,7 @@ def sig_gp():
 
 
 def test_update_with_signature_gp_learning_its_kernel_matches_loosely(sig_gp):
-    new = LocalizerUpdater(sig_gp, kernel="learn").partial_fit(B, YB).localizer_
+    new = LocalizerUpdater(sig_gp, kernel="learn", cross_pairs=False).partial_fit(B, YB).localizer_
     ref = _retrained(sig_gp, readout=SIG_GP, signature="fourier", rotation_pooling=3)
     err = np.linalg.norm(new.predict(C) - ref.predict(C), axis=1)
     assert err.max() < 1e-4 * max(1.0, float(np.ptp(YA)))
@@ -118,7 +118,7 @@ def test_update_with_signature_gp_learning_its_kernel_matches_loosely(sig_gp):
 
 
 def test_update_keeping_the_kernel_equals_a_retrain_with_that_kernel(sig_gp):
-    new = LocalizerUpdater(sig_gp, kernel="keep").partial_fit(B, YB).localizer_
+    new = LocalizerUpdater(sig_gp, kernel="keep", cross_pairs=False).partial_fit(B, YB).localizer_
     kept = {**SIG_GP, **sig_gp.regression_.hyperparameters()}
     ref = _retrained(sig_gp, readout=kept, signature="fourier", rotation_pooling=3)
     _close(new.predict(C), ref.predict(C), 1e-8)
@@ -126,7 +126,7 @@ def test_update_keeping_the_kernel_equals_a_retrain_with_that_kernel(sig_gp):
     assert new.regression_.noise_ == sig_gp.regression_.noise_
     assert new.info["updates"][-1]["kernel"] == "kept" and new.info["readout_kernel_images"] == len(A)
     # the kernel learned again differs: keeping it is a choice, not a no-op
-    relearned = LocalizerUpdater(sig_gp, kernel="learn").partial_fit(B, YB).localizer_
+    relearned = LocalizerUpdater(sig_gp, kernel="learn", cross_pairs=False).partial_fit(B, YB).localizer_
     assert not np.allclose(relearned.regression_.length_scale_, sig_gp.regression_.length_scale_)
 
 
@@ -139,6 +139,39 @@ def test_auto_learns_the_kernel_again_when_the_images_doubled(sig_gp):
     assert doubled.info["updates"][-1]["kernel"] == "learned" and doubled.info["readout_kernel_images"] == 82
     with pytest.raises(ValueError, match="kernel must be one of auto, keep, learn"):
         LocalizerUpdater(sig_gp, kernel="fixed")
+
+
+def test_cross_run_pairs_join_each_new_view_to_the_nearest_old_one(quad):
+    """The update with cross-run pairs equals the top stage re-solved with
+    the run and those pairs added to its statistics (the pairs at every
+    pooled rotation, the transition weight spread over them), to 1e-9;
+    pairs only within the radius; bad radii refused."""
+    from sfanav.localization.updates import cross_run_pairs
+
+    mem = quad.readout_memory_
+    i_old, j_new = cross_run_pairs(mem.positions, YB, 0.4)
+    assert len(i_old) > 0 and len(i_old) < len(YB)
+    d = np.hypot(*(mem.positions[i_old] - YB[j_new]).T)
+    assert d.max() < 0.4
+    nearest = np.hypot(*(mem.positions[None, :, :] - YB[j_new][:, None, :]).transpose(2, 0, 1)).min(axis=1)
+    np.testing.assert_allclose(d, nearest)
+    new = LocalizerUpdater(quad, pair_radius=0.4).partial_fit(B, YB).localizer_
+    assert new.info["updates"][-1]["cross_pairs"] == len(i_old)
+    net_up = NetworkUpdater(quad.network)
+    Z_old, Z_new = mem.inputs[i_old], top_stage_inputs(quad, B)[j_new]
+    K, k = Z_new.shape[1:]
+    net_up.add_pairs(Z_old.reshape(-1, k), Z_new.reshape(-1, k), np.full(len(i_old) * K, net_up.transition_weight / K))
+    ref = Localizer(net_up.partial_fit(B).network_, readout="quadratic", n_outputs=5)
+    ref.fit(np.concatenate([A, B]), np.concatenate([YA, YB]))
+    _close(new.predict(C), ref.predict(C))
+    without = LocalizerUpdater(quad, cross_pairs=False).partial_fit(B, YB).localizer_
+    assert not np.allclose(new.predict(C), without.predict(C))
+    with pytest.raises(ValueError, match="pair_radius must be a positive"):
+        LocalizerUpdater(quad, pair_radius=0.0)
+    with pytest.raises(ValueError, match=r"a and b must both be \(M, 23\)"):
+        NetworkUpdater(quad.network).add_pairs(np.zeros((2, 5)), np.zeros((2, 5)))
+    with pytest.raises(ValueError, match="weights must be 2 finite"):
+        NetworkUpdater(quad.network).add_pairs(np.zeros((2, k)), np.zeros((2, k)), [1.0, -1.0])
 
 
 def test_one_solve_for_two_runs_equals_two_solves(quad):

@@ -162,6 +162,28 @@ def test_bad_arguments(net_a):
 # ---------------------------------------------------------------- Network.partial_fit and sfanav update
 
 
+def test_pairs_of_stage_inputs_add_exactly_their_derivative_moments(net_a):
+    """add_pairs adds sum_i w_i d_i d_i^T (d the difference of the expanded
+    stage inputs) to the updated stage's derivative moments and nothing to
+    its samples; weight 0 changes nothing after a solve."""
+    from sfanav import _core
+
+    up = NetworkUpdater(net_a)
+    (s0,) = up.top_statistics()
+    rng = np.random.default_rng(4)
+    k = 23
+    A, B, w = rng.normal(size=(9, k)), rng.normal(size=(9, k)), rng.uniform(0, 2, 9)
+    up.add_pairs(A, B, w)
+    (s1,) = up.top_statistics()
+    D = np.asarray(_core.expand(B, 2)) - np.asarray(_core.expand(A, 2))
+    _close(s1.derivative_covariance() * s1.pair_weight_sum,
+           s0.derivative_covariance() * s0.pair_weight_sum + (D * w[:, None]).T @ D, 1e-12)
+    _close(s1.covariance(), s0.covariance(), 0)
+    assert s1.n_samples == s0.n_samples and s1.n_pairs == s0.n_pairs + 9 and up.n_pairs_ == 9
+    zero = NetworkUpdater(net_a).add_pairs(A, B, np.zeros(9)).solve()
+    _same_outputs(zero, NetworkUpdater(net_a).solve(), _images(5, 9))
+
+
 def test_network_partial_fit_matches_the_updater(net_a):
     net = Network.from_bytes(net_a.to_bytes(include_statistics=True))
     assert net.partial_fit(B) is net

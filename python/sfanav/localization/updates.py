@@ -329,6 +329,18 @@ class LocalizerUpdater:
         fitted with ``readout_augmentation``): the new runs get copies drawn
         from it as well (``seed``).
     seed : int, default 0
+    cross_pairs : bool, default True
+        Join each new view to the map's view nearest to it (within
+        ``pair_radius``) by a derivative pair of their inputs to the
+        re-solved stage (:func:`cross_run_pairs`,
+        :meth:`~sfanav.sfa.updates.NetworkUpdater.add_pairs`): the pair
+        place-major training forms between a place's views in two
+        recordings, which makes the slow features invariant to what differs
+        between the runs (light, season). Weight: the network's transition
+        weight per pair, spread over the K pooled rotations. False: each run
+        joins only as its own sequence.
+    pair_radius : float or None, default None
+        Metres; None: twice the median spacing of the map's views.
     kernel : {"auto", "keep", "learn"}, default "auto"
         A Gaussian-process readout's kernel hyperparameters (length scales,
         noise): ``"keep"`` fits the posterior on all views with the fitted
@@ -346,19 +358,25 @@ class LocalizerUpdater:
     ----------
     localizer_ : Localizer
         The localizer as of the last solve, with the grown readout memory.
-    n_images_, n_pending_, n_solves_ : int
-        Images added, added since the last solve, solves.
+    n_images_, n_pending_, n_solves_, n_pairs_ : int
+        Images added, added since the last solve, solves, cross-run pairs
+        added.
 
     Raises TypeError / NotFittedError / ValueError for a localizer that
     cannot be updated (no memory, no statistics), naming what is missing.
     """
 
     def __init__(self, localizer: Localizer, policy: UpdatePolicy | None = None, *,
-                 augmentation: CorruptionModel | None = None, seed: int = 0, kernel: str = "auto") -> None:
+                 augmentation: CorruptionModel | None = None, seed: int = 0, kernel: str = "auto",
+                 cross_pairs: bool = True, pair_radius: float | None = None) -> None:
         mem = updatable_memory(localizer, "its readout cannot be refitted after an update")
         if kernel not in KERNEL:
             raise ValueError(f"kernel must be one of {', '.join(KERNEL)}, got {kernel!r}")
         self.kernel = kernel
+        self.cross_pairs = bool(cross_pairs)
+        if pair_radius is not None and not (np.isfinite(pair_radius) and pair_radius > 0):
+            raise ValueError(f"pair_radius must be a positive number of metres or None, got {pair_radius!r}")
+        self.pair_radius = pair_radius
         if mem.augmented is not None and augmentation is None:
             raise ValueError("this localizer's readout was fitted on corrupted copies as well: pass the corruption "
                              "model (augmentation=) so that the new runs get copies too")
@@ -373,7 +391,8 @@ class LocalizerUpdater:
         self.seed = check_int(seed, "seed", minimum=0)
         self.localizer_ = localizer
         self._pending: ReadoutMemory | None = None
-        self.n_images_ = self.n_pending_ = self.n_solves_ = 0
+        self.n_images_ = self.n_pending_ = self.n_solves_ = self.n_pairs_ = 0
+        self._pairs_at_solve = 0
 
     def partial_fit(self, images: Any, xy: Any = None) -> "LocalizerUpdater":
         """Adds one run: images (N, H, W[, C]) as the localizer takes them
@@ -392,6 +411,14 @@ class LocalizerUpdater:
         mem = loc.readout_memory_
         new = _memory_of(loc, a, Y, self.augmentation, self.seed, max_views=len(a))
         new.max_views = mem.max_views
+        if self.cross_pairs:
+            seen = mem if self._pending is None else _concat(mem, self._pending)
+            i_old, j_new = cross_run_pairs(seen.positions, new.positions, self.pair_radius)
+            K = new.inputs.shape[1]
+            w = np.full(len(i_old) * K, self._net.transition_weight / K)
+            k = new.inputs.shape[2]
+            self._net.add_pairs(seen.inputs[i_old].reshape(-1, k), new.inputs[j_new].reshape(-1, k), w)
+            self.n_pairs_ += len(i_old)
         self._net.partial_fit(net_images)
         self._pending = new if self._pending is None else _concat(self._pending, new)
         self.n_images_ += len(a)
@@ -426,7 +453,10 @@ class LocalizerUpdater:
         new.info["n_train_images"] = int(new.info.get("n_train_images", mem.n_seen)) + n_added
         new.info["updates"] = list(new.info.get("updates", [])) + [{"n_images": int(n_added),
                                                                      "readout_views": int(len(views)),
-                                                                     "kernel": "learned" if learn else "kept"}]
+                                                                     "kernel": "learned" if learn else "kept",
+                                                                     "cross_pairs": int(self.n_pairs_
+                                                                                        - self._pairs_at_solve)}]
+        self._pairs_at_solve = self.n_pairs_
         new.info["readout_kernel_images"] = int(n_seen if learn else learned_on)
         new.readout_memory_ = mem if self._pending is None else mem.extended(self._pending)
         self.localizer_ = new
@@ -434,6 +464,36 @@ class LocalizerUpdater:
         self.n_pending_ = 0
         self.n_solves_ += 1
         return new
+
+
+def cross_run_pairs(old_xy: Any, new_xy: Any, radius: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """For each new view, the old view nearest to it: ``(i_old, j_new)``
+    int64 (P,), only pairs closer than ``radius`` metres (None: twice the
+    median distance from an old view to its nearest other old view).
+    ``old_xy`` (N, 2), ``new_xy`` (M, 2), metres in one frame.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> cross_run_pairs(np.c_[np.arange(5.0), np.zeros(5)], [[1.1, 0.2], [9.0, 0.0]])
+    (array([1]), array([0]))
+    """
+    from scipy.spatial import cKDTree
+
+    P = as_matrix(old_xy, "old positions", n_cols=2)
+    Q = as_matrix(new_xy, "new positions", n_cols=2)
+    if len(P) == 0 or len(Q) == 0:
+        e = np.zeros(0, dtype=np.int64)
+        return e, e.copy()
+    tree = cKDTree(P)
+    if radius is None:
+        if len(P) < 2:
+            raise ValueError("one old view: give pair_radius")
+        spacing = float(np.median(tree.query(P, k=2)[0][:, 1]))
+        radius = 2.0 * spacing if spacing > 0 else 1e-9
+    d, i = tree.query(Q, k=1)
+    keep = np.flatnonzero(d < radius)
+    return i[keep].astype(np.int64), keep.astype(np.int64)
 
 
 KERNEL = ("auto", "keep", "learn")

@@ -164,6 +164,8 @@ class NetworkUpdater:
         Images added since the last solve.
     n_solves_ : int
         Solves so far.
+    n_pairs_ : int
+        Derivative pairs added by :meth:`add_pairs` so far.
 
     Raises TypeError for a network that is not a Network, NotFittedError
     for an unfitted one, ValueError for one saved without statistics.
@@ -190,6 +192,7 @@ class NetworkUpdater:
         self.n_images_ = 0
         self.n_pending_ = 0
         self.n_solves_ = 0
+        self.n_pairs_ = 0
         self._core = self._training_core()
 
     # ------------------------------------------------------------ checks
@@ -263,6 +266,49 @@ class NetworkUpdater:
         self.n_pending_ = 0
         self.n_solves_ += 1
         return self.network_
+
+    @property
+    def transition_weight(self) -> float:
+        """The weight of the derivative pair between consecutive images in
+        the network's training (``Network.fit(transition_weight=)``)."""
+        return self._tw
+
+    def add_pairs(self, a: Any, b: Any, weights: Any = None) -> "NetworkUpdater":
+        """Adds derivative pairs between views given by their inputs to the
+        updated stage: ``a``, ``b`` (M, k) float (the frozen stages' outputs
+        of two views each, e.g. a readout memory's stored inputs and a new
+        run's), ``weights`` (M,) >= 0 (default 1). Each pair adds
+        ``w (e(b) - e(a)) (e(b) - e(a))^T`` to the stage's derivative
+        statistics, ``e`` its expansion, and nothing to its sample moments:
+        a slowness constraint between views that no sequence joins (the same
+        place in two recordings: what place-major training gives). The next
+        solve uses them. Only for networks whose top layer is one node.
+        Returns ``self``. ValueError for shapes that do not match the stage
+        or bad weights (nothing added then)."""
+        states = self._core.node_states(True)
+        top = states[self._layer]
+        if len(top) != 1:
+            raise ValueError(f"pairs of stage inputs need a top layer of one node, this one has {len(top)}")
+        stage = top[0]["stages"][self._stage]
+        A = np.ascontiguousarray(np.asarray(a, dtype=np.float64))
+        B = np.ascontiguousarray(np.asarray(b, dtype=np.float64))
+        k = int(stage["input_dim"])
+        if A.ndim != 2 or A.shape != B.shape or A.shape[1] != k:
+            raise ValueError(f"a and b must both be (M, {k}) stage inputs, got {A.shape} and {B.shape}")
+        if not (np.isfinite(A).all() and np.isfinite(B).all()):
+            raise ValueError("the stage inputs contain NaN or infinity")
+        w = np.ones(len(A)) if weights is None else np.asarray(weights, dtype=np.float64).reshape(-1)
+        if len(w) != len(A) or not np.all(np.isfinite(w) & (w >= 0)):
+            raise ValueError(f"weights must be {len(A)} finite numbers >= 0")
+        if len(A) == 0:
+            return self
+        degree = int(stage["degree"])
+        stats = _core.Statistics.from_state(stage["stats"])
+        stats.add_pairs(np.asarray(_core.expand(A, degree)), np.asarray(_core.expand(B, degree)), w)
+        stage["stats"] = stats.get_state()
+        self._core = _core.Network.from_states(self.network_.config_, states, self._layer)
+        self.n_pairs_ += len(A)
+        return self
 
     def top_statistics(self) -> list[Any]:
         """The statistics of the stage being updated, one per top-layer node
