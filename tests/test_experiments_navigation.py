@@ -66,7 +66,8 @@ def test_71_rows_for_both_descents(results, name):
               "thesis rule, graph SFA of the run (ideal slow features, n = 2)",
               "thesis rule, geodesic cost of the run (true positions)",
               "thesis rule, metric cost, tracked positions", "thesis rule, geodesic metric cost, tracked positions",
-              "metric descent + geodesic field, no ground truth"):
+              "metric descent + geodesic field, no ground truth",
+              "robust descent, perfect memory homing (rotational image difference)"):
         assert f"success ({d})" in rows and f"efficiency ({d})" in rows
     assert rows["loop closures kept (no ground truth)"]["sfanav"] >= 0
     assert rows["position code: RMS of x, y from s1-s2 (m)"]["sfanav"] > 0
@@ -75,7 +76,7 @@ def test_71_rows_for_both_descents(results, name):
         assert "efficiency vs any-angle shortest path (robust descent)" in rows
     _check_values(r)
     assert "QUICK" in r.notes and "trials" in r.notes
-    assert len(r.plots) == 14 and all((out / p).exists() or __import__("os").path.exists(p) for p in r.plots)
+    assert len(r.plots) == 15 and all((out / p).exists() or __import__("os").path.exists(p) for p in r.plots)
     saved = json.loads((out / f"{name}.json").read_text())
     assert saved["experiment"] == name and len(saved["rows"]) == len(r.rows)
     assert "thesis rule" in r.table() and "robust descent" in r.table()

@@ -691,3 +691,41 @@ def test_image_features_apply_rows_before_the_network(tiny_world):
     imgs = np.stack([sim.renderer.render(cam, p) for p in poses])
     np.testing.assert_allclose(cropped, net.transform(Crop()(imgs)))
     assert Crop.calls == 2 and not np.allclose(plain, cropped)
+
+
+# --------------------------------------------------------------------- the peer: perfect memory homing
+
+def test_rotational_image_difference_is_the_best_roll():
+    """The FFT form equals the minimum over every roll of the RMS difference;
+    a rolled copy of the target costs 0 (rotation invariance)."""
+    rng = np.random.default_rng(0)
+    T = rng.uniform(0, 255, (6, 24))
+    Q = rng.uniform(0, 255, (4, 6, 24))
+    Q[1] = np.roll(T, 7, axis=1)
+    brute = [min(np.sqrt(((q - np.roll(T, d, axis=1)) ** 2).mean()) for d in range(24)) for q in Q]
+    got = nav.rotational_image_difference(Q, T)
+    np.testing.assert_allclose(got, brute, rtol=1e-9, atol=1e-4)  # grey levels; the FFT form cancels sums of squares
+    assert got[1] == pytest.approx(0.0, abs=1e-4)
+    cost = nav.image_difference_cost(24)(T.ravel(), 1, None)
+    np.testing.assert_allclose(cost(Q.reshape(4, -1)), got)
+    assert cost.residuals(Q.reshape(4, -1)).shape == (4, 1)
+    with pytest.raises(ValueError, match="24-column rows"):
+        nav.RotationalImageDifferenceCost(np.zeros(25), 24)
+    with pytest.raises(ValueError, match="features have 10 values"):
+        cost(np.zeros((1, 10)))
+
+
+def test_perfect_memory_homing_reaches_targets_in_the_open(tiny_world):
+    """The peer in the closed loop: the robust descent of the rotational image
+    difference to the target's panorama, from 1.5-2.5 m away in the tiny
+    garden's open part."""
+    world, cam, sim, _ = tiny_world
+    feats = nav.PanoramaFeatures(sim.renderer, cam)
+    navi = nav.Navigator(sim, feats, nav.RobustDescent(), n_outputs=1, max_iterations=25,
+                         cost=nav.image_difference_cost(feats.width))
+    S = np.array([[-1.8, 1.2], [1.6, -1.5]])
+    T = np.array([[-0.2, 1.8], [1.7, 0.6]])
+    summary = nav.evaluate_trials(navi, S, T)
+    assert summary.success_rate == 1.0, summary.reasons
+    for r in summary.results:
+        assert r.costs[-1] < r.costs[0] and r.images >= 2 * r.iterations

@@ -46,6 +46,7 @@ from .navigation_scenes import (
     coordinate_model,
     free_space,
     grid_features,
+    homing_navigator,
     image_trials,
     metric_localizer,
     navigator,
@@ -224,6 +225,21 @@ def _run_71(kind: str, out: Path, *, quick: bool, seed: int, progress: bool) -> 
             titles=[("reached" if s.results[i].success else s.results[i].reason)
                     + (f" e={s.efficiencies[i]:.2f}" if s.results[i].success else "") for i in sel],
             title=f"7.1 {kind}: {d.name}")))
+    # the peer: homing by perfect memory (robust descent of the rotational image difference to the target's view)
+    label = "robust descent, perfect memory homing (rotational image difference)"
+    s = nav.evaluate_trials(homing_navigator(sc), starts[:n_img], targets[:n_img],
+                            optimal_lengths=None if optimal is None else optimal[:n_img], progress=progress,
+                            desc=label)
+    rows += _summary_rows(label, s, None)
+    rows.append({"metric": f"mean stops ({label})", "thesis": None, "sfanav": s.mean_iterations})
+    notes_runs.append(f"{label}: {_reasons(s)}")
+    sel = pick_trials(s.results, 8)
+    plots.append(str(nav.plot_trajectories(
+        [s.results[i] for i in sel], out / f"7.1-{kind}-trajectories-perfect-memory-homing.png", world=sc.world,
+        optimal=[opt_paths[i] for i in sel],
+        titles=[("reached" if s.results[i].success else s.results[i].reason)
+                + (f" e={s.efficiencies[i]:.2f}" if s.results[i].success else "") for i in sel],
+        title=f"7.1 {kind}: {label}")))
     # the sfanav default network's slow features (horizon band, wider layers: the metric arms' localizer's
     # network, unpooled), n = 2 raw (the thesis's setting) and n = 8 weighted by beta_1 / beta_i (7.2.1's remedy)
     loc, dcam = metric_localizer(sc, out, seed, progress=progress)

@@ -180,6 +180,17 @@ def navigator(sc: Scene, net: Any, descent: Any, *, n: int = 2, weights: Any = N
                          max_iterations=QUICK_ITERATIONS if sc.quick else MAX_ITERATIONS)
 
 
+def homing_navigator(sc: Scene) -> nav.Navigator:
+    """The peer in the scene's simulator: homing by perfect memory (the
+    robust descent of the rotational image difference to the target's
+    panorama, :mod:`sfanav.navigation.homing`)."""
+    sim = sc.fresh_noise()
+    feats = nav.PanoramaFeatures(sim.renderer, sc.camera)
+    return nav.Navigator(sim, feats, nav.RobustDescent(), n_outputs=1, success_radius=SUCCESS_RADIUS,
+                         max_iterations=QUICK_ITERATIONS if sc.quick else MAX_ITERATIONS,
+                         cost=nav.image_difference_cost(feats.width))
+
+
 def free_space(sc: Scene, extra: float = 0.05):
     r = sc.robot.size / 2 + extra
     return lambda x, y: sc.world.free(x, y, r)

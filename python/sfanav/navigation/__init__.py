@@ -6,6 +6,9 @@
 * feature sources for the closed loop (:class:`ImageFeatures`,
   :class:`MetricFeatures`, :class:`CoordinateFeatures`,
   :class:`RunGraphFeatures`);
+* the peer: homing by perfect memory (:class:`PanoramaFeatures`,
+  :func:`image_difference_cost`: descent of the rotational image difference
+  to the target's view);
 * :class:`GeodesicField`: shortest paths through the space an exploration
   run covered;
 * :class:`Navigator` (the closed loop on a simulated robot), trials and their
@@ -29,6 +32,7 @@ from .features import (
     fit_coordinate_sfa,
 )
 from .geodesic import GeodesicField
+from .homing import PanoramaFeatures, RotationalImageDifferenceCost, image_difference_cost, rotational_image_difference
 from .gradient import PlaneGradient, difference_quotient, plane_gradient
 from .mission import Mission, check_goal_in_map, image_goal, navigate
 from .navigator import NavigationResult, Navigator
@@ -44,4 +48,5 @@ from .planning import (
 from .plots import plot_cost_surface, plot_trajectories
 from .trials import TrialSummary, evaluate_trials, sample_trials
 
-__all__ = ["Mission", "check_goal_in_map", "image_goal", "navigate", "GridMap", "CoordinateFeatures", "Descent", "GeodesicField", "ImageFeatures", "MapTracker", "MetricDescent", "MetricFeatures", "NavigationResult", "Navigator", "PlaneGradient", "PointSimulator", "RobustDescent", "RunGraphFeatures", "ScaledCost", "SlowFeatureCost", "StepInfo", "ThesisDescent", "TrialSummary", "astar", "beta_weights", "difference_quotient", "evaluate_trials", "fit_coordinate_sfa", "halfplane_optimal", "occupancy_grid", "path_length", "plane_gradient", "plot_cost_surface", "plot_trajectories", "run_spread", "sample_trials", "shortest_path", "travel_time"]
+__all__ = ["PanoramaFeatures", "RotationalImageDifferenceCost", "image_difference_cost",
+           "rotational_image_difference", "Mission", "check_goal_in_map", "image_goal", "navigate", "GridMap", "CoordinateFeatures", "Descent", "GeodesicField", "ImageFeatures", "MapTracker", "MetricDescent", "MetricFeatures", "NavigationResult", "Navigator", "PlaneGradient", "PointSimulator", "RobustDescent", "RunGraphFeatures", "ScaledCost", "SlowFeatureCost", "StepInfo", "ThesisDescent", "TrialSummary", "astar", "beta_weights", "difference_quotient", "evaluate_trials", "fit_coordinate_sfa", "halfplane_optimal", "occupancy_grid", "path_length", "plane_gradient", "plot_cost_surface", "plot_trajectories", "run_spread", "sample_trials", "shortest_path", "travel_time"]

@@ -190,6 +190,9 @@ class Navigator:
         pos = np.vstack([odo_cams["left"][0, :2], odo_cams["right"][0, :2]])
         if self.tracker is not None:
             F = self.tracker.update(pos, F)
+        residuals = getattr(cost, "residuals", None)
+        if residuals is not None:  # a cost that is not a distance of features (e.g. an image difference)
+            return cost(F), pos, np.asarray(residuals(F), float)
         R = F[:, : cost.n] - cost.target
         if cost.weights is not None:
             R = R * cost.weights
