@@ -234,3 +234,26 @@ def test_cli_update(tmp_path, capsys):
     code, out, err = run(capsys, "update", model, "--dataset", tmp_path / "runb", "--out", model, "--overwrite")
     assert_one_line_error(code, err, "must differ")
     assert model.read_bytes() == original
+
+
+def test_cli_update_reads_a_bag(tmp_path, capsys):
+    """``--dataset`` may be a ROS bag: imported on the fly, the update equals
+    the one from the images; without a pose topic one line, MODEL intact."""
+    pytest.importorskip("rosbags")
+    from bagtools import raw_image, write_camera_bag
+    from clitools import assert_one_line_error, run
+
+    net = Network(TINY).fit(_u8(A), ROT, cache=False, progress=False)
+    model = tmp_path / "net.sfanav"
+    net.save(model, include_statistics=True)
+    original = model.read_bytes()
+    bag = write_camera_bag(tmp_path / "runb.bag", [raw_image(i) for i in _u8(B)])
+    code, out, err = run(capsys, "update", model, "--dataset", bag, "--odom-topic", "/odom",
+                         "--out", tmp_path / "new.sfanav", "--no-progress")
+    assert code == 0, err
+    assert "importing" in err and f"updated with {len(B)} images" in out
+    new = Network.from_bytes((tmp_path / "new.sfanav").read_bytes())
+    _same_outputs(new, NetworkUpdater(net).partial_fit(_u8(B)).network_, _u8(C))
+    code, out, err = run(capsys, "update", model, "--dataset", bag, "--out", tmp_path / "bad.sfanav")
+    assert_one_line_error(code, err, "--odom-topic", "bag")
+    assert not (tmp_path / "bad.sfanav").exists() and model.read_bytes() == original

@@ -31,7 +31,12 @@ def _add_update(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     )
     p.add_argument("model", metavar="MODEL",
                    help="network model file with training statistics, or updatable localizer model file")
-    p.add_argument("--dataset", required=True, metavar="RUN", help="dataset folder holding the new run")
+    p.add_argument("--dataset", required=True, metavar="RUN",
+                   help="dataset folder holding the new run, or a ROS bag (ROS 1 .bag, ROS 2 folder, .mcap or .db3: "
+                        "imported on the fly, as sfanav import would, with the topics below)")
+    p.add_argument("--image-topic", default=None, metavar="TOPIC", help="a bag's image topic (default: the only one)")
+    p.add_argument("--odom-topic", default=None, metavar="TOPIC", help="a bag's odometry topic")
+    p.add_argument("--pose-topic", default=None, metavar="TOPIC", help="a bag's ground-truth pose topic")
     p.add_argument("--run", dest="run_name", default=None, metavar="NAME", help="run of the dataset (default: all)")
     p.add_argument("--camera", default=None, metavar="NAME", help="camera to use if the dataset has several")
     p.add_argument("--out", required=True, metavar="NEW", help="the updated model file")
@@ -50,10 +55,50 @@ def _add_update(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     return p
 
 
-def _run_update(args: argparse.Namespace) -> int:
-    import numpy as np
+BAG_SUFFIXES = (".bag", ".mcap", ".db3")
+
+
+def _is_bag(path: "Any") -> bool:
+    """A ROS 1 bag, an MCAP or SQLite ROS 2 bag file, or a ROS 2 bag folder."""
+    from pathlib import Path
+
+    p = Path(path)
+    return p.suffix.lower() in BAG_SUFFIXES or (p.is_dir() and (p / "metadata.yaml").is_file())
+
+
+def _open_run(args: argparse.Namespace, stack: "Any") -> "Any":
+    """The dataset holding the new run: ``--dataset`` as it is, or a bag
+    imported into a temporary dataset (removed when ``stack`` closes)."""
+    import tempfile
+    from pathlib import Path
 
     from ...data.dataset import Dataset
+    from ...data.rosbag import import_bag
+
+    path = existing_path(args.dataset, "dataset or bag")
+    if not _is_bag(path):
+        return Dataset(path)
+    if args.odom_topic is None and args.pose_topic is None:
+        raise UsageError(f"{path} is a bag: give --odom-topic, --pose-topic or both (the images need poses)")
+    tmp = Path(stack.enter_context(tempfile.TemporaryDirectory(prefix="sfanav-update-"))) / "run"
+    log(f"importing {path} (as sfanav import would)")
+    try:
+        return import_bag(path, tmp, image_topic=args.image_topic, odom_topic=args.odom_topic,
+                          pose_topic=args.pose_topic, progress=not args.no_progress, log=log)
+    except (ValueError, KeyError) as exc:
+        raise UsageError(f"{path}: {exc}") from None
+
+
+def _run_update(args: argparse.Namespace) -> int:
+    import contextlib
+
+    with contextlib.ExitStack() as stack:
+        return _update(args, stack)
+
+
+def _update(args: argparse.Namespace, stack: "Any") -> int:
+    import numpy as np
+
     from ...data.sources import select_run
     from ...localization.localizer import Localizer
     from ...sfa.modelfile import load
@@ -66,12 +111,12 @@ def _run_update(args: argparse.Namespace) -> int:
         raise UsageError("--out must differ from MODEL: an update leaves the model it starts from as it was")
     net = load(model)
     if isinstance(net, Localizer):
-        return _update_localizer(args, model, out, net)
+        return _update_localizer(args, model, out, net, stack)
     if not isinstance(net, Network):
         raise UsageError(f"{model} holds a {type(net).__name__}; sfanav update adds runs to network and localizer "
                          "model files")
     updater = NetworkUpdater(net)  # refuses a model without statistics before the run is read
-    ds = select_run(Dataset(existing_path(args.dataset, "dataset")), args.run_name, args.camera)
+    ds = select_run(_open_run(args, stack), args.run_name, args.camera)
     h, _, c = net.input_shape
     period = net.period_
     native = ds.images(gray=c == 1, indices=np.arange(1))
@@ -90,12 +135,11 @@ def _run_update(args: argparse.Namespace) -> int:
     return 0
 
 
-def _update_localizer(args: argparse.Namespace, model: "Any", out: "Any", loc: "Any") -> int:
+def _update_localizer(args: argparse.Namespace, model: "Any", out: "Any", loc: "Any", stack: "Any") -> int:
     """A localizer model file updated with the run (ground truth needed)."""
     import numpy as np
 
     from ...data.corruptions import CAMERA
-    from ...data.dataset import Dataset
     from ...data.preprocessing import Preprocessing
     from ...data.sources import load_run, select_run
     from ...localization.updates import LocalizerUpdater, drop_readout_memory, readout_memory_bytes
@@ -117,7 +161,7 @@ def _update_localizer(args: argparse.Namespace, model: "Any", out: "Any", loc: "
         updater = LocalizerUpdater(loc, augmentation=augmentation, kernel=args.kernel)
     except ValueError as exc:
         raise UsageError(f"{model}: {exc}") from None
-    ds = select_run(Dataset(existing_path(args.dataset, "dataset")), args.run_name, args.camera)
+    ds = select_run(_open_run(args, stack), args.run_name, args.camera)
     _check_source(ds, loc, model)
     xy_ok = bool(np.isfinite(ds.poses[:, :2]).all())
     if not xy_ok and not ds.has_odometry:
