@@ -134,7 +134,7 @@ def test_5_2_3_quick(tmp_path):
     required = [f"MED (m) [{t}]" for t in tags] + BASELINES + [f"{b} [flat ground]" for b in BASELINES] + [
         "MED gain from jitter (m) [thesis configuration]", "MED gain from jitter (m) [sfanav default]",
         "MED cost of the uneven ground (m) [sfanav default]", "camera tilt rms (deg), train run",
-        "horizon ring shift rms (px), test run", "best sfanav MED (m), uneven ground"]
+        "horizon ring shift rms (px), test run", "best sfanav MED (m), uneven ground"] + product()
     rows = check(res, tmp_path, required)
     # the thesis's 0.33 m beside the jittered rows (its method), the SLAM peers as the thesis's only
     assert rows["MED (m) [thesis configuration, jitter 0.8 px]"]["thesis"] == 0.33

@@ -126,9 +126,12 @@ class ProductResult:
 
 
 def product_runs(dataset: Any, network: Network, *, train: str = "train", tests: Sequence[str] = ("test",),
-                 labels: Sequence[str] | None = None, log: Log = quiet_log) -> tuple[ProductRun, list[ProductRun]]:
+                 labels: Sequence[str] | None = None, mirror: Any = None,
+                 log: Log = quiet_log) -> tuple[ProductRun, list[ProductRun]]:
     """A dataset's training run and test runs (selected by ``run=``) in
-    ``network``'s input format, with their ground truth and odometry.
+    ``network``'s input format, with their ground truth and odometry
+    (omnidirectional images unwarped about ``mirror``, as
+    :func:`sfanav.data.sources.load_run` takes it).
     Panoramas are resized to the network's input
     (:meth:`sfanav.data.Preprocessing.for_network`); gray panoramas for an
     RGB network are read gray and repeated into three channels. ``labels``
@@ -149,7 +152,7 @@ def product_runs(dataset: Any, network: Network, *, train: str = "train", tests:
 
     def one(run: str, label: str) -> ProductRun:
         part = dataset.select(run=run)
-        X, xy = load_run(part, prep, log=log)
+        X, xy = load_run(part, prep, mirror=mirror, log=log)
         if X.ndim == 3 and c == 3:
             X = np.repeat(X[..., None], 3, axis=3)
         return ProductRun(X, xy, part.odometry, label)
@@ -357,14 +360,16 @@ def quick_subsample(run: ProductRun, limit: int = QUICK_TRAIN_FRAMES) -> Product
 
 def scene_rows(dataset: Any, *, quick: bool, thesis: Sequence[Any] | None = None, tests: Sequence[str] = ("test",),
                labels: Sequence[str] | None = None, peer_queries: int | None = 1000, seed: int = 0,
-               progress: bool = False, log: Log = quiet_log) -> ProductResult:
+               progress: bool = False, mirror: Any = None, log: Log = quiet_log) -> ProductResult:
     """:func:`product_rows` on a simulated dataset's ``train`` run and its
     ``tests`` runs: the sfanav default network (350x40 RGB; ``quick``: the
     tiny :func:`quick_network` on all its 8 rows) on the panoramas resized to
     its input, the horizon band placed by the dataset's camera elevation;
-    ``quick``: :func:`configuration` and :func:`quick_subsample`."""
+    ``quick``: :func:`configuration` and :func:`quick_subsample`;
+    ``mirror``: for omnidirectional images, the mirror they are unwarped
+    about."""
     net, recipe = configuration(quick)
-    train, runs = product_runs(dataset, net(), tests=tests, labels=labels, log=log)
+    train, runs = product_runs(dataset, net(), tests=tests, labels=labels, mirror=mirror, log=log)
     train = quick_subsample(train) if quick else train
     elevation = tuple(dataset.metadata.get("camera", {}).get("elevation_deg", CAMERA_ELEVATION))
     return product_rows(train, runs, thesis=thesis, network=net, recipe=recipe,
