@@ -157,7 +157,7 @@ def test_cross_run_pairs_join_each_new_view_to_the_nearest_old_one(quad):
     assert d.max() < 0.4
     nearest = np.hypot(*(mem.positions[None, :, :] - YB[j_new][:, None, :]).transpose(2, 0, 1)).min(axis=1)
     np.testing.assert_allclose(d, nearest)
-    new = LocalizerUpdater(quad, pair_radius=0.4).partial_fit(B, YB).localizer_
+    new = LocalizerUpdater(quad, cross_pairs=True, pair_radius=0.4).partial_fit(B, YB).localizer_
     assert new.info["updates"][-1]["cross_pairs"] == len(i_old)
     net_up = NetworkUpdater(quad.network)
     Z_old, Z_new = mem.inputs[i_old], top_stage_inputs(quad, B)[j_new]
@@ -166,7 +166,8 @@ def test_cross_run_pairs_join_each_new_view_to_the_nearest_old_one(quad):
     ref = Localizer(net_up.partial_fit(B).network_, readout="quadratic", n_outputs=5)
     ref.fit(np.concatenate([A, B]), np.concatenate([YA, YB]))
     _close(new.predict(C), ref.predict(C))
-    without = LocalizerUpdater(quad, cross_pairs=False).partial_fit(B, YB).localizer_
+    without = LocalizerUpdater(quad).partial_fit(B, YB).localizer_  # the default: no pairs
+    assert without.info["updates"][-1]["cross_pairs"] == 0
     assert not np.allclose(new.predict(C), without.predict(C))
     with pytest.raises(ValueError, match="pair_radius must be a positive"):
         LocalizerUpdater(quad, pair_radius=0.0)

@@ -329,7 +329,7 @@ class LocalizerUpdater:
         fitted with ``readout_augmentation``): the new runs get copies drawn
         from it as well (``seed``).
     seed : int, default 0
-    cross_pairs : bool, default True
+    cross_pairs : bool, default False
         Join each new view to the map's view nearest to it (within
         ``pair_radius``) by a derivative pair of their inputs to the
         re-solved stage (:func:`cross_run_pairs`,
@@ -338,7 +338,11 @@ class LocalizerUpdater:
         recordings, which makes the slow features invariant to what differs
         between the runs (light, season). Weight: the network's transition
         weight per pair, spread over the K pooled rotations. False: each run
-        joins only as its own sequence.
+        joins only as its own sequence. Off by default: on the seasons
+        scene fed season by season the pairs made the updated map worse
+        at most steps (docs/updates-measured.md): with the lower layers
+        frozen on the first recording the top stage cannot become
+        invariant to the season without losing position.
     pair_radius : float or None, default None
         Metres; None: twice the median spacing of the map's views.
     kernel : {"auto", "keep", "refine", "learn"}, default "auto"
@@ -369,7 +373,7 @@ class LocalizerUpdater:
 
     def __init__(self, localizer: Localizer, policy: UpdatePolicy | None = None, *,
                  augmentation: CorruptionModel | None = None, seed: int = 0, kernel: str = "auto",
-                 cross_pairs: bool = True, pair_radius: float | None = None) -> None:
+                 cross_pairs: bool = False, pair_radius: float | None = None) -> None:
         mem = updatable_memory(localizer, "its readout cannot be refitted after an update")
         if kernel not in KERNEL:
             raise ValueError(f"kernel must be one of {', '.join(KERNEL)}, got {kernel!r}")
