@@ -143,25 +143,20 @@ def main(argv=None) -> int:
     updated, t_upd_loc = best(lambda: LocalizerUpdater(loc).partial_fit(XB, yB).localizer_, a.repeats)
     relearned, t_upd_learn = best(lambda: LocalizerUpdater(loc, kernel="learn").partial_fit(XB, yB).localizer_,
                                   a.repeats)
-    kept, t_upd_keep = best(lambda: LocalizerUpdater(loc, kernel="keep").partial_fit(XB, yB).localizer_, a.repeats)
     retrained, t_re_loc = best(lambda: train(base + run), a.repeats)
     kernel = updated.info["updates"][-1]["kernel"]
     meds = {"base": med(loc, T, txy), f"update (kernel {kernel})": med(updated, T, txy),
-            "update (kernel kept)": med(kept, T, txy), "update (kernel learned)": med(relearned, T, txy),
-            "retrain": med(retrained, T, txy)}
+            "update (kernel learned)": med(relearned, T, txy), "retrain": med(retrained, T, txy)}
     res = {"command": "benches/bench_updates.py " + " ".join(argv if argv is not None else sys.argv[1:]),
            "small": a.small, "image": [int(X.shape[2]), int(X.shape[1])], "base": base, "run": run, "runs": runs,
            "memory_views": views, "repeats": a.repeats,
            "seconds": {"train_base": t_base, "update_network": t_upd_net, "retrain_network": t_re_net,
                        "update_localizer": t_upd_loc, "update_localizer_kernel_learned": t_upd_learn,
-                       "update_localizer_kernel_kept": t_upd_keep,
                        "retrain_localizer": t_re_loc},
            "test_frames": int(len(T)), "med_m": meds,
            "ratios": {"network update / retrain": t_upd_net / t_re_net,
                       "localizer update / retrain": t_upd_loc / t_re_loc,
                       "localizer update, kernel learned / retrain": t_upd_learn / t_re_loc,
-                      "localizer update, kernel kept / retrain": t_upd_keep / t_re_loc,
-                      "MED update, kernel kept / retrain": meds["update (kernel kept)"] / meds["retrain"],
                       "MED update / retrain": meds[f"update (kernel {kernel})"] / meds["retrain"],
                       "MED update, kernel learned / retrain": meds["update (kernel learned)"] / meds["retrain"],
                       "readout refit share of the localizer update": max(0.0, t_upd_loc - t_upd_net) / t_upd_loc}}
@@ -169,7 +164,6 @@ def main(argv=None) -> int:
     print(f"  network   {t_upd_net:8.2f} s / {t_re_net:8.2f} s = {t_upd_net / t_re_net:.3f}  (target <= 0.10)")
     print(f"  localizer {t_upd_loc:8.2f} s / {t_re_loc:8.2f} s = {t_upd_loc / t_re_loc:.3f}  (target <= 0.10; "
           f"kernel {kernel})")
-    print(f"  localizer {t_upd_keep:8.2f} s / {t_re_loc:8.2f} s = {t_upd_keep / t_re_loc:.3f}  (kernel kept)")
     print(f"  localizer {t_upd_learn:8.2f} s / {t_re_loc:8.2f} s = {t_upd_learn / t_re_loc:.3f}  (kernel learned again)")
     print(f"\nMED on {len(T)} frames of the test walk (m): "
           + ", ".join(f"{k} {v:.3f}" for k, v in meds.items()))

@@ -238,12 +238,6 @@ def test_a_fit_with_kept_hyperparameters_equals_the_learned_fit_on_the_same_data
         SignatureGPReadout(4, 20, length_scale=[1.0] * 4, signature_scale=1.0, noise=float("nan"))
     with pytest.raises(sfanav.NotFittedError):
         SignatureGPReadout(4, 20).hyperparameters()
-    # refined from the learned kernel: at most the steps asked for, no worse a likelihood than the start
-    e = SignatureGPReadout(4, 20, **a.hyperparameters(), refine=5).fit(F[::2], xy[::2])
-    c_lml = SignatureGPReadout(4, 20, **a.hyperparameters()).fit(F[::2], xy[::2]).log_marginal_likelihood_
-    assert 0 <= e.n_iterations_ <= 5 and e.log_marginal_likelihood_ >= c_lml - 1e-9
-    with pytest.raises(ValueError, match="refine needs the hyperparameters"):
-        SignatureGPReadout(4, 20, refine=5)
 
 
 def test_training_predictions_are_the_posterior_mean_at_the_training_samples():

@@ -70,12 +70,6 @@ class SignatureGPReadout:
         signal variance). Given, :meth:`fit` only solves the posterior (one
         Cholesky factorisation) instead of learning them; an updated
         localizer keeps its readout's kernel this way.
-    refine : int, default 0
-        With the hyperparameters given: at most this many steps of the
-        likelihood optimisation started from them (0: kept as given). An
-        update refines the kernel of the map it updates this way: the
-        re-solved slow features move a little, and a warm start needs a
-        fraction of a full optimisation's steps.
 
     Fitted attributes: ``training_predictions_`` ((N, 2): the posterior
     mean at the N training samples, computed from the fit; None when
@@ -96,8 +90,7 @@ class SignatureGPReadout:
     """
 
     def __init__(self, n_outputs: int = 12, n_signature: int = 1, max_fit: int = 800, max_train: int = 3000,
-                 length_scale: Any = None, signature_scale: float | None = None, noise: float | None = None,
-                 refine: int = 0) -> None:
+                 length_scale: Any = None, signature_scale: float | None = None, noise: float | None = None) -> None:
         self.n_outputs = check_int(n_outputs, "n_outputs", minimum=0)
         self.n_signature = check_int(n_signature, "n_signature", minimum=1)
         self.max_fit = check_int(max_fit, "max_fit", minimum=3)
@@ -106,9 +99,6 @@ class SignatureGPReadout:
         if any(given) and not all(given):
             raise ValueError("give length_scale, signature_scale and noise (fixed hyperparameters) or none (learned)")
         self.length_scale = self.signature_scale = self.noise = None
-        self.refine = check_int(refine, "refine", minimum=0)
-        if self.refine and not all(given):
-            raise ValueError("refine needs the hyperparameters to start from (length_scale, signature_scale, noise)")
         if all(given):
             ls = np.asarray(length_scale, float).reshape(-1)
             if ls.shape != (self.n_outputs,) or not np.all(np.isfinite(ls)) or np.any(ls <= 0):
@@ -201,21 +191,15 @@ class SignatureGPReadout:
         grad[m + 1] = tau * float(np.trace(M))
         return -lml, -grad
 
-    def _learn(self, S: np.ndarray, Dg: np.ndarray, Y: np.ndarray, start: tuple[np.ndarray, float, float] | None = None,
-               maxiter: int = 200) -> tuple[np.ndarray, float, float, float]:
+    def _learn(self, S: np.ndarray, Dg: np.ndarray, Y: np.ndarray) -> tuple[np.ndarray, float, float, float]:
         m = S.shape[1]
         bounds = [_LOG_BOUNDS["length"]] * m + [_LOG_BOUNDS["signature"], _LOG_BOUNDS["noise"]]
-        if start is None:
-            # one start: slow features at a few standard deviations, the signature's scale of the order of 100
-            # median distances and little noise, where the optima on the gardens suite lie (docs/gardens-suite.md)
-            theta0 = np.r_[np.full(m, np.log(3.0 * max(1.0, np.sqrt(m / 4)))), np.log(100.0), np.log(1e-4)]
-        else:
-            lo, hi = np.array(bounds).T
-            theta0 = np.clip(np.r_[np.log(start[0]), np.log(start[1]), np.log(start[2])], lo, hi)
+        # one start: slow features at a few standard deviations, the signature's scale of the order of
+        # 100 median distances and little noise, where the optima on the gardens suite lie (docs/gardens-suite.md)
+        theta0 = np.r_[np.full(m, np.log(3.0 * max(1.0, np.sqrt(m / 4)))), np.log(100.0), np.log(1e-4)]
         best = minimize(self._neg_lml, theta0, args=(S, Dg, Y), jac=True, method="L-BFGS-B", bounds=bounds,
-                        options={"maxiter": maxiter})
+                        options={"maxiter": 200})
         th = best.x
-        self.n_iterations_ = int(best.nit)
         return np.exp(th[:m]), float(np.exp(th[m])), float(np.exp(th[m + 1])), float(-best.fun)
 
     # ------------------------------------------------------------ fit / predict
@@ -244,8 +228,7 @@ class SignatureGPReadout:
                      float(hyperparameters_from.signature_scale_), float(hyperparameters_from.noise_))
         elif self.length_scale is not None:
             fixed = (np.array(self.length_scale, float), float(self.signature_scale), float(self.noise))
-        refine = self.refine if hyperparameters_from is None else 0
-        return self._fit_prepared(S, self._distances(G, as_matrix(xy, "xy")), fixed=fixed, refine=refine)
+        return self._fit_prepared(S, self._distances(G, as_matrix(xy, "xy")), fixed=fixed)
 
     @classmethod
     def fit_nested(cls, features: Any, xy: Any, n_outputs: int, n_signature: int,
@@ -271,8 +254,8 @@ class SignatureGPReadout:
         unit = float(np.median(dg)) if dg.size else 0.0
         return {"G": G, "Y": Y, "keep": keep, "D": self._l1(G[keep], G[keep]), "unit": unit if unit > 0 else 1.0}
 
-    def _fit_prepared(self, S: np.ndarray, prep: dict[str, Any], fixed: tuple[np.ndarray, float, float] | None = None,
-                      refine: int = 0) -> "SignatureGPReadout":
+    def _fit_prepared(self, S: np.ndarray, prep: dict[str, Any],
+                      fixed: tuple[np.ndarray, float, float] | None = None) -> "SignatureGPReadout":
         G, Y, keep, D = prep["G"], prep["Y"], prep["keep"], prep["D"]
         self.distance_unit_ = prep["unit"]
         self.mean_ = S.mean(axis=0)
@@ -285,11 +268,8 @@ class SignatureGPReadout:
         y_sd = np.where(y_sd > 0, y_sd, 1.0)
         Yf = (Y[fit_idx] - y_mean) / y_sd
         Dg = D[np.ix_(fit_pos, fit_pos)] / self.distance_unit_
-        self.n_iterations_ = 0
         if fixed is None:
             ls, lg, tau, lml = self._learn(Ss[fit_idx], Dg, Yf)
-        elif refine:
-            ls, lg, tau, lml = self._learn(Ss[fit_idx], Dg, Yf, start=fixed, maxiter=refine)
         else:
             ls, lg, tau = fixed
             lml = float(-self._neg_lml(np.r_[np.log(ls), np.log(lg), np.log(tau)], Ss[fit_idx], Dg, Yf)[0])

@@ -345,19 +345,18 @@ class LocalizerUpdater:
         invariant to the season without losing position.
     pair_radius : float or None, default None
         Metres; None: twice the median spacing of the map's views.
-    kernel : {"auto", "keep", "refine", "learn"}, default "auto"
+    kernel : {"auto", "keep", "learn"}, default "auto"
         A Gaussian-process readout's kernel hyperparameters (length scales,
         noise): ``"keep"`` fits the posterior on all views with the fitted
-        kernel (one Cholesky factorisation); ``"refine"`` starts the
-        likelihood optimisation from the fitted kernel for at most
-        :data:`REFINE_STEPS` steps (the re-solved slow features move a
-        little; the signature GP); ``"learn"`` learns them again from
-        scratch, as training does (most of a retrain's readout cost);
+        kernel (one Cholesky factorisation: the update's cost stays a small
+        fraction of a retrain); ``"learn"`` learns them again by maximum
+        likelihood, as training does (most of a retrain's readout cost);
         ``"auto"`` learns them when the map has seen at least twice the
-        images the kernel was learned on (``info["readout_kernel_images"]``)
-        and refines them otherwise, so full relearning happens at
-        geometrically spaced sizes. Other readouts are refitted as trained
-        in every case. Measured in docs/updates-measured.md.
+        images the kernel was learned on (``info["readout_kernel_images"]``),
+        and keeps them otherwise, so relearning happens at geometrically
+        spaced sizes and its cost per added image stays bounded. Other
+        readouts are refitted as trained in every case. Measured in
+        docs/updates-measured.md.
 
     Attributes
     ----------
@@ -448,8 +447,7 @@ class LocalizerUpdater:
         n_seen = views.n_seen
         learned_on = int((old.info or {}).get("readout_kernel_images", mem.n_seen))
         learn = self.kernel == "learn" or (self.kernel == "auto" and n_seen >= 2 * learned_on)
-        mode = "learn" if learn else ("refine" if self.kernel in ("auto", "refine") else "keep")
-        new = old.sibling(network=net, readout=readout_spec_for_update(old, mode),
+        new = old.sibling(network=net, readout=readout_spec_for_update(old, "learn" if learn else "keep"),
                           n_outputs=old.n_outputs_, rotation_pooling=old.rotation_pooling_)
         new.fit_features(F, views.positions, signatures=views.signatures, augmented=aug)
         # the parameters as the user gave them
@@ -459,8 +457,7 @@ class LocalizerUpdater:
         new.info["n_train_images"] = int(new.info.get("n_train_images", mem.n_seen)) + n_added
         new.info["updates"] = list(new.info.get("updates", [])) + [{"n_images": int(n_added),
                                                                      "readout_views": int(len(views)),
-                                                                     "kernel": {"learn": "learned", "refine": "refined",
-                                                                                "keep": "kept"}[mode],
+                                                                     "kernel": "learned" if learn else "kept",
                                                                      "cross_pairs": int(self.n_pairs_
                                                                                         - self._pairs_at_solve)}]
         self._pairs_at_solve = self.n_pairs_
@@ -503,10 +500,8 @@ def cross_run_pairs(old_xy: Any, new_xy: Any, radius: float | None = None) -> tu
     return i[keep].astype(np.int64), keep.astype(np.int64)
 
 
-KERNEL = ("auto", "keep", "refine", "learn")
+KERNEL = ("auto", "keep", "learn")
 """What an update does with a Gaussian-process readout's kernel."""
-REFINE_STEPS = 25
-"""Likelihood optimisation steps of ``kernel="refine"``, started from the updated map's kernel."""
 
 _GP_HYPERPARAMETERS = {"gp": ("length_scale", "noise"), "gp-signature": ("length_scale", "signature_scale", "noise")}
 
@@ -515,20 +510,15 @@ def readout_spec_for_update(localizer: Localizer, kernel: str = "keep") -> dict[
     """The readout spec an update refits ``localizer``'s readout with: its
     fitted spec, and for a Gaussian-process readout (``gp``,
     ``gp-signature``) its fitted kernel hyperparameters fixed (``kernel=
-    "keep"``), as the start of :data:`REFINE_STEPS` optimisation steps
-    (``"refine"``, the signature GP; the plain GP keeps them) or left to be
-    learned (``"learn"``)."""
+    "keep"``) or left to be learned (``"learn"``)."""
     spec = dict(localizer.readout_spec_)
     names = _GP_HYPERPARAMETERS.get(spec.get("kind"), ())
     for name in names:
         spec.pop(name, None)
-    spec.pop("refine", None)
-    if names and kernel in ("keep", "refine"):
+    if names and kernel == "keep":
         reg = localizer.regression_
         spec.update({name: ([float(v) for v in np.ravel(getattr(reg, name + "_"))] if name == "length_scale"
                             else float(getattr(reg, name + "_"))) for name in names})
-        if kernel == "refine" and spec.get("kind") == "gp-signature":
-            spec["refine"] = REFINE_STEPS
     return spec
 
 

@@ -46,11 +46,10 @@ def _add_update(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                         "smaller; it cannot be updated again)")
     p.add_argument("--mirror", default=None, metavar="CX,CY,INNER,OUTER",
                    help="mirror of omnidirectional images (default: the localizer's)")
-    p.add_argument("--kernel", choices=("auto", "keep", "refine", "learn"), default="auto",
-                   help="a Gaussian-process readout's kernel: keep the fitted one and refit the posterior, refine it "
-                        "by a few optimisation steps from the fitted one, learn it again as training does, or (auto, "
-                        "default) refine it, and learn it again once the model has seen twice the images it was "
-                        "learned on")
+    p.add_argument("--kernel", choices=("auto", "keep", "learn"), default="auto",
+                   help="a Gaussian-process readout's kernel: keep the fitted one and refit the posterior (fast), "
+                        "learn it again as training does, or (auto, default) learn it again once the model has "
+                        "seen twice the images it was learned on")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(run=_run_update)
     return p
