@@ -154,11 +154,11 @@ def main(argv=None) -> int:
                        "update_localizer": t_upd_loc, "update_localizer_kernel_learned": t_upd_learn,
                        "retrain_localizer": t_re_loc},
            "test_frames": int(len(T)), "med_m": meds,
-           "ratios": {"network update / retrain": t_upd_net / t_re_net,
-                      "localizer update / retrain": t_upd_loc / t_re_loc,
-                      "localizer update, kernel learned / retrain": t_upd_learn / t_re_loc,
-                      "MED update / retrain": meds[f"update (kernel {kernel})"] / meds["retrain"],
-                      "MED update, kernel learned / retrain": meds["update (kernel learned)"] / meds["retrain"],
+           "ratios": {"network update over retrain": t_upd_net / t_re_net,
+                      "localizer update over retrain": t_upd_loc / t_re_loc,
+                      "localizer update, kernel learned over retrain": t_upd_learn / t_re_loc,
+                      "MED update over retrain": meds[f"update (kernel {kernel})"] / meds["retrain"],
+                      "MED update, kernel learned over retrain": meds["update (kernel learned)"] / meds["retrain"],
                       "readout refit share of the localizer update": max(0.0, t_upd_loc - t_upd_net) / t_upd_loc}}
     print(f"\nupdate with {run} frames against retrain on {base + run} (best of {a.repeats}):")
     print(f"  network   {t_upd_net:8.2f} s / {t_re_net:8.2f} s = {t_upd_net / t_re_net:.3f}  (target <= 0.10)")
@@ -189,10 +189,10 @@ def main(argv=None) -> int:
                           "model_file_bytes": model.stat().st_size, "rss_mb": rss_mb(), "peak_rss_mb": peak_mb()})
     res["accumulation"] = steps
     s0, sn = steps[0], steps[-1]
-    res["ratios"].update({"statistics bytes, last / first": sn["network_statistics_bytes"]
+    res["ratios"].update({"statistics bytes, last over first": sn["network_statistics_bytes"]
                           / s0["network_statistics_bytes"],
-                          "model file bytes, last / first": sn["model_file_bytes"] / s0["model_file_bytes"],
-                          "images, last / first": sn["images"] / s0["images"]})
+                          "model file bytes, last over first": sn["model_file_bytes"] / s0["model_file_bytes"],
+                          "images, last over first": sn["images"] / s0["images"]})
     print(f"\nmemory as runs accumulate (readout memory bound {views} views):")
     print(f"  {'runs':>4} {'images':>6} {'update s':>8} {'stats B':>10} {'memory B':>10} {'views':>5} "
           f"{'file B':>10} {'RSS MB':>7} {'peak MB':>7}")
@@ -200,9 +200,9 @@ def main(argv=None) -> int:
         print(f"  {s['runs_added']:>4} {s['images']:>6} {s['update_seconds']:>8.2f} {s['network_statistics_bytes']:>10} "
               f"{s['readout_memory_bytes']:>10} {s['readout_memory_views']:>5} {s['model_file_bytes']:>10} "
               f"{s['rss_mb']:>7.0f} {s['peak_rss_mb']:>7.0f}")
-    print(f"  images x{res['ratios']['images, last / first']:.2f}; statistics bytes "
-          f"x{res['ratios']['statistics bytes, last / first']:.3f}; model file "
-          f"x{res['ratios']['model file bytes, last / first']:.3f}")
+    print(f"  images x{res['ratios']['images, last over first']:.2f}; statistics bytes "
+          f"x{res['ratios']['statistics bytes, last over first']:.3f}; model file "
+          f"x{res['ratios']['model file bytes, last over first']:.3f}")
     if a.json is not None:
         a.json.parent.mkdir(parents=True, exist_ok=True)
         tmp = a.json.with_name(a.json.name + ".tmp")
