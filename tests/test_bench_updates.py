@@ -31,6 +31,6 @@ def test_bench_updates_small(tmp_path, capsys):
     # the statistics do not grow with the images; the readout memory stays at its bound
     assert len({s["network_statistics_bytes"] for s in steps}) == 1 and steps[0]["network_statistics_bytes"] > 0
     assert all(s["readout_memory_views"] <= res["memory_views"] for s in steps)
-    assert res["ratios"]["model file bytes, last / first"] < 1.01
+    assert res["ratios"]["model file bytes, last over first"] < 1.01
     with pytest.raises(SystemExit):
         bench_updates.main(["--small", "--run", "-1", "--data", str(tmp_path / "data")])
