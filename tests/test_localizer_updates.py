@@ -7,6 +7,7 @@ are refused leaving the localizer as it was."""
 
 import numpy as np
 import pytest
+import sfanav
 from sfanav import Localizer, Network, Rotation
 from sfanav.localization.training import fit_localizer
 from sfanav.localization.updates import (
@@ -330,3 +331,33 @@ def test_readout_augmentation_copies_are_kept_and_extended():
     new = LocalizerUpdater(loc, augmentation=CAMERA).partial_fit(u8[1], YB).localizer_
     assert new.readout_memory_.augmented[0].shape == new.readout_memory_.inputs.shape == (70,) + mem.inputs.shape[1:]
     assert np.isfinite(new.predict(u8[2])).all() and new.n_augmented_ == 70
+
+
+def test_resolve_all_trains_every_layer_again_on_the_remembered_images(tmp_path):
+    """With a memory that keeps the images, resolve="all" equals training the
+    localizer again on A + B (one sequence) with B's views paired to their
+    nearest A views, to 1e-9; the memory keeps both runs' images and run
+    labels; without images, or for a network alone, one clear error."""
+    from sfanav.localization.updates import cross_run_pairs
+
+    loc = fit_localizer(Network(TINY), A, YA, rotation=ROT, progress=False, readout="quadratic", n_outputs=5)
+    remember(loc, A, YA, max_views=1000, keep_images=True)
+    assert loc.readout_memory_.images.shape == A.shape
+    up = LocalizerUpdater(loc, UpdatePolicy(resolve="all"), pair_radius=0.4)
+    new = up.partial_fit(B, YB).localizer_
+    i, j = cross_run_pairs(YA, YB, 0.4)
+    ref = fit_localizer(Network(TINY), np.concatenate([A, B]), np.concatenate([YA, YB]), rotation=ROT,
+                        progress=False, readout={"kind": "quadratic", "n_outputs": 5, "ridge": 0.0, "degree": 2},
+                        n_outputs=5, rotation_pooling=1, network_fit={"pairs": (i, len(A) + j, np.ones(len(i)))})
+    _close(new.predict(C), ref.predict(C))
+    mem = new.readout_memory_
+    assert len(mem) == len(A) + len(B) and mem.runs.tolist() == [0] * len(A) + [1] * len(B)
+    assert new.info["updates"][-1]["resolve"] == "all" and new.info["updates"][-1]["cross_run_pairs"] == len(i)
+    # the memory survives the model file
+    back = sfanav.load(new.save(tmp_path / "all.sfanav"))
+    np.testing.assert_array_equal(back.readout_memory_.images, mem.images)
+    assert back.readout_memory_.runs.tolist() == mem.runs.tolist()
+    with pytest.raises(ValueError, match="keeps none"):
+        LocalizerUpdater(_trained(readout="quadratic", n_outputs=5), UpdatePolicy(resolve="all"))
+    with pytest.raises(ValueError, match="a network alone re-solves its top stage only"):
+        NetworkUpdater(loc.network, UpdatePolicy(resolve="all"))

@@ -44,7 +44,7 @@ import numpy as np
 
 from .. import _core
 from .._checks import NotFittedError, as_matrix, check_int, check_same_length
-from ..data.corruptions import CorruptionModel
+from ..data.corruptions import CAMERA, CorruptionModel
 from ..sfa.modelfile import state_from_bytes
 from ..sfa.updates import NetworkUpdater, UpdatePolicy, statistics_bytes
 from .localizer import Localizer, pooling_step
@@ -84,13 +84,21 @@ class ReadoutMemory:
         The bound: :meth:`extended` keeps an evenly spaced subset.
     n_seen : int or None
         Views the memory was drawn from (default n).
+    images : array (n, H, W[, C]) or None
+        The views' images as the localizer takes them (8-bit panoramas):
+        what re-solving every layer (``UpdatePolicy(resolve="all")``) trains
+        on. About H x W x C bytes a view (42 kB at 350x40 RGB).
+    runs : array (n,) int or None
+        The run each view came from, in the order the runs were added
+        (default all 0).
 
     ``nbytes`` is what it adds to the model file (its arrays). ValueError
     for arrays that disagree in length or shape.
     """
 
     def __init__(self, inputs: Any, positions: Any, signatures: Any = None, augmented: Any = None, *,
-                 max_views: int = MAX_VIEWS, n_seen: int | None = None) -> None:
+                 max_views: int = MAX_VIEWS, n_seen: int | None = None, images: Any = None,
+                 runs: Any = None) -> None:
         Z = np.asarray(inputs, dtype=np.float64)
         if Z.ndim != 3 or not np.isfinite(Z).all():
             raise ValueError(f"readout memory inputs must be a finite (n, K, k) array, got shape {Z.shape}")
@@ -107,6 +115,14 @@ class ReadoutMemory:
                 raise ValueError("the augmented copies in a readout memory must have the shapes of the views")
             A = (Za, Ga)
         self.inputs, self.positions, self.signatures, self.augmented = Z, Y, G, A
+        self.images = None if images is None else np.asarray(images)
+        if self.images is not None and (self.images.ndim not in (3, 4) or len(self.images) != len(Z)):
+            raise ValueError(f"readout memory images must be (n, H, W[, C]) with n = {len(Z)}, got shape "
+                             f"{self.images.shape}")
+        R = np.zeros(len(Z), np.int64) if runs is None else np.asarray(runs)
+        if R.shape != (len(Z),) or (len(R) and (R.dtype.kind not in "iu" or R.min() < 0)):
+            raise ValueError(f"readout memory runs must be {len(Z)} integers >= 0")
+        self.runs = R.astype(np.int64)
         self.max_views = check_int(max_views, "max_views")
         self.n_seen = len(Z) if n_seen is None else check_int(n_seen, "n_seen", minimum=0)
 
@@ -119,7 +135,8 @@ class ReadoutMemory:
 
     @property
     def nbytes(self) -> int:
-        arrays = [self.inputs, self.positions, self.signatures]
+        arrays = [self.inputs, self.positions, self.signatures, self.images,
+                  self.runs if self.runs.any() else None]  # as saved: run labels only past the first run
         if self.augmented is not None:
             arrays += list(self.augmented)
         return int(sum(a.nbytes for a in arrays if a is not None))
@@ -131,14 +148,17 @@ class ReadoutMemory:
             self.augmented[0][idx], None if self.augmented[1] is None else self.augmented[1][idx])
         return ReadoutMemory(self.inputs[idx], self.positions[idx],
                              None if self.signatures is None else self.signatures[idx], aug,
-                             max_views=self.max_views, n_seen=self.n_seen)
+                             max_views=self.max_views, n_seen=self.n_seen,
+                             images=None if self.images is None else self.images[idx], runs=self.runs[idx])
 
     def extended(self, other: "ReadoutMemory") -> "ReadoutMemory":
         """This memory followed by ``other``'s views, thinned to an evenly
         spaced subset of at most ``max_views``; ``n_seen`` adds up."""
         if other.inputs.shape[1:] != self.inputs.shape[1:] or (other.signatures is None) != (self.signatures is None) \
-                or (other.augmented is None) != (self.augmented is None):
-            raise ValueError("the views to add do not match the readout memory (stage inputs, signatures, copies)")
+                or (other.augmented is None) != (self.augmented is None) or (other.images is None) != (
+                    self.images is None) or (self.images is not None and other.images.shape[1:] != self.images.shape[1:]):
+            raise ValueError("the views to add do not match the readout memory (stage inputs, signatures, copies, "
+                             "images)")
 
         def cat(a: Any, b: Any) -> Any:
             return None if a is None else np.concatenate([a, b])
@@ -146,9 +166,11 @@ class ReadoutMemory:
         aug = None
         if self.augmented is not None:
             aug = (cat(self.augmented[0], other.augmented[0]), cat(self.augmented[1], other.augmented[1]))
+        first = int(self.runs.max()) + 1 if len(self.runs) else 0  # the added views' runs follow
         both = ReadoutMemory(cat(self.inputs, other.inputs), cat(self.positions, other.positions),
                              cat(self.signatures, other.signatures), aug, max_views=self.max_views,
-                             n_seen=self.n_seen + other.n_seen)
+                             n_seen=self.n_seen + other.n_seen, images=cat(self.images, other.images),
+                             runs=np.concatenate([self.runs, first + other.runs]))
         return both.subset(_even(len(both), self.max_views))
 
     def get_state(self) -> dict[str, Any]:
@@ -161,6 +183,10 @@ class ReadoutMemory:
             out["augmented_inputs"] = self.augmented[0]
             if self.augmented[1] is not None:
                 out["augmented_signatures"] = self.augmented[1]
+        if self.images is not None:
+            out["images"] = self.images
+        if self.runs.any():
+            out["runs"] = self.runs
         return out
 
     @classmethod
@@ -170,7 +196,8 @@ class ReadoutMemory:
             if "augmented_inputs" in state:
                 aug = (state["augmented_inputs"], state.get("augmented_signatures"))
             return cls(state["inputs"], state["positions"], state.get("signatures"), aug,
-                       max_views=state["max_views"], n_seen=state["n_seen"])
+                       max_views=state["max_views"], n_seen=state["n_seen"], images=state.get("images"),
+                       runs=state.get("runs"))
         except (KeyError, TypeError) as exc:
             raise ValueError(f"invalid readout memory state: {exc}") from None
 
@@ -233,7 +260,7 @@ def top_stage_features(network: Any, inputs: Any) -> np.ndarray:
 
 
 def _memory_of(localizer: Localizer, images: Any, xy: Any, augmentation: CorruptionModel | None, seed: int,
-               max_views: int) -> ReadoutMemory:
+               max_views: int, keep_images: bool = False) -> ReadoutMemory:
     """A readout memory of the evenly spaced views of a run (all kept, then
     thinned by the caller)."""
     a = np.asarray(images)
@@ -247,19 +274,20 @@ def _memory_of(localizer: Localizer, images: Any, xy: Any, augmentation: Corrupt
         altered = augmentation.apply(a, seed=seed + 1)  # the draw fit_localizer makes for readout_augmentation
         aug = (top_stage_inputs(localizer, altered), localizer.signatures(altered) if sig else None)
     return ReadoutMemory(top_stage_inputs(localizer, a), Y, localizer.signatures(a) if sig else None, aug,
-                         max_views=max_views, n_seen=len(np.asarray(images)))
+                         max_views=max_views, n_seen=len(np.asarray(images)), images=a if keep_images else None)
 
 
 def remember(localizer: Localizer, images: Any, xy: Any, *, max_views: int = MAX_VIEWS,
-             augmentation: CorruptionModel | None = None, seed: int = 0) -> Localizer:
+             augmentation: CorruptionModel | None = None, seed: int = 0, keep_images: bool = False) -> Localizer:
     """Gives a fitted localizer the readout memory of its training run:
     ``images`` (N, H, W[, C]) as given to ``fit`` and the positions ``xy``
     (N, 2) its readout was fitted to; at most ``max_views`` evenly spaced
     views are kept. ``augmentation``: the corruption model of the readout's
     ``readout_augmentation`` (with the same ``seed``), if it was fitted on
-    corrupted copies. Sets and returns ``localizer`` (``readout_memory_``);
-    it is saved with the model file, together with the network's training
-    statistics.
+    corrupted copies. ``keep_images``: keep the views' images too, for
+    updates that re-solve every layer (``UpdatePolicy(resolve="all")``).
+    Sets and returns ``localizer`` (``readout_memory_``); it is saved with
+    the model file, together with the network's training statistics.
 
     NotFittedError for an unfitted localizer, ValueError for one without a
     network or whose network cannot be split at its top stage.
@@ -271,7 +299,7 @@ def remember(localizer: Localizer, images: Any, xy: Any, *, max_views: int = MAX
     if augmentation is not None and not isinstance(augmentation, CorruptionModel):
         raise TypeError(f"augmentation must be a CorruptionModel or None, got {type(augmentation).__name__}")
     localizer.readout_memory_ = _memory_of(localizer, images, xy, augmentation, seed,
-                                           check_int(max_views, "max_views"))
+                                           check_int(max_views, "max_views"), keep_images=bool(keep_images))
     return localizer
 
 
@@ -389,8 +417,11 @@ class LocalizerUpdater:
         self.policy = UpdatePolicy() if policy is None else policy
         if not isinstance(self.policy, UpdatePolicy):
             raise TypeError(f"policy must be an UpdatePolicy, got {type(self.policy).__name__}")
-        # the network solves when this updater says so
-        self._net = NetworkUpdater(localizer.trained_network(), UpdatePolicy(self.policy.resolve, every=sys.maxsize))
+        if self.policy.resolve == "all" and mem.images is None:
+            raise ValueError("re-solving every layer (resolve='all') trains on the old views' images, and this "
+                             "localizer's readout memory keeps none: remember(..., keep_images=True)")
+        # the network solves when this updater says so (its top-stage statistics; unused under resolve="all")
+        self._net = NetworkUpdater(localizer.trained_network(), UpdatePolicy("top", every=sys.maxsize))
         self.augmentation = augmentation if mem.augmented is not None else None
         self.seed = check_int(seed, "seed", minimum=0)
         self.localizer_ = localizer
@@ -413,7 +444,8 @@ class LocalizerUpdater:
         check_same_length(a, Y, "images", "xy")
         net_images = self._net.check_run(loc.network_input(a))
         mem = loc.readout_memory_
-        new = _memory_of(loc, a, Y, self.augmentation, self.seed, max_views=len(a))
+        new = _memory_of(loc, a, Y, self.augmentation, self.seed, max_views=len(a),
+                         keep_images=mem.images is not None)
         new.max_views = mem.max_views
         if self.cross_pairs:
             seen = mem if self._pending is None else _concat(mem, self._pending)
@@ -436,9 +468,11 @@ class LocalizerUpdater:
         memory's and the pending runs' views; returns the new localizer
         (also ``localizer_``)."""
         old = self.localizer_
-        net = self._net.solve()
         mem = old.readout_memory_
         views = mem if self._pending is None else _concat(mem, self._pending)
+        if self.policy.resolve == "all":
+            return self._solve_all(old, views)
+        net = self._net.solve()
         F = top_stage_features(net, views.inputs)
         aug = None
         if views.augmented is not None:
@@ -463,6 +497,62 @@ class LocalizerUpdater:
         self._pairs_at_solve = self.n_pairs_
         new.info["readout_kernel_images"] = int(n_seen if learn else learned_on)
         new.readout_memory_ = mem if self._pending is None else mem.extended(self._pending)
+        self.localizer_ = new
+        self._pending = None
+        self.n_pending_ = 0
+        self.n_solves_ += 1
+        return new
+
+    def _solve_all(self, old: Localizer, views: ReadoutMemory) -> Localizer:
+        """``resolve="all"``: the localizer trained again, every layer, on the
+        remembered and the pending views' images as one sequence run after run,
+        the runs joined by derivative pairs between each view and the nearest
+        view of an earlier run (:func:`cross_run_pairs`, at every layer and
+        simulated rotation: what place-major training gives a place seen in two
+        runs), with the training recipe the model file records (rotation,
+        invariance partners, readout augmentation, readout kind)."""
+        from ..sfa.network import Network, Rotation
+        from .training import fit_localizer
+
+        info = dict(old.info or {})
+        net0 = old.trained_network()
+        rot = info.get("rotation") or {}
+        rotation = Rotation(int(rot.get("step", net0.step_ or 5)), float(rot.get("window", 1.0)))
+        invariance = None
+        if info.get("invariance"):
+            if info["invariance"] != CAMERA.describe():
+                raise ValueError("this localizer's network was trained with invariance partners of a corruption model "
+                                 "this sfanav does not know, so it cannot be trained again as it was")
+            invariance = CAMERA
+        R, P = views.runs, views.positions
+        a_idx: list[np.ndarray] = []
+        b_idx: list[np.ndarray] = []
+        for r in np.unique(R)[1:]:
+            earlier, this = np.flatnonzero(R < r), np.flatnonzero(R == r)
+            i, j = cross_run_pairs(P[earlier], P[this], self.pair_radius)
+            a_idx.append(earlier[i])
+            b_idx.append(this[j])
+        pa = np.concatenate(a_idx) if a_idx else np.zeros(0, np.int64)
+        pb = np.concatenate(b_idx) if b_idx else np.zeros(0, np.int64)
+        fit = {"transition_weight": self._net.transition_weight}
+        if len(pa):
+            fit["pairs"] = (pa, pb, np.full(len(pa), self._net.transition_weight))
+        new = fit_localizer(Network(net0.config), views.images, P, rotation=rotation,
+                            readout=readout_spec_for_update(old, "learn"), n_outputs=old.n_outputs_, rows=old.rows,
+                            rotation_pooling=old.rotation_pooling_, signature=old.signature, photometric=old.photometric,
+                            readout_augmentation=self.augmentation, invariance=invariance,
+                            invariance_weight=float(info.get("invariance_weight", 1.0)), network_fit=fit,
+                            progress=False, seed=self.seed)
+        memory = _memory_of(new, views.images, P, self.augmentation, self.seed, max_views=len(P), keep_images=True)
+        memory.runs, memory.max_views, memory.n_seen = views.runs.copy(), views.max_views, views.n_seen
+        n_added = 0 if self._pending is None else self._pending.n_seen
+        new.info = {**info, **{k: v for k, v in new.info.items() if k not in ("n_train_images",)}}
+        new.info["n_train_images"] = int(info.get("n_train_images", old.readout_memory_.n_seen)) + n_added
+        new.info["updates"] = list(info.get("updates", [])) + [{"n_images": int(n_added), "readout_views": int(len(P)),
+                                                                "resolve": "all", "cross_run_pairs": int(len(pa))}]
+        new.info["readout_kernel_images"] = int(views.n_seen)
+        new.readout_memory_ = memory.subset(_even(len(memory), memory.max_views))
+        new.readout, new.n_outputs, new.rotation_pooling = old.readout, old.n_outputs, old.rotation_pooling
         self.localizer_ = new
         self._pending = None
         self.n_pending_ = 0

@@ -46,8 +46,11 @@ from .modelfile import state_from_bytes
 
 __all__ = ["RESOLVE", "UpdatePolicy", "NetworkUpdater", "statistics_bytes", "drop_statistics"]
 
-RESOLVE = ("top",)
-"""What an update can re-solve: ``"top"``, the final stage of the top layer."""
+RESOLVE = ("top", "all")
+"""What an update can re-solve: ``"top"``, the final stage of the top layer
+(exact from the stored statistics); ``"all"``, every layer, trained again
+on the images a localizer's readout memory keeps and the new runs
+(:class:`sfanav.localization.updates.LocalizerUpdater` only)."""
 
 SCALE_RATIO = 50.0  # a run whose pixel scale differs this much from training is refused (0..255 against 0..1)
 
@@ -58,10 +61,13 @@ class UpdatePolicy:
 
     Parameters
     ----------
-    resolve : {"top"}, default "top"
-        The stages re-solved from the stored statistics plus the new runs'.
-        ``"top"``: the final stage of the top layer; every stage below it
-        stays as trained (exact, see :mod:`sfanav.sfa.updates`).
+    resolve : {"top", "all"}, default "top"
+        The stages re-solved. ``"top"``: the final stage of the top layer,
+        from the stored statistics plus the new runs'; every stage below it
+        stays as trained (exact, see :mod:`sfanav.sfa.updates`). ``"all"``:
+        every layer, trained again on the remembered images and the new
+        runs (a localizer whose readout memory keeps its images; the cost
+        of a retrain on them).
     every : int or None, default None
         None: solve after every :meth:`NetworkUpdater.partial_fit` (and on
         :meth:`NetworkUpdater.solve`). N: solve once at least N images have
@@ -176,6 +182,10 @@ class NetworkUpdater:
         policy = UpdatePolicy() if policy is None else policy
         if not isinstance(policy, UpdatePolicy):
             raise TypeError(f"policy must be an UpdatePolicy, got {type(policy).__name__}")
+        if policy.resolve != "top":
+            raise ValueError(f"a network alone re-solves its top stage only (resolve='top'); resolve="
+                             f"{policy.resolve!r} needs the old images: update a localizer whose readout memory "
+                             "keeps them (LocalizerUpdater, remember(..., keep_images=True))")
         self.policy = policy
         self.batch_size = check_int(batch_size, "batch_size")
         self._state = _network_state(network)
