@@ -316,6 +316,25 @@ def test_cli_update_of_a_localizer(tmp_path, capsys):
                          "--out", tmp_path / "bad.sfanav")
     assert_one_line_error(code, err, "--updatable")
     assert not (tmp_path / "bad.sfanav").exists()
+    # every layer trained again: a model that keeps its images, --resolve all equals the Python update
+    code, out, err = run(capsys, "update", model, "--dataset", tmp_path / "b", "--out", tmp_path / "bad.sfanav",
+                         "--resolve", "all")
+    assert_one_line_error(code, err, "keep_images")
+    code, out, err = run(capsys, "train", "--dataset", tmp_path / "a", "--out", tmp_path / "img.sfanav",
+                         "--updatable", "--keep-images", *common)
+    assert code == 0, err
+    kept = sfanav.load(tmp_path / "img.sfanav")
+    assert kept.readout_memory_.images.shape == (len(A), 8, 60, 3)
+    code, out, err = run(capsys, "update", tmp_path / "img.sfanav", "--dataset", tmp_path / "b", "--resolve", "all",
+                         "--out", tmp_path / "all.sfanav", "--no-progress")
+    assert code == 0, err
+    new_all = sfanav.load(tmp_path / "all.sfanav")
+    ref_all = LocalizerUpdater(kept, UpdatePolicy(resolve="all")).partial_fit(Xb, YB).localizer_
+    _close(new_all.predict(Xc), ref_all.predict(Xc), 1e-9)
+    assert new_all.info["updates"][-1]["resolve"] == "all"
+    code, out, err = run(capsys, "train", "--dataset", tmp_path / "a", "--out", tmp_path / "x.sfanav",
+                         "--keep-images", *common)
+    assert_one_line_error(code, err, "--updatable")
 
 
 def test_readout_augmentation_copies_are_kept_and_extended():

@@ -256,4 +256,7 @@ def test_cli_update_reads_a_bag(tmp_path, capsys):
     _same_outputs(new, NetworkUpdater(net).partial_fit(_u8(B)).network_, _u8(C))
     code, out, err = run(capsys, "update", model, "--dataset", bag, "--out", tmp_path / "bad.sfanav")
     assert_one_line_error(code, err, "--odom-topic", "bag")
+    code, out, err = run(capsys, "update", model, "--dataset", bag, "--odom-topic", "/odom", "--resolve", "all",
+                         "--out", tmp_path / "bad.sfanav")
+    assert_one_line_error(code, err, "is a network", "--keep-images")
     assert not (tmp_path / "bad.sfanav").exists() and model.read_bytes() == original

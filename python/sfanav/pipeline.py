@@ -45,7 +45,7 @@ def train_localizer(images: Any, *, xy: Any = None, odometry: Any = None, timest
                     prep: Any = None, metric_map: str = "pose-graph", loop_closures: Any = None,
                     closure_weights: Any = None, network_images: Any = None,
                     network_fit: Mapping[str, Any] | None = None, readout_memory: int | None = None,
-                    filter_noise: bool = True,
+                    readout_memory_images: bool = False, filter_noise: bool = True,
                     info: Mapping[str, Any] | None = None, seed: int = 0, progress: bool = False,
                     log: Log = quiet_log) -> Any:
     """Trains a localizer on one run as ``sfanav train`` does.
@@ -91,6 +91,10 @@ def train_localizer(images: Any, *, xy: Any = None, odometry: Any = None, timest
         the network's statistics and at most this many training views
         (docs/updates.md); without ground truth the memory holds the learned
         positions (the model's odometry frame).
+    readout_memory_images : bool
+        The readout memory keeps the views' images too (about H x W x C
+        bytes each), for updates that train every layer again
+        (``UpdatePolicy(resolve="all")``, ``sfanav update --resolve all``).
     filter_noise : bool
         With odometry for every frame, choose and store the EKF noise in
         ``info["ekf_noise"]`` (:func:`sfanav.odometry.noise_for_localizer`);
@@ -136,7 +140,7 @@ def train_localizer(images: Any, *, xy: Any = None, odometry: Any = None, timest
     fit_kw.update(rotation=rotation or Rotation(step=ROTATION_STEP), prep=prep, progress=progress,
                   loop_closures=loop_closures, closure_weights=closure_weights, network_images=network_images,
                   network_fit=dict(network_fit or {}), info={**dict(info or {}), **recipe.info()},
-                  seed=seed)
+                  seed=seed, **({"readout_memory_images": True} if readout_memory_images else {}))
     if supervision == "odometry":
         loc = fit_localizer_from_odometry(net, images, odometry, method=metric_map, timestamps=timestamps,
                                           gyro=gyro, readout_memory=readout_memory, **fit_kw)

@@ -43,6 +43,7 @@ def fit_localizer(
     invariance_weight: float = 1.0,
     seed: int = 0,
     readout_memory: int | None = None,
+    readout_memory_images: bool = False,
 ) -> Localizer:
     """Trains ``network`` on ``images`` (the training run, in temporal order)
     under simulated rotation and fits the readout of its slowest outputs to
@@ -92,6 +93,8 @@ def fit_localizer(
     for later updates (:func:`sfanav.localization.updates.remember`: the
     localizer can then take new runs with ``partial_fit``, and its model
     file keeps the network's training statistics). None: not updatable.
+    ``readout_memory_images``: the memory keeps the views' images too, for
+    updates that train every layer again (``UpdatePolicy(resolve="all")``).
 
     ``network_fit``: more keyword arguments of the network's
     :meth:`~sfanav.Network.fit`, e.g. ``{"client": dask_client, "breaks":
@@ -148,7 +151,8 @@ def fit_localizer(
     if readout_memory is not None:
         from .updates import remember
 
-        remember(loc, raw, Y, max_views=readout_memory, augmentation=readout_augmentation, seed=seed)
+        remember(loc, raw, Y, max_views=readout_memory, augmentation=readout_augmentation, seed=seed,
+                 keep_images=readout_memory_images)
     loc.info = dict(info or {})
     if prep is not None:
         loc.info["preprocessing"] = prep.to_dict()

@@ -125,6 +125,10 @@ def _add_train(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                    help="keep what sfanav update needs to add later runs: the network's training statistics and a "
                         "readout memory of at most N evenly spaced training views (default 3000; docs/updates.md "
                         "says what it costs)")
+    p.add_argument("--keep-images", action="store_true",
+                   help="with --updatable: the readout memory keeps the views' images too (about W x H x C bytes "
+                        "each), so that sfanav update --resolve all can train every layer again on the old and new "
+                        "runs")
     p.add_argument("--overwrite", action="store_true", help="replace an existing model file")
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
     add_train_arguments(p)
@@ -187,6 +191,8 @@ def _run_train(args: argparse.Namespace) -> int:
     if args.scheduler is not None and args.landmarks is not None:
         raise UsageError("--scheduler trains the panorama network; landmark models (--landmarks) train in this "
                          "process")
+    if args.keep_images and args.updatable is None:
+        raise UsageError("--keep-images keeps images in the readout memory of an updatable model: add --updatable")
     with contextlib.ExitStack() as stack:
         return _train(args, stack)
 
@@ -297,6 +303,7 @@ def _train(args: argparse.Namespace, stack: Any) -> int:
                           rotation=Rotation(step=args.step, window=args.window), prep=prep,
                           metric_map=args.metric_map, loop_closures=closures, closure_weights=weights,
                           network_images=network_images, network_fit=network_fit, readout_memory=args.updatable,
+                          readout_memory_images=args.keep_images,
                           info={"dataset": str(args.dataset), "run": run,
                                 "network": args.preset or (str(args.config) if args.config else "sfanav-default")},
                           progress=not args.no_progress, log=log)

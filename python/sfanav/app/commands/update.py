@@ -50,6 +50,11 @@ def _add_update(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                    help="a Gaussian-process readout's kernel: keep the fitted one and refit the posterior (fast), "
                         "learn it again as training does, or (auto, default) learn it again once the model has "
                         "seen twice the images it was learned on")
+    p.add_argument("--resolve", choices=("top", "all"), default="top",
+                   help="re-solve the top stage from the stored statistics (default; exact, a fraction of a "
+                        "retrain), or train every layer again on the images the model keeps (sfanav train "
+                        "--updatable --keep-images) and the new run, each view paired with the old run's nearest "
+                        "view (a retrain's cost; learns what differs between the runs, e.g. light or season)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(run=_run_update)
     return p
@@ -115,6 +120,10 @@ def _update(args: argparse.Namespace, stack: "Any") -> int:
     if not isinstance(net, Network):
         raise UsageError(f"{model} holds a {type(net).__name__}; sfanav update adds runs to network and localizer "
                          "model files")
+    if args.resolve != "top":
+        raise UsageError(f"{model} is a network: it re-solves its top stage only (--resolve top); training every "
+                         "layer again needs the old images, which an updatable localizer keeps (sfanav train "
+                         "--updatable --keep-images)")
     updater = NetworkUpdater(net)  # refuses a model without statistics before the run is read
     ds = select_run(_open_run(args, stack), args.run_name, args.camera)
     h, _, c = net.input_shape
@@ -143,6 +152,7 @@ def _update_localizer(args: argparse.Namespace, model: "Any", out: "Any", loc: "
     from ...data.preprocessing import Preprocessing
     from ...data.sources import load_run, select_run
     from ...localization.updates import LocalizerUpdater, drop_readout_memory, readout_memory_bytes
+    from ...sfa.updates import UpdatePolicy
     from ..common import mirror_of
 
     if loc.network is None:
@@ -158,7 +168,8 @@ def _update_localizer(args: argparse.Namespace, model: "Any", out: "Any", loc: "
         augmentation = CAMERA
     try:
         # refuses a network without statistics
-        updater = LocalizerUpdater(loc, augmentation=augmentation, kernel=args.kernel)
+        updater = LocalizerUpdater(loc, UpdatePolicy(resolve=args.resolve), augmentation=augmentation,
+                                   kernel=args.kernel)
     except ValueError as exc:
         raise UsageError(f"{model}: {exc}") from None
     ds = select_run(_open_run(args, stack), args.run_name, args.camera)
