@@ -96,6 +96,19 @@ def pick_trials(results: list[nav.NavigationResult], k: int) -> list[int]:
 
 
 
+def _plot_trials(s: nav.TrialSummary, path: Path, sc: Scene, opt_paths: list[Any] | None, title: str) -> str:
+    """Up to 8 of a summary's trials (failures first), with their shortest
+    paths if given, each titled by its outcome and efficiency; the PNG's
+    path."""
+    sel = pick_trials(s.results, 8)
+    return str(nav.plot_trajectories(
+        [s.results[i] for i in sel], path, world=sc.world,
+        optimal=None if opt_paths is None else [opt_paths[i] for i in sel],
+        titles=[("reached" if s.results[i].success else s.results[i].reason)
+                + (f" e={s.efficiencies[i]:.2f}" if s.results[i].success else "") for i in sel],
+        title=title))
+
+
 def metric_arms(sc: Scene, out: Path, seed: int, starts: np.ndarray, targets: np.ndarray,
                 optimal: np.ndarray | None, *, progress: bool = False,
                 localizer: tuple[Any, Any] | None = None, field: Any = None,
@@ -142,14 +155,9 @@ def metric_arms(sc: Scene, out: Path, seed: int, starts: np.ndarray, targets: np
         rows += _summary_rows(name, s, None)
         rows.append({"metric": f"mean stops ({name})", "thesis": None, "sfanav": s.mean_iterations})
         notes.append(f"{name}: {_reasons(s)}")
-        sel = pick_trials(s.results, 8)
         tag = name.replace(" ", "-").replace("+", "plus").replace(",", "")
-        plots.append(str(nav.plot_trajectories(
-            [s.results[i] for i in sel], out / f"7.1-{sc.name.split('-')[-1]}-trajectories-{tag}.png",
-            world=sc.world,
-            titles=[("reached" if s.results[i].success else s.results[i].reason)
-                    + (f" e={s.efficiencies[i]:.2f}" if s.results[i].success else "") for i in sel],
-            title=f"7.1: {name}")))
+        plots.append(_plot_trials(s, out / f"7.1-{sc.name.split('-')[-1]}-trajectories-{tag}.png", sc, None,
+                                  f"7.1: {name}"))
     return rows, plots, notes
 
 
@@ -217,14 +225,9 @@ def _run_71(kind: str, out: Path, *, quick: bool, seed: int, progress: bool) -> 
         rows.append({"metric": f"mean stops ({d.name})", "thesis": None, "sfanav": s.mean_iterations})
         notes_runs.append(f"{d.name}: {_reasons(s)}" + (f", escapes {sum(r.escapes for r in s.results)}"
                                                         if d.name == "robust descent" else ""))
-        sel = pick_trials(s.results, 8)
         tag = d.name.replace(" ", "-")
-        plots.append(str(nav.plot_trajectories(
-            [s.results[i] for i in sel], out / f"7.1-{kind}-trajectories-{tag}.png", world=sc.world,
-            optimal=[opt_paths[i] for i in sel],
-            titles=[("reached" if s.results[i].success else s.results[i].reason)
-                    + (f" e={s.efficiencies[i]:.2f}" if s.results[i].success else "") for i in sel],
-            title=f"7.1 {kind}: {d.name}")))
+        plots.append(_plot_trials(s, out / f"7.1-{kind}-trajectories-{tag}.png", sc, opt_paths,
+                                  f"7.1 {kind}: {d.name}"))
     # the peer: homing by perfect memory (robust descent of the rotational image difference to the target's view)
     label = "robust descent, perfect memory homing (rotational image difference)"
     s = nav.evaluate_trials(homing_navigator(sc), starts[:n_img], targets[:n_img],
@@ -233,13 +236,8 @@ def _run_71(kind: str, out: Path, *, quick: bool, seed: int, progress: bool) -> 
     rows += _summary_rows(label, s, None)
     rows.append({"metric": f"mean stops ({label})", "thesis": None, "sfanav": s.mean_iterations})
     notes_runs.append(f"{label}: {_reasons(s)}")
-    sel = pick_trials(s.results, 8)
-    plots.append(str(nav.plot_trajectories(
-        [s.results[i] for i in sel], out / f"7.1-{kind}-trajectories-perfect-memory-homing.png", world=sc.world,
-        optimal=[opt_paths[i] for i in sel],
-        titles=[("reached" if s.results[i].success else s.results[i].reason)
-                + (f" e={s.efficiencies[i]:.2f}" if s.results[i].success else "") for i in sel],
-        title=f"7.1 {kind}: {label}")))
+    plots.append(_plot_trials(s, out / f"7.1-{kind}-trajectories-perfect-memory-homing.png", sc, opt_paths,
+                              f"7.1 {kind}: {label}"))
     # the sfanav default network's slow features (horizon band, wider layers: the metric arms' localizer's
     # network, unpooled), n = 2 raw (the thesis's setting) and n = 8 weighted by beta_1 / beta_i (7.2.1's remedy)
     loc, dcam = metric_localizer(sc, out, seed, progress=progress)
@@ -259,13 +257,8 @@ def _run_71(kind: str, out: Path, *, quick: bool, seed: int, progress: bool) -> 
             rows.append({"metric": f"mean stops ({label})", "thesis": None, "sfanav": s.mean_iterations})
             notes_runs.append(f"{label}: {_reasons(s)}")
             if d.name == "thesis rule":
-                sel = pick_trials(s.results, 8)
-                plots.append(str(nav.plot_trajectories(
-                    [s.results[i] for i in sel], out / f"7.1-{kind}-trajectories-default-network-n{n}.png",
-                    world=sc.world, optimal=[opt_paths[i] for i in sel],
-                    titles=[("reached" if s.results[i].success else s.results[i].reason)
-                            + (f" e={s.efficiencies[i]:.2f}" if s.results[i].success else "") for i in sel],
-                    title=f"7.1 {kind}: {label}")))
+                plots.append(_plot_trials(s, out / f"7.1-{kind}-trajectories-default-network-n{n}.png", sc,
+                                          opt_paths, f"7.1 {kind}: {label}"))
     # the same trials with slow features of the coordinates (the ideal case of the image network)
     model = coordinate_model(sc)
     for d in _descents():
