@@ -314,7 +314,7 @@ def join_run(localizer: Localizer, images: Any, odometry: Any, *, features: Any 
              min_closures: int = 10, min_fraction: float = 0.4, ransac_trials: int = 300,
              drift_search_deg: Any = DRIFT_SEARCH_DEG, robust_scale: float = 3.0, compass: bool = True,
              compass_sigma_deg: float = 5.0, min_travel: float = 5.0, solver: str = "lm", chunk: int = 50,
-             random_state: int = 0) -> JoinedRun:
+             random_state: int = 0, gyro: Any = None, gyro_noise: Any = None) -> JoinedRun:
     """Places a run without ground truth in a localizer's map frame (see
     the module docstring).
 
@@ -356,6 +356,13 @@ def join_run(localizer: Localizer, images: Any, odometry: Any, *, features: Any 
     solver : {"lm", "isam2"}, default "lm"
         Levenberg-Marquardt on the whole graph, or iSAM2 fed ``chunk``
         frames (with their closures) per update.
+    gyro : array (N,) or None
+        A yaw gyro's integrated heading (rad; :attr:`sfanav.Dataset.gyro`):
+        fused with the odometry's turns first
+        (:func:`sfanav.odometry.gyro.fuse_gyro`), and the odometry factors'
+        heading sigmas become the fused ones, as in the training run's pose
+        graph. ``gyro_noise``: its noise model
+        (:data:`sfanav.odometry.gyro.DEFAULT_GYRO_NOISE`).
 
     Returns
     -------
@@ -384,6 +391,12 @@ def join_run(localizer: Localizer, images: Any, odometry: Any, *, features: Any 
     a = np.asarray(images)
     if len(a) != len(P):
         raise ValueError(f"images has {len(a)} frames but odometry has {len(P)} poses; they must match")
+    heading_sigma = None
+    if gyro is not None:
+        from .gyro import fuse_gyro
+
+        fused = fuse_gyro(P, gyro, odometry_noise=odometry_noise, gyro_noise=gyro_noise)
+        P, heading_sigma = fused.odometry, fused.heading_sigma
     if solver not in SOLVERS:
         raise ValueError(f"solver must be one of {SOLVERS}, got {solver!r}")
     chunk = check_int(chunk, "chunk")
@@ -427,7 +440,7 @@ def join_run(localizer: Localizer, images: Any, odometry: Any, *, features: Any 
     else:
         pairs, rel = None, np.zeros(0)
     n_compass = 0 if pairs is None else len(pairs)
-    sig = odometry_sigmas(P, odometry_noise)
+    sig = odometry_sigmas(P, odometry_noise, heading_sigma)
     steps, cov = _local_steps(P, sig)
     g = gtsam
 

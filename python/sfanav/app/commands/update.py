@@ -187,7 +187,7 @@ def _update_localizer(args: argparse.Namespace, model: "Any", out: "Any", loc: "
                          f"frame): a new run joins it through its odometry, and {args.dataset} has none for every "
                          "image")
     if not xy_ok or frame_of_odometry:  # ground truth is another frame than such a map's: join instead
-        joined = _joined_positions(args, model, loc, images, ds.odometry)
+        joined = _joined_positions(args, model, loc, images, ds.odometry, ds.gyro)
         xy = joined.positions
     log(f"adding {len(images)} images of {args.dataset} to {model} (readout memory: {len(mem)} views)")
     try:
@@ -226,7 +226,8 @@ def _check_source(ds: "Any", loc: "Any", model: "Any") -> None:
                          f"{want} deg: the run does not match the model")
 
 
-def _joined_positions(args: argparse.Namespace, model: "Any", loc: "Any", images: "Any", odometry: "Any") -> "Any":
+def _joined_positions(args: argparse.Namespace, model: "Any", loc: "Any", images: "Any", odometry: "Any",
+                      gyro: "Any" = None) -> "Any":
     """The run joined to the map frame from its odometry and closures to
     the map (sfanav.odometry.map_joining); UsageError if it cannot join."""
     import numpy as np
@@ -238,7 +239,9 @@ def _joined_positions(args: argparse.Namespace, model: "Any", loc: "Any", images
     log(f"{why}: joining {args.dataset} to {model}'s map through its odometry and loop closures to the map's views "
         "(pose graph, GTSAM)")
     try:
-        joined = join_run(loc, images, odometry)
+        joined = join_run(loc, images, odometry, gyro=gyro)
+        if gyro is not None:
+            log("the run has a gyro (gyro_heading): its turns are fused with the odometry's")
     except ImportError as exc:
         raise UsageError(f"joining a run without ground truth needs GTSAM: {exc}") from None
     except ValueError as exc:
