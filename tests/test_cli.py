@@ -138,6 +138,11 @@ def test_evaluate_writes_report_metrics_and_plots(tiny, tmp_path, capsys):
     assert {"test_run", "random_splits", "eta_p", "eta_phi", "baselines", "error_vs_n"} <= set(m)
     assert set(m["baselines"]) == {"perfect memory", "Fourier signature"}
     assert m["test_run"]["n"] == 40
+    # evo's trajectory errors of the estimates (definitions checked against evo in test_trajectory_metrics);
+    # the rigid alignment on the run (least squares) can only lower the RMS error
+    assert 0 < m["test_run"]["ape_rmse"] and 0 < m["test_run"]["rpe_rmse"]
+    assert m["test_run"]["ape_rmse"] <= m["test_run"]["rmse"] + 1e-12
+    assert "APE rmse" in stdout and "RPE rmse" in stdout
     report = (out / "report.md").read_text()
     assert "perfect memory" in report and "random" in report and "![" in report
     for name in ("MAE x (%)", "MED (m)", "max eta_phi (outputs 1-8)", "MED (m) perfect memory",

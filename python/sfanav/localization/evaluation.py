@@ -31,6 +31,7 @@ from .protocols import (
 )
 from .report import write_report
 from .signature_readout import SignatureGPReadout
+from .trajectory_metrics import trajectory_errors
 
 
 @dataclass
@@ -42,7 +43,9 @@ class Evaluation:
     metrics : dict
         Test-run metrics of the SFA localizer
         (:func:`sfanav.localization.localization_metrics`, metres and %), plus
-        ``query_ms`` per image.
+        ``query_ms`` per image and evo's trajectory errors ``ape_rmse`` (m,
+        after a rigid alignment on the run) and ``rpe_rmse`` (m per frame;
+        :func:`sfanav.localization.trajectory_metrics.trajectory_errors`).
     splits : RegressionResult or None
         The thesis 5.1.1 protocol on the test run's features: random 50/50
         splits, 100 repeats (optimistic on a continuous walk).
@@ -162,6 +165,11 @@ def evaluate(
     crange = coordinate_range(test_xy)
     m = localization_metrics(pred, test_xy, coordinate_range=crange)
     m["query_ms"] = sfa_ms
+    try:  # the trajectory errors as evo defines them (APE after a rigid alignment on this run, RPE per frame)
+        te = trajectory_errors(pred, test_xy)
+        m["ape_rmse"], m["rpe_rmse"] = te["ape_rmse"], te["rpe_rmse"]
+    except ValueError:  # fewer than 2 frames, or every estimate at one point: no alignment
+        pass
     ev = Evaluation(metrics=m, predictions=pred, frame_alignment=frame)
     ev.model_bytes = _model_bytes(loc)
     n_reg = loc.n_outputs_

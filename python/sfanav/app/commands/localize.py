@@ -429,5 +429,8 @@ def _run_evaluate(args: argparse.Namespace) -> int:
     (out / "metrics.json").write_text(json.dumps(metrics_json(ev), indent=2) + "\n")
     rows = evaluation_rows(ev)
     print(table([("metric", "sfanav")] + [(r["metric"], fmt(r["sfanav"])) for r in rows]))
+    if "ape_rmse" in ev.metrics:
+        print(f"trajectory errors as evo defines them: APE rmse {ev.metrics['ape_rmse']:.3f} m (aligned on the run), "
+              f"RPE rmse {ev.metrics['rpe_rmse']:.3f} m per frame")
     print(f"wrote {ev.report}, {out / 'metrics.json'} and {len(ev.plots)} plots")
     return 0
