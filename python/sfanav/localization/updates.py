@@ -447,7 +447,10 @@ class LocalizerUpdater:
         new = _memory_of(loc, a, Y, self.augmentation, self.seed, max_views=len(a),
                          keep_images=mem.images is not None)
         new.max_views = mem.max_views
-        if self.cross_pairs:
+        # resolve="all" trains every layer again on the images at solve time (with its own cross-run pairs):
+        # the top-stage statistics below would be computed for nothing
+        top = self.policy.resolve == "top"
+        if top and self.cross_pairs:
             seen = mem if self._pending is None else _concat(mem, self._pending)
             i_old, j_new = cross_run_pairs(seen.positions, new.positions, self.pair_radius)
             K = new.inputs.shape[1]
@@ -455,7 +458,8 @@ class LocalizerUpdater:
             k = new.inputs.shape[2]
             self._net.add_pairs(seen.inputs[i_old].reshape(-1, k), new.inputs[j_new].reshape(-1, k), w)
             self.n_pairs_ += len(i_old)
-        self._net.partial_fit(net_images)
+        if top:
+            self._net.partial_fit(net_images)
         self._pending = new if self._pending is None else _concat(self._pending, new)
         self.n_images_ += len(a)
         self.n_pending_ += len(a)
