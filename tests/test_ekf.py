@@ -31,6 +31,27 @@ def test_ctrv_jacobians_match_finite_differences():
         Vn = np.column_stack([(ctrv_motion(x, u + h * e) - ctrv_motion(x, u - h * e)) / (2 * h) for e in np.eye(2)])
         np.testing.assert_allclose(F, Fn, atol=1e-8)
         np.testing.assert_allclose(V, Vn, atol=1e-7)
+        # with the displacement's direction off the arc (beta held; the noise is in d and dtheta)
+        u3 = np.array([0.7, dth, 0.4])
+        F, V = ctrv_jacobians(x, u3)
+        Fn = np.column_stack([(ctrv_motion(x + h * e, u3) - ctrv_motion(x - h * e, u3)) / (2 * h) for e in np.eye(3)])
+        Vn = np.column_stack([(ctrv_motion(x, u3 + h * e) - ctrv_motion(x, u3 - h * e)) / (2 * h)
+                              for e in np.eye(3)[:, :2].T])
+        np.testing.assert_allclose(F, Fn, atol=1e-8)
+        np.testing.assert_allclose(V, Vn, atol=1e-7)
+
+
+def test_prediction_keeps_the_odometrys_direction_on_sparse_turns():
+    # a mower's serpentine with 2 m between frames and quarter turns on the spot at the lane ends: the
+    # filter without measurements follows the odometry exactly (the arc model was metres off at each lane end)
+    lanes = [(x, 2.0 * r, 0.0 if r % 2 == 0 else np.pi) for r in range(4)
+             for x in (np.arange(8) * 2.0 if r % 2 == 0 else np.arange(8)[::-1] * 2.0)]
+    P = np.array(lanes)
+    P[8::8, 2] = np.pi / 2
+    ekf = OdometryEKF()
+    fused = ekf.run(P, np.full((len(P), 2), np.nan), P[0])
+    np.testing.assert_allclose(fused[:, :2], P[:, :2], atol=1e-9)
+    np.testing.assert_allclose(OdometryEKF.dead_reckoning(P, P[0])[:, :2], P[:, :2], atol=1e-9)
 
 
 def test_ekf_beats_both_inputs(run):

@@ -2,6 +2,8 @@
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from sfanav.odometry import Lines, dead_reckon, increments, lines_from_labels, lines_from_odometry, segment_lines, wrap_angle
 
@@ -27,6 +29,33 @@ def test_increments_and_dead_reckoning_invert_each_other():
     # an arc: quarter circle of radius 2 in 10 steps
     Q = dead_reckon(np.tile([np.pi / 10, np.pi / 20], (10, 1)))
     np.testing.assert_allclose(Q[-1], (2.0, 2.0, np.pi / 2), atol=1e-12)
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(0, 2**31 - 1), st.floats(0.01, 3.0))
+def test_increments_with_direction_reproduce_any_odometry(seed, scale):
+    # arbitrary poses: sideways slides, turns on the spot before or after driving, reversing, standing still
+    rng = np.random.default_rng(seed)
+    P = np.c_[np.cumsum(scale * rng.normal(size=(40, 2)), axis=0), rng.uniform(-np.pi, np.pi, 40)]
+    P[5] = P[4]  # standing still
+    P[9, :2] = P[8, :2]  # a turn on the spot
+    U = increments(P, direction=True)
+    assert U.shape == (39, 3) and np.all(np.abs(U[:, 2]) <= np.pi / 2 + 1e-12)
+    np.testing.assert_allclose(U[:, :2], increments(P), atol=1e-12)  # the first two columns are the arc's
+    Q = dead_reckon(U, P[0])
+    np.testing.assert_allclose(Q[:, :2], P[:, :2], atol=1e-9)
+    np.testing.assert_allclose(wrap_angle(Q[:, 2] - P[:, 2]), 0.0, atol=1e-9)
+
+
+def test_a_turn_on_the_spot_then_a_step_is_off_the_arc():
+    P = np.array([[0.0, 0.0, 0.0], [0.0, 2.0, np.pi / 2]])  # quarter turn, then 2 m: a mower's lane change
+    U = increments(P, direction=True)
+    np.testing.assert_allclose(U[0, 1:], [np.pi / 2, np.pi / 4], atol=1e-12)
+    arc = dead_reckon(U[:, :2])[-1]
+    assert np.hypot(arc[0], arc[1] - 2.0) > 1.4  # the arc model misses by 2 sin(pi / 4)
+    np.testing.assert_allclose(dead_reckon(U)[-1], [0.0, 2.0, np.pi / 2], atol=1e-12)
+    with pytest.raises(ValueError, match="steps must have shape"):
+        dead_reckon(np.zeros((3, 4)))
 
 
 def test_segment_lines_on_a_square():

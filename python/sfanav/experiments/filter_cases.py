@@ -20,7 +20,7 @@ import numpy as np
 from ..odometry.dead_reckoning import dead_reckon, increments, wrap_angle
 from ..odometry.fusion import fuse
 
-CASES = ("clean", "sharp_turns", "dropped", "slip", "kidnap", "raster")
+CASES = ("clean", "sharp_turns", "dropped", "slip", "kidnap", "raster", "serpentine")
 """``clean``: a smooth random drive; ``sharp_turns``: sparse frames with a
 turn of 60-120 degrees in one frame every 6-10 frames; ``dropped``: blocks
 of 5-12 frames missing (the odometry spans the gaps, the stamps show them);
@@ -29,7 +29,10 @@ robot stands (the odometry drives on); ``kidnap``: the robot carried 20 m
 with the odometry showing nothing; ``raster``: a raster survey, every row
 driven in the same direction, each row end a 28 m jump back (in the
 odometry too, as a wheel-odometry simulator records it) and a heading drift
-of 0.1 deg/m."""
+of 0.1 deg/m; ``serpentine``: a mower's lanes driven back and forth, at
+each lane end a quarter turn on the spot, one frame's step to the next
+lane, another quarter turn (the displacement of those frames is off the
+arc a turn-rate model assumes), and the same heading drift."""
 
 
 def _drive(n: int, step: float, rng: np.random.Generator, area: float, sharp: bool) -> np.ndarray:
@@ -59,7 +62,8 @@ def make_filter_case(kind: str, *, random_state: int = 0, n_frames: int = 240, s
     Parameters
     ----------
     n_frames : int
-        Frames of the run (``raster``: rows of 24 frames, as many as fit;
+        Frames of the run (``raster``: rows of 24 frames, ``serpentine``
+        of 20, as many as fit;
         ``dropped``: before dropping).
     step : float
         Metres between frames.
@@ -77,7 +81,8 @@ def make_filter_case(kind: str, *, random_state: int = 0, n_frames: int = 240, s
         ``estimates`` (N, 2), ``stamps`` (N,) seconds (one per nominal
         frame), ``noise`` (the filter's noise for these settings, as
         :func:`sfanav.odometry.fuse` takes it), ``events`` (frames where the
-        robot was kidnapped or slipped; for ``raster`` the row starts).
+        robot was kidnapped or slipped; for ``raster`` and ``serpentine``
+        the row starts).
     Raises ValueError on an unknown kind.
     """
     if kind not in CASES:
@@ -91,11 +96,23 @@ def make_filter_case(kind: str, *, random_state: int = 0, n_frames: int = 240, s
         xs = 1.0 + step * np.arange(per_row)
         truth = np.array([(x, 1.0 + step * r, 0.0) for r in range(rows) for x in xs])
         events = [r * per_row for r in range(1, rows)]
-        U_true = increments(truth)
+        U_true = increments(truth, direction=True)
         U_odo = U_true.copy()
         drift = np.deg2rad(0.1)  # rad per metre
+    elif kind == "serpentine":
+        per_row = 20
+        rows = max(2, n_frames // per_row)
+        xs = 1.0 + step * np.arange(per_row)
+        truth = np.array([(x, 1.0 + step * r, 0.0 if r % 2 == 0 else np.pi)
+                          for r in range(rows) for x in (xs if r % 2 == 0 else xs[::-1])])
+        turns = np.arange(1, rows) * per_row  # each lane's first frame: reached by a quarter turn and a step
+        truth[turns, 2] = np.pi / 2
+        U_true = increments(truth, direction=True)
+        U_odo = U_true.copy()
+        drift = np.deg2rad(0.1)
+        events = [int(t) for t in turns]
     else:
-        U_true = _drive(n_frames, step, rng, area, sharp=kind == "sharp_turns")
+        U_true = np.c_[_drive(n_frames, step, rng, area, sharp=kind == "sharp_turns"), np.zeros(n_frames - 1)]
         U_odo = U_true.copy()
         if kind == "kidnap":
             k = n_frames // 2  # step k (frame k to k + 1): carried, the odometry shows nothing
@@ -109,7 +126,8 @@ def make_filter_case(kind: str, *, random_state: int = 0, n_frames: int = 240, s
     Un[:, 0] *= 1 + distance_noise * rng.normal(size=len(Un))
     Un[:, 1] += heading_noise * rng.normal(size=len(Un)) + drift * np.abs(U_odo[:, 0])
     odometry = dead_reckon(Un, (0.0, 0.0, 0.0))
-    start = (area / 2, area / 2, float(rng.uniform(-np.pi, np.pi))) if kind != "raster" else (1.0, 1.0, 0.0)
+    start = ((area / 2, area / 2, float(rng.uniform(-np.pi, np.pi))) if kind not in ("raster", "serpentine")
+             else (1.0, 1.0, 0.0))
     if kind == "kidnap":
         k = events[0] - 1
         before = dead_reckon(U_true[:k], start)  # frames 0..k

@@ -33,39 +33,66 @@ def as_poses(odometry: Any, name: str = "odometry", *, min_rows: int = 2) -> np.
     return P
 
 
-def increments(odometry: Any) -> np.ndarray:
+def increments(odometry: Any, *, direction: bool = False) -> np.ndarray:
     """Motion increments between consecutive odometry poses.
 
     Parameters
     ----------
     odometry : array of shape (N, 3)
         Poses ``(x, y, theta)``: metres, metres, radians; N >= 2.
+    direction : bool, default False
+        Also return the third column ``beta``: the angle (radians, in
+        [-pi/2, pi/2]) from the arc's chord (the mid-step heading, reversed
+        when reversing) to the odometry's displacement. It is 0 when the
+        robot drove a circular arc; a robot that turns on the spot and then
+        drives (a lane change between sparse frames) has ``beta = dtheta /
+        2``. With it, :func:`dead_reckon` and :class:`sfanav.odometry.OdometryEKF`
+        reproduce the odometry's displacements exactly, whatever the robot
+        did between two frames.
 
     Returns
     -------
-    ndarray of shape (N - 1, 2)
-        ``(d, dtheta)`` per step: signed arc length in metres (negative when
-        the displacement points against the mid-step heading, i.e. reversing)
-        and the heading change in radians, wrapped to (-pi, pi]. A lateral
-        component of the displacement (sliding sideways) is folded into the
-        length of the chord.
+    ndarray of shape (N - 1, 2), or (N - 1, 3) with ``direction``
+        ``(d, dtheta[, beta])`` per step: signed arc length in metres
+        (negative when the displacement points against the mid-step heading,
+        i.e. reversing) and the heading change in radians, wrapped to (-pi,
+        pi]. Without ``direction`` a lateral component of the displacement
+        (sliding sideways, a turn before driving) is folded into the length
+        of the chord and its direction is lost.
+
+    Example
+    -------
+    >>> P = np.array([[0.0, 0.0, 0.0], [0.0, 2.0, np.pi / 2]])  # turn on the spot, drive 2 m
+    >>> np.round(increments(P, direction=True), 3).tolist()
+    [[2.221, 1.571, 0.785]]
+    >>> np.round(dead_reckon(increments(P, direction=True))[-1], 6).tolist()
+    [0.0, 2.0, 1.570796]
     """
     P = as_poses(odometry)
     dxy = np.diff(P[:, :2], axis=0)
     dth = wrap_angle(np.diff(P[:, 2]))
     mid = P[:-1, 2] + 0.5 * dth
     chord = np.hypot(dxy[:, 0], dxy[:, 1])
-    sign = np.where(dxy[:, 0] * np.cos(mid) + dxy[:, 1] * np.sin(mid) < 0, -1.0, 1.0)
-    return np.c_[sign * chord / arc_factor(dth), dth]
+    back = dxy[:, 0] * np.cos(mid) + dxy[:, 1] * np.sin(mid) < 0
+    sign = np.where(back, -1.0, 1.0)
+    U = np.c_[sign * chord / arc_factor(dth), dth]
+    if not direction:
+        return U
+    heading = np.arctan2(dxy[:, 1], dxy[:, 0]) + np.where(back, np.pi, 0.0)
+    beta = np.where(chord > 0, wrap_angle(heading - mid), 0.0)
+    return np.c_[U, beta]
 
 
 def dead_reckon(steps: Any, start_pose: Any = (0.0, 0.0, 0.0)) -> np.ndarray:
-    """Integrates motion increments from a start pose (arc model).
+    """Integrates motion increments from a start pose (arc model; with a
+    third column ``beta`` each displacement turned by it off the arc's chord,
+    which reproduces the odometry exactly).
 
     Parameters
     ----------
-    steps : array of shape (N - 1, 2)
-        ``(d, dtheta)`` per step, metres and radians (see :func:`increments`).
+    steps : array of shape (N - 1, 2) or (N - 1, 3)
+        ``(d, dtheta[, beta])`` per step, metres and radians (see
+        :func:`increments`).
     start_pose : array of shape (3,)
         ``(x, y, theta)`` of the first frame, metres and radians.
 
@@ -74,13 +101,15 @@ def dead_reckon(steps: Any, start_pose: Any = (0.0, 0.0, 0.0)) -> np.ndarray:
     ndarray of shape (N, 3)
         Poses ``(x, y, theta)``; headings are not wrapped (they accumulate).
     """
-    U = as_matrix(steps, "steps", n_cols=2, min_rows=0)
+    U = as_matrix(steps, "steps", min_rows=0)
+    if U.shape[1] not in (2, 3):
+        raise ValueError(f"steps must have shape (N - 1, 2) or (N - 1, 3) (d, dtheta[, beta]), got shape {U.shape}")
     s0 = as_real_array(start_pose, "start_pose").astype(np.float64).ravel()
     if s0.shape != (3,):
         raise ValueError(f"start_pose must be (x [m], y [m], heading [rad]), got shape {s0.shape}")
     check_finite(s0, "start_pose")
     theta = s0[2] + np.concatenate([[0.0], np.cumsum(U[:, 1])])
-    mid = theta[:-1] + 0.5 * U[:, 1]
+    mid = theta[:-1] + 0.5 * U[:, 1] + (U[:, 2] if U.shape[1] == 3 else 0.0)
     chord = U[:, 0] * arc_factor(U[:, 1])
     xy = np.cumsum(np.c_[chord * np.cos(mid), chord * np.sin(mid)], axis=0)
     out = np.empty((len(U) + 1, 3))

@@ -14,7 +14,16 @@ rate ``dtheta_k / dt`` over the step (``dt`` cancels)::
     theta' = theta + dtheta
 
 which is the CTRV update ``x + v / w (sin(theta + w dt) - sin theta)``, ...
-written without the division by the turn rate. Process noise enters
+written without the division by the turn rate. Beyond the thesis, the
+displacement keeps the direction the odometry measured: the increment's
+third component ``beta`` (:func:`sfanav.odometry.increments` with
+``direction=True``) turns it off the arc's chord, ``theta + dtheta / 2 +
+beta`` in place of ``theta + dtheta / 2``. On dense frames ``beta`` is
+about 0 and the model is the thesis's; between sparse frames where the
+robot turned on the spot and then drove (a mower's lane change) the arc
+puts the robot up to ``d sin(dtheta / 2)`` off (1.4 m after a 2 m step with
+a quarter turn) and the filter lost the track at every row end. Process
+noise enters
 through the odometry: ``Q = V diag(sigma_d^2, sigma_theta^2) V^T``, ``V`` the
 Jacobian of the motion with respect to ``u``, plus ``process_floor`` on the
 diagonal.
@@ -73,12 +82,21 @@ from .dead_reckoning import arc_factor, as_poses, dead_reckon, increments, wrap_
 from .recovery import FilterEvent, pose_from_window, step_anomalies
 
 
+def _direction(pose: np.ndarray, u: np.ndarray) -> float:
+    """The displacement's direction (rad): the mid-step heading, turned by
+    the increment's ``beta`` when it has one."""
+    return float(pose[2] + 0.5 * float(u[1]) + (float(u[2]) if len(u) > 2 else 0.0))
+
+
 def ctrv_motion(pose: np.ndarray, u: np.ndarray) -> np.ndarray:
     """One CTRV step: pose (3,) ``(x [m], y [m], theta [rad])`` moved by the
-    increment u (2,) ``(d [m], dtheta [rad])``."""
+    increment u (2,) ``(d [m], dtheta [rad])`` or (3,) ``(d, dtheta, beta)``
+    (:func:`sfanav.odometry.increments` with ``direction=True``: the
+    displacement turned by ``beta`` off the arc's chord, as the odometry
+    measured it)."""
     d, dth = float(u[0]), float(u[1])
     k = float(arc_factor(dth))
-    h = pose[2] + 0.5 * dth
+    h = _direction(pose, u)
     return np.array([pose[0] + d * k * np.cos(h), pose[1] + d * k * np.sin(h), pose[2] + dth])
 
 
@@ -92,10 +110,11 @@ def _dsinc_half(dth: float) -> float:
 
 def ctrv_jacobians(pose: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Jacobians of :func:`ctrv_motion`: F (3, 3) with respect to the pose and
-    V (3, 2) with respect to the increment."""
+    V (3, 2) with respect to the increment's ``(d, dtheta)`` (``beta`` held:
+    the odometry's noise is in distance and turn)."""
     d, dth = float(u[0]), float(u[1])
     k = float(arc_factor(dth))
-    h = pose[2] + 0.5 * dth
+    h = _direction(pose, u)
     c, s = np.cos(h), np.sin(h)
     F = np.array([[1.0, 0.0, -d * k * s], [0.0, 1.0, d * k * c], [0.0, 0.0, 1.0]])
     dk = _dsinc_half(dth)
@@ -407,7 +426,7 @@ class OdometryEKF:
         check_finite(s0, "start_pose")
         sd, sh, sr, st, *_ = self._check()
         self._check_recovery(sr)
-        U = increments(P) if len(P) > 1 else np.zeros((0, 2))
+        U = increments(P, direction=True) if len(P) > 1 else np.zeros((0, 3))
         turn_var = sh**2 + st**2 * np.abs(U[:, 1])
         if gyro is not None:
             from .gyro import as_gyro, fuse_turns
@@ -417,7 +436,7 @@ class OdometryEKF:
                                               gyro_noise)
         if stamps is not None and len(np.ravel(np.asarray(stamps))) != len(P):
             raise ValueError(f"stamps must have one time per frame ({len(P)}), got {len(np.ravel(np.asarray(stamps)))}")
-        scale, jump = step_anomalies(U, stamps, gap_factor=self.gap_factor, jump_factor=self.jump_factor)
+        scale, jump = step_anomalies(U[:, :2], stamps, gap_factor=self.gap_factor, jump_factor=self.jump_factor)
         self.start(s0)
         N = len(P)
         poses = np.empty((N, 3))
@@ -499,7 +518,7 @@ class OdometryEKF:
         lv = self._live
         u, tv = None, 0.0
         if lv["last"] is not None:
-            u = increments(np.stack([lv["last"], p]))[0]
+            u = increments(np.stack([lv["last"], p]), direction=True)[0]
             tv = lv["sh"] ** 2 + lv["st"] ** 2 * abs(float(u[1]))
         return self._advance(p, z, u, tv, sc, bool(jump))
 
@@ -589,7 +608,7 @@ class OdometryEKF:
     def dead_reckoning(odometry: Any, start_pose: Any) -> np.ndarray:
         """Odometry alone re-anchored at the start pose: (N, 3) poses (what the
         filter predicts without measurements)."""
-        return dead_reckon(increments(as_poses(odometry)), start_pose)
+        return dead_reckon(increments(as_poses(odometry), direction=True), start_pose)
 
 
 @dataclass
