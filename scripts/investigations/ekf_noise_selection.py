@@ -73,7 +73,7 @@ def main() -> None:
         n = len(X)
         block = max(1, min(20, n // 10))
         held = cross_val_predict(loc.readout_spec_, feats, loc.training_positions_, n_folds=5, block=block)
-        rules = {"current": loc.info["ekf_noise"],
+        rules = {"current": noise_from_run(tr.odometry, held, reference=loc.training_positions_),  # the library's rule
                  "floor": noise_from_run(tr.odometry, held, reference=loc.training_positions_, **FLOOR),
                  "nll": noise_from_run(tr.odometry, held)}
         for t in tests:
