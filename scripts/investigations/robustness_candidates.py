@@ -27,7 +27,11 @@ Candidates (all the sfanav default's network, rows, pooling, signature and reado
 * lowpass-S-flat(-0.25): the same, then a quadratic profile over the rows of the rows' means removed
   per channel (in the log domain: a vignetting is a smooth offset per row); -0.5, -1: invariance weights;
 * lowpass-2-flat-o2-0.25: with 2 grey levels added before the log instead of 8 (gamma is exact in the
-  log domain without the offset; the low-pass already damps the dark pixels' noise).
+  log domain without the offset; the low-pass already damps the dark pixels' noise);
+* logfirst-2-oK-0.25: the logarithm (offset K grey levels) before the 2 px low-pass, then the flat field and
+  contrast, with standard's partners: the low-pass before the log does not commute with a gamma, after it
+  the gamma is a scale of the log the contrast step removes (measured with --extra, which adds gamma 0.7
+  and exposure 0.6).
 
     for p in suite-inner suite-control suite-dense-trees; do sfanav simulate --preset $p --seed 1 --out runs/cand/$p; done
     sfanav simulate --preset demo --out runs/cand/demo
@@ -54,6 +58,8 @@ GARDENS = {"suite-inner": ("train-grid", "test-walk"), "demo": ("train", "test")
            "suite-control": ("train-grid", "test-walk"), "suite-dense-trees": ("train-grid", "test-walk")}
 CORRUPTIONS = ["jpeg-90", "jpeg-50", "noise-10", "defocus-1", "defocus-2", "motion-blur", "exposure-1.5",
                "gamma-1.4", "white-balance", "vignetting", "dead-pixels"]
+EXTRA_CORRUPTIONS = ["gamma-0.7", "exposure-0.6"]
+"""Measured from 2026-12-06 (--extra): the gamma below 1 and the underexposure the first runs did not have."""
 JPEG_ONLY = CorruptionModel({"jpeg": {"kind": "jpeg", "quality": (50, 95)}})
 
 
@@ -72,15 +78,18 @@ def _lowpass_normalize(images, kind):
     from scipy.ndimage import gaussian_filter
 
     from sfanav.data.photometric import log_contrast, normalize
-    if kind is None or not kind.startswith("lowpass-"):
+    if kind is None or not kind.startswith(("lowpass-", "logfirst-")):
         return normalize(images, kind)
     parts = kind.split("-")
     sigma = float(parts[1])
-    flat = "flat" in parts
+    log_first = parts[0] == "logfirst"
+    flat = "flat" in parts or log_first
     offset = next((float(p[1:]) for p in parts if p.startswith("o")), 8.0)
     a = np.asarray(images, np.float32)
     single = a.ndim in (2, 3) and not (a.ndim == 3 and a.shape[-1] > 4)
     b = a[None] if single else a
+    if log_first:  # the logarithm before the low-pass: a gamma is then a scale the contrast step removes
+        b = np.log(np.maximum(b, 0.0) + np.float32(offset))
     sig = (sigma, sigma, 0.0)[:b.ndim - 1]
     modes = ("nearest", "wrap", "nearest")[:b.ndim - 1]
     out = np.stack([gaussian_filter(im, sig, mode=modes) for im in b])
@@ -89,7 +98,7 @@ def _lowpass_normalize(images, kind):
         t = np.linspace(-1.0, 1.0, h)
         V = np.stack([np.ones(h), t, t * t], axis=1)
         P = V @ np.linalg.pinv(V)  # projector onto the quadratic profiles
-        v = np.log(np.maximum(out, 0.0) + offset)
+        v = out if log_first else np.log(np.maximum(out, 0.0) + offset)
         prof = np.einsum("ij,nj...->ni...", P, v.mean(axis=2)).astype(np.float32)
         v = v - prof[:, :, None]
         sd = v.reshape(len(v), -1).std(axis=1).reshape((-1,) + (1,) * (v.ndim - 1))
@@ -101,7 +110,9 @@ def _lowpass_normalize(images, kind):
 
 localizer_module.photometric_normalize = _lowpass_normalize
 LOWPASS = ("0.7", "1", "1.5", "2", "1-flat", "2-flat", "2-flat-o2")
-localizer_module.PHOTOMETRIC = (*localizer_module.PHOTOMETRIC, *(f"lowpass-{s}" for s in LOWPASS))
+LOGFIRST = ("2-o2", "2-o8")
+localizer_module.PHOTOMETRIC = (*localizer_module.PHOTOMETRIC, *(f"lowpass-{s}" for s in LOWPASS),
+                                *(f"logfirst-{s}" for s in LOGFIRST))
 
 CANDIDATES = {
     "none": ({"robustness": "none"}, None),
@@ -119,6 +130,7 @@ CANDIDATES = {
     **{f"lowpass-{s}": ({"robustness": "light", "photometric": f"lowpass-{s}"}, None) for s in LOWPASS},
     **{f"lowpass-{s}-0.25": ({"robustness": "standard", "photometric": f"lowpass-{s}"}, None)
        for s in LOWPASS},
+    **{f"logfirst-{s}-0.25": ({"robustness": "standard", "photometric": f"logfirst-{s}"}, None) for s in LOGFIRST},
     "lowpass-2-flat-0.5": ({"robustness": "full", "invariance_weight": 0.5, "photometric": "lowpass-2-flat"}, None),
     "lowpass-2-flat-1": ({"robustness": "full", "photometric": "lowpass-2-flat"}, None),
 }
@@ -170,6 +182,7 @@ def main():
     ap.add_argument("--gardens", default=",".join(GARDENS))
     ap.add_argument("--json")
     ap.add_argument("--markdown", action="store_true", help="print the docs' table from --json and stop")
+    ap.add_argument("--extra", action="store_true", help="also the corruptions of EXTRA_CORRUPTIONS")
     a = ap.parse_args()
     out = json.loads(Path(a.json).read_text()) if a.json and Path(a.json).exists() else {}
     if a.markdown:
@@ -185,7 +198,8 @@ def main():
         T0, xyt = load_run(ds.select(run=te), native, log=lambda m: None)
         conform = Preprocessor(prep, log=lambda *m, **k: None)
         X = conform(X0)
-        tests = {"clean": conform(T0), **{c: conform(corrupt(T0, c, seed=1)) for c in CORRUPTIONS}}
+        tests = {"clean": conform(T0), **{c: conform(corrupt(T0, c, seed=1))
+                                          for c in CORRUPTIONS + (EXTRA_CORRUPTIONS if a.extra else [])}}
         elev = tuple(cam["elevation_deg"])
         for name in a.candidates.split(","):
             t0 = time.perf_counter()
