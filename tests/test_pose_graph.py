@@ -197,3 +197,31 @@ def test_refinement_is_refused_when_the_readout_contradicts_the_odometry(synthet
                                                readout={"kind": "gp", "n_outputs": 2}, offset_sigma=given, **kw)
         assert kept == 2 and chi <= 2.0 and np.isfinite(sigma)
         assert med(P, truth[:, :2]) < 0.05
+
+
+def test_refinement_may_reshape_the_map_but_not_squeeze_it():
+    # a serpentine whose odometry's distances err by 5 % per step (no drift): the refinement's readout offsets
+    # correct them where the readout is exact (a quadratic map of a position code), but a readout that smooths
+    # across neighbouring lanes shrinks their offsets and would squeeze the map across the lanes: the rounds
+    # are refused by the area test (the size test before, the RMS radius against the last round, let it pass)
+    from sfanav.odometry import dead_reckon, increments
+    from sfanav.odometry.pose_graph import PlacePairs, refine_positions
+
+    truth = serpentine(n_lanes=12, per_lane=40, length=16.0)
+    rng = np.random.default_rng(0)
+    U = increments(truth, direction=True)
+    U[:, 0] *= 1 + 0.05 * rng.normal(size=len(U))
+    odo = dead_reckon(U, truth[0])
+    features = truth[:, :2] / 3.0
+    g = fit_pose_graph(rotating_panoramas(truth[:, 2]), features, odo, refine=0)
+    pairs = PlacePairs(g.pairs.current, g.pairs.past, g.pairs.distance)
+    kw = {"noise": {"distance_sigma": 0.05, "heading_sigma": 0.004, "turn_sigma": 0.01}, "rounds": 2,
+          "heading_sigma": np.radians(1.0), "offset_sigma": None}
+    before = med(g.poses[:, :2], truth[:, :2])
+    P, kept, _, _ = refine_positions(features, odo, g.poses[:, 2], g.poses[:, :2], pairs,
+                                     readout={"kind": "quadratic", "n_outputs": 2, "ridge": 0.0}, **kw)
+    assert kept == 2 and med(P, truth[:, :2]) < 0.8 * before
+    smooth = {"kind": "kernel", "n_outputs": 2, "gamma": 1.0, "alpha": 1.0}
+    P, kept, _, _ = refine_positions(features, odo, g.poses[:, 2], g.poses[:, :2], pairs, readout=smooth, **kw)
+    assert kept == 0
+    np.testing.assert_array_equal(P, g.poses[:, :2])

@@ -5,7 +5,8 @@
 learned training positions' median error against the truth (after a rigid
 fit; evaluation only) without refinement, with the offsets' standard
 deviation fixed at 0.05 m (the rule until 2026-12-02), estimated (the
-default), and estimated with a third round. Writes ``OUT/pose-graph-refinement.json``.
+default), estimated with a third round, and estimated with the size test
+before 2026-12-06 (the RMS radius instead of the area). Writes ``OUT/pose-graph-refinement.json``.
 
     PYTHONPATH=python python3 scripts/investigations/pose_graph_refinement.py OUT [--runs open obstacle garden0 garden1 garden2]
 """
@@ -19,10 +20,20 @@ from pathlib import Path
 
 import numpy as np
 from sfanav.localization.error_metrics import align
+import sfanav.odometry.pose_graph as pg
 from sfanav.odometry import fit_pose_graph
 
 VARIANTS = {"no refinement": {"refine": 0}, "offset sigma 0.05 m": {"offset_sigma": 0.05},
-            "estimated (default)": {}, "estimated, 3 rounds": {"refine": 3}}
+            "estimated (default)": {}, "estimated, 3 rounds": {"refine": 3},
+            "estimated, size by RMS radius": {}}
+RADIUS = "estimated, size by RMS radius"
+"""The size test until 2026-12-06 (the refined map's RMS distance from its centroid against the unrefined
+map's) in place of the area test, patched in for the comparison."""
+
+
+def radius_ratio(new: np.ndarray, old: np.ndarray) -> float:
+    a, b = new - new.mean(axis=0), old - old.mean(axis=0)
+    return float(np.sqrt((a * a).sum() / max((b * b).sum(), 1e-300)))
 
 
 def median_error(P: np.ndarray, T: np.ndarray) -> float:
@@ -57,6 +68,7 @@ def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("out")
     ap.add_argument("--runs", nargs="*", default=["open", "obstacle", "garden0", "garden1", "garden2"])
+    ap.add_argument("--variants", nargs="*", default=list(VARIANTS))
     a = ap.parse_args()
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -64,9 +76,16 @@ def main() -> None:
     for run in a.runs:
         imgs, F, odo, truth = garden_run(int(run[6:]), out) if run.startswith("garden") else nav_run(run, out)
         res[run] = {"frames": len(F)}
-        for name, kw in VARIANTS.items():
+        for name in a.variants:
+            kw = VARIANTS[name]
             t0 = time.perf_counter()
-            g = fit_pose_graph(imgs, F, odo, **kw)
+            area = pg._area
+            if name == RADIUS:
+                pg._area = radius_ratio
+            try:
+                g = fit_pose_graph(imgs, F, odo, **kw)
+            finally:
+                pg._area = area
             res[run][name] = {"training positions median error (m)": median_error(g.poses[:, :2], truth),
                               **g.info(), "seconds": time.perf_counter() - t0}
             print(f"{run} {name}: {res[run][name]['training positions median error (m)']:.4f} m, "
