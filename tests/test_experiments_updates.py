@@ -1,5 +1,5 @@
-"""The online-update experiments (6.2.2-online, 6.2.2-seasons-online) as
-quick smoke runs: rows present and finite (or flagged), the first model
+"""The online-update experiments (6.2.2-online, 6.2.2-seasons-online,
+6.2.1-changes-online) as quick smoke runs: rows present and finite (or flagged), the first model
 identical to the batch one, the last updated model within a generous
 factor of the batch place-major training; bad arguments refused."""
 
@@ -34,7 +34,7 @@ def _rows(result, out):
 
 
 def test_registered():
-    assert {"6.2.2-online", "6.2.2-seasons-online"} <= set(experiments.names())
+    assert {"6.2.2-online", "6.2.2-seasons-online", "6.2.1-changes-online"} <= set(experiments.names())
 
 
 def test_622_online_quick(out):
@@ -65,6 +65,31 @@ def test_622_seasons_online_quick(out):
     assert res.details["batch"].details["permutations"]["sfanav default"] == [list(range(10))]
     upd = np.asarray(res.details["curves"]["updated"])
     assert upd.shape == (1, 3) and np.isfinite(upd).all()
+
+
+def test_621_changes_online_quick(out):
+    from sfanav.experiments.updates import CHANGES_LABELS
+
+    res = experiments.run("6.2.1-changes-online", out, quick=True, progress=False)
+    rows = _rows(res, out)
+    expected = [f"MED (m) on the test walk [{label}]" for label in CHANGES_LABELS]
+    for tag in ("", " [updated, every layer]"):
+        expected += [f"update time / retrain time{tag}", f"updated / stale MED{tag}", f"updated / retrained MED{tag}"]
+    expected.append("stale / retrained MED")
+    assert [r["metric"] for r in res.rows] == expected
+    med = res.details["med"]
+    assert set(med) == set(CHANGES_LABELS) and all(math.isfinite(v) and v > 0 for v in med.values())
+    assert rows["update time / retrain time"]["sfanav"] > 0
+    ratio = rows["updated / retrained MED"]["sfanav"]
+    assert ratio is None or ratio == pytest.approx(med["updated"] / med["retrained"])
+    # the updates made new models: the stale one is the model trained on A
+    models = res.details["models"]
+    assert models["updated"] is not models["stale"] and models["stale"].readout_memory_ is not None
+    assert models["updated"].info["updates"][-1]["n_images"] == len(res.details["dataset"].select(run="B")) // 4
+    # perfect memory of A + B stores B's views of the changed garden as well
+    assert len(models["perfect memory A + B"].xy_) > len(models["perfect memory A"].xy_)
+    assert [r["change"] for r in res.details["changes"]].count("added") == 5
+    assert "garden-changes" in res.notes and res.plots[0].endswith("6.2.1-changes-online-med.png")
 
 
 def test_bad_arguments(out):

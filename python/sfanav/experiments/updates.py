@@ -20,6 +20,13 @@ default policy) and every layer trained again on the remembered images
 (``[updated, every layer]``, ``UpdatePolicy(resolve="all")`` with a readout
 memory that keeps the images).
 
+``6.2.1-changes-online``: a garden whose objects change between runs (sim
+preset ``garden-changes``): the sfanav default trained on run A (the stale
+model), updated with run B, a second exploration after objects were moved,
+removed and added (both policies), beside a retrain on A + B and perfect
+memory of A and of A + B; all tested on a walk in the changed garden
+(:func:`run_changes`).
+
 Rows: ``MED (m) after k recordings [updated]`` / ``[updated, every layer]`` /
 ``[batch place-major]`` / ``[perfect memory]`` (mean over permutations), the same on the held-out
 last recording, and ``update time / retrain time after k recordings``.
@@ -34,13 +41,17 @@ from typing import Any
 
 import numpy as np
 
+from .. import sim
 from ..data.sources import load_run
+from ..localization import baselines
 from ..localization.error_metrics import localization_metrics
 from ..localization.updates import MAX_VIEWS, LocalizerUpdater, remember
+from ..pipeline import train_localizer
+from ..sfa.network import Rotation
 from ..sfa.updates import UpdatePolicy
 from . import ExperimentResult, register
 from .flags import area_diagonal, flag_row
-from .localization import progress_log
+from .localization import progress_log, simulated
 from .robustness import long_term_configuration, run_622, train_long_term
 
 CONFIG = "sfanav default"
@@ -197,3 +208,133 @@ def exp_622_online(out: Path, *, quick: bool, seed: int, progress: bool) -> Expe
 def exp_622_seasons_online(out: Path, *, quick: bool, seed: int, progress: bool) -> ExperimentResult:
     return run_online(out, quick=quick, seed=seed, progress=progress, preset="thesis-6.2.2-seasons",
                       chronological=True)
+
+
+# ----------------------------------------------------------------------------------- 6.2.1-changes-online
+CHANGES_PRESET = "garden-changes"
+"""The scene of ``6.2.1-changes-online``: runs A, B (after the garden changed) and a test walk after B."""
+CHANGES_QUICK_FRAMES = 600
+"""Quick mode: the first frames of every run (most of A's and B's lanes), of which every
+:data:`CHANGES_QUICK_STEP`-th is used."""
+CHANGES_QUICK_STEP = 4
+CHANGES_LABELS = ("stale", "updated", LABEL_ALL, "retrained", "perfect memory A", "perfect memory A + B")
+"""The models of ``6.2.1-changes-online``, as the rows name them."""
+
+
+def _fit_changes(make_net: Any, X: np.ndarray, xy: np.ndarray, recipe: Any, elev: tuple[float, float],
+                 memory: int | None = None) -> tuple[Any, float]:
+    """6.2.1's training of a configuration on images X (N, H, W[, C]) at
+    positions xy (N, 2) m: simulated rotation (5 px, whole panorama), the
+    recipe's pooling. ``memory``: keep that many views, with their images,
+    for updates of either policy. Returns (localizer, seconds)."""
+    t0 = time.perf_counter()
+    loc = train_localizer(X, xy=xy, network=make_net(), recipe=recipe, camera_elevation=elev, rotation=Rotation(5, 1.0),
+                          readout_memory=memory, readout_memory_images=memory is not None)
+    return loc, time.perf_counter() - t0
+
+
+def run_changes(out: Path, *, quick: bool, seed: int, progress: bool,
+                readout_memory: int = MAX_VIEWS) -> ExperimentResult:
+    """A garden whose objects change between runs (``garden-changes``):
+    the sfanav default trained on run A (``stale``), updated with run B
+    after the change by the top-stage policy (``updated``) and by
+    ``UpdatePolicy(resolve="all")`` (``updated, every layer``), retrained
+    from scratch on A + B (``retrained``), and perfect memory of A and of
+    A + B; MED (m) of each on the test walk in the changed garden, the
+    updates' time against the retrain's. ``readout_memory``: views the
+    stale model keeps (the default holds all of A and B). Quick: the tiny
+    network on 60x8 panoramas, every :data:`CHANGES_QUICK_STEP`-th of the
+    first :data:`CHANGES_QUICK_FRAMES` frames of every run."""
+    name = "6.2.1-changes-online"
+    log = progress_log(progress)
+    if quick:
+        ds = simulated(out, CHANGES_PRESET, seed, quick=True, camera=sim.PanoramicCamera(60, 8),
+                       max_frames=CHANGES_QUICK_FRAMES, progress=progress)
+    else:
+        ds = simulated(out, CHANGES_PRESET, seed, quick=False, progress=progress)
+    make_net, prep, recipe = long_term_configuration(CONFIG, quick)
+    run_a, run_b, test = (load_run(ds.select(run=r), prep, log=log) for r in ("A", "B", "test"))
+    if quick:
+        run_a, run_b, test = ((X[::CHANGES_QUICK_STEP], xy[::CHANGES_QUICK_STEP]) for X, xy in (run_a, run_b, test))
+    both = (np.concatenate([run_a[0], run_b[0]]), np.concatenate([run_a[1], run_b[1]]))
+    elev = tuple(ds.metadata["camera"].get("elevation_deg", (-30.0, 20.0)))
+    models: dict[str, Any] = {}
+    med: dict[str, float] = {}
+    ext: dict[str, int] = {}
+    secs: dict[str, float] = {}
+    models["stale"], secs["stale"] = _fit_changes(make_net, *run_a, recipe, elev, memory=readout_memory)
+    log(f"{name}: stale model trained on A ({len(run_a[1])} frames) in {secs['stale']:.1f} s")
+    for resolve, label in zip(RESOLVES, ("updated", LABEL_ALL)):
+        t0 = time.perf_counter()
+        models[label] = LocalizerUpdater(models["stale"], UpdatePolicy(resolve=resolve)).partial_fit(*run_b).localizer_
+        secs[label] = time.perf_counter() - t0
+        log(f"{name}: updated with B ({len(run_b[1])} frames, resolve {resolve}) in {secs[label]:.1f} s")
+    models["retrained"], secs["retrained"] = _fit_changes(make_net, *both, recipe, elev)
+    log(f"{name}: retrained on A + B in {secs['retrained']:.1f} s")
+    for label in CHANGES_LABELS[:4]:
+        med[label], ext[label] = _med(models[label], *test)
+    for label, run in (("perfect memory A", run_a), ("perfect memory A + B", both)):
+        models[label] = baselines.PerfectMemory().fit(*run)
+        med[label], ext[label] = float(localization_metrics(models[label].predict(test[0]), test[1])["med"]), 0
+    log(f"{name}: MED (m) on the test walk " + ", ".join(f"{k} {v:.3f}" for k, v in med.items()))
+    diagonal = area_diagonal(run_a[1])
+    rows: list[dict[str, Any]] = [
+        flag_row({"metric": f"MED (m) on the test walk [{label}]", "thesis": None, "sfanav": med[label],
+                  "configuration": label}, extrapolated=ext[label], diagonal=diagonal) for label in CHANGES_LABELS]
+    shown = {r["configuration"]: r["sfanav"] for r in rows}  # None: withheld (flag_row)
+
+    def ratio(metric: str, a: str, b: str) -> dict[str, Any]:
+        if shown[a] is None or shown[b] is None:
+            return {"metric": metric, "thesis": None, "sfanav": None, "flag": "a MED it divides is withheld"}
+        return {"metric": metric, "thesis": None, "sfanav": med[a] / med[b]}
+
+    for label, tag in (("updated", ""), (LABEL_ALL, f" [{LABEL_ALL}]")):
+        rows += [{"metric": f"update time / retrain time{tag}", "thesis": None,
+                  "sfanav": secs[label] / secs["retrained"]},
+                 ratio(f"updated / stale MED{tag}", label, "stale"),
+                 ratio(f"updated / retrained MED{tag}", label, "retrained")]
+    rows.append(ratio("stale / retrained MED", "stale", "retrained"))
+    path = _plot_changes(out / f"{name}-med.png", name, shown)
+    changed = ds.metadata.get("gardens", {}).get("after", {}).get("objects", [])
+    what = "; ".join(f"{c} " + ", ".join(r["kind"] for r in changed if r["change"] == c)
+                     for c in ("moved", "removed", "added") if any(r["change"] == c for r in changed))
+    notes = (f"Scene: sim preset {CHANGES_PRESET} (seed {seed}): the 16x18 m garden of thesis-6.2.1-static; run A "
+             f"({len(run_a[1])} frames, grid with crossings), then the garden changed ({what or 'no record'}); run B "
+             f"({len(run_b[1])} frames, crossing grid, 2 m lanes) and the test walk ({len(test[1])} frames) in the "
+             f"changed garden. Models: the sfanav default ({'tiny network, 60x8' if quick else '350x40'}, 6.2.1's "
+             "training: simulated rotation 5 px, no robustness) trained on A with a readout memory of "
+             f"{readout_memory} views and their images (stale); updated with B at its ground-truth positions, the "
+             f"top stage re-solved and the readout refitted (updated), or every layer trained again on the "
+             f"remembered and the new images, each view of B paired with the nearest view of A ({LABEL_ALL}); "
+             "retrained from scratch on A then B as one sequence (retrained); perfect memory (rotational image "
+             "difference) of A and of A + B. Times: each update against the retrain, same process."
+             + (f" Quick: every {CHANGES_QUICK_STEP}th of the first {CHANGES_QUICK_FRAMES} frames of every run, "
+                "a smoke test, not a measurement." if quick else ""))
+    return ExperimentResult(name, rows, [str(path)], notes,
+                            details={"models": models, "med": med, "seconds": secs, "changes": changed,
+                                     "dataset": ds})
+
+
+def _plot_changes(path: Path, name: str, med: dict[str, float | None]) -> Path:
+    """A bar per model: MED (m), None for a withheld figure (no bar)."""
+    from .._plotting import figure, save_figure
+
+    fig = figure(7, 4)
+    ax = fig.add_subplot()
+    labels = list(med)
+    values = [med[k] for k in labels]
+    bars = ax.bar(range(len(labels)), [0.0 if v is None else v for v in values],
+                  color=["0.55", "C0", "C1", "C2", "C7", "C7"][: len(labels)])
+    for b, v in zip(bars, values):
+        ax.annotate("withheld" if v is None else f"{v:.2f}", (b.get_x() + b.get_width() / 2, b.get_height()),
+                    ha="center", va="bottom", fontsize=8)
+    ax.set_xticks(range(len(labels)), [k.replace(", ", ",\n").replace(" A", "\nA") for k in labels], fontsize=8)
+    ax.set_ylabel("MED on the test walk (m)")
+    ax.set_title(f"{name}: a garden changed between runs A and B")
+    return save_figure(fig, path, 120)
+
+
+@register("6.2.1-changes-online", "a garden whose objects change between runs: the sfanav default trained on run A, "
+          "updated with run B after the change, beside a retrain on A + B and perfect memory")
+def exp_621_changes_online(out: Path, *, quick: bool, seed: int, progress: bool) -> ExperimentResult:
+    return run_changes(out, quick=quick, seed=seed, progress=progress)

@@ -6,6 +6,8 @@
 * :class:`Lighting`, :class:`Season` (``conditions.py``): recording
   conditions, light and season; ``transient.py``: objects that come and go
   with the seasons (``World.generate(transient=...)``).
+* :class:`GardenChanges` (``changes.py``): a garden whose objects are
+  moved, removed or added between runs (``RunSpec(changes=...)``).
 * :class:`Robot`, :class:`OdometryNoise`, :func:`simulate_odometry`,
   :class:`GyroNoise`, :func:`simulate_gyro`, :class:`Simulator`
   (``robot.py``): kinematics, camera mounts, odometry, a yaw gyro,
@@ -27,6 +29,7 @@ from .cameras import (
     camera_from_dict,
     column_of_bearing,
 )
+from .changes import GardenChanges
 from .conditions import SEASONS, Lighting, Season, season_of_year
 from .presets import PRESETS, simulate
 from .render import Renderer
@@ -53,6 +56,7 @@ __all__ = [
     "Primitive",
     "DynamicCylinder",
     "MarkerOcclusion",
+    "GardenChanges",
     "Texture",
     "Lighting",
     "Season",

@@ -19,6 +19,7 @@ import numpy as np
 from . import surveys as S
 from . import trajectories as T
 from .cameras import OmniCamera, PanoramicCamera
+from .changes import GardenChanges, changed_gardens
 from .conditions import SEASONS, Lighting, Season, season_of_year
 from .render import Renderer
 from .robot import GyroNoise, OdometryNoise, Robot
@@ -44,14 +45,22 @@ class RunSpec:
     drawn from the preset seed's jitter stream); the dataset's poses and
     odometry are those of the jittered drive. None (default): every
     condition drives the exact trajectory.
+
+    ``changes``: the run sees a changed garden, objects moved, removed or
+    added (:class:`~sfanav.sim.changes.GardenChanges`; runs with changes of
+    the same name see the same garden). None (default): the generated world.
     """
 
     name: str
     trajectory: Callable[[World, np.random.Generator], T.Trajectory]
     conditions: dict[str, Lighting | LightFn] = field(default_factory=lambda: {"default": Lighting()})
     jitter: tuple[float, float] | None = None
+    changes: GardenChanges | None = None
 
     def __post_init__(self) -> None:
+        if self.changes is not None and not isinstance(self.changes, GardenChanges):
+            raise TypeError(f"run {self.name!r}: changes must be a GardenChanges or None, got "
+                            f"{type(self.changes).__name__}")
         if self.jitter is not None:
             try:
                 lat, head = (float(v) for v in self.jitter)
@@ -323,6 +332,26 @@ _add(Preset(
     lambda: OmniCamera(500),
     _garden_runs(lines=False),
     dynamic=True,
+))
+
+
+#: garden-changes: the garden after run A (run B and the test walk see it): 4 objects moved around the garden,
+#: 3 removed, 5 new ones beyond the area's border (sim.changes)
+GARDEN_CHANGES = GardenChanges("after", move=4, remove=3, add=("car", "trailer", "shed", "furniture", "parasol"))
+
+
+_add(Preset(
+    "garden-changes", "-",
+    "the 16x18 m garden of thesis-6.2.1-static (same seed, same world) whose objects change between runs: run A, "
+    "the grid exploration with crossings (~1780 frames); then 4 garden objects moved around the garden, 3 removed, "
+    "a car, a trailer, a shed, garden furniture and a parasol added beyond the area's border (garden 'after', "
+    "world-after.json); run B, a second exploration in the changed garden (crossing grid, 2 m lanes, ~1040 frames) "
+    "and the 1090-frame test walk there; 350x40 RGB panoramas",
+    _garden((16.0, 18.0), 30, markers=(136, 144)),
+    lambda: PanoramicCamera(350, 40),
+    lambda rng: [RunSpec("A", lambda w, r: T.grid(w.area, spacing=1.6, step=0.26)),
+                 RunSpec("B", lambda w, r: S.crossing(w.area, 2.0, 0.26), changes=GARDEN_CHANGES),
+                 RunSpec("test", lambda w, r: T.random_walk(w.area, 1090, rng=r, world=w), changes=GARDEN_CHANGES)],
 ))
 
 
@@ -686,8 +715,9 @@ def simulate(preset: str, out: str | os.PathLike, seed: int = 0, *, max_frames: 
         Directory of the dataset (must not exist or be empty, unless ``overwrite``).
     seed : int
         Seeds the world, the trajectories, the lighting conditions, the
-        odometry noise, the pose jitter and the uneven ground: same seed,
-        same dataset (the gyro noise of a robot with a gyro too).
+        odometry noise, the pose jitter, the uneven ground and the changed
+        gardens: same seed, same dataset (the gyro noise of a robot with a
+        gyro too).
     max_frames : int, optional
         Keep only the first frames of every run (quick looks, tests).
     camera : PanoramicCamera or OmniCamera, optional
@@ -706,7 +736,11 @@ def simulate(preset: str, out: str | os.PathLike, seed: int = 0, *, max_frames: 
         attitude per frame, :class:`~sfanav.sim.terrain.Attitude`) and
         records the ground's recipe in the metadata (``terrain``). A
         preset whose robot has a gyro (``mower-survey``) adds the column
-        ``gyro_heading`` (:attr:`~sfanav.Dataset.gyro`).
+        ``gyro_heading`` (:attr:`~sfanav.Dataset.gyro`). Runs that see a
+        changed garden (``RunSpec.changes``) name it in
+        ``metadata["runs"][run]["garden"]``; ``metadata["gardens"][name]``
+        holds its world file (``world-<name>.json``), the changes' spec and
+        one record per object changed (:meth:`GardenChanges.apply`).
     """
     from ..data.dataset import Dataset
     from ..data.writer import DatasetWriter
@@ -722,13 +756,15 @@ def simulate(preset: str, out: str | os.PathLike, seed: int = 0, *, max_frames: 
     cam = camera or p.camera()
     robot = p.robot()
     runs = p.runs(s_runs)
-    full = [r.trajectory(world, s_traj) for r in runs]  # jitter draws over the whole run, then it is cut
+    gardens = changed_gardens(world, runs, seed)  # each from its own stream: other draws are unchanged
+    worlds = [world if r.changes is None else gardens[r.changes.name][0] for r in runs]
+    full = [r.trajectory(wd, s_traj) for r, wd in zip(runs, worlds)]  # jitter draws over the whole run, then it is cut
     trajs = [tr if max_frames is None else tr[: int(max_frames)] for tr in full]
     s_jit = _jitter_stream(seed)
     if p.dynamic:
         world.add_dynamic({"period": float(max(trajs[0].times[-1], 1e-3)), "radius": 0.6, "height": 2.5},
                           seed=int(s_world.integers(2**31)))
-    renderer = Renderer(world)
+    renderers = {id(wd): Renderer(wd) for wd in {id(wd): wd for wd in worlds}.values()}
     heights = None if flat else preset_terrain(preset, seed)
     total = sum(len(t) * len(r.conditions) * len(robot.cameras) for t, r in zip(trajs, runs))
     attitude_cols = set(ATTITUDE_COLUMNS) if heights is not None else set()
@@ -747,6 +783,9 @@ def simulate(preset: str, out: str | os.PathLike, seed: int = 0, *, max_frames: 
         "world": "world.json",
         "runs": {},
     }
+    if gardens:
+        meta["gardens"] = {name: {"world": f"world-{name}.json", "changes": spec.to_dict(), "objects": records}
+                           for name, (_, records, spec) in gardens.items()}
     if heights is not None:
         meta["terrain"] = heights.ground.to_dict()
     bar = None
@@ -756,19 +795,23 @@ def simulate(preset: str, out: str | os.PathLike, seed: int = 0, *, max_frames: 
         bar = tqdm(total=total, desc=f"simulate {p.name}", unit="img")
     frame = 0
     with DatasetWriter(out, meta, overwrite=overwrite, extra_columns=extra_cols) as w:
-        for r, tr, whole in zip(runs, trajs, full):
+        for r, tr, whole, wd in zip(runs, trajs, full, worlds):
             info: dict[str, Any] = {"frames": len(tr), "conditions": {}}
+            if r.changes is not None:
+                info["garden"] = r.changes.name
             if r.jitter is not None:
                 info["jitter"] = {"lateral_m": r.jitter[0], "heading_deg": r.jitter[1]}
             for cond, light in r.conditions.items():
                 info["conditions"][cond] = light.to_dict() if isinstance(light, Lighting) else {
                     "changing": True, "start": light(0.0).to_dict(), "end": light(1.0).to_dict()}
                 drive = tr if r.jitter is None else T.jitter(whole, *r.jitter, rng=s_jit)[: len(tr)]
-                frame = _record(w, renderer, robot, cam, drive, run=r.name, condition=cond, lighting=light,
+                frame = _record(w, renderers[id(wd)], robot, cam, drive, run=r.name, condition=cond, lighting=light,
                                 frame0=frame, rng=s_odo, bar=bar, heights=heights, gyro_rng=s_gyro)
             meta["runs"][r.name] = info
         w.metadata.update(meta)
         world.save(Path(out) / "world.json")
+        for name, (changed, _, _) in gardens.items():
+            changed.save(Path(out) / f"world-{name}.json")
     if bar is not None:
         bar.close()
     return Dataset(out)
