@@ -21,6 +21,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from .._checks import NotFittedError, as_matrix, check_same_length
+from .._threads import one_blas_thread
 from .quadratic import QuadraticRegression
 from .signature_readout import SignatureGPReadout
 
@@ -332,7 +333,7 @@ class GPReadout(_KernelMachine):
         kernel = (ConstantKernel(1.0, (1e-3, 1e3)) * RBF(np.ones(d), (1e-2, 1e3))
                   + WhiteKernel(1e-2, (1e-8, 1e1)))
         keep = self._even(len(Xs), self.max_fit)
-        with warnings.catch_warnings():
+        with warnings.catch_warnings(), one_blas_thread():  # many factorisations: threads thrash when busy
             warnings.simplefilter("ignore", ConvergenceWarning)  # a length scale at its bound: feature unused
             gp = GaussianProcessRegressor(kernel, normalize_y=True, random_state=0).fit(Xs[keep], Y[keep])
         k = gp.kernel_

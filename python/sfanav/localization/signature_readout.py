@@ -30,6 +30,7 @@ import numpy as np
 
 from .._checks import NotFittedError, as_matrix, check_int, check_same_length
 from .._resources import get_num_threads
+from .._threads import one_blas_thread
 
 try:  # loaded before any threadpool limit (see readouts.py)
     from scipy.linalg import cho_factor, cho_solve
@@ -197,8 +198,9 @@ class SignatureGPReadout:
         # one start: slow features at a few standard deviations, the signature's scale of the order of
         # 100 median distances and little noise, where the optima on the gardens suite lie (docs/gardens-suite.md)
         theta0 = np.r_[np.full(m, np.log(3.0 * max(1.0, np.sqrt(m / 4)))), np.log(100.0), np.log(1e-4)]
-        best = minimize(self._neg_lml, theta0, args=(S, Dg, Y), jac=True, method="L-BFGS-B", bounds=bounds,
-                        options={"maxiter": 200})
+        with one_blas_thread():  # ~100 factorisations of an 800x800 matrix: threads thrash on a busy machine
+            best = minimize(self._neg_lml, theta0, args=(S, Dg, Y), jac=True, method="L-BFGS-B", bounds=bounds,
+                            options={"maxiter": 200})
         th = best.x
         return np.exp(th[:m]), float(np.exp(th[m])), float(np.exp(th[m + 1])), float(-best.fun)
 
