@@ -60,7 +60,7 @@ def check(d, out, required):
         if isinstance(v, (int, float)):
             assert math.isfinite(v), r
     for p in d["plots"]:
-        assert Path(p).exists(), p
+        assert not Path(p).is_absolute() and (out / p).exists(), p  # relative to the JSON's folder
     assert d["notes"] and "quick" in d["notes"]
     return {r["metric"]: r for r in d["rows"]}
 

@@ -82,11 +82,21 @@ class ExperimentResult:
 
     def write_json(self, path: str | Path) -> Path:
         """Writes :meth:`to_json` to ``path`` atomically (a temporary file
-        renamed into place)."""
+        renamed into place). Plots in the JSON's folder or below it are
+        written relative to it, so that a results file stays valid when
+        its folder is moved or committed."""
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
+        out = self.to_json()
+        base = path.parent.resolve()
+
+        def relative(p: str) -> str:
+            q = Path(p).resolve()
+            return q.relative_to(base).as_posix() if q.is_relative_to(base) else str(p)
+
+        out["plots"] = [relative(p) for p in out["plots"]]
         tmp = path.with_name(path.name + ".tmp")
-        tmp.write_text(json.dumps(self.to_json(), indent=2, default=float) + "\n")
+        tmp.write_text(json.dumps(out, indent=2, default=float) + "\n")
         os.replace(tmp, path)
         return path
 
