@@ -9,6 +9,11 @@ default), estimated with a third round, and estimated with the size test
 before 2026-12-06 (the RMS radius instead of the area). Writes ``OUT/pose-graph-refinement.json``.
 
     PYTHONPATH=python python3 scripts/investigations/pose_graph_refinement.py OUT [--runs open obstacle garden0 garden1 garden2]
+        [--variants "no refinement" "estimated (default)" ...]
+
+Runs: the 7.1 exploration runs (``open``, ``obstacle``), the realistic gardens (``garden0``..``garden2``) and,
+from 2026-12-06, the serpentines and crossings of :data:`SCENES` (``5.1.1``, ``demo``, ``suite-inner``,
+``suite-control``, ``mower-serpentine``, ``mower-crossing``; the odometry noise model from the dataset).
 """
 
 from __future__ import annotations
@@ -36,6 +41,10 @@ def radius_ratio(new: np.ndarray, old: np.ndarray) -> float:
     return float(np.sqrt((a * a).sum() / max((b * b).sum(), 1e-300)))
 
 
+def mean_error(P: np.ndarray, T: np.ndarray) -> float:
+    return float(np.mean(np.hypot(*(align(P, T).apply(P) - T).T)))
+
+
 def median_error(P: np.ndarray, T: np.ndarray) -> float:
     return float(np.median(np.hypot(*(align(P, T).apply(P) - T).T)))
 
@@ -49,19 +58,29 @@ def nav_run(kind: str, out: Path):
     return imgs, loc.features(imgs), NS.exploration_odometry(sc, 0), sc.trajectory.poses[:, :2]
 
 
-def garden_run(seed: int, out: Path):
+SCENES = {"5.1.1": ("thesis-5.1.1-grid", 0, "train"), "demo": ("demo", 0, "train"),
+          "suite-inner": ("suite-inner", 1, "train-grid"), "suite-control": ("suite-control", 1, "train-grid"),
+          "mower-serpentine": ("mower-survey", 0, "serpentine"), "mower-crossing": ("mower-survey", 0, "crossing")}
+"""Further runs (2026-12-06): name -> (sim preset, seed, run); the sfanav default's features, as for the gardens."""
+
+
+def garden_run(seed: int, out: Path, preset: str = "realistic-garden", run: str = "train"):
     from sfanav.data.preprocessing import Preprocessing
     from sfanav.data.sources import load_run
     from sfanav.experiments.localization import simulated
+    from sfanav.localization.recipe import default_network
     from sfanav.pipeline import train_localizer
 
-    ds = simulated(out, "realistic-garden", seed, quick=False, progress=True)
+    ds = simulated(out, preset, seed, quick=False, progress=True)
     cam = ds.metadata["camera"]
-    prep = Preprocessing(int(cam["width"]), int(cam["height"]), False, False)
-    tr = ds.select(run="train")
+    if preset == "realistic-garden":  # as measured on 2026-12-02
+        prep = Preprocessing(int(cam["width"]), int(cam["height"]), False, False)
+    else:  # the panoramas resized to the default network's input, as sfanav train does
+        prep = Preprocessing.for_network(default_network())
+    tr = ds.select(run=run)
     X, xy = load_run(tr, prep)
     loc = train_localizer(X, xy=xy, camera_elevation=tuple(cam.get("elevation_deg", (-30.0, 20.0))))
-    return X, loc.features(X), tr.odometry, xy
+    return X, loc.features(X), tr.odometry, xy, ds.metadata.get("robot", {}).get("odometry_noise")
 
 
 def main() -> None:
@@ -74,7 +93,14 @@ def main() -> None:
     out.mkdir(parents=True, exist_ok=True)
     res: dict[str, dict] = {}
     for run in a.runs:
-        imgs, F, odo, truth = garden_run(int(run[6:]), out) if run.startswith("garden") else nav_run(run, out)
+        noise = None
+        if run in SCENES:
+            preset, seed, name_ = SCENES[run]
+            imgs, F, odo, truth, noise = garden_run(seed, out, preset, name_)
+        elif run.startswith("garden"):
+            imgs, F, odo, truth, _ = garden_run(int(run[6:]), out)
+        else:
+            imgs, F, odo, truth = nav_run(run, out)
         res[run] = {"frames": len(F)}
         for name in a.variants:
             kw = VARIANTS[name]
@@ -83,10 +109,11 @@ def main() -> None:
             if name == RADIUS:
                 pg._area = radius_ratio
             try:
-                g = fit_pose_graph(imgs, F, odo, **kw)
+                g = fit_pose_graph(imgs, F, odo, odometry_noise=noise, **kw)
             finally:
                 pg._area = area
             res[run][name] = {"training positions median error (m)": median_error(g.poses[:, :2], truth),
+                              "training positions mean error (m)": mean_error(g.poses[:, :2], truth),
                               **g.info(), "seconds": time.perf_counter() - t0}
             print(f"{run} {name}: {res[run][name]['training positions median error (m)']:.4f} m, "
                   f"rounds kept {g.refined}, offset sigma {g.offset_sigma:.3f} m", flush=True)
