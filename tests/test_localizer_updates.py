@@ -362,7 +362,7 @@ def test_resolve_all_trains_every_layer_again_on_the_remembered_images(tmp_path)
     loc = fit_localizer(Network(TINY), A, YA, rotation=ROT, progress=False, readout="quadratic", n_outputs=5)
     remember(loc, A, YA, max_views=1000, keep_images=True)
     assert loc.readout_memory_.images.shape == A.shape
-    up = LocalizerUpdater(loc, UpdatePolicy(resolve="all"), pair_radius=0.4)
+    up = LocalizerUpdater(loc, UpdatePolicy(resolve="all"), pair_radius=0.4, pair_max_turn_deg=None)
     new = up.partial_fit(B, YB).localizer_
     i, j = cross_run_pairs(YA, YB, 0.4)
     ref = fit_localizer(Network(TINY), np.concatenate([A, B]), np.concatenate([YA, YB]), rotation=ROT,
@@ -378,5 +378,26 @@ def test_resolve_all_trains_every_layer_again_on_the_remembered_images(tmp_path)
     assert back.readout_memory_.runs.tolist() == mem.runs.tolist()
     with pytest.raises(ValueError, match="keeps none"):
         LocalizerUpdater(_trained(readout="quadratic", n_outputs=5), UpdatePolicy(resolve="all"))
+    with pytest.raises(ValueError, match="pair_max_turn_deg"):
+        LocalizerUpdater(loc, UpdatePolicy(resolve="all"), pair_max_turn_deg=-1.0)
     with pytest.raises(ValueError, match="a network alone re-solves its top stage only"):
         NetworkUpdater(loc.network, UpdatePolicy(resolve="all"))
+
+
+def test_resolve_all_pairs_only_views_that_face_the_same_way():
+    """A second run through the first's places, half of its panoramas turned
+    by 90 degrees: under resolve="all" only the pairs whose panoramas face
+    the same way (within pair_max_turn_deg) join the runs, and the update
+    equals the retrain with those pairs alone."""
+    loc = fit_localizer(Network(TINY), A, YA, rotation=ROT, progress=False, readout="quadratic", n_outputs=5)
+    remember(loc, A, YA, max_views=1000, keep_images=True)
+    B2, Y2 = A[:30].copy(), YA[:30].copy()
+    B2[1::2] = np.roll(B2[1::2], 15, axis=2)  # a quarter turn of 60 columns
+    new = LocalizerUpdater(loc, UpdatePolicy(resolve="all"), pair_radius=0.01).partial_fit(B2, Y2).localizer_
+    info = new.info["updates"][-1]
+    assert info["cross_run_pairs"] == 15 and info["cross_run_pairs_turned"] == 15
+    i = np.arange(0, 30, 2)
+    ref = fit_localizer(Network(TINY), np.concatenate([A, B2]), np.concatenate([YA, Y2]), rotation=ROT,
+                        progress=False, readout={"kind": "quadratic", "n_outputs": 5, "ridge": 0.0, "degree": 2},
+                        n_outputs=5, rotation_pooling=1, network_fit={"pairs": (i, len(A) + i, np.ones(len(i)))})
+    _close(new.predict(C), ref.predict(C))

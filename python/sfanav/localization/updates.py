@@ -335,6 +335,11 @@ def updatable_memory(localizer: Any, why: str) -> "ReadoutMemory":
     return mem
 
 
+PAIR_MAX_TURN_DEG = 15.0
+"""The largest heading difference (degrees) of a cross-run pair under ``resolve="all"``
+(:class:`LocalizerUpdater` ``pair_max_turn_deg``)."""
+
+
 class LocalizerUpdater:
     """Adds runs to a fitted :class:`~sfanav.Localizer` (scikit-learn's
     ``partial_fit``): the network's top stage re-solved from its statistics
@@ -373,6 +378,16 @@ class LocalizerUpdater:
         invariant to the season without losing position.
     pair_radius : float or None, default None
         Metres; None: twice the median spacing of the map's views.
+    pair_max_turn_deg : float or None, default 15
+        Under ``resolve="all"``, a cross-run pair is kept only if its two
+        panoramas face the same way to within this many degrees (their
+        column shift by :func:`sfanav.loopclosure.align`): every layer's
+        nodes see parts of the panorama, and a pair of views of one place
+        at different headings tells each node that two different directions
+        are the same (on ``6.2.1-changes-online``, where the second run
+        crosses the first's lanes at right angles, the pairs made the
+        every-layer update 2.2x the retrain's error; with this test 1.0x,
+        docs/updates-measured.md). None: every pair.
     kernel : {"auto", "keep", "learn"}, default "auto"
         A Gaussian-process readout's kernel hyperparameters (length scales,
         noise): ``"keep"`` fits the posterior on all views with the fitted
@@ -400,7 +415,8 @@ class LocalizerUpdater:
 
     def __init__(self, localizer: Localizer, policy: UpdatePolicy | None = None, *,
                  augmentation: CorruptionModel | None = None, seed: int = 0, kernel: str = "auto",
-                 cross_pairs: bool = False, pair_radius: float | None = None) -> None:
+                 cross_pairs: bool = False, pair_radius: float | None = None,
+                 pair_max_turn_deg: float | None = PAIR_MAX_TURN_DEG) -> None:
         mem = updatable_memory(localizer, "its readout cannot be refitted after an update")
         if kernel not in KERNEL:
             raise ValueError(f"kernel must be one of {', '.join(KERNEL)}, got {kernel!r}")
@@ -409,6 +425,10 @@ class LocalizerUpdater:
         if pair_radius is not None and not (np.isfinite(pair_radius) and pair_radius > 0):
             raise ValueError(f"pair_radius must be a positive number of metres or None, got {pair_radius!r}")
         self.pair_radius = pair_radius
+        if pair_max_turn_deg is not None and not (np.isfinite(pair_max_turn_deg) and 0 <= pair_max_turn_deg <= 180):
+            raise ValueError(f"pair_max_turn_deg must be a number of degrees in [0, 180] or None, got "
+                             f"{pair_max_turn_deg!r}")
+        self.pair_max_turn_deg = pair_max_turn_deg
         if mem.augmented is not None and augmentation is None:
             raise ValueError("this localizer's readout was fitted on corrupted copies as well: pass the corruption "
                              "model (augmentation=) so that the new runs get copies too")
@@ -538,6 +558,14 @@ class LocalizerUpdater:
             b_idx.append(this[j])
         pa = np.concatenate(a_idx) if a_idx else np.zeros(0, np.int64)
         pb = np.concatenate(b_idx) if b_idx else np.zeros(0, np.int64)
+        n_found = len(pa)
+        if len(pa) and self.pair_max_turn_deg is not None:
+            from ..loopclosure.closures import align
+
+            W = views.images.shape[2]
+            shift = align(views.images, pa, pb)
+            keep = np.minimum(shift, W - shift) * (360.0 / W) <= self.pair_max_turn_deg
+            pa, pb = pa[keep], pb[keep]
         fit = {"transition_weight": self._net.transition_weight}
         if len(pa):
             fit["pairs"] = (pa, pb, np.full(len(pa), self._net.transition_weight))
@@ -553,7 +581,8 @@ class LocalizerUpdater:
         new.info = {**info, **{k: v for k, v in new.info.items() if k not in ("n_train_images",)}}
         new.info["n_train_images"] = int(info.get("n_train_images", old.readout_memory_.n_seen)) + n_added
         new.info["updates"] = list(info.get("updates", [])) + [{"n_images": int(n_added), "readout_views": int(len(P)),
-                                                                "resolve": "all", "cross_run_pairs": int(len(pa))}]
+                                                                "resolve": "all", "cross_run_pairs": int(len(pa)),
+                                                                "cross_run_pairs_turned": int(n_found - len(pa))}]
         new.info["readout_kernel_images"] = int(views.n_seen)
         new.readout_memory_ = memory.subset(_even(len(memory), memory.max_views))
         new.readout, new.n_outputs, new.rotation_pooling = old.readout, old.n_outputs, old.rotation_pooling
