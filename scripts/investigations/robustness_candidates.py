@@ -110,7 +110,7 @@ def _lowpass_normalize(images, kind):
 
 localizer_module.photometric_normalize = _lowpass_normalize
 LOWPASS = ("0.7", "1", "1.5", "2", "1-flat", "2-flat", "2-flat-o2")
-LOGFIRST = ("2-o2", "2-o8")
+LOGFIRST = ("2-o2", "2-o8", "2-o16", "2-o32")
 localizer_module.PHOTOMETRIC = (*localizer_module.PHOTOMETRIC, *(f"lowpass-{s}" for s in LOWPASS),
                                 *(f"logfirst-{s}" for s in LOGFIRST))
 
