@@ -52,6 +52,9 @@ def test_rows_with_and_without_odometry(runs):
     assert ratio == pytest.approx(rows["MED (m) sfanav default [no ground truth]"]
                                   / rows["MED (m) sfanav default [ground truth]"])
     assert set(res.models) == {"ground truth", "no ground truth"}
+    t_gt, t_ngt = rows["training (s) sfanav default [ground truth]"], rows["training (s) sfanav default [no ground truth]"]
+    assert t_gt > 0 and t_ngt > 0
+    assert rows["training time ratio sfanav default [no ground truth] / [ground truth]"] == pytest.approx(t_ngt / t_gt)
     assert res.models["no ground truth"].info["supervision"] == "odometry"
     assert "ekf_noise" in res.models["no ground truth"].info
 

@@ -24,7 +24,10 @@ Every localization experiment reports, on its own training and test runs:
   and ground-truth positions;
 * ratios: ``MED ratio sfanav default [ground truth] / best peer``, the same
   for the other sfanav rows, and ``MED ratio sfanav default [no ground
-  truth] / [ground truth]``.
+  truth] / [ground truth]``;
+* ``training (s) sfanav default [ground truth]`` / ``[no ground truth]``
+  and their ratio: the recipe's wall time on the training run, same
+  process (a ratio: the machines are shared).
 
 The sfanav rows and the peers see the same images: the run in the default
 network's input format (:func:`product_runs` loads a dataset's runs so,
@@ -42,6 +45,7 @@ Example
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -231,14 +235,19 @@ def product_rows(train: ProductRun, tests: Sequence[ProductRun], *, thesis: Sequ
     make = network or default_network
     kw = dict(network=None, recipe=recipe, camera_elevation=camera_elevation, seed=seed, progress=progress, log=log)
     models: dict[str, Any] = {}
+    seconds: dict[str, float] = {}
+    t0 = time.perf_counter()
     models["ground truth"] = train_localizer(train.images, xy=train.xy, odometry=train.odometry,
                                              supervision="ground-truth", **{**kw, "network": make()})
+    seconds["ground truth"] = time.perf_counter() - t0
     frames = {"ground truth": None}
     missing = ""
     if train.has_odometry:
         try:
+            t0 = time.perf_counter()
             ngt = train_localizer(train.images, odometry=train.odometry, supervision="odometry",
                                   **{**kw, "network": make()})
+            seconds["no ground truth"] = time.perf_counter() - t0
         except ValueError as exc:  # the run's odometry fixes no metric map (too short, never straight, ...)
             missing = f"no '[no ground truth]' rows: the training run's odometry fixes no map ({exc}); "
             log(missing)
@@ -253,6 +262,13 @@ def product_rows(train: ProductRun, tests: Sequence[ProductRun], *, thesis: Sequ
 
     rows: list[dict[str, Any]] = []
     meds: dict[str, float] = {}
+    for sup, sec in seconds.items():
+        rows.append({"metric": f"training (s) {_name(DEFAULT, (sup,), '')}", "thesis": None, "sfanav": sec,
+                     "configuration": DEFAULT, "supervision": sup})
+    if len(seconds) == 2:
+        rows.append({"metric": "training time ratio sfanav default [no ground truth] / [ground truth]", "thesis": None,
+                     "sfanav": seconds["no ground truth"] / max(seconds["ground truth"], 1e-9),
+                     "configuration": DEFAULT})
 
     def add(name: str, config: str, pred: np.ndarray, xy: np.ndarray, crange: np.ndarray, **extra: Any) -> None:
         m = localization_metrics(pred, xy, coordinate_range=crange)
