@@ -262,11 +262,13 @@ def product_rows(train: ProductRun, tests: Sequence[ProductRun], *, thesis: Sequ
 
     rows: list[dict[str, Any]] = []
     meds: dict[str, float] = {}
+    scene = tests[0].label if len(tests) == 1 else ""  # an experiment with one training per test run names it
     for sup, sec in seconds.items():
-        rows.append({"metric": f"training (s) {_name(DEFAULT, (sup,), '')}", "thesis": None, "sfanav": sec,
+        rows.append({"metric": f"training (s) {_name(DEFAULT, (sup,), scene)}", "thesis": None, "sfanav": sec,
                      "configuration": DEFAULT, "supervision": sup})
     if len(seconds) == 2:
-        rows.append({"metric": "training time ratio sfanav default [no ground truth] / [ground truth]", "thesis": None,
+        rows.append({"metric": "training time ratio sfanav default [no ground truth] / [ground truth]"
+                               + (f" [{scene}]" if scene else ""), "thesis": None,
                      "sfanav": seconds["no ground truth"] / max(seconds["ground truth"], 1e-9),
                      "configuration": DEFAULT})
 
