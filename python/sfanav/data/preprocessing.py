@@ -223,7 +223,11 @@ class Preprocessor:
             if self.jitter >= ring:
                 raise ValueError(f"centre jitter {self.jitter:g} px is not smaller than the mirror ring's width "
                                  f"({ring:.1f} px, radii {m.inner_radius:.1f}..{m.outer_radius:.1f})")
-            self._unwarper = m.unwarper((W, H), jitter=self.jitter, random_state=self.seed)
+            # clockwise: a mirror flips the scene; read so, the panorama follows sfanav's convention (a left turn
+            # shifts the scene to larger columns, as sfanav.sim.PanoramicCamera), which the panorama compass, the
+            # pose graph and homing assume (counter-clockwise gave mirrored panoramas whose compass read every turn
+            # the wrong way: 6.2.1-static without ground truth 7.0 m, docs/experiments.md)
+            self._unwarper = m.unwarper((W, H), jitter=self.jitter, random_state=self.seed, clockwise=True)
             if self.jitter:
                 how += f"; centre jittered by up to +-{self.jitter:g} px per image (seed {self.seed})"
             self.mode = "unwarp"
