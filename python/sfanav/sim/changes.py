@@ -54,7 +54,7 @@ import numpy as np
 
 from .._checks import check_int, check_positive_float
 from .objects import ObjectBuilder
-from .primitives import Primitive, WorldObject
+from .primitives import Primitive, WorldObject, posed
 from .transient import TransientBuilder
 
 if TYPE_CHECKING:
@@ -226,9 +226,7 @@ class GardenChanges:
                 break
         else:
             raise ValueError(f"garden changes {self.name!r}: no room to move the {o.kind} at ({o.x:.1f}, {o.y:.1f}) m")
-        c, s = np.cos(turn), np.sin(turn)
-        parts = [Primitive(**{**asdict(p), "x": x + c * (p.x - o.x) - s * (p.y - o.y),
-                              "y": y + s * (p.x - o.x) + c * (p.y - o.y), "yaw": p.yaw + turn}) for p in o.parts]
+        parts = posed(o.parts, x, y, turn, about=(o.x, o.y))
         return WorldObject(o.kind, float(x), float(y), o.radius, parts, o.obstacle, o.marker_id, o.seasons), turn
 
 
@@ -334,7 +332,4 @@ class _ChangeBuilder(TransientBuilder):
             raise ValueError(f"no room for a new {kind} in the ring around the {self.w.area[0]:g} x "
                              f"{self.w.area[1]:g} m area")
         yaw = a - np.pi / 2 + self.u(-0.2, 0.2) if kind in _ALONG_BORDER else self.u(0, 2 * np.pi)
-        c, s = np.cos(yaw), np.sin(yaw)
-        moved = [Primitive(**{**asdict(p), "x": x + c * p.x - s * p.y, "y": y + s * p.x + c * p.y,
-                              "yaw": p.yaw + yaw}) for p in parts]
-        return WorldObject(kind, float(x), float(y), float(radius), moved, False)
+        return WorldObject(kind, float(x), float(y), float(radius), posed(parts, x, y, yaw), False)

@@ -33,13 +33,12 @@ colours RGB in [0, 1].
 
 from __future__ import annotations
 
-from dataclasses import asdict
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from .objects import ObjectBuilder
-from .primitives import Primitive, WorldObject, season_names
+from .primitives import Primitive, WorldObject, posed, season_names
 
 if TYPE_CHECKING:
     from .world import World
@@ -191,10 +190,8 @@ class TransientBuilder(ObjectBuilder):
                 x, y = _finite(spec["x"], f"transient object {i} x"), _finite(spec["y"], f"transient object {i} y")
             else:
                 x, y = self._free_spot(radius, [o for o in placed if o.obstacle] + out, f"{kind} (transient {i})")
-            c, s = np.cos(yaw), np.sin(yaw)
-            moved = [Primitive(**{**asdict(p), "x": x + c * p.x - s * p.y, "y": y + s * p.x + c * p.y,
-                                  "yaw": p.yaw + yaw}) for p in parts]
-            out.append(WorldObject(kind, float(x), float(y), float(radius), moved, kind not in FLAT_KINDS,
+            out.append(WorldObject(kind, float(x), float(y), float(radius), posed(parts, x, y, yaw),
+                                   kind not in FLAT_KINDS,
                                    seasons=seasons))
         return out
 
