@@ -28,6 +28,9 @@ Candidates (all the sfanav default's network, rows, pooling, signature and reado
   per channel (in the log domain: a vignetting is a smooth offset per row); -0.5, -1: invariance weights;
 * lowpass-2-flat-o2-0.25: with 2 grey levels added before the log instead of 8 (gamma is exact in the
   log domain without the offset; the low-pass already damps the dark pixels' noise);
+* gamma-W: the default's normalisation (lowpass-2-flat) with gamma 0.6..1.6 added to the corruptions of
+  the invariance partners and the readout's copies (CAMERA_GAMMA), invariance weight W (0.25, 0.5);
+  gamma-lowpass-3-flat-0.25: the same with a 3 px low-pass (lowpass-3-flat-0.25 without gamma);
 * logfirst-2-oK-0.25: the logarithm (offset K grey levels) before the 2 px low-pass, then the flat field and
   contrast, with standard's partners: the low-pass before the log does not commute with a gamma, after it
   the gamma is a scale of the log the contrast step removes (measured with --extra, which adds gamma 0.7
@@ -61,6 +64,8 @@ CORRUPTIONS = ["jpeg-90", "jpeg-50", "noise-10", "defocus-1", "defocus-2", "moti
 EXTRA_CORRUPTIONS = ["gamma-0.7", "exposure-0.6"]
 """Measured from 2026-12-06 (--extra): the gamma below 1 and the underexposure the first runs did not have."""
 JPEG_ONLY = CorruptionModel({"jpeg": {"kind": "jpeg", "quality": (50, 95)}})
+CAMERA_GAMMA = CorruptionModel({**CAMERA.families, "gamma": {"kind": "gamma", "gamma": (0.6, 1.6)}})
+"""CAMERA with gamma 0.6..1.6 as an eighth family (what the normalisation leaves of a gamma)."""
 
 
 def row_gain(images):
@@ -109,7 +114,7 @@ def _lowpass_normalize(images, kind):
 
 
 localizer_module.photometric_normalize = _lowpass_normalize
-LOWPASS = ("0.7", "1", "1.5", "2", "1-flat", "2-flat", "2-flat-o2")
+LOWPASS = ("0.7", "1", "1.5", "2", "1-flat", "2-flat", "2-flat-o2", "3-flat")
 LOGFIRST = ("2-o2", "2-o8", "2-o16", "2-o32")
 localizer_module.PHOTOMETRIC = (*localizer_module.PHOTOMETRIC, *(f"lowpass-{s}" for s in LOWPASS),
                                 *(f"logfirst-{s}" for s in LOGFIRST))
@@ -133,6 +138,11 @@ CANDIDATES = {
     **{f"logfirst-{s}-0.25": ({"robustness": "standard", "photometric": f"logfirst-{s}"}, None) for s in LOGFIRST},
     "lowpass-2-flat-0.5": ({"robustness": "full", "invariance_weight": 0.5, "photometric": "lowpass-2-flat"}, None),
     "lowpass-2-flat-1": ({"robustness": "full", "photometric": "lowpass-2-flat"}, None),
+    **{f"gamma-{w}": ({"robustness": "full", "invariance_weight": w, "photometric": "lowpass-2-flat",
+                      "invariance": CAMERA_GAMMA, "readout_augmentation": CAMERA_GAMMA}, None)
+       for w in (0.25, 0.5)},
+    "gamma-lowpass-3-flat-0.25": ({"robustness": "standard", "photometric": "lowpass-3-flat",
+                                   "invariance": CAMERA_GAMMA, "readout_augmentation": CAMERA_GAMMA}, None),
 }
 
 
