@@ -4,6 +4,8 @@ the covariance of uninformative images and bad input."""
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from sfanav import sim
 from sfanav.loopclosure.relative_pose import RelativePoses, gradient_offsets, relative_poses
@@ -185,3 +187,67 @@ def test_heading_agrees_with_the_panorama_compass(scene):
     rp = relative_poses(X, i, j)
     compass = relative_headings(X, j, i)  # heading of current (j) minus past (i)
     np.testing.assert_allclose(_wrapdeg(rp.dtheta - compass), 0, atol=4.0)
+
+
+def _reference_poses(images, i_idx, j_idx, n_bearings=96, window_deg=30.0):
+    """The per-pair numpy path (kept for tests) of relative_poses's warping."""
+    from sfanav.loopclosure import relative_pose as rp
+    from sfanav.loopclosure.closures import panorama_rows
+
+    R = panorama_rows(np.asarray(images, float)).astype(np.float64)
+    W = R.shape[2]
+    alphas = 2 * np.pi * np.arange(n_bearings) / n_bearings - np.pi
+    cols = rp._warp_columns(W, alphas, np.asarray(rp.DEFAULT_RATIOS))
+    win = int(np.ceil(window_deg * W / 360.0))
+    out = []
+    for a, b in zip(i_idx, j_idx):
+        st = rp._pair_setup(R[a], R[b], win)
+        S = rp._scores_reference(st[0], st[1], cols, st[2])
+        out.append(rp._pose_from_scores(S, alphas, st[2], W, R.shape[1], rp.DEFAULT_TEMPERATURE))
+    return np.array(out)
+
+
+def test_the_core_scores_match_the_numpy_reference(scene):
+    """The Rust core's warping scores (in parallel, in chunks) give the same
+    relative poses as the per-pair numpy path, to rounding."""
+    images = scene[0]
+    n = len(images)
+    i = np.arange(0, n - 3)
+    j = i + 3
+    got = relative_poses(images, i, j)
+    want = _reference_poses(images, i, j)
+    np.testing.assert_allclose(got.dtheta, want[:, 0], atol=1e-9)
+    np.testing.assert_allclose(got.bearing, want[:, 1], atol=1e-9)
+    np.testing.assert_allclose(got.sigma_dtheta, want[:, 2], rtol=1e-7)
+    np.testing.assert_allclose(got.sigma_bearing, want[:, 3], rtol=1e-7)
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.integers(1, 4), st.integers(8, 40), st.integers(1, 6), st.integers(0, 10_000))
+def test_warp_scores_property(rows, width, n_shifts, seed):
+    """sfanav._core.warp_scores equals the numpy reference for any images,
+    warped columns and (possibly negative, fractional) shifts."""
+    from sfanav import _core
+    from sfanav.loopclosure.relative_pose import _scores_reference
+
+    rng = np.random.default_rng(seed)
+    a, b = rng.normal(size=(2, 2, rows, width))
+    cols = rng.uniform(0, width, size=(3, 2, width))
+    shifts = rng.uniform(-2 * width, 2 * width, size=(2, n_shifts))
+    got = _core.warp_scores(a, b, cols.reshape(6, width), shifts).reshape(2, 3, 2, n_shifts)
+    for p in range(2):
+        np.testing.assert_allclose(got[p], _scores_reference(a[p], b[p], cols, shifts[p]), rtol=1e-10, atol=1e-10)
+
+
+def test_warp_scores_bad_input():
+    from sfanav import _core
+
+    a = np.zeros((2, 3, 16))
+    with pytest.raises(ValueError, match="must match"):
+        _core.warp_scores(a, a[:1], np.zeros((1, 16)), np.zeros((2, 1)))
+    with pytest.raises(ValueError, match="columns"):
+        _core.warp_scores(a, a, np.zeros((1, 15)), np.zeros((2, 1)))
+    with pytest.raises(ValueError, match="shifts"):
+        _core.warp_scores(a, a, np.zeros((1, 16)), np.zeros((3, 1)))
+    with pytest.raises(ValueError, match="NaN"):
+        _core.warp_scores(a, a, np.full((1, 16), np.nan), np.zeros((2, 1)))

@@ -13,7 +13,9 @@
 //! * [`rotation`], [`trainer`], [`training`]: training under simulated
 //!   rotation, one layer at a time ([`LayerTrainer`]) and the whole loop
 //!   ([`fit`]) over images of any [`Pixel`] type from a [`BatchSource`];
-//! * [`closures`]: loop closures for feedback training ([`LoopClosures`]).
+//! * [`closures`]: loop closures for feedback training ([`LoopClosures`]);
+//! * [`warping`]: the warping method's scores for the relative poses of loop
+//!   closures ([`warp_scores`]).
 //!
 //! Nothing here depends on Python; the `sfanav-py` crate binds it.
 
@@ -33,6 +35,7 @@ pub mod stats;
 pub mod trainer;
 pub mod training;
 pub mod view;
+pub mod warping;
 
 pub use closures::LoopClosures;
 pub use error::{Result, SfaError};
@@ -49,3 +52,4 @@ pub use training::{
     SpatialPairs,
 };
 pub use view::{Sample, View};
+pub use warping::warp_scores;

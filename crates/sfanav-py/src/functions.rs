@@ -3,6 +3,7 @@
 
 use crate::arrays::{arr2, mat_to_py, out2, vec1, view_of, Arr};
 use crate::error::{guard, run};
+use numpy::PyUntypedArrayMethods;
 use pyo3::prelude::*;
 
 /// expand(x, degree) -> ndarray: all monomials of degree 1..=degree.
@@ -51,6 +52,48 @@ pub(crate) fn solve_generalized<'py>(
     let (am, bm) = (to_mat(&a), to_mat(&b));
     let g = run(py, || sfa_core::solve(am.as_ref(), bm.as_ref(), n, tol))?;
     Ok((vec1(py, g.values), mat_to_py(py, g.vectors)?, g.rank, vec1(py, g.dropped)))
+}
+
+/// warp_scores(a, b, columns, shifts) -> ndarray (pairs, hypotheses, shifts):
+/// the warping method's scores of pairs of panoramas (`a`, `b`: (pairs,
+/// rows, width) float64; `columns`: (hypotheses, width); `shifts`: (pairs,
+/// n_shifts)), computed in parallel with the GIL released.
+#[pyfunction]
+pub(crate) fn warp_scores<'py>(
+    py: Python<'py>,
+    a: numpy::PyReadonlyArray3<'py, f64>,
+    b: numpy::PyReadonlyArray3<'py, f64>,
+    columns: numpy::PyReadonlyArray2<'py, f64>,
+    shifts: numpy::PyReadonlyArray2<'py, f64>,
+) -> PyResult<Bound<'py, PyAny>> {
+    let (sa, sb) = (a.shape().to_vec(), b.shape().to_vec());
+    if sa != sb {
+        return Err(pyo3::exceptions::PyValueError::new_err(format!(
+            "warp_scores: a has shape {sa:?} and b {sb:?}; they must match"
+        )));
+    }
+    let (pairs, rows, width) = (sa[0], sa[1], sa[2]);
+    if columns.shape()[1] != width {
+        return Err(pyo3::exceptions::PyValueError::new_err(format!(
+            "warp_scores: columns has {} columns for images {width} wide",
+            columns.shape()[1]
+        )));
+    }
+    if shifts.shape()[0] != pairs {
+        return Err(pyo3::exceptions::PyValueError::new_err(format!(
+            "warp_scores: shifts has {} rows for {pairs} pairs",
+            shifts.shape()[0]
+        )));
+    }
+    let hyps = columns.shape()[0];
+    let n_shifts = shifts.shape()[1];
+    let own = |x: numpy::ndarray::ArrayViewD<'_, f64>| x.iter().copied().collect::<Vec<f64>>();
+    let (va, vb) = (own(a.as_array().into_dyn()), own(b.as_array().into_dyn()));
+    let (vc, vs) = (own(columns.as_array().into_dyn()), own(shifts.as_array().into_dyn()));
+    let out = run(py, || sfa_core::warp_scores(&va, &vb, pairs, rows, width, &vc, &vs, n_shifts))?;
+    let arr = numpy::ndarray::Array3::from_shape_vec((pairs, hyps, n_shifts), out)
+        .map_err(|e| pyo3::exceptions::PyRuntimeError::new_err(e.to_string()))?;
+    Ok(numpy::PyArray3::from_owned_array(py, arr).into_any())
 }
 
 /// set_memory_limit(bytes): the limit (bytes) that the core checks its

@@ -159,28 +159,31 @@ def _normalised(rows: np.ndarray) -> np.ndarray | None:
     return None if s <= 1e-6 * scale else a / s
 
 
-def _warp_pair(a: np.ndarray, b: np.ndarray, cols: np.ndarray, alphas: np.ndarray,
-               temperature: float, window: int) -> tuple[float, float, float, float, float, float]:
-    """(dtheta, bearing, sigma_dtheta, sigma_bearing, corr, contrast) of one
-    pair of row images (K, W)."""
-    K, W = a.shape
+def _pair_setup(a: np.ndarray, b: np.ndarray, window: int) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """The normalised row images of a pair and the relative headings (column
+    shifts) to try: every shift, or a window around the circular
+    cross-correlation's best shift (the panorama compass); None for an image
+    without contrast."""
+    W = a.shape[1]
     na, nb = _normalised(a), _normalised(b)
     if na is None or nb is None:
-        return 0.0, 0.0, np.inf, np.inf, 0.0, 0.0
+        return None
+    if window >= W // 2:
+        return na, nb, np.arange(W, dtype=float)
+    corr = np.fft.irfft((np.fft.rfft(nb, axis=1) * np.conj(np.fft.rfft(na, axis=1))).sum(axis=0), n=W)
+    s0 = int(np.argmax(corr))
+    return na, nb, (s0 + np.arange(-window, window + 1)).astype(float)
+
+
+def _scores_reference(na: np.ndarray, nb: np.ndarray, cols: np.ndarray, shifts: np.ndarray) -> np.ndarray:
+    """The warping scores (A, N, S) of one pair in numpy: the reference the
+    core's :func:`sfanav._core.warp_scores` is tested against."""
+    W = na.shape[1]
     D = (na * na).sum(0)[:, None] + (nb * nb).sum(0)[None, :] - 2.0 * (na.T @ nb)  # D[u, v]
     flat = D.ravel()
     A, N, _ = cols.shape
-    # relative headings tried: every column shift, or a window around the
-    # circular cross-correlation's best shift (the panorama compass)
-    if window >= W // 2:
-        shifts = np.arange(W, dtype=float)
-    else:
-        corr = np.fft.irfft((np.fft.rfft(nb, axis=1) * np.conj(np.fft.rfft(na, axis=1))).sum(axis=0), n=W)
-        s0 = int(np.argmax(corr))
-        shifts = (s0 + np.arange(-window, window + 1)).astype(float)
-    n_s = len(shifts)
     rowbase = np.arange(W) * W
-    S = np.empty((A, N, n_s))
+    S = np.empty((A, N, len(shifts)))
     for a0 in range(0, A, 16):
         c = cols[a0 : a0 + 16, :, None, :] + shifts[None, None, :, None]  # (a, N, S, W)
         f = np.floor(c)
@@ -188,6 +191,15 @@ def _warp_pair(a: np.ndarray, b: np.ndarray, cols: np.ndarray, alphas: np.ndarra
         f = f.astype(np.int64) % W
         d = flat[rowbase + f] * (1 - t) + flat[rowbase + (f + 1) % W] * t
         S[a0 : a0 + 16] = d.mean(axis=3)
+    return S
+
+
+def _pose_from_scores(S: np.ndarray, alphas: np.ndarray, shifts: np.ndarray, W: int, K: int,
+                      temperature: float) -> tuple[float, float, float, float, float, float]:
+    """(dtheta, bearing, sigma_dtheta, sigma_bearing, corr, contrast) of one
+    pair from its warping scores ``S`` (A, N, n_shifts)."""
+    A = len(alphas)
+    n_s = len(shifts)
     smin = float(S.min())
     contrast = float(1.0 - smin / max(float(np.median(S)), 1e-300))
     tau = max(temperature * smin / (W * K), 1e-9 * float(np.median(S)), 1e-300)
@@ -211,6 +223,35 @@ def _warp_pair(a: np.ndarray, b: np.ndarray, cols: np.ndarray, alphas: np.ndarra
     ss = np.inf if vs > 0.5 * np.pi**2 / 3 else np.sqrt(vs)
     corr = cas / np.sqrt(va * vs) if np.isfinite(sa) and np.isfinite(ss) else 0.0
     return float(_wrap(psi)), float(_wrap(alpha)), float(ss), float(sa), float(corr), contrast
+
+
+_NO_CONTRAST = (0.0, 0.0, np.inf, np.inf, 0.0, 0.0)
+_CHUNK = 64
+"""Pairs scored per call of the core (bounds the images copied at once)."""
+
+
+def _warp_pairs(R: np.ndarray, i: np.ndarray, j: np.ndarray, cols: np.ndarray, alphas: np.ndarray,
+                temperature: float, window: int) -> np.ndarray:
+    """(M, 6) rows of :func:`_pose_from_scores` for the pairs ``(i, j)`` of
+    the row images ``R`` (n, K, W); the scores in the Rust core, in parallel."""
+    from .. import _core
+
+    _, K, W = R.shape
+    A, N, _ = cols.shape
+    flat_cols = np.ascontiguousarray(cols.reshape(A * N, W))
+    out = np.array([_NO_CONTRAST] * len(i), dtype=float).reshape(len(i), 6)
+    for c0 in range(0, len(i), _CHUNK):
+        setups = [(k, _pair_setup(R[i[k]], R[j[k]], window)) for k in range(c0, min(c0 + _CHUNK, len(i)))]
+        setups = [(k, st) for k, st in setups if st is not None]
+        if not setups:
+            continue
+        a = np.stack([st[0] for _, st in setups])
+        b = np.stack([st[1] for _, st in setups])
+        sh = np.stack([st[2] for _, st in setups])
+        S = _core.warp_scores(a, b, flat_cols, sh).reshape(len(setups), A, N, sh.shape[1])
+        for (k, st), Sk in zip(setups, S):
+            out[k] = _pose_from_scores(Sk, alphas, st[2], W, K, temperature)
+    return out
 
 
 def gradient_offsets(features: Any, i_idx: Any, j_idx: Any, gradient: Any) -> tuple[np.ndarray, np.ndarray]:
@@ -393,7 +434,7 @@ def relative_poses(images: Any, i_idx: Any, j_idx: Any, *, distance: Any = None,
     cols = _warp_columns(W, alphas, nus)
     win = W // 2 if max_turn_deg is None else int(np.ceil(check_positive_float(max_turn_deg, "max_turn_deg")
                                                           * W / 360.0))
-    out = np.array([_warp_pair(R[a], R[b], cols, alphas, temp, win) for a, b in zip(i, j)]).reshape(m, 6)
+    out = _warp_pairs(R, i, j, cols, alphas, temp, win)
     dth, brg, sth, sbr, corr, contrast = out.T
     c, s = np.cos(brg), np.sin(brg)
     dx, dy = dist * c, dist * s

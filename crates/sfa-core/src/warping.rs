@@ -1,0 +1,317 @@
+//! Scores of the warping method of snapshot homing (Franz, Schoelkopf,
+//! Mallot and Buelthoff 1998), the inner loop of the relative poses of
+//! loop closures (`sfanav.loopclosure.relative_pose`).
+//!
+//! For a pair of panoramas, given as `rows x width` images `a` (frame `i`)
+//! and `b` (frame `j`), and a set of warping hypotheses (a baseline
+//! direction and a distance ratio each), every hypothesis `h` says at which
+//! fractional column `c[h, u]` of `b` the column `u` of `a` appears when the
+//! relative heading is zero; a relative heading of `s` columns adds `s`.
+//! The score of `(h, s)` is the mean over the columns `u` of the squared
+//! distance between column `u` of `a` and column `c[h, u] + s` of `b`,
+//! linearly interpolated between the two neighbouring columns of `b`
+//! (circularly):
+//!
+//! ```text
+//! D[u, v]     = sum_k (a[k, u] - b[k, v])^2
+//! S[h, s]     = mean_u ((1 - t) D[u, f] + t D[u, f + 1]),
+//!               f = floor(c[h, u] + s) mod width,  t = frac(c[h, u] + s)
+//! ```
+//!
+//! The pairs are scored in parallel (rayon), each with its own `width x
+//! width` distance table. Accumulation is in `f64`.
+
+use rayon::prelude::*;
+
+use crate::error::{Result, SfaError};
+use crate::memory;
+
+/// Warping scores of `pairs` pairs of panoramas.
+///
+/// * `a`, `b`: `pairs x rows x width` values (row-major), the two images of
+///   each pair;
+/// * `columns`: `hypotheses x width` fractional columns (row-major), the
+///   same for every pair;
+/// * `shifts`: `pairs x n_shifts` relative headings tried per pair, in
+///   columns (any real value; taken modulo `width`).
+///
+/// Returns `pairs x hypotheses x n_shifts` scores (row-major).
+///
+/// Errors: sizes that disagree, a zero width, rows or hypotheses, a
+/// non-finite value in any input, an output beyond the memory limit.
+#[allow(clippy::too_many_arguments)]
+pub fn warp_scores(
+    a: &[f64],
+    b: &[f64],
+    pairs: usize,
+    rows: usize,
+    width: usize,
+    columns: &[f64],
+    shifts: &[f64],
+    n_shifts: usize,
+) -> Result<Vec<f64>> {
+    if width == 0 || rows == 0 {
+        return Err(SfaError::InvalidArgument(format!(
+            "warping needs images of at least one row and column, got {rows} x {width}"
+        )));
+    }
+    let image = rows.checked_mul(width).ok_or_else(|| SfaError::InvalidArgument("image size overflows".into()))?;
+    let expect = pairs.checked_mul(image).ok_or_else(|| SfaError::InvalidArgument("pair images overflow".into()))?;
+    if a.len() != expect {
+        return Err(SfaError::ShapeMismatch {
+            what: "warping images a (pairs x rows x width)",
+            expected: expect,
+            got: a.len(),
+        });
+    }
+    if b.len() != expect {
+        return Err(SfaError::ShapeMismatch {
+            what: "warping images b (pairs x rows x width)",
+            expected: expect,
+            got: b.len(),
+        });
+    }
+    if columns.is_empty() || columns.len() % width != 0 {
+        return Err(SfaError::InvalidArgument(format!(
+            "{} warped columns do not split into hypotheses of width {width}",
+            columns.len()
+        )));
+    }
+    let hyps = columns.len() / width;
+    if n_shifts == 0 {
+        return Err(SfaError::InvalidArgument("warping needs at least one relative heading (shift)".into()));
+    }
+    let n_sh = pairs.checked_mul(n_shifts).ok_or_else(|| SfaError::InvalidArgument("shifts overflow".into()))?;
+    if shifts.len() != n_sh {
+        return Err(SfaError::ShapeMismatch {
+            what: "warping shifts (pairs x n_shifts)",
+            expected: n_sh,
+            got: shifts.len(),
+        });
+    }
+    for (what, v, cols) in [
+        ("warping images a", a, width),
+        ("warping images b", b, width),
+        ("warped columns", columns, width),
+        ("warping shifts", shifts, n_shifts),
+    ] {
+        if let Some(at) = v.iter().position(|x| !x.is_finite()) {
+            return Err(SfaError::NonFinite { what, row: at / cols, col: at % cols });
+        }
+    }
+    let out_len = memory::bytes_of(8, &[pairs, hyps, n_shifts]);
+    let table = memory::bytes_of(8, &[width, width, rayon::current_num_threads().max(1)]);
+    memory::check(
+        || format!("warping scores of {pairs} pairs x {hyps} hypotheses x {n_shifts} shifts"),
+        memory::total(&[out_len, table]),
+    )?;
+    let mut out = vec![0.0f64; pairs * hyps * n_shifts];
+    if pairs == 0 {
+        return Ok(out);
+    }
+    out.par_chunks_mut(hyps * n_shifts).enumerate().for_each(|(p, dst)| {
+        let pa = &a[p * image..(p + 1) * image];
+        let pb = &b[p * image..(p + 1) * image];
+        let sh = &shifts[p * n_shifts..(p + 1) * n_shifts];
+        score_pair(pa, pb, rows, width, columns, hyps, sh, dst);
+    });
+    Ok(out)
+}
+
+/// The scores of one pair into `dst` (`hyps x shifts.len()`).
+#[allow(clippy::too_many_arguments)]
+fn score_pair(
+    a: &[f64],
+    b: &[f64],
+    rows: usize,
+    width: usize,
+    columns: &[f64],
+    hyps: usize,
+    shifts: &[f64],
+    dst: &mut [f64],
+) {
+    let w = width;
+    let stride = w + 1; // each row of D carries its first column again at the end: no wrap for `f + 1`
+                        // D[u, v] = |a_u|^2 + |b_v|^2 - 2 a_u . b_v
+    let mut na = vec![0.0f64; w];
+    let mut nb = vec![0.0f64; w];
+    for k in 0..rows {
+        let (ra, rb) = (&a[k * w..(k + 1) * w], &b[k * w..(k + 1) * w]);
+        for u in 0..w {
+            na[u] += ra[u] * ra[u];
+            nb[u] += rb[u] * rb[u];
+        }
+    }
+    let mut d = vec![0.0f64; w * stride];
+    for k in 0..rows {
+        let (ra, rb) = (&a[k * w..(k + 1) * w], &b[k * w..(k + 1) * w]);
+        for u in 0..w {
+            let x = -2.0 * ra[u];
+            let row = &mut d[u * stride..u * stride + w];
+            for (dv, bv) in row.iter_mut().zip(rb) {
+                *dv += x * bv;
+            }
+        }
+    }
+    for u in 0..w {
+        let row = &mut d[u * stride..(u + 1) * stride];
+        for (dv, nbv) in row[..w].iter_mut().zip(&nb) {
+            *dv += na[u] + nbv;
+        }
+        row[w] = row[0];
+    }
+    let wf = w as f64;
+    let ns = shifts.len();
+    // split each shift into an integer number of columns (reduced modulo the width) and a fraction; shifts
+    // that share one fraction (every integer shift, the library's case) share the floors of the columns
+    let mut whole = vec![0usize; ns];
+    let mut frac = vec![0.0f64; ns];
+    for (si, &s) in shifts.iter().enumerate() {
+        let f = s.floor();
+        frac[si] = s - f;
+        whole[si] = (f.rem_euclid(wf) as usize) % w;
+    }
+    let mut base = vec![0usize; w];
+    let mut t = vec![0.0f64; w];
+    let mut acc = vec![0.0f64; ns];
+    for h in 0..hyps {
+        let cols = &columns[h * w..(h + 1) * w];
+        acc.iter_mut().for_each(|x| *x = 0.0);
+        let mut si0 = 0;
+        while si0 < ns {
+            // the run of shifts with the fraction of shift si0
+            let fr = frac[si0];
+            let mut si1 = si0 + 1;
+            while si1 < ns && frac[si1] == fr {
+                si1 += 1;
+            }
+            for (u, &c0) in cols.iter().enumerate() {
+                let c = c0 + fr;
+                let f = c.floor();
+                t[u] = c - f;
+                base[u] = (f.rem_euclid(wf) as usize) % w;
+            }
+            for u in 0..w {
+                let row = &d[u * stride..(u + 1) * stride];
+                let (bu, tu) = (base[u], t[u]);
+                for si in si0..si1 {
+                    let mut f0 = bu + whole[si];
+                    if f0 >= w {
+                        f0 -= w;
+                    }
+                    acc[si] += row[f0] + tu * (row[f0 + 1] - row[f0]);
+                }
+            }
+            si0 = si1;
+        }
+        for si in 0..ns {
+            dst[h * ns + si] = acc[si] / wf;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The formula of the module docs, evaluated directly.
+    fn naive(a: &[f64], b: &[f64], rows: usize, w: usize, columns: &[f64], shifts: &[f64]) -> Vec<f64> {
+        let hyps = columns.len() / w;
+        let mut out = Vec::new();
+        for h in 0..hyps {
+            for &s in shifts {
+                let mut acc = 0.0;
+                for u in 0..w {
+                    let c = columns[h * w + u] + s;
+                    let f = c.floor();
+                    let t = c - f;
+                    let f0 = (f as i64).rem_euclid(w as i64) as usize;
+                    let f1 = (f0 + 1) % w;
+                    let dist = |v: usize| (0..rows).map(|k| (a[k * w + u] - b[k * w + v]).powi(2)).sum::<f64>();
+                    acc += (1.0 - t) * dist(f0) + t * dist(f1);
+                }
+                out.push(acc / w as f64);
+            }
+        }
+        out
+    }
+
+    fn lcg(n: usize, seed: u64) -> Vec<f64> {
+        let mut x = seed;
+        (0..n)
+            .map(|_| {
+                x = x.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+                ((x >> 11) as f64) / ((1u64 << 53) as f64) - 0.5
+            })
+            .collect()
+    }
+
+    #[test]
+    fn matches_the_formula() {
+        let (pairs, rows, w) = (3, 4, 24);
+        let a = lcg(pairs * rows * w, 1);
+        let b = lcg(pairs * rows * w, 2);
+        let columns: Vec<f64> = lcg(5 * w, 3).iter().map(|v| (v + 0.5) * w as f64).collect();
+        let shifts: Vec<f64> = vec![-3.0, 0.0, 2.5, 30.25, -1.75, 5.0, 0.5, 11.0, -26.0];
+        let got = warp_scores(&a, &b, pairs, rows, w, &columns, &shifts, 3).unwrap();
+        for p in 0..pairs {
+            let want = naive(
+                &a[p * rows * w..(p + 1) * rows * w],
+                &b[p * rows * w..(p + 1) * rows * w],
+                rows,
+                w,
+                &columns,
+                &shifts[p * 3..(p + 1) * 3],
+            );
+            for (g, e) in got[p * 15..(p + 1) * 15].iter().zip(&want) {
+                assert!((g - e).abs() <= 1e-12 * (1.0 + e.abs()), "{g} vs {e}");
+            }
+        }
+    }
+
+    #[test]
+    fn integer_and_mixed_shifts_match_the_formula() {
+        let (rows, w) = (3, 20);
+        let a = lcg(rows * w, 4);
+        let b = lcg(rows * w, 5);
+        let columns: Vec<f64> = lcg(4 * w, 6).iter().map(|v| (v + 0.5) * w as f64).collect();
+        for shifts in [vec![-25.0, -3.0, 0.0, 1.0, 2.0, 19.0, 41.0], vec![1.0, 1.5, 2.0, 2.5, 2.5, -0.25]] {
+            let got = warp_scores(&a, &b, 1, rows, w, &columns, &shifts, shifts.len()).unwrap();
+            let want = naive(&a, &b, rows, w, &columns, &shifts);
+            for (g, e) in got.iter().zip(&want) {
+                assert!((g - e).abs() <= 1e-12 * (1.0 + e.abs()), "{g} vs {e}");
+            }
+        }
+    }
+
+    #[test]
+    fn a_turned_copy_scores_zero_at_its_turn() {
+        let (rows, w) = (2, 16);
+        let a = lcg(rows * w, 7);
+        // b is a turned by 3 columns: b[k, (u + 3) % w] = a[k, u]
+        let mut b = vec![0.0; rows * w];
+        for k in 0..rows {
+            for u in 0..w {
+                b[k * w + (u + 3) % w] = a[k * w + u];
+            }
+        }
+        let identity: Vec<f64> = (0..w).map(|u| u as f64).collect();
+        let shifts: Vec<f64> = (0..w).map(|s| s as f64).collect();
+        let s = warp_scores(&a, &b, 1, rows, w, &identity, &shifts, w).unwrap();
+        let best = (0..w).min_by(|&i, &j| s[i].total_cmp(&s[j])).unwrap();
+        assert_eq!(best, 3);
+        assert!(s[3].abs() < 1e-12);
+    }
+
+    #[test]
+    fn bad_input_is_an_error() {
+        let a = vec![0.0; 8];
+        assert!(warp_scores(&a, &a, 1, 2, 4, &[0.0; 4], &[0.0], 1).is_ok());
+        assert!(warp_scores(&a, &a[..7], 1, 2, 4, &[0.0; 4], &[0.0], 1).is_err());
+        assert!(warp_scores(&a, &a, 1, 2, 4, &[0.0; 3], &[0.0], 1).is_err());
+        assert!(warp_scores(&a, &a, 1, 2, 4, &[0.0; 4], &[], 0).is_err());
+        assert!(warp_scores(&a, &a, 1, 2, 4, &[f64::NAN, 0.0, 0.0, 0.0], &[0.0], 1).is_err());
+        assert!(warp_scores(&a, &a, 1, 0, 4, &[0.0; 4], &[0.0], 1).is_err());
+        assert_eq!(warp_scores(&[], &[], 0, 2, 4, &[0.0; 4], &[], 1).unwrap().len(), 0);
+    }
+}
