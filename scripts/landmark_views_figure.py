@@ -16,12 +16,12 @@ import numpy as np
 
 from sfanav import sim
 from sfanav.landmarks import ViewExtractor
-from sfanav.sim import presets
+from sfanav.sim import presets, recording
 
 
 def main(out: Path) -> None:
     p = presets.get("thesis-5.4-landmarks")
-    s_world, s_runs, s_traj, _ = presets.random_streams(0)
+    s_world, s_runs, s_traj, _ = recording.random_streams(0)
     world = sim.World.generate(int(s_world.integers(2**31)), **p.world)
     cam, ren = p.camera(), sim.Renderer(world)
     runs = p.runs(s_runs)

@@ -28,8 +28,8 @@ def main() -> None:
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
     p = sim.presets.get("realistic-garden")
-    world = sim.presets.preset_world("realistic-garden", a.seed)
-    s_runs, s_traj = sim.presets.random_streams(a.seed)[1:3]
+    world = sim.recording.preset_world("realistic-garden", a.seed)
+    s_runs, s_traj = sim.recording.random_streams(a.seed)[1:3]
     runs = p.runs(s_runs)
     train = runs[0].trajectory(world, s_traj)
     test = runs[1].trajectory(world, s_traj)

@@ -34,7 +34,7 @@ def save(path: Path, img) -> None:
 def main() -> None:
     out = Path(sys.argv[1] if len(sys.argv) > 1 else "docs/images")
     out.mkdir(parents=True, exist_ok=True)
-    world = sim.presets.preset_world("thesis-5.3-garden", seed=0)
+    world = sim.recording.preset_world("thesis-5.3-garden", seed=0)
     ren = sim.Renderer(world)
     pose = (0.0, 0.0, 0.0)
     save(out / "sim-panorama.png", ren.render(sim.PanoramicCamera(600, 60), pose))
@@ -44,7 +44,7 @@ def main() -> None:
     save(out / "sim-omni.png", img)
     save(out / "sim-omni-unwarped.png", omni.unwarp(img, 600, 55))
 
-    world = sim.presets.preset_world("thesis-6.2.2-seasons", seed=0)
+    world = sim.recording.preset_world("thesis-6.2.2-seasons", seed=0)
     ren = sim.Renderer(world)
     start = sim.trajectories.border_loop(world.area, 279, rng=0).poses[0]
     cam = sim.PanoramicCamera(1200, 100, (-30, 30))

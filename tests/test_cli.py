@@ -95,7 +95,7 @@ def test_localize_dataset_folder_and_video(tiny, tmp_path, capsys):
 
 
 def test_localize_unwarps_omnidirectional_images(tiny, tmp_path, capsys):
-    world = sim.presets.preset_world("demo", 3)
+    world = sim.recording.preset_world("demo", 3)
     renderer = sim.Renderer(world)
     omni = sim.OmniCamera(48)
     folder = tmp_path / "omni"

@@ -87,8 +87,8 @@ def test_detour_keeps_clear_of_obstacles_and_leaves_free_runs_alone():
 
 def test_realistic_presets_share_the_outer_garden_and_have_three_seeds():
     for seed in (0, 1, 2):
-        rich = sim.presets.preset_world("realistic-garden", seed)
-        ctrl = sim.presets.preset_world("realistic-garden-control", seed)
+        rich = sim.recording.preset_world("realistic-garden", seed)
+        ctrl = sim.recording.preset_world("realistic-garden-control", seed)
         assert len(rich.obstacles) == 12 and not ctrl.obstacles
         assert len(rich.ground.patches) == 5 and not ctrl.ground.patches
         assert [(o.kind, o.x, o.y) for o in rich.objects if not o.obstacle] == [(o.kind, o.x, o.y) for o in ctrl.objects]

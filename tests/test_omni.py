@@ -12,7 +12,7 @@ from sfanav.data import Preprocessing, Preprocessor, Unwarper
 from sfanav.data.dataset import Dataset
 from sfanav.data.sources import load_run
 from sfanav.sim import Attitude, UnevenGround
-from sfanav.sim.presets import preset_terrain
+from sfanav.sim.recording import preset_terrain
 
 from clitools import TINY_TOML, assert_one_line_error, run
 

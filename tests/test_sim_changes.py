@@ -171,7 +171,7 @@ def test_garden_changes_preset_records_what_changed(tmp_path, capsys):
     assert counts == {"moved": 4, "removed": 3, "added": 5}
     before, after = World.load(out / "world.json"), World.load(out / g["world"])
     # run A's world is thesis-6.2.1-static's, at the same seed
-    same = sim.presets.preset_world("thesis-6.2.1-static", 0)
+    same = sim.recording.preset_world("thesis-6.2.1-static", 0)
     assert json.loads(json.dumps(same.to_dict())) == json.loads(json.dumps(before.to_dict()))
     assert sorted(o.kind for o in after.objects if o.kind not in {p.kind for p in before.objects}) == \
            ["car", "furniture", "parasol", "trailer"]
@@ -188,7 +188,7 @@ def test_garden_changes_preset_records_what_changed(tmp_path, capsys):
         np.testing.assert_array_equal(sel.image(0), r.render(cam, tuple(sel.poses[0])))
     # deterministic from the seed: the gardens the runs see
     runs = sim.presets.get("garden-changes").runs(np.random.default_rng(0))
-    again = changed_gardens(sim.presets.preset_world("garden-changes", 0), runs, 0)["after"]
+    again = changed_gardens(sim.recording.preset_world("garden-changes", 0), runs, 0)["after"]
     assert again[1] == g["objects"]
-    other = changed_gardens(sim.presets.preset_world("garden-changes", 1), runs, 1)["after"]
+    other = changed_gardens(sim.recording.preset_world("garden-changes", 1), runs, 1)["after"]
     assert other[1] != g["objects"]

@@ -175,8 +175,8 @@ def test_seasons_preset_records_a_year(seasons_ds):
         assert lo <= light.sun_elevation_deg <= hi
     # the same garden as thesis-6.2.2-conditions
     assert ds.metadata["description"].startswith("the 15x15 m garden and 279-frame border-wire loop")
-    assert sim.presets.preset_world("thesis-6.2.2-seasons", 1).to_dict() == \
-        sim.presets.preset_world("thesis-6.2.2-conditions", 1).to_dict()
+    assert sim.recording.preset_world("thesis-6.2.2-seasons", 1).to_dict() == \
+        sim.recording.preset_world("thesis-6.2.2-conditions", 1).to_dict()
     # winter's lawn is less green than summer's
     g = {s: greenness(np.stack([ds.image(i) for i in np.nonzero(np.char.endswith(ds.conditions.astype(str), s))[0]])
                       [:, 5:]) for s in ("summer", "winter")}
@@ -188,10 +188,10 @@ def test_each_recording_drives_its_own_jittered_loop(seasons_ds):
     conds = sorted(set(ds.conditions))
     P = {c: ds.select(condition=c).poses for c in conds}
     # reproducible from the seed: the loop of the trajectory stream, jittered from the jitter stream in order
-    _, _, s_traj, _ = sim.presets.random_streams(1)
-    world = sim.presets.preset_world("thesis-6.2.2-seasons", 1)
+    _, _, s_traj, _ = sim.recording.random_streams(1)
+    world = sim.recording.preset_world("thesis-6.2.2-seasons", 1)
     loop = sim.trajectories.border_loop(world.area, 279, rng=s_traj)
-    s_jit = sim.presets._jitter_stream(1)
+    s_jit = sim.recording.jitter_stream(1)
     for c in ds.metadata["runs"]["loop"]["conditions"]:
         drive = sim.trajectories.jitter(loop, 0.05, 2.0, rng=s_jit)
         np.testing.assert_allclose(P[c], drive.poses[:3], atol=1e-9)

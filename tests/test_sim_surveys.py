@@ -294,7 +294,7 @@ def test_gyro_column_is_validated(tmp_path):
 
 def test_mower_survey_preset(tmp_path):
     p = sim.presets.get("mower-survey")
-    world = sim.presets.preset_world("mower-survey", 0)
+    world = sim.recording.preset_world("mower-survey", 0)
     runs = {r.name: r.trajectory(world, np.random.default_rng(0)) for r in p.runs(np.random.default_rng(0))}
     assert {"serpentine", "perimeter-serpentine", "spiral", "crossing", "random",
             "serpentine-random-heading"} <= set(runs)

@@ -145,7 +145,7 @@ def test_transient_must_be_a_list_and_fit():
 
 
 def test_seasons_preset_has_objects_that_come_and_go():
-    w = sim.presets.preset_world("thesis-6.1-seasons", 0)
+    w = sim.recording.preset_world("thesis-6.1-seasons", 0)
     by_season = {s: sorted(o.kind for o in w.transient if o.present(s)) for s in SEASONS}
     assert by_season["summer"] == ["furniture", "paddling_pool", "parasol", "toys"]
     assert by_season["winter"] == ["snow_patch", "snow_patch", "snowman", "tarp"]

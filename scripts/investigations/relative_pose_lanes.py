@@ -47,7 +47,7 @@ for spec in a.gardens.split(","):
     name, spacing = spec.split(":")
     spacing = float(spacing)
     rng = np.random.default_rng(a.seed)
-    w = sim.presets.preset_world(name, a.seed)
+    w = sim.recording.preset_world(name, a.seed)
     tr = T.detour(T.grid(w.area, spacing=spacing, step=0.25, turn="arc", margin=0.5, crossings=False), w)
     P = tr.poses
     straight = np.abs(np.sin(P[:, 2])) < 0.02

@@ -475,12 +475,13 @@ def _plot_721(outcome: list[tuple[int, str, str, float, float]], path: Path) -> 
 def _coordinate_scene(kind: str, seed: int, quick: bool) -> tuple[Any, Any, Any]:
     """(world, trajectory, velocity regions) of a 7.2.2 preset (quick: 1500 frames)."""
     from ..sim import presets as P
+    from ..sim import recording as R
     from ..sim import trajectories as T
     from ..sim.world import World
 
     name = f"thesis-7.2.2-{kind}"
     p = P.get(name)
-    s_world, s_runs, s_traj, _ = P.random_streams(seed)
+    s_world, s_runs, s_traj, _ = R.random_streams(seed)
     world = World.generate(int(s_world.integers(2**31)), **p.world)
     regions = T.VelocityRegions.half_plane(0.0, "left", 3.0) if kind == "halfplane" else T.VelocityRegions.disc(5.0, factor=3.0)
     if quick:

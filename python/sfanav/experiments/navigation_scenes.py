@@ -95,6 +95,7 @@ def scene(kind: str, seed: int = 0, *, quick: bool = False, lawn: str | None = N
     preset's lawn (``"uniform"``; ``"patchy"``: the scenes before
     2026-11-24, see :meth:`sfanav.sim.World.generate`)."""
     from ..sim import presets as P
+    from ..sim import recording as R
     from ..sim import trajectories as T
     from ..sim.cameras import PanoramicCamera
     from ..sim.robot import OdometryNoise, Robot
@@ -112,7 +113,7 @@ def scene(kind: str, seed: int = 0, *, quick: bool = False, lawn: str | None = N
         return Scene(f"quick-{kind}", world, cam, robot, traj, True)
     name = f"thesis-7.1-{kind}"
     p = P.get(name)
-    s_world, s_runs, s_traj, _ = P.random_streams(seed)
+    s_world, s_runs, s_traj, _ = R.random_streams(seed)
     world = World.generate(int(s_world.integers(2**31)), **{**p.world, **({"lawn": lawn} if lawn else {})})
     traj = p.runs(s_runs)[0].trajectory(world, s_traj)
     return Scene(name, world, p.camera(), p.robot(), traj, False)

@@ -18,10 +18,10 @@
   segments, random walks, velocity regions.
 * :class:`UnevenGround`, :class:`HeightField`, :class:`Attitude`
   (``terrain.py``): uneven ground that tilts and bobs the camera.
-* ``presets``: the thesis's scenes; :func:`simulate` writes a dataset.
+* ``presets``: the thesis's scenes; ``recording``: :func:`simulate` writes a preset's dataset.
 """
 
-from . import presets, surveys, trajectories
+from . import presets, recording, surveys, trajectories
 from .cameras import (
     OmniCamera,
     PanoramicCamera,
@@ -31,7 +31,8 @@ from .cameras import (
 )
 from .changes import GardenChanges
 from .conditions import SEASONS, Lighting, Season, season_of_year
-from .presets import PRESETS, simulate
+from .presets import PRESETS
+from .recording import simulate
 from .render import Renderer
 from .robot import (
     GyroNoise,
@@ -78,6 +79,7 @@ __all__ = [
     "VelocityRegions",
     "trajectories",
     "presets",
+    "recording",
     "PRESETS",
     "simulate",
     "bearings",

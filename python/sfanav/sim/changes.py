@@ -233,7 +233,7 @@ class GardenChanges:
 def changes_stream(seed: int, name: str) -> np.random.Generator:
     """The random stream of the changed garden ``name`` of a preset seed:
     independent of the preset's other streams and of other gardens'
-    (:func:`sfanav.sim.presets.simulate` uses it)."""
+    (:func:`sfanav.sim.recording.simulate` uses it)."""
     key = zlib.crc32(name.encode("utf-8"))
     return np.random.default_rng(np.random.SeedSequence(int(seed), spawn_key=(7, key)))
 

@@ -38,7 +38,7 @@ def _add_simulate(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
 
 
 def _run_simulate(args: argparse.Namespace) -> int:
-    from ...sim import OmniCamera, PanoramicCamera, presets
+    from ...sim import OmniCamera, PanoramicCamera, presets, recording
 
     if args.preset not in presets.PRESETS:
         raise UsageError(f"unknown preset {args.preset!r}; available: {', '.join(presets.PRESETS)}")
@@ -61,7 +61,7 @@ def _run_simulate(args: argparse.Namespace) -> int:
                 w, h = 600, 60
             el = base.elevation_deg if isinstance(base, PanoramicCamera) else (-30.0, 20.0)
             camera = PanoramicCamera(w, h, el, rgb=not args.gray)
-    ds = presets.simulate(args.preset, args.out, args.seed, max_frames=args.max_frames, camera=camera,
-                          overwrite=args.overwrite, progress=not args.no_progress)
+    ds = recording.simulate(args.preset, args.out, args.seed, max_frames=args.max_frames, camera=camera,
+                            overwrite=args.overwrite, progress=not args.no_progress)
     print(f"wrote {len(ds)} images to {args.out}")
     return 0
