@@ -264,3 +264,32 @@ def test_without_gtsam_the_error_names_the_extra(monkeypatch):
     T = lanes(2)
     with pytest.raises(ImportError, match="hand-written"):
         fit_pose_graph(rotating_panoramas(T[:, 2]), T[:, :2], T, refine=0, solver="gtsam")
+
+
+def test_per_step_noise_fields_weigh_the_odometry():
+    """A noise model that keeps its noise in the per-step fields (the
+    simulator's mower odometry: heading noise per frame, distance noise as a
+    fraction of the step) weighs every step by them in both back ends,
+    instead of taking a straight step's heading as exact."""
+    from sfanav.odometry.pose_graph import PER_STEP_NOISE, step_distance_sigmas, step_heading_sigmas
+    from sfanav.odometry.pose_graph_gtsam import odometry_noise_model, odometry_sigmas
+    from sfanav.sim import OdometryNoise
+
+    noise = OdometryNoise.mower(distance_fraction=0.02, heading_deg=0.5, drift_deg_per_m=0.1)
+    raw = noise.to_dict()
+    assert raw["heading_sigma"] == 0.0 and raw["distance_sigma"] == 0.0  # all of it per step
+    odo = np.array([[0.0, 0.0, 0.0], [1.2, 0.0, 0.0], [2.4, 0.0, 0.5]])
+    sig = odometry_sigmas(odo, raw)
+    d, dth = np.array([1.2, 1.2]), np.array([0.0, 0.5])
+    want_h = np.sqrt(raw["step_heading_sigma"] ** 2 + (raw["turn_fraction"] * dth) ** 2
+                     + raw["turn_sigma"] ** 2 * np.abs(dth) + 1e-10)
+    np.testing.assert_allclose(sig[:, 2], want_h, rtol=1e-12)
+    np.testing.assert_allclose(sig[:, 0], np.sqrt((0.02 * d) ** 2 + 1e-10), rtol=1e-12)
+    nz = odometry_noise_model(raw)
+    assert set(PER_STEP_NOISE) <= set(nz)
+    np.testing.assert_allclose(step_heading_sigmas(nz, d, dth), want_h, rtol=1e-12)
+    np.testing.assert_allclose(step_distance_sigmas(nz, d), sig[:, 0], rtol=1e-12)
+    # a random-walk-only model is unchanged by the per-step terms (they default to zero)
+    rw = {"distance_sigma": 0.02, "heading_sigma": 0.01, "turn_sigma": 0.02}
+    np.testing.assert_allclose(odometry_sigmas(odo, rw)[:, 2],
+                               np.sqrt((0.01**2 + 0.01 * 0.02**2) * d + 0.02**2 * np.abs(dth) + 1e-10), rtol=1e-12)

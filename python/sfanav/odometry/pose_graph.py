@@ -212,8 +212,7 @@ def _solve_headings(odometry: np.ndarray, pairs: PlacePairs, rel: np.ndarray, no
     e = np.arange(n - 1)
     dth = wrap_angle(np.diff(odometry[:, 2]))
     dd = np.hypot(*np.diff(odometry[:, :2], axis=0).T)
-    slip = noise.get("slip_rate", 0.0) * noise.get("slip_heading_sigma", 0.0) ** 2  # rad^2 per m (Poisson)
-    st = np.sqrt((noise["heading_sigma"] ** 2 + slip) * dd + noise["turn_sigma"] ** 2 * np.abs(dth) + 1e-10)
+    st = step_heading_sigmas(noise, dd, dth)
     if step_sigma is not None:  # a gyro fused in: its per-step sigmas
         st = np.asarray(step_sigma, np.float64)
     theta = odometry[0, 2] + np.concatenate([[0.0], np.cumsum(dth)])
@@ -267,12 +266,40 @@ mean extra distance (m) and the heading error (rad) of one (the defaults of
 :class:`sfanav.sim.OdometryNoise`)."""
 
 
+PER_STEP_NOISE = {"step_heading_sigma": 0.0, "distance_fraction": 0.0, "turn_fraction": 0.0}
+"""Noise per odometry step beside the random walk (zero when the noise
+model gives none): a heading error per step (rad), a distance error as a
+fraction of the step's length, a turn error as a fraction of the step's
+turn (the per-step fields of :class:`sfanav.sim.OdometryNoise`, e.g. its
+``mower`` model, which puts all of its noise there)."""
+
+
 def _heading_noise(odometry_noise: Any) -> dict[str, float]:
     out = dict(noise_dict(odometry_noise))
     raw = odometry_noise.to_dict() if hasattr(odometry_noise, "to_dict") else (odometry_noise or {})
-    for k, v in SLIP_DEFAULTS.items():
+    for k, v in {**SLIP_DEFAULTS, **PER_STEP_NOISE}.items():
         out[k] = check_nonneg_float(raw.get(k, v), f"odometry_noise[{k!r}]") if isinstance(raw, Mapping) else v
     return out
+
+
+def step_heading_sigmas(noise: Mapping[str, float], d: np.ndarray, dtheta: np.ndarray) -> np.ndarray:
+    """Standard deviation (rad) of each odometry step's heading change:
+    ``sqrt((heading_sigma^2 + slip_rate slip_heading_sigma^2) d +
+    turn_sigma^2 |dtheta| + step_heading_sigma^2 + (turn_fraction dtheta)^2)``
+    for steps of ``d`` metres turning ``dtheta`` rad (a floor of 1e-5 keeps
+    standing frames finite)."""
+    slip = noise.get("slip_rate", 0.0) * noise.get("slip_heading_sigma", 0.0) ** 2  # rad^2 per m (Poisson)
+    return np.sqrt((noise["heading_sigma"] ** 2 + slip) * d + noise["turn_sigma"] ** 2 * np.abs(dtheta)
+                   + noise.get("step_heading_sigma", 0.0) ** 2 + (noise.get("turn_fraction", 0.0) * dtheta) ** 2
+                   + 1e-10)
+
+
+def step_distance_sigmas(noise: Mapping[str, float], d: np.ndarray) -> np.ndarray:
+    """Standard deviation (m) of each odometry step's length along it:
+    ``sqrt((distance_sigma^2 + 2 slip_rate slip_distance^2) d +
+    (distance_fraction d)^2)`` (floor 1e-5 m)."""
+    slip = 2.0 * noise.get("slip_rate", 0.0) * noise.get("slip_distance", 0.0) ** 2  # m^2 per m (exponential)
+    return np.sqrt((noise["distance_sigma"] ** 2 + slip) * d + (noise.get("distance_fraction", 0.0) * d) ** 2 + 1e-10)
 
 
 def _solve_positions(step: np.ndarray, sd: np.ndarray, pairs: PlacePairs, offsets: np.ndarray, sigma: float,
@@ -346,8 +373,7 @@ def refine_positions(features: np.ndarray, odometry: np.ndarray, headings: np.nd
         return P, 0, float("nan"), float("nan")
     step = turned_steps(odometry, headings)
     d = np.hypot(*step.T)
-    slip = 2.0 * noise.get("slip_rate", 0.0) * noise.get("slip_distance", 0.0) ** 2  # m^2 per m (exponential)
-    sd = np.sqrt((noise["distance_sigma"] ** 2 + slip) * d + (heading_sigma * d) ** 2 + 1e-8)
+    sd = np.sqrt(step_distance_sigmas(noise, d) ** 2 + (heading_sigma * d) ** 2 + 1e-8)
     i, j = pairs.current, pairs.past
     spec = dict(readout)
     if spec.get("n_outputs") is not None:

@@ -54,7 +54,7 @@ import numpy as np
 from .._checks import as_real_array, check_finite, check_int, check_nonneg_float, check_positive_float
 from .dead_reckoning import as_poses, wrap_angle
 from .metric_cost import noise_dict
-from .pose_graph import SLIP_DEFAULTS
+from .pose_graph import PER_STEP_NOISE, SLIP_DEFAULTS, step_distance_sigmas, step_heading_sigmas
 
 HEADING_ONLY_SIGMA = 1e4
 """Position standard deviation (m) given to a closure whose position is
@@ -205,11 +205,12 @@ def odometry_noise_model(odometry_noise: Any = None) -> dict[str, float]:
     """The random-walk noise model of the odometry (``distance_sigma``,
     ``heading_sigma``, ``turn_sigma`` of
     :data:`~sfanav.odometry.DEFAULT_ODOMETRY_NOISE`) with the slip model
-    (:data:`~sfanav.odometry.pose_graph.SLIP_DEFAULTS` where not given), as
+    (:data:`~sfanav.odometry.pose_graph.SLIP_DEFAULTS` where not given) and
+    the per-step terms (:data:`~sfanav.odometry.pose_graph.PER_STEP_NOISE`), as
     the hand-written solver reads it."""
     out = dict(noise_dict(odometry_noise))
     raw = odometry_noise.to_dict() if hasattr(odometry_noise, "to_dict") else (odometry_noise or {})
-    for k, v in SLIP_DEFAULTS.items():
+    for k, v in {**SLIP_DEFAULTS, **PER_STEP_NOISE}.items():
         out[k] = check_nonneg_float(raw.get(k, v), f"odometry_noise[{k!r}]") if isinstance(raw, Mapping) else v
     return out
 
@@ -219,9 +220,10 @@ def odometry_sigmas(odometry: Any, odometry_noise: Any = None, heading_sigma: An
     (m), across it (m) and of its heading change (rad).
 
     With d the step's length and dtheta its turn: heading
-    ``sqrt((heading_sigma^2 + slip_rate slip_heading_sigma^2) d +
-    turn_sigma^2 |dtheta|)`` (the hand-written solver's weights); along
-    ``sqrt((distance_sigma^2 + 2 slip_rate slip_distance^2) d)``; across
+    :func:`~sfanav.odometry.pose_graph.step_heading_sigmas` (the
+    hand-written solver's weights: random walk, slip and the per-step
+    terms); along :func:`~sfanav.odometry.pose_graph.step_distance_sigmas`;
+    across
     ``sqrt(distance_sigma^2 d + (d sigma_heading / 2)^2)`` (the heading
     error at mid-step turns the step). A floor of 1e-5 keeps standing
     frames finite.
@@ -230,14 +232,12 @@ def odometry_sigmas(odometry: Any, odometry_noise: Any = None, heading_sigma: An
     nz = odometry_noise_model(odometry_noise)
     d = np.hypot(*np.diff(P[:, :2], axis=0).T)
     dth = wrap_angle(np.diff(P[:, 2]))
-    slip_h = nz["slip_rate"] * nz["slip_heading_sigma"] ** 2
-    slip_d = 2.0 * nz["slip_rate"] * nz["slip_distance"] ** 2
-    sh = np.sqrt((nz["heading_sigma"] ** 2 + slip_h) * d + nz["turn_sigma"] ** 2 * np.abs(dth) + 1e-10)
+    sh = step_heading_sigmas(nz, d, dth)
     if heading_sigma is not None:
         sh = as_real_array(heading_sigma, "heading_sigma").astype(np.float64).reshape(-1)
         if sh.shape != d.shape or not np.all(np.isfinite(sh)) or np.any(sh <= 0):
             raise ValueError(f"heading_sigma must hold {len(d)} positive finite step sigmas, got shape {sh.shape}")
-    sa = np.sqrt((nz["distance_sigma"] ** 2 + slip_d) * d + 1e-10)
+    sa = step_distance_sigmas(nz, d)
     sl = np.sqrt(nz["distance_sigma"] ** 2 * d + (0.5 * d * sh) ** 2 + 1e-10)
     return np.c_[sa, sl, sh]
 
