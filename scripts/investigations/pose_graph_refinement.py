@@ -6,7 +6,9 @@ learned training positions' median error against the truth (after a rigid
 fit; evaluation only) without refinement, with the offsets' standard
 deviation fixed at 0.05 m (the rule until 2026-12-02), estimated (the
 default), estimated with a third round, and estimated with the size test
-before 2026-12-06 (the RMS radius instead of the area). Writes ``OUT/pose-graph-refinement.json``.
+before 2026-12-06 (the RMS radius instead of the area); from 2026-12-06 also GTSAM with heading-only and with
+relative-pose closures (the warping scores now in the Rust core). Writes ``OUT/pose-graph-refinement.json``;
+the features of each run are cached as ``OUT/cache/RUN.npz`` (images, features, odometry, truth).
 
     PYTHONPATH=python python3 scripts/investigations/pose_graph_refinement.py OUT [--runs open obstacle garden0 garden1 garden2]
         [--variants "no refinement" "estimated (default)" ...]
@@ -30,7 +32,10 @@ from sfanav.odometry import fit_pose_graph
 
 VARIANTS = {"no refinement": {"refine": 0}, "offset sigma 0.05 m": {"offset_sigma": 0.05},
             "estimated (default)": {}, "estimated, 3 rounds": {"refine": 3},
-            "estimated, size by RMS radius": {}}
+            "estimated, size by RMS radius": {},
+            "GTSAM heading-only": {"solver": "gtsam"},
+            "GTSAM relative-pose": {"solver": "gtsam", "pair_closures": "relative-pose"},
+            "GTSAM relative-pose, no refinement": {"solver": "gtsam", "pair_closures": "relative-pose", "refine": 0}}
 RADIUS = "estimated, size by RMS radius"
 """The size test until 2026-12-06 (the refined map's RMS distance from its centroid against the unrefined
 map's) in place of the area test, patched in for the comparison."""
@@ -60,7 +65,8 @@ def nav_run(kind: str, out: Path):
 
 SCENES = {"5.1.1": ("thesis-5.1.1-grid", 0, "train"), "demo": ("demo", 0, "train"),
           "suite-inner": ("suite-inner", 1, "train-grid"), "suite-control": ("suite-control", 1, "train-grid"),
-          "mower-serpentine": ("mower-survey", 0, "serpentine"), "mower-crossing": ("mower-survey", 0, "crossing")}
+          "mower-serpentine": ("mower-survey", 0, "serpentine"), "mower-crossing": ("mower-survey", 0, "crossing"),
+          "5.2-indoor-I": ("thesis-5.2-indoor-I", 0, "train"), "5.2-indoor-II": ("thesis-5.2-indoor-II", 0, "train")}
 """Further runs (2026-12-06): name -> (sim preset, seed, run); the sfanav default's features, as for the gardens."""
 
 
@@ -77,8 +83,12 @@ def garden_run(seed: int, out: Path, preset: str = "realistic-garden", run: str 
         prep = Preprocessing(int(cam["width"]), int(cam["height"]), False, False)
     else:  # the panoramas resized to the default network's input, as sfanav train does
         prep = Preprocessing.for_network(default_network())
+        if not cam.get("rgb", True):  # gray panoramas read gray, repeated into three channels (product rows)
+            prep = Preprocessing(prep.width, prep.height, True, prep.normalize)
     tr = ds.select(run=run)
     X, xy = load_run(tr, prep)
+    if X.ndim == 3:
+        X = np.repeat(X[..., None], 3, axis=3)
     loc = train_localizer(X, xy=xy, camera_elevation=tuple(cam.get("elevation_deg", (-30.0, 20.0))))
     return X, loc.features(X), tr.odometry, xy, ds.metadata.get("robot", {}).get("odometry_noise")
 
@@ -91,17 +101,29 @@ def main() -> None:
     a = ap.parse_args()
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
-    res: dict[str, dict] = {}
+    prev = out / "pose-graph-refinement.json"
+    res: dict[str, dict] = json.loads(prev.read_text()) if prev.exists() else {}
     for run in a.runs:
         noise = None
-        if run in SCENES:
+        cache = out / "cache" / f"{run}.npz"
+        if cache.exists():
+            z = np.load(cache, allow_pickle=False)
+            imgs, F, odo, truth = z["images"], z["features"], z["odometry"], z["truth"]
+            noise = json.loads(str(z["noise"])) if str(z["noise"]) != "null" else None
+        elif run in SCENES:
             preset, seed, name_ = SCENES[run]
             imgs, F, odo, truth, noise = garden_run(seed, out, preset, name_)
         elif run.startswith("garden"):
             imgs, F, odo, truth, _ = garden_run(int(run[6:]), out)
         else:
             imgs, F, odo, truth = nav_run(run, out)
-        res[run] = {"frames": len(F)}
+        if not cache.exists():
+            cache.parent.mkdir(parents=True, exist_ok=True)
+            noise_json = json.dumps(noise if noise is None or isinstance(noise, dict) else vars(noise), default=float)
+            np.savez(cache.with_suffix(".part.npz"), images=imgs, features=F, odometry=odo, truth=truth,
+                     noise=np.array(noise_json))
+            cache.with_suffix(".part.npz").replace(cache)
+        res.setdefault(run, {})["frames"] = len(F)
         for name in a.variants:
             kw = VARIANTS[name]
             t0 = time.perf_counter()
