@@ -8,8 +8,8 @@ around the panorama compass's). This times, on P pairs of seeded smooth
 grid (48 directions, 5 ratios, +-20 deg around the compass, the channels'
 mean as ``fit_pose_graph(pair_closures="relative-pose")`` calls it):
 
-* the per-pair numpy path (``_scores_reference`` for every pair, then the
-  same pseudo-posterior): the reference, as the library ran it before;
+* the per-pair numpy path (``reference_warping``): the reference, as the
+  library ran it before;
 * ``relative_poses`` (the scores in the Rust core, pairs in parallel).
 
     python3 benches/bench_relative_pose.py [--pairs 200] [--repeats 3] [--json out.json]
@@ -24,43 +24,17 @@ import argparse
 import json
 import os
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _benchlib import best  # noqa: E402  (shared with the other benches)
 from bench_network import make_images  # noqa: E402  (seeded synthetic panoramas)
 
 N_BEARINGS = 48
 RATIOS = (0.05, 0.1, 0.2, 0.3, 0.4)
 MAX_TURN_DEG = 20.0
-
-
-def best(f, repeats: int):
-    ts, out = [], None
-    for _ in range(repeats):
-        t = time.perf_counter()
-        out = f()
-        ts.append(time.perf_counter() - t)
-    return min(ts), out
-
-
-def reference(images: np.ndarray, i: np.ndarray, j: np.ndarray) -> np.ndarray:
-    from sfanav.loopclosure import relative_pose as rp
-    from sfanav.loopclosure.closures import panorama_rows
-
-    R = panorama_rows(images.mean(axis=-1)).astype(np.float64)
-    W = R.shape[2]
-    alphas = 2 * np.pi * np.arange(N_BEARINGS) / N_BEARINGS - np.pi
-    cols = rp._warp_columns(W, alphas, np.asarray(RATIOS))
-    win = int(np.ceil(MAX_TURN_DEG * W / 360.0))
-    out = []
-    for a, b in zip(i, j):
-        st = rp._pair_setup(R[a], R[b], win)
-        S = rp._scores_reference(st[0], st[1], cols, st[2])
-        out.append(rp._pose_from_scores(S, alphas, st[2], W, R.shape[1], rp.DEFAULT_TEMPERATURE))
-    return np.array(out)
 
 
 def main(argv=None) -> int:
@@ -71,16 +45,17 @@ def main(argv=None) -> int:
     a = p.parse_args(argv)
 
     from sfanav import get_num_threads
-    from sfanav.loopclosure.relative_pose import relative_poses
+    from sfanav.loopclosure.relative_pose import reference_warping, relative_poses
 
     n = a.pairs + 1
     X = make_images(0, n, 40, 350, 3, seed=7)
     i = np.arange(a.pairs)
     j = i + 1
     gray = X.mean(axis=-1)
-    t_core, rp = best(lambda: relative_poses(gray, i, j, n_bearings=N_BEARINGS, ratios=RATIOS,
+    rp, t_core = best(lambda: relative_poses(gray, i, j, n_bearings=N_BEARINGS, ratios=RATIOS,
                                              max_turn_deg=MAX_TURN_DEG), a.repeats)
-    t_ref, ref = best(lambda: reference(X, i, j), a.repeats)
+    ref, t_ref = best(lambda: reference_warping(gray, i, j, n_bearings=N_BEARINGS, ratios=RATIOS,
+                                                max_turn_deg=MAX_TURN_DEG), a.repeats)
     diff = float(np.nanmax(np.abs(np.c_[rp.dtheta, rp.bearing] - ref[:, :2])))
     res = {"pairs": a.pairs, "threads": get_num_threads(), "cpus": os.cpu_count(),
            "seconds numpy reference": t_ref, "seconds core": t_core, "ratio reference / core": t_ref / t_core,

@@ -47,7 +47,7 @@ from pathlib import Path
 
 import numpy as np
 
-from _benchlib import rendered_garden  # shared with the other benches (benches/ is the script's folder)
+from _benchlib import best, rendered_garden  # shared with the other benches (benches/ is the script's folder)
 
 
 def rss_mb() -> float:
@@ -61,16 +61,6 @@ def rss_mb() -> float:
 
 def peak_mb() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
-
-
-def best(f, repeats: int):
-    """(result of the last call, fastest seconds) of ``repeats`` calls of f."""
-    ts, out = [], None
-    for _ in range(repeats):
-        t = time.perf_counter()
-        out = f()
-        ts.append(time.perf_counter() - t)
-    return out, min(ts)
 
 
 def garden(root: Path, n: int, small: bool, seed: int, n_test: int):

@@ -8,7 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from sfanav import sim
-from sfanav.loopclosure.relative_pose import RelativePoses, gradient_offsets, relative_poses
+from sfanav.loopclosure.relative_pose import RelativePoses, gradient_offsets, reference_warping, relative_poses
 
 W = 120
 
@@ -189,24 +189,6 @@ def test_heading_agrees_with_the_panorama_compass(scene):
     np.testing.assert_allclose(_wrapdeg(rp.dtheta - compass), 0, atol=4.0)
 
 
-def _reference_poses(images, i_idx, j_idx, n_bearings=96, window_deg=30.0):
-    """The per-pair numpy path (kept for tests) of relative_poses's warping."""
-    from sfanav.loopclosure import relative_pose as rp
-    from sfanav.loopclosure.closures import panorama_rows
-
-    R = panorama_rows(np.asarray(images, float)).astype(np.float64)
-    W = R.shape[2]
-    alphas = 2 * np.pi * np.arange(n_bearings) / n_bearings - np.pi
-    cols = rp._warp_columns(W, alphas, np.asarray(rp.DEFAULT_RATIOS))
-    win = int(np.ceil(window_deg * W / 360.0))
-    out = []
-    for a, b in zip(i_idx, j_idx):
-        st = rp._pair_setup(R[a], R[b], win)
-        S = rp._scores_reference(st[0], st[1], cols, st[2])
-        out.append(rp._pose_from_scores(S, alphas, st[2], W, R.shape[1], rp.DEFAULT_TEMPERATURE))
-    return np.array(out)
-
-
 def test_the_core_scores_match_the_numpy_reference(scene):
     """The Rust core's warping scores (in parallel, in chunks) give the same
     relative poses as the per-pair numpy path, to rounding."""
@@ -215,7 +197,7 @@ def test_the_core_scores_match_the_numpy_reference(scene):
     i = np.arange(0, n - 3)
     j = i + 3
     got = relative_poses(images, i, j)
-    want = _reference_poses(images, i, j)
+    want = reference_warping(images, i, j)
     np.testing.assert_allclose(got.dtheta, want[:, 0], atol=1e-9)
     np.testing.assert_allclose(got.bearing, want[:, 1], atol=1e-9)
     np.testing.assert_allclose(got.sigma_dtheta, want[:, 2], rtol=1e-7)

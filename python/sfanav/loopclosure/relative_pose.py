@@ -452,6 +452,33 @@ def relative_poses(images: Any, i_idx: Any, j_idx: Any, *, distance: Any = None,
     return RelativePoses(i, j, dth, brg, dist, dx, dy, sth, sbr, np.where(known, dsig, np.inf), cov, contrast)
 
 
+def reference_warping(images: Any, i_idx: Any, j_idx: Any, *, n_bearings: int = 96, ratios: Any = DEFAULT_RATIOS,
+                      temperature: float = DEFAULT_TEMPERATURE, max_turn_deg: float = 30.0) -> np.ndarray:
+    """The warping of :func:`relative_poses` pair by pair in numpy, without
+    the Rust core: the independent reference its tests and
+    ``benches/bench_relative_pose.py`` compare against (slow: about 0.1 s
+    per pair of 350x40 panoramas).
+
+    Returns an array (M, 6): relative heading, bearing (rad), their sigmas,
+    their correlation and the scores' contrast per pair, as
+    :class:`RelativePoses` holds them. Takes the images, pairs and grid
+    options of :func:`relative_poses` (all rows, no distance)."""
+    R = panorama_rows(as_images(images)).astype(np.float64)
+    n, K, W = R.shape
+    i, j = _pairs(i_idx, j_idx, n)
+    A = check_int(n_bearings, "n_bearings", minimum=8)
+    alphas = 2 * np.pi * np.arange(A) / A - np.pi
+    cols = _warp_columns(W, alphas, as_real_array(ratios, "ratios").astype(np.float64).ravel())
+    win = int(np.ceil(check_positive_float(max_turn_deg, "max_turn_deg") * W / 360.0))
+    out = np.array([_NO_CONTRAST] * len(i), dtype=float).reshape(len(i), 6)
+    for k, (a, b) in enumerate(zip(i, j)):
+        st = _pair_setup(R[a], R[b], win)
+        if st is not None:
+            S = _scores_reference(st[0], st[1], cols, st[2])
+            out[k] = _pose_from_scores(S, alphas, st[2], W, K, temperature)
+    return out
+
+
 def _row_index(rows: Any, H: int) -> np.ndarray:
     r = np.asarray(rows)
     if r.ndim != 1 or r.dtype.kind not in "iu":

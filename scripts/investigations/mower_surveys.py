@@ -1,0 +1,59 @@
+#!/usr/bin/env python3
+"""The product on a lawn mower's survey patterns (issue 42): for each survey run of the ``mower-survey``
+preset (30x30 m garden, the robot facing its direction of travel, frames 1.2 m apart, the mower's odometry
+noise, a yaw gyro), the sfanav default trained on that run with ground truth and without (positions learned
+from the run's images and odometry, what ``sfanav train --supervision odometry`` runs), tested on the
+preset's ``test-walk``; single images and fused with the test walk's odometry, beside the peers
+(:func:`sfanav.experiments.product_rows.product_rows`, the experiments' product rows). Writes one JSON
+with every pattern's rows, incrementally.
+
+    sfanav simulate --preset mower-survey --out runs/mower            # or reuse a dataset of that preset
+    PYTHONPATH=python python3 scripts/investigations/mower_surveys.py runs/mower OUT.json \\
+        [--patterns serpentine perimeter-serpentine spiral crossing random]
+
+The gyro column is not used here (the product rows take images and odometry only).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+
+from sfanav.data import Dataset
+from sfanav.experiments.product_rows import product_rows, product_runs
+from sfanav.localization.recipe import default_network
+
+PATTERNS = ("serpentine", "perimeter-serpentine", "spiral", "crossing", "random")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("dataset", help="a dataset of the mower-survey preset")
+    ap.add_argument("out", help="JSON to write")
+    ap.add_argument("--patterns", nargs="*", default=list(PATTERNS))
+    ap.add_argument("--test", default="test-walk")
+    a = ap.parse_args()
+    ds = Dataset(a.dataset)
+    elev = tuple(ds.metadata["camera"].get("elevation_deg", (-30.0, 20.0)))
+    out_path = Path(a.out)
+    res = json.loads(out_path.read_text()) if out_path.exists() else {}
+    for pattern in a.patterns:
+        t0 = time.perf_counter()
+        train, tests = product_runs(ds, default_network(), train=pattern, tests=(a.test,))
+        r = product_rows(train, tests, camera_elevation=elev)
+        rows = {row["metric"]: row["sfanav"] for row in r.rows}
+        res[pattern] = {"frames": len(train.images), "rows": rows, "seconds": time.perf_counter() - t0}
+        sup = rows.get("MED (m) sfanav default [ground truth]")
+        ngt = rows.get("MED (m) sfanav default [no ground truth]")
+        print(f"{pattern}: supervised {sup:.3f} m, no ground truth {ngt:.3f} m (ratio {ngt / sup:.2f}), "
+              f"fused {rows.get('MED (m) sfanav default [no ground truth, fused]', float('nan')):.3f} m, "
+              f"{time.perf_counter() - t0:.0f} s", flush=True)
+        tmp = out_path.with_suffix(".part")
+        tmp.write_text(json.dumps(res, indent=1, default=float) + "\n")
+        tmp.replace(out_path)
+
+
+if __name__ == "__main__":
+    main()
