@@ -287,3 +287,20 @@ def test_train_with_loop_closures(tiny, tmp_path, capsys):
     code, _, err = run(capsys, "train", "--dataset", tiny["root"] / "data", "--config", tiny["config"],
                        "--out", tmp_path / "s.sfa", "--loop-closures", "surf", "--no-progress")
     assert code == 2 and "invalid choice" in err
+
+
+def test_train_with_relative_pose_closures(tiny, tmp_path, capsys):
+    """--closures relative-pose trains without ground truth with GTSAM's
+    relative-pose closures and records it; with the metric learner it is one
+    clear error."""
+    code, _, err = run(capsys, "train", "--dataset", tiny["root"] / "data", "--config", tiny["config"],
+                       "--out", tmp_path / "rp.sfa", "--supervision", "odometry", "--closures", "relative-pose",
+                       "--no-progress")
+    assert code == 0, err
+    info = sfanav.load(tmp_path / "rp.sfa").info
+    assert info["closures"] == "relative-pose" and info["supervision"] == "odometry"
+    code, _, err = run(capsys, "train", "--dataset", tiny["root"] / "data", "--config", tiny["config"],
+                       "--out", tmp_path / "ml.sfa", "--supervision", "odometry", "--closures", "relative-pose",
+                       "--metric-map", "metric-learning", "--no-progress")
+    assert_one_line_error(code, err, "--closures relative-pose needs --metric-map pose-graph")
+    assert not (tmp_path / "ml.sfa").exists()

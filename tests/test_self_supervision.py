@@ -208,3 +208,16 @@ def test_timestamps_must_increase(run):
         learn_positions(run["features"], run["odometry"], timestamps=bad)
     with pytest.raises(ValueError, match="must match"):
         check_timestamps(t[:-1], n)
+
+
+def test_train_localizer_checks_closures_first():
+    """An unknown closures kind, or relative-pose closures with the metric
+    learner, is a ValueError before any training."""
+    from sfanav.pipeline import train_localizer
+
+    X = np.zeros((6, 8, 60, 3))
+    odo = np.c_[np.arange(6.0), np.zeros(6), np.zeros(6)]
+    with pytest.raises(ValueError, match="closures must be one of"):
+        train_localizer(X, odometry=odo, closures="pose")
+    with pytest.raises(ValueError, match="needs metric_map='pose-graph'"):
+        train_localizer(X, odometry=odo, closures="relative-pose", metric_map="metric-learning")

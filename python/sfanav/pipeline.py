@@ -27,6 +27,11 @@ from .odometry.self_supervision import fit_localizer_from_odometry
 from .sfa.network import Network, Rotation
 
 METRIC_MAPS = ("pose-graph", "metric-learning")
+CLOSURES = ("heading", "relative-pose")
+"""What the pose graph's loop closures measure (``train_localizer(closures=)``, ``sfanav train --closures``):
+the relative heading (the default), or the whole relative pose by the warping method (GTSAM;
+docs/odometry.md: better maps on the mower's survey patterns and where places are seen from near
+landmarks, worse where the landmarks stand far away at the garden's border)."""
 """How positions are learned without ground truth (``sfanav train --metric-map``)."""
 ROTATION_STEP = 5
 """The simulated rotation's step in pixels (the thesis's)."""
@@ -40,7 +45,8 @@ def _all_finite(a: Any, n_cols: int) -> bool:
 
 
 def train_localizer(images: Any, *, xy: Any = None, odometry: Any = None, timestamps: Any = None, gyro: Any = None,
-                    supervision: str = "auto", network: Network | None = None, recipe: Recipe | None = None,
+                    supervision: str = "auto", closures: str = "heading", network: Network | None = None,
+                    recipe: Recipe | None = None,
                     camera_elevation: Sequence[float] | None = None, rotation: Rotation | None = None,
                     prep: Any = None, metric_map: str = "pose-graph", loop_closures: Any = None,
                     closure_weights: Any = None, network_images: Any = None,
@@ -68,6 +74,10 @@ def train_localizer(images: Any, *, xy: Any = None, odometry: Any = None, timest
         What the readout is fitted to; ``"auto"``: ground truth where the run
         has it, else positions learned from its images and odometry
         (:func:`sfanav.localization.recipe.supervision_for`).
+    closures : "heading" or "relative-pose"
+        Without ground truth, what the pose graph's loop closures measure
+        (:data:`CLOSURES`); ``"relative-pose"`` needs GTSAM (``pip install
+        sfanav[gtsam]``).
     network : Network or None
         The unfitted network (default: the sfanav default's).
     recipe : Recipe or None
@@ -129,6 +139,10 @@ def train_localizer(images: Any, *, xy: Any = None, odometry: Any = None, timest
     """
     if metric_map not in METRIC_MAPS:
         raise ValueError(f"metric_map must be one of {METRIC_MAPS}, got {metric_map!r}")
+    if closures not in CLOSURES:
+        raise ValueError(f"closures must be one of {CLOSURES}, got {closures!r}")
+    if closures != "heading" and metric_map != "pose-graph":
+        raise ValueError(f"closures={closures!r} needs metric_map='pose-graph', got {metric_map!r}")
     recipe = recipe if recipe is not None else recipe_for()
     net = network if network is not None else default_network()
     has_odometry = _all_finite(odometry, 3)
@@ -142,9 +156,15 @@ def train_localizer(images: Any, *, xy: Any = None, odometry: Any = None, timest
                   network_fit=dict(network_fit or {}), info={**dict(info or {}), **recipe.info()},
                   seed=seed, **({"readout_memory_images": True} if readout_memory_images else {}))
     if supervision == "odometry":
+        graph = {"solver": "gtsam", "pair_closures": "relative-pose"} if closures == "relative-pose" else None
+        if graph is not None:
+            from .odometry.pose_graph_gtsam import require_gtsam
+
+            require_gtsam()  # a clear error before any training
         loc = fit_localizer_from_odometry(net, images, odometry, method=metric_map, timestamps=timestamps,
-                                          gyro=gyro, readout_memory=readout_memory, **fit_kw)
+                                          gyro=gyro, readout_memory=readout_memory, pose_graph=graph, **fit_kw)
         loc.info["gyro"] = gyro is not None
+        loc.info["closures"] = closures
     else:
         loc = fit_localizer(net, images, np.asarray(xy, float)[:, :2], readout_memory=readout_memory, **fit_kw)
         loc.info["supervision"] = "ground-truth"

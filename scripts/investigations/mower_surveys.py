@@ -9,7 +9,7 @@ with every pattern's rows, incrementally.
 
     sfanav simulate --preset mower-survey --out runs/mower            # or reuse a dataset of that preset
     PYTHONPATH=python python3 scripts/investigations/mower_surveys.py runs/mower OUT.json \\
-        [--patterns serpentine perimeter-serpentine spiral crossing random]
+        [--patterns serpentine perimeter-serpentine spiral crossing random] [--closures relative-pose]
 
 The gyro column is not used here (the product rows take images and odometry only).
 """
@@ -34,6 +34,8 @@ def main() -> None:
     ap.add_argument("out", help="JSON to write")
     ap.add_argument("--patterns", nargs="*", default=list(PATTERNS))
     ap.add_argument("--test", default="test-walk")
+    ap.add_argument("--closures", default="heading", choices=("heading", "relative-pose"),
+                    help="the pose graph's closures without ground truth (train_localizer(closures=))")
     a = ap.parse_args()
     ds = Dataset(a.dataset)
     elev = tuple(ds.metadata["camera"].get("elevation_deg", (-30.0, 20.0)))
@@ -42,7 +44,7 @@ def main() -> None:
     for pattern in a.patterns:
         t0 = time.perf_counter()
         train, tests = product_runs(ds, default_network(), train=pattern, tests=(a.test,))
-        r = product_rows(train, tests, camera_elevation=elev)
+        r = product_rows(train, tests, camera_elevation=elev, closures=a.closures)
         rows = {row["metric"]: row["sfanav"] for row in r.rows}
         res[pattern] = {"frames": len(train.images), "rows": rows, "seconds": time.perf_counter() - t0}
         sup = rows.get("MED (m) sfanav default [ground truth]")

@@ -66,7 +66,9 @@ def nav_run(kind: str, out: Path):
 SCENES = {"5.1.1": ("thesis-5.1.1-grid", 0, "train"), "demo": ("demo", 0, "train"),
           "suite-inner": ("suite-inner", 1, "train-grid"), "suite-control": ("suite-control", 1, "train-grid"),
           "mower-serpentine": ("mower-survey", 0, "serpentine"), "mower-crossing": ("mower-survey", 0, "crossing"),
-          "5.2-indoor-I": ("thesis-5.2-indoor-I", 0, "train"), "5.2-indoor-II": ("thesis-5.2-indoor-II", 0, "train")}
+          "5.2-indoor-I": ("thesis-5.2-indoor-I", 0, "train"), "5.2-indoor-II": ("thesis-5.2-indoor-II", 0, "train"),
+          "mower-spiral": ("mower-survey", 0, "spiral"), "mower-perimeter-serpentine": ("mower-survey", 0, "perimeter-serpentine"),
+          "mower-random": ("mower-survey", 0, "random")}
 """Further runs (2026-12-06): name -> (sim preset, seed, run); the sfanav default's features, as for the gardens."""
 
 

@@ -178,7 +178,8 @@ def _peer_queries(n: int, limit: int | None) -> np.ndarray:
 def product_rows(train: ProductRun, tests: Sequence[ProductRun], *, thesis: Sequence[Any] | None = None,
                  network: Callable[[], Network] | None = None, recipe: Recipe | None = None,
                  camera_elevation: Sequence[float] | None = None, peer_queries: int | None = 1000,
-                 seed: int = 0, progress: bool = False, log: Log = quiet_log) -> ProductResult:
+                 closures: str = "heading", seed: int = 0, progress: bool = False,
+                 log: Log = quiet_log) -> ProductResult:
     """Trains the sfanav default on ``train`` (with ground truth and, where
     the run has odometry, without), scores it on every test run beside the
     thesis configuration's estimates and the peers, and returns the rows.
@@ -203,6 +204,9 @@ def product_rows(train: ProductRun, tests: Sequence[ProductRun], *, thesis: Sequ
     peer_queries : int or None
         The peers answer at most this many evenly spaced test images; the
         ratios to the best peer compare on those images.
+    closures : "heading" or "relative-pose"
+        The pose graph's closures of the model without ground truth
+        (:func:`sfanav.pipeline.train_localizer`).
     seed, progress, log
         As :func:`~sfanav.pipeline.train_localizer`.
 
@@ -245,7 +249,7 @@ def product_rows(train: ProductRun, tests: Sequence[ProductRun], *, thesis: Sequ
     if train.has_odometry:
         try:
             t0 = time.perf_counter()
-            ngt = train_localizer(train.images, odometry=train.odometry, supervision="odometry",
+            ngt = train_localizer(train.images, odometry=train.odometry, supervision="odometry", closures=closures,
                                   **{**kw, "network": make()})
             seconds["no ground truth"] = time.perf_counter() - t0
         except ValueError as exc:  # the run's odometry fixes no metric map (too short, never straight, ...)
