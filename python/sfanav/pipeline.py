@@ -27,12 +27,12 @@ from .odometry.self_supervision import fit_localizer_from_odometry
 from .sfa.network import Network, Rotation
 
 METRIC_MAPS = ("pose-graph", "metric-learning")
+"""How positions are learned without ground truth (``sfanav train --metric-map``)."""
 CLOSURES = ("heading", "relative-pose")
 """What the pose graph's loop closures measure (``train_localizer(closures=)``, ``sfanav train --closures``):
 the relative heading (the default), or the whole relative pose by the warping method (GTSAM;
 docs/odometry.md: better maps on the mower's survey patterns and where places are seen from near
 landmarks, worse where the landmarks stand far away at the garden's border)."""
-"""How positions are learned without ground truth (``sfanav train --metric-map``)."""
 ROTATION_STEP = 5
 """The simulated rotation's step in pixels (the thesis's)."""
 

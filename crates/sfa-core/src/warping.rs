@@ -57,19 +57,10 @@ pub fn warp_scores(
     }
     let image = rows.checked_mul(width).ok_or_else(|| SfaError::InvalidArgument("image size overflows".into()))?;
     let expect = pairs.checked_mul(image).ok_or_else(|| SfaError::InvalidArgument("pair images overflow".into()))?;
-    if a.len() != expect {
-        return Err(SfaError::ShapeMismatch {
-            what: "warping images a (pairs x rows x width)",
-            expected: expect,
-            got: a.len(),
-        });
-    }
-    if b.len() != expect {
-        return Err(SfaError::ShapeMismatch {
-            what: "warping images b (pairs x rows x width)",
-            expected: expect,
-            got: b.len(),
-        });
+    for (what, v) in [("warping images a (pairs x rows x width)", a), ("warping images b (pairs x rows x width)", b)] {
+        if v.len() != expect {
+            return Err(SfaError::ShapeMismatch { what, expected: expect, got: v.len() });
+        }
     }
     if columns.is_empty() || columns.len() % width != 0 {
         return Err(SfaError::InvalidArgument(format!(

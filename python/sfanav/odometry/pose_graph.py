@@ -274,7 +274,12 @@ turn (the per-step fields of :class:`sfanav.sim.OdometryNoise`, e.g. its
 ``mower`` model, which puts all of its noise there)."""
 
 
-def _heading_noise(odometry_noise: Any) -> dict[str, float]:
+def odometry_noise_model(odometry_noise: Any = None) -> dict[str, float]:
+    """The odometry's noise model as both pose-graph back ends read it: the
+    random walk (``distance_sigma``, ``heading_sigma``, ``turn_sigma`` of
+    :data:`~sfanav.odometry.DEFAULT_ODOMETRY_NOISE`), the slip model
+    (:data:`SLIP_DEFAULTS` where not given) and the per-step terms
+    (:data:`PER_STEP_NOISE`)."""
     out = dict(noise_dict(odometry_noise))
     raw = odometry_noise.to_dict() if hasattr(odometry_noise, "to_dict") else (odometry_noise or {})
     for k, v in {**SLIP_DEFAULTS, **PER_STEP_NOISE}.items():
@@ -555,7 +560,7 @@ def fit_pose_graph(images: Any, features: Any, odometry: Any, *, odometry_noise:
     sigma = np.radians(check_positive_float(compass_sigma_deg, "compass_sigma_deg"))
     iterations = check_int(iterations, "iterations", minimum=1)
     robust = check_positive_float(robust, "robust")
-    noise = _heading_noise(odometry_noise)
+    noise = odometry_noise_model(odometry_noise)
     if solver not in SOLVERS:
         raise ValueError(f"solver must be one of {SOLVERS}, got {solver!r}")
     if relative_poses is not None and solver != "gtsam":

@@ -45,16 +45,14 @@ Example
 from __future__ import annotations
 
 import time
-from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
-from .._checks import as_real_array, check_finite, check_int, check_nonneg_float, check_positive_float
+from .._checks import as_real_array, check_finite, check_int, check_positive_float
 from .dead_reckoning import as_poses, wrap_angle
-from .metric_cost import noise_dict
-from .pose_graph import PER_STEP_NOISE, SLIP_DEFAULTS, step_distance_sigmas, step_heading_sigmas
+from .pose_graph import odometry_noise_model, step_distance_sigmas, step_heading_sigmas
 
 HEADING_ONLY_SIGMA = 1e4
 """Position standard deviation (m) given to a closure whose position is
@@ -199,20 +197,6 @@ def _index(a: Any, name: str) -> np.ndarray:
     if (arr < 0).any():
         raise ValueError(f"{name} must hold frame indices >= 0, got {arr.min()}")
     return arr
-
-
-def odometry_noise_model(odometry_noise: Any = None) -> dict[str, float]:
-    """The random-walk noise model of the odometry (``distance_sigma``,
-    ``heading_sigma``, ``turn_sigma`` of
-    :data:`~sfanav.odometry.DEFAULT_ODOMETRY_NOISE`) with the slip model
-    (:data:`~sfanav.odometry.pose_graph.SLIP_DEFAULTS` where not given) and
-    the per-step terms (:data:`~sfanav.odometry.pose_graph.PER_STEP_NOISE`), as
-    the hand-written solver reads it."""
-    out = dict(noise_dict(odometry_noise))
-    raw = odometry_noise.to_dict() if hasattr(odometry_noise, "to_dict") else (odometry_noise or {})
-    for k, v in {**SLIP_DEFAULTS, **PER_STEP_NOISE}.items():
-        out[k] = check_nonneg_float(raw.get(k, v), f"odometry_noise[{k!r}]") if isinstance(raw, Mapping) else v
-    return out
 
 
 def odometry_sigmas(odometry: Any, odometry_noise: Any = None, heading_sigma: Any = None) -> np.ndarray:
