@@ -37,7 +37,7 @@ def _product(rows):
 
 
 def test_registered():
-    assert {"6.2.1-static", "6.2.1-light", "6.2.1-dynamic", "6.2.1-bow", "6.2.2", "6.2.2-seasons"} <= set(
+    assert {"6.2.1-static", "6.2.1-light", "6.2.1-gain", "6.2.1-dynamic", "6.2.1-bow", "6.2.2", "6.2.2-seasons"} <= set(
         experiments.names())
 
 
