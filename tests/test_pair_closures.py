@@ -13,7 +13,7 @@ from sfanav.localization import align  # noqa: E402
 from sfanav.loopclosure import RelativePoses as Measured  # noqa: E402
 from sfanav.loopclosure import relative_poses  # noqa: E402
 from sfanav.odometry import fit_pose_graph  # noqa: E402
-from sfanav.odometry.pair_closures import local_gradients, pair_relative_poses  # noqa: E402
+from sfanav.odometry.pair_closures import decorrelate, local_gradients, pair_relative_poses  # noqa: E402
 from sfanav.odometry.pose_graph_gtsam import HEADING_ONLY_SIGMA, RelativePoses  # noqa: E402
 
 
@@ -94,6 +94,45 @@ def test_pair_closures_measure_relative_poses_with_honest_sigmas(scene):
     both = (M.covariance[:, 0, 0] < HEADING_ONLY_SIGMA**2 / 2) & full
     np.testing.assert_allclose(np.hypot(M.dx, M.dy)[both], np.hypot(*(g.poses[j, :2] - g.poses[i, :2]).T)[both],
                                rtol=1e-6, atol=1e-3)
+
+
+def test_decorrelate_counts_the_closures_of_a_place_as_one():
+    rng = np.random.default_rng(3)
+    A = rng.standard_normal((6, 3, 3))
+    cov = A @ np.swapaxes(A, 1, 2) + 0.1 * np.eye(3)
+    mid = np.array([[0.0, 0.0], [0.3, 0.0], [0.0, 0.4], [5.0, 5.0], [5.2, 5.0], [9.0, 0.0]])
+    out = decorrelate(cov, mid, 1.0)
+    n = np.array([3, 3, 3, 2, 2, 1])
+    D = np.zeros((6, 3, 3))
+    D[:, 0, 0] = D[:, 1, 1] = np.sqrt(n)
+    D[:, 2, 2] = 1.0
+    np.testing.assert_allclose(out, D @ cov @ D, rtol=1e-12)  # position block x n, heading kept
+    np.testing.assert_allclose(out[:, 2, 2], cov[:, 2, 2])
+    assert np.all(np.linalg.eigvalsh(out) > 0)  # still positive definite
+    np.testing.assert_array_equal(cov, A @ np.swapaxes(A, 1, 2) + 0.1 * np.eye(3))  # input untouched
+    # the information of n fully correlated closures of one place: that of one
+    info = np.linalg.inv(out[:3, :2, :2]).sum(axis=0)
+    np.testing.assert_allclose(np.trace(info), np.trace(np.linalg.inv(cov[:3, :2, :2]).mean(axis=0)), rtol=1e-12)
+    assert decorrelate(np.zeros((0, 3, 3)), np.zeros((0, 2)), 1.0).shape == (0, 3, 3)
+    with pytest.raises(ValueError, match="midpoints"):
+        decorrelate(cov, mid[:3], 1.0)
+    with pytest.raises(ValueError, match="radius"):
+        decorrelate(cov, mid, 0.0)
+
+
+def test_pair_closures_correlation_radius_inflates_the_relative_poses(scene):
+    X, F, odo, T = scene
+    g = fit_pose_graph(X, F, odo, refine=0, min_travel=3.0, n_outputs=4, solver="gtsam")
+    i, j, xy = g.pairs.past, g.pairs.current, g.poses[:, :2]
+    C = pair_relative_poses(X, F, xy, i, j, g.relative_heading, np.radians(5))
+    D = pair_relative_poses(X, F, xy, i, j, g.relative_heading, np.radians(5), correlation_radius=1.5)
+    full = C.covariance[:, 0, 0] < HEADING_ONLY_SIGMA**2 / 2
+    assert full.sum() > 3
+    np.testing.assert_allclose(D.covariance[full], decorrelate(C.covariance[full], 0.5 * (xy[i] + xy[j])[full], 1.5))
+    np.testing.assert_array_equal(D.covariance[~full], C.covariance[~full])  # heading-only ones stay
+    np.testing.assert_array_equal(D.dx, C.dx)
+    with pytest.raises(ValueError, match="correlation_radius"):
+        pair_relative_poses(X, F, xy, i, j, g.relative_heading, np.radians(5), correlation_radius=-1.0)
 
 
 def test_local_gradients_recover_a_linear_field():

@@ -9,7 +9,9 @@ with every pattern's rows, incrementally.
 
     sfanav simulate --preset mower-survey --out runs/mower            # or reuse a dataset of that preset
     PYTHONPATH=python python3 scripts/investigations/mower_surveys.py runs/mower OUT.json \\
-        [--patterns serpentine perimeter-serpentine spiral crossing random] [--closures relative-pose]
+        [--patterns serpentine perimeter-serpentine spiral crossing random] [--closures relative-pose] [--tag T]
+
+Other presets' runs too (``--patterns train --test test`` on a ``thesis-5.1.1-grid`` dataset).
 
 The gyro column is not used here (the product rows take images and odometry only).
 """
@@ -36,6 +38,7 @@ def main() -> None:
     ap.add_argument("--test", default="test-walk")
     ap.add_argument("--closures", default="heading", choices=("heading", "relative-pose"),
                     help="the pose graph's closures without ground truth (train_localizer(closures=))")
+    ap.add_argument("--tag", default="", help="appended to each run's key in the JSON (e.g. ' (relative-pose)')")
     a = ap.parse_args()
     ds = Dataset(a.dataset)
     elev = tuple(ds.metadata["camera"].get("elevation_deg", (-30.0, 20.0)))
@@ -46,7 +49,7 @@ def main() -> None:
         train, tests = product_runs(ds, default_network(), train=pattern, tests=(a.test,))
         r = product_rows(train, tests, camera_elevation=elev, closures=a.closures)
         rows = {row["metric"]: row["sfanav"] for row in r.rows}
-        res[pattern] = {"frames": len(train.images), "rows": rows, "seconds": time.perf_counter() - t0}
+        res[pattern + a.tag] = {"frames": len(train.images), "rows": rows, "seconds": time.perf_counter() - t0}
         sup = rows.get("MED (m) sfanav default [ground truth]")
         ngt = rows.get("MED (m) sfanav default [no ground truth]")
         print(f"{pattern}: supervised {sup:.3f} m, no ground truth {ngt:.3f} m (ratio {ngt / sup:.2f}), "

@@ -78,6 +78,39 @@ def local_gradients(features: Any, positions: Any, centres: Any, *, n_neighbors:
     return out
 
 
+def decorrelate(covariance: Any, midpoints: Any, radius: float) -> np.ndarray:
+    """Closures' covariances (M, 3, 3) with the position block (the first
+    two rows and columns) multiplied by the number of closures whose
+    ``midpoints`` (M, 2), metres, lie within ``radius`` of theirs (itself
+    included): ``n`` closures of one place whose position errors are fully
+    correlated carry the information of one, so each gets ``n`` times its
+    variance. The heading block is left as it is (the compass's heading
+    errors are small and independent). Returns a new array.
+
+    Why: the warping assumes every landmark at one distance; in a garden
+    whose landmarks are not, its bearing errs alike for every pair of a
+    place (errors of closures within 1 m correlate 0.2-0.6, against 0.0 for
+    random pairs; docs/odometry.md), and a pose graph that counts each as
+    independent is pulled off by the shared error.
+
+    >>> cov = np.tile(np.eye(3), (3, 1, 1))
+    >>> decorrelate(cov, [[0.0, 0.0], [0.5, 0.0], [9.0, 0.0]], 1.0)[:, 0, 0].tolist()
+    [2.0, 2.0, 1.0]
+    """
+    C = np.array(covariance, dtype=np.float64)
+    mid = as_matrix(midpoints, "midpoints", min_rows=0)
+    if C.ndim != 3 or C.shape[1:] != (3, 3) or mid.shape != (len(C), 2):
+        raise ValueError(f"covariance must be (M, 3, 3) and midpoints (M, 2), got {C.shape} and {mid.shape}")
+    r = check_positive_float(radius, "radius")
+    if len(C) == 0:
+        return C
+    n = np.array([len(x) for x in cKDTree(mid).query_ball_point(mid, r)], dtype=np.float64)
+    f = np.sqrt(n)
+    C[:, :2, :] *= f[:, None, None]
+    C[:, :, :2] *= f[:, None, None]
+    return C
+
+
 def _rotate_to_j(cov: np.ndarray, dtheta: np.ndarray) -> np.ndarray:
     """Covariances of (dx, dy, dtheta) in frame i, expressed with the
     position error in frame j (GTSAM's Pose2 local coordinates of the
@@ -93,7 +126,8 @@ def pair_relative_poses(images: Any, features: Any, positions: Any, i_idx: Any, 
                         compass_sigma: float, *, map_distance_sigma: float = 0.5, use_gradient: bool = False,
                         n_neighbors: int = 30, gradient_fraction: float = 0.3,
                         max_sigma_bearing_deg: float = 30.0, gray: bool = True,
-                        warp: dict[str, Any] | None = None) -> RelativePoses:
+                        warp: dict[str, Any] | None = None,
+                        correlation_radius: float | None = None) -> RelativePoses:
     """Loop closures from ``i`` (earlier) to ``j`` for place pairs: relative
     poses where the panoramas tell the baseline's direction, heading-only
     (the compass's) elsewhere. See the module docstring.
@@ -133,6 +167,13 @@ def pair_relative_poses(images: Any, features: Any, positions: Any, i_idx: Any, 
     warp : dict, optional
         Keywords of :func:`sfanav.loopclosure.relative_poses` (default
         :data:`WARP_OPTIONS`).
+    correlation_radius : float or None, default None
+        Metres. The warping's bearing errors are not independent: closures
+        of one place share the landmarks whose unequal distances bias the
+        warping alike (:func:`decorrelate`). With a radius, each closure's
+        position covariance is multiplied by the number of relative-pose
+        closures whose midpoints (in ``positions``) lie within it, so the
+        closures of one place count as one measurement. None: independent.
 
     Returns
     -------
@@ -196,6 +237,9 @@ def pair_relative_poses(images: Any, features: Any, positions: Any, i_idx: Any, 
         full = _rotate_to_j(rp.covariance[good], rp.dtheta[good])
         full += np.eye(3)[None] * 1e-10
         cov[good] = full
+    if correlation_radius is not None and good.any():
+        cov[good] = decorrelate(cov[good], 0.5 * (X[i[good]] + X[j[good]]),
+                                check_positive_float(correlation_radius, "correlation_radius"))
     dx = np.where(good, rp.dx, 0.0)
     dy = np.where(good, rp.dy, 0.0)
     dth = np.where(good, rp.dtheta, rel)
