@@ -13,7 +13,12 @@ from sfanav.localization import align  # noqa: E402
 from sfanav.loopclosure import RelativePoses as Measured  # noqa: E402
 from sfanav.loopclosure import relative_poses  # noqa: E402
 from sfanav.odometry import fit_pose_graph  # noqa: E402
-from sfanav.odometry.pair_closures import decorrelate, local_gradients, pair_relative_poses  # noqa: E402
+from sfanav.odometry.pair_closures import (  # noqa: E402
+    CORRELATION_RADIUS,
+    decorrelate,
+    local_gradients,
+    pair_relative_poses,
+)
 from sfanav.odometry.pose_graph_gtsam import HEADING_ONLY_SIGMA, RelativePoses  # noqa: E402
 
 
@@ -124,9 +129,12 @@ def test_pair_closures_correlation_radius_inflates_the_relative_poses(scene):
     X, F, odo, T = scene
     g = fit_pose_graph(X, F, odo, refine=0, min_travel=3.0, n_outputs=4, solver="gtsam")
     i, j, xy = g.pairs.past, g.pairs.current, g.poses[:, :2]
-    C = pair_relative_poses(X, F, xy, i, j, g.relative_heading, np.radians(5))
+    C = pair_relative_poses(X, F, xy, i, j, g.relative_heading, np.radians(5), correlation_radius=None)
     D = pair_relative_poses(X, F, xy, i, j, g.relative_heading, np.radians(5), correlation_radius=1.5)
+    E = pair_relative_poses(X, F, xy, i, j, g.relative_heading, np.radians(5))  # the default: decorrelated
     full = C.covariance[:, 0, 0] < HEADING_ONLY_SIGMA**2 / 2
+    r = CORRELATION_RADIUS
+    np.testing.assert_allclose(E.covariance[full], decorrelate(C.covariance[full], 0.5 * (xy[i] + xy[j])[full], r))
     assert full.sum() > 3
     np.testing.assert_allclose(D.covariance[full], decorrelate(C.covariance[full], 0.5 * (xy[i] + xy[j])[full], 1.5))
     np.testing.assert_array_equal(D.covariance[~full], C.covariance[~full])  # heading-only ones stay

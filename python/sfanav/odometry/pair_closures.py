@@ -52,6 +52,12 @@ WARP_OPTIONS = {"n_bearings": 48, "ratios": (0.03, 0.08, 0.15, 0.25, 0.4), "max_
 grid's size times the pairs'; the sub-grid parabola keeps the precision)."""
 
 
+CORRELATION_RADIUS = 1.5
+"""Metres: relative-pose closures whose midpoints lie this close share one
+place's warping error (:func:`decorrelate`). Chosen on eleven runs' maps
+against 1.0 and 2.0 m (docs/odometry.md, "Correlated bearing errors")."""
+
+
 def local_gradients(features: Any, positions: Any, centres: Any, *, n_neighbors: int = 30) -> np.ndarray:
     """The slow features' gradient ``dF/d(x, y)`` (M, m, 2), per metre, at
     each frame of ``centres`` (M,): the least-squares plane through the
@@ -127,7 +133,7 @@ def pair_relative_poses(images: Any, features: Any, positions: Any, i_idx: Any, 
                         n_neighbors: int = 30, gradient_fraction: float = 0.3,
                         max_sigma_bearing_deg: float = 30.0, gray: bool = True,
                         warp: dict[str, Any] | None = None,
-                        correlation_radius: float | None = None) -> RelativePoses:
+                        correlation_radius: float | None = CORRELATION_RADIUS) -> RelativePoses:
     """Loop closures from ``i`` (earlier) to ``j`` for place pairs: relative
     poses where the panoramas tell the baseline's direction, heading-only
     (the compass's) elsewhere. See the module docstring.
@@ -167,13 +173,14 @@ def pair_relative_poses(images: Any, features: Any, positions: Any, i_idx: Any, 
     warp : dict, optional
         Keywords of :func:`sfanav.loopclosure.relative_poses` (default
         :data:`WARP_OPTIONS`).
-    correlation_radius : float or None, default None
+    correlation_radius : float or None, default :data:`CORRELATION_RADIUS`
         Metres. The warping's bearing errors are not independent: closures
         of one place share the landmarks whose unequal distances bias the
         warping alike (:func:`decorrelate`). With a radius, each closure's
         position covariance is multiplied by the number of relative-pose
         closures whose midpoints (in ``positions``) lie within it, so the
-        closures of one place count as one measurement. None: independent.
+        closures of one place count as one measurement. None: each closure
+        independent (before 2026-12-06).
 
     Returns
     -------
