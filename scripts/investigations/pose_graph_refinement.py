@@ -7,7 +7,7 @@ fit; evaluation only) without refinement, with the offsets' standard
 deviation fixed at 0.05 m (the rule until 2026-12-02), estimated (the
 default), estimated with a third round, and estimated with the size test
 before 2026-12-06 (the RMS radius instead of the area); from 2026-12-06 also GTSAM with heading-only and with
-relative-pose closures (the warping scores now in the Rust core). Writes ``OUT/pose-graph-refinement.json``;
+relative-pose closures (the warping scores now in the Rust core), later decorrelated by place. Writes ``OUT/pose-graph-refinement.json``;
 the features of each run are cached as ``OUT/cache/RUN.npz`` (images, features, odometry, truth).
 
     PYTHONPATH=python python3 scripts/investigations/pose_graph_refinement.py OUT [--runs open obstacle garden0 garden1 garden2]
@@ -35,7 +35,15 @@ VARIANTS = {"no refinement": {"refine": 0}, "offset sigma 0.05 m": {"offset_sigm
             "estimated, size by RMS radius": {},
             "GTSAM heading-only": {"solver": "gtsam"},
             "GTSAM relative-pose": {"solver": "gtsam", "pair_closures": "relative-pose"},
-            "GTSAM relative-pose, no refinement": {"solver": "gtsam", "pair_closures": "relative-pose", "refine": 0}}
+            "GTSAM relative-pose, no refinement": {"solver": "gtsam", "pair_closures": "relative-pose", "refine": 0},
+            "GTSAM relative-pose, independent": {"solver": "gtsam", "pair_closures": "relative-pose",
+                                                 "pair_options": {"correlation_radius": None}},
+            "GTSAM relative-pose, decorrelated 1.0 m": {"solver": "gtsam", "pair_closures": "relative-pose",
+                                                        "pair_options": {"correlation_radius": 1.0}},
+            "GTSAM relative-pose, decorrelated 2.0 m": {"solver": "gtsam", "pair_closures": "relative-pose",
+                                                        "pair_options": {"correlation_radius": 2.0}}}
+"""From 2026-12-06 "GTSAM relative-pose" decorrelates the closures of one place (``correlation_radius`` 1.5 m, the
+default of :func:`sfanav.odometry.pair_closures.pair_relative_poses`); "independent" is the rule before."""
 RADIUS = "estimated, size by RMS radius"
 """The size test until 2026-12-06 (the refined map's RMS distance from its centroid against the unrefined
 map's) in place of the area test, patched in for the comparison."""
