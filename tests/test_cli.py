@@ -290,15 +290,16 @@ def test_train_with_loop_closures(tiny, tmp_path, capsys):
 
 
 def test_train_with_relative_pose_closures(tiny, tmp_path, capsys):
-    """--closures relative-pose trains without ground truth with GTSAM's
-    relative-pose closures and records it; with the metric learner it is one
-    clear error."""
-    code, _, err = run(capsys, "train", "--dataset", tiny["root"] / "data", "--config", tiny["config"],
-                       "--out", tmp_path / "rp.sfa", "--supervision", "odometry", "--closures", "relative-pose",
-                       "--no-progress")
-    assert code == 0, err
-    info = sfanav.load(tmp_path / "rp.sfa").info
-    assert info["closures"] == "relative-pose" and info["supervision"] == "odometry"
+    """Without ground truth the pose graph's closures are GTSAM's relative
+    poses by default (recorded in the model); --closures heading keeps the
+    heading-only closures; --closures with the metric learner is one clear
+    error."""
+    for flag, want in (([], "relative-pose"), (["--closures", "heading"], "heading")):
+        code, _, err = run(capsys, "train", "--dataset", tiny["root"] / "data", "--config", tiny["config"],
+                           "--out", tmp_path / f"rp-{want}.sfa", "--supervision", "odometry", *flag, "--no-progress")
+        assert code == 0, err
+        info = sfanav.load(tmp_path / f"rp-{want}.sfa").info
+        assert info["closures"] == want and info["supervision"] == "odometry"
     code, _, err = run(capsys, "train", "--dataset", tiny["root"] / "data", "--config", tiny["config"],
                        "--out", tmp_path / "ml.sfa", "--supervision", "odometry", "--closures", "relative-pose",
                        "--metric-map", "metric-learning", "--no-progress")

@@ -221,3 +221,5 @@ def test_train_localizer_checks_closures_first():
         train_localizer(X, odometry=odo, closures="pose")
     with pytest.raises(ValueError, match="needs metric_map='pose-graph'"):
         train_localizer(X, odometry=odo, closures="relative-pose", metric_map="metric-learning")
+    with pytest.raises(ValueError, match="needs metric_map='pose-graph'"):
+        train_localizer(X, odometry=odo, closures="heading", metric_map="metric-learning")

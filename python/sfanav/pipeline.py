@@ -28,11 +28,14 @@ from .sfa.network import Network, Rotation
 
 METRIC_MAPS = ("pose-graph", "metric-learning")
 """How positions are learned without ground truth (``sfanav train --metric-map``)."""
-CLOSURES = ("heading", "relative-pose")
+CLOSURES = ("relative-pose", "heading")
 """What the pose graph's loop closures measure (``train_localizer(closures=)``, ``sfanav train --closures``):
-the relative heading (the default), or the whole relative pose by the warping method (GTSAM;
-docs/odometry.md: better maps on the mower's survey patterns and where places are seen from near
-landmarks, worse where the landmarks stand far away at the garden's border)."""
+the whole relative pose by the warping method on GTSAM, the closures of one place counted as one (the
+default since 2026-12-06), or the relative heading only (the default before). docs/odometry.md, "Correlated
+bearing errors": the product without ground truth improved on the five mower survey patterns and the
+thesis-like gardens measured."""
+DEFAULT_CLOSURES = "relative-pose"
+"""The closures of ``closures=None`` with the pose graph."""
 ROTATION_STEP = 5
 """The simulated rotation's step in pixels (the thesis's)."""
 
@@ -45,7 +48,7 @@ def _all_finite(a: Any, n_cols: int) -> bool:
 
 
 def train_localizer(images: Any, *, xy: Any = None, odometry: Any = None, timestamps: Any = None, gyro: Any = None,
-                    supervision: str = "auto", closures: str = "heading", network: Network | None = None,
+                    supervision: str = "auto", closures: str | None = None, network: Network | None = None,
                     recipe: Recipe | None = None,
                     camera_elevation: Sequence[float] | None = None, rotation: Rotation | None = None,
                     prep: Any = None, metric_map: str = "pose-graph", loop_closures: Any = None,
@@ -74,10 +77,11 @@ def train_localizer(images: Any, *, xy: Any = None, odometry: Any = None, timest
         What the readout is fitted to; ``"auto"``: ground truth where the run
         has it, else positions learned from its images and odometry
         (:func:`sfanav.localization.recipe.supervision_for`).
-    closures : "heading" or "relative-pose"
+    closures : "relative-pose", "heading" or None
         Without ground truth, what the pose graph's loop closures measure
-        (:data:`CLOSURES`); ``"relative-pose"`` needs GTSAM (``pip install
-        sfanav[gtsam]``).
+        (:data:`CLOSURES`; GTSAM solves the relative-pose graph). None: the
+        pose graph's default (:data:`DEFAULT_CLOSURES`), nothing with the
+        metric learner.
     network : Network or None
         The unfitted network (default: the sfanav default's).
     recipe : Recipe or None
@@ -139,10 +143,12 @@ def train_localizer(images: Any, *, xy: Any = None, odometry: Any = None, timest
     """
     if metric_map not in METRIC_MAPS:
         raise ValueError(f"metric_map must be one of {METRIC_MAPS}, got {metric_map!r}")
-    if closures not in CLOSURES:
-        raise ValueError(f"closures must be one of {CLOSURES}, got {closures!r}")
-    if closures != "heading" and metric_map != "pose-graph":
+    if closures is not None and closures not in CLOSURES:
+        raise ValueError(f"closures must be one of {CLOSURES} or None, got {closures!r}")
+    if closures is not None and metric_map != "pose-graph":
         raise ValueError(f"closures={closures!r} needs metric_map='pose-graph', got {metric_map!r}")
+    if closures is None and metric_map == "pose-graph":
+        closures = DEFAULT_CLOSURES
     recipe = recipe if recipe is not None else recipe_for()
     net = network if network is not None else default_network()
     has_odometry = _all_finite(odometry, 3)
@@ -164,7 +170,8 @@ def train_localizer(images: Any, *, xy: Any = None, odometry: Any = None, timest
         loc = fit_localizer_from_odometry(net, images, odometry, method=metric_map, timestamps=timestamps,
                                           gyro=gyro, readout_memory=readout_memory, pose_graph=graph, **fit_kw)
         loc.info["gyro"] = gyro is not None
-        loc.info["closures"] = closures
+        if closures is not None:
+            loc.info["closures"] = closures
     else:
         loc = fit_localizer(net, images, np.asarray(xy, float)[:, :2], readout_memory=readout_memory, **fit_kw)
         loc.info["supervision"] = "ground-truth"

@@ -36,8 +36,9 @@ def main() -> None:
     ap.add_argument("out", help="JSON to write")
     ap.add_argument("--patterns", nargs="*", default=list(PATTERNS))
     ap.add_argument("--test", default="test-walk")
-    ap.add_argument("--closures", default="heading", choices=("heading", "relative-pose"),
-                    help="the pose graph's closures without ground truth (train_localizer(closures=))")
+    ap.add_argument("--closures", default=None, choices=("heading", "relative-pose"),
+                    help="the pose graph's closures without ground truth (train_localizer(closures=); default: its "
+                         "default, relative-pose since 2026-12-06)")
     ap.add_argument("--tag", default="", help="appended to each run's key in the JSON (e.g. ' (relative-pose)')")
     a = ap.parse_args()
     ds = Dataset(a.dataset)

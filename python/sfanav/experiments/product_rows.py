@@ -178,7 +178,7 @@ def _peer_queries(n: int, limit: int | None) -> np.ndarray:
 def product_rows(train: ProductRun, tests: Sequence[ProductRun], *, thesis: Sequence[Any] | None = None,
                  network: Callable[[], Network] | None = None, recipe: Recipe | None = None,
                  camera_elevation: Sequence[float] | None = None, peer_queries: int | None = 1000,
-                 closures: str = "heading", seed: int = 0, progress: bool = False,
+                 closures: str | None = None, seed: int = 0, progress: bool = False,
                  log: Log = quiet_log) -> ProductResult:
     """Trains the sfanav default on ``train`` (with ground truth and, where
     the run has odometry, without), scores it on every test run beside the
@@ -204,9 +204,9 @@ def product_rows(train: ProductRun, tests: Sequence[ProductRun], *, thesis: Sequ
     peer_queries : int or None
         The peers answer at most this many evenly spaced test images; the
         ratios to the best peer compare on those images.
-    closures : "heading" or "relative-pose"
+    closures : "relative-pose", "heading" or None
         The pose graph's closures of the model without ground truth
-        (:func:`sfanav.pipeline.train_localizer`).
+        (:func:`sfanav.pipeline.train_localizer`; None: its default).
     seed, progress, log
         As :func:`~sfanav.pipeline.train_localizer`.
 

@@ -30,9 +30,10 @@ factor shares.
 * The first frame has a tight prior at its odometry pose, ``b`` a wide one
   (:data:`DRIFT_PRIOR_SIGMA`) so that a run without closures stays solvable.
 
-GTSAM is an optional dependency (``pip install sfanav[gtsam]``); importing
-this module works without it, and the solvers raise ImportError naming the
-extra. Measurements against the hand-written solver: docs/odometry.md,
+GTSAM is a dependency of sfanav since its relative-pose closures became the
+default of training without ground truth (2026-12-06); importing this module
+still works without it, and the solvers raise ImportError naming the
+package. Measurements against the hand-written solver: docs/odometry.md,
 "Pose graph on GTSAM".
 
 Example
@@ -77,8 +78,9 @@ def require_gtsam() -> Any:
     try:
         import gtsam
     except ImportError as exc:  # pragma: no cover - exercised where gtsam is absent
-        raise ImportError("the GTSAM pose-graph back end needs the 'gtsam' package (pip install 'sfanav[gtsam]' "
-                          "or pip install gtsam); solver='hand-written' works without it") from exc
+        raise ImportError("the GTSAM pose-graph back end needs the 'gtsam' package, a dependency of sfanav "
+                          "(pip install gtsam); without it train with closures='heading' and solver='hand-written'"
+                          ) from exc
     return gtsam
 
 

@@ -80,11 +80,10 @@ def _add_train(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                    help="what the readout is fitted to: ground-truth x, y, or positions learned from the run's "
                         "images and odometry (no ground truth: estimates in the odometry's frame); "
                         "auto (default): ground truth if the run has it, else odometry")
-    p.add_argument("--closures", choices=("heading", "relative-pose"), default="heading",
-                   help="with odometry supervision and the pose graph, what its loop closures measure: the relative "
-                        "heading (default) or the whole relative pose from the two panoramas (needs gtsam: pip "
-                        "install sfanav[gtsam]; better maps on a mower's serpentines and spirals and where places "
-                        "are seen from near landmarks, worse where all landmarks stand far away; docs/odometry.md)")
+    p.add_argument("--closures", choices=("relative-pose", "heading"), default=None,
+                   help="with odometry supervision and the pose graph, what its loop closures measure: the whole "
+                        "relative pose from the two panoramas (the default; GTSAM), or the relative heading only "
+                        "(the default before 2026-12-06); docs/odometry.md, 'Correlated bearing errors'")
     p.add_argument("--metric-map", choices=("pose-graph", "metric-learning"), default="pose-graph",
                    help="with odometry supervision, how positions are learned: pose-graph (default; the odometry's "
                         "heading drift corrected by loop closures found by the slow features and the panoramas) "
@@ -264,7 +263,7 @@ def _train(args: argparse.Namespace, stack: Any) -> int:
     times = _run_times(train) if supervision == "odometry" else None  # checked before any training
     if args.loop_closures is None and args.closure_weights != "uniform":
         raise UsageError("--closure-weights needs --loop-closures")
-    if args.closures != "heading" and args.metric_map != "pose-graph":
+    if args.closures is not None and args.metric_map != "pose-graph":
         raise UsageError(f"--closures {args.closures} needs --metric-map pose-graph")
     if args.loop_closures == "gt" and supervision != "ground-truth":
         raise UsageError("--loop-closures gt needs ground-truth positions, and this run is trained without them; "
