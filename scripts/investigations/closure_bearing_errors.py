@@ -59,7 +59,7 @@ def bearing_errors(imgs: np.ndarray, P: np.ndarray, i: np.ndarray, j: np.ndarray
     return {"closures": int(len(i)), "informative": int(ok.sum()),
             "mean error (deg)": float(np.degrees(e.mean())),
             "median |error| (deg)": float(np.degrees(np.median(np.abs(e)))),
-            "median |error| / sigma": float(np.median(np.abs(e) / sb)),
+            "median |error| in sigmas": float(np.median(np.abs(e) / sb)),
             "lateral error mean (m)": float(np.mean(np.abs(e) * d)),
             "error correlation, closures within 1 m": float(np.corrcoef(e[near[:, 0]], e[near[:, 1]])[0, 1]),
             "error correlation, random closures": float(np.corrcoef(e[rnd[:, 0]], e[rnd[:, 1]])[0, 1])}
