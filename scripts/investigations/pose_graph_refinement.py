@@ -76,7 +76,7 @@ SCENES = {"5.1.1": ("thesis-5.1.1-grid", 0, "train"), "demo": ("demo", 0, "train
           "mower-serpentine": ("mower-survey", 0, "serpentine"), "mower-crossing": ("mower-survey", 0, "crossing"),
           "5.2-indoor-I": ("thesis-5.2-indoor-I", 0, "train"), "5.2-indoor-II": ("thesis-5.2-indoor-II", 0, "train"),
           "mower-spiral": ("mower-survey", 0, "spiral"), "mower-perimeter-serpentine": ("mower-survey", 0, "perimeter-serpentine"),
-          "mower-random": ("mower-survey", 0, "random")}
+          "mower-random": ("mower-survey", 0, "random"), "5.1.2": ("thesis-5.1.2-outdoor", 0, "train")}
 """Further runs (2026-12-06): name -> (sim preset, seed, run); the sfanav default's features, as for the gardens."""
 
 
