@@ -31,9 +31,8 @@ METRIC_MAPS = ("pose-graph", "metric-learning")
 CLOSURES = ("relative-pose", "heading")
 """What the pose graph's loop closures measure (``train_localizer(closures=)``, ``sfanav train --closures``):
 the whole relative pose by the warping method on GTSAM, the closures of one place counted as one (the
-default since 2026-12-06), or the relative heading only (the default before). docs/odometry.md, "Correlated
-bearing errors": the product without ground truth improved on the five mower survey patterns and the
-thesis-like gardens measured."""
+default), or the relative heading only. docs/odometry.md, "Correlated bearing errors", has the measurements
+behind the choice."""
 DEFAULT_CLOSURES = "relative-pose"
 """The closures of ``closures=None`` with the pose graph."""
 ROTATION_STEP = 5

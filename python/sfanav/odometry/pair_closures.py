@@ -180,7 +180,7 @@ def pair_relative_poses(images: Any, features: Any, positions: Any, i_idx: Any, 
         position covariance is multiplied by the number of relative-pose
         closures whose midpoints (in ``positions``) lie within it, so the
         closures of one place count as one measurement. None: each closure
-        independent (before 2026-12-06).
+        independent.
 
     Returns
     -------

@@ -30,10 +30,9 @@ factor shares.
 * The first frame has a tight prior at its odometry pose, ``b`` a wide one
   (:data:`DRIFT_PRIOR_SIGMA`) so that a run without closures stays solvable.
 
-GTSAM is a dependency of sfanav since its relative-pose closures became the
-default of training without ground truth (2026-12-06); importing this module
-still works without it, and the solvers raise ImportError naming the
-package. Measurements against the hand-written solver: docs/odometry.md,
+GTSAM is a dependency of sfanav (its relative-pose closures are the default
+of training without ground truth); importing this module still works without
+it, and the solvers raise ImportError naming the package. Measurements against the hand-written solver: docs/odometry.md,
 "Pose graph on GTSAM".
 
 Example

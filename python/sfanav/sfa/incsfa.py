@@ -22,8 +22,7 @@ exact, mergeable statistics and solve a generalised eigenproblem
 (:mod:`sfanav.sfa.node`), IncSFA keeps no statistics: it is an approximation
 whose quality depends on its learning rates and on how many passes it sees,
 and two streams cannot be merged. It is here as the peer of the exact
-updates (issue 45); its measurement on the update experiments is still to
-be made (docs/updates.md says so).
+updates; docs/updates.md says what has been measured with it.
 
 Examples
 --------

@@ -82,8 +82,8 @@ def _add_train(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                         "auto (default): ground truth if the run has it, else odometry")
     p.add_argument("--closures", choices=("relative-pose", "heading"), default=None,
                    help="with odometry supervision and the pose graph, what its loop closures measure: the whole "
-                        "relative pose from the two panoramas (the default; GTSAM), or the relative heading only "
-                        "(the default before 2026-12-06); docs/odometry.md, 'Correlated bearing errors'")
+                        "relative pose from the two panoramas (the default; GTSAM), or the relative heading only; "
+                        "docs/odometry.md, 'Correlated bearing errors'")
     p.add_argument("--metric-map", choices=("pose-graph", "metric-learning"), default="pose-graph",
                    help="with odometry supervision, how positions are learned: pose-graph (default; the odometry's "
                         "heading drift corrected by loop closures found by the slow features and the panoramas) "
