@@ -8,6 +8,9 @@ experiment's format with the error-vs-sets plot. The permutations and fits are t
 
     PYTHONPATH=python python3 scripts/investigations/long_term_combine.py OUT --logs runs/exp622/log-6.2.2.txt \
         --json runs/exp622/6.2.2-partial-sfanav_default-p10.json --configs "thesis config" "sfanav default"
+
+--product adds the product rows of a long_term.py run (they are computed on the first permutation's split, so a
+one-permutation run of the first configuration gives the rows the full run would).
 """
 import argparse
 import json
@@ -27,6 +30,10 @@ ap.add_argument("--configs", nargs="+", default=["thesis config", "sfanav defaul
 ap.add_argument("--preset", default="thesis-6.2.2-conditions")
 ap.add_argument("--permutations", type=int, default=10)
 ap.add_argument("--sets", type=int, default=9)
+ap.add_argument("--diagonal", type=float, help="the area's diagonal (m): rows above 10x it are withheld and "
+                "flagged, as the experiment does (6.2.2's loop: 19.1 m)")
+ap.add_argument("--product", type=Path, help="a long_term.py JSON whose product rows (the sfanav default as a user "
+                "trains it, and the peers, on the first permutation's split) join the combined result")
 a = ap.parse_args()
 
 name = "6.2.2" if a.preset == "thesis-6.2.2-conditions" else "6.2.2-seasons"
@@ -48,7 +55,7 @@ for log in a.logs:
             curves.setdefault(key, np.full((a.permutations, a.sets), np.nan))[p, k - 1] = float(val)
 for path in a.json:
     d = json.loads(path.read_text())
-    notes = d.get("notes", notes)
+    notes = notes or d.get("notes", "")  # the first file's (the first configuration's run)
     for key, c in d["curves"].items():
         if key.removesuffix(HELD) in a.configs or (key == "perfect memory" and "perfect memory" not in curves):
             curves[key] = np.asarray(c, dtype=np.float64)
@@ -58,7 +65,13 @@ if missing:
 order = ([k for c in a.configs for k in (c, c + HELD) if k in curves]
          + ["perfect memory"] * ("perfect memory" in curves))
 curves = {k: curves[k] for k in order}
-rows = curve_rows(curves, a.preset)
+rows = curve_rows(curves, a.preset, diagonal=a.diagonal)
+if a.product:
+    d = json.loads(a.product.read_text())
+    curve = tuple(r["metric"] for r in curve_rows({k: np.asarray(v) for k, v in d["curves"].items()}, a.preset))
+    rows += [r for r in d["rows"] if r["metric"] not in curve]
+    notes += "\n" + d["notes"].split("\n", 1)[1].replace(
+        "; 'thesis configuration': the first configuration's model on that split.", ".") if "\n" in d["notes"] else ""
 plot = plot_curves(curves, a.out / f"{name}-error-vs-sets.png", name, THESIS_622[a.preset].get(9))
 res = ExperimentResult(name, rows, [str(plot)], notes + " Combined from separate processes "
                        "(scripts/investigations/long_term_combine.py).",

@@ -404,7 +404,9 @@ def run_622(out: Path, *, quick: bool, seed: int, progress: bool, permutations: 
              + f"\nProduct rows on the first permutation's split ({n_sets} training recordings in place-major "
              "order, the next recording as test): " + product.note
              + " The training set joins several recordings, so no single run's odometry: no '[no ground truth]' "
-             "or fused rows here; 'thesis configuration': the first configuration's model on that split.")
+             "or fused rows here"
+             + ("; 'thesis configuration': the first configuration's model on that split." if configs[0] == CONFIGS[0]
+                else "."))
     return ExperimentResult(name, rows, [str(path)] + plots, notes,
                             details={"curves": {k: v.tolist() for k, v in curves.items()},
                                      "seconds": {k: v.tolist() for k, v in seconds.items()},
