@@ -68,14 +68,15 @@ def test_622_seasons_online_quick(out):
 
 
 def test_621_changes_online_quick(out):
-    from sfanav.experiments.updates import CHANGES_LABELS
+    from sfanav.experiments.updates import CHANGES_LABELS, LABEL_INCSFA
 
     res = experiments.run("6.2.1-changes-online", out, quick=True, progress=False)
     rows = _rows(res, out)
     expected = [f"MED (m) on the test walk [{label}]" for label in CHANGES_LABELS]
-    for tag in ("", " [updated, every layer]"):
+    for tag in ("", " [updated, every layer]", f" [{LABEL_INCSFA}]"):
         expected += [f"update time / retrain time{tag}", f"updated / stale MED{tag}", f"updated / retrained MED{tag}"]
-    expected.append("stale / retrained MED")
+    expected += ["stale / retrained MED",
+                 f"mean canonical correlation with the exact top stage on A's views [{LABEL_INCSFA}]"]
     assert [r["metric"] for r in res.rows] == expected
     med = res.details["med"]
     assert set(med) == set(CHANGES_LABELS) and all(math.isfinite(v) and v > 0 for v in med.values())
@@ -89,6 +90,14 @@ def test_621_changes_online_quick(out):
     # perfect memory of A + B stores B's views of the changed garden as well
     assert len(models["perfect memory A + B"].xy_) > len(models["perfect memory A"].xy_)
     assert [r["change"] for r in res.details["changes"]].count("added") == 5
+    # the online peer: IncSFA learned A's then B's top-stage sequence, the readout refitted on A's and B's views
+    peer, info = models[LABEL_INCSFA], res.details["incsfa"]
+    n_b = len(res.details["dataset"].select(run="B")) // 4
+    n_views = models["stale"].readout_memory_.n_seen + n_b
+    assert peer.n_runs_ == 2 and info["readout_views"] == len(models["updated"].readout_memory_) == n_views
+    assert peer.node_.n_components == models["stale"].trained_network().n_outputs_ and info["degree"] == 2
+    assert len(info["agreement_a"]) == info["passes"] and all(0 <= a <= 1 for a in info["agreement_a"])
+    assert rows[f"update time / retrain time [{LABEL_INCSFA}]"]["sfanav"] > 0 and LABEL_INCSFA in res.notes
     assert "garden-changes" in res.notes and res.plots[0].endswith("6.2.1-changes-online-med.png")
 
 

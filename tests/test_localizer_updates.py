@@ -16,8 +16,10 @@ from sfanav.localization.updates import (
     drop_readout_memory,
     readout_memory_bytes,
     remember,
+    top_stage_degree,
     top_stage_features,
     top_stage_inputs,
+    top_stage_training_inputs,
 )
 from sfanav.sfa.updates import NetworkUpdater, UpdatePolicy
 
@@ -82,6 +84,31 @@ def test_stage_inputs_give_the_features(quad, pooled):
         assert Z.shape == (len(C), loc.rotation_pooling_ if loc.rotation_pooling_ > 1 else 1, Z.shape[2])
         _close(top_stage_features(loc.network, Z), loc.features(C), 1e-12)
     assert pooled.readout_memory_.inputs.shape[1] == 3
+
+
+def test_training_inputs_are_the_sequence_the_top_stage_was_solved_from(quad, pooled):
+    """Batch SFA (numpy) on the top stage's training inputs, flattened image
+    after image and expanded with the stage's degree, gives the stage's
+    delta values and its outputs."""
+    from sfanav import _core
+
+    for loc in (quad, pooled):
+        Z = top_stage_training_inputs(loc, A)
+        n_views = -(-A.shape[2] // ROT.step)
+        assert Z.shape == (len(A), n_views, loc.readout_memory_.inputs.shape[2])
+        assert top_stage_degree(loc.network) == 2
+        E = np.asarray(_core.expand(Z.reshape(-1, Z.shape[2]), 2))
+        w, V = np.linalg.eigh(np.cov(E.T, bias=True))
+        keep = w > w.max() * 1e-10
+        W = V[:, keep] / np.sqrt(w[keep])
+        D = np.diff(E, axis=0)
+        delta, U = np.linalg.eigh(W.T @ (D.T @ D / len(D)) @ W)
+        m = loc.network.n_outputs_
+        np.testing.assert_allclose(delta[:m], loc.network.delta_values_, rtol=1e-6)
+        Y = (E - E.mean(axis=0)) @ W @ U[:, :m]
+        F = top_stage_features(loc.network, Z.reshape(-1, 1, Z.shape[2]))
+        for j in range(m):
+            assert abs(np.corrcoef(Y[:, j], F[:, j])[0, 1]) > 0.9999
 
 
 def test_update_equals_retraining_quadratic(quad):

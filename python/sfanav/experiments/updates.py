@@ -25,7 +25,9 @@ preset ``garden-changes``): the sfanav default trained on run A (the stale
 model), updated with run B, a second exploration after objects were moved,
 removed and added (both policies), beside a retrain on A + B and perfect
 memory of A and of A + B; all tested on a walk in the changed garden
-(:func:`run_changes`).
+(:func:`run_changes`). Its online peer: the stale model's top stage
+replaced by IncSFA learning from A's and then B's top-stage sequence, the
+readout refitted (``IncSFA top stage``, :mod:`sfanav.experiments.incsfa_peer`).
 
 Rows: ``MED (m) after k recordings [updated]`` / ``[updated, every layer]`` /
 ``[batch place-major]`` / ``[perfect memory]`` (mean over permutations), the same on the held-out
@@ -51,6 +53,7 @@ from ..sfa.network import Rotation
 from ..sfa.updates import UpdatePolicy
 from . import ExperimentResult, register
 from .flags import area_diagonal, flag_row
+from .incsfa_peer import INCSFA_MCA_RATES, INCSFA_WHITENED, incsfa_update
 from .localization import progress_log, simulated
 from .robustness import long_term_configuration, run_622, train_long_term
 
@@ -217,7 +220,10 @@ CHANGES_QUICK_FRAMES = 600
 """Quick mode: the first frames of every run (most of A's and B's lanes), of which every
 :data:`CHANGES_QUICK_STEP`-th is used."""
 CHANGES_QUICK_STEP = 4
-CHANGES_LABELS = ("stale", "updated", LABEL_ALL, "retrained", "perfect memory A", "perfect memory A + B")
+LABEL_INCSFA = "IncSFA top stage"
+"""The rows' name for the online peer: the stale model's top stage replaced by IncSFA."""
+CHANGES_LABELS = ("stale", "updated", LABEL_ALL, LABEL_INCSFA, "retrained", "perfect memory A",
+                  "perfect memory A + B")
 """The models of ``6.2.1-changes-online``, as the rows name them."""
 
 
@@ -239,12 +245,16 @@ def run_changes(out: Path, *, quick: bool, seed: int, progress: bool,
     the sfanav default trained on run A (``stale``), updated with run B
     after the change by the top-stage policy (``updated``) and by
     ``UpdatePolicy(resolve="all")`` (``updated, every layer``), retrained
-    from scratch on A + B (``retrained``), and perfect memory of A and of
-    A + B; MED (m) of each on the test walk in the changed garden, the
-    updates' time against the retrain's. ``readout_memory``: views the
-    stale model keeps (the default holds all of A and B). Quick: the tiny
-    network on 60x8 panoramas, every :data:`CHANGES_QUICK_STEP`-th of the
-    first :data:`CHANGES_QUICK_FRAMES` frames of every run."""
+    from scratch on A + B (``retrained``), the online peer (``IncSFA top
+    stage``: the stale model's top stage replaced by IncSFA learning from
+    A's and then B's top-stage sequence, the readout refitted,
+    :func:`sfanav.experiments.incsfa_peer.incsfa_update`), and perfect
+    memory of A and of A + B; MED (m) of each on the test walk in the
+    changed garden, the updates' time against the retrain's.
+    ``readout_memory``: views the stale model keeps (the default holds all
+    of A and B). Quick: the tiny network on 60x8 panoramas, every
+    :data:`CHANGES_QUICK_STEP`-th of the first :data:`CHANGES_QUICK_FRAMES`
+    frames of every run."""
     name = "6.2.1-changes-online"
     log = progress_log(progress)
     if quick:
@@ -271,7 +281,12 @@ def run_changes(out: Path, *, quick: bool, seed: int, progress: bool,
         log(f"{name}: updated with B ({len(run_b[1])} frames, resolve {resolve}) in {secs[label]:.1f} s")
     models["retrained"], secs["retrained"] = _fit_changes(make_net, *both, recipe, elev)
     log(f"{name}: retrained on A + B in {secs['retrained']:.1f} s")
-    for label in CHANGES_LABELS[:4]:
+    # the online peer: the top stage learned by IncSFA from A's, then B's sequence; the readout refitted
+    models[LABEL_INCSFA], incsfa = incsfa_update(models["stale"], run_a, run_b, mca_rates=INCSFA_MCA_RATES,
+                                                 n_whitened=INCSFA_WHITENED, seed=seed,
+                                                 log=lambda msg: log(f"{name}: {msg}"))
+    secs[LABEL_INCSFA] = incsfa["seconds_update"]
+    for label in CHANGES_LABELS[:5]:
         med[label], ext[label] = _med(models[label], *test)
     for label, run in (("perfect memory A", run_a), ("perfect memory A + B", both)):
         models[label] = baselines.PerfectMemory().fit(*run)
@@ -288,12 +303,14 @@ def run_changes(out: Path, *, quick: bool, seed: int, progress: bool,
             return {"metric": metric, "thesis": None, "sfanav": None, "flag": "a MED it divides is withheld"}
         return {"metric": metric, "thesis": None, "sfanav": med[a] / med[b]}
 
-    for label, tag in (("updated", ""), (LABEL_ALL, f" [{LABEL_ALL}]")):
+    for label, tag in (("updated", ""), (LABEL_ALL, f" [{LABEL_ALL}]"), (LABEL_INCSFA, f" [{LABEL_INCSFA}]")):
         rows += [{"metric": f"update time / retrain time{tag}", "thesis": None,
                   "sfanav": secs[label] / secs["retrained"]},
                  ratio(f"updated / stale MED{tag}", label, "stale"),
                  ratio(f"updated / retrained MED{tag}", label, "retrained")]
     rows.append(ratio("stale / retrained MED", "stale", "retrained"))
+    rows.append({"metric": f"mean canonical correlation with the exact top stage on A's views [{LABEL_INCSFA}]",
+                 "thesis": None, "sfanav": float(np.mean(incsfa["canonical_a"]))})
     path = _plot_changes(out / f"{name}-med.png", name, shown)
     changed = ds.metadata.get("gardens", {}).get("after", {}).get("objects", [])
     what = "; ".join(f"{c} " + ", ".join(r["kind"] for r in changed if r["change"] == c)
@@ -307,24 +324,34 @@ def run_changes(out: Path, *, quick: bool, seed: int, progress: bool,
              f"top stage re-solved and the readout refitted (updated), or every layer trained again on the "
              f"remembered and the new images, each view of B paired with the nearest view of A ({LABEL_ALL}); "
              "retrained from scratch on A then B as one sequence (retrained); perfect memory (rotational image "
-             "difference) of A and of A + B. Times: each update against the retrain, same process."
+             f"difference) of A and of A + B. {LABEL_INCSFA}: the stale model's lower layers frozen, its top stage "
+             f"replaced by IncSFA (CCIPCA whitening of {incsfa['n_whitened']} directions, CIMCA; "
+             f"{models['stale'].trained_network().n_outputs_} outputs) fed the exact top stage's training sequence "
+             "(the frozen stages' outputs under every simulated rotation, image after image) expanded as that stage "
+             f"expands it (degree {incsfa['degree']}), {incsfa['passes']} passes over A's sequence then "
+             f"{incsfa['passes']} over B's (CIMCA's step {', '.join(f'{r:g}' for r in incsfa['mca_rates'])} of its "
+             "bound in successive passes); the readout (its kind, the kernel learned again: the stale kernel belongs "
+             f"to other features) refitted on the IncSFA features of the {incsfa['readout_views']} remembered and new "
+             f"views; its update time: the passes over B, the features and the readout (the passes over A, "
+             f"{incsfa['seconds_a']:.0f} s, are its training on A). Times: each update against the retrain, same "
+             "process."
              + (f" Quick: every {CHANGES_QUICK_STEP}th of the first {CHANGES_QUICK_FRAMES} frames of every run, "
                 "a smoke test, not a measurement." if quick else ""))
     return ExperimentResult(name, rows, [str(path)], notes,
                             details={"models": models, "med": med, "seconds": secs, "changes": changed,
-                                     "dataset": ds})
+                                     "dataset": ds, "incsfa": incsfa})
 
 
 def _plot_changes(path: Path, name: str, med: dict[str, float | None]) -> Path:
     """A bar per model: MED (m), None for a withheld figure (no bar)."""
     from .._plotting import figure, save_figure
 
-    fig = figure(7, 4)
+    fig = figure(8, 4)
     ax = fig.add_subplot()
     labels = list(med)
     values = [med[k] for k in labels]
     bars = ax.bar(range(len(labels)), [0.0 if v is None else v for v in values],
-                  color=["0.55", "C0", "C1", "C2", "C7", "C7"][: len(labels)])
+                  color=["0.55", "C0", "C1", "C3", "C2", "C7", "C7"][: len(labels)])
     for b, v in zip(bars, values):
         ax.annotate("withheld" if v is None else f"{v:.2f}", (b.get_x() + b.get_width() / 2, b.get_height()),
                     ha="center", va="bottom", fontsize=8)

@@ -50,7 +50,8 @@ from ..sfa.updates import NetworkUpdater, UpdatePolicy, statistics_bytes
 from .localizer import Localizer, pooling_step
 
 __all__ = ["MAX_VIEWS", "ReadoutMemory", "remember", "top_stage_inputs", "top_stage_features",
-           "LocalizerUpdater", "readout_memory_bytes", "drop_readout_memory", "updatable_memory"]
+           "top_stage_training_inputs", "top_stage_degree", "LocalizerUpdater", "readout_memory_bytes",
+           "drop_readout_memory", "updatable_memory"]
 
 MAX_VIEWS = 3000
 """Default bound on the views a readout memory keeps."""
@@ -257,6 +258,32 @@ def top_stage_features(network: Any, inputs: Any) -> np.ndarray:
     n, K, k = Z.shape
     Y = np.asarray(top.transform(np.ascontiguousarray(Z.reshape(n * K, k))))
     return Y.reshape(n, K, -1).mean(axis=1)
+
+
+def top_stage_training_inputs(localizer: Localizer, images: Any) -> np.ndarray:
+    """The inputs of the network's top stage for images (N, H, W[, C]) as
+    the localizer sees them, under the simulated rotations the network was
+    trained with (``step_`` px over the whole panorama): (N, V, k) float64,
+    V = ceil(W / step), view v the panorama rolled left by v * step px.
+    Flattened to (N * V, k), image after image, this is the sequence whose
+    statistics the top stage was solved from (derivative pairs between
+    consecutive views and from an image's last view to the next image's
+    first). ValueError for a network that records no training rotation."""
+    net = localizer.trained_network()
+    step = net.step_
+    if step is None:
+        raise ValueError("this localizer's network records no training rotation (step)")
+    a = np.ascontiguousarray(localizer.network_input(np.asarray(images)))
+    below, _ = _split_network(net)
+    return np.asarray(below.transform_rotations(a, int(step)), dtype=np.float64)
+
+
+def top_stage_degree(network: Any) -> int:
+    """The polynomial degree the network's top stage expands its inputs
+    with before solving (``sfanav._core.expand(inputs, degree)``): what
+    its statistics are sums over."""
+    _, top = _split_network(network)
+    return int(top.get_state(with_statistics=False)["stages"][0]["degree"])
 
 
 def _memory_of(localizer: Localizer, images: Any, xy: Any, augmentation: CorruptionModel | None, seed: int,
