@@ -31,6 +31,17 @@ Candidates (all the sfanav default's network, rows, pooling, signature and reado
 * gamma-W: the default's normalisation (lowpass-2-flat) with gamma 0.6..1.6 added to the corruptions of
   the invariance partners and the readout's copies (CAMERA_GAMMA), invariance weight W (0.25, 0.5);
   gamma-lowpass-3-flat-0.25: the same with a 3 px low-pass (lowpass-3-flat-0.25 without gamma);
+* NAME@S: candidate NAME trained with fit_localizer(seed=S), the draw of the partners' and the readout copies'
+  corruptions (the spread over S is what the draw alone does);
+* stratified-0.25, dealt-0.25: the default with the partners' corruption families dealt in turn along the run
+  (image i gets family (i + seed) mod 7) instead of drawn uniformly; the two differ only in the stream their
+  strengths are drawn from (StratifiedModel, DealtModel);
+* clipQQ-0.25, clipQQ-gamma-0.25: every channel clipped at its QQ-th percentile before the default's
+  normalisation (a clipped overexposure is then a gain while less than 1 - QQ % saturates), with gamma
+  partners; eq-S-flat-0.25, eqlog-S-flat-0.25 (-gamma): a coarse histogram equalisation per channel (16
+  quantile knots) after an S px low-pass, with or without the log, then the flat field;
+* --matched C1,C2: the candidate trained on the exploration run with corruption C and tested on the test run
+  with C (the model that has seen the camera);
 * lowpass-2-flat-0.25-clean-readout: the default with its readout fitted on the clean run only (what the
   corrupted copies cost the readout's precision; measured first on the 6.2.1 scenes);
 * logfirst-2-oK-0.25: the logarithm (offset K grey levels) before the 2 px low-pass, then the flat field and
@@ -75,6 +86,38 @@ CAMERA_GAMMA = CorruptionModel({**CAMERA.families, "gamma": {"kind": "gamma", "g
 """CAMERA with gamma 0.6..1.6 as an eighth family (what the normalisation leaves of a gamma)."""
 
 
+class StratifiedModel(CorruptionModel):
+    """CAMERA with the families dealt in turn along the run (image i gets family (i + seed) mod F, its parameters
+    drawn as before) instead of one uniformly random family per image: every family equally often and evenly
+    spread over the run, whatever the seed (does the partners' draw make the clean precision a lottery?)."""
+
+    def draw(self, n, *, seed=0, start=0, dealt=False):
+        names = list(self.families)
+        out = []
+        for i in range(start, start + n):
+            rng = np.random.default_rng([seed, i, 17])
+            out.append(self._draw(names[(i + seed) % len(names)], rng))
+        return out
+
+
+class DealtModel(CorruptionModel):
+    """StratifiedModel's families with the strengths CAMERA draws for the image (the same stream, after the
+    uniform family draw it ignores): the two differ only in their strength draws (measured as dealt-0.25)."""
+
+    def draw(self, n, *, seed=0, start=0, dealt=False):
+        names = list(self.families)
+        out = []
+        for i in range(start, start + n):
+            rng = np.random.default_rng([seed, i, 17])
+            rng.integers(len(names))
+            out.append(self._draw(names[(i + seed) % len(names)], rng))
+        return out
+
+
+CAMERA_STRATIFIED = StratifiedModel(CAMERA.families)
+CAMERA_DEALT = DealtModel(CAMERA.families)
+
+
 def row_gain(images):
     a = np.asarray(images, np.float32)
     return a / np.maximum(a.mean(axis=2, keepdims=True), 8.0) * 100.0
@@ -85,11 +128,70 @@ def channel_gain(images):
     return a / np.maximum(a.mean(axis=(1, 2), keepdims=True), 4.0) * 100.0
 
 
+def quantile_clip(images, q):
+    """Every image's channels clipped at their own q-quantile (q in 0..1): a clipped overexposure (``min(g I,
+    255)``) is then exactly the gain ``g`` while less than 1 - q of a channel saturates, and the clip commutes
+    with a gamma and a white balance (a quantile commutes with any increasing map of one channel)."""
+    a = np.asarray(images, np.float32)
+    single = a.ndim in (2, 3) and not (a.ndim == 3 and a.shape[-1] > 4)
+    b = a[None] if single else a
+    top = np.quantile(b, q, axis=(1, 2), keepdims=True).astype(np.float32)
+    out = np.minimum(b, top)
+    return out[0] if single else out
+
+
+def quantile_equalize(images, knots=16, spacing=1.0):
+    """Every image's channels mapped through their own quantiles onto a uniform 0..255 range, piecewise
+    linearly between ``knots`` + 1 quantile levels (a coarse histogram equalisation): invariant to any
+    increasing map of a channel (gain, gamma, white balance, clipping but for the clipped pixels) as far as it
+    is linear between knots; knots closer than ``spacing`` grey levels are pushed apart so that noise in a flat
+    region (the sky) is not stretched over a wide range."""
+    a = np.asarray(images, np.float32)
+    single = a.ndim in (2, 3) and not (a.ndim == 3 and a.shape[-1] > 4)
+    b = a[None] if single else a
+    b4 = b if b.ndim == 4 else b[..., None]
+    levels = np.linspace(0.0, 1.0, knots + 1)
+    out = np.empty(b4.shape, np.float32)
+    for i in range(len(b4)):
+        for c in range(b4.shape[-1]):
+            v = b4[i, ..., c]
+            x = np.quantile(v, levels)
+            for j in range(1, len(x)):
+                x[j] = max(x[j], x[j - 1] + spacing)
+            out[i, ..., c] = np.interp(v, x, levels * 255.0)
+    out = out if b.ndim == 4 else out[..., 0]
+    return out[0] if single else out
+
+
 def _lowpass_normalize(images, kind):
-    """log-contrast after a Gaussian low-pass: kind 'lowpass-S' (S in px)."""
+    """log-contrast after a Gaussian low-pass: kind 'lowpass-S' (S in px); a prefix 'clipQQ-' first clips every
+    channel at its QQ-th percentile (quantile_clip)."""
     from scipy.ndimage import gaussian_filter
 
     from sfanav.data.photometric import log_contrast, normalize
+    if kind is not None and kind.startswith("eq"):  # eq[log]-S-flat: low-pass S px, equalise, [log,] flat field
+        from scipy.ndimage import gaussian_filter as _gf
+        parts = kind.split("-")
+        a = np.asarray(images, np.float32)
+        single = a.ndim in (2, 3) and not (a.ndim == 3 and a.shape[-1] > 4)
+        b = a[None] if single else a
+        sig = (float(parts[1]), float(parts[1]), 0.0)[:b.ndim - 1]
+        modes = ("nearest", "wrap", "nearest")[:b.ndim - 1]
+        b = quantile_equalize(np.stack([_gf(im, sig, mode=modes) for im in b]))
+        v = np.log(b + 8.0) if parts[0] == "eqlog" else b
+        h = v.shape[1]
+        t = np.linspace(-1.0, 1.0, h)
+        V = np.stack([np.ones(h), t, t * t], axis=1)
+        P = V @ np.linalg.pinv(V)
+        v = v - np.einsum("ij,nj...->ni...", P, v.mean(axis=2)).astype(np.float32)[:, :, None]
+        sd = v.reshape(len(v), -1).std(axis=1).reshape((-1,) + (1,) * (v.ndim - 1))
+        out = (v * (40.0 / np.maximum(sd, 1e-6))).astype(np.float32)
+        return out[0] if single else out
+    if kind is not None and kind.startswith("clip"):
+        head, kind = kind.split("-", 1)
+        images = quantile_clip(images, float(head[4:]) / 100.0)
+        if kind == "default":
+            return normalize(images, "lowpass-log-contrast")
     if kind is None or not kind.startswith(("lowpass-", "logfirst-")):
         return normalize(images, kind)
     parts = kind.split("-")
@@ -123,8 +225,11 @@ def _lowpass_normalize(images, kind):
 localizer_module.photometric_normalize = _lowpass_normalize
 LOWPASS = ("0.7", "1", "1.5", "2", "1-flat", "2-flat", "2-flat-o2", "3-flat")
 LOGFIRST = ("2-o2", "2-o8", "2-o16", "2-o32")
+CLIP = ("80", "90", "95")
 localizer_module.PHOTOMETRIC = (*localizer_module.PHOTOMETRIC, *(f"lowpass-{s}" for s in LOWPASS),
-                                *(f"logfirst-{s}" for s in LOGFIRST))
+                                *(f"logfirst-{s}" for s in LOGFIRST),
+                                *(f"clip{q}-{k}" for q in CLIP for k in ("default", "lowpass-1-flat")),
+                                *(f"{e}-{s}-flat" for e in ("eq", "eqlog") for s in ("1", "2", "3")))
 
 CANDIDATES = {
     "none": ({"robustness": "none"}, None),
@@ -152,6 +257,21 @@ CANDIDATES = {
                                            "readout_augmentation": None}, None),
     "gamma-lowpass-3-flat-0.25": ({"robustness": "standard", "photometric": "lowpass-3-flat",
                                    "invariance": CAMERA_GAMMA, "readout_augmentation": CAMERA_GAMMA}, None),
+    **{f"clip{q}-0.25": ({"robustness": "standard", "photometric": f"clip{q}-default"}, None) for q in CLIP},
+    **{f"clip{q}-gamma-0.25": ({"robustness": "standard", "photometric": f"clip{q}-default",
+                                "invariance": CAMERA_GAMMA, "readout_augmentation": CAMERA_GAMMA}, None)
+       for q in CLIP},
+    **{f"clip{q}-gamma-lowpass-1-flat-0.25": ({"robustness": "standard", "photometric": f"clip{q}-lowpass-1-flat",
+                                               "invariance": CAMERA_GAMMA, "readout_augmentation": CAMERA_GAMMA},
+                                              None) for q in CLIP},
+    "dealt-0.25": ({"robustness": "standard", "photometric": "lowpass-2-flat", "invariance": CAMERA_DEALT}, None),
+    "stratified-0.25": ({"robustness": "standard", "photometric": "lowpass-2-flat", "invariance": CAMERA_STRATIFIED},
+                        None),
+    **{f"{e}-{s}-flat-0.25": ({"robustness": "standard", "photometric": f"{e}-{s}-flat"}, None)
+       for e in ("eq", "eqlog") for s in ("1", "2", "3")},
+    **{f"{e}-{s}-flat-gamma-0.25": ({"robustness": "standard", "photometric": f"{e}-{s}-flat",
+                                     "invariance": CAMERA_GAMMA, "readout_augmentation": CAMERA_GAMMA}, None)
+       for e in ("eq", "eqlog") for s in ("1", "2", "3")},
 }
 
 
@@ -164,8 +284,13 @@ class _Normalised:
 
 
 def train(name, X, xy, elev):
+    """A candidate trained on images X at xy; ``NAME@S``: the candidate with fit_localizer(seed=S) (the draw of
+    the invariance partners' and the readout copies' corruptions)."""
+    name, _, seed = name.partition("@")
     opts, pre = CANDIDATES[name]
     opts = dict(opts)
+    if seed:
+        opts["seed"] = int(seed)
     kw = recipe_for(robustness=opts.pop("robustness")).fit_kwargs(elev)
     net = default_network(**opts.pop("network", {}))
     kw.update(opts)
@@ -201,11 +326,20 @@ def main():
     ap.add_argument("--gardens", default=",".join(DEFAULT_GARDENS))
     ap.add_argument("--json")
     ap.add_argument("--markdown", action="store_true", help="print the docs' table from --json and stop")
+    ap.add_argument("--summarize", action="store_true", help="recompute the seed spread of --json and stop")
     ap.add_argument("--extra", action="store_true", help="also the corruptions of EXTRA_CORRUPTIONS")
+    ap.add_argument("--matched", help="comma-separated corruptions: train each candidate on the corrupted "
+                    "exploration run and test on the test run with the same corruption (the model that has seen "
+                    "exactly this camera: what no invariance can beat by much), instead of the clean-trained table")
     a = ap.parse_args()
     out = json.loads(Path(a.json).read_text()) if a.json and Path(a.json).exists() else {}
     if a.markdown:
         print(markdown(out))
+        return
+    if a.summarize:
+        out["seeds"] = seed_spread(out)
+        Path(a.json).write_text(json.dumps(out, indent=1) + "\n")
+        print(json.dumps(out["seeds"], indent=1))
         return
     prep = Preprocessing.for_network(default_network())
     for g in a.gardens.split(","):
@@ -221,6 +355,20 @@ def main():
         tests = {"clean": conform(T0), **{c: conform(corrupt(T0, c, seed=1))
                                           for c in CORRUPTIONS + (EXTRA_CORRUPTIONS if a.extra else [])}}
         elev = tuple(cam["elevation_deg"])
+        if a.matched:
+            for name in a.candidates.split(","):
+                key = f"{g}|{name}|matched"
+                med = dict(out.get(key, {}).get("MED (m)", {}))
+                for c in ["clean"] + a.matched.split(","):
+                    Xc = X if c == "clean" else conform(corrupt(X0, c, seed=2))
+                    model = train(name, Xc, xy, elev)
+                    med[c] = localization_metrics(model.predict(tests[c]), xyt)["med"]
+                    print(f"{g:18s} {name:16s} trained and tested on {c}: {med[c]:.3f} m "
+                          f"(x{med[c] / med['clean']:.2f} clean)", flush=True)
+                    out[key] = {"MED (m)": med}
+                    if a.json:
+                        Path(a.json).write_text(json.dumps(out, indent=1) + "\n")
+            continue
         for name in a.candidates.split(","):
             t0 = time.perf_counter()
             model = train(name, X, xy, elev)
@@ -243,8 +391,32 @@ def main():
         summary[name] = {"worst ratio to own clean": worst, "clean / none (geometric mean)": cost}
         print(f"{name:16s} worst x{worst:.2f}, clean / none {cost:.2f}" if cost else name, flush=True)
     out["summary"] = summary
+    out["seeds"] = seed_spread(out)
     if a.json:
         Path(a.json).write_text(json.dumps(out, indent=1) + "\n")
+
+
+def seed_spread(out):
+    """Per garden and candidate trained at several seeds (``NAME`` is seed 0, ``NAME@S`` seed S): the clean MEDs,
+    their mean, min, max and max / min, and the mean MED under each corruption; keys ``garden|NAME``."""
+    groups = {}
+    for k, v in out.items():
+        parts = k.split("|")
+        if len(parts) != 2 or "MED (m)" not in v:
+            continue
+        g, name = parts
+        base, _, seed = name.partition("@")
+        groups.setdefault(f"{g}|{base}", {})[int(seed or 0)] = v["MED (m)"]
+    res = {}
+    for key, by_seed in groups.items():
+        if len(by_seed) < 2:
+            continue
+        clean = [by_seed[s]["clean"] for s in sorted(by_seed)]
+        common = set.intersection(*(set(m) for m in by_seed.values()))
+        res[key] = {"seeds": sorted(by_seed), "clean": clean, "clean mean": float(np.mean(clean)),
+                    "clean min": min(clean), "clean max": max(clean), "clean max over min": max(clean) / min(clean),
+                    "mean": {c: float(np.mean([m[c] for m in by_seed.values()])) for c in sorted(common)}}
+    return res
 
 
 if __name__ == "__main__":
