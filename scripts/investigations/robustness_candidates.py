@@ -31,6 +31,8 @@ Candidates (all the sfanav default's network, rows, pooling, signature and reado
 * gamma-W: the default's normalisation (lowpass-2-flat) with gamma 0.6..1.6 added to the corruptions of
   the invariance partners and the readout's copies (CAMERA_GAMMA), invariance weight W (0.25, 0.5);
   gamma-lowpass-3-flat-0.25: the same with a 3 px low-pass (lowpass-3-flat-0.25 without gamma);
+* twice-0.25: the default with its network trained on the run twice over (two copies one after the other),
+  each copy with its own draw of partners: two partners per image, the readout on the run once;
 * NAME@S: candidate NAME trained with fit_localizer(seed=S), the draw of the partners' and the readout copies'
   corruptions (the spread over S is what the draw alone does);
 * stratified-0.25, dealt-0.25: the default with the partners' corruption families dealt in turn along the run
@@ -264,6 +266,7 @@ CANDIDATES = {
     **{f"clip{q}-gamma-lowpass-1-flat-0.25": ({"robustness": "standard", "photometric": f"clip{q}-lowpass-1-flat",
                                                "invariance": CAMERA_GAMMA, "readout_augmentation": CAMERA_GAMMA},
                                               None) for q in CLIP},
+    "twice-0.25": ({"robustness": "standard", "photometric": "lowpass-2-flat", "twice": True}, None),
     "dealt-0.25": ({"robustness": "standard", "photometric": "lowpass-2-flat", "invariance": CAMERA_DEALT}, None),
     "stratified-0.25": ({"robustness": "standard", "photometric": "lowpass-2-flat", "invariance": CAMERA_STRATIFIED},
                         None),
@@ -291,12 +294,37 @@ def train(name, X, xy, elev):
     opts = dict(opts)
     if seed:
         opts["seed"] = int(seed)
+    if opts.pop("twice", False):  # the network sees the run twice, each copy with its own partners
+        return _twice(opts, X, xy, elev)
     kw = recipe_for(robustness=opts.pop("robustness")).fit_kwargs(elev)
     net = default_network(**opts.pop("network", {}))
     kw.update(opts)
     if pre is None:
         return fit_localizer(net, X, xy, rotation=Rotation(5, 1.0), progress=False, **kw)
     return _Normalised(pre, fit_localizer(net, pre(X), xy, rotation=Rotation(5, 1.0), progress=False, **kw))
+
+
+def _twice(opts, X, xy, elev):
+    """The candidate with its network trained on the run twice over, one copy after the other, each copy with its
+    own draw of invariance partners (seed and seed + 7919); the readout on the run once."""
+    import sfanav.localization.training as training
+
+    kw = recipe_for(robustness=opts.pop("robustness")).fit_kwargs(elev)
+    kw.update(opts)
+    net = default_network()
+    original, fit = training.invariance_partners, net.fit
+
+    def partners(images, model, network_input, **k):
+        a = original(images, model, network_input, **k)
+        b = original(images, model, network_input, **{**k, "seed": k.get("seed", 0) + 7919})
+        return np.arange(2 * len(images)), np.concatenate([a[1], b[1]]), np.concatenate([a[2], b[2]])
+
+    net.fit = lambda images, rotation, **k: fit(np.concatenate([images, images]), rotation, **k)
+    training.invariance_partners = partners
+    try:
+        return fit_localizer(net, X, xy, rotation=Rotation(5, 1.0), progress=False, **kw)
+    finally:
+        training.invariance_partners = original
 
 
 def markdown(out):
