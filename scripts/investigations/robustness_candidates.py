@@ -93,27 +93,25 @@ class StratifiedModel(CorruptionModel):
     drawn as before) instead of one uniformly random family per image: every family equally often and evenly
     spread over the run, whatever the seed (does the partners' draw make the clean precision a lottery?)."""
 
+    skip_uniform = False
+    """Draw (and ignore) the uniform family first, as CAMERA does, so that the strengths are CAMERA's."""
+
     def draw(self, n, *, seed=0, start=0, dealt=False):
         names = list(self.families)
         out = []
         for i in range(start, start + n):
             rng = np.random.default_rng([seed, i, 17])
+            if self.skip_uniform:
+                rng.integers(len(names))
             out.append(self._draw(names[(i + seed) % len(names)], rng))
         return out
 
 
-class DealtModel(CorruptionModel):
+class DealtModel(StratifiedModel):
     """StratifiedModel's families with the strengths CAMERA draws for the image (the same stream, after the
     uniform family draw it ignores): the two differ only in their strength draws (measured as dealt-0.25)."""
 
-    def draw(self, n, *, seed=0, start=0, dealt=False):
-        names = list(self.families)
-        out = []
-        for i in range(start, start + n):
-            rng = np.random.default_rng([seed, i, 17])
-            rng.integers(len(names))
-            out.append(self._draw(names[(i + seed) % len(names)], rng))
-        return out
+    skip_uniform = True
 
 
 CAMERA_STRATIFIED = StratifiedModel(CAMERA.families)
@@ -134,9 +132,7 @@ def quantile_clip(images, q):
     """Every image's channels clipped at their own q-quantile (q in 0..1): a clipped overexposure (``min(g I,
     255)``) is then exactly the gain ``g`` while less than 1 - q of a channel saturates, and the clip commutes
     with a gamma and a white balance (a quantile commutes with any increasing map of one channel)."""
-    a = np.asarray(images, np.float32)
-    single = a.ndim in (2, 3) and not (a.ndim == 3 and a.shape[-1] > 4)
-    b = a[None] if single else a
+    b, single = _batch(images)
     top = np.quantile(b, q, axis=(1, 2), keepdims=True).astype(np.float32)
     out = np.minimum(b, top)
     return out[0] if single else out
@@ -148,9 +144,7 @@ def quantile_equalize(images, knots=16, spacing=1.0):
     increasing map of a channel (gain, gamma, white balance, clipping but for the clipped pixels) as far as it
     is linear between knots; knots closer than ``spacing`` grey levels are pushed apart so that noise in a flat
     region (the sky) is not stretched over a wide range."""
-    a = np.asarray(images, np.float32)
-    single = a.ndim in (2, 3) and not (a.ndim == 3 and a.shape[-1] > 4)
-    b = a[None] if single else a
+    b, single = _batch(images)
     b4 = b if b.ndim == 4 else b[..., None]
     levels = np.linspace(0.0, 1.0, knots + 1)
     out = np.empty(b4.shape, np.float32)
@@ -165,29 +159,43 @@ def quantile_equalize(images, knots=16, spacing=1.0):
     return out[0] if single else out
 
 
-def _lowpass_normalize(images, kind):
-    """log-contrast after a Gaussian low-pass: kind 'lowpass-S' (S in px); a prefix 'clipQQ-' first clips every
-    channel at its QQ-th percentile (quantile_clip)."""
+def _batch(images):
+    """(float32 batch (N, H, W[, C]), whether ``images`` was a single image)."""
+    a = np.asarray(images, np.float32)
+    single = a.ndim in (2, 3) and not (a.ndim == 3 and a.shape[-1] > 4)
+    return (a[None] if single else a), single
+
+
+def _lowpass(b, sigma):
+    """A Gaussian low-pass of ``sigma`` px of every image of a batch (wrapping around the panorama's seam)."""
     from scipy.ndimage import gaussian_filter
 
+    sig = (sigma, sigma, 0.0)[:b.ndim - 1]
+    modes = ("nearest", "wrap", "nearest")[:b.ndim - 1]
+    return np.stack([gaussian_filter(im, sig, mode=modes) for im in b])
+
+
+def _flat_contrast(v):
+    """A batch of (log) images minus the quadratic profile over the rows (per channel) of the rows' means, scaled
+    to the normalisation's contrast (40 per standard deviation)."""
+    h = v.shape[1]
+    t = np.linspace(-1.0, 1.0, h)
+    V = np.stack([np.ones(h), t, t * t], axis=1)
+    P = V @ np.linalg.pinv(V)  # projector onto the quadratic profiles
+    v = v - np.einsum("ij,nj...->ni...", P, v.mean(axis=2)).astype(np.float32)[:, :, None]
+    sd = v.reshape(len(v), -1).std(axis=1).reshape((-1,) + (1,) * (v.ndim - 1))
+    return (v * (40.0 / np.maximum(sd, 1e-6))).astype(np.float32)
+
+
+def _lowpass_normalize(images, kind):
+    """log-contrast after a Gaussian low-pass: kind 'lowpass-S' (S in px); a prefix 'clipQQ-' first clips every
+    channel at its QQ-th percentile (quantile_clip); 'eq[log]-S-flat': low-pass S px, equalise, [log,] flat field."""
     from sfanav.data.photometric import log_contrast, normalize
-    if kind is not None and kind.startswith("eq"):  # eq[log]-S-flat: low-pass S px, equalise, [log,] flat field
-        from scipy.ndimage import gaussian_filter as _gf
+    if kind is not None and kind.startswith("eq"):
         parts = kind.split("-")
-        a = np.asarray(images, np.float32)
-        single = a.ndim in (2, 3) and not (a.ndim == 3 and a.shape[-1] > 4)
-        b = a[None] if single else a
-        sig = (float(parts[1]), float(parts[1]), 0.0)[:b.ndim - 1]
-        modes = ("nearest", "wrap", "nearest")[:b.ndim - 1]
-        b = quantile_equalize(np.stack([_gf(im, sig, mode=modes) for im in b]))
-        v = np.log(b + 8.0) if parts[0] == "eqlog" else b
-        h = v.shape[1]
-        t = np.linspace(-1.0, 1.0, h)
-        V = np.stack([np.ones(h), t, t * t], axis=1)
-        P = V @ np.linalg.pinv(V)
-        v = v - np.einsum("ij,nj...->ni...", P, v.mean(axis=2)).astype(np.float32)[:, :, None]
-        sd = v.reshape(len(v), -1).std(axis=1).reshape((-1,) + (1,) * (v.ndim - 1))
-        out = (v * (40.0 / np.maximum(sd, 1e-6))).astype(np.float32)
+        b, single = _batch(images)
+        b = quantile_equalize(_lowpass(b, float(parts[1])))
+        out = _flat_contrast(np.log(b + 8.0) if parts[0] == "eqlog" else b)
         return out[0] if single else out
     if kind is not None and kind.startswith("clip"):
         head, kind = kind.split("-", 1)
@@ -201,24 +209,12 @@ def _lowpass_normalize(images, kind):
     log_first = parts[0] == "logfirst"
     flat = "flat" in parts or log_first
     offset = next((float(p[1:]) for p in parts if p.startswith("o")), 8.0)
-    a = np.asarray(images, np.float32)
-    single = a.ndim in (2, 3) and not (a.ndim == 3 and a.shape[-1] > 4)
-    b = a[None] if single else a
+    b, single = _batch(images)
     if log_first:  # the logarithm before the low-pass: a gamma is then a scale the contrast step removes
         b = np.log(np.maximum(b, 0.0) + np.float32(offset))
-    sig = (sigma, sigma, 0.0)[:b.ndim - 1]
-    modes = ("nearest", "wrap", "nearest")[:b.ndim - 1]
-    out = np.stack([gaussian_filter(im, sig, mode=modes) for im in b])
+    out = _lowpass(b, sigma)
     if flat:  # log, minus a quadratic profile over the rows (per channel) of the rows' means, then the contrast
-        h = out.shape[1]
-        t = np.linspace(-1.0, 1.0, h)
-        V = np.stack([np.ones(h), t, t * t], axis=1)
-        P = V @ np.linalg.pinv(V)  # projector onto the quadratic profiles
-        v = out if log_first else np.log(np.maximum(out, 0.0) + offset)
-        prof = np.einsum("ij,nj...->ni...", P, v.mean(axis=2)).astype(np.float32)
-        v = v - prof[:, :, None]
-        sd = v.reshape(len(v), -1).std(axis=1).reshape((-1,) + (1,) * (v.ndim - 1))
-        out = (v * (40.0 / np.maximum(sd, 1e-6))).astype(np.float32)
+        out = _flat_contrast(out if log_first else np.log(np.maximum(out, 0.0) + offset))
     else:
         out = log_contrast(out)
     return out[0] if single else out
