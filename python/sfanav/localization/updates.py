@@ -230,14 +230,19 @@ def _split_network(network: Any) -> tuple[Any, Any]:
     return below, _core.SfaNode.from_state(final)
 
 
+def _below_top(localizer: Localizer, images: Any) -> tuple[Any, np.ndarray, Any]:
+    """(trained network, the images as its input, the network below its top stage)."""
+    net = localizer.trained_network()
+    below, _ = _split_network(net)
+    return net, np.ascontiguousarray(localizer.network_input(np.asarray(images))), below
+
+
 def top_stage_inputs(localizer: Localizer, images: Any) -> np.ndarray:
     """The inputs of the network's top stage for images (N, H, W[, C]) as the
     localizer sees them (photometric normalisation, rows, the K pooled
     rotations): (N, K, k) float64, K = 1 without rotation pooling (the
     window at rotation 0, as :meth:`Localizer.features`)."""
-    net = localizer.trained_network()
-    a = np.ascontiguousarray(localizer.network_input(np.asarray(images)))
-    below, _ = _split_network(net)
+    net, a, below = _below_top(localizer, images)
     K = localizer.rotation_pooling_
     if K == 1:
         v = net.input_shape[1]
@@ -269,12 +274,10 @@ def top_stage_training_inputs(localizer: Localizer, images: Any) -> np.ndarray:
     statistics the top stage was solved from (derivative pairs between
     consecutive views and from an image's last view to the next image's
     first). ValueError for a network that records no training rotation."""
-    net = localizer.trained_network()
+    net, a, below = _below_top(localizer, images)
     step = net.step_
     if step is None:
         raise ValueError("this localizer's network records no training rotation (step)")
-    a = np.ascontiguousarray(localizer.network_input(np.asarray(images)))
-    below, _ = _split_network(net)
     return np.asarray(below.transform_rotations(a, int(step)), dtype=np.float64)
 
 
