@@ -33,6 +33,8 @@ Candidates (all the sfanav default's network, rows, pooling, signature and reado
   gamma-lowpass-3-flat-0.25: the same with a 3 px low-pass (lowpass-3-flat-0.25 without gamma);
 * twice-0.25: the default with its network trained on the run twice over (two copies one after the other),
   each copy with its own draw of partners: two partners per image, the readout on the run once;
+* wideN-0.25, wideN: the default (standard) and light with N top outputs instead of 12, all read out
+  (whether the features the partners' draw decides about survive in a wider top layer);
 * NAME@S: candidate NAME trained with fit_localizer(seed=S), the draw of the partners' and the readout copies'
   corruptions (the spread over S is what the draw alone does);
 * stratified-0.25, dealt-0.25: the default with the partners' corruption families dealt in turn along the run
@@ -247,6 +249,8 @@ CANDIDATES = {
        for s in LOWPASS},
     **{f"logfirst-{s}-0.25": ({"robustness": "standard", "photometric": f"logfirst-{s}"}, None) for s in LOGFIRST},
     "lowpass-2-flat-0.5": ({"robustness": "full", "invariance_weight": 0.5, "photometric": "lowpass-2-flat"}, None),
+    **{f"lowpass-2-flat-{w}": ({"robustness": "full", "invariance_weight": w, "photometric": "lowpass-2-flat"}, None)
+       for w in (0.1, 0.15)},
     "lowpass-2-flat-1": ({"robustness": "full", "photometric": "lowpass-2-flat"}, None),
     **{f"gamma-{w}": ({"robustness": "full", "invariance_weight": w, "photometric": "lowpass-2-flat",
                       "invariance": CAMERA_GAMMA, "readout_augmentation": CAMERA_GAMMA}, None)
@@ -262,6 +266,10 @@ CANDIDATES = {
     **{f"clip{q}-gamma-lowpass-1-flat-0.25": ({"robustness": "standard", "photometric": f"clip{q}-lowpass-1-flat",
                                                "invariance": CAMERA_GAMMA, "readout_augmentation": CAMERA_GAMMA},
                                               None) for q in CLIP},
+    **{f"wide{n}-0.25": ({"robustness": "standard", "photometric": "lowpass-2-flat", "n_outputs": n,
+                          "network": {"out": n}}, None) for n in (16, 24)},
+    **{f"wide{n}": ({"robustness": "light", "photometric": "lowpass-2-flat", "n_outputs": n,
+                     "network": {"out": n}}, None) for n in (16, 24)},
     "twice-0.25": ({"robustness": "standard", "photometric": "lowpass-2-flat", "twice": True}, None),
     "dealt-0.25": ({"robustness": "standard", "photometric": "lowpass-2-flat", "invariance": CAMERA_DEALT}, None),
     "stratified-0.25": ({"robustness": "standard", "photometric": "lowpass-2-flat", "invariance": CAMERA_STRATIFIED},
@@ -437,9 +445,13 @@ def seed_spread(out):
             continue
         clean = [by_seed[s]["clean"] for s in sorted(by_seed)]
         common = set.intersection(*(set(m) for m in by_seed.values()))
+        mean = {c: float(np.mean([m[c] for m in by_seed.values()])) for c in sorted(common)}
+        corrupted = {c: v for c, v in mean.items() if c in CORRUPTIONS}  # the eleven every candidate has
         res[key] = {"seeds": sorted(by_seed), "clean": clean, "clean mean": float(np.mean(clean)),
                     "clean min": min(clean), "clean max": max(clean), "clean max over min": max(clean) / min(clean),
-                    "mean": {c: float(np.mean([m[c] for m in by_seed.values()])) for c in sorted(common)}}
+                    "mean": mean, "corrupted mean": float(np.mean(list(corrupted.values()))) if corrupted else None,
+                    "worst corruption": max(corrupted, key=corrupted.get) if corrupted else None,
+                    "worst corruption mean": max(corrupted.values()) if corrupted else None}
     return res
 
 
