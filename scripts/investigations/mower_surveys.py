@@ -13,7 +13,9 @@ with every pattern's rows, incrementally.
 
 Other presets' runs too (``--patterns train --test test`` on a ``thesis-5.1.1-grid`` dataset).
 
-The gyro column is not used here (the product rows take images and odometry only).
+The survey runs' yaw gyro (``gyro_heading``) goes to the pose graph of the training without ground truth, as
+``sfanav train`` passes it, since 2026-12-06 (the product rows' ``ProductRun.gyro``); the JSON's entries from before
+that day were trained without it.
 """
 
 from __future__ import annotations
