@@ -466,11 +466,12 @@ def refine_positions(features: np.ndarray, odometry: np.ndarray, headings: np.nd
     return P, accepted, chi, sigma
 
 
-MAX_MISFIT_GROWTH = 1.0
+MAX_MISFIT_GROWTH = 1.1
 """The default of :func:`fit_pose_graph`'s ``max_misfit_growth``: with
 relative-pose closures a refinement round is kept only if the closures'
-measured relative positions fit its map at least as well as the unrefined
-one (docs/odometry.md, "The refinement against relative-pose closures").
+measured relative positions fit its map at most 10 % worse than the
+unrefined one (chosen on 19 runs: docs/odometry.md, "The refinement
+against relative-pose closures").
 """
 
 SOLVERS = ("hand-written", "gtsam")
