@@ -225,3 +225,72 @@ def test_refinement_may_reshape_the_map_but_not_squeeze_it():
     P, kept, _, _ = refine_positions(features, odo, g.poses[:, 2], g.poses[:, :2], pairs, readout=smooth, **kw)
     assert kept == 0
     np.testing.assert_array_equal(P, g.poses[:, :2])
+
+
+def test_closure_misfit_is_the_median_squared_mahalanobis_distance():
+    from sfanav.odometry.pose_graph import closure_misfit
+    from sfanav.odometry.pose_graph_gtsam import HEADING_ONLY_SIGMA, RelativePoses
+
+    # frame 1 seen from frame 0 (heading 90 deg): 1 m ahead is +y in the world
+    P = np.array([[0.0, 0.0], [0.0, 1.0], [5.0, 5.0]])
+    th = np.array([np.pi / 2, np.pi / 2, 0.0])
+    exact = RelativePoses([0], [1], [1.0], [0.0], [0.0], sigmas=[[0.1, 0.2, 0.01]])
+    assert closure_misfit(P, th, exact) == pytest.approx(0.0, abs=1e-20)
+    # 0.1 m off along x (sigma 0.1) and 0.4 m along y (sigma 0.2): 1 + 4 = 5; the measured pose turned by
+    # 90 deg swaps the axes the residual is expressed in (sigma 0.1 across, 0.2 along): 16 + 0.25
+    off = RelativePoses([0], [1], [1.1], [0.4], [0.0], sigmas=[[0.1, 0.2, 0.01]])
+    assert closure_misfit(P, th, off) == pytest.approx(5.0)
+    turned = RelativePoses([0], [1], [1.1], [0.4], [np.pi / 2], sigmas=[[0.1, 0.2, 0.01]])
+    assert closure_misfit(P, th, turned) == pytest.approx(0.4**2 / 0.01 + 0.1**2 / 0.04)
+    # the median over closures with a position; heading-only ones and those not kept do not count
+    three = RelativePoses([0, 0, 1], [1, 2, 2], [1.1, 0.0, 0.0], [0.4, 0.0, 0.0], [0.0, 0.0, 0.0],
+                          sigmas=[[0.1, 0.2, 0.01], [np.inf, np.inf, 0.01], [HEADING_ONLY_SIGMA] * 2 + [0.01]])
+    assert closure_misfit(P, th, three) == pytest.approx(5.0)
+    assert np.isnan(closure_misfit(P, th, three, keep=[False, True, True]))
+
+
+def test_refinement_is_refused_when_it_moves_the_map_away_from_the_closures():
+    # the serpentine of the test above: an exact readout corrects the odometry's distance errors; relative-pose
+    # closures that measure the true relative positions agree with it (the rounds are kept), closures that
+    # measure the unrefined map's relative positions do not (the rounds are refused, the map kept)
+    from sfanav.odometry import dead_reckon, increments
+    from sfanav.odometry.pose_graph import PlacePairs, closure_misfit, refine_positions
+    from sfanav.odometry.pose_graph_gtsam import RelativePoses
+
+    truth = serpentine(n_lanes=12, per_lane=40, length=16.0)
+    rng = np.random.default_rng(0)
+    U = increments(truth, direction=True)
+    U[:, 0] *= 1 + 0.05 * rng.normal(size=len(U))
+    odo = dead_reckon(U, truth[0])
+    features = truth[:, :2] / 3.0
+    g = fit_pose_graph(rotating_panoramas(truth[:, 2]), features, odo, refine=0)
+    pairs = PlacePairs(g.pairs.current, g.pairs.past, g.pairs.distance)
+    th = g.poses[:, 2]
+
+    def measuring(xy):
+        i, j = pairs.past, pairs.current
+        d = xy[j] - xy[i]
+        c, s = np.cos(th[i]), np.sin(th[i])
+        dx, dy = c * d[:, 0] + s * d[:, 1] + 0.01 * rng.normal(size=len(i)), \
+            -s * d[:, 0] + c * d[:, 1] + 0.01 * rng.normal(size=len(i))
+        return RelativePoses(i, j, dx, dy, th[j] - th[i], sigmas=np.tile([0.05, 0.05, 0.01], (len(i), 1)))
+
+    kw = {"noise": {"distance_sigma": 0.05, "heading_sigma": 0.004, "turn_sigma": 0.01}, "rounds": 2,
+          "heading_sigma": np.radians(1.0), "offset_sigma": None, "max_misfit_growth": 1.0,
+          "readout": {"kind": "quadratic", "n_outputs": 2, "ridge": 0.0}}
+    before = med(g.poses[:, :2], truth[:, :2])
+    trace = []
+    P, kept, _, _ = refine_positions(features, odo, th, g.poses[:, :2], pairs, closures=measuring(truth[:, :2]),
+                                     trace=trace, **kw)
+    assert kept == 2 and med(P, truth[:, :2]) < 0.8 * before
+    assert trace[0]["misfit"] < trace[0]["misfit0"]
+    stale = measuring(g.poses[:, :2])
+    trace = []
+    P, kept, _, _ = refine_positions(features, odo, th, g.poses[:, :2], pairs, closures=stale, trace=trace, **kw)
+    assert kept == 0 and trace[0]["misfit"] > trace[0]["misfit0"]
+    np.testing.assert_array_equal(P, g.poses[:, :2])
+    assert closure_misfit(g.poses[:, :2], th, stale) == pytest.approx(trace[0]["misfit0"])
+    # without the test the same rounds are kept
+    P, kept, _, _ = refine_positions(features, odo, th, g.poses[:, :2], pairs, closures=stale,
+                                     **{**kw, "max_misfit_growth": None})
+    assert kept == 2

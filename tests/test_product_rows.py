@@ -100,3 +100,18 @@ def test_odometry_that_fixes_no_map_leaves_out_the_no_ground_truth_rows(runs):
     rows = _rows(res)
     assert not any("no ground truth" in k for k in rows) and "fixes no map" in res.note
     assert "MED (m) sfanav default [ground truth]" in rows
+
+
+def test_a_training_runs_gyro_goes_to_the_pose_graph(runs):
+    train, (test,) = runs
+    assert train.gyro is None  # the demo garden has no gyro
+    heading = np.unwrap(train.odometry[:, 2])  # a gyro that agrees with the wheels
+    res = product_rows(ProductRun(train.images, train.xy, train.odometry, gyro=heading), [test],
+                       network=quick_network, recipe=recipe_for(rows="all", robustness="none"), peer_queries=10)
+    assert res.models["no ground truth"].info["gyro"] is True
+    assert "MED (m) sfanav default [no ground truth]" in _rows(res)
+    with pytest.raises(ValueError, match="gyro must have"):
+        ProductRun(train.images, train.xy, train.odometry, gyro=heading[:-1])
+    bad = heading.copy()
+    bad[2] = np.nan
+    assert ProductRun(train.images, train.xy, train.odometry, gyro=bad).gyro is None  # missing: none

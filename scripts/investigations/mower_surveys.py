@@ -13,7 +13,9 @@ with every pattern's rows, incrementally.
 
 Other presets' runs too (``--patterns train --test test`` on a ``thesis-5.1.1-grid`` dataset).
 
-The gyro column is not used here (the product rows take images and odometry only).
+The survey runs' yaw gyro (``gyro_heading``) goes to the pose graph of the training without ground truth, as
+``sfanav train`` passes it (the product rows' ``ProductRun.gyro``, since 2026-12-06); ``--no-gyro`` trains without
+it, as every entry of docs/results/investigations/mower-surveys.json was.
 """
 
 from __future__ import annotations
@@ -44,6 +46,8 @@ def main() -> None:
     ap.add_argument("--closures", default=None, choices=("heading", "relative-pose"),
                     help="the pose graph's closures without ground truth (train_localizer(closures=); default: its "
                          "default, relative-pose since 2026-12-06)")
+    ap.add_argument("--no-gyro", action="store_true", help="train without the runs' gyro (the entries before "
+                    "2026-12-06 15:00)")
     ap.add_argument("--tag", default="", help="appended to each run's key in the JSON (e.g. ' (relative-pose)')")
     a = ap.parse_args()
     ds = Dataset(a.dataset)
@@ -53,6 +57,8 @@ def main() -> None:
     for pattern in a.patterns:
         t0 = time.perf_counter()
         train, tests = product_runs(ds, default_network(), train=pattern, tests=(a.test,))
+        if a.no_gyro:
+            train.gyro = None
         r = product_rows(train, tests, camera_elevation=elev, closures=a.closures)
         rows = {row["metric"]: row["sfanav"] for row in r.rows}
         res[pattern + a.tag] = {"frames": len(train.images), "rows": rows, "seconds": time.perf_counter() - t0,

@@ -9,7 +9,8 @@ Every localization experiment reports, on its own training and test runs:
   fitted to ground truth;
 * ``sfanav default [no ground truth]``: the same recipe with
   ``supervision="odometry"`` (positions learned from the training run's
-  images and odometry), only where the training run has odometry that
+  images and odometry, and its yaw gyro where it has one, as ``sfanav
+  train`` reads a dataset's ``gyro_heading``), only where the training run has odometry that
   fixes a map (else the note says why); its
   estimates are in the training run's odometry frame and are moved into the
   world frame for scoring only, by the rigid transform fitted on the
@@ -84,12 +85,16 @@ class ProductRun:
         run has none.
     label : str
         Names a test run in the row names (``""`` for a scene's only test run).
+    gyro : array (N,) or None
+        A yaw gyro's integrated heading (rad), if the run has one: the
+        training run's goes to the pose graph as ``sfanav train`` passes it.
     """
 
     images: Any
     xy: Any
     odometry: Any = None
     label: str = ""
+    gyro: Any = None
 
     def __post_init__(self) -> None:
         self.images = as_images(self.images, "images")
@@ -100,6 +105,11 @@ class ProductRun:
             if odo.ndim != 2 or odo.shape[1] < 3 or len(odo) != len(self.images):
                 raise ValueError(f"odometry must have shape ({len(self.images)}, 3), got {odo.shape}")
             self.odometry = odo[:, :3] if np.isfinite(odo[:, :3]).all() else None
+        if self.gyro is not None:
+            g = np.asarray(self.gyro, dtype=float).reshape(-1)
+            if len(g) != len(self.images):
+                raise ValueError(f"gyro must have {len(self.images)} values, got {len(g)}")
+            self.gyro = g if np.isfinite(g).all() else None
 
     @property
     def has_odometry(self) -> bool:
@@ -133,7 +143,7 @@ def product_runs(dataset: Any, network: Network, *, train: str = "train", tests:
                  labels: Sequence[str] | None = None, mirror: Any = None,
                  log: Log = quiet_log) -> tuple[ProductRun, list[ProductRun]]:
     """A dataset's training run and test runs (selected by ``run=``) in
-    ``network``'s input format, with their ground truth and odometry
+    ``network``'s input format, with their ground truth, odometry and gyro
     (omnidirectional images unwarped about ``mirror``, as
     :func:`sfanav.data.sources.load_run` takes it).
     Panoramas are resized to the network's input
@@ -159,7 +169,7 @@ def product_runs(dataset: Any, network: Network, *, train: str = "train", tests:
         X, xy = load_run(part, prep, mirror=mirror, log=log)
         if X.ndim == 3 and c == 3:
             X = np.repeat(X[..., None], 3, axis=3)
-        return ProductRun(X, xy, part.odometry, label)
+        return ProductRun(X, xy, part.odometry, label, part.gyro)
 
     return one(train, ""), [one(t, lab) for t, lab in zip(tests, labels)]
 
@@ -249,8 +259,8 @@ def product_rows(train: ProductRun, tests: Sequence[ProductRun], *, thesis: Sequ
     if train.has_odometry:
         try:
             t0 = time.perf_counter()
-            ngt = train_localizer(train.images, odometry=train.odometry, supervision="odometry", closures=closures,
-                                  **{**kw, "network": make()})
+            ngt = train_localizer(train.images, odometry=train.odometry, gyro=train.gyro, supervision="odometry",
+                                  closures=closures, **{**kw, "network": make()})
             seconds["no ground truth"] = time.perf_counter() - t0
         except ValueError as exc:  # the run's odometry fixes no metric map (too short, never straight, ...)
             missing = f"no '[no ground truth]' rows: the training run's odometry fixes no map ({exc}); "

@@ -34,7 +34,7 @@ pose. Nothing here reads ground truth.
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -178,6 +178,8 @@ class PoseGraph:
     offset_sigma : float
         The last refinement round's standard deviation of the readout's
         pair offsets (m; NaN without refinement).
+    refine_trace : list of dict
+        Every refinement round tried (:func:`refine_positions`' ``trace``).
     """
 
     poses: np.ndarray
@@ -188,6 +190,7 @@ class PoseGraph:
     refined: int = 0
     refine_chi: float = float("nan")
     offset_sigma: float = float("nan")
+    refine_trace: list[dict[str, float]] = field(default_factory=list)
 
     @property
     def n_inliers(self) -> int:
@@ -202,7 +205,9 @@ class PoseGraph:
                 "refinement odometry residual (sd)": None if not np.isfinite(self.refine_chi)
                 else float(self.refine_chi),
                 "refinement offset sigma (m)": None if not np.isfinite(self.offset_sigma)
-                else float(self.offset_sigma)}
+                else float(self.offset_sigma),
+                "refinement rounds tried": [{k: (float(v) if np.isfinite(v) else None) for k, v in r.items()}
+                                            for r in self.refine_trace]}
 
 
 def _solve_headings(odometry: np.ndarray, pairs: PlacePairs, rel: np.ndarray, noise: Mapping[str, float],
@@ -340,10 +345,51 @@ def _area(new: np.ndarray, old: np.ndarray) -> float:
     return float(abs(np.linalg.det(M)))
 
 
+def closure_misfit(positions: Any, headings: Any, closures: Any, keep: Any = None) -> float:
+    """How far a map is from the relative positions its closures measured:
+    the median over the closures with a measured position of the squared
+    Mahalanobis distance (2 degrees of freedom) between the map's relative
+    position of frame ``j`` seen from frame ``i`` and the measured one,
+    under the closure's position covariance (in the measured pose's frame,
+    as GTSAM's between factor). ``positions`` (N, 2) m and ``headings``
+    (N,) rad are the map; ``closures`` a
+    :class:`~sfanav.odometry.pose_graph_gtsam.RelativePoses`; ``keep``
+    (M,) bool selects closures (e.g. the robust solve's inliers). NaN when
+    no closure measures a position.
+
+    >>> from sfanav.odometry.pose_graph_gtsam import RelativePoses
+    >>> c = RelativePoses([0], [1], [1.0], [0.0], [0.0], sigmas=[[0.1, 0.1, 0.01]])
+    >>> round(closure_misfit([[0, 0], [1.2, 0]], [0, 0], c), 6)
+    4.0
+    """
+    from .pose_graph_gtsam import HEADING_ONLY_SIGMA
+
+    P = np.asarray(positions, np.float64)
+    th = np.asarray(headings, np.float64)
+    m = len(closures.i)
+    cov = np.array([closures.covariance_of(k)[:2, :2] for k in range(m)]).reshape(m, 2, 2)
+    sel = np.diagonal(cov, axis1=1, axis2=2).max(axis=1) < (0.1 * HEADING_ONLY_SIGMA) ** 2
+    if keep is not None:
+        sel &= np.asarray(keep, bool)
+    if not sel.any():
+        return float("nan")
+    i, j = closures.i[sel], closures.j[sel]
+    d = P[j] - P[i]
+    c, s_ = np.cos(th[i]), np.sin(th[i])
+    rel = np.c_[c * d[:, 0] + s_ * d[:, 1], -s_ * d[:, 0] + c * d[:, 1]]  # j's position in i's frame
+    r = rel - np.c_[closures.dx[sel], closures.dy[sel]]
+    c, s_ = np.cos(closures.dtheta[sel]), np.sin(closures.dtheta[sel])
+    r = np.c_[c * r[:, 0] + s_ * r[:, 1], -s_ * r[:, 0] + c * r[:, 1]]  # in the measured pose's frame
+    m2 = np.einsum("ki,kij,kj->k", r, np.linalg.inv(cov[sel]), r)
+    return float(np.median(m2))
+
+
 def refine_positions(features: np.ndarray, odometry: np.ndarray, headings: np.ndarray, positions: np.ndarray,
                      pairs: PlacePairs, *, noise: Mapping[str, float], readout: Mapping[str, Any],
                      rounds: int, offset_sigma: float | None, heading_sigma: float,
-                     max_chi: float = 2.0, max_scale_change: float = 0.02) -> tuple[np.ndarray, int, float, float]:
+                     max_chi: float = 2.0, max_scale_change: float = 0.02, closures: Any = None,
+                     closure_keep: Any = None, max_misfit_growth: float | None = None,
+                     trace: list[dict[str, float]] | None = None) -> tuple[np.ndarray, int, float, float]:
     """Positions (N, 2) refined by ``rounds`` of: fit ``readout`` (a spec of
     :func:`sfanav.localization.make_readout`) to the current positions, then
     solve the positions from the odometry steps turned by ``headings``
@@ -369,7 +415,13 @@ def refine_positions(features: np.ndarray, odometry: np.ndarray, headings: np.nd
     test before, the RMS distance from the centroid against the last
     round's, let it pass), whereas a run with crossings gets its shape
     corrected at about the same area (docs/odometry.md, "Where the
-    refinement hurts").
+    refinement hurts"). With ``closures`` (relative-pose closures the
+    positions were solved with; ``closure_keep`` their inliers) and
+    ``max_misfit_growth``, a round is also refused when it moves the map
+    away from what the closures measured: its :func:`closure_misfit` more
+    than ``max_misfit_growth`` times the unrefined map's. ``trace``, if a
+    list, receives one dict per round tried (``chi``, ``area``,
+    ``misfit``; the unrefined map's misfit first as ``misfit0``).
     Returns (positions, rounds kept, the last round's step RMS, the offsets'
     standard deviation of the last round)."""
     P = np.asarray(positions, np.float64).copy()
@@ -385,6 +437,7 @@ def refine_positions(features: np.ndarray, odometry: np.ndarray, headings: np.nd
         spec["n_outputs"] = min(int(spec["n_outputs"]), features.shape[1])
     accepted = 0
     chi = sigma = float("nan")
+    misfit0 = closure_misfit(P0, headings, closures, closure_keep) if closures is not None else float("nan")
     for _ in range(rounds):
         G = make_readout(spec).fit(features, P).predict(features)
         off = G[i] - G[j]
@@ -400,12 +453,26 @@ def refine_positions(features: np.ndarray, odometry: np.ndarray, headings: np.nd
         r2 = np.sort((((np.diff(new, axis=0) - step) / sd[:, None]) ** 2).sum(axis=1) / 2)
         chi = float(np.sqrt(np.mean(r2[: max(1, int(np.ceil(0.99 * len(r2))))])))  # the rarest 1 %: slips
         sigma = sig
-        if chi > max_chi or abs(_area(new, P0) - 1.0) > max_scale_change:
+        area = _area(new, P0)
+        misfit = closure_misfit(new, headings, closures, closure_keep) if closures is not None else float("nan")
+        if trace is not None:
+            trace.append({"chi": chi, "area": area, "misfit": misfit, "misfit0": misfit0, "offset sigma": sig})
+        grew = (max_misfit_growth is not None and np.isfinite(misfit0) and misfit0 > 0
+                and misfit > max_misfit_growth * misfit0)
+        if chi > max_chi or abs(area - 1.0) > max_scale_change or grew:
             break  # the readout's offsets contradict the odometry: keep the positions of the last round
         P = new
         accepted += 1
     return P, accepted, chi, sigma
 
+
+MAX_MISFIT_GROWTH = 1.1
+"""The default of :func:`fit_pose_graph`'s ``max_misfit_growth``: with
+relative-pose closures a refinement round is kept only if the closures'
+measured relative positions fit its map at most 10 % worse than the
+unrefined one (chosen on 19 runs: docs/odometry.md, "The refinement
+against relative-pose closures").
+"""
 
 SOLVERS = ("hand-written", "gtsam")
 """The back ends of :func:`fit_pose_graph`."""
@@ -450,7 +517,8 @@ def fit_pose_graph(images: Any, features: Any, odometry: Any, *, odometry_noise:
                    offset_sigma: float | None = None, heading_sigma_deg: float = 1.0,
                    solver: str = "hand-written", relative_poses: Any = None,
                    pair_closures: str = "heading", pair_options: Mapping[str, Any] | None = None,
-                   gyro: Any = None, gyro_noise: Mapping[str, float] | None = None) -> PoseGraph:
+                   gyro: Any = None, gyro_noise: Mapping[str, float] | None = None,
+                   max_misfit_growth: float | None = MAX_MISFIT_GROWTH) -> PoseGraph:
     """Solves the pose graph of one run from its panoramas, slow features and
     odometry (see the module docstring).
 
@@ -525,6 +593,11 @@ def fit_pose_graph(images: Any, features: Any, odometry: Any, *, odometry_noise:
         reads the odometry, with the fused heading sigma per step.
     gyro_noise : mapping, optional
         The gyro's noise model (:data:`sfanav.odometry.gyro.DEFAULT_GYRO_NOISE`).
+    max_misfit_growth : float or None, default :data:`MAX_MISFIT_GROWTH`
+        With relative-pose closures, refuse a refinement round whose map
+        fits the closures' measured relative positions worse than this
+        many times the unrefined map (:func:`closure_misfit`); None: no
+        such test. Heading-only closures measure no position: no test.
 
     Returns
     -------
@@ -573,6 +646,7 @@ def fit_pose_graph(images: Any, features: Any, odometry: Any, *, odometry_noise:
     offset_sigma = None if offset_sigma is None else check_positive_float(offset_sigma, "offset_sigma")
     heading_sigma = np.radians(check_positive_float(heading_sigma_deg, "heading_sigma_deg"))
     rel = relative_headings(R, pairs.current, pairs.past)
+    closures = None
     if solver == "gtsam":
         xy, theta, drift, w = _solve_gtsam(P, pairs, rel, sigma, odometry_noise, robust, relative_poses,
                                            step_sigma=step_sigma)
@@ -587,7 +661,11 @@ def fit_pose_graph(images: Any, features: Any, odometry: Any, *, odometry_noise:
         theta, drift, w = _solve_headings(P, pairs, rel, noise, sigma, iterations, robust, step_sigma)
         xy = integrate(P, theta)
     kept = PlacePairs(pairs.current[w >= 0.5], pairs.past[w >= 0.5], pairs.distance[w >= 0.5])
+    trace: list[dict[str, float]] = []
     xy, done, chi, osig = refine_positions(F, P, theta, xy, kept, noise=noise,
                                            readout=refine_readout or REFINE_READOUT, rounds=rounds,
-                                           offset_sigma=offset_sigma, heading_sigma=heading_sigma)
-    return PoseGraph(np.c_[xy, theta], drift, pairs, rel, w, refined=done, refine_chi=chi, offset_sigma=osig)
+                                           offset_sigma=offset_sigma, heading_sigma=heading_sigma,
+                                           closures=closures, closure_keep=w >= 0.5,
+                                           max_misfit_growth=max_misfit_growth, trace=trace)
+    return PoseGraph(np.c_[xy, theta], drift, pairs, rel, w, refined=done, refine_chi=chi, offset_sigma=osig,
+                     refine_trace=trace)
