@@ -199,13 +199,11 @@ def test_refinement_is_refused_when_the_readout_contradicts_the_odometry(synthet
         assert med(P, truth[:, :2]) < 0.05
 
 
-def test_refinement_may_reshape_the_map_but_not_squeeze_it():
-    # a serpentine whose odometry's distances err by 5 % per step (no drift): the refinement's readout offsets
-    # correct them where the readout is exact (a quadratic map of a position code), but a readout that smooths
-    # across neighbouring lanes shrinks their offsets and would squeeze the map across the lanes: the rounds
-    # are refused by the area test (the size test before, the RMS radius against the last round, let it pass)
+def _lanes_with_distance_errors():
+    """A serpentine whose odometry's distances err by 5 % per step (no drift), its features an exact position
+    code, and the unrefined pose graph: (truth, odometry, features, graph, pairs, rng)."""
     from sfanav.odometry import dead_reckon, increments
-    from sfanav.odometry.pose_graph import PlacePairs, refine_positions
+    from sfanav.odometry.pose_graph import PlacePairs
 
     truth = serpentine(n_lanes=12, per_lane=40, length=16.0)
     rng = np.random.default_rng(0)
@@ -215,6 +213,17 @@ def test_refinement_may_reshape_the_map_but_not_squeeze_it():
     features = truth[:, :2] / 3.0
     g = fit_pose_graph(rotating_panoramas(truth[:, 2]), features, odo, refine=0)
     pairs = PlacePairs(g.pairs.current, g.pairs.past, g.pairs.distance)
+    return truth, odo, features, g, pairs, rng
+
+
+def test_refinement_may_reshape_the_map_but_not_squeeze_it():
+    # a serpentine whose odometry's distances err by 5 % per step (no drift): the refinement's readout offsets
+    # correct them where the readout is exact (a quadratic map of a position code), but a readout that smooths
+    # across neighbouring lanes shrinks their offsets and would squeeze the map across the lanes: the rounds
+    # are refused by the area test (the size test before, the RMS radius against the last round, let it pass)
+    from sfanav.odometry.pose_graph import refine_positions
+
+    truth, odo, features, g, pairs, _ = _lanes_with_distance_errors()
     kw = {"noise": {"distance_sigma": 0.05, "heading_sigma": 0.004, "turn_sigma": 0.01}, "rounds": 2,
           "heading_sigma": np.radians(1.0), "offset_sigma": None}
     before = med(g.poses[:, :2], truth[:, :2])
@@ -253,18 +262,10 @@ def test_refinement_is_refused_when_it_moves_the_map_away_from_the_closures():
     # the serpentine of the test above: an exact readout corrects the odometry's distance errors; relative-pose
     # closures that measure the true relative positions agree with it (the rounds are kept), closures that
     # measure the unrefined map's relative positions do not (the rounds are refused, the map kept)
-    from sfanav.odometry import dead_reckon, increments
-    from sfanav.odometry.pose_graph import PlacePairs, closure_misfit, refine_positions
+    from sfanav.odometry.pose_graph import closure_misfit, refine_positions
     from sfanav.odometry.pose_graph_gtsam import RelativePoses
 
-    truth = serpentine(n_lanes=12, per_lane=40, length=16.0)
-    rng = np.random.default_rng(0)
-    U = increments(truth, direction=True)
-    U[:, 0] *= 1 + 0.05 * rng.normal(size=len(U))
-    odo = dead_reckon(U, truth[0])
-    features = truth[:, :2] / 3.0
-    g = fit_pose_graph(rotating_panoramas(truth[:, 2]), features, odo, refine=0)
-    pairs = PlacePairs(g.pairs.current, g.pairs.past, g.pairs.distance)
+    truth, odo, features, g, pairs, rng = _lanes_with_distance_errors()
     th = g.poses[:, 2]
 
     def measuring(xy):
