@@ -460,7 +460,7 @@ def refine_positions(features: np.ndarray, odometry: np.ndarray, headings: np.nd
         grew = (max_misfit_growth is not None and np.isfinite(misfit0) and misfit0 > 0
                 and misfit > max_misfit_growth * misfit0)
         if chi > max_chi or abs(area - 1.0) > max_scale_change or grew:
-            break  # the readout's offsets contradict the odometry: keep the positions of the last round
+            break  # the offsets contradict the odometry, the scale or the closures: keep the last round's map
         P = new
         accepted += 1
     return P, accepted, chi, sigma
