@@ -374,12 +374,13 @@ def closure_misfit(positions: Any, headings: Any, closures: Any, keep: Any = Non
     if not sel.any():
         return float("nan")
     i, j = closures.i[sel], closures.j[sel]
-    d = P[j] - P[i]
-    c, s_ = np.cos(th[i]), np.sin(th[i])
-    rel = np.c_[c * d[:, 0] + s_ * d[:, 1], -s_ * d[:, 0] + c * d[:, 1]]  # j's position in i's frame
-    r = rel - np.c_[closures.dx[sel], closures.dy[sel]]
-    c, s_ = np.cos(closures.dtheta[sel]), np.sin(closures.dtheta[sel])
-    r = np.c_[c * r[:, 0] + s_ * r[:, 1], -s_ * r[:, 0] + c * r[:, 1]]  # in the measured pose's frame
+
+    def turned_back(v: np.ndarray, angle: np.ndarray) -> np.ndarray:  # vectors (K, 2) into frames turned by angle
+        c, s_ = np.cos(angle), np.sin(angle)
+        return np.c_[c * v[:, 0] + s_ * v[:, 1], -s_ * v[:, 0] + c * v[:, 1]]
+
+    rel = turned_back(P[j] - P[i], th[i])  # j's position in i's frame
+    r = turned_back(rel - np.c_[closures.dx[sel], closures.dy[sel]], closures.dtheta[sel])  # in the measured pose's
     m2 = np.einsum("ki,kij,kj->k", r, np.linalg.inv(cov[sel]), r)
     return float(np.median(m2))
 
