@@ -182,3 +182,21 @@ def test_recovery_refuses_bad_input():
         OdometryEKF().run(*args, stamps=np.r_[np.arange(29.0), 5.0])
     with pytest.raises(ValueError, match="kind"):
         make_filter_case("teleport")
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_pose_from_window_drops_one_outlier_among_four_frames(seed):
+    # four frames 1.2 m apart with 0.05 m noise, one estimate 4 m off: a least-squares fit spreads the outlier
+    # so that no residual exceeds 3 times the median; the two-frame fit of the others finds it
+    rng = np.random.default_rng(seed)
+    odo = np.c_[1.2 * np.arange(4.0), np.zeros(4), np.zeros(4)]
+    a = rng.uniform(-np.pi, np.pi)
+    R = np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]])
+    truth = odo[:, :2] @ R.T + [5.0, -3.0]
+    est = truth + rng.normal(0, 0.05, truth.shape)
+    bad = rng.integers(0, 3)  # not the last frame, whose pose is returned
+    est[bad] += 4.0 * np.array([np.cos(a + 1.0), np.sin(a + 1.0)])
+    pose, known = pose_from_window(odo, est, min_spread=1.0)
+    assert known
+    assert np.hypot(*(pose[:2] - truth[-1])) < 0.25
+    assert abs(np.angle(np.exp(1j * (pose[2] - a)))) < 0.15

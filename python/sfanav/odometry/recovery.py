@@ -145,7 +145,10 @@ def pose_from_window(odometry: Any, estimates: Any, *, min_spread: float) -> tup
     min_spread : float
         Metres: when the window's odometry positions span at least this
         along x or y, a rigid fit of them to the estimates (refitted once
-        without the estimates more than 3 times the median residual off)
+        without the estimates more than 3 times the median residual off,
+        the residuals of the least-squares fit or, where lower in median,
+        of the best fit through two frames: one outlier in four frames
+        pulls a least-squares fit too far for the trimming to find it)
         gives the position and heading; else the heading is unknown.
 
     Returns
@@ -173,9 +176,40 @@ def pose_from_window(odometry: Any, estimates: Any, *, min_spread: float) -> tup
         return np.array([*np.median(Z, axis=0), np.nan]), False
     al = align(P[:, :2], Z)
     res = np.hypot(*(al.apply(P[:, :2]) - Z).T)
+    pair = _best_pair_residuals(P[:, :2], Z)
+    if pair is not None and np.median(pair) < np.median(res):  # an outlier pulled the least-squares fit
+        res = pair
     keep = res <= 3.0 * max(float(np.median(res)), 1e-9)
     if 3 <= keep.sum() < len(P) and float(np.ptp(P[keep, :2], axis=0).max()) >= min_spread:
         al = align(P[keep, :2], Z[keep])
     xy = al.apply(P[-1:, :2])[0]
     heading = float(wrap_angle(P[-1, 2] + np.arctan2(al.rotation[1, 0], al.rotation[0, 0])))
     return np.array([xy[0], xy[1], heading]), True
+
+
+_MAX_PAIR_POINTS = 12
+"""Points of a window the least-median fit draws its pairs from (evenly spaced)."""
+
+
+def _best_pair_residuals(X: np.ndarray, Z: np.ndarray) -> np.ndarray | None:
+    """Residuals (n,) of the least-median-of-squares rigid fit of points X
+    (n, 2) to Z (n, 2) over the transforms that pairs of points fix (pairs
+    closer than a tenth of the window's span skipped: their rotation is
+    noise); None without such a pair. A least-squares fit of four frames
+    spreads one outlier over all of them, so that trimming at 3 times the
+    median residual keeps it; the pair fit of the others leaves it alone."""
+    idx = np.unique(np.linspace(0, len(X) - 1, min(len(X), _MAX_PAIR_POINTS)).round().astype(int))
+    span = float(np.ptp(X, axis=0).max())
+    best, best_med = None, np.inf
+    for ai, a in enumerate(idx):
+        for b in idx[ai + 1:]:
+            dx, dz = X[b] - X[a], Z[b] - Z[a]
+            if np.hypot(*dx) < 0.1 * span:
+                continue
+            ang = np.arctan2(dz[1], dz[0]) - np.arctan2(dx[1], dx[0])
+            R = np.array([[np.cos(ang), -np.sin(ang)], [np.sin(ang), np.cos(ang)]])
+            r = np.hypot(*((X - 0.5 * (X[a] + X[b])) @ R.T + 0.5 * (Z[a] + Z[b]) - Z).T)
+            if np.median(r) < best_med:
+                best, best_med = r, float(np.median(r))
+    return best
+
