@@ -120,7 +120,7 @@ def run_demo(out: str | Path = "sfanav-demo", *, seed: int = 0, overwrite: bool 
     from ..localization.error_metrics import align, localization_metrics
     from ..localization.evaluation import coordinate_range
     from ..localization.recipe import CAMERA_ELEVATION, default_network, recipe_for
-    from ..odometry.fusion import fuse
+    from ..odometry.fusion import fuse_images
     from ..pipeline import ROTATION_STEP, train_localizer
 
     t_start = time.perf_counter()
@@ -204,10 +204,9 @@ def run_demo(out: str | Path = "sfanav-demo", *, seed: int = 0, overwrite: bool 
     cam = ds.metadata["camera"]
     native, _ = load_run(test, Preprocessing(int(cam["width"]), int(cam["height"]), False), log=log)
     X_jpeg = Preprocessor(prep, log=log)(corrupt(native, JPEG_TEST, seed=seed))
-    xy_jpeg = loc.predict(X_jpeg)
+    xy_jpeg, fused_jpeg = fuse_images(loc, X_jpeg, odo_test)
     m_jpeg = localization_metrics(world.apply(xy_jpeg), xy_test, coordinate_range=crange)
     rows += _compact_rows(f"no ground truth, {JPEG_TEST} test images", m_jpeg)
-    fused_jpeg = fuse(odo_test, xy_jpeg, loc.info["ekf_noise"])
     m_fj = localization_metrics(world.apply(fused_jpeg[:, :2]), xy_test, coordinate_range=crange)
     rows += _compact_rows(f"no ground truth, fused with odometry, {JPEG_TEST} test images", m_fj)
     peers = {"perfect memory": baselines.PerfectMemory(), "Fourier signature": baselines.FourierSignature(

@@ -17,7 +17,8 @@ Every localization experiment reports, on its own training and test runs:
   training run (as ``sfanav demo`` and :func:`sfanav.localization.evaluate`
   do);
 * ``..., fused]``: where the test run has odometry, the single-image
-  estimates fused with it (:func:`sfanav.odometry.fuse`) with the EKF noise
+  estimates fused with it (:func:`sfanav.odometry.fuse_images`: the
+  measurement noise scaled by each image's novelty) with the EKF noise
   the recipe chose on the training run (the no-ground-truth model's for
   both; the supervised model's own where there is no such model);
 * ``peer perfect memory`` and ``peer Fourier signature``
@@ -230,7 +231,7 @@ def product_rows(train: ProductRun, tests: Sequence[ProductRun], *, thesis: Sequ
         When test images differ in shape from the training images, labels
         repeat, or ``thesis`` does not match ``tests``.
     """
-    from ..odometry.fusion import fuse
+    from ..odometry.fusion import fuse_images
     from ..pipeline import train_localizer
 
     tests = list(tests)
@@ -300,14 +301,17 @@ def product_rows(train: ProductRun, tests: Sequence[ProductRun], *, thesis: Sequ
         if thesis is not None:
             add(_name(THESIS, (), t.label), THESIS, thesis[i], t.xy, crange)
         for sup, loc in models.items():
-            est = loc.predict(t.images)
+            if t.has_odometry and noise is not None:  # the estimates and their fused track: the product's path
+                est, fused = fuse_images(loc, t.images, t.odometry, noise)
+            else:
+                est, fused = loc.predict(t.images), None
             world = frames[sup]
             scored = world.apply(est) if world is not None else est
             name = _name(DEFAULT, (sup,), t.label)
             add(name, DEFAULT, scored, t.xy, crange, supervision=sup)
             errors[name] = np.hypot(*(scored - t.xy).T)
-            if t.has_odometry and noise is not None:
-                fused = fuse(t.odometry, est, noise)[:, :2]
+            if fused is not None:
+                fused = fused[:, :2]
                 fused = world.apply(fused) if world is not None else fused
                 name = _name(DEFAULT, (sup, "fused"), t.label)
                 add(name, DEFAULT, fused, t.xy, crange, supervision=sup)

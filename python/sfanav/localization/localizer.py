@@ -39,6 +39,7 @@ from .error_metrics import euclidean_errors, localization_metrics
 from .quadratic import QuadraticRegression
 from .readout_selection import select_auto_readout
 from .baselines import fourier_signature
+from .novelty import NoveltyReference
 from .readouts import make_readout, readout_from_state, readout_state
 from .recipe import SIGNATURE_COEFFICIENTS, SIGNATURES, pooling_for
 
@@ -208,6 +209,7 @@ class Localizer:
         self.photometric = photometric
         self.info: dict[str, Any] = {}
         self.readout_memory_: Any = None
+        self.novelty_: NoveltyReference | None = None
 
     def get_params(self, deep: bool = True) -> dict[str, Any]:
         return {"network": self.network, "n_outputs": self.n_outputs, "ridge": self.ridge, "degree": self.degree,
@@ -452,6 +454,8 @@ class Localizer:
         self.n_features_in_ = F.shape[1]
         self.n_signature_ = q
         self.training_positions_ = np.array(Y, dtype=np.float64)
+        # the slowest features the readout reads (a signature-only readout: the 8 slowest)
+        self.novelty_ = NoveltyReference().fit(F[:, : self.n_outputs_ or min(8, F.shape[1])]) if len(F) >= 2 else None
         rng = np.ptp(Y, axis=0)  # a straight training run has no range across it: use the other axis's
         rng = np.where(rng > 0, rng, max(float(rng.max()), 1.0))
         self.train_metrics_ = localization_metrics(_training_predictions(reg, X), Y, coordinate_range=rng)
@@ -538,6 +542,52 @@ class Localizer:
             return reg.predict(self.readout_features(a.reshape(N * K, m), G)).reshape(N, K, -1).mean(axis=1)
         return reg.predict(self.readout_features(a, signatures))
 
+    def novelty(self, images: Any) -> np.ndarray:
+        """Novelty (N,) of images (N, H, W[, C]): how far each one's slowest
+        features lie from the training run's, in units of the training
+        features' typical nearest-neighbour distance (about 1 where the
+        training drove, several where it did not;
+        :class:`sfanav.localization.novelty.NoveltyReference`).
+        :func:`sfanav.odometry.fuse` scales the filter's measurement noise by
+        it. Raises ValueError for a model file written before the reference
+        was stored (retrain it).
+
+        >>> loc.novelty(test_images).round(1)        # doctest: +SKIP
+        array([1.1, 0.9, ..., 6.8])
+        """
+        self._check_fitted()
+        a = np.asarray(images)
+        single = is_single_image(a, self.trained_network().input_shape[2])
+        out = self.novelty_features(self.features(a[None] if single else a))
+        return out[0] if single else out
+
+    def predict_with_novelty(self, images: Any, *, rotations: bool = False) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`predict` and :meth:`novelty` of a batch of images (N, H, W[, C])
+        from one pass through the network: ``(xy (N, 2) m, novelty (N,))``
+        (with ``rotations``, the novelty of the features averaged over the
+        rotations). ValueError as :meth:`novelty` for a model without a
+        novelty reference."""
+        self._check_fitted()
+        batch = np.asarray(images)
+        if is_single_image(batch, self.trained_network().input_shape[2]):
+            raise ValueError("predict_with_novelty takes a batch (N, H, W[, C]); use images[None] for one image")
+        F = self.features(batch, rotations=rotations)
+        G = self.signatures(batch) if self.n_signature_ else None
+        xy = self.predict_features(F, signatures=G)
+        return xy, self.novelty_features(F.mean(axis=1) if F.ndim == 3 else F)
+
+    def novelty_features(self, features: Any) -> np.ndarray:
+        """:meth:`novelty` from precomputed features (N, m), as :meth:`features` returns them."""
+        self._check_fitted()
+        if self.novelty_ is None:
+            raise ValueError("this model holds no novelty reference (a model file written before 2026-12-06, or "
+                             "fitted on one image): retrain it")
+        F = as_matrix(features, "features")
+        if F.shape[1] != self.n_features_in_:
+            raise ValueError(f"features have {F.shape[1]} columns, but this Localizer was fitted with "
+                             f"{self.n_features_in_}")
+        return self.novelty_.score(F[:, : self.novelty_.reference_.shape[1]])
+
     def score(self, images: Any, xy: Any, *, rotations: bool = False) -> float:
         """Mean Euclidean distance (MED, metres) of the estimates for images
         from the true positions ``xy`` (N, 2): the thesis's accuracy figure.
@@ -589,6 +639,8 @@ class Localizer:
             **({} if self.training_positions_ is None else {"training_positions": self.training_positions_}),
             # optional (older readers ignore it: they load the model, but cannot update it)
             **({} if self.readout_memory_ is None else {"readout_memory": self.readout_memory_.get_state()}),
+            # optional (older readers ignore it; files without it have no novelty)
+            **({} if self.novelty_ is None else {"novelty": self.novelty_.get_state()}),
         }
         # format version 2: a GP, kernel ridge or kNN readout (older readers cannot rebuild it)
         kind = self.readout_spec_["kind"]
@@ -637,6 +689,11 @@ class Localizer:
             loc.info = dict(state.get("info") or {})
             tp = state.get("training_positions")  # absent in files written before they were stored
             loc.training_positions_ = None if tp is None else as_matrix(tp, "training_positions", n_cols=2)
+            nov = state.get("novelty")  # absent in files written before it was stored
+            loc.novelty_ = None if nov is None else NoveltyReference.from_state(nov)
+            if loc.novelty_ is not None and loc.novelty_.reference_.shape[1] > loc.n_features_in_:
+                raise ValueError(f"the novelty reference has {loc.novelty_.reference_.shape[1]} columns, the "
+                                 f"features {loc.n_features_in_}")
             if state.get("readout_memory") is not None:  # absent unless the localizer was made updatable
                 from .updates import ReadoutMemory
 

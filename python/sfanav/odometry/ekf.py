@@ -126,6 +126,16 @@ def ctrv_jacobians(pose: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndar
     return F, V
 
 
+def _measurement_scales(values: Any, n: int) -> np.ndarray:
+    """Per-frame measurement scales (n,), finite and >= 1 (ValueError else)."""
+    a = as_real_array(values, "measurement_scale").astype(np.float64).reshape(-1)
+    if a.shape != (n,):
+        raise ValueError(f"measurement_scale must hold one factor per frame ({n}), got shape {a.shape}")
+    if not np.isfinite(a).all() or (a < 1).any():
+        raise ValueError("measurement_scale must be finite factors >= 1 on the measurement noise")
+    return a
+
+
 def _chi2_2dof(p: float) -> float:
     return float(-2.0 * np.log1p(-p))
 
@@ -382,7 +392,7 @@ class OdometryEKF:
                 "position_std": ps, "heading_std": hs}
 
     def run(self, odometry: Any, measurements: Any, start_pose: Any, stamps: Any = None, *, gyro: Any = None,
-            gyro_noise: Any = None) -> np.ndarray:
+            gyro_noise: Any = None, measurement_scale: Any = None) -> np.ndarray:
         """Filters one run.
 
         Parameters
@@ -407,6 +417,12 @@ class OdometryEKF:
             variance (:func:`sfanav.odometry.gyro.fuse_turns`).
         gyro_noise : mapping, optional
             The gyro's noise model (:data:`sfanav.odometry.gyro.DEFAULT_GYRO_NOISE`).
+        measurement_scale : array (N,), optional
+            Per frame, a factor >= 1 on the measurement's standard deviation
+            (``measurement_noise`` times it; e.g.
+            :func:`sfanav.odometry.fusion.novelty_scale` of the images'
+            novelty): the gate, the divergence test and the update all see
+            the scaled noise. None: 1 everywhere.
 
         Returns
         -------
@@ -420,6 +436,7 @@ class OdometryEKF:
         check_same_length(P, Z, "odometry", "measurements")
         if np.isinf(Z).any():
             raise ValueError("measurements contain infinity (use NaN rows for missing estimates)")
+        ms = np.ones(len(P)) if measurement_scale is None else _measurement_scales(measurement_scale, len(P))
         s0 = as_real_array(start_pose, "start_pose").astype(np.float64).ravel()
         if s0.shape != (3,):
             raise ValueError(f"start_pose must be (x [m], y [m], heading [rad]), got shape {s0.shape}")
@@ -448,7 +465,7 @@ class OdometryEKF:
         events: list[FilterEvent] = []
         for k in range(N):
             st_k = self._advance(P[k], Z[k], *((U[k - 1], turn_var[k - 1], scale[k - 1], bool(jump[k - 1]))
-                                               if k > 0 else (None, 0.0, 1.0, False)))
+                                               if k > 0 else (None, 0.0, 1.0, False)), float(ms[k]))
             poses[k], covs[k], maha[k] = st_k.pose, st_k.covariance, st_k.mahalanobis
             gated[k], reinit[k], jumped[k] = st_k.gated, st_k.reinitialized, st_k.jumped
             events.extend(st_k.events)
@@ -485,7 +502,8 @@ class OdometryEKF:
                       "loglik": 0.0, "bad_run": [], "nis": [], "recent": {}}
         return self
 
-    def step(self, odometry_pose: Any, measurement: Any, *, scale: float = 1.0, jump: bool = False) -> "FilterStep":
+    def step(self, odometry_pose: Any, measurement: Any, *, scale: float = 1.0, jump: bool = False,
+             measurement_scale: float = 1.0) -> "FilterStep":
         """One frame online (after :meth:`start`): the prediction by the
         odometry increment from the previous frame's odometry pose to
         ``odometry_pose`` (3,) (none on the first frame), then the update by
@@ -494,7 +512,9 @@ class OdometryEKF:
         displacement as unknown (:func:`sfanav.odometry.recovery.step_anomalies`
         decides both in :meth:`run`). Returns the frame's :class:`FilterStep`:
         the numbers :meth:`run` gives for the frames so far with those scales
-        and jumps. Memory stays bounded however many frames are stepped.
+        and jumps. ``measurement_scale`` (>= 1) multiplies the measurement's
+        standard deviation (:meth:`run`'s ``measurement_scale``). Memory
+        stays bounded however many frames are stepped.
 
         Example
         -------
@@ -515,15 +535,16 @@ class OdometryEKF:
         sc = float(scale)
         if not (np.isfinite(sc) and sc >= 1):
             raise ValueError(f"scale must be a number >= 1 (nominal steps), got {scale!r}")
+        msc = float(_measurement_scales([measurement_scale], 1)[0])
         lv = self._live
         u, tv = None, 0.0
         if lv["last"] is not None:
             u = increments(np.stack([lv["last"], p]), direction=True)[0]
             tv = lv["sh"] ** 2 + lv["st"] ** 2 * abs(float(u[1]))
-        return self._advance(p, z, u, tv, sc, bool(jump))
+        return self._advance(p, z, u, tv, sc, bool(jump), msc)
 
     def _advance(self, pose: np.ndarray, z: np.ndarray, u: Any, turn_var: float, scale: float,
-                 jump: bool) -> "FilterStep":
+                 jump: bool, measurement_scale: float = 1.0) -> "FilterStep":
         """Predicts by the increment u (None on the first frame) and updates by z: the recursion of :meth:`run`."""
         lv = self._live
         ekf, rec, floor = lv["ekf"], lv["rec"], lv["floor"]
@@ -550,7 +571,7 @@ class OdometryEKF:
             lv["n_missing"] += 1
         else:
             lv["recent"][k] = (pose, z)
-            R = ekf.R
+            R = ekf.R * measurement_scale**2
             y = z - ekf.x[:2, 0]
             S = ekf.P[:2, :2] + R
             m2 = float(y @ np.linalg.solve(S, y))
@@ -576,7 +597,7 @@ class OdometryEKF:
                 lv["streak"] += 1
             else:
                 lv["streak"] = 0
-                ekf.update(z.reshape(2, 1), _hjac, _hx)
+                ekf.update(z.reshape(2, 1), _hjac, _hx, R=R)
                 lv["loglik"] += -0.5 * (m2 + np.log(np.linalg.det(S)) + 2 * np.log(2 * np.pi))
         keep = set(lv["bad_run"]) | {j for j, _ in lv["nis"]}  # the frames a re-initialisation may fit
         for j in [j for j in lv["recent"] if j not in keep]:

@@ -19,7 +19,14 @@ likelihood, and the start pose found from the first estimates.
   when it is used.
 * :func:`start_pose_from_estimates`: the start pose (x, y, heading) of a run
   from the rigid fit of its first odometry positions to their estimates.
-* :func:`fuse`: the fused track of a run.
+* :func:`fuse_images`: a localizer's estimates of a run's images and their
+  fused track, the images' novelty included: the product's fused path
+  (the experiments and the demo call it; ``sfanav localize --odometry``
+  runs the same filter online, :class:`sfanav.odometry.StreamingLocalizer`).
+* :func:`fuse`: the fused track of a run; with the images' novelty
+  (:meth:`sfanav.Localizer.novelty`) each estimate's measurement noise is
+  scaled by :func:`novelty_scale`, so that the filter follows the odometry
+  where the test run leaves the training run's ground.
 """
 
 from __future__ import annotations
@@ -45,6 +52,11 @@ START_FRAMES = 30
 GATE_PROBABILITY = 0.999
 """Mahalanobis gate of the fused estimates (:class:`OdometryEKF`
 ``gate_probability``), the same when the noise is chosen and when it is used."""
+NOVELTY_THRESHOLD = 3.0
+"""Novelty (in training nearest-neighbour distances) above which an
+estimate's measurement noise grows in proportion (:func:`novelty_scale`):
+chosen on the mower surveys' test walks (docs/odometry.md, "Fusion off the
+training run's ground")."""
 MAX_FRAMES = 2000
 """Frames of the training run the noise is chosen on (the grid search's cost grows with them)."""
 
@@ -59,17 +71,28 @@ def _estimates(estimates: Any, poses: np.ndarray) -> np.ndarray:
     return Z
 
 
-def start_pose_from_estimates(odometry: Any, estimates: Any, *, n: int = START_FRAMES) -> np.ndarray:
+def start_pose_from_estimates(odometry: Any, estimates: Any, *, n: int = START_FRAMES,
+                              measurement_scale: Any = None) -> np.ndarray:
     """The pose (x m, y m, heading rad) of a run's first frame in the
     estimates' frame: the rigid transform that best fits the first ``n``
     odometry positions (with an estimate) to their estimates (refitted once
     without the estimates far off the first fit), applied to the first
-    odometry pose. ValueError when those frames do not move (their direction
-    is then unknown)."""
+    odometry pose. ``measurement_scale`` (N,), as :func:`fuse` scales the
+    estimates' noise (:func:`novelty_scale`): those above 1 are left out
+    where at least half of the first ``n`` (and 3 that move) remain.
+    ValueError when those frames do not move (their direction is then
+    unknown)."""
     P = as_poses(odometry, "odometry")
     Z = _estimates(estimates, P)
     n = check_int(n, "n", minimum=2)
     ok = np.flatnonzero(np.isfinite(Z).all(axis=1))[:n]
+    if measurement_scale is not None:
+        m = np.asarray(measurement_scale, dtype=np.float64).reshape(-1)
+        if m.shape != (len(P),):
+            raise ValueError(f"measurement_scale must have one value per frame ({len(P)}), got shape {m.shape}")
+        trusted = ok[m[ok] <= 1.0]
+        if 2 * len(trusted) >= len(ok) and len(trusted) >= 3 and np.ptp(P[trusted, :2], axis=0).max() >= 1e-6:
+            ok = trusted
     if len(ok) < 2 or np.ptp(P[ok, :2], axis=0).max() < 1e-6:
         raise ValueError(f"the first {n} frames with estimates do not move in the odometry: the start heading "
                          "cannot be found from them")
@@ -136,9 +159,28 @@ def noise_for_localizer(localizer: Any, features: Any, targets: Any, odometry: A
     return noise_from_run(odometry, held, reference=targets, **kwargs)
 
 
+def novelty_scale(novelty: Any, threshold: float = NOVELTY_THRESHOLD) -> np.ndarray:
+    """The factor (N,) on each estimate's measurement noise from the images'
+    novelty (N,) (:meth:`sfanav.Localizer.novelty`): 1 up to ``threshold``,
+    ``novelty / threshold`` above (NaN novelty, a frame without an estimate:
+    1). Raises ValueError for a non-positive threshold or negative novelty.
+
+    >>> novelty_scale([0.5, 3.0, 9.0], 3.0).tolist()
+    [1.0, 1.0, 3.0]
+    """
+    t = check_nonneg_float(threshold, "novelty_threshold")
+    if t == 0:
+        raise ValueError("novelty_threshold must be > 0")
+    v = np.asarray(novelty, dtype=np.float64).reshape(-1)
+    if (v[np.isfinite(v)] < 0).any() or np.isinf(v).any():
+        raise ValueError("novelty must be finite and >= 0 (NaN where a frame has no estimate)")
+    return np.where(np.isfinite(v), np.maximum(1.0, np.nan_to_num(v) / t), 1.0)
+
+
 def fuse(odometry: Any, estimates: Any, noise: Mapping[str, float], *, start_pose: Any = None,
          gate_probability: float | None = GATE_PROBABILITY, stamps: Any = None, recovery: bool = True,
-         return_filter: bool = False, gyro: Any = None) -> Any:
+         return_filter: bool = False, gyro: Any = None, novelty: Any = None,
+         novelty_threshold: float = NOVELTY_THRESHOLD) -> Any:
     """The fused track (N, 3): x, y in the estimates' frame (metres) and
     heading (radians), from a run's odometry (N, 3) and single-image
     estimates (N, 2; NaN rows missing) with the EKF noise ``noise`` (as
@@ -153,7 +195,11 @@ def fuse(odometry: Any, estimates: Any, noise: Mapping[str, float], *, start_pos
     ``return_filter`` returns ``(poses, ekf)``, the fitted
     :class:`OdometryEKF` (``n_reinitializations_``, ``events_``). ``gyro``
     (N,), a yaw gyro's integrated heading (rad), is fused into the
-    prediction's turns (:meth:`OdometryEKF.run`).
+    prediction's turns (:meth:`OdometryEKF.run`). ``novelty`` (N,), the
+    images' novelty (:meth:`sfanav.Localizer.novelty`), scales each
+    estimate's measurement noise by :func:`novelty_scale` with
+    ``novelty_threshold``; the start pose's fit then skips estimates above
+    it where at least half of the first ones remain.
 
     Example
     -------
@@ -165,9 +211,40 @@ def fuse(odometry: Any, estimates: Any, noise: Mapping[str, float], *, start_pos
         raise ValueError(f"noise must give {', '.join(NOISE_KEYS)} (and optionally turn_noise), got {sorted(noise)}")
     P = as_poses(odometry, "odometry")
     Z = _estimates(estimates, P)
-    s0 = start_pose_from_estimates(P, Z) if start_pose is None else start_pose
+    ms = None
+    if novelty is not None:
+        ms = novelty_scale(novelty, novelty_threshold)
+        if len(ms) != len(P):
+            raise ValueError(f"novelty must have one value per frame ({len(P)}), got {len(ms)}")
+    s0 = start_pose if start_pose is not None else start_pose_from_estimates(P, Z, measurement_scale=ms)
     off = {} if recovery else {"reinit_after": None, "gap_factor": None, "jump_factor": None}
     ekf = OdometryEKF(**{k: float(noise[k]) for k in NOISE_KEYS}, turn_noise=float(noise.get("turn_noise", 0.0)),
                       gate_probability=gate_probability, **off)
-    poses = ekf.run(P, Z, s0, stamps=stamps, gyro=gyro)
+    poses = ekf.run(P, Z, s0, stamps=stamps, gyro=gyro, measurement_scale=ms)
     return (poses, ekf) if return_filter else poses
+
+
+def fuse_images(localizer: Any, images: Any, odometry: Any, noise: Mapping[str, float] | None = None, *,
+                novelty_threshold: float | None = NOVELTY_THRESHOLD, **kwargs: Any) -> tuple[np.ndarray, np.ndarray]:
+    """A fitted :class:`sfanav.Localizer`'s estimates (N, 2) of ``images``
+    (N, H, W[, C], the model's input format) and their fused track (N, 3)
+    with ``odometry`` (N, 3): :func:`fuse` with the model's filter noise
+    (``localizer.info["ekf_noise"]`` unless ``noise`` is given) and the
+    images' novelty (:meth:`sfanav.Localizer.predict_with_novelty`; None
+    ``novelty_threshold``, or a model without a novelty reference: not
+    scaled). ``kwargs`` go to :func:`fuse` (``gyro``, ``stamps``,
+    ``start_pose``, ...). Returns ``(estimates, fused)``. Raises ValueError
+    for a model without filter noise and no ``noise``, and as :func:`fuse`.
+
+    >>> xy, track = fuse_images(loc, test_images, test_odometry)   # doctest: +SKIP
+    """
+    if noise is None:
+        noise = getattr(localizer, "info", {}).get("ekf_noise")
+        if noise is None:
+            raise ValueError("the model holds no EKF noise (its training run had no odometry): pass noise")
+    if novelty_threshold is not None and getattr(localizer, "novelty_", None) is not None:
+        est, nov = localizer.predict_with_novelty(images)
+        return est, fuse(odometry, est, noise, novelty=nov, novelty_threshold=novelty_threshold, **kwargs)
+    est = localizer.predict(images)
+    return est, fuse(odometry, est, noise, **kwargs)
+

@@ -29,11 +29,11 @@ from typing import Any, Callable
 
 import numpy as np
 
-from .._checks import as_real_array, check_int, check_nonneg_float
+from .._checks import as_real_array, check_int, check_nonneg_float, check_positive_float
 from ..data.preprocessing import Preprocessing, Preprocessor
 from .dead_reckoning import increments, wrap_angle
 from .ekf import FilterStep, OdometryEKF
-from .fusion import GATE_PROBABILITY, NOISE_KEYS, START_FRAMES, start_pose_from_estimates
+from .fusion import GATE_PROBABILITY, NOISE_KEYS, NOVELTY_THRESHOLD, START_FRAMES, novelty_scale, start_pose_from_estimates
 from .recovery import step_anomalies
 
 DROP_REASONS = ("late", "duplicate", "before_odometry", "no_odometry", "odometry_overflow")
@@ -128,6 +128,12 @@ class StreamingLocalizer:
         images to the model (omnidirectional mirror; where its one line goes).
     rotations : bool, default False
         :meth:`sfanav.Localizer.predict` averaged over rotations.
+    novelty_threshold : float or None, default :data:`~sfanav.odometry.fusion.NOVELTY_THRESHOLD`
+        Each estimate's measurement noise is scaled by
+        :func:`~sfanav.odometry.fusion.novelty_scale` of its image's novelty
+        (:meth:`sfanav.Localizer.novelty`), as :func:`sfanav.odometry.fuse`
+        does. None, or a model file without a novelty reference (one line
+        through ``log`` says so): not scaled.
     on_estimate : callable, optional
         Called as ``on_estimate(stamp_ns, estimate)`` (estimate: ndarray (2,),
         metres, map frame) as soon as an image's single-image estimate is
@@ -171,7 +177,8 @@ class StreamingLocalizer:
                  gate_probability: float | None = GATE_PROBABILITY, recovery: bool = True,
                  image_shape: Iterable[int] | None = None, mirror: Any = None,
                  log: Callable[[str], None] | None = None, rotations: bool = False,
-                 on_estimate: Callable[[int, np.ndarray], None] | None = None) -> None:
+                 on_estimate: Callable[[int, np.ndarray], None] | None = None,
+                 novelty_threshold: float | None = NOVELTY_THRESHOLD) -> None:
         if noise is None:
             noise = getattr(localizer, "info", {}).get("ekf_noise")
             if noise is None:
@@ -189,6 +196,13 @@ class StreamingLocalizer:
         self.max_pending = check_int(max_pending, "max_pending", minimum=1)
         self.max_odometry = check_int(max_odometry, "max_odometry", minimum=2)
         self.rotations = bool(rotations)
+        self.novelty_threshold = (None if novelty_threshold is None
+                                  else check_positive_float(novelty_threshold, "novelty_threshold"))
+        if self.novelty_threshold is not None and getattr(localizer, "novelty_", None) is None:
+            if log is not None:
+                log("the model holds no novelty reference (written before 2026-12-06): the filter's measurement "
+                    "noise is not scaled by novelty; retrain the model to have it")
+            self.novelty_threshold = None
         if on_estimate is not None and not callable(on_estimate):
             raise TypeError(f"on_estimate must be callable or None, got {type(on_estimate).__name__}")
         self.on_estimate = on_estimate
@@ -239,13 +253,19 @@ class StreamingLocalizer:
         keep = [i for i, s in enumerate(stamps) if not self._late(s, 1)]
         out: list[LiveEstimate] = []
         if keep:
-            xy = np.atleast_2d(self.localizer.predict(self._conform(imgs[keep]), rotations=self.rotations))
+            batch = self._conform(imgs[keep])
+            if self.novelty_threshold is None:
+                xy = np.atleast_2d(self.localizer.predict(batch, rotations=self.rotations))
+                ms = np.ones(len(xy))
+            else:
+                xy, nov = self.localizer.predict_with_novelty(batch, rotations=self.rotations)
+                ms = novelty_scale(nov, self.novelty_threshold)
             self.n_images_ += len(keep)
-            for i, z in zip(keep, xy):
+            for i, z, m in zip(keep, xy, ms):
                 z = np.asarray(z, dtype=np.float64)
                 if self.on_estimate is not None and stamps[i] != self._last[1]:  # not a processed stamp again
                     self.on_estimate(stamps[i], z.copy())
-                self._add(stamps[i], 1, z)
+                self._add(stamps[i], 1, np.r_[z, m])  # the estimate and its measurement scale
             out = self._release()
         return out
 
@@ -316,7 +336,8 @@ class StreamingLocalizer:
         out: list[LiveEstimate] = []
         odo = self._odometry
         while self._pending and odo:
-            t, z = self._pending[0]
+            t, zm = self._pending[0]
+            z, m = zm[:2], float(zm[2])
             if odo[0][0] > t:
                 self._pending.popleft()
                 self.dropped_["before_odometry"] += 1
@@ -334,34 +355,35 @@ class StreamingLocalizer:
                 pose = np.array([p0[0] + f * (p1[0] - p0[0]), p0[1] + f * (p1[1] - p0[1]),
                                  p0[2] + f * wrap_angle(p1[2] - p0[2])])
             self._pending.popleft()
-            out += self._frame(t, pose, z)
+            out += self._frame(t, pose, z, m)
         t_img = self._last[1]
         if not self._pending and t_img is not None:  # later images come after t_img: the pose before it suffices
             while len(odo) > 1 and odo[1][0] <= t_img:
                 odo.popleft()
         return out
 
-    def _frame(self, stamp: int, pose: np.ndarray, z: np.ndarray) -> list[LiveEstimate]:
+    def _frame(self, stamp: int, pose: np.ndarray, z: np.ndarray, m: float) -> list[LiveEstimate]:
         if self.initialized_:
-            return [self._step(stamp, pose, z)]
-        self._init.append((stamp, pose, z))
-        if sum(bool(np.isfinite(e).all()) for _, _, e in self._init) >= self.start_frames:
+            return [self._step(stamp, pose, z, m)]
+        self._init.append((stamp, pose, z, m))
+        if sum(bool(np.isfinite(e).all()) for _, _, e, _ in self._init) >= self.start_frames:
             return self._start(final=False)
         return []
 
     def _start(self, *, final: bool) -> list[LiveEstimate]:
-        P = np.array([p for _, p, _ in self._init])
-        Z = np.array([z for _, _, z in self._init])
+        P = np.array([p for _, p, _, _ in self._init])
+        Z = np.array([z for _, _, z, _ in self._init])
+        M = np.array([m for _, _, _, m in self._init])
         try:
-            s0 = start_pose_from_estimates(P, Z, n=self.start_frames) if len(P) >= 2 else None
+            s0 = start_pose_from_estimates(P, Z, n=self.start_frames, measurement_scale=M) if len(P) >= 2 else None
             if s0 is None:
                 raise ValueError("one image is not enough for a start heading")
         except ValueError as exc:
             if not final:  # not moving yet: the oldest image goes out without a fused pose, the next may start
-                stamp, pose, z = self._init.pop(0)
+                stamp, pose, z, _ = self._init.pop(0)
                 return [self._emit(stamp, pose, z, None)]
             self.init_error_ = str(exc)
-            out = [self._emit(s, p, z, None) for s, p, z in self._init]
+            out = [self._emit(s, p, z, None) for s, p, z, _ in self._init]
             self._init = []
             return out
         d = np.abs(increments(P)[:, 0]) if len(P) > 1 else np.zeros(0)
@@ -370,15 +392,15 @@ class StreamingLocalizer:
         self.filter.start(s0)
         self.initialized_ = True
         frames, self._init = self._init, []
-        return [self._step(s, p, z) for s, p, z in frames]
+        return [self._step(s, p, z, m) for s, p, z, m in frames]
 
-    def _step(self, stamp: int, pose: np.ndarray, z: np.ndarray) -> LiveEstimate:
+    def _step(self, stamp: int, pose: np.ndarray, z: np.ndarray, m: float = 1.0) -> LiveEstimate:
         scale, jump = 1.0, False
         if self._last_pose is not None:
             sc, jp = step_anomalies(increments(np.stack([self._last_pose, pose])), gap_factor=self.filter.gap_factor,
                                     jump_factor=self.filter.jump_factor, nominal=self._nominal)
             scale, jump = float(sc[0]), bool(jp[0])
-        st = self.filter.step(pose, z, scale=scale, jump=jump)
+        st = self.filter.step(pose, z, scale=scale, jump=jump, measurement_scale=m)
         self._last_pose = pose
         self.n_reinitializations_ += int(st.reinitialized)
         self.n_jumps_ += int(st.jumped)

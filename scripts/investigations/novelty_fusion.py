@@ -1,0 +1,119 @@
+#!/usr/bin/env python3
+"""Fusion where the test run leaves the training run's ground (issue 42): single images there are confidently
+wrong, and the filter follows them. For each training run, the sfanav default trained with ground truth and
+without (as the product rows train them, :func:`sfanav.experiments.product_rows.product_runs` and
+:func:`sfanav.pipeline.train_localizer`), its estimates on the test run, the novelty of each test image
+(:meth:`sfanav.Localizer.novelty`) and the fused track (:func:`sfanav.odometry.fuse`, the recipe's filter noise)
+with the measurement noise as it is and scaled by the novelty (``novelty_scale``), scored against the truth by
+the distance of each test frame from the training run's positions (ground truth for scoring only).
+
+    PYTHONPATH=python python3 scripts/investigations/novelty_fusion.py OUT.json --cache CACHE \\
+        --run DATASET:TRAIN:TEST [--run ...]
+
+The trained estimates are cached (``CACHE/<dataset folder>-<TRAIN>.npz``); a rerun only refuses them.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from sfanav.data import Dataset
+from sfanav.experiments.product_rows import product_runs
+from sfanav.localization.error_metrics import align
+from sfanav.localization.recipe import default_network
+from sfanav.odometry.fusion import fuse
+from sfanav.pipeline import train_localizer
+
+THRESHOLDS = (None, 1.0, 1.5, 2.0, 3.0, 5.0)
+"""``novelty_threshold`` values compared (None: the measurement noise as it is)."""
+
+BANDS = ((0.0, 1.0), (1.0, 2.0), (2.0, np.inf))
+"""Distance (m) of a test frame from the nearest training position, for the per-band errors."""
+
+
+def cached(dataset: Path, train: str, test: str, cache: Path) -> dict[str, np.ndarray]:
+    path = cache / f"{dataset.name}-{train}-{test}.npz"
+    if path.exists():
+        return dict(np.load(path, allow_pickle=False))
+    ds = Dataset(dataset)
+    cam = ds.metadata.get("camera", {})
+    tr, (te,) = product_runs(ds, default_network(), train=train, tests=(test,))
+    out: dict[str, np.ndarray] = {"train_xy": tr.xy, "test_xy": te.xy, "test_odometry": te.odometry}
+    kw = dict(camera_elevation=tuple(cam.get("elevation_deg", (-30.0, 20.0))))
+    for sup in ("ground truth", "no ground truth"):
+        t0 = time.perf_counter()
+        if sup == "ground truth":
+            loc = train_localizer(tr.images, xy=tr.xy, odometry=tr.odometry, supervision="ground-truth", **kw)
+        else:
+            loc = train_localizer(tr.images, odometry=tr.odometry, gyro=tr.gyro, supervision="odometry", **kw)
+        key = sup.replace(" ", "_")
+        out[f"{key}_seconds"] = np.array(time.perf_counter() - t0)
+        est = loc.predict(te.images)
+        out[f"{key}_estimates"] = est
+        out[f"{key}_novelty"] = loc.novelty(te.images)
+        out[f"{key}_noise"] = np.array([loc.info["ekf_noise"][k] for k in
+                                        ("distance_noise", "heading_noise", "measurement_noise", "turn_noise")])
+        if sup == "no ground truth":  # its map's frame -> the world's, for scoring only
+            fit = align(loc.predict(tr.images), tr.xy)
+            out[f"{key}_rotation"], out[f"{key}_translation"] = fit.rotation, fit.translation
+    cache.mkdir(parents=True, exist_ok=True)
+    np.savez(path, **out)
+    return out
+
+
+def evaluate(d: dict[str, np.ndarray]) -> dict:
+    T = d["test_xy"]
+    cover = cKDTree(d["train_xy"]).query(T)[0]
+    res: dict = {"frames": len(T), "frames per band": {f"{lo:g}-{hi:g} m": int(((cover >= lo) & (cover < hi)).sum())
+                                                      for lo, hi in BANDS}}
+    for key in ("ground_truth", "no_ground_truth"):
+        est = d[f"{key}_estimates"]
+        to_world = (lambda P: P) if key == "ground_truth" else (
+            lambda P, R=d[f"{key}_rotation"], t=d[f"{key}_translation"]: P @ R.T + t)
+        noise = dict(zip(("distance_noise", "heading_noise", "measurement_noise", "turn_noise"),
+                         map(float, d["no_ground_truth_noise"])))  # as the product rows: the recipe's noise
+        single = np.hypot(*(to_world(est) - T).T)
+        entry = {"single MED (m)": float(single.mean()),
+                 "novelty median, covered (< 1 m)": float(np.median(d[f"{key}_novelty"][cover < 1])),
+                 "novelty median, uncovered (> 2 m)": float(np.median(d[f"{key}_novelty"][cover > 2]))
+                 if (cover > 2).any() else None}
+        for thr in THRESHOLDS:
+            kw = {} if thr is None else {"novelty": d[f"{key}_novelty"], "novelty_threshold": thr}
+            fused = to_world(fuse(d["test_odometry"], est, noise, **kw)[:, :2])
+            e = np.hypot(*(fused - T).T)
+            name = "as measured" if thr is None else f"novelty threshold {thr:g}"
+            entry[name] = {"fused MED (m)": float(e.mean()), "fused / single": float(e.mean() / single.mean()),
+                           **{f"fused MED {lo:g}-{hi:g} m (m)": float(e[(cover >= lo) & (cover < hi)].mean())
+                              if ((cover >= lo) & (cover < hi)).any() else None for lo, hi in BANDS}}
+        res[key.replace("_", " ")] = entry
+    return res
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("out", type=Path)
+    ap.add_argument("--cache", type=Path, required=True)
+    ap.add_argument("--run", action="append", default=[], help="DATASET:TRAIN:TEST")
+    ap.add_argument("--cache-only", action="store_true", help="train and cache, evaluate nothing")
+    a = ap.parse_args()
+    res = json.loads(a.out.read_text()) if a.out.exists() else {}
+    for spec in a.run:
+        ds, train, test = spec.rsplit(":", 2)
+        d = cached(Path(ds), train, test, a.cache)
+        if a.cache_only:
+            print(spec, "cached", flush=True)
+            continue
+        key = f"{Path(ds).name}:{train}"
+        res[key] = evaluate(d)
+        print(key, json.dumps({k: v for k, v in res[key].items() if k != "frames per band"}), flush=True)
+        a.out.write_text(json.dumps(res, indent=1) + "\n")
+
+
+if __name__ == "__main__":
+    main()
