@@ -3,14 +3,18 @@
 wrong, and the filter follows them. For each training run, the sfanav default trained with ground truth and
 without (as the product rows train them, :func:`sfanav.experiments.product_rows.product_runs` and
 :func:`sfanav.pipeline.train_localizer`), its estimates on the test run, the novelty of each test image
-(:meth:`sfanav.Localizer.novelty`) and the fused track (:func:`sfanav.odometry.fuse`, the recipe's filter noise)
-with the measurement noise as it is and scaled by the novelty (``novelty_scale``), scored against the truth by
-the distance of each test frame from the training run's positions (ground truth for scoring only).
+(:meth:`sfanav.Localizer.novelty`) and the fused track (:func:`sfanav.odometry.fuse`): with the filter noise the
+recipe chose before novelty existed, as it is, with twice its measurement noise and scaled by the novelty
+(``novelty_scale``) at several thresholds; and with the noise chosen again on the training run with novelty
+(:func:`sfanav.odometry.fusion.noise_for_localizer`, the held-out estimates scaled alike), on the recipe's grid and
+on one extended to 0.8 m. Scored against the truth, also by the distance of each test frame from the training
+run's positions (ground truth for scoring only).
 
     PYTHONPATH=python python3 scripts/investigations/novelty_fusion.py OUT.json --cache CACHE \\
         --run DATASET:TRAIN:TEST [--run ...]
 
-The trained estimates are cached (``CACHE/<dataset folder>-<TRAIN>.npz``); a rerun only refuses them.
+The trained models, their test estimates and training features are cached (``CACHE/<dataset folder>-<TRAIN>-...``);
+a rerun only fuses again (``--cache-only``: train and cache, nothing else).
 """
 
 from __future__ import annotations
@@ -27,11 +31,20 @@ from sfanav.data import Dataset
 from sfanav.experiments.product_rows import product_runs
 from sfanav.localization.error_metrics import align
 from sfanav.localization.recipe import default_network
-from sfanav.odometry.fusion import fuse
+from sfanav.odometry.fusion import fuse, noise_for_localizer
 from sfanav.pipeline import train_localizer
 
-THRESHOLDS = (None, 1.0, 1.5, 2.0, 3.0, 5.0)
-"""``novelty_threshold`` values compared (None: the measurement noise as it is)."""
+THRESHOLDS = (0.5, 1.0, 2.0, 3.0)
+"""``novelty_threshold`` values compared with the model's filter noise as the recipe chose it (without novelty),
+beside that noise as it is and with twice its measurement noise (the recipe's grid of measurement noise ends at
+0.4 m, and it often chooses that)."""
+
+CALIBRATED = (0.5, 1.0, 2.0)
+"""``novelty_threshold`` values with the filter noise chosen again on the training run with novelty
+(:func:`sfanav.odometry.fusion.noise_for_localizer`'s held-out estimates scaled alike)."""
+
+WIDE_GRID = (0.05, 0.1, 0.2, 0.4, 0.8)
+"""The measurement noise grid (m) extended by one step."""
 
 BANDS = ((0.0, 1.0), (1.0, 2.0), (2.0, np.inf))
 """Distance (m) of a test frame from the nearest training position, for the per-band errors."""
@@ -44,7 +57,9 @@ def cached(dataset: Path, train: str, test: str, cache: Path) -> dict[str, np.nd
     ds = Dataset(dataset)
     cam = ds.metadata.get("camera", {})
     tr, (te,) = product_runs(ds, default_network(), train=train, tests=(test,))
-    out: dict[str, np.ndarray] = {"train_xy": tr.xy, "test_xy": te.xy, "test_odometry": te.odometry}
+    out: dict[str, np.ndarray] = {"train_xy": tr.xy, "test_xy": te.xy, "test_odometry": te.odometry,
+                                  "train_odometry": tr.odometry}
+    cache.mkdir(parents=True, exist_ok=True)
     kw = dict(camera_elevation=tuple(cam.get("elevation_deg", (-30.0, 20.0))))
     for sup in ("ground truth", "no ground truth"):
         t0 = time.perf_counter()
@@ -54,6 +69,10 @@ def cached(dataset: Path, train: str, test: str, cache: Path) -> dict[str, np.nd
             loc = train_localizer(tr.images, odometry=tr.odometry, gyro=tr.gyro, supervision="odometry", **kw)
         key = sup.replace(" ", "_")
         out[f"{key}_seconds"] = np.array(time.perf_counter() - t0)
+        loc.save(cache / f"{dataset.name}-{train}-{key}.sfa")  # for the filter noise chosen again offline
+        F = loc.features(tr.images)  # what the pipeline chooses the filter noise on: the readout's features
+        out[f"{key}_train_features"] = loc.readout_features(F, loc.signatures(tr.images) if loc.n_signature_ else None)
+        out[f"{key}_targets"] = loc.training_positions_
         est = loc.predict(te.images)
         out[f"{key}_estimates"] = est
         out[f"{key}_novelty"] = loc.novelty(te.images)
@@ -67,33 +86,52 @@ def cached(dataset: Path, train: str, test: str, cache: Path) -> dict[str, np.nd
     return out
 
 
-def evaluate(d: dict[str, np.ndarray]) -> dict:
+def noises(d: dict[str, np.ndarray], model: Path) -> dict[str, tuple[dict[str, float], float | None]]:
+    """The filter noise of each variant and the novelty threshold it fuses with (None: no novelty)."""
+    import sfanav
+
+    stored = dict(zip(("distance_noise", "heading_noise", "measurement_noise", "turn_noise"),
+                      map(float, d["no_ground_truth_noise"])))  # as the product rows: the recipe's noise
+    out: dict[str, tuple[dict[str, float], float | None]] = {"as measured": (stored, None)}
+    for thr in THRESHOLDS:
+        out[f"novelty threshold {thr:g}"] = (stored, thr)
+    out["measurement noise x 2, no novelty"] = (dict(stored, measurement_noise=2 * stored["measurement_noise"]), None)
+    loc = sfanav.load(model)  # the model without ground truth, whose noise both fused rows use
+    args = (loc, d["no_ground_truth_train_features"], d["no_ground_truth_targets"], d["train_odometry"])
+    out["noise grid to 0.8 m, no novelty"] = (noise_for_localizer(*args, novelty_threshold=None,
+                                                                  measurement_noise=WIDE_GRID), None)
+    for thr in CALIBRATED:
+        out[f"noise chosen with novelty {thr:g}"] = (noise_for_localizer(*args, novelty_threshold=thr), thr)
+        out[f"noise chosen with novelty {thr:g}, grid to 0.8 m"] = (
+            noise_for_localizer(*args, novelty_threshold=thr, measurement_noise=WIDE_GRID), thr)
+    return out
+
+
+def evaluate(d: dict[str, np.ndarray], model: Path) -> dict:
     T = d["test_xy"]
     cover = cKDTree(d["train_xy"]).query(T)[0]
     res: dict = {"frames": len(T), "frames per band": {f"{lo:g}-{hi:g} m": int(((cover >= lo) & (cover < hi)).sum())
                                                       for lo, hi in BANDS}}
+    variants = noises(d, model)
+    res["filter noise"] = {k: v[0] for k, v in variants.items()}
     for key in ("ground_truth", "no_ground_truth"):
         est = d[f"{key}_estimates"]
         to_world = (lambda P: P) if key == "ground_truth" else (
             lambda P, R=d[f"{key}_rotation"], t=d[f"{key}_translation"]: P @ R.T + t)
-        noise = dict(zip(("distance_noise", "heading_noise", "measurement_noise", "turn_noise"),
-                         map(float, d["no_ground_truth_noise"])))  # as the product rows: the recipe's noise
         single = np.hypot(*(to_world(est) - T).T)
         entry = {"single MED (m)": float(single.mean()),
                  "novelty median, covered (< 1 m)": float(np.median(d[f"{key}_novelty"][cover < 1])),
                  "novelty median, uncovered (> 2 m)": float(np.median(d[f"{key}_novelty"][cover > 2]))
                  if (cover > 2).any() else None}
-        for thr in THRESHOLDS:
+        for name, (noise, thr) in variants.items():
             kw = {} if thr is None else {"novelty": d[f"{key}_novelty"], "novelty_threshold": thr}
             fused = to_world(fuse(d["test_odometry"], est, noise, **kw)[:, :2])
             e = np.hypot(*(fused - T).T)
-            name = "as measured" if thr is None else f"novelty threshold {thr:g}"
             entry[name] = {"fused MED (m)": float(e.mean()), "fused / single": float(e.mean() / single.mean()),
                            **{f"fused MED {lo:g}-{hi:g} m (m)": float(e[(cover >= lo) & (cover < hi)].mean())
                               if ((cover >= lo) & (cover < hi)).any() else None for lo, hi in BANDS}}
         res[key.replace("_", " ")] = entry
     return res
-
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -110,8 +148,9 @@ def main() -> None:
             print(spec, "cached", flush=True)
             continue
         key = f"{Path(ds).name}:{train}"
-        res[key] = evaluate(d)
-        print(key, json.dumps({k: v for k, v in res[key].items() if k != "frames per band"}), flush=True)
+        res[key] = evaluate(d, a.cache / f"{Path(ds).name}-{train}-no_ground_truth.sfa")
+        print(key, {sup: {k: round(v["fused MED (m)"], 3) for k, v in res[key][sup].items() if isinstance(v, dict)}
+                    for sup in ("ground truth", "no ground truth")}, flush=True)
         a.out.write_text(json.dumps(res, indent=1) + "\n")
 
 

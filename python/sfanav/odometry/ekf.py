@@ -680,6 +680,7 @@ def grid_search(
     criterion: str | None = None,
     ekf_params: Mapping[str, Any] | None = None,
     progress: bool = True,
+    measurement_scale: Any = None,
 ) -> GridSearchResult:
     """Chooses the process and measurement noise of :class:`OdometryEKF` by
     grid search (thesis 5.3.2: "chosen based on a grid search").
@@ -701,6 +702,10 @@ def grid_search(
         Other :class:`OdometryEKF` parameters (e.g. ``gate_probability``).
     progress : bool, default True
         A tqdm progress bar over the grid.
+    measurement_scale : array (N,), optional
+        Per-frame factors on the measurement noise (:meth:`OdometryEKF.run`):
+        the grid's ``measurement_noise`` is then the noise of a frame with
+        factor 1.
     """
     t0 = time.perf_counter()
     if criterion is None:
@@ -721,7 +726,7 @@ def grid_search(
     try:
         for sd, sh, sr in grid:
             ekf = OdometryEKF(sd, sh, sr, **dict(ekf_params or {}))
-            poses = ekf.run(odometry, measurements, start_pose)
+            poses = ekf.run(odometry, measurements, start_pose, measurement_scale=measurement_scale)
             row = {"distance_noise": sd, "heading_noise": sh, "measurement_noise": sr}
             if T is not None:
                 row["med"] = float(np.linalg.norm(poses[:, :2] - T, axis=1).mean())

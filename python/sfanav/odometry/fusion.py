@@ -38,7 +38,8 @@ import numpy as np
 
 from .._checks import as_matrix, check_int, check_nonneg_float, check_same_length
 from ..localization.error_metrics import align
-from ..localization.readout_selection import cross_val_predict
+from ..localization.novelty import NoveltyReference
+from ..localization.readout_selection import block_folds, cross_val_predict
 from .dead_reckoning import as_poses, wrap_angle
 from .ekf import OdometryEKF, grid_search
 
@@ -52,10 +53,14 @@ START_FRAMES = 30
 GATE_PROBABILITY = 0.999
 """Mahalanobis gate of the fused estimates (:class:`OdometryEKF`
 ``gate_probability``), the same when the noise is chosen and when it is used."""
-NOVELTY_THRESHOLD = 3.0
+NOVELTY_THRESHOLD = 1.0
 """Novelty (in training nearest-neighbour distances) above which an
 estimate's measurement noise grows in proportion (:func:`novelty_scale`):
-chosen on the mower surveys' test walks (docs/odometry.md, "Fusion off the
+1, as far as training images lie from each other, so that the noise is
+proportional to the novelty wherever an image is farther from the training
+run than its own images are. Chosen against 0.5, 2 and 3 on the mower
+surveys' test walks, the demo and three suite gardens, with the filter
+noise chosen on the training run alike (docs/odometry.md, "Fusion off the
 training run's ground")."""
 MAX_FRAMES = 2000
 """Frames of the training run the noise is chosen on (the grid search's cost grows with them)."""
@@ -109,7 +114,7 @@ def start_pose_from_estimates(odometry: Any, estimates: Any, *, n: int = START_F
 
 def noise_from_run(odometry: Any, estimates: Any, *, reference: Any = None, start_pose: Any = None,
                    max_frames: int | None = MAX_FRAMES, turn_noise: float = TURN_NOISE, progress: bool = False,
-                   **grid: Any) -> dict[str, float]:
+                   measurement_scale: Any = None, **grid: Any) -> dict[str, float]:
     """The EKF noise for a run's odometry (N, 3) and estimates (N, 2), by
     :func:`sfanav.odometry.grid_search` on the run's first ``max_frames``
     frames (None: all; the grid runs the filter once per candidate).
@@ -122,7 +127,10 @@ def noise_from_run(odometry: Any, estimates: Any, *, reference: Any = None, star
     run) too much. ``start_pose`` defaults to
     :func:`start_pose_from_estimates`; ``grid`` overrides the candidate
     standard deviations; every candidate runs with ``turn_noise`` (rad per
-    sqrt(rad) of turn, default :data:`TURN_NOISE`). Returns
+    sqrt(rad) of turn, default :data:`TURN_NOISE`). ``measurement_scale``
+    (N,): per-frame factors on the measurement noise, as :func:`fuse`
+    applies them (:func:`novelty_scale`); the chosen ``measurement_noise``
+    is then that of a frame with factor 1. Returns
     ``{"distance_noise", "heading_noise", "measurement_noise",
     "turn_noise"}``. Raises ValueError on mismatched or non-finite input."""
     P = as_poses(odometry, "odometry")
@@ -131,19 +139,27 @@ def noise_from_run(odometry: Any, estimates: Any, *, reference: Any = None, star
     if reference is not None:
         T = as_matrix(reference, "reference", n_cols=2)
         check_same_length(P, T, "odometry", "reference")
+    ms = None
+    if measurement_scale is not None:
+        ms = np.asarray(measurement_scale, dtype=np.float64).reshape(-1)
+        if ms.shape != (len(P),):
+            raise ValueError(f"measurement_scale must have one value per frame ({len(P)}), got shape {ms.shape}")
     if max_frames is not None:
         m = check_int(max_frames, "max_frames", minimum=2)
         P, Z = P[:m], Z[:m]
         T = None if T is None else T[:m]
-    s0 = start_pose_from_estimates(P, Z) if start_pose is None else start_pose
+        ms = None if ms is None else ms[:m]
+    s0 = start_pose_from_estimates(P, Z, measurement_scale=ms) if start_pose is None else start_pose
     turn = check_nonneg_float(turn_noise, "turn_noise")
     res = grid_search(P, Z, s0, T, criterion="nll" if T is None else "med", progress=progress,
-                      ekf_params={"turn_noise": turn, "gate_probability": GATE_PROBABILITY}, **grid)
+                      ekf_params={"turn_noise": turn, "gate_probability": GATE_PROBABILITY},
+                      measurement_scale=ms, **grid)
     return {**{k: float(res.best_params[k]) for k in NOISE_KEYS}, "turn_noise": turn}
 
 
 def noise_for_localizer(localizer: Any, features: Any, targets: Any, odometry: Any, *, block: int = 20,
-                        n_folds: int = 5, **kwargs: Any) -> dict[str, float]:
+                        n_folds: int = 5, novelty_threshold: float | None = NOVELTY_THRESHOLD,
+                        **kwargs: Any) -> dict[str, float]:
     """The EKF noise for a fitted localizer, chosen on its training run:
     :func:`noise_from_run` on the odometry (N, 3) and the *held-out*
     estimates of the run (:func:`sfanav.localization.cross_val_predict` of
@@ -151,11 +167,23 @@ def noise_for_localizer(localizer: Any, features: Any, targets: Any, odometry: A
     the localizer's readout on ``features`` (N, m), its rotation-pooled
     features of the run, and ``targets`` (N, 2), the positions its readout
     was fitted to: ground truth, or the learned positions), the noise whose
-    fused track of the run is nearest ``targets``. ``kwargs`` go to
-    :func:`noise_from_run`. Raises ValueError as those."""
+    fused track of the run is nearest ``targets``. With the localizer's
+    novelty reference (and ``novelty_threshold`` not None) each held-out
+    estimate's noise is scaled by :func:`novelty_scale` of its novelty
+    against the other folds' features, as :func:`fuse_images` scales a test
+    run's: the chosen ``measurement_noise`` is then that of a novelty at
+    most ``novelty_threshold``. ``kwargs`` go to :func:`noise_from_run`.
+    Raises ValueError as those."""
     n = len(np.asarray(targets))
     block = max(1, min(int(block), n // (2 * n_folds)))  # short runs: shorter blocks, each fold held out twice
     held = cross_val_predict(localizer.readout_spec_, features, targets, n_folds=n_folds, block=block)
+    ref = getattr(localizer, "novelty_", None)
+    if novelty_threshold is not None and ref is not None and "measurement_scale" not in kwargs:
+        F = as_matrix(features, "features")[:, : ref.reference_.shape[1]]
+        nov = np.empty(n)
+        for train, out in block_folds(n, n_folds, block):
+            nov[out] = NoveltyReference().fit(F[train]).score(F[out])
+        kwargs["measurement_scale"] = novelty_scale(nov, novelty_threshold)
     return noise_from_run(odometry, held, reference=targets, **kwargs)
 
 
