@@ -127,7 +127,7 @@ def evaluate(d: dict[str, np.ndarray], model: Path) -> dict:
             kw = {} if thr is None else {"novelty": d[f"{key}_novelty"], "novelty_threshold": thr}
             fused = to_world(fuse(d["test_odometry"], est, noise, **kw)[:, :2])
             e = np.hypot(*(fused - T).T)
-            entry[name] = {"fused MED (m)": float(e.mean()), "fused / single": float(e.mean() / single.mean()),
+            entry[name] = {"fused MED (m)": float(e.mean()), "fused over single": float(e.mean() / single.mean()),
                            **{f"fused MED {lo:g}-{hi:g} m (m)": float(e[(cover >= lo) & (cover < hi)].mean())
                               if ((cover >= lo) & (cover < hi)).any() else None for lo, hi in BANDS}}
         res[key.replace("_", " ")] = entry
