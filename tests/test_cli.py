@@ -175,13 +175,18 @@ def test_demo_quick(tmp_path, capsys):
     head = (tmp_path / "demo" / "test-estimates.csv").read_text().splitlines()[0]
     assert head == "frame,x,y,fused_x,fused_y,fused_heading"
     # the fused track came from the streaming localizer (image by image): the batch filter over the same
-    # estimates gives the same track
+    # estimates, with the same images' novelty, gives the same track
     from sfanav.data import Dataset
+    from sfanav.data.preprocessing import Preprocessing, Preprocessor
+    from sfanav.data.sources import open_images
     from sfanav.odometry.fusion import fuse
 
     rows = np.loadtxt(tmp_path / "demo" / "test-estimates.csv", delimiter=",", skiprows=1)
     odo = Dataset(tmp_path / "demo" / "dataset").select(run="test").odometry
-    batch = fuse(odo, rows[:, 1:3], sfanav.load(tmp_path / "demo" / "model.sfa").info["ekf_noise"])
+    loc = sfanav.load(tmp_path / "demo" / "model.sfa")
+    images = np.concatenate(list(open_images(tmp_path / "demo" / "dataset", run="test").batches(64)))
+    novelty = loc.novelty(Preprocessor(Preprocessing.of_model(loc))(images))
+    batch = fuse(odo, rows[:, 1:3], loc.info["ekf_noise"], novelty=novelty)
     np.testing.assert_allclose(rows[:, 3:5], batch[:, :2], atol=2e-3)
     # the Rerun recording holds the whole walk
     if importlib.util.find_spec("rerun") is not None:
