@@ -178,6 +178,11 @@ class Localizer:
         (:func:`sfanav.odometry.learn_positions`). Saved in the model file;
         :func:`sfanav.navigation.navigate` builds its geodesic field over
         them. ``None`` for a model file written before they were stored.
+    novelty_ : NoveltyReference or None
+        The training run's slowest features, against which :meth:`novelty`
+        scores a query (:class:`sfanav.localization.novelty.NoveltyReference`).
+        Saved in the model file; ``None`` for a file written before it was
+        stored.
     info : dict
         Free JSON metadata saved with the model (the ``sfanav`` command
         stores the image preprocessing and training settings here).

@@ -200,8 +200,8 @@ class StreamingLocalizer:
                                   else check_positive_float(novelty_threshold, "novelty_threshold"))
         if self.novelty_threshold is not None and getattr(localizer, "novelty_", None) is None:
             if log is not None:
-                log("the model holds no novelty reference (written before 2026-12-06): the filter's measurement "
-                    "noise is not scaled by novelty; retrain the model to have it")
+                log("the model holds no novelty reference (a Localizer file written before 2026-12-06, or another "
+                    "kind of model): the filter's measurement noise is not scaled by novelty")
             self.novelty_threshold = None
         if on_estimate is not None and not callable(on_estimate):
             raise TypeError(f"on_estimate must be callable or None, got {type(on_estimate).__name__}")
