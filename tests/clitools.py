@@ -46,6 +46,22 @@ def tiny_dataset(root):
     return ds, cfg
 
 
+def tiny_trained(root):
+    """:func:`tiny_dataset` under ``root`` with a model trained on it by ``sfanav train`` (the tiny config):
+    ``{"root", "model" (path), "loc" (the loaded model), "images" (the test run's), "odometry" (the test run's)}``."""
+    import numpy as np
+
+    from sfanav.data.sources import open_images
+
+    tiny_dataset(root)
+    model = root / "tiny.sfa"
+    assert main(["train", "--dataset", str(root / "data"), "--config", str(root / "tiny.toml"), "--out", str(model),
+                 "--no-progress"]) == 0
+    src = open_images(root / "data", run="test")
+    return {"root": root, "model": model, "loc": sfanav.load(model),
+            "images": np.concatenate(list(src.batches(64))), "odometry": src.odometry}
+
+
 def run(capsys, *args):
     """``sfanav ARGS`` in this process: (exit status, stdout, stderr)."""
     try:

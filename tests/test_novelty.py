@@ -107,19 +107,9 @@ def test_fuse_follows_the_odometry_where_the_estimates_are_novel_and_wrong():
 
 @pytest.fixture(scope="module")
 def tiny(tmp_path_factory):
-    import sfanav
-    from clitools import tiny_dataset
-    from sfanav.app.cli import main
-    from sfanav.data.sources import open_images
+    from clitools import tiny_trained
 
-    root = tmp_path_factory.mktemp("novelty")
-    tiny_dataset(root)
-    model = root / "tiny.sfa"
-    assert main(["train", "--dataset", str(root / "data"), "--config", str(root / "tiny.toml"), "--out", str(model),
-                 "--no-progress"]) == 0
-    src = open_images(root / "data", run="test")
-    return {"model": model, "loc": sfanav.load(model), "images": np.concatenate(list(src.batches(64))),
-            "odometry": src.odometry}
+    return tiny_trained(tmp_path_factory.mktemp("novelty"))
 
 
 def test_a_model_keeps_its_novelty_reference(tiny, tmp_path):

@@ -19,20 +19,10 @@ PERIOD = 100_000_003  # ns between images
 
 @pytest.fixture(scope="module")
 def tiny(tmp_path_factory):
-    import sfanav
-    from clitools import tiny_dataset
-    from sfanav.app.cli import main
-    from sfanav.data.sources import open_images
+    from clitools import tiny_trained
 
-    root = tmp_path_factory.mktemp("live")
-    tiny_dataset(root)
-    model = root / "tiny.sfa"
-    assert main(["train", "--dataset", str(root / "data"), "--config", str(root / "tiny.toml"), "--out", str(model),
-                 "--no-progress"]) == 0
-    src = open_images(root / "data", run="test")
-    images = np.concatenate(list(src.batches(64)))
-    return {"root": root, "model": model, "loc": sfanav.load(model), "images": images, "odometry": src.odometry,
-            "stamps": [BASE + k * PERIOD for k in range(len(images))]}
+    t = tiny_trained(tmp_path_factory.mktemp("live"))
+    return {**t, "stamps": [BASE + k * PERIOD for k in range(len(t["images"]))]}
 
 
 def _in_order(tiny, **kw):
