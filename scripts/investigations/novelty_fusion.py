@@ -31,7 +31,7 @@ from sfanav.data import Dataset
 from sfanav.experiments.product_rows import product_runs
 from sfanav.localization.error_metrics import align
 from sfanav.localization.recipe import default_network
-from sfanav.odometry.fusion import fuse, noise_for_localizer
+from sfanav.odometry.fusion import MEASUREMENT_NOISE_GRID, fuse, noise_for_localizer
 from sfanav.pipeline import train_localizer
 
 THRESHOLDS = (0.5, 1.0, 2.0, 3.0)
@@ -43,8 +43,11 @@ CALIBRATED = (0.5, 1.0, 2.0)
 """``novelty_threshold`` values with the filter noise chosen again on the training run with novelty
 (:func:`sfanav.odometry.fusion.noise_for_localizer`'s held-out estimates scaled alike)."""
 
-WIDE_GRID = (0.05, 0.1, 0.2, 0.4, 0.8)
-"""The measurement noise grid (m) extended by one step."""
+RECIPE_GRID = (0.05, 0.1, 0.2, 0.4)
+"""The measurement noise grid (m) of the recipe before this study (grid_search's default)."""
+
+WIDE_GRID = MEASUREMENT_NOISE_GRID
+"""The measurement noise grid (m) extended by one step (the library's since this study)."""
 
 BANDS = ((0.0, 1.0), (1.0, 2.0), (2.0, np.inf))
 """Distance (m) of a test frame from the nearest training position, for the per-band errors."""
@@ -73,15 +76,12 @@ def cached(dataset: Path, train: str, test: str, cache: Path) -> dict[str, np.nd
         F = loc.features(tr.images)  # what the pipeline chooses the filter noise on: the readout's features
         out[f"{key}_train_features"] = loc.readout_features(F, loc.signatures(tr.images) if loc.n_signature_ else None)
         out[f"{key}_targets"] = loc.training_positions_
-        est = loc.predict(te.images)
-        out[f"{key}_estimates"] = est
-        out[f"{key}_novelty"] = loc.novelty(te.images)
+        out[f"{key}_estimates"], out[f"{key}_novelty"] = loc.predict_with_novelty(te.images)
         out[f"{key}_noise"] = np.array([loc.info["ekf_noise"][k] for k in
                                         ("distance_noise", "heading_noise", "measurement_noise", "turn_noise")])
         if sup == "no ground truth":  # its map's frame -> the world's, for scoring only
             fit = align(loc.predict(tr.images), tr.xy)
             out[f"{key}_rotation"], out[f"{key}_translation"] = fit.rotation, fit.translation
-    cache.mkdir(parents=True, exist_ok=True)
     np.savez(path, **out)
     return out
 
@@ -90,18 +90,19 @@ def noises(d: dict[str, np.ndarray], model: Path) -> dict[str, tuple[dict[str, f
     """The filter noise of each variant and the novelty threshold it fuses with (None: no novelty)."""
     import sfanav
 
-    stored = dict(zip(("distance_noise", "heading_noise", "measurement_noise", "turn_noise"),
-                      map(float, d["no_ground_truth_noise"])))  # as the product rows: the recipe's noise
-    out: dict[str, tuple[dict[str, float], float | None]] = {"as measured": (stored, None)}
-    for thr in THRESHOLDS:
-        out[f"novelty threshold {thr:g}"] = (stored, thr)
-    out["measurement noise x 2, no novelty"] = (dict(stored, measurement_noise=2 * stored["measurement_noise"]), None)
-    loc = sfanav.load(model)  # the model without ground truth, whose noise both fused rows use
+    loc = sfanav.load(model)  # the model without ground truth, whose noise both fused rows use (as the product rows)
     args = (loc, d["no_ground_truth_train_features"], d["no_ground_truth_targets"], d["train_odometry"])
+    # the recipe's noise before this study (whatever code trained the cached model): no novelty, the old grid
+    before = noise_for_localizer(*args, novelty_threshold=None, measurement_noise=RECIPE_GRID)
+    out: dict[str, tuple[dict[str, float], float | None]] = {"as measured": (before, None)}
+    for thr in THRESHOLDS:
+        out[f"novelty threshold {thr:g}"] = (before, thr)
+    out["measurement noise x 2, no novelty"] = (dict(before, measurement_noise=2 * before["measurement_noise"]), None)
     out["noise grid to 0.8 m, no novelty"] = (noise_for_localizer(*args, novelty_threshold=None,
                                                                   measurement_noise=WIDE_GRID), None)
     for thr in CALIBRATED:
-        out[f"noise chosen with novelty {thr:g}"] = (noise_for_localizer(*args, novelty_threshold=thr), thr)
+        out[f"noise chosen with novelty {thr:g}"] = (noise_for_localizer(*args, novelty_threshold=thr,
+                                                                        measurement_noise=RECIPE_GRID), thr)
         out[f"noise chosen with novelty {thr:g}, grid to 0.8 m"] = (
             noise_for_localizer(*args, novelty_threshold=thr, measurement_noise=WIDE_GRID), thr)
     return out

@@ -36,7 +36,7 @@ from typing import Any
 
 import numpy as np
 
-from .._checks import as_matrix, check_int, check_nonneg_float, check_same_length
+from .._checks import as_matrix, check_int, check_nonneg_float, check_positive_float, check_same_length
 from ..localization.error_metrics import align
 from ..localization.novelty import NoveltyReference
 from ..localization.readout_selection import block_folds, cross_val_predict
@@ -203,9 +203,7 @@ def novelty_scale(novelty: Any, threshold: float = NOVELTY_THRESHOLD) -> np.ndar
     >>> novelty_scale([0.5, 3.0, 9.0], 3.0).tolist()
     [1.0, 1.0, 3.0]
     """
-    t = check_nonneg_float(threshold, "novelty_threshold")
-    if t == 0:
-        raise ValueError("novelty_threshold must be > 0")
+    t = check_positive_float(threshold, "novelty_threshold")
     v = np.asarray(novelty, dtype=np.float64).reshape(-1)
     if (v[np.isfinite(v)] < 0).any() or np.isinf(v).any():
         raise ValueError("novelty must be finite and >= 0 (NaN where a frame has no estimate)")
