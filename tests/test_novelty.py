@@ -9,7 +9,8 @@ from hypothesis import strategies as st
 
 from sfanav.experiments.filter_cases import make_filter_case
 from sfanav.localization.novelty import NoveltyReference
-from sfanav.odometry import OdometryEKF, fuse, fuse_images, novelty_scale
+from sfanav.odometry import OdometryEKF, fuse, fuse_images, noise_for_localizer, novelty_exponent, novelty_scale
+from sfanav.odometry.fusion import check_noise
 from sfanav.odometry.streaming import StreamingLocalizer
 
 
@@ -55,6 +56,65 @@ def test_novelty_scale():
             novelty_scale(bad)
     with pytest.raises(ValueError, match="novelty_threshold"):
         novelty_scale([1.0], 0.0)
+
+
+def test_novelty_scale_with_an_exponent_and_a_knee():
+    v = np.array([0.5, 1.0, 4.0, 9.0, 18.0, 36.0])
+    # (v / t) ** p up to the knee, then in proportion: continuous at the knee
+    assert np.allclose(novelty_scale(v, 1.0, exponent=0.5, knee=9.0), [1.0, 1.0, 2.0, 3.0, 6.0, 12.0])
+    assert np.allclose(novelty_scale(v, 2.0, exponent=0.0, knee=9.0), [1.0, 1.0, 1.0, 1.0, 2.0, 4.0])
+    # exponent 1 is the proportional scale whatever the knee; a knee below the threshold is the threshold
+    assert np.allclose(novelty_scale(v, 2.0, exponent=1.0, knee=3.0), novelty_scale(v, 2.0))
+    assert np.allclose(novelty_scale(v, 2.0, exponent=0.0, knee=1.0), novelty_scale(v, 2.0))
+    for kw, match in [({"exponent": 1.5}, "novelty_exponent"), ({"exponent": -0.1}, "novelty_exponent"),
+                      ({"knee": 0.0}, "novelty_knee"), ({"knee": np.nan}, "novelty_knee")]:
+        with pytest.raises(ValueError, match=match):
+            novelty_scale(v, 1.0, **kw)
+
+
+@settings(max_examples=25, deadline=None)
+@given(p=st.floats(0.0, 1.0), seed=st.integers(0, 10_000))
+def test_novelty_exponent_recovers_a_power_law(p, seed):
+    rng = np.random.default_rng(seed)
+    nov = rng.uniform(0.5, 12.0, 400)
+    err = 0.05 * nov**p * rng.exponential(1.0, 400)  # errors of a power of the novelty, noisy
+    assert novelty_exponent(err, nov) == pytest.approx(p, abs=0.2)
+
+
+def test_novelty_exponent_clips_and_bad_input():
+    nov = np.linspace(1.0, 8.0, 200)
+    assert novelty_exponent(0.01 * nov**3, nov) == 1.0  # steeper than proportional: proportional
+    assert novelty_exponent(1.0 / nov, nov) == 0.0  # precise where novel: not scaled
+    assert novelty_exponent(np.ones(10), np.arange(10.0)) == 1.0  # too few frames to tell: proportional
+    assert novelty_exponent(np.r_[np.nan, nov[1:] ** 0.5], nov) == pytest.approx(0.5, abs=0.02)
+    with pytest.raises(ValueError, match="same length"):
+        novelty_exponent(nov[:-1], nov)
+    with pytest.raises(ValueError, match=">= 0"):
+        novelty_exponent(-nov, nov)
+
+
+def test_check_noise():
+    base = {"distance_noise": 0.02, "heading_noise": 0.01, "measurement_noise": 0.3}
+    full = {**base, "turn_noise": 0.1, "novelty_exponent": 0.5, "novelty_knee": 4.0}
+    assert check_noise(full) == full
+    for bad, match in [({**base, "gain": 1.0}, "novelty_exponent"), ({"distance_noise": 0.1}, "measurement_noise"),
+                       ({**base, "measurement_noise": "x"}, "numbers"), ([1, 2], "mapping")]:
+        with pytest.raises(ValueError, match=match):
+            check_noise(bad)
+
+
+def test_fuse_uses_the_noise_novelty_exponent():
+    run = make_filter_case("clean", random_state=3)
+    noise = {"distance_noise": 0.02, "heading_noise": 0.01, "measurement_noise": 0.3}
+    nov = np.linspace(0.5, 6.0, len(run["estimates"]))
+    # exponent 0 up to a knee above every novelty: the plain fuse; exponent 1: the proportional scale
+    flat = fuse(run["odometry"], run["estimates"], {**noise, "novelty_exponent": 0.0, "novelty_knee": 10.0},
+                novelty=nov)
+    assert np.array_equal(flat, fuse(run["odometry"], run["estimates"], noise))
+    prop = fuse(run["odometry"], run["estimates"], {**noise, "novelty_exponent": 1.0, "novelty_knee": 2.0},
+                novelty=nov)
+    assert np.array_equal(prop, fuse(run["odometry"], run["estimates"], noise, novelty=nov))
+    assert not np.array_equal(prop, flat)
 
 
 @settings(max_examples=15, deadline=None)
@@ -151,3 +211,19 @@ def test_fuse_images_and_the_stream_scale_the_noise_alike(tiny):
     assert np.allclose(np.array([e.pose for e in out]), fused, atol=1e-9)
     with pytest.raises(ValueError, match="novelty_threshold"):
         StreamingLocalizer(loc, novelty_threshold=0.0)
+
+
+def test_the_noise_is_chosen_with_its_novelty_exponent(tiny):
+    loc = tiny["loc"]
+    noise = loc.info["ekf_noise"]  # chosen on the training run by sfanav train
+    assert 0.0 <= noise["novelty_exponent"] <= 1.0 and noise["novelty_knee"] >= 1.0
+    # on another run (the test run standing in for a training run): the exponent of its held-out errors, the knee
+    # the held-out novelty's quantile
+    F = loc.readout_features(loc.features(tiny["images"]),
+                             loc.signatures(tiny["images"]) if loc.n_signature_ else None)
+    xy = loc.predict(tiny["images"])
+    again = noise_for_localizer(loc, F, xy, tiny["odometry"])
+    assert 0.0 <= again["novelty_exponent"] <= 1.0 and again["novelty_knee"] >= 1.0
+    assert noise_for_localizer(loc, F, xy, tiny["odometry"]) == again
+    plain = noise_for_localizer(loc, F, xy, tiny["odometry"], novelty_threshold=None)
+    assert "novelty_exponent" not in plain and "novelty_knee" not in plain

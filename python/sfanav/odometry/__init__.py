@@ -22,7 +22,8 @@ from __future__ import annotations
 
 from .dead_reckoning import arc_factor, as_poses, dead_reckon, increments, wrap_angle
 from .ekf import GridSearchResult, OdometryEKF, ctrv_jacobians, ctrv_motion, grid_search
-from .fusion import fuse, fuse_images, noise_for_localizer, noise_from_run, novelty_scale, start_pose_from_estimates
+from .fusion import (fuse, fuse_images, noise_for_localizer, noise_from_run, novelty_exponent, novelty_scale,
+                     start_pose_from_estimates)
 from .lines import Lines, lines_from_labels, lines_from_odometry, segment_lines
 from .metric_cost import DEFAULT_ODOMETRY_NOISE, metric_cost, odometry_variances
 from .metric_learning import MetricLearner
@@ -36,4 +37,4 @@ from .self_supervision import (
 )
 from .tracker import MapTracker
 
-__all__ = ["PlacePairs", "PoseGraph", "fit_pose_graph", "place_pairs", "relative_headings", "fuse", "fuse_images", "novelty_scale", "noise_for_localizer", "noise_from_run", "start_pose_from_estimates", "LearnedPositions", "OdometryMapWarning", "fit_localizer_from_odometry", "learn_positions", "DEFAULT_ODOMETRY_NOISE", "GridSearchResult", "Lines", "MapTracker", "MetricLearner", "OdometryEKF", "arc_factor", "as_poses", "ctrv_jacobians", "ctrv_motion", "dead_reckon", "grid_search", "increments", "lines_from_labels", "lines_from_odometry", "metric_cost", "odometry_variances", "plot_fusion", "plot_metric_lines", "segment_lines", "wrap_angle"]
+__all__ = ["PlacePairs", "PoseGraph", "fit_pose_graph", "place_pairs", "relative_headings", "fuse", "fuse_images", "novelty_exponent", "novelty_scale", "noise_for_localizer", "noise_from_run", "start_pose_from_estimates", "LearnedPositions", "OdometryMapWarning", "fit_localizer_from_odometry", "learn_positions", "DEFAULT_ODOMETRY_NOISE", "GridSearchResult", "Lines", "MapTracker", "MetricLearner", "OdometryEKF", "arc_factor", "as_poses", "ctrv_jacobians", "ctrv_motion", "dead_reckon", "grid_search", "increments", "lines_from_labels", "lines_from_odometry", "metric_cost", "odometry_variances", "plot_fusion", "plot_metric_lines", "segment_lines", "wrap_angle"]

@@ -62,6 +62,13 @@ run than its own images are. Chosen against 0.5, 2 and 3 on the mower
 surveys' test walks, the demo and three suite gardens, with the filter
 noise chosen on the training run alike (docs/odometry.md, "Fusion off the
 training run's ground")."""
+NOVELTY_KNEE_QUANTILE = 0.75
+"""Quantile of the training run's held-out novelty up to which
+:func:`noise_for_localizer`'s fitted novelty exponent holds: beyond it (no
+held-out image was that novel) the noise grows in proportion to the
+novelty again (:func:`novelty_scale`'s ``knee``)."""
+NOISE_OPTIONAL = ("turn_noise", "novelty_exponent", "novelty_knee")
+"""Keys a filter noise mapping may give beside :data:`NOISE_KEYS`."""
 MEASUREMENT_NOISE_GRID = (0.05, 0.1, 0.2, 0.4, 0.8)
 """Candidate ``measurement_noise`` (m) of :func:`noise_for_localizer`: that
 of a familiar image, whose novelty is at most :data:`NOVELTY_THRESHOLD`
@@ -164,7 +171,7 @@ def noise_from_run(odometry: Any, estimates: Any, *, reference: Any = None, star
 
 def noise_for_localizer(localizer: Any, features: Any, targets: Any, odometry: Any, *, block: int = 20,
                         n_folds: int = 5, novelty_threshold: float | None = NOVELTY_THRESHOLD,
-                        **kwargs: Any) -> dict[str, float]:
+                        fit_exponent: bool = True, **kwargs: Any) -> dict[str, float]:
     """The EKF noise for a fitted localizer, chosen on its training run:
     :func:`noise_from_run` on the odometry (N, 3) and the *held-out*
     estimates of the run (:func:`sfanav.localization.cross_val_predict` of
@@ -178,36 +185,132 @@ def noise_for_localizer(localizer: Any, features: Any, targets: Any, odometry: A
     against the other folds' features, as :func:`fuse_images` scales a test
     run's: the chosen ``measurement_noise`` is then that of a novelty at
     most ``novelty_threshold``, from :data:`MEASUREMENT_NOISE_GRID` unless
-    ``kwargs`` give one. ``kwargs`` go to :func:`noise_from_run`.
+    ``kwargs`` give one. How the held-out errors grow with the novelty
+    decides how the noise does (:func:`novelty_exponent`, returned as
+    ``novelty_exponent``, up to the held-out novelty's
+    :data:`NOVELTY_KNEE_QUANTILE`, returned as ``novelty_knee``; in
+    proportion beyond): a scene whose estimates stay precise on novel
+    images keeps trusting them (``fit_exponent`` False: in proportion
+    throughout, the noise of models trained before 2026-12-07, without
+    those keys). ``kwargs`` go to :func:`noise_from_run`.
     Raises ValueError as those."""
     n = len(np.asarray(targets))
     block = max(1, min(int(block), n // (2 * n_folds)))  # short runs: shorter blocks, each fold held out twice
     held = cross_val_predict(localizer.readout_spec_, features, targets, n_folds=n_folds, block=block)
     ref = getattr(localizer, "novelty_", None)
-    if novelty_threshold is not None and ref is not None and "measurement_scale" not in kwargs:
-        F = as_matrix(features, "features")[:, : ref.reference_.shape[1]]
-        nov = np.empty(n)
-        for train, out in block_folds(n, n_folds, block):
-            nov[out] = NoveltyReference().fit(F[train]).score(F[out])
-        kwargs["measurement_scale"] = novelty_scale(nov, novelty_threshold)
-        kwargs.setdefault("measurement_noise", MEASUREMENT_NOISE_GRID)
-    return noise_from_run(odometry, held, reference=targets, **kwargs)
+    if novelty_threshold is None or ref is None or "measurement_scale" in kwargs:
+        return noise_from_run(odometry, held, reference=targets, **kwargs)
+    F = as_matrix(features, "features")[:, : ref.reference_.shape[1]]
+    nov = np.empty(n)
+    for train, out in block_folds(n, n_folds, block):
+        nov[out] = NoveltyReference().fit(F[train]).score(F[out])
+    shape = {}
+    if fit_exponent:
+        shape = {"novelty_exponent": novelty_exponent(np.hypot(*(held - np.asarray(targets, dtype=float)).T), nov),
+                 "novelty_knee": max(float(novelty_threshold), float(np.quantile(nov, NOVELTY_KNEE_QUANTILE)))}
+    kwargs["measurement_scale"] = noise_novelty_scale(shape, nov, novelty_threshold)
+    kwargs.setdefault("measurement_noise", MEASUREMENT_NOISE_GRID)
+    return {**noise_from_run(odometry, held, reference=targets, **kwargs), **shape}
 
 
-def novelty_scale(novelty: Any, threshold: float = NOVELTY_THRESHOLD) -> np.ndarray:
+def novelty_scale(novelty: Any, threshold: float = NOVELTY_THRESHOLD, *, exponent: float = 1.0,
+                  knee: float = np.inf) -> np.ndarray:
     """The factor (N,) on each estimate's measurement noise from the images'
     novelty (N,) (:meth:`sfanav.Localizer.novelty`): 1 up to ``threshold``,
-    ``novelty / threshold`` above (NaN novelty, a frame without an estimate:
-    1). Raises ValueError for a non-positive threshold or negative novelty.
+    ``(novelty / threshold) ** exponent`` up to ``knee`` (at least
+    ``threshold``) and in proportion to the novelty beyond it, continuous
+    (NaN novelty, a frame without an estimate: 1). ``exponent`` in [0, 1]
+    (1, the default: proportional throughout; :func:`novelty_exponent` fits
+    it on a training run). Raises ValueError for a non-positive threshold or
+    knee, an exponent outside [0, 1] or negative novelty.
 
     >>> novelty_scale([0.5, 3.0, 9.0], 3.0).tolist()
     [1.0, 1.0, 3.0]
+    >>> novelty_scale([4.0, 16.0, 32.0], 1.0, exponent=0.5, knee=16.0).tolist()
+    [2.0, 4.0, 8.0]
     """
     t = check_positive_float(threshold, "novelty_threshold")
+    p = check_nonneg_float(exponent, "novelty_exponent")
+    if p > 1:
+        raise ValueError(f"novelty_exponent must be in [0, 1], got {exponent!r}")
+    k = float(knee)
+    if not k > 0:
+        raise ValueError(f"novelty_knee must be > 0, got {knee!r}")
+    k = max(k, t)
     v = np.asarray(novelty, dtype=np.float64).reshape(-1)
     if (v[np.isfinite(v)] < 0).any() or np.isinf(v).any():
         raise ValueError("novelty must be finite and >= 0 (NaN where a frame has no estimate)")
-    return np.where(np.isfinite(v), np.maximum(1.0, np.nan_to_num(v) / t), 1.0)
+    v = np.nan_to_num(v, nan=0.0)
+    inner = np.maximum(1.0, np.minimum(v, k) / t) ** p
+    return np.where(v > k, inner * v / k, inner)
+
+
+def novelty_exponent(errors: Any, novelty: Any, *, bins: int = 10) -> float:
+    """How an estimate's error grows with its image's novelty: the slope of
+    the log mean error (N,) against the log median novelty (N,) over
+    ``bins`` quantile bins of the novelty, clipped to [0, 1] (1: the error
+    is proportional to the novelty; 0: unrelated). Fitted on a training
+    run's held-out estimates (:func:`noise_for_localizer`), it tells a scene
+    whose estimates stay precise off the training images (an indoor room
+    whose test path runs between its training path's, docs/odometry.md)
+    from one where they extrapolate. Frames with a NaN error or novelty are
+    left out; fewer than three usable bins give 1. Raises ValueError for
+    arrays of different lengths or negative values.
+
+    >>> nov = np.linspace(1.0, 8.0, 200)
+    >>> round(novelty_exponent(0.1 * nov ** 0.5, nov), 2)
+    0.5
+    """
+    e = np.asarray(errors, dtype=np.float64).reshape(-1)
+    v = np.asarray(novelty, dtype=np.float64).reshape(-1)
+    if len(e) != len(v):
+        raise ValueError(f"errors ({len(e)}) and novelty ({len(v)}) must have the same length")
+    ok = np.isfinite(e) & np.isfinite(v)
+    e, v = e[ok], v[ok]
+    if (e < 0).any() or (v < 0).any():
+        raise ValueError("errors and novelty must be >= 0")
+    bins = check_int(bins, "bins", minimum=3)
+    if len(v) < 3 * bins:
+        return 1.0
+    x = np.log(np.maximum(v, 1e-3))
+    edges = np.quantile(x, np.linspace(0.0, 1.0, bins + 1))
+    xs, ys = [], []
+    for a, b in zip(edges[:-1], edges[1:]):
+        m = (x >= a) & (x <= b)
+        mean = float(e[m].mean()) if m.sum() >= 3 else 0.0
+        if mean > 0:
+            xs.append(float(np.median(x[m])))
+            ys.append(np.log(mean))
+    if len(xs) < 3 or np.ptp(xs) <= 0:
+        return 1.0
+    return float(np.clip(np.polyfit(xs, ys, 1)[0], 0.0, 1.0))
+
+
+def check_noise(noise: Mapping[str, float]) -> dict[str, float]:
+    """A filter noise mapping as :func:`noise_from_run` and
+    :func:`noise_for_localizer` return it, checked: :data:`NOISE_KEYS`
+    required, :data:`NOISE_OPTIONAL` allowed, every value a float. Returns a
+    new dict; ValueError for missing or unknown keys and for values that are
+    not numbers."""
+    if not isinstance(noise, Mapping):
+        raise ValueError(f"noise must be a mapping of {', '.join(NOISE_KEYS)}, got {type(noise).__name__}")
+    unknown = set(noise) - set(NOISE_KEYS) - set(NOISE_OPTIONAL)
+    if unknown or not set(NOISE_KEYS) <= set(noise):
+        raise ValueError(f"noise must give {', '.join(NOISE_KEYS)} (and optionally {', '.join(NOISE_OPTIONAL)}), "
+                         f"got {sorted(noise)}")
+    try:
+        return {k: float(v) for k, v in noise.items()}
+    except (TypeError, ValueError):
+        raise ValueError(f"noise values must be numbers, got {dict(noise)!r}") from None
+
+
+def noise_novelty_scale(noise: Mapping[str, float], novelty: Any,
+                        threshold: float = NOVELTY_THRESHOLD) -> np.ndarray:
+    """:func:`novelty_scale` of ``novelty`` (N,) with the exponent and knee a
+    filter noise mapping holds (``novelty_exponent``, ``novelty_knee``;
+    without them: proportional, the models trained before 2026-12-07)."""
+    return novelty_scale(novelty, threshold, exponent=noise.get("novelty_exponent", 1.0),
+                         knee=noise.get("novelty_knee", np.inf))
 
 
 def fuse(odometry: Any, estimates: Any, noise: Mapping[str, float], *, start_pose: Any = None,
@@ -231,7 +334,8 @@ def fuse(odometry: Any, estimates: Any, noise: Mapping[str, float], *, start_pos
     prediction's turns (:meth:`OdometryEKF.run`). ``novelty`` (N,), the
     images' novelty (:meth:`sfanav.Localizer.novelty`), scales each
     estimate's measurement noise by :func:`novelty_scale` with
-    ``novelty_threshold``; the start pose's fit then skips estimates above
+    ``novelty_threshold`` and the noise's ``novelty_exponent`` and
+    ``novelty_knee`` where it gives them; the start pose's fit then skips estimates above
     it where at least half of the first ones remain.
 
     Example
@@ -239,14 +343,12 @@ def fuse(odometry: Any, estimates: Any, noise: Mapping[str, float], *, start_pos
     >>> poses, ekf = fuse(odometry, estimates, noise, return_filter=True)  # doctest: +SKIP
     >>> print(f"{ekf.n_reinitializations_} re-initialisations")             # doctest: +SKIP
     """
-    unknown = set(noise) - set(NOISE_KEYS) - {"turn_noise"}
-    if unknown or not set(NOISE_KEYS) <= set(noise):
-        raise ValueError(f"noise must give {', '.join(NOISE_KEYS)} (and optionally turn_noise), got {sorted(noise)}")
+    noise = check_noise(noise)
     P = as_poses(odometry, "odometry")
     Z = _estimates(estimates, P)
     ms = None
     if novelty is not None:
-        ms = novelty_scale(novelty, novelty_threshold)
+        ms = noise_novelty_scale(noise, novelty, novelty_threshold)
         if len(ms) != len(P):
             raise ValueError(f"novelty must have one value per frame ({len(P)}), got {len(ms)}")
     s0 = start_pose if start_pose is not None else start_pose_from_estimates(P, Z, measurement_scale=ms)

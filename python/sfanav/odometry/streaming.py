@@ -33,7 +33,8 @@ from .._checks import as_real_array, check_int, check_nonneg_float, check_positi
 from ..data.preprocessing import Preprocessing, Preprocessor
 from .dead_reckoning import increments, wrap_angle
 from .ekf import FilterStep, OdometryEKF
-from .fusion import GATE_PROBABILITY, NOISE_KEYS, NOVELTY_THRESHOLD, START_FRAMES, novelty_scale, start_pose_from_estimates
+from .fusion import (GATE_PROBABILITY, NOISE_KEYS, NOVELTY_THRESHOLD, START_FRAMES, check_noise, noise_novelty_scale,
+                     start_pose_from_estimates)
 from .recovery import step_anomalies
 
 DROP_REASONS = ("late", "duplicate", "before_odometry", "no_odometry", "odometry_overflow")
@@ -131,8 +132,9 @@ class StreamingLocalizer:
     novelty_threshold : float or None, default :data:`~sfanav.odometry.fusion.NOVELTY_THRESHOLD`
         Each estimate's measurement noise is scaled by
         :func:`~sfanav.odometry.fusion.novelty_scale` of its image's novelty
-        (:meth:`sfanav.Localizer.novelty`), as :func:`sfanav.odometry.fuse`
-        does. None, or a model file without a novelty reference (one line
+        (:meth:`sfanav.Localizer.novelty`) with the noise's
+        ``novelty_exponent`` and ``novelty_knee``, as
+        :func:`sfanav.odometry.fuse` does. None, or a model file without a novelty reference (one line
         through ``log`` says so): not scaled.
     on_estimate : callable, optional
         Called as ``on_estimate(stamp_ns, estimate)`` (estimate: ndarray (2,),
@@ -184,11 +186,9 @@ class StreamingLocalizer:
             if noise is None:
                 raise ValueError("the model holds no EKF noise (its training run had no odometry): pass noise, "
                                  "or retrain it on a run with odometry")
-        unknown = set(noise) - set(NOISE_KEYS) - {"turn_noise"}
-        if unknown or not set(NOISE_KEYS) <= set(noise):
-            raise ValueError(f"noise must give {', '.join(NOISE_KEYS)} (and optionally turn_noise), got {sorted(noise)}")
+        noise = check_noise(noise)
         self.localizer = localizer
-        self.noise = dict(noise)
+        self.noise = noise
         self.window_ns = as_stamp(window_ns, "window_ns")
         if self.window_ns < 0:
             raise ValueError(f"window_ns must be >= 0, got {window_ns}")
@@ -259,7 +259,7 @@ class StreamingLocalizer:
                 ms = np.ones(len(xy))
             else:
                 xy, nov = self.localizer.predict_with_novelty(batch, rotations=self.rotations)
-                ms = novelty_scale(nov, self.novelty_threshold)
+                ms = noise_novelty_scale(self.noise, nov, self.novelty_threshold)
             self.n_images_ += len(keep)
             for i, z, m in zip(keep, xy, ms):
                 z = np.asarray(z, dtype=np.float64)
