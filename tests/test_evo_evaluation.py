@@ -304,6 +304,7 @@ def test_cli_fused_track_as_tum_with_headings_matches_evo(tiny, tmp_path, capsys
     code, out, err = run(capsys, "localize", tiny["model"], tiny["root"] / "data", "--run", "test", "--odometry",
                          "--out", tmp_path / "f.tum", "--out-ground-truth", tmp_path / "g.tum", "--no-progress")
     assert code == 0, err
+    assert "images farther from the training run than its own images are" in out + err  # the novelty's summary
     est = file_interface.read_tum_trajectory_file(str(tmp_path / "f.tum"))
     gt = file_interface.read_tum_trajectory_file(str(tmp_path / "g.tum"))
     # beside the fused track (headings) the truth carries its heading

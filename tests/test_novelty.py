@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 from sfanav.experiments.filter_cases import make_filter_case
 from sfanav.localization.novelty import NoveltyReference
 from sfanav.odometry import OdometryEKF, fuse, fuse_images, noise_for_localizer, novelty_exponent, novelty_scale
-from sfanav.odometry.fusion import check_noise
+from sfanav.odometry.fusion import check_noise, noise_novelty_scale
 from sfanav.odometry.streaming import StreamingLocalizer
 
 
@@ -209,6 +209,8 @@ def test_fuse_images_and_the_stream_scale_the_noise_alike(tiny):
     out += live.flush()
     assert len(out) == len(est)
     assert np.allclose(np.array([e.pose for e in out]), fused, atol=1e-9)
+    ms = noise_novelty_scale(loc.info["ekf_noise"], nov, 0.5)
+    assert live.n_novel_ == int((ms > 1).sum()) and live.max_measurement_scale_ == pytest.approx(ms.max())
     with pytest.raises(ValueError, match="novelty_threshold"):
         StreamingLocalizer(loc, novelty_threshold=0.0)
 

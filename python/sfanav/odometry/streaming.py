@@ -156,6 +156,11 @@ class StreamingLocalizer:
         Whether the start pose is known.
     n_reinitializations_, n_jumps_, n_gaps_ : int
         Filter events so far.
+    n_novel_ : int
+        Images whose estimate's measurement noise their novelty scaled up
+        (0 without novelty scaling).
+    max_measurement_scale_ : float
+        The largest such factor so far (1 when none).
     init_error_ : str or None
         Why no start pose was found when :meth:`flush` emitted images
         without a fused pose.
@@ -228,6 +233,8 @@ class StreamingLocalizer:
         self.dropped_: Counter = Counter()
         self.initialized_ = False
         self.n_reinitializations_ = self.n_jumps_ = self.n_gaps_ = 0
+        self.n_novel_ = 0
+        self.max_measurement_scale_ = 1.0
         self.init_error_: str | None = None
 
     # ------------------------------------------------------------------ input
@@ -260,6 +267,8 @@ class StreamingLocalizer:
             else:
                 xy, nov = self.localizer.predict_with_novelty(batch, rotations=self.rotations)
                 ms = noise_novelty_scale(self.noise, nov, self.novelty_threshold)
+                self.n_novel_ += int((ms > 1).sum())
+                self.max_measurement_scale_ = max(self.max_measurement_scale_, float(ms.max(initial=1.0)))
             self.n_images_ += len(keep)
             for i, z, m in zip(keep, xy, ms):
                 z = np.asarray(z, dtype=np.float64)

@@ -231,6 +231,9 @@ def _run_localize(args: argparse.Namespace) -> int:
         fused = np.array([e.pose for e in preds])
         log(f"fused track: {live.n_reinitializations_} re-initialisation(s) from the single-image estimates, "
             f"{live.n_jumps_} odometry jump(s)")
+        if live.novelty_threshold is not None:
+            log(f"novelty: {live.n_novel_} of {live.n_images_} images farther from the training run than its own "
+                f"images are; their estimates weighed as up to {live.max_measurement_scale_:.1f}x noisier")
     frames = src.frames if src.frames is not None else np.arange(len(xy))
     if view is not None:
         if live is not None:  # the last batch's estimates, emitted at flush
