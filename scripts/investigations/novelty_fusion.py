@@ -106,7 +106,7 @@ def noises(d: dict[str, np.ndarray], model: Path) -> dict[str, tuple[dict[str, f
         out[f"noise chosen with novelty {thr:g}, grid to 0.8 m"] = (
             noise_for_localizer(*args, novelty_threshold=thr, measurement_noise=WIDE_GRID), thr)
     # the default of 2026-12-06 (the noise in proportion to the novelty throughout); the one above, at threshold 1
-    # with the grid to 0.8 m, is the library's since 2026-12-07 (the exponent fitted on the training run)
+    # with the grid to 0.8 m, is the library's since the evening of that day (the exponent fitted on the training run)
     out["noise chosen with novelty 1, grid to 0.8 m, proportional"] = (
         noise_for_localizer(*args, novelty_threshold=1.0, measurement_noise=WIDE_GRID, fit_exponent=False), 1.0)
     return out

@@ -191,7 +191,7 @@ def noise_for_localizer(localizer: Any, features: Any, targets: Any, odometry: A
     :data:`NOVELTY_KNEE_QUANTILE`, returned as ``novelty_knee``; in
     proportion beyond): a scene whose estimates stay precise on novel
     images keeps trusting them (``fit_exponent`` False: in proportion
-    throughout, the noise of models trained before 2026-12-07, without
+    throughout, as in models whose noise predates the exponent, without
     those keys). ``kwargs`` go to :func:`noise_from_run`.
     Raises ValueError as those."""
     n = len(np.asarray(targets))
@@ -308,7 +308,7 @@ def noise_novelty_scale(noise: Mapping[str, float], novelty: Any,
                         threshold: float = NOVELTY_THRESHOLD) -> np.ndarray:
     """:func:`novelty_scale` of ``novelty`` (N,) with the exponent and knee a
     filter noise mapping holds (``novelty_exponent``, ``novelty_knee``;
-    without them: proportional, the models trained before 2026-12-07)."""
+    without them, as in models whose noise predates these keys: proportional)."""
     return novelty_scale(novelty, threshold, exponent=noise.get("novelty_exponent", 1.0),
                          knee=noise.get("novelty_knee", np.inf))
 
