@@ -335,8 +335,8 @@ def fuse(odometry: Any, estimates: Any, noise: Mapping[str, float], *, start_pos
     images' novelty (:meth:`sfanav.Localizer.novelty`), scales each
     estimate's measurement noise by :func:`novelty_scale` with
     ``novelty_threshold`` and the noise's ``novelty_exponent`` and
-    ``novelty_knee`` where it gives them; the start pose's fit then skips estimates above
-    it where at least half of the first ones remain.
+    ``novelty_knee`` where it gives them; the start pose's fit then skips
+    estimates above it where at least half of the first ones remain.
 
     Example
     -------

@@ -134,8 +134,8 @@ class StreamingLocalizer:
         :func:`~sfanav.odometry.fusion.novelty_scale` of its image's novelty
         (:meth:`sfanav.Localizer.novelty`) with the noise's
         ``novelty_exponent`` and ``novelty_knee``, as
-        :func:`sfanav.odometry.fuse` does. None, or a model file without a novelty reference (one line
-        through ``log`` says so): not scaled.
+        :func:`sfanav.odometry.fuse` does. None, or a model file without a
+        novelty reference (one line through ``log`` says so): not scaled.
     on_estimate : callable, optional
         Called as ``on_estimate(stamp_ns, estimate)`` (estimate: ndarray (2,),
         metres, map frame) as soon as an image's single-image estimate is
