@@ -37,7 +37,7 @@ from typing import Any
 import numpy as np
 
 from .._checks import as_matrix, check_int, check_nonneg_float, check_positive_float, check_same_length
-from ..localization.error_metrics import align
+from ..localization.error_metrics import align, euclidean_errors
 from ..localization.novelty import NoveltyReference
 from ..localization.readout_selection import block_folds, cross_val_predict
 from .dead_reckoning import as_poses, wrap_angle
@@ -206,7 +206,7 @@ def noise_for_localizer(localizer: Any, features: Any, targets: Any, odometry: A
         nov[out] = NoveltyReference().fit(F[train]).score(F[out])
     shape = {}
     if fit_exponent:
-        shape = {"novelty_exponent": novelty_exponent(np.hypot(*(held - np.asarray(targets, dtype=float)).T), nov),
+        shape = {"novelty_exponent": novelty_exponent(euclidean_errors(held, targets), nov),
                  "novelty_knee": max(float(novelty_threshold), float(np.quantile(nov, NOVELTY_KNEE_QUANTILE)))}
     kwargs["measurement_scale"] = noise_novelty_scale(shape, nov, novelty_threshold)
     kwargs.setdefault("measurement_noise", MEASUREMENT_NOISE_GRID)
