@@ -75,6 +75,14 @@ def test_crossover(bench):
     assert bench.crossover([10, 100], [20.0, 30.0], [10.0, 10.0]) == 10.0
 
 
+def test_extrapolated_query_time_never_falls(bench):
+    assert bench.extrapolate_query_ms([(1000, 1.0), (2000, 2.0)], 4000) == pytest.approx(4.0)
+    assert bench.extrapolate_query_ms([(100, 1.0), (150, 1.5), (2000, 5.0), (4000, 7.0)], 8000) == pytest.approx(11.0)
+    # timing noise: the second size measured faster than the first -> the larger one pro rata, not negative
+    assert bench.extrapolate_query_ms([(100, 0.9), (150, 0.5)], 600) == pytest.approx(2.0)
+    assert bench.extrapolate_query_ms([(100, 0.5)], 600) == pytest.approx(3.0)
+
+
 def test_bad_sizes(bench):
     with pytest.raises(SystemExit):
         bench.main(["--small", "--sizes", "a,b"])
