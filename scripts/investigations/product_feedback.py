@@ -29,7 +29,7 @@ from sfanav.localization import baselines
 from sfanav.localization.error_metrics import align, localization_metrics
 from sfanav.localization.recipe import default_network
 from sfanav.loopclosure import make_detector
-from sfanav.odometry.fusion import fuse
+from sfanav.odometry.fusion import fuse_images
 from sfanav.pipeline import train_localizer
 
 
@@ -79,12 +79,15 @@ def main() -> None:
                 world = align(loc.predict(train.images), train.xy)  # scoring only
             name = f"sfanav default{fb} [{sup}]"
             entry["training (s)"][name] = time.perf_counter() - t0
-            est = loc.predict(test.images)
+            fused = test.has_odometry and "ekf_noise" in loc.info
+            if fused:  # the product's path: the measurement noise scaled by each image's novelty
+                est, f = fuse_images(loc, test.images, test.odometry)
+            else:
+                est = loc.predict(test.images)
             scored = world.apply(est) if world is not None else est
             entry["MED (m)"][name] = localization_metrics(scored, test.xy)["med"]
-            if test.has_odometry and "ekf_noise" in loc.info:
-                f = fuse(test.odometry, est, loc.info["ekf_noise"])[:, :2]
-                f = world.apply(f) if world is not None else f
+            if fused:
+                f = world.apply(f[:, :2]) if world is not None else f[:, :2]
                 entry["MED (m)"][f"sfanav default{fb} [{sup}, fused]"] = localization_metrics(f, test.xy)["med"]
             print(f"{key}: {name} {entry['MED (m)'][name]:.3f} m ({entry['training (s)'][name]:.0f} s)", flush=True)
             res[key] = entry
