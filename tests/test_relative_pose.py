@@ -233,3 +233,84 @@ def test_warp_scores_bad_input():
         _core.warp_scores(a, a, np.zeros((1, 16)), np.zeros((3, 1)))
     with pytest.raises(ValueError, match="NaN"):
         _core.warp_scores(a, a, np.full((1, 16), np.nan), np.zeros((2, 1)))
+
+
+def _landmark_panorama(L, amp, pose, W=180, width=1.2):
+    """Gray panorama (K, W) of point landmarks ``L`` (n, 2), each a Gaussian
+    bump ``width`` columns wide with per-row amplitudes ``amp`` (n, K), seen
+    from ``pose`` (x, y, heading); columns as :func:`relative_poses` reads them."""
+    d = L - pose[:2]
+    b = np.arctan2(d[:, 1], d[:, 0]) - pose[2]
+    c = (W / 2 - 0.5 - b * W / (2 * np.pi)) % W
+    dc = (np.arange(W)[None, :] - c[:, None] + W / 2) % W - W / 2
+    return amp.T @ np.exp(-0.5 * (dc / width) ** 2)
+
+
+def test_min_warping_is_not_pulled_by_landmarks_at_unequal_distances():
+    """Landmarks 1.5-3 m away on one side and 20-40 m on the other: the one
+    distance per hypothesis of the warping errs by degrees in the heading and
+    by tens of degrees in the baseline direction; min-warping (a distance per
+    column) stays within about a degree and a few degrees."""
+    errs = {"warping": [], "min-warping": []}
+    for seed in range(6):
+        rng = np.random.default_rng(seed)
+        b = rng.uniform(-np.pi, np.pi, 60)
+        r = np.where(b > 0, rng.uniform(1.5, 3.0, 60), rng.uniform(20, 40, 60))
+        L, amp = np.c_[r * np.cos(b), r * np.sin(b)], rng.uniform(0.2, 1.0, (60, 4))
+        a = rng.uniform(-np.pi, np.pi)
+        p0, p1 = np.r_[0.0, 0.0, 0.3], np.r_[0.5 * np.cos(a), 0.5 * np.sin(a), 0.3 + rng.uniform(-0.3, 0.3)]
+        X = np.stack([_landmark_panorama(L, amp, p0), _landmark_panorama(L, amp, p1)])
+        for method, e in errs.items():
+            rp = relative_poses(X, [0], [1], method=method)
+            e.append((abs(_wrapdeg(rp.dtheta[0] - (p1[2] - p0[2]))), abs(_wrapdeg(rp.bearing[0] - (a - p0[2])))))
+    w, m = np.median(errs["warping"], axis=0), np.median(errs["min-warping"], axis=0)
+    assert m[0] < 1.0 and m[0] < 0.5 * w[0], (w, m)
+    assert m[1] < 10.0 and m[1] < 0.5 * w[1], (w, m)
+
+
+def test_min_warping_on_the_garden_and_its_reference(scene):
+    X, P, i, j = scene
+    rp = relative_poses(X, i, j, method="min-warping")
+    bearing, dtheta, _ = _truth(P, i, j)
+    assert np.abs(_wrapdeg(rp.dtheta - dtheta)).max() < 4.0
+    assert np.median(np.abs(_wrapdeg(rp.bearing - bearing))) < 15.0
+    want = reference_warping(X, i, j, method="min-warping")
+    np.testing.assert_allclose(rp.dtheta, want[:, 0], atol=1e-9)
+    np.testing.assert_allclose(rp.bearing, want[:, 1], atol=1e-9)
+    np.testing.assert_allclose(rp.sigma_bearing, want[:, 3], rtol=1e-7)
+    with pytest.raises(ValueError, match="method"):
+        relative_poses(X, i, j, method="minwarp")
+    with pytest.raises(ValueError, match="method"):
+        reference_warping(X, i, j, method="minwarp")
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.integers(1, 4), st.integers(8, 40), st.integers(1, 6), st.integers(1, 3), st.integers(0, 10_000))
+def test_min_warp_scores_property(rows, width, n_shifts, n_ratios, seed):
+    """sfanav._core.warp_scores with group = the ratios per direction equals
+    the numpy reference's min-warping, and is never above the plain warping's
+    best ratio of each direction."""
+    from sfanav import _core
+    from sfanav.loopclosure.relative_pose import _scores_reference
+
+    rng = np.random.default_rng(seed)
+    a, b = rng.normal(size=(2, 2, rows, width))
+    cols = rng.uniform(0, width, size=(3, n_ratios, width))
+    shifts = rng.uniform(-2 * width, 2 * width, size=(2, n_shifts))
+    flat = cols.reshape(3 * n_ratios, width)
+    got = _core.warp_scores(a, b, flat, shifts, n_ratios)
+    plain = _core.warp_scores(a, b, flat, shifts).reshape(2, 3, n_ratios, n_shifts)
+    assert got.shape == (2, 3, n_shifts)
+    for p in range(2):
+        want = _scores_reference(a[p], b[p], cols, shifts[p], min_warping=True)[:, 0]
+        np.testing.assert_allclose(got[p], want, rtol=1e-10, atol=1e-10)
+    assert np.all(got <= plain.min(axis=2) + 1e-10)
+
+
+def test_min_warp_scores_bad_group():
+    from sfanav import _core
+
+    a = np.zeros((2, 3, 16))
+    for group in (0, 3):
+        with pytest.raises(ValueError, match="groups"):
+            _core.warp_scores(a, a, np.zeros((4, 16)), np.zeros((2, 1)), group)

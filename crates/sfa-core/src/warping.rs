@@ -18,6 +18,18 @@
 //!               f = floor(c[h, u] + s) mod width,  t = frac(c[h, u] + s)
 //! ```
 //!
+//! Min-warping (Moeller 2009, "Local visual homing by warping of
+//! two-dimensional images") lets every column have its own landmark
+//! distance: the hypotheses come in groups (one baseline direction, its
+//! distance ratios), and a group's score takes, column by column, the best
+//! ratio of the group before the mean:
+//!
+//! ```text
+//! M[g, s]     = mean_u min_{h in g} ((1 - t) D[u, f] + t D[u, f + 1])
+//! ```
+//!
+//! ([`min_warp_scores`]; groups of one are [`warp_scores`]).
+//!
 //! The pairs are scored in parallel (rayon), each with its own `width x
 //! width` distance table. Accumulation is in `f64`.
 
@@ -50,6 +62,49 @@ pub fn warp_scores(
     shifts: &[f64],
     n_shifts: usize,
 ) -> Result<Vec<f64>> {
+    scores(a, b, pairs, rows, width, columns, 1, shifts, n_shifts)
+}
+
+/// Min-warping scores of `pairs` pairs of panoramas: as [`warp_scores`],
+/// with the `hypotheses` rows of `columns` taken in consecutive groups of
+/// `group` (one baseline direction and its distance ratios each); each
+/// column of `a` takes the group's best hypothesis before the mean over the
+/// columns (see the module docs).
+///
+/// Returns `pairs x (hypotheses / group) x n_shifts` scores (row-major).
+///
+/// Errors: as [`warp_scores`], and a zero `group` or hypotheses that do not
+/// split into groups of `group`.
+#[allow(clippy::too_many_arguments)]
+pub fn min_warp_scores(
+    a: &[f64],
+    b: &[f64],
+    pairs: usize,
+    rows: usize,
+    width: usize,
+    columns: &[f64],
+    group: usize,
+    shifts: &[f64],
+    n_shifts: usize,
+) -> Result<Vec<f64>> {
+    if group == 0 {
+        return Err(SfaError::InvalidArgument("min-warping needs groups of at least one hypothesis".into()));
+    }
+    scores(a, b, pairs, rows, width, columns, group, shifts, n_shifts)
+}
+
+#[allow(clippy::too_many_arguments)]
+fn scores(
+    a: &[f64],
+    b: &[f64],
+    pairs: usize,
+    rows: usize,
+    width: usize,
+    columns: &[f64],
+    group: usize,
+    shifts: &[f64],
+    n_shifts: usize,
+) -> Result<Vec<f64>> {
     if width == 0 || rows == 0 {
         return Err(SfaError::InvalidArgument(format!(
             "warping needs images of at least one row and column, got {rows} x {width}"
@@ -69,6 +124,12 @@ pub fn warp_scores(
         )));
     }
     let hyps = columns.len() / width;
+    if hyps % group != 0 {
+        return Err(SfaError::InvalidArgument(format!(
+            "{hyps} warping hypotheses do not split into groups of {group}"
+        )));
+    }
+    let groups = hyps / group;
     if n_shifts == 0 {
         return Err(SfaError::InvalidArgument("warping needs at least one relative heading (shift)".into()));
     }
@@ -90,26 +151,28 @@ pub fn warp_scores(
             return Err(SfaError::NonFinite { what, row: at / cols, col: at % cols });
         }
     }
-    let out_len = memory::bytes_of(8, &[pairs, hyps, n_shifts]);
-    let table = memory::bytes_of(8, &[width, width, rayon::current_num_threads().max(1)]);
+    let out_len = memory::bytes_of(8, &[pairs, groups, n_shifts]);
+    let threads = rayon::current_num_threads().max(1);
+    let table = memory::bytes_of(8, &[width, width, threads]);
+    let minima = if group > 1 { memory::bytes_of(8, &[width, n_shifts, threads]) } else { Some(0) };
     memory::check(
         || format!("warping scores of {pairs} pairs x {hyps} hypotheses x {n_shifts} shifts"),
-        memory::total(&[out_len, table]),
+        memory::total(&[out_len, table, minima]),
     )?;
-    let mut out = vec![0.0f64; pairs * hyps * n_shifts];
+    let mut out = vec![0.0f64; pairs * groups * n_shifts];
     if pairs == 0 {
         return Ok(out);
     }
-    out.par_chunks_mut(hyps * n_shifts).enumerate().for_each(|(p, dst)| {
+    out.par_chunks_mut(groups * n_shifts).enumerate().for_each(|(p, dst)| {
         let pa = &a[p * image..(p + 1) * image];
         let pb = &b[p * image..(p + 1) * image];
         let sh = &shifts[p * n_shifts..(p + 1) * n_shifts];
-        score_pair(pa, pb, rows, width, columns, hyps, sh, dst);
+        score_pair(pa, pb, rows, width, columns, hyps, group, sh, dst);
     });
     Ok(out)
 }
 
-/// The scores of one pair into `dst` (`hyps x shifts.len()`).
+/// The scores of one pair into `dst` (`hyps / group x shifts.len()`).
 #[allow(clippy::too_many_arguments)]
 fn score_pair(
     a: &[f64],
@@ -118,6 +181,7 @@ fn score_pair(
     width: usize,
     columns: &[f64],
     hyps: usize,
+    group: usize,
     shifts: &[f64],
     dst: &mut [f64],
 ) {
@@ -165,38 +229,58 @@ fn score_pair(
     let mut base = vec![0usize; w];
     let mut t = vec![0.0f64; w];
     let mut acc = vec![0.0f64; ns];
-    for h in 0..hyps {
-        let cols = &columns[h * w..(h + 1) * w];
+    // min-warping: the best value so far of every (column, shift) over the group's hypotheses
+    let mut best = if group > 1 { vec![f64::INFINITY; w * ns] } else { Vec::new() };
+    for g in 0..hyps / group {
         acc.iter_mut().for_each(|x| *x = 0.0);
-        let mut si0 = 0;
-        while si0 < ns {
-            // the run of shifts with the fraction of shift si0
-            let fr = frac[si0];
-            let mut si1 = si0 + 1;
-            while si1 < ns && frac[si1] == fr {
-                si1 += 1;
-            }
-            for (u, &c0) in cols.iter().enumerate() {
-                let c = c0 + fr;
-                let f = c.floor();
-                t[u] = c - f;
-                base[u] = (f.rem_euclid(wf) as usize) % w;
-            }
-            for u in 0..w {
-                let row = &d[u * stride..(u + 1) * stride];
-                let (bu, tu) = (base[u], t[u]);
-                for si in si0..si1 {
-                    let mut f0 = bu + whole[si];
-                    if f0 >= w {
-                        f0 -= w;
+        best.iter_mut().for_each(|x| *x = f64::INFINITY);
+        for h in g * group..(g + 1) * group {
+            let cols = &columns[h * w..(h + 1) * w];
+            let mut si0 = 0;
+            while si0 < ns {
+                // the run of shifts with the fraction of shift si0
+                let fr = frac[si0];
+                let mut si1 = si0 + 1;
+                while si1 < ns && frac[si1] == fr {
+                    si1 += 1;
+                }
+                for (u, &c0) in cols.iter().enumerate() {
+                    let c = c0 + fr;
+                    let f = c.floor();
+                    t[u] = c - f;
+                    base[u] = (f.rem_euclid(wf) as usize) % w;
+                }
+                for u in 0..w {
+                    let row = &d[u * stride..(u + 1) * stride];
+                    let (bu, tu) = (base[u], t[u]);
+                    for si in si0..si1 {
+                        let mut f0 = bu + whole[si];
+                        if f0 >= w {
+                            f0 -= w;
+                        }
+                        let v = row[f0] + tu * (row[f0 + 1] - row[f0]);
+                        if group > 1 {
+                            let m = &mut best[u * ns + si];
+                            if v < *m {
+                                *m = v;
+                            }
+                        } else {
+                            acc[si] += v;
+                        }
                     }
-                    acc[si] += row[f0] + tu * (row[f0 + 1] - row[f0]);
+                }
+                si0 = si1;
+            }
+        }
+        if group > 1 {
+            for u in 0..w {
+                for (a_si, m) in acc.iter_mut().zip(&best[u * ns..(u + 1) * ns]) {
+                    *a_si += m;
                 }
             }
-            si0 = si1;
         }
         for si in 0..ns {
-            dst[h * ns + si] = acc[si] / wf;
+            dst[g * ns + si] = acc[si] / wf;
         }
     }
 }
@@ -258,6 +342,65 @@ mod tests {
                 assert!((g - e).abs() <= 1e-12 * (1.0 + e.abs()), "{g} vs {e}");
             }
         }
+    }
+
+    /// Min-warping's formula, evaluated directly: per column the group's least interpolated distance.
+    fn naive_min(a: &[f64], b: &[f64], rows: usize, w: usize, columns: &[f64], group: usize, shifts: &[f64]) -> Vec<f64> {
+        let hyps = columns.len() / w;
+        let mut out = Vec::new();
+        for g in 0..hyps / group {
+            for &s in shifts {
+                let mut acc = 0.0;
+                for u in 0..w {
+                    let mut m = f64::INFINITY;
+                    for h in g * group..(g + 1) * group {
+                        let c = columns[h * w + u] + s;
+                        let f = c.floor();
+                        let t = c - f;
+                        let f0 = (f as i64).rem_euclid(w as i64) as usize;
+                        let f1 = (f0 + 1) % w;
+                        let dist = |v: usize| (0..rows).map(|k| (a[k * w + u] - b[k * w + v]).powi(2)).sum::<f64>();
+                        m = m.min((1.0 - t) * dist(f0) + t * dist(f1));
+                    }
+                    acc += m;
+                }
+                out.push(acc / w as f64);
+            }
+        }
+        out
+    }
+
+    #[test]
+    fn min_warping_matches_its_formula() {
+        let (pairs, rows, w, group) = (2, 3, 18, 3);
+        let a = lcg(pairs * rows * w, 11);
+        let b = lcg(pairs * rows * w, 12);
+        let columns: Vec<f64> = lcg(6 * w, 13).iter().map(|v| (v + 0.5) * w as f64).collect();
+        let shifts: Vec<f64> = vec![-2.0, 0.0, 0.5, 1.0, 7.25, -3.0, 3.0, 3.5];
+        let got = min_warp_scores(&a, &b, pairs, rows, w, &columns, group, &shifts, 4).unwrap();
+        assert_eq!(got.len(), pairs * 2 * 4);
+        let plain = warp_scores(&a, &b, pairs, rows, w, &columns, &shifts, 4).unwrap();
+        for p in 0..pairs {
+            let img = p * rows * w..(p + 1) * rows * w;
+            let want = naive_min(&a[img.clone()], &b[img], rows, w, &columns, group, &shifts[p * 4..(p + 1) * 4]);
+            for (gi, e) in got[p * 8..(p + 1) * 8].iter().zip(&want) {
+                assert!((gi - e).abs() <= 1e-12 * (1.0 + e.abs()), "{gi} vs {e}");
+            }
+            // the per-column minimum is never above any one hypothesis of its group
+            for gr in 0..2 {
+                for si in 0..4 {
+                    let m = got[p * 8 + gr * 4 + si];
+                    for h in gr * group..(gr + 1) * group {
+                        assert!(m <= plain[p * 24 + h * 4 + si] + 1e-12);
+                    }
+                }
+            }
+        }
+        // groups of one are the plain warping
+        let one = min_warp_scores(&a, &b, pairs, rows, w, &columns, 1, &shifts, 4).unwrap();
+        assert_eq!(one, plain);
+        assert!(min_warp_scores(&a, &b, pairs, rows, w, &columns, 0, &shifts, 4).is_err());
+        assert!(min_warp_scores(&a, &b, pairs, rows, w, &columns, 4, &shifts, 4).is_err());
     }
 
     #[test]

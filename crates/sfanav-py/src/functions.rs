@@ -54,17 +54,21 @@ pub(crate) fn solve_generalized<'py>(
     Ok((vec1(py, g.values), mat_to_py(py, g.vectors)?, g.rank, vec1(py, g.dropped)))
 }
 
-/// warp_scores(a, b, columns, shifts) -> ndarray (pairs, hypotheses, shifts):
-/// the warping method's scores of pairs of panoramas (`a`, `b`: (pairs,
-/// rows, width) float64; `columns`: (hypotheses, width); `shifts`: (pairs,
-/// n_shifts)), computed in parallel with the GIL released.
+/// warp_scores(a, b, columns, shifts, group=1) -> ndarray (pairs,
+/// hypotheses / group, shifts): the warping method's scores of pairs of
+/// panoramas (`a`, `b`: (pairs, rows, width) float64; `columns`:
+/// (hypotheses, width); `shifts`: (pairs, n_shifts)), computed in parallel
+/// with the GIL released; `group` > 1: min-warping over consecutive groups
+/// of that many hypotheses (each column's best hypothesis of its group).
 #[pyfunction]
+#[pyo3(signature = (a, b, columns, shifts, group = 1))]
 pub(crate) fn warp_scores<'py>(
     py: Python<'py>,
     a: numpy::PyReadonlyArray3<'py, f64>,
     b: numpy::PyReadonlyArray3<'py, f64>,
     columns: numpy::PyReadonlyArray2<'py, f64>,
     shifts: numpy::PyReadonlyArray2<'py, f64>,
+    group: usize,
 ) -> PyResult<Bound<'py, PyAny>> {
     let (sa, sb) = (a.shape().to_vec(), b.shape().to_vec());
     if sa != sb {
@@ -85,13 +89,19 @@ pub(crate) fn warp_scores<'py>(
             shifts.shape()[0]
         )));
     }
-    let hyps = columns.shape()[0];
+    if group == 0 || columns.shape()[0] % group != 0 {
+        return Err(pyo3::exceptions::PyValueError::new_err(format!(
+            "warp_scores: {} hypotheses do not split into groups of {group}",
+            columns.shape()[0]
+        )));
+    }
+    let groups = columns.shape()[0] / group;
     let n_shifts = shifts.shape()[1];
     let own = |x: numpy::ndarray::ArrayViewD<'_, f64>| x.iter().copied().collect::<Vec<f64>>();
     let (va, vb) = (own(a.as_array().into_dyn()), own(b.as_array().into_dyn()));
     let (vc, vs) = (own(columns.as_array().into_dyn()), own(shifts.as_array().into_dyn()));
-    let out = run(py, || sfa_core::warp_scores(&va, &vb, pairs, rows, width, &vc, &vs, n_shifts))?;
-    let arr = numpy::ndarray::Array3::from_shape_vec((pairs, hyps, n_shifts), out)
+    let out = run(py, || sfa_core::min_warp_scores(&va, &vb, pairs, rows, width, &vc, group, &vs, n_shifts))?;
+    let arr = numpy::ndarray::Array3::from_shape_vec((pairs, groups, n_shifts), out)
         .map_err(|e| pyo3::exceptions::PyRuntimeError::new_err(e.to_string()))?;
     Ok(numpy::PyArray3::from_owned_array(py, arr).into_any())
 }

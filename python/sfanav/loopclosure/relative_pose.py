@@ -27,6 +27,13 @@ neighbouring pixels), whose spread gives the standard deviations of the
 baseline direction and the relative heading and their correlation: flat
 scores (a featureless scene) give a spread over the whole circle.
 
+``method="min-warping"`` (Moeller 2009, "Local visual homing by warping
+of two-dimensional images") drops the one-distance assumption: each column
+of ``i`` takes its own best ratio of the grid (its landmark's distance),
+and a hypothesis is a baseline direction and a heading only. Landmarks at
+unequal distances then no longer pull the direction and the heading
+towards the nearer ones (docs/relative-pose.md, "Min-warping").
+
 The warping gives direction, not distance: ``nu`` mixes the distance of the
 frames with the unknown distance of the landmarks. The distance comes from
 outside: a prior (``distance``, e.g. the odometry's or the lane spacing)
@@ -62,6 +69,10 @@ DEFAULT_TEMPERATURE = 48.0
 """Inflation of the pseudo-posterior's temperature over independent pixel
 noise (neighbouring pixels are correlated); calibrated on the measurement in
 docs/relative-pose.md."""
+
+METHODS = ("warping", "min-warping")
+"""The warping variants :func:`relative_poses` offers: one landmark distance
+per hypothesis, or one per column (min-warping)."""
 
 DEFAULT_DISTANCE_FRACTION = 0.3
 """Standard deviation of a distance prior, as a fraction of it, when
@@ -175,22 +186,24 @@ def _pair_setup(a: np.ndarray, b: np.ndarray, window: int) -> tuple[np.ndarray, 
     return na, nb, (s0 + np.arange(-window, window + 1)).astype(float)
 
 
-def _scores_reference(na: np.ndarray, nb: np.ndarray, cols: np.ndarray, shifts: np.ndarray) -> np.ndarray:
-    """The warping scores (A, N, S) of one pair in numpy: the reference the
-    core's :func:`sfanav._core.warp_scores` is tested against."""
+def _scores_reference(na: np.ndarray, nb: np.ndarray, cols: np.ndarray, shifts: np.ndarray,
+                      min_warping: bool = False) -> np.ndarray:
+    """The warping scores (A, N, S) of one pair in numpy (min-warping: (A, 1,
+    S), each column's best ratio): the reference the core's
+    :func:`sfanav._core.warp_scores` is tested against."""
     W = na.shape[1]
     D = (na * na).sum(0)[:, None] + (nb * nb).sum(0)[None, :] - 2.0 * (na.T @ nb)  # D[u, v]
     flat = D.ravel()
     A, N, _ = cols.shape
     rowbase = np.arange(W) * W
-    S = np.empty((A, N, len(shifts)))
+    S = np.empty((A, 1 if min_warping else N, len(shifts)))
     for a0 in range(0, A, 16):
         c = cols[a0 : a0 + 16, :, None, :] + shifts[None, None, :, None]  # (a, N, S, W)
         f = np.floor(c)
         t = c - f
         f = f.astype(np.int64) % W
         d = flat[rowbase + f] * (1 - t) + flat[rowbase + (f + 1) % W] * t
-        S[a0 : a0 + 16] = d.mean(axis=3)
+        S[a0 : a0 + 16] = d.min(axis=1, keepdims=True).mean(axis=3) if min_warping else d.mean(axis=3)
     return S
 
 
@@ -231,9 +244,10 @@ _CHUNK = 64
 
 
 def _warp_pairs(R: np.ndarray, i: np.ndarray, j: np.ndarray, cols: np.ndarray, alphas: np.ndarray,
-                temperature: float, window: int) -> np.ndarray:
+                temperature: float, window: int, min_warping: bool = False) -> np.ndarray:
     """(M, 6) rows of :func:`_pose_from_scores` for the pairs ``(i, j)`` of
-    the row images ``R`` (n, K, W); the scores in the Rust core, in parallel."""
+    the row images ``R`` (n, K, W); the scores in the Rust core, in parallel
+    (min-warping: each column's best ratio)."""
     from .. import _core
 
     _, K, W = R.shape
@@ -248,7 +262,10 @@ def _warp_pairs(R: np.ndarray, i: np.ndarray, j: np.ndarray, cols: np.ndarray, a
         a = np.stack([st[0] for _, st in setups])
         b = np.stack([st[1] for _, st in setups])
         sh = np.stack([st[2] for _, st in setups])
-        S = _core.warp_scores(a, b, flat_cols, sh).reshape(len(setups), A, N, sh.shape[1])
+        if min_warping:
+            S = _core.warp_scores(a, b, flat_cols, sh, N).reshape(len(setups), A, 1, sh.shape[1])
+        else:
+            S = _core.warp_scores(a, b, flat_cols, sh).reshape(len(setups), A, N, sh.shape[1])
         for (k, st), Sk in zip(setups, S):
             out[k] = _pose_from_scores(Sk, alphas, st[2], W, K, temperature)
     return out
@@ -333,7 +350,7 @@ def _per_pair(v: Any, name: str, m: int, positive: bool) -> np.ndarray:
 def relative_poses(images: Any, i_idx: Any, j_idx: Any, *, distance: Any = None, distance_sigma: Any = None,
                    features: Any = None, gradient: Any = None, rows: Any = None, n_bearings: int = 96,
                    ratios: Any = DEFAULT_RATIOS, temperature: float = DEFAULT_TEMPERATURE,
-                   max_turn_deg: float | None = 30.0) -> RelativePoses:
+                   max_turn_deg: float | None = 30.0, method: str = "warping") -> RelativePoses:
     """Relative poses (heading, baseline direction, offset) of pairs of
     panoramas by the warping method, with a covariance.
 
@@ -368,6 +385,9 @@ def relative_poses(images: Any, i_idx: Any, j_idx: Any, *, distance: Any = None,
         shift with None (slower). The window also bounds ``sigma_dtheta``
         (a featureless scene then reports about ``max_turn_deg / sqrt(3)``
         rather than ``inf``; ``sigma_bearing`` still tells).
+    method : "warping" or "min-warping"
+        One landmark distance (ratio) per hypothesis, or each column's best
+        ratio (min-warping; see the module's docs). Same cost.
 
     Returns
     -------
@@ -379,7 +399,7 @@ def relative_poses(images: Any, i_idx: Any, j_idx: Any, *, distance: Any = None,
         Images that are not a batch of panoramas, indices that are not
         1-D integers within the frames or of different lengths, a
         non-positive distance or sigma, ``features`` without ``gradient``
-        (or the reverse), ratios outside (0, 1).
+        (or the reverse), ratios outside (0, 1), an unknown method.
 
     Examples
     --------
@@ -405,6 +425,8 @@ def relative_poses(images: Any, i_idx: Any, j_idx: Any, *, distance: Any = None,
     if nus.size == 0 or not np.all((nus > 0) & (nus < 1)):
         raise ValueError(f"ratios must be numbers in (0, 1), got {ratios!r}")
     temp = check_positive_float(temperature, "temperature")
+    if method not in METHODS:
+        raise ValueError(f"method must be one of {METHODS}, got {method!r}")
     if (features is None) != (gradient is None):
         raise ValueError("features and gradient go together: give both or neither")
 
@@ -434,7 +456,7 @@ def relative_poses(images: Any, i_idx: Any, j_idx: Any, *, distance: Any = None,
     cols = _warp_columns(W, alphas, nus)
     win = W // 2 if max_turn_deg is None else int(np.ceil(check_positive_float(max_turn_deg, "max_turn_deg")
                                                           * W / 360.0))
-    out = _warp_pairs(R, i, j, cols, alphas, temp, win)
+    out = _warp_pairs(R, i, j, cols, alphas, temp, win, min_warping=method == "min-warping")
     dth, brg, sth, sbr, corr, contrast = out.T
     c, s = np.cos(brg), np.sin(brg)
     dx, dy = dist * c, dist * s
@@ -453,7 +475,8 @@ def relative_poses(images: Any, i_idx: Any, j_idx: Any, *, distance: Any = None,
 
 
 def reference_warping(images: Any, i_idx: Any, j_idx: Any, *, n_bearings: int = 96, ratios: Any = DEFAULT_RATIOS,
-                      temperature: float = DEFAULT_TEMPERATURE, max_turn_deg: float = 30.0) -> np.ndarray:
+                      temperature: float = DEFAULT_TEMPERATURE, max_turn_deg: float = 30.0,
+                      method: str = "warping") -> np.ndarray:
     """The warping of :func:`relative_poses` pair by pair in numpy, without
     the Rust core: the independent reference its tests and
     ``benches/bench_relative_pose.py`` compare against (slow: about 0.1 s
@@ -463,6 +486,8 @@ def reference_warping(images: Any, i_idx: Any, j_idx: Any, *, n_bearings: int = 
     their correlation and the scores' contrast per pair, as
     :class:`RelativePoses` holds them. Takes the images, pairs and grid
     options of :func:`relative_poses` (all rows, no distance)."""
+    if method not in METHODS:
+        raise ValueError(f"method must be one of {METHODS}, got {method!r}")
     R = panorama_rows(as_images(images)).astype(np.float64)
     n, K, W = R.shape
     i, j = _pairs(i_idx, j_idx, n)
@@ -474,7 +499,7 @@ def reference_warping(images: Any, i_idx: Any, j_idx: Any, *, n_bearings: int = 
     for k, (a, b) in enumerate(zip(i, j)):
         st = _pair_setup(R[a], R[b], win)
         if st is not None:
-            S = _scores_reference(st[0], st[1], cols, st[2])
+            S = _scores_reference(st[0], st[1], cols, st[2], min_warping=method == "min-warping")
             out[k] = _pose_from_scores(S, alphas, st[2], W, K, temperature)
     return out
 
