@@ -297,9 +297,10 @@ def test_train_with_loop_closures(tiny, tmp_path, capsys):
 def test_train_with_relative_pose_closures(tiny, tmp_path, capsys):
     """Without ground truth the pose graph's closures are GTSAM's relative
     poses by default (recorded in the model); --closures heading keeps the
-    heading-only closures; --closures with the metric learner is one clear
+    heading-only closures, min-warping measures them by min-warping; --closures with the metric learner is one clear
     error."""
-    for flag, want in (([], "relative-pose"), (["--closures", "heading"], "heading")):
+    for flag, want in (([], "relative-pose"), (["--closures", "heading"], "heading"),
+                       (["--closures", "min-warping"], "min-warping")):
         code, _, err = run(capsys, "train", "--dataset", tiny["root"] / "data", "--config", tiny["config"],
                            "--out", tmp_path / f"rp-{want}.sfa", "--supervision", "odometry", *flag, "--no-progress")
         assert code == 0, err

@@ -15,6 +15,7 @@ from sfanav.loopclosure import relative_poses  # noqa: E402
 from sfanav.odometry import fit_pose_graph  # noqa: E402
 from sfanav.odometry.pair_closures import (  # noqa: E402
     CORRELATION_RADIUS,
+    WARP_OPTIONS,
     decorrelate,
     local_gradients,
     pair_relative_poses,
@@ -73,6 +74,11 @@ def test_relative_pose_closures_improve_on_heading_only(scene):
     e0, e1 = mean_error(heading.poses[:, :2], T[:, :2]), mean_error(full.poses[:, :2], T[:, :2])
     assert e1 < 0.85 * e0, (e0, e1)
     assert len(full.weights) == len(full.pairs) and full.n_inliers > 0.8 * len(full.pairs)
+    # min-warping's closures (pair_options' warp) improve on heading-only alike, and reach the warping
+    warp = {**WARP_OPTIONS, "method": "min-warping"}
+    mw = fit_pose_graph(X, F, odo, pair_closures="relative-pose", pair_options={"warp": warp}, **kw)
+    e2 = mean_error(mw.poses[:, :2], T[:, :2])
+    assert e2 < 0.85 * e0 and not np.allclose(mw.poses, full.poses), (e0, e1, e2)
     # the hand-written path is unchanged by the option's existence
     hw = fit_pose_graph(X, F, odo, refine=0, min_travel=3.0, n_outputs=4)
     assert mean_error(hw.poses[:, :2], T[:, :2]) == pytest.approx(e0, abs=0.02)

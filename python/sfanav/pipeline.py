@@ -28,10 +28,11 @@ from .sfa.network import Network, Rotation
 
 METRIC_MAPS = ("pose-graph", "metric-learning")
 """How positions are learned without ground truth (``sfanav train --metric-map``)."""
-CLOSURES = ("relative-pose", "heading")
+CLOSURES = ("relative-pose", "min-warping", "heading")
 """What the pose graph's loop closures measure (``train_localizer(closures=)``, ``sfanav train --closures``):
 the whole relative pose by the warping method on GTSAM, the closures of one place counted as one (the
-default), or the relative heading only. docs/odometry.md, "Correlated bearing errors", has the measurements
+default), the same by min-warping (a landmark distance per image column: the better map on a mower's
+serpentine of lanes, docs/relative-pose.md "Min-warping"), or the relative heading only. docs/odometry.md, "Correlated bearing errors", has the measurements
 behind the choice."""
 DEFAULT_CLOSURES = "relative-pose"
 """The closures of ``closures=None`` with the pose graph."""
@@ -76,7 +77,7 @@ def train_localizer(images: Any, *, xy: Any = None, odometry: Any = None, timest
         What the readout is fitted to; ``"auto"``: ground truth where the run
         has it, else positions learned from its images and odometry
         (:func:`sfanav.localization.recipe.supervision_for`).
-    closures : "relative-pose", "heading" or None
+    closures : "relative-pose", "min-warping", "heading" or None
         Without ground truth, what the pose graph's loop closures measure
         (:data:`CLOSURES`; GTSAM solves the relative-pose graph). None: the
         pose graph's default (:data:`DEFAULT_CLOSURES`), nothing with the
@@ -161,7 +162,13 @@ def train_localizer(images: Any, *, xy: Any = None, odometry: Any = None, timest
                   network_fit=dict(network_fit or {}), info={**dict(info or {}), **recipe.info()},
                   seed=seed, **({"readout_memory_images": True} if readout_memory_images else {}))
     if supervision == "odometry":
-        graph = {"solver": "gtsam", "pair_closures": "relative-pose"} if closures == "relative-pose" else None
+        graph = None
+        if closures in ("relative-pose", "min-warping"):
+            from .odometry.pair_closures import WARP_OPTIONS
+
+            graph = {"solver": "gtsam", "pair_closures": "relative-pose"}
+            if closures == "min-warping":
+                graph["pair_options"] = {"warp": {**WARP_OPTIONS, "method": "min-warping"}}
         if graph is not None:
             from .odometry.pose_graph_gtsam import require_gtsam
 

@@ -154,10 +154,10 @@ fn scores(
     let out_len = memory::bytes_of(8, &[pairs, groups, n_shifts]);
     let threads = rayon::current_num_threads().max(1);
     let table = memory::bytes_of(8, &[width, width, threads]);
-    let minima = if group > 1 { memory::bytes_of(8, &[width, n_shifts, threads]) } else { Some(0) };
+    let warped = memory::bytes_of(16, &[group, width, threads]);
     memory::check(
         || format!("warping scores of {pairs} pairs x {hyps} hypotheses x {n_shifts} shifts"),
-        memory::total(&[out_len, table, minima]),
+        memory::total(&[out_len, table, warped]),
     )?;
     let mut out = vec![0.0f64; pairs * groups * n_shifts];
     if pairs == 0 {
@@ -226,58 +226,48 @@ fn score_pair(
         frac[si] = s - f;
         whole[si] = (f.rem_euclid(wf) as usize) % w;
     }
-    let mut base = vec![0usize; w];
-    let mut t = vec![0.0f64; w];
+    // the floors and fractions of the warped columns of one group's hypotheses (group x w), and the running
+    // minimum over them of one column's values at the shifts of one fraction (min-warping; groups of one
+    // add the values themselves, in the same order)
+    let mut base = vec![0usize; group * w];
+    let mut t = vec![0.0f64; group * w];
+    let mut mins = vec![0.0f64; ns];
     let mut acc = vec![0.0f64; ns];
-    // min-warping: the best value so far of every (column, shift) over the group's hypotheses
-    let mut best = if group > 1 { vec![f64::INFINITY; w * ns] } else { Vec::new() };
     for g in 0..hyps / group {
         acc.iter_mut().for_each(|x| *x = 0.0);
-        best.iter_mut().for_each(|x| *x = f64::INFINITY);
-        for h in g * group..(g + 1) * group {
-            let cols = &columns[h * w..(h + 1) * w];
-            let mut si0 = 0;
-            while si0 < ns {
-                // the run of shifts with the fraction of shift si0
-                let fr = frac[si0];
-                let mut si1 = si0 + 1;
-                while si1 < ns && frac[si1] == fr {
-                    si1 += 1;
-                }
-                for (u, &c0) in cols.iter().enumerate() {
-                    let c = c0 + fr;
-                    let f = c.floor();
-                    t[u] = c - f;
-                    base[u] = (f.rem_euclid(wf) as usize) % w;
-                }
-                for u in 0..w {
-                    let row = &d[u * stride..(u + 1) * stride];
-                    let (bu, tu) = (base[u], t[u]);
+        let cols = &columns[g * group * w..(g + 1) * group * w];
+        let mut si0 = 0;
+        while si0 < ns {
+            // the run of shifts with the fraction of shift si0
+            let fr = frac[si0];
+            let mut si1 = si0 + 1;
+            while si1 < ns && frac[si1] == fr {
+                si1 += 1;
+            }
+            for (k, &c0) in cols.iter().enumerate() {
+                let c = c0 + fr;
+                let f = c.floor();
+                t[k] = c - f;
+                base[k] = (f.rem_euclid(wf) as usize) % w;
+            }
+            for u in 0..w {
+                let row = &d[u * stride..(u + 1) * stride];
+                mins[si0..si1].fill(f64::INFINITY);
+                for h in 0..group {
+                    let (bu, tu) = (base[h * w + u], t[h * w + u]);
                     for si in si0..si1 {
                         let mut f0 = bu + whole[si];
                         if f0 >= w {
                             f0 -= w;
                         }
-                        let v = row[f0] + tu * (row[f0 + 1] - row[f0]);
-                        if group > 1 {
-                            let m = &mut best[u * ns + si];
-                            if v < *m {
-                                *m = v;
-                            }
-                        } else {
-                            acc[si] += v;
-                        }
+                        mins[si] = mins[si].min(row[f0] + tu * (row[f0 + 1] - row[f0]));
                     }
                 }
-                si0 = si1;
-            }
-        }
-        if group > 1 {
-            for u in 0..w {
-                for (a_si, m) in acc.iter_mut().zip(&best[u * ns..(u + 1) * ns]) {
-                    *a_si += m;
+                for si in si0..si1 {
+                    acc[si] += mins[si];
                 }
             }
+            si0 = si1;
         }
         for si in 0..ns {
             dst[g * ns + si] = acc[si] / wf;
@@ -345,7 +335,15 @@ mod tests {
     }
 
     /// Min-warping's formula, evaluated directly: per column the group's least interpolated distance.
-    fn naive_min(a: &[f64], b: &[f64], rows: usize, w: usize, columns: &[f64], group: usize, shifts: &[f64]) -> Vec<f64> {
+    fn naive_min(
+        a: &[f64],
+        b: &[f64],
+        rows: usize,
+        w: usize,
+        columns: &[f64],
+        group: usize,
+        shifts: &[f64],
+    ) -> Vec<f64> {
         let hyps = columns.len() / w;
         let mut out = Vec::new();
         for g in 0..hyps / group {

@@ -387,7 +387,7 @@ def relative_poses(images: Any, i_idx: Any, j_idx: Any, *, distance: Any = None,
         rather than ``inf``; ``sigma_bearing`` still tells).
     method : "warping" or "min-warping"
         One landmark distance (ratio) per hypothesis, or each column's best
-        ratio (min-warping; see the module's docs). Same cost.
+        ratio (min-warping; see the module's docs); about the same cost.
 
     Returns
     -------
