@@ -25,8 +25,8 @@ import numpy as np
 
 import sfanav.odometry.pair_closures as pc
 import sfanav.odometry.pose_graph as pg
-from sfanav.data.dataset import Dataset
 from sfanav.localization.error_metrics import align
+from refinement_guard import cached_run  # noqa: E402  (this folder: the cache's reader)
 
 MAX_SIGMA_BEARING = np.radians(30.0)
 
@@ -98,13 +98,7 @@ def main() -> None:
     base = dict(pc.WARP_OPTIONS)
     res = json.loads(a.out.read_text()) if a.out.exists() else {}
     for spec in a.run:
-        ds, _, run = spec.rpartition(":")
-        key = f"{Path(ds).name}:{run}"
-        path = a.cache / Path(ds).name / f"{run}.npz"
-        if not path.exists():
-            raise SystemExit(f"{path}: no cache (run refinement_guard.py on {spec} first)")
-        d = dict(np.load(path))
-        gyro = Dataset(Path(ds)).select(run=run).gyro
+        key, d, gyro = cached_run(spec, a.cache)
         T = d["truth"]
         entry = res.get(key, {"frames": len(T), "map error (m)": {}, "closures": {}})
         first_call = None

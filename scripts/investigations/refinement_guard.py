@@ -53,6 +53,18 @@ def run_data(dataset: Path, cache: Path, run: str) -> dict[str, np.ndarray]:
     return dict(np.load(path))
 
 
+def cached_run(spec: str, cache: Path) -> tuple[str, dict[str, np.ndarray], np.ndarray | None]:
+    """``DATASET:RUN``'s key (``DATASET-folder:RUN``), its cached data (:func:`run_data`'s, which must exist)
+    and the run's gyro (None without one), for the studies that read this cache."""
+    from sfanav.data.dataset import Dataset
+
+    ds, _, run = spec.rpartition(":")
+    path = cache / Path(ds).name / f"{run}.npz"
+    if not path.exists():
+        raise SystemExit(f"{path}: no cache (run refinement_guard.py on {spec} first)")
+    return f"{Path(ds).name}:{run}", dict(np.load(path)), Dataset(Path(ds)).select(run=run).gyro
+
+
 def map_error(P: np.ndarray, T: np.ndarray) -> float:
     return float(np.hypot(*(align(P, T).apply(P) - T).T).mean())
 

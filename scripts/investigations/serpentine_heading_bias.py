@@ -23,9 +23,9 @@ import numpy as np
 
 import sfanav.odometry.pair_closures as pc
 import sfanav.odometry.pose_graph as pg
-from sfanav.data.dataset import Dataset
 from sfanav.localization.error_metrics import align
 from sfanav.odometry.gyro import fuse_gyro
+from refinement_guard import cached_run  # noqa: E402  (this folder: the cache's reader)
 
 VARIANTS = {"default": {}, "heading variance x 0.0625": {"scale": 1 / 16}, "heading variance x 0.25": {"scale": 0.25},
             "heading sigma floor 0.3 deg": {"floor_deg": 0.3}, "heading sigma floor 0.7 deg": {"floor_deg": 0.7},
@@ -107,13 +107,7 @@ def main() -> None:
     a = ap.parse_args()
     res = json.loads(a.out.read_text()) if a.out.exists() else {}
     for spec in a.run:
-        ds, _, run = spec.rpartition(":")
-        key = f"{Path(ds).name}:{run}"
-        path = a.cache / Path(ds).name / f"{run}.npz"
-        if not path.exists():
-            raise SystemExit(f"{path}: no cache (run refinement_guard.py on {spec} first)")
-        d = dict(np.load(path))
-        gyro = Dataset(Path(ds)).select(run=run).gyro
+        key, d, gyro = cached_run(spec, a.cache)
         T = d["truth"]
         entry: dict = {"frames": len(T), "map error (m)": {}}
         for name, variant in VARIANTS.items():

@@ -62,7 +62,7 @@ pub fn warp_scores(
     shifts: &[f64],
     n_shifts: usize,
 ) -> Result<Vec<f64>> {
-    scores(a, b, pairs, rows, width, columns, 1, shifts, n_shifts)
+    min_warp_scores(a, b, pairs, rows, width, columns, 1, shifts, n_shifts)
 }
 
 /// Min-warping scores of `pairs` pairs of panoramas: as [`warp_scores`],
@@ -90,21 +90,6 @@ pub fn min_warp_scores(
     if group == 0 {
         return Err(SfaError::InvalidArgument("min-warping needs groups of at least one hypothesis".into()));
     }
-    scores(a, b, pairs, rows, width, columns, group, shifts, n_shifts)
-}
-
-#[allow(clippy::too_many_arguments)]
-fn scores(
-    a: &[f64],
-    b: &[f64],
-    pairs: usize,
-    rows: usize,
-    width: usize,
-    columns: &[f64],
-    group: usize,
-    shifts: &[f64],
-    n_shifts: usize,
-) -> Result<Vec<f64>> {
     if width == 0 || rows == 0 {
         return Err(SfaError::InvalidArgument(format!(
             "warping needs images of at least one row and column, got {rows} x {width}"
