@@ -32,8 +32,8 @@ CLOSURES = ("relative-pose", "min-warping", "heading")
 """What the pose graph's loop closures measure (``train_localizer(closures=)``, ``sfanav train --closures``):
 the whole relative pose by the warping method on GTSAM, the closures of one place counted as one (the
 default), the same by min-warping (a landmark distance per image column: the better map on a mower's
-serpentine of lanes, docs/relative-pose.md "Min-warping"), or the relative heading only. docs/odometry.md, "Correlated bearing errors", has the measurements
-behind the choice."""
+serpentine of lanes, docs/relative-pose.md "Min-warping"), or the relative heading only. docs/odometry.md,
+"Correlated bearing errors", has the measurements behind the choice."""
 DEFAULT_CLOSURES = "relative-pose"
 """The closures of ``closures=None`` with the pose graph."""
 ROTATION_STEP = 5
