@@ -262,10 +262,7 @@ def _warp_pairs(R: np.ndarray, i: np.ndarray, j: np.ndarray, cols: np.ndarray, a
         a = np.stack([st[0] for _, st in setups])
         b = np.stack([st[1] for _, st in setups])
         sh = np.stack([st[2] for _, st in setups])
-        if min_warping:
-            S = _core.warp_scores(a, b, flat_cols, sh, N).reshape(len(setups), A, 1, sh.shape[1])
-        else:
-            S = _core.warp_scores(a, b, flat_cols, sh).reshape(len(setups), A, N, sh.shape[1])
+        S = _core.warp_scores(a, b, flat_cols, sh, N if min_warping else 1).reshape(len(setups), A, -1, sh.shape[1])
         for (k, st), Sk in zip(setups, S):
             out[k] = _pose_from_scores(Sk, alphas, st[2], W, K, temperature)
     return out
