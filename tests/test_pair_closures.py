@@ -84,6 +84,38 @@ def test_relative_pose_closures_improve_on_heading_only(scene):
     assert mean_error(hw.poses[:, :2], T[:, :2]) == pytest.approx(e0, abs=0.02)
 
 
+def test_closure_method_auto_keeps_the_map_its_closures_fit_better(scene):
+    X, F, odo, T = scene
+    kw = dict(refine=1, min_travel=3.0, n_outputs=4, solver="gtsam", pair_closures="relative-pose")
+    fits = {m: fit_pose_graph(X, F, odo, closure_method=m, **kw) for m in ("warping", "min-warping")}
+    assert {m: g.closure_method for m, g in fits.items()} == {"warping": "warping", "min-warping": "min-warping"}
+    misfits = {m: g.misfit for m, g in fits.items()}
+    assert all(np.isfinite(v) and v > 0 for v in misfits.values()) and misfits["warping"] != misfits["min-warping"]
+    # the misfit is closure_misfit of the final map against its own closures
+    from sfanav.odometry.pose_graph import closure_misfit
+    g = fits["warping"]
+    assert g.misfit == closure_misfit(g.poses[:, :2], g.poses[:, 2], g.closures)
+    auto = fit_pose_graph(X, F, odo, closure_method="auto", **kw)
+    best = min(misfits, key=misfits.get)
+    assert auto.closure_method == best
+    np.testing.assert_array_equal(auto.poses, fits[best].poses)
+    assert auto.method_misfits == pytest.approx(misfits)
+    info = auto.info()
+    assert info["closure method"] == best and set(info["closure misfit by method"]) == {"warping", "min-warping"}
+    # the old spelling through pair_options' warp is the same fit as closure_method
+    warp = {**WARP_OPTIONS, "method": "min-warping"}
+    old = fit_pose_graph(X, F, odo, pair_options={"warp": warp}, **kw)
+    np.testing.assert_array_equal(old.poses, fits["min-warping"].poses)
+    assert old.closure_method == "min-warping"
+    # heading-only closures: no relative-pose closures, no method, no misfit
+    h = fit_pose_graph(X, F, odo, refine=0, min_travel=3.0, n_outputs=4, solver="gtsam", closure_method="auto")
+    assert h.closures is None and h.closure_method is None and np.isnan(h.misfit)
+    with pytest.raises(ValueError, match="closure_method must be one of"):
+        fit_pose_graph(X, F, odo, closure_method="both", **kw)
+    with pytest.raises(ValueError, match="given twice"):
+        fit_pose_graph(X, F, odo, closure_method="auto", pair_options={"warp": warp}, **kw)
+
+
 def test_pair_closures_measure_relative_poses_with_honest_sigmas(scene):
     X, F, odo, T = scene
     g = fit_pose_graph(X, F, odo, refine=0, min_travel=3.0, n_outputs=4, solver="gtsam")

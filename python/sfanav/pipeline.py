@@ -28,12 +28,16 @@ from .sfa.network import Network, Rotation
 
 METRIC_MAPS = ("pose-graph", "metric-learning")
 """How positions are learned without ground truth (``sfanav train --metric-map``)."""
-CLOSURES = ("relative-pose", "min-warping", "heading")
+CLOSURES = ("relative-pose", "min-warping", "auto", "heading")
 """What the pose graph's loop closures measure (``train_localizer(closures=)``, ``sfanav train --closures``):
-the whole relative pose by the warping method on GTSAM, the closures of one place counted as one (the
-default), the same by min-warping (a landmark distance per image column: the better map on a mower's
-serpentine of lanes, docs/relative-pose.md "Min-warping"), or the relative heading only. docs/odometry.md,
-"Correlated bearing errors", has the measurements behind the choice."""
+the whole relative pose by the warping method on GTSAM, the closures of one place counted as one; the same by
+min-warping (a landmark distance per image column: the better map on a mower's serpentine of lanes,
+docs/relative-pose.md "Min-warping"); ``auto``: both, keeping the map its own closures fit better (no ground
+truth; docs/relative-pose.md "Choosing the method without ground truth"); or the relative heading only.
+docs/odometry.md, "Correlated bearing errors", has the measurements behind the relative pose."""
+CLOSURE_METHOD = {"relative-pose": "warping", "min-warping": "min-warping", "auto": "auto"}
+"""The pose graph's ``closure_method`` (:data:`sfanav.odometry.pose_graph.CLOSURE_METHODS`) of each relative-pose
+choice of :data:`CLOSURES`."""
 DEFAULT_CLOSURES = "relative-pose"
 """The closures of ``closures=None`` with the pose graph."""
 ROTATION_STEP = 5
@@ -77,7 +81,7 @@ def train_localizer(images: Any, *, xy: Any = None, odometry: Any = None, timest
         What the readout is fitted to; ``"auto"``: ground truth where the run
         has it, else positions learned from its images and odometry
         (:func:`sfanav.localization.recipe.supervision_for`).
-    closures : "relative-pose", "min-warping", "heading" or None
+    closures : "relative-pose", "min-warping", "auto", "heading" or None
         Without ground truth, what the pose graph's loop closures measure
         (:data:`CLOSURES`; GTSAM solves the relative-pose graph). None: the
         pose graph's default (:data:`DEFAULT_CLOSURES`), nothing with the
@@ -163,12 +167,8 @@ def train_localizer(images: Any, *, xy: Any = None, odometry: Any = None, timest
                   seed=seed, **({"readout_memory_images": True} if readout_memory_images else {}))
     if supervision == "odometry":
         graph = None
-        if closures in ("relative-pose", "min-warping"):
-            from .odometry.pair_closures import WARP_OPTIONS
-
-            graph = {"solver": "gtsam", "pair_closures": "relative-pose"}
-            if closures == "min-warping":
-                graph["pair_options"] = {"warp": {**WARP_OPTIONS, "method": "min-warping"}}
+        if closures in CLOSURE_METHOD:
+            graph = {"solver": "gtsam", "pair_closures": "relative-pose", "closure_method": CLOSURE_METHOD[closures]}
         if graph is not None:
             from .odometry.pose_graph_gtsam import require_gtsam
 

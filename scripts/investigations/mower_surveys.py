@@ -43,7 +43,7 @@ def main() -> None:
     ap.add_argument("out", help="JSON to write")
     ap.add_argument("--patterns", nargs="*", default=list(PATTERNS))
     ap.add_argument("--test", default="test-walk")
-    ap.add_argument("--closures", default=None, choices=("heading", "relative-pose", "min-warping"),
+    ap.add_argument("--closures", default=None, choices=("heading", "relative-pose", "min-warping", "auto"),
                     help="the pose graph's closures without ground truth (train_localizer(closures=); default: its "
                          "default, relative-pose since 2026-12-06)")
     ap.add_argument("--no-gyro", action="store_true", help="train without the runs' gyro (the entries before "

@@ -215,7 +215,7 @@ def product_rows(train: ProductRun, tests: Sequence[ProductRun], *, thesis: Sequ
     peer_queries : int or None
         The peers answer at most this many evenly spaced test images; the
         ratios to the best peer compare on those images.
-    closures : "relative-pose", "min-warping", "heading" or None
+    closures : "relative-pose", "min-warping", "auto", "heading" or None
         The pose graph's closures of the model without ground truth
         (:func:`sfanav.pipeline.train_localizer`; None: its default).
     seed, progress, log

@@ -57,6 +57,12 @@ REFINE_READOUT = {"kind": "gp", "n_outputs": 12}
 """The readout whose predicted offsets refine the positions (at most as many
 outputs as the features have)."""
 
+CLOSURE_METHODS = ("warping", "min-warping", "auto")
+"""How :func:`fit_pose_graph` measures relative-pose closures
+(``closure_method``): the warping (one landmark distance per hypothesis),
+min-warping (one per image column), or both, keeping the map whose
+closures fit it better (:func:`closure_misfit`, no ground truth)."""
+
 DEFAULT_COMPASS_SIGMA_DEG = 5.0
 """Standard deviation (degrees) assumed for a pair's relative heading: the
 panorama compass reads pairs of frames 1-2 m apart to a fraction of a degree
@@ -180,6 +186,14 @@ class PoseGraph:
         pair offsets (m; NaN without refinement).
     refine_trace : list of dict
         Every refinement round tried (:func:`refine_positions`' ``trace``).
+    closures : RelativePoses or None
+        The relative-pose closures the map was solved with (None with
+        heading-only closures).
+    closure_method : str or None
+        What measured them ("warping" or "min-warping"; None without).
+    method_misfits : dict
+        With ``closure_method="auto"``: each method's map's
+        :func:`closure_misfit` against its own closures (the lower won).
     """
 
     poses: np.ndarray
@@ -191,6 +205,17 @@ class PoseGraph:
     refine_chi: float = float("nan")
     offset_sigma: float = float("nan")
     refine_trace: list[dict[str, float]] = field(default_factory=list)
+    closures: Any = None
+    closure_method: str | None = None
+    method_misfits: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def misfit(self) -> float:
+        """:func:`closure_misfit` of the final map against its own
+        closures (NaN without relative-pose closures)."""
+        if self.closures is None or len(self.closures) == 0:
+            return float("nan")
+        return closure_misfit(self.poses[:, :2], self.poses[:, 2], self.closures)
 
     @property
     def n_inliers(self) -> int:
@@ -207,7 +232,11 @@ class PoseGraph:
                 "refinement offset sigma (m)": None if not np.isfinite(self.offset_sigma)
                 else float(self.offset_sigma),
                 "refinement rounds tried": [{k: (float(v) if np.isfinite(v) else None) for k, v in r.items()}
-                                            for r in self.refine_trace]}
+                                            for r in self.refine_trace],
+                **({"closure method": self.closure_method} if self.closure_method else {}),
+                **({"closure misfit by method": {k: (float(v) if np.isfinite(v) else None)
+                                                 for k, v in self.method_misfits.items()}}
+                   if self.method_misfits else {})}
 
 
 def _solve_headings(odometry: np.ndarray, pairs: PlacePairs, rel: np.ndarray, noise: Mapping[str, float],
@@ -519,7 +548,8 @@ def fit_pose_graph(images: Any, features: Any, odometry: Any, *, odometry_noise:
                    solver: str = "hand-written", relative_poses: Any = None,
                    pair_closures: str = "heading", pair_options: Mapping[str, Any] | None = None,
                    gyro: Any = None, gyro_noise: Mapping[str, float] | None = None,
-                   max_misfit_growth: float | None = MAX_MISFIT_GROWTH) -> PoseGraph:
+                   max_misfit_growth: float | None = MAX_MISFIT_GROWTH,
+                   closure_method: str = "warping") -> PoseGraph:
     """Solves the pose graph of one run from its panoramas, slow features and
     odometry (see the module docstring).
 
@@ -599,6 +629,17 @@ def fit_pose_graph(images: Any, features: Any, odometry: Any, *, odometry_noise:
         fits the closures' measured relative positions worse than this
         many times the unrefined map (:func:`closure_misfit`); None: no
         such test. Heading-only closures measure no position: no test.
+    closure_method : {"warping", "min-warping", "auto"}, default "warping"
+        With relative-pose closures, how the panoramas measure them
+        (:data:`CLOSURE_METHODS`; the ``method`` of
+        :func:`sfanav.loopclosure.relative_poses`). ``"auto"`` solves the
+        graph with each and keeps the map whose closures fit it better
+        (the lower :attr:`PoseGraph.misfit`; a tie keeps the warping):
+        min-warping wins where landmarks at unequal distances bias the
+        warping over long baselines (lanes), the warping where short
+        baselines make min-warping's bearings noisier (dense gardens).
+        Twice the closures' cost. Measured in docs/relative-pose.md,
+        "Choosing the method without ground truth".
 
     Returns
     -------
@@ -612,9 +653,29 @@ def fit_pose_graph(images: Any, features: Any, odometry: Any, *, odometry_noise:
         Mismatched lengths, non-finite values, images that are not
         panoramas, an unknown solver, ``relative_poses`` with the
         hand-written solver, ``pair_closures="relative-pose"`` without
-        ``solver="gtsam"``, a gyro of another length or not finite.
-        ImportError: ``solver="gtsam"`` without gtsam.
+        ``solver="gtsam"``, a gyro of another length or not finite, an
+        unknown ``closure_method`` or one also given in ``pair_options``'
+        ``warp``. ImportError: ``solver="gtsam"`` without gtsam.
     """
+    if closure_method not in CLOSURE_METHODS:
+        raise ValueError(f"closure_method must be one of {CLOSURE_METHODS}, got {closure_method!r}")
+    warp = dict((pair_options or {}).get("warp") or {})
+    if "method" in warp and closure_method != "warping":
+        raise ValueError(f"the warping method is given twice: closure_method={closure_method!r} and "
+                         f"pair_options['warp']['method']={warp['method']!r}; give closure_method only")
+    if closure_method == "auto" and pair_closures == "relative-pose":
+        kw = dict(odometry_noise=odometry_noise, compass_sigma_deg=compass_sigma_deg, n_neighbors=n_neighbors,
+                  min_travel=min_travel, n_outputs=n_outputs, iterations=iterations, robust=robust, refine=refine,
+                  refine_readout=refine_readout, offset_sigma=offset_sigma, heading_sigma_deg=heading_sigma_deg,
+                  solver=solver, relative_poses=relative_poses, pair_closures=pair_closures,
+                  pair_options=pair_options, gyro=gyro, gyro_noise=gyro_noise, max_misfit_growth=max_misfit_growth)
+        fits = {m: fit_pose_graph(images, features, odometry, closure_method=m, **kw)
+                for m in ("warping", "min-warping")}
+        misfits = {m: g.misfit for m, g in fits.items()}
+        best = "min-warping" if misfits["min-warping"] < misfits["warping"] else "warping"  # NaN: the warping
+        out = fits[best]
+        out.method_misfits = misfits
+        return out
     P = as_poses(odometry, "odometry")
     if pair_closures not in PAIR_CLOSURES:
         raise ValueError(f"pair_closures must be one of {PAIR_CLOSURES}, got {pair_closures!r}")
@@ -652,10 +713,13 @@ def fit_pose_graph(images: Any, features: Any, odometry: Any, *, odometry_noise:
         xy, theta, drift, w = _solve_gtsam(P, pairs, rel, sigma, odometry_noise, robust, relative_poses,
                                            step_sigma=step_sigma)
         if pair_closures == "relative-pose" and len(pairs):
-            from .pair_closures import pair_relative_poses
+            from .pair_closures import WARP_OPTIONS, pair_relative_poses
 
+            popts = dict(pair_options or {})
+            if closure_method != "warping":
+                popts["warp"] = {**(popts.get("warp") or WARP_OPTIONS), "method": closure_method}
             closures = pair_relative_poses(images, F[:, : min(int(n_outputs), F.shape[1])], xy, pairs.past,
-                                           pairs.current, rel, sigma, **dict(pair_options or {}))
+                                           pairs.current, rel, sigma, **popts)
             xy, theta, drift, w = _solve_gtsam(P, pairs, rel, sigma, odometry_noise, robust, relative_poses,
                                                step_sigma=step_sigma, closures=closures)
     else:
@@ -668,5 +732,6 @@ def fit_pose_graph(images: Any, features: Any, odometry: Any, *, odometry_noise:
                                            offset_sigma=offset_sigma, heading_sigma=heading_sigma,
                                            closures=closures, closure_keep=w >= 0.5,
                                            max_misfit_growth=max_misfit_growth, trace=trace)
+    method = None if closures is None else str(warp.get("method", closure_method))
     return PoseGraph(np.c_[xy, theta], drift, pairs, rel, w, refined=done, refine_chi=chi, offset_sigma=osig,
-                     refine_trace=trace)
+                     refine_trace=trace, closures=closures, closure_method=method)

@@ -80,11 +80,12 @@ def _add_train(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                    help="what the readout is fitted to: ground-truth x, y, or positions learned from the run's "
                         "images and odometry (no ground truth: estimates in the odometry's frame); "
                         "auto (default): ground truth if the run has it, else odometry")
-    p.add_argument("--closures", choices=("relative-pose", "min-warping", "heading"), default=None,
+    p.add_argument("--closures", choices=("relative-pose", "min-warping", "auto", "heading"), default=None,
                    help="with odometry supervision and the pose graph, what its loop closures measure: the whole "
-                        "relative pose from the two panoramas by the warping (the default; GTSAM) or by "
+                        "relative pose from the two panoramas by the warping (the default; GTSAM), by "
                         "min-warping (a landmark distance per image column: better maps on serpentine lanes, "
-                        "worse on grids), or the relative heading only; docs/odometry.md, 'Correlated bearing "
+                        "worse on grids), auto (both, keeping the map its closures fit better; twice the "
+                        "closures' time), or the relative heading only; docs/odometry.md, 'Correlated bearing "
                         "errors', docs/relative-pose.md, 'Min-warping'")
     p.add_argument("--metric-map", choices=("pose-graph", "metric-learning"), default="pose-graph",
                    help="with odometry supervision, how positions are learned: pose-graph (default; the odometry's "
