@@ -314,3 +314,44 @@ def test_min_warp_scores_bad_group():
     for group in (0, 3):
         with pytest.raises(ValueError, match="groups"):
             _core.warp_scores(a, a, np.zeros((4, 16)), np.zeros((2, 1)), group)
+    for group in (0, 3):
+        with pytest.raises(ValueError, match="groups"):
+            _core.warp_and_min_warp_scores(a, a, np.zeros((4, 16)), np.zeros((2, 1)), group)
+    with pytest.raises(ValueError, match="must match"):
+        _core.warp_and_min_warp_scores(a, a[:1], np.zeros((4, 16)), np.zeros((2, 1)), 2)
+
+
+@settings(max_examples=20, deadline=None)
+@given(st.integers(1, 4), st.integers(8, 40), st.integers(1, 6), st.integers(1, 3), st.integers(0, 10_000))
+def test_both_scores_from_one_pass_property(rows, width, n_shifts, n_ratios, seed):
+    """sfanav._core.warp_and_min_warp_scores gives what warp_scores gives with
+    groups of one and with the group, from one pass."""
+    from sfanav import _core
+
+    rng = np.random.default_rng(seed)
+    a, b = rng.normal(size=(2, 3, rows, width))
+    flat = rng.uniform(0, width, size=(2 * n_ratios, width))
+    shifts = np.round(rng.uniform(-2 * width, 2 * width, size=(3, n_shifts)) * 4) / 4
+    each, mins = _core.warp_and_min_warp_scores(a, b, flat, shifts, n_ratios)
+    assert each.shape == (3, 2 * n_ratios, n_shifts) and mins.shape == (3, 2, n_shifts)
+    np.testing.assert_allclose(each, _core.warp_scores(a, b, flat, shifts), rtol=1e-12, atol=1e-12)
+    np.testing.assert_array_equal(mins, _core.warp_scores(a, b, flat, shifts, n_ratios))
+
+
+def test_relative_poses_by_method_are_each_methods_relative_poses(scene):
+    from sfanav.loopclosure.relative_pose import relative_poses_by_method
+
+    X = scene[0]
+    i, j = np.arange(0, 6), np.arange(3, 9)
+    both = relative_poses_by_method(X, i, j, distance=1.0, n_bearings=32, ratios=(0.05, 0.2))
+    assert list(both) == ["warping", "min-warping"]
+    for m, rp in both.items():
+        one = relative_poses(X, i, j, distance=1.0, n_bearings=32, ratios=(0.05, 0.2), method=m)
+        for name in ("dtheta", "bearing", "sigma_dtheta", "sigma_bearing", "covariance", "distance"):
+            np.testing.assert_allclose(getattr(rp, name), getattr(one, name), rtol=1e-9, atol=1e-12, err_msg=name)
+    with pytest.raises(ValueError, match="method must be one of"):
+        relative_poses_by_method(X, i, j, methods=("warping", "warping"))
+    with pytest.raises(ValueError, match="method must be one of"):
+        relative_poses_by_method(X, i, j, methods=("bearing",))
+    with pytest.raises(ValueError, match="method must be one of"):
+        relative_poses(X, i, j, method=("warping",))

@@ -15,7 +15,7 @@
 //!   ([`fit`]) over images of any [`Pixel`] type from a [`BatchSource`];
 //! * [`closures`]: loop closures for feedback training ([`LoopClosures`]);
 //! * [`warping`]: the warping method's scores for the relative poses of loop
-//!   closures ([`warp_scores`], [`min_warp_scores`]).
+//!   closures ([`warp_scores`], [`min_warp_scores`], [`warp_and_min_warp_scores`]).
 //!
 //! Nothing here depends on Python; the `sfanav-py` crate binds it.
 
@@ -52,4 +52,4 @@ pub use training::{
     SpatialPairs,
 };
 pub use view::{Sample, View};
-pub use warping::{min_warp_scores, warp_scores};
+pub use warping::{min_warp_scores, warp_and_min_warp_scores, warp_scores};

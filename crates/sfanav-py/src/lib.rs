@@ -28,6 +28,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(functions::expanded_dim, m)?)?;
     m.add_function(wrap_pyfunction!(functions::solve_generalized, m)?)?;
     m.add_function(wrap_pyfunction!(functions::warp_scores, m)?)?;
+    m.add_function(wrap_pyfunction!(functions::warp_and_min_warp_scores, m)?)?;
     m.add_function(wrap_pyfunction!(functions::set_memory_limit, m)?)?;
     m.add_function(wrap_pyfunction!(functions::get_memory_limit, m)?)?;
     m.add_function(wrap_pyfunction!(functions::_test_panic, m)?)?;

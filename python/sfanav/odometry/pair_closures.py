@@ -43,7 +43,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from .._checks import as_matrix, check_int, check_positive_float
-from ..loopclosure.relative_pose import gradient_offsets, relative_poses
+from ..loopclosure.relative_pose import gradient_offsets, relative_poses_by_method
 from .pose_graph_gtsam import HEADING_ONLY_SIGMA, RelativePoses
 
 WARP_OPTIONS = {"n_bearings": 48, "ratios": (0.03, 0.08, 0.15, 0.25, 0.4), "max_turn_deg": 20.0}
@@ -128,12 +128,18 @@ def _rotate_to_j(cov: np.ndarray, dtheta: np.ndarray) -> np.ndarray:
     return 0.5 * (out + np.swapaxes(out, 1, 2))
 
 
+def pair_relative_poses_by_method(*args: Any, methods: Any = ("warping", "min-warping"),
+                                  **kwargs: Any) -> dict[str, RelativePoses]:
+    """:func:`pair_relative_poses` by several warping methods at once
+    (``methods``, of :data:`sfanav.loopclosure.relative_pose.METHODS`):
+    ``{method: RelativePoses}``, the scores of both from one pass of the
+    core. Arguments as :func:`pair_relative_poses` (``warp`` without a
+    ``method``); raises as it does, and ValueError for an unknown method."""
+    return _pair_relative_poses(*args, methods=tuple(methods), **kwargs)
+
+
 def pair_relative_poses(images: Any, features: Any, positions: Any, i_idx: Any, j_idx: Any, compass: Any,
-                        compass_sigma: float, *, map_distance_sigma: float = 0.5, use_gradient: bool = False,
-                        n_neighbors: int = 30, gradient_fraction: float = 0.3,
-                        max_sigma_bearing_deg: float = 30.0, gray: bool = True,
-                        warp: dict[str, Any] | None = None,
-                        correlation_radius: float | None = CORRELATION_RADIUS) -> RelativePoses:
+                        compass_sigma: float, **kwargs: Any) -> RelativePoses:
     """Loop closures from ``i`` (earlier) to ``j`` for place pairs: relative
     poses where the panoramas tell the baseline's direction, heading-only
     (the compass's) elsewhere. See the module docstring.
@@ -194,6 +200,17 @@ def pair_relative_poses(images: Any, features: Any, positions: Any, i_idx: Any, 
         As :func:`sfanav.loopclosure.relative_poses`; mismatched lengths;
         non-positive sigmas.
     """
+    out = _pair_relative_poses(images, features, positions, i_idx, j_idx, compass, compass_sigma, **kwargs)
+    return next(iter(out.values()))
+
+
+def _pair_relative_poses(images: Any, features: Any, positions: Any, i_idx: Any, j_idx: Any, compass: Any,
+                         compass_sigma: float, *, map_distance_sigma: float = 0.5, use_gradient: bool = False,
+                         n_neighbors: int = 30, gradient_fraction: float = 0.3,
+                         max_sigma_bearing_deg: float = 30.0, gray: bool = True,
+                         warp: dict[str, Any] | None = None,
+                         correlation_radius: float | None = CORRELATION_RADIUS,
+                         methods: tuple[str, ...] | None = None) -> dict[str, RelativePoses]:
     F = as_matrix(features, "features")
     X = as_matrix(positions, "positions")
     i = np.asarray(i_idx, np.int64).reshape(-1)
@@ -234,9 +251,22 @@ def pair_relative_poses(images: Any, features: Any, positions: Any, i_idx: Any, 
     sub = np.asarray(images)[used]
     if gray and sub.ndim == 4:
         sub = sub.astype(np.float32).mean(axis=3)
-    rp = relative_poses(sub, inv[:m], inv[m:], distance=np.maximum(dist, 1e-3), distance_sigma=dsig,
-                        **(WARP_OPTIONS if warp is None else warp))
-    rp.i, rp.j = i, j
+    wopts = dict(WARP_OPTIONS if warp is None else warp)
+    methods = methods or (wopts.get("method", "warping"),)
+    wopts.pop("method", None)
+    rps = relative_poses_by_method(sub, inv[:m], inv[m:], distance=np.maximum(dist, 1e-3), distance_sigma=dsig,
+                                   methods=methods, **wopts)
+    out = {}
+    for name, rp in rps.items():
+        rp.i, rp.j = i, j
+        out[name] = _closures(rp, X, rel, cs, maxb, radius)
+    return out
+
+
+def _closures(rp: Any, X: np.ndarray, rel: np.ndarray, cs: float, maxb: float, radius: float | None) -> RelativePoses:
+    """The pose graph's closures from one method's relative poses (see
+    :func:`pair_relative_poses`)."""
+    i, j, m = rp.i, rp.j, len(rp.i)
     good = rp.informative(maxb) & np.isfinite(rp.covariance).all(axis=(1, 2))
     cov = np.zeros((m, 3, 3))
     cov[:, 0, 0] = cov[:, 1, 1] = HEADING_ONLY_SIGMA**2

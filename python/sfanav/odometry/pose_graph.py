@@ -193,7 +193,7 @@ class PoseGraph:
         What measured them ("warping" or "min-warping"; None without).
     method_misfits : dict
         With ``closure_method="auto"``: each method's map's
-        :func:`closure_misfit` against its own closures (the lower won).
+        :attr:`misfit` (the lower won).
     """
 
     poses: np.ndarray
@@ -633,12 +633,13 @@ def fit_pose_graph(images: Any, features: Any, odometry: Any, *, odometry_noise:
         With relative-pose closures, how the panoramas measure them
         (:data:`CLOSURE_METHODS`; the ``method`` of
         :func:`sfanav.loopclosure.relative_poses`). ``"auto"`` solves the
-        graph with each and keeps the map whose closures fit it better
-        (the lower :attr:`PoseGraph.misfit`; a tie keeps the warping):
+        graph with each (refinement included) and keeps the map whose own
+        closures fit it better (the lower :attr:`PoseGraph.misfit`, in
+        :attr:`PoseGraph.method_misfits`; a tie keeps the warping):
         min-warping wins where landmarks at unequal distances bias the
         warping over long baselines (lanes), the warping where short
         baselines make min-warping's bearings noisier (dense gardens).
-        Twice the closures' cost. Measured in docs/relative-pose.md,
+        Twice the closures' and the refinement's cost. Measured in docs/relative-pose.md,
         "Choosing the method without ground truth".
 
     Returns
@@ -663,19 +664,6 @@ def fit_pose_graph(images: Any, features: Any, odometry: Any, *, odometry_noise:
     if "method" in warp and closure_method != "warping":
         raise ValueError(f"the warping method is given twice: closure_method={closure_method!r} and "
                          f"pair_options['warp']['method']={warp['method']!r}; give closure_method only")
-    if closure_method == "auto" and pair_closures == "relative-pose":
-        kw = dict(odometry_noise=odometry_noise, compass_sigma_deg=compass_sigma_deg, n_neighbors=n_neighbors,
-                  min_travel=min_travel, n_outputs=n_outputs, iterations=iterations, robust=robust, refine=refine,
-                  refine_readout=refine_readout, offset_sigma=offset_sigma, heading_sigma_deg=heading_sigma_deg,
-                  solver=solver, relative_poses=relative_poses, pair_closures=pair_closures,
-                  pair_options=pair_options, gyro=gyro, gyro_noise=gyro_noise, max_misfit_growth=max_misfit_growth)
-        fits = {m: fit_pose_graph(images, features, odometry, closure_method=m, **kw)
-                for m in ("warping", "min-warping")}
-        misfits = {m: g.misfit for m, g in fits.items()}
-        best = "min-warping" if misfits["min-warping"] < misfits["warping"] else "warping"  # NaN: the warping
-        out = fits[best]
-        out.method_misfits = misfits
-        return out
     P = as_poses(odometry, "odometry")
     if pair_closures not in PAIR_CLOSURES:
         raise ValueError(f"pair_closures must be one of {PAIR_CLOSURES}, got {pair_closures!r}")
@@ -708,30 +696,43 @@ def fit_pose_graph(images: Any, features: Any, odometry: Any, *, odometry_noise:
     offset_sigma = None if offset_sigma is None else check_positive_float(offset_sigma, "offset_sigma")
     heading_sigma = np.radians(check_positive_float(heading_sigma_deg, "heading_sigma_deg"))
     rel = relative_headings(R, pairs.current, pairs.past)
-    closures = None
-    if solver == "gtsam":
-        xy, theta, drift, w = _solve_gtsam(P, pairs, rel, sigma, odometry_noise, robust, relative_poses,
-                                           step_sigma=step_sigma)
-        if pair_closures == "relative-pose" and len(pairs):
-            from .pair_closures import WARP_OPTIONS, pair_relative_poses
 
-            popts = dict(pair_options or {})
-            if closure_method != "warping":
-                popts["warp"] = {**(popts.get("warp") or WARP_OPTIONS), "method": closure_method}
-            closures = pair_relative_poses(images, F[:, : min(int(n_outputs), F.shape[1])], xy, pairs.past,
-                                           pairs.current, rel, sigma, **popts)
-            xy, theta, drift, w = _solve_gtsam(P, pairs, rel, sigma, odometry_noise, robust, relative_poses,
-                                               step_sigma=step_sigma, closures=closures)
-    else:
+    def refined(xy: np.ndarray, theta: np.ndarray, w: np.ndarray, closures: Any) -> tuple:
+        kept = PlacePairs(pairs.current[w >= 0.5], pairs.past[w >= 0.5], pairs.distance[w >= 0.5])
+        trace: list[dict[str, float]] = []
+        out = refine_positions(F, P, theta, xy, kept, noise=noise, readout=refine_readout or REFINE_READOUT,
+                               rounds=rounds, offset_sigma=offset_sigma, heading_sigma=heading_sigma,
+                               closures=closures, closure_keep=w >= 0.5, max_misfit_growth=max_misfit_growth,
+                               trace=trace)
+        return out + (trace,)
+
+    if solver != "gtsam":
         theta, drift, w = _solve_headings(P, pairs, rel, noise, sigma, iterations, robust, step_sigma)
-        xy = integrate(P, theta)
-    kept = PlacePairs(pairs.current[w >= 0.5], pairs.past[w >= 0.5], pairs.distance[w >= 0.5])
-    trace: list[dict[str, float]] = []
-    xy, done, chi, osig = refine_positions(F, P, theta, xy, kept, noise=noise,
-                                           readout=refine_readout or REFINE_READOUT, rounds=rounds,
-                                           offset_sigma=offset_sigma, heading_sigma=heading_sigma,
-                                           closures=closures, closure_keep=w >= 0.5,
-                                           max_misfit_growth=max_misfit_growth, trace=trace)
-    method = None if closures is None else str(warp.get("method", closure_method))
-    return PoseGraph(np.c_[xy, theta], drift, pairs, rel, w, refined=done, refine_chi=chi, offset_sigma=osig,
-                     refine_trace=trace, closures=closures, closure_method=method)
+        xy, done, chi, osig, trace = refined(integrate(P, theta), theta, w, None)
+        return PoseGraph(np.c_[xy, theta], drift, pairs, rel, w, refined=done, refine_chi=chi, offset_sigma=osig,
+                         refine_trace=trace)
+    xy, theta, drift, w = _solve_gtsam(P, pairs, rel, sigma, odometry_noise, robust, relative_poses,
+                                       step_sigma=step_sigma)
+    if pair_closures != "relative-pose" or not len(pairs):
+        xy, done, chi, osig, trace = refined(xy, theta, w, None)
+        return PoseGraph(np.c_[xy, theta], drift, pairs, rel, w, refined=done, refine_chi=chi, offset_sigma=osig,
+                         refine_trace=trace)
+    from .pair_closures import pair_relative_poses_by_method
+
+    methods = ("warping", "min-warping") if closure_method == "auto" else (warp.get("method", closure_method),)
+    measured = pair_relative_poses_by_method(images, F[:, : min(int(n_outputs), F.shape[1])], xy, pairs.past,
+                                             pairs.current, rel, sigma, methods=methods, **dict(pair_options or {}))
+    graphs = {}
+    for m, c in measured.items():
+        xy_m, theta_m, drift_m, w_m = _solve_gtsam(P, pairs, rel, sigma, odometry_noise, robust, relative_poses,
+                                                   step_sigma=step_sigma, closures=c)
+        xy_m, done, chi, osig, trace = refined(xy_m, theta_m, w_m, c)
+        graphs[m] = PoseGraph(np.c_[xy_m, theta_m], drift_m, pairs, rel, w_m, refined=done, refine_chi=chi,
+                              offset_sigma=osig, refine_trace=trace, closures=c, closure_method=m)
+    if closure_method != "auto":
+        return graphs[methods[0]]
+    # the map its own closures fit better (a tie or NaN: the warping)
+    misfits = {m: g.misfit for m, g in graphs.items()}
+    out = graphs["min-warping" if misfits["min-warping"] < misfits["warping"] else "warping"]
+    out.method_misfits = misfits
+    return out
