@@ -296,16 +296,24 @@ def test_train_with_loop_closures(tiny, tmp_path, capsys):
 
 def test_train_with_relative_pose_closures(tiny, tmp_path, capsys):
     """Without ground truth the pose graph's closures are GTSAM's relative
-    poses by default (recorded in the model); --closures heading keeps the
-    heading-only closures, min-warping measures them by min-warping; --closures with the metric learner is one clear
-    error."""
-    for flag, want in (([], "relative-pose"), (["--closures", "heading"], "heading"),
-                       (["--closures", "min-warping"], "min-warping")):
+    poses by whichever warping method fits better by default (auto; recorded
+    in the model with the method kept and both misfits); --closures heading
+    keeps the heading-only closures, relative-pose / min-warping measure them
+    by one method; --closures with the metric learner is one clear error."""
+    for flag, want, method in (([], "auto", None), (["--closures", "heading"], "heading", "-"),
+                               (["--closures", "relative-pose"], "relative-pose", "warping"),
+                               (["--closures", "min-warping"], "min-warping", "min-warping")):
         code, _, err = run(capsys, "train", "--dataset", tiny["root"] / "data", "--config", tiny["config"],
                            "--out", tmp_path / f"rp-{want}.sfa", "--supervision", "odometry", *flag, "--no-progress")
         assert code == 0, err
         info = sfanav.load(tmp_path / f"rp-{want}.sfa").info
         assert info["closures"] == want and info["supervision"] == "odometry"
+        if method is None:  # auto: the method of the lower misfit (None: no closure measured a position here)
+            m = {k: (np.inf if v is None else v) for k, v in info["closure misfit by method"].items()}
+            assert set(m) == {"warping", "min-warping"}
+            assert info["closure method"] == ("min-warping" if m["min-warping"] < m["warping"] else "warping")
+        else:
+            assert info.get("closure method", "-") == method and "closure misfit by method" not in info
     code, _, err = run(capsys, "train", "--dataset", tiny["root"] / "data", "--config", tiny["config"],
                        "--out", tmp_path / "ml.sfa", "--supervision", "odometry", "--closures", "relative-pose",
                        "--metric-map", "metric-learning", "--no-progress")

@@ -30,15 +30,16 @@ METRIC_MAPS = ("pose-graph", "metric-learning")
 """How positions are learned without ground truth (``sfanav train --metric-map``)."""
 CLOSURES = ("relative-pose", "min-warping", "auto", "heading")
 """What the pose graph's loop closures measure (``train_localizer(closures=)``, ``sfanav train --closures``):
-the whole relative pose by the warping method on GTSAM, the closures of one place counted as one; the same by
-min-warping (a landmark distance per image column: the better map on a mower's serpentine of lanes,
-docs/relative-pose.md "Min-warping"); ``auto``: both, keeping the map its own closures fit better (no ground
-truth; docs/relative-pose.md "Choosing the method without ground truth"); or the relative heading only.
-docs/odometry.md, "Correlated bearing errors", has the measurements behind the relative pose."""
+the whole relative pose on GTSAM (the closures of one place counted as one) by the warping method; the same
+by min-warping (a landmark distance per image column: the better map on a mower's serpentine of lanes,
+docs/relative-pose.md "Min-warping"); ``auto`` (the default since 2026-12-07): both, keeping the map its own
+closures fit better (no ground truth; docs/relative-pose.md "Choosing the method without ground truth"); or
+the relative heading only. docs/odometry.md, "Correlated bearing errors", has the measurements behind the
+relative pose."""
 CLOSURE_METHOD = {"relative-pose": "warping", "min-warping": "min-warping", "auto": "auto"}
 """The pose graph's ``closure_method`` (:data:`sfanav.odometry.pose_graph.CLOSURE_METHODS`) of each relative-pose
 choice of :data:`CLOSURES`."""
-DEFAULT_CLOSURES = "relative-pose"
+DEFAULT_CLOSURES = "auto"
 """The closures of ``closures=None`` with the pose graph."""
 ROTATION_STEP = 5
 """The simulated rotation's step in pixels (the thesis's)."""

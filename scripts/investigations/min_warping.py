@@ -8,6 +8,10 @@ test), once per variant of :data:`sfanav.odometry.pair_closures.WARP_OPTIONS` (`
 closures of the first variant's last measurement are measured again under every variant, so their errors compare
 on the same pairs. Ground truth is used for scoring only.
 
+Each variant's entry also holds the map's ``misfit`` (:attr:`sfanav.odometry.pose_graph.PoseGraph.misfit`, no ground
+truth), and ``choice by misfit`` the variant of the lower one with its map error: what
+``fit_pose_graph(closure_method="auto")`` keeps (tests/test_pair_closures.py checks that it keeps the lower one).
+
     PYTHONPATH=python python3 scripts/investigations/min_warping.py OUT.json --cache CACHE \\
         --run DATASET:RUN [--run DATASET:RUN ...] [--variants "warping,min-warping"]
 
@@ -109,13 +113,40 @@ def main() -> None:
             P = g.poses[:, :2]
             err = np.hypot(*(align(P, T[:, :2]).apply(P) - T[:, :2]).T)
             entry["map error (m)"][v] = {"mean": float(err.mean()), "median": float(np.median(err)),
-                                         "fit (s)": time.perf_counter() - t}
+                                         "fit (s)": time.perf_counter() - t, "misfit": g.misfit}
             first_call = first_call or spy[-1]
             print(key, v, json.dumps(entry["map error (m)"][v]), flush=True)
         for v in variants:
             entry["closures"][v] = closure_errors(first_call, T, options(v, {}))
+        me = entry["map error (m)"]
+        if {"warping", "min-warping"} <= set(me):
+            best = "min-warping" if me["min-warping"]["misfit"] < me["warping"]["misfit"] else "warping"
+            entry["choice by misfit"] = {"method": best, "map error (m)": me[best]["mean"],
+                                         "misfit min-warping over warping":
+                                             me["min-warping"]["misfit"] / me["warping"]["misfit"],
+                                         "over the warping": me[best]["mean"] / me["warping"]["mean"]}
         res[key] = entry
         a.out.write_text(json.dumps(res, indent=1) + "\n")
+    runs = [e for k, e in res.items() if isinstance(e, dict) and "choice by misfit" in e]
+    if runs:
+        me = [e["map error (m)"] for e in runs]
+        gm = lambda r: float(np.exp(np.mean(np.log(r))))  # noqa: E731
+        res["summary"] = {
+            "runs": len(runs),
+            "min-warping over the warping, geometric mean": gm([m["min-warping"]["mean"] / m["warping"]["mean"]
+                                                               for m in me]),
+            "min-warping over the warping, worst": max(m["min-warping"]["mean"] / m["warping"]["mean"] for m in me),
+            "choice by misfit over the warping, geometric mean": gm([e["choice by misfit"]["over the warping"]
+                                                                    for e in runs]),
+            "choice by misfit over the warping, worst": max(e["choice by misfit"]["over the warping"] for e in runs),
+            "choice by misfit over the better method, worst": max(
+                e["choice by misfit"]["map error (m)"] / min(m["warping"]["mean"], m["min-warping"]["mean"])
+                for e, m in zip(runs, me)),
+            "choices of the better method": sum(
+                e["choice by misfit"]["map error (m)"] <= min(m["warping"]["mean"], m["min-warping"]["mean"])
+                for e, m in zip(runs, me))}
+        a.out.write_text(json.dumps(res, indent=1) + "\n")
+        print(json.dumps(res["summary"], indent=1))
 
 
 if __name__ == "__main__":

@@ -45,7 +45,7 @@ def main() -> None:
     ap.add_argument("--test", default="test-walk")
     ap.add_argument("--closures", default=None, choices=("heading", "relative-pose", "min-warping", "auto"),
                     help="the pose graph's closures without ground truth (train_localizer(closures=); default: its "
-                         "default, relative-pose since 2026-12-06)")
+                         "default: relative-pose from 2026-12-06, auto since 2026-12-07)")
     ap.add_argument("--no-gyro", action="store_true", help="train without the runs' gyro (the entries before "
                     "2026-12-06 15:00)")
     ap.add_argument("--tag", default="", help="appended to each run's key in the JSON (e.g. ' (relative-pose)')")

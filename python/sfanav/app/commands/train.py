@@ -82,11 +82,10 @@ def _add_train(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                         "auto (default): ground truth if the run has it, else odometry")
     p.add_argument("--closures", choices=("relative-pose", "min-warping", "auto", "heading"), default=None,
                    help="with odometry supervision and the pose graph, what its loop closures measure: the whole "
-                        "relative pose from the two panoramas by the warping (the default; GTSAM), by "
-                        "min-warping (a landmark distance per image column: better maps on serpentine lanes, "
-                        "worse on grids), auto (both, keeping the map its closures fit better; twice the "
-                        "closures' time), or the relative heading only; docs/odometry.md, 'Correlated bearing "
-                        "errors', docs/relative-pose.md, 'Min-warping'")
+                        "relative pose from the two panoramas (GTSAM) by the warping, by min-warping (a landmark "
+                        "distance per image column: better maps on serpentine lanes, worse on dense grids), or "
+                        "auto (the default: both, keeping the map its own closures fit better), or the relative "
+                        "heading only; docs/relative-pose.md, 'Choosing the method without ground truth'")
     p.add_argument("--metric-map", choices=("pose-graph", "metric-learning"), default="pose-graph",
                    help="with odometry supervision, how positions are learned: pose-graph (default; the odometry's "
                         "heading drift corrected by loop closures found by the slow features and the panoramas) "
