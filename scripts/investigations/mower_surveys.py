@@ -61,8 +61,11 @@ def main() -> None:
             train.gyro = None
         r = product_rows(train, tests, camera_elevation=elev, closures=a.closures)
         rows = {row["metric"]: row["sfanav"] for row in r.rows}
+        summary = {k: rows.get(v) for k, v in SUMMARY.items()}
+        fused, single = (rows.get(f"MED (m) sfanav default [no ground truth{x}]") for x in (", fused", ""))
+        summary["fused over single images, no ground truth"] = fused / single if fused and single else None
         res[pattern + a.tag] = {"frames": len(train.images), "rows": rows, "seconds": time.perf_counter() - t0,
-                                "summary": {k: rows.get(v) for k, v in SUMMARY.items()}}
+                                "summary": summary}
         sup = rows.get("MED (m) sfanav default [ground truth]")
         ngt = rows.get("MED (m) sfanav default [no ground truth]")
         print(f"{pattern}: supervised {sup:.3f} m, no ground truth {ngt:.3f} m (ratio {ngt / sup:.2f}), "
