@@ -30,6 +30,7 @@ import numpy as np
 import sfanav.odometry.pair_closures as pc
 import sfanav.odometry.pose_graph as pg
 from sfanav.localization.error_metrics import align
+from sfanav.loopclosure.relative_pose import relative_poses_by_method
 from refinement_guard import cached_run  # noqa: E402  (this folder: the cache's reader)
 
 MAX_SIGMA_BEARING = np.radians(30.0)
@@ -50,7 +51,7 @@ def options(variant: str, base: dict) -> dict:
 def fit(d: dict, gyro, warp: dict, spy: list) -> pg.PoseGraph:
     """The pose graph under ``warp``; ``spy`` receives every (images, i, j, kwargs, frames i, frames j) measured."""
     saved = dict(pc.WARP_OPTIONS)
-    orig_rp, orig_pair = pc.relative_poses, pc.pair_relative_poses
+    orig_rp, orig_pair = pc.relative_poses_by_method, pc.pair_relative_poses
 
     def rp(images, i, j, **kw):
         spy.append([images, np.asarray(i), np.asarray(j), kw])
@@ -63,12 +64,12 @@ def fit(d: dict, gyro, warp: dict, spy: list) -> pg.PoseGraph:
 
     pc.WARP_OPTIONS.clear()
     pc.WARP_OPTIONS.update(warp)
-    pc.relative_poses, pc.pair_relative_poses = rp, pair
+    pc.relative_poses_by_method, pc.pair_relative_poses = rp, pair
     try:
         return pg.fit_pose_graph(d["X"], d["F"], d["odometry"], n_outputs=8, solver="gtsam",
                                  pair_closures="relative-pose", gyro=gyro)
     finally:
-        pc.relative_poses, pc.pair_relative_poses = orig_rp, orig_pair
+        pc.relative_poses_by_method, pc.pair_relative_poses = orig_rp, orig_pair
         pc.WARP_OPTIONS.clear()
         pc.WARP_OPTIONS.update(saved)
 
@@ -77,8 +78,10 @@ def closure_errors(call: list, T: np.ndarray, warp: dict) -> dict:
     """Heading and bearing errors (deg) of one measurement's pairs under ``warp``, their ratio to the reported
     sigma, on the informative pairs."""
     images, i, j, kw, fi, fj = call
-    kw = {k: v for k, v in kw.items() if k not in ("method", "temperature")}
-    rp = pc.relative_poses(images, i, j, **kw, **warp)
+    kw = {k: v for k, v in kw.items() if k not in ("methods", "temperature")}
+    method = warp.get("method", "warping")
+    rp = relative_poses_by_method(images, i, j, **kw, methods=(method,),
+                                  **{k: v for k, v in warp.items() if k != "method"})[method]
     ok = rp.informative(MAX_SIGMA_BEARING)
     dv = T[fj, :2] - T[fi, :2]
     eh = np.degrees(wrap(rp.dtheta - wrap(T[fj, 2] - T[fi, 2])))[ok]

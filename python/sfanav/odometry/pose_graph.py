@@ -717,11 +717,17 @@ def fit_pose_graph(images: Any, features: Any, odometry: Any, *, odometry_noise:
         xy, done, chi, osig, trace = refined(xy, theta, w, None)
         return PoseGraph(np.c_[xy, theta], drift, pairs, rel, w, refined=done, refine_chi=chi, offset_sigma=osig,
                          refine_trace=trace)
-    from .pair_closures import pair_relative_poses_by_method
+    from . import pair_closures as pc  # looked up at the call: studies wrap pair_relative_poses
 
-    methods = ("warping", "min-warping") if closure_method == "auto" else (warp.get("method", closure_method),)
-    measured = pair_relative_poses_by_method(images, F[:, : min(int(n_outputs), F.shape[1])], xy, pairs.past,
-                                             pairs.current, rel, sigma, methods=methods, **dict(pair_options or {}))
+    args = (images, F[:, : min(int(n_outputs), F.shape[1])], xy, pairs.past, pairs.current, rel, sigma)
+    popts = dict(pair_options or {})
+    if closure_method == "auto":
+        measured = pc.pair_relative_poses_by_method(*args, methods=("warping", "min-warping"), **popts)
+    else:
+        if closure_method != "warping":
+            popts["warp"] = {**(popts.get("warp") or pc.WARP_OPTIONS), "method": closure_method}
+        used = str((popts.get("warp") or pc.WARP_OPTIONS).get("method", "warping"))
+        measured = {used: pc.pair_relative_poses(*args, **popts)}
     graphs = {}
     for m, c in measured.items():
         xy_m, theta_m, drift_m, w_m = _solve_gtsam(P, pairs, rel, sigma, odometry_noise, robust, relative_poses,
@@ -730,7 +736,7 @@ def fit_pose_graph(images: Any, features: Any, odometry: Any, *, odometry_noise:
         graphs[m] = PoseGraph(np.c_[xy_m, theta_m], drift_m, pairs, rel, w_m, refined=done, refine_chi=chi,
                               offset_sigma=osig, refine_trace=trace, closures=c, closure_method=m)
     if closure_method != "auto":
-        return graphs[methods[0]]
+        return next(iter(graphs.values()))
     # the map its own closures fit better (a tie or NaN: the warping)
     misfits = {m: g.misfit for m, g in graphs.items()}
     out = graphs["min-warping" if misfits["min-warping"] < misfits["warping"] else "warping"]
