@@ -223,3 +223,20 @@ def test_train_localizer_checks_closures_first():
         train_localizer(X, odometry=odo, closures="relative-pose", metric_map="metric-learning")
     with pytest.raises(ValueError, match="needs metric_map='pose-graph'"):
         train_localizer(X, odometry=odo, closures="heading", metric_map="metric-learning")
+
+
+def test_describe_closures_says_what_the_pose_graph_measured():
+    from sfanav.pipeline import describe_closures
+
+    auto = {"loop closures": 12, "loop closures kept": 11, "closures": "auto", "closure method": "warping",
+            "closure misfit by method": {"warping": 0.05, "min-warping": 0.08}}
+    assert describe_closures(auto) == ("11 of 12 loop closures kept, relative poses by the warping (closures' "
+                                       "misfit 0.05 against 0.08 by min-warping)")
+    # no closure measured a position: both misfits unknown, no comparison printed
+    none = {**auto, "closure misfit by method": {"warping": None, "min-warping": None}}
+    assert describe_closures(none) == "11 of 12 loop closures kept, relative poses by the warping"
+    assert describe_closures({"loop closures": 3, "loop closures kept": 3, "closures": "heading"}) == \
+        "3 of 3 loop closures kept, relative headings only"
+    assert describe_closures({"loop closures": 3, "loop closures kept": 2, "closures": "min-warping",
+                              "closure method": "min-warping"}) == \
+        "2 of 3 loop closures kept, relative poses by min-warping"

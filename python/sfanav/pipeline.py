@@ -45,6 +45,29 @@ ROTATION_STEP = 5
 """The simulated rotation's step in pixels (the thesis's)."""
 
 
+def describe_closures(info: Mapping[str, Any]) -> str:
+    """The pose graph's loop closures of a model trained without ground
+    truth, in words, from its ``info``: how many were kept, what they
+    measure and (``closures="auto"``) which warping method the misfit
+    chose.
+
+    >>> print(describe_closures({"loop closures": 10, "loop closures kept": 9, "closures": "auto",
+    ...                          "closure method": "min-warping",
+    ...                          "closure misfit by method": {"warping": 0.2, "min-warping": 0.1}}))
+    9 of 10 loop closures kept, relative poses by min-warping (closures' misfit 0.1 against 0.2 by the warping)
+    """
+    out = f"{info.get('loop closures kept', 0)} of {info.get('loop closures', 0)} loop closures kept"
+    method, misfits = info.get("closure method"), info.get("closure misfit by method") or {}
+    if method is None:
+        return out + (", relative headings only" if info.get("closures") == "heading" else "")
+    out += f", relative poses by {'the ' if method == 'warping' else ''}{method}"
+    other = next((m for m in misfits if m != method), None)
+    if other is not None and misfits.get(method) is not None and misfits.get(other) is not None:
+        out += (f" (closures' misfit {misfits[method]:.3g} against {misfits[other]:.3g} by "
+                f"{'the ' if other == 'warping' else ''}{other})")
+    return out
+
+
 def _all_finite(a: Any, n_cols: int) -> bool:
     if a is None:
         return False

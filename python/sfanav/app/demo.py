@@ -121,7 +121,7 @@ def run_demo(out: str | Path = "sfanav-demo", *, seed: int = 0, overwrite: bool 
     from ..localization.evaluation import coordinate_range
     from ..localization.recipe import CAMERA_ELEVATION, default_network, recipe_for
     from ..odometry.fusion import fuse_images
-    from ..pipeline import ROTATION_STEP, train_localizer
+    from ..pipeline import ROTATION_STEP, describe_closures, train_localizer
 
     t_start = time.perf_counter()
     out = Path(out)
@@ -245,8 +245,7 @@ def run_demo(out: str | Path = "sfanav-demo", *, seed: int = 0, overwrite: bool 
         f"{len(X_test)} test images (random walk), {prep.describe()}.\n"
         f"Rows '[no ground truth]' (the product: what a robot has): network {'tiny (quick)' if quick else DEMO_NETWORK} "
         f"trained on the images under simulated rotation ({rotation.step} px); the training run's positions learned "
-        f"from its images and odometry by the pose graph ({loc.info['loop closures kept']} of "
-        f"{loc.info['loop closures']} {loc.info.get('closures', 'heading')} loop closures kept, "
+        f"from its images and odometry by the pose graph ({describe_closures(loc.info)}, "
         f"odometry heading drift "
         f"{loc.info['odometry heading drift (deg per m)']:.3f} deg/m corrected); readout "
         f"{loc.describe_readout()} fitted to them. Its estimates are in the training run's odometry frame; for "

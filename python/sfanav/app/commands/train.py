@@ -213,7 +213,7 @@ def _train(args: argparse.Namespace, stack: Any) -> int:
     from ...data.preprocessing import Preprocessing, Preprocessor
     from ...data.sources import load_run, select_run
     from ...localization.recipe import CAMERA_ELEVATION, recipe_for, supervision_for
-    from ...pipeline import train_localizer
+    from ...pipeline import describe_closures, train_localizer
     from ...sfa.network import Rotation
 
     t0 = time.perf_counter()
@@ -317,7 +317,7 @@ def _train(args: argparse.Namespace, stack: Any) -> int:
                                 "network": args.preset or (str(args.config) if args.config else "sfanav-default")},
                           progress=not args.no_progress, log=log)
     if supervision == "odometry" and args.metric_map == "pose-graph":
-        log(f"pose graph: {loc.info['loop closures kept']} of {loc.info['loop closures']} loop closures kept, "
+        log(f"pose graph: {describe_closures(loc.info)}, "
              f"odometry heading drift {loc.info['odometry heading drift (deg per m)']:.3f} deg/m corrected")
     elif supervision == "odometry":
         log(f"metric map from {loc.info['lines']} straight lines ({loc.info['points on lines']} frames), "
