@@ -90,19 +90,7 @@ pub fn min_warp_scores(
     shifts: &[f64],
     n_shifts: usize,
 ) -> Result<Vec<f64>> {
-    let (image, hyps) = check_inputs(a, b, pairs, rows, width, columns, group, shifts, n_shifts, false)?;
-    let groups = hyps / group;
-    let mut out = vec![0.0f64; pairs * groups * n_shifts];
-    if pairs == 0 {
-        return Ok(out);
-    }
-    out.par_chunks_mut(groups * n_shifts).enumerate().for_each(|(p, dst)| {
-        let pa = &a[p * image..(p + 1) * image];
-        let pb = &b[p * image..(p + 1) * image];
-        let sh = &shifts[p * n_shifts..(p + 1) * n_shifts];
-        score_pair::<false>(pa, pb, rows, width, columns, hyps, group, sh, dst, &mut []);
-    });
-    Ok(out)
+    scores::<false>(a, b, pairs, rows, width, columns, group, shifts, n_shifts).map(|(_, mins)| mins)
 }
 
 /// The warping's and min-warping's scores of `pairs` pairs from one pass:
@@ -124,21 +112,40 @@ pub fn warp_and_min_warp_scores(
     shifts: &[f64],
     n_shifts: usize,
 ) -> Result<(Vec<f64>, Vec<f64>)> {
-    let (image, hyps) = check_inputs(a, b, pairs, rows, width, columns, group, shifts, n_shifts, true)?;
+    scores::<true>(a, b, pairs, rows, width, columns, group, shifts, n_shifts)
+}
+
+/// The driver of both: `(each hypothesis's scores, empty without BOTH;
+/// each group's min-warping scores)`, the pairs in parallel.
+#[allow(clippy::too_many_arguments)]
+fn scores<const BOTH: bool>(
+    a: &[f64],
+    b: &[f64],
+    pairs: usize,
+    rows: usize,
+    width: usize,
+    columns: &[f64],
+    group: usize,
+    shifts: &[f64],
+    n_shifts: usize,
+) -> Result<(Vec<f64>, Vec<f64>)> {
+    let (image, hyps) = check_inputs(a, b, pairs, rows, width, columns, group, shifts, n_shifts, BOTH)?;
     let groups = hyps / group;
-    let mut each = vec![0.0f64; pairs * hyps * n_shifts];
+    let per_pair = if BOTH { hyps * n_shifts } else { 0 };
+    let mut each = vec![0.0f64; pairs * per_pair];
     let mut mins = vec![0.0f64; pairs * groups * n_shifts];
     if pairs == 0 {
         return Ok((each, mins));
     }
-    mins.par_chunks_mut(groups * n_shifts).zip(each.par_chunks_mut(hyps * n_shifts)).enumerate().for_each(
-        |(p, (dst, dst_each))| {
-            let pa = &a[p * image..(p + 1) * image];
-            let pb = &b[p * image..(p + 1) * image];
-            let sh = &shifts[p * n_shifts..(p + 1) * n_shifts];
-            score_pair::<true>(pa, pb, rows, width, columns, hyps, group, sh, dst, dst_each);
-        },
-    );
+    // one (possibly empty) slice of `each` per pair, so that both outputs go through one parallel loop
+    let mut each_of: Vec<&mut [f64]> =
+        if BOTH { each.chunks_mut(per_pair).collect() } else { (0..pairs).map(|_| Default::default()).collect() };
+    mins.par_chunks_mut(groups * n_shifts).zip(each_of.par_iter_mut()).enumerate().for_each(|(p, (dst, e))| {
+        let pa = &a[p * image..(p + 1) * image];
+        let pb = &b[p * image..(p + 1) * image];
+        let sh = &shifts[p * n_shifts..(p + 1) * n_shifts];
+        score_pair::<BOTH>(pa, pb, rows, width, columns, hyps, group, sh, dst, e);
+    });
     Ok((each, mins))
 }
 

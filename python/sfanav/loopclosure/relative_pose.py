@@ -436,7 +436,6 @@ def relative_poses_by_method(images: Any, i_idx: Any, j_idx: Any, *, distance: A
     >>> sorted(relative_poses_by_method(pano, [0], [1], distance=1.0))
     ['min-warping', 'warping']
     """
-    method = methods
     X = as_images(images)
     R = panorama_rows(X).astype(np.float64)
     if rows is not None:
@@ -453,9 +452,10 @@ def relative_poses_by_method(images: Any, i_idx: Any, j_idx: Any, *, distance: A
     if nus.size == 0 or not np.all((nus > 0) & (nus < 1)):
         raise ValueError(f"ratios must be numbers in (0, 1), got {ratios!r}")
     temp = check_positive_float(temperature, "temperature")
-    methods = (method,) if isinstance(method, str) else tuple(method)
+    given = methods
+    methods = (methods,) if isinstance(methods, str) else tuple(methods)
     if not methods or len(set(methods)) != len(methods) or any(m not in METHODS for m in methods):
-        raise ValueError(f"method must be one of {METHODS}, got {method!r}")
+        raise ValueError(f"method must be one of {METHODS}, got {given!r}")
     if (features is None) != (gradient is None):
         raise ValueError("features and gradient go together: give both or neither")
 

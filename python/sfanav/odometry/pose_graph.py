@@ -697,26 +697,26 @@ def fit_pose_graph(images: Any, features: Any, odometry: Any, *, odometry_noise:
     heading_sigma = np.radians(check_positive_float(heading_sigma_deg, "heading_sigma_deg"))
     rel = relative_headings(R, pairs.current, pairs.past)
 
-    def refined(xy: np.ndarray, theta: np.ndarray, w: np.ndarray, closures: Any) -> tuple:
+    def refined(xy: np.ndarray, theta: np.ndarray, drift: float, w: np.ndarray, closures: Any = None,
+                method: str | None = None) -> PoseGraph:
+        """The pose graph after the refinement of its positions."""
         kept = PlacePairs(pairs.current[w >= 0.5], pairs.past[w >= 0.5], pairs.distance[w >= 0.5])
         trace: list[dict[str, float]] = []
-        out = refine_positions(F, P, theta, xy, kept, noise=noise, readout=refine_readout or REFINE_READOUT,
-                               rounds=rounds, offset_sigma=offset_sigma, heading_sigma=heading_sigma,
-                               closures=closures, closure_keep=w >= 0.5, max_misfit_growth=max_misfit_growth,
-                               trace=trace)
-        return out + (trace,)
+        xy, done, chi, osig = refine_positions(F, P, theta, xy, kept, noise=noise,
+                                               readout=refine_readout or REFINE_READOUT, rounds=rounds,
+                                               offset_sigma=offset_sigma, heading_sigma=heading_sigma,
+                                               closures=closures, closure_keep=w >= 0.5,
+                                               max_misfit_growth=max_misfit_growth, trace=trace)
+        return PoseGraph(np.c_[xy, theta], drift, pairs, rel, w, refined=done, refine_chi=chi, offset_sigma=osig,
+                         refine_trace=trace, closures=closures, closure_method=method)
 
     if solver != "gtsam":
         theta, drift, w = _solve_headings(P, pairs, rel, noise, sigma, iterations, robust, step_sigma)
-        xy, done, chi, osig, trace = refined(integrate(P, theta), theta, w, None)
-        return PoseGraph(np.c_[xy, theta], drift, pairs, rel, w, refined=done, refine_chi=chi, offset_sigma=osig,
-                         refine_trace=trace)
+        return refined(integrate(P, theta), theta, drift, w)
     xy, theta, drift, w = _solve_gtsam(P, pairs, rel, sigma, odometry_noise, robust, relative_poses,
                                        step_sigma=step_sigma)
     if pair_closures != "relative-pose" or not len(pairs):
-        xy, done, chi, osig, trace = refined(xy, theta, w, None)
-        return PoseGraph(np.c_[xy, theta], drift, pairs, rel, w, refined=done, refine_chi=chi, offset_sigma=osig,
-                         refine_trace=trace)
+        return refined(xy, theta, drift, w)
     from . import pair_closures as pc  # looked up at the call: studies wrap pair_relative_poses
 
     args = (images, F[:, : min(int(n_outputs), F.shape[1])], xy, pairs.past, pairs.current, rel, sigma)
@@ -728,13 +728,9 @@ def fit_pose_graph(images: Any, features: Any, odometry: Any, *, odometry_noise:
             popts["warp"] = {**(popts.get("warp") or pc.WARP_OPTIONS), "method": closure_method}
         used = str((popts.get("warp") or pc.WARP_OPTIONS).get("method", "warping"))
         measured = {used: pc.pair_relative_poses(*args, **popts)}
-    graphs = {}
-    for m, c in measured.items():
-        xy_m, theta_m, drift_m, w_m = _solve_gtsam(P, pairs, rel, sigma, odometry_noise, robust, relative_poses,
-                                                   step_sigma=step_sigma, closures=c)
-        xy_m, done, chi, osig, trace = refined(xy_m, theta_m, w_m, c)
-        graphs[m] = PoseGraph(np.c_[xy_m, theta_m], drift_m, pairs, rel, w_m, refined=done, refine_chi=chi,
-                              offset_sigma=osig, refine_trace=trace, closures=c, closure_method=m)
+    graphs = {m: refined(*_solve_gtsam(P, pairs, rel, sigma, odometry_noise, robust, relative_poses,
+                                       step_sigma=step_sigma, closures=c), closures=c, method=m)
+              for m, c in measured.items()}
     if closure_method != "auto":
         return next(iter(graphs.values()))
     # the map its own closures fit better (a tie or NaN: the warping)
