@@ -243,11 +243,70 @@ def test_a_fit_with_kept_hyperparameters_equals_the_learned_fit_on_the_same_data
 def test_training_predictions_are_the_posterior_mean_at_the_training_samples():
     """Computed from the fit (Y - noise * dual) they equal predict() on the
     training features (up to the float32 signatures predict reads); None
-    when max_train thinned the samples and after a model-file round trip."""
+    after a model-file round trip."""
     rng = np.random.default_rng(5)
     xy, slow, sig = _place_data(150, rng, 0.02, 0.01)
     F = np.hstack([slow, sig])
     r = SignatureGPReadout(4, 20).fit(F, xy)
     np.testing.assert_allclose(r.training_predictions_, r.predict(F), atol=1e-6)
-    assert SignatureGPReadout(4, 20, max_train=100).fit(F, xy).training_predictions_ is None
+    thinned = SignatureGPReadout(4, 20, max_train=100).fit(F, xy)  # the DTC posterior's, from the cached distances
+    np.testing.assert_allclose(thinned.training_predictions_, thinned.predict(F), atol=1e-4)
     assert SignatureGPReadout.from_state(r.get_state()).training_predictions_ is None
+
+
+def _kernel(r, A, B):
+    """The fitted readout's kernel between feature rows A and B, evaluated
+    directly (float64 signatures)."""
+    S_a, G_a = r._split(A)
+    S_b, G_b = r._split(B)
+    Za, Zb = (S_a - r.mean_) / r.scale_ / r.length_scale_, (S_b - r.mean_) / r.scale_ / r.length_scale_
+    d2 = ((Za[:, None, :] - Zb[None]) ** 2).sum(axis=2)
+    d1 = np.abs(G_a[:, None, :] - G_b[None]).sum(axis=2)
+    return np.exp(-0.5 * d2 - d1 / (r.distance_unit_ * r.signature_scale_))
+
+
+def test_a_thinned_fit_is_the_dtc_posterior_of_every_sample():
+    """With max_train below N the weights of the kept samples minimise
+    |Y - mean - K_nm w|^2 + noise w' K_mm w over all N samples (the normal
+    equations solved directly here), not the kept samples' exact GP."""
+    rng = np.random.default_rng(7)
+    xy, slow, sig = _place_data(240, rng, 0.02, 0.01)
+    F = np.hstack([slow, sig])
+    r = SignatureGPReadout(4, 20, max_train=60).fit(F, xy)
+    keep = np.unique(np.linspace(0, len(F) - 1, 60).round().astype(int))
+    kept = F[keep]
+    Knm, Kmm = _kernel(r, F, kept), _kernel(r, kept, kept)
+    w = np.linalg.solve(Knm.T @ Knm + r.noise_ * Kmm, Knm.T @ (xy - xy.mean(axis=0)))
+    np.testing.assert_allclose(r.predict(F), Knm @ w + xy.mean(axis=0), atol=2e-3)
+    # and it uses what the thinning dropped: closer to the full GP than the kept samples' exact GP
+    full = SignatureGPReadout(4, 20, **r.hyperparameters()).fit(F, xy).predict(F)
+    subset_gp = np.linalg.solve(Kmm + r.noise_ * np.eye(len(kept)), xy[keep] - xy.mean(axis=0))
+    assert np.abs(r.predict(F) - full).mean() < np.abs(Knm @ subset_gp + xy.mean(axis=0) - full).mean()
+
+
+def test_with_every_sample_kept_the_dtc_weights_are_the_exact_gps():
+    rng = np.random.default_rng(8)
+    xy, slow, sig = _place_data(120, rng, 0.02, 0.01)
+    F = np.hstack([slow, sig])
+    r = SignatureGPReadout(4, 20).fit(F, xy)
+    S, G = r._split(F)
+    K = np.exp(-0.5 * r._sq_dists(r.X_, r.X_) - r._l1(G, G) / (r.distance_unit_ * r.signature_scale_))
+    w, P = r._dtc_dual(K, r.X_, G, G, xy - r.y_mean_, r.noise_, r._l1(G, G, dtype=np.float32))
+    np.testing.assert_allclose(K @ w, K @ r.dual_, atol=1e-5)
+    np.testing.assert_allclose(P + r.y_mean_, r.training_predictions_, atol=1e-5)
+
+
+def test_a_run_too_long_for_the_distance_cache_gets_the_same_dtc_fit(monkeypatch):
+    """Without the cached distances (a run whose N x max_train table exceeds
+    the cache) the distances are computed per block: the same weights, no
+    training predictions."""
+    import sfanav.localization.signature_readout as sr
+
+    rng = np.random.default_rng(9)
+    xy, slow, sig = _place_data(200, rng, 0.02, 0.01)
+    F = np.hstack([slow, sig])
+    cached = SignatureGPReadout(4, 20, max_train=50).fit(F, xy)
+    monkeypatch.setattr(sr, "_DISTANCE_CACHE_BYTES", 0)
+    blocks = SignatureGPReadout(4, 20, max_train=50, **cached.hyperparameters()).fit(F, xy)
+    np.testing.assert_allclose(blocks.predict(F), cached.predict(F), atol=1e-4)
+    assert blocks.training_predictions_ is None

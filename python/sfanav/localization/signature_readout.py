@@ -33,15 +33,20 @@ from .._resources import get_num_threads
 from .._threads import one_blas_thread
 
 try:  # loaded before any threadpool limit (see readouts.py)
-    from scipy.linalg import cho_factor, cho_solve
+    from scipy.linalg import cho_factor, cho_solve, cholesky, solve_triangular
     from scipy.linalg.lapack import dpotri
     from scipy.optimize import minimize
     from scipy.spatial.distance import cdist
 except ImportError:  # pragma: no cover - scipy is a dependency
-    cho_factor = cho_solve = minimize = cdist = dpotri = None
+    cho_factor = cho_solve = cholesky = solve_triangular = minimize = cdist = dpotri = None
 
 _LOG_BOUNDS = {"length": (np.log(1e-2), np.log(1e3)), "signature": (np.log(1e-3), np.log(1e4)),
                "noise": (np.log(1e-8), np.log(1.0))}
+
+
+# the largest float32 table of every training sample's signature distance to the kept samples a fit keeps
+# (a 12000-sample run with 3000 kept: 144 MB); longer runs recompute the distances per block
+_DISTANCE_CACHE_BYTES = 2**29
 
 
 def _even(n: int, m: int) -> np.ndarray:
@@ -63,7 +68,12 @@ class SignatureGPReadout:
         Evenly spaced training samples the hyperparameters are fitted on
         (each step of the optimiser is cubic in their number).
     max_train : int, default 3000
-        Evenly spaced training samples the posterior mean uses.
+        Evenly spaced training samples the model keeps (its size and query
+        time grow with them). Longer runs are not thinned away: the
+        posterior mean is then the deterministic training conditional's
+        (DTC; Quinonero-Candela and Rasmussen 2005) with the kept samples as
+        inducing points and every training sample as data, which is the
+        exact GP's when every sample is kept (docs/gardens-suite.md).
     length_scale, signature_scale, noise : optional
         Fixed kernel hyperparameters (all three or none): ``length_scale``
         (n_outputs,) in standard deviations of the slow features,
@@ -73,9 +83,9 @@ class SignatureGPReadout:
         localizer keeps its readout's kernel this way.
 
     Fitted attributes: ``training_predictions_`` ((N, 2): the posterior
-    mean at the N training samples, computed from the fit; None when
-    ``max_train`` thinned them, and after loading), ``length_scale_`` (n_outputs,), ``signature_scale_``
-    (``l_g``, in units of ``distance_unit_``, the median L1 distance between
+    mean at the N training samples, computed from the fit; None after
+    loading, and when a run too long for the distance cache was thinned),
+    ``length_scale_`` (n_outputs,), ``signature_scale_`` (``l_g``, in units of ``distance_unit_``, the median L1 distance between
     training signatures), ``noise_`` (noise / signal variance),
     ``log_marginal_likelihood_``.
 
@@ -138,12 +148,12 @@ class SignatureGPReadout:
         d2 = (A**2).sum(axis=1)[:, None] + (B**2).sum(axis=1)[None, :] - 2.0 * A @ B.T
         return np.maximum(d2, 0.0)
 
-    def _l1(self, A: np.ndarray, B: np.ndarray, chunk: int = 128) -> np.ndarray:
-        """L1 distances (len(A), len(B)), blocks of rows on the Rust core's
-        worker threads (:func:`sfanav.get_num_threads`; SciPy's cdist
-        releases the GIL): the signature distances are most of a fit's and
-        an update's time."""
-        out = np.empty((len(A), len(B)))
+    def _l1(self, A: np.ndarray, B: np.ndarray, chunk: int = 128, dtype: Any = np.float64) -> np.ndarray:
+        """L1 distances (len(A), len(B)) as ``dtype``, blocks of rows on the
+        Rust core's worker threads (:func:`sfanav.get_num_threads`; SciPy's
+        cdist releases the GIL): the signature distances are most of a fit's
+        and an update's time."""
+        out = np.empty((len(A), len(B)), dtype)
 
         def block(s: int) -> None:
             out[s : s + chunk] = cdist(A[s : s + chunk], B, "cityblock")
@@ -254,7 +264,13 @@ class SignatureGPReadout:
         sub = G[_even(len(G), 300)]
         dg = self._l1(sub, sub)[np.triu_indices(len(sub), 1)]
         unit = float(np.median(dg)) if dg.size else 0.0
-        return {"G": G, "Y": Y, "keep": keep, "D": self._l1(G[keep], G[keep]), "unit": unit if unit > 0 else 1.0}
+        Dnm = None  # every sample to the kept ones, for the DTC posterior: computed once, shared by nested fits
+        if len(keep) < len(G) and len(G) * len(keep) * 4 <= _DISTANCE_CACHE_BYTES:
+            Dnm = self._l1(G, G[keep], dtype=np.float32)
+            D = Dnm[keep].astype(np.float64)
+        else:
+            D = self._l1(G[keep], G[keep])
+        return {"G": G, "Y": Y, "keep": keep, "D": D, "Dnm": Dnm, "unit": unit if unit > 0 else 1.0}
 
     def _fit_prepared(self, S: np.ndarray, prep: dict[str, Any],
                       fixed: tuple[np.ndarray, float, float] | None = None) -> "SignatureGPReadout":
@@ -278,14 +294,61 @@ class SignatureGPReadout:
         self.length_scale_, self.signature_scale_, self.noise_, self.log_marginal_likelihood_ = ls, lg, tau, lml
         self.X_, self.G_ = Ss[keep] / ls, G[keep].astype(np.float32)
         K = np.exp(-0.5 * self._sq_dists(self.X_, self.X_) - D / (self.distance_unit_ * lg))
+        if len(keep) < len(Y):
+            self.y_mean_ = Y.mean(axis=0)
+            self.dual_, P = self._dtc_dual(K, Ss / ls, G, G[keep], Y - self.y_mean_, max(tau, 1e-10), prep["Dnm"])
+            self.training_predictions_ = None if P is None else P + self.y_mean_
+            return self
         K[np.diag_indices_from(K)] += max(tau, 1e-10)
-        self.y_mean_ = Y[keep].mean(axis=0)
-        self.dual_ = cho_solve(cho_factor(K, overwrite_a=True, check_finite=False), Y[keep] - self.y_mean_,
+        self.y_mean_ = Y.mean(axis=0)
+        self.dual_ = cho_solve(cho_factor(K, overwrite_a=True, check_finite=False), Y - self.y_mean_,
                                check_finite=False)
         # K dual = (K + tau I) dual - tau dual = Y - mean - tau dual: the posterior mean at the training
         # samples without a second pass over their signature distances (when every sample was kept)
-        self.training_predictions_ = (Y - max(tau, 1e-10) * self.dual_) if len(keep) == len(Y) else None
+        self.training_predictions_ = Y - max(tau, 1e-10) * self.dual_
         return self
+
+    def _dtc_dual(self, Kmm: np.ndarray, Z: np.ndarray, G: np.ndarray, Gk: np.ndarray, Yc: np.ndarray,
+                  tau: float, Dnm: np.ndarray | None = None, chunk: int = 1024
+                  ) -> tuple[np.ndarray, np.ndarray | None]:
+        """Weights ``w`` (m, 2) of the kept (inducing) samples ``self.X_``,
+        ``Gk`` whose predictions ``K(x, kept) w`` are the DTC posterior mean
+        given all N samples (``Z``: scaled slow features, ``G``: signatures,
+        ``Yc``: centred positions), and those predictions at the N samples
+        (centred; None without ``Dnm``, the cached signature distances of the
+        N samples to the kept ones). ``w`` minimises ``|Yc - K_nm w|^2 + tau
+        w' K_mm w``, solved as ``L' w = (V V' + tau I)^-1 V Yc`` with ``K_mm =
+        L L'`` and ``V = L^-1 K_mn`` accumulated over blocks of N (memory m x
+        ``chunk``): the matrix inverted is bounded below by ``tau``, unlike
+        the normal equations."""
+        m = len(Kmm)
+        L = None
+        for jitter in (1e-10, 1e-8, 1e-6, 1e-4):  # K_mm is singular where kept samples coincide
+            try:
+                L = cholesky(Kmm + jitter * np.eye(m), lower=True, check_finite=False)
+                break
+            except np.linalg.LinAlgError:
+                continue
+        if L is None:
+            raise np.linalg.LinAlgError("the kept samples' kernel matrix is not positive definite")
+        width = self.distance_unit_ * self.signature_scale_
+
+        def block(s: int) -> np.ndarray:
+            d1 = Dnm[s : s + chunk] if Dnm is not None else self._l1(G[s : s + chunk], Gk)
+            return np.exp(-0.5 * self._sq_dists(Z[s : s + chunk], self.X_) - d1 / width)
+
+        A = np.zeros((m, m))
+        b = np.zeros((m, Yc.shape[1]))
+        for s in range(0, len(Z), chunk):
+            V = solve_triangular(L, block(s).T, lower=True, check_finite=False)
+            A += V @ V.T
+            b += V @ Yc[s : s + chunk]
+        A[np.diag_indices_from(A)] += tau
+        u = cho_solve(cho_factor(A, lower=True, overwrite_a=True, check_finite=False), b, check_finite=False)
+        w = solve_triangular(L, u, lower=True, trans="T", check_finite=False)
+        if Dnm is None:
+            return w, None
+        return w, np.concatenate([block(s) @ w for s in range(0, len(Z), chunk)])
 
     def predict(self, features: Any, chunk: int = 1024) -> np.ndarray:
         """Positions (N, 2) of features (N, >= n_outputs + n_signature)."""
