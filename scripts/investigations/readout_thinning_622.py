@@ -2,10 +2,11 @@
 """Why the product is 2.0x the peers in 6.2.2 (issue 44): its GP readout keeps at most ``max_train`` (3000) training
 samples, and it is fitted on each image and its corrupted copy (9 x 279 recordings -> 5022 samples, 60 % kept). The
 product of the experiment's first permutation (nine recordings in place-major order, the tenth as test), trained
-as ``sfanav train`` trains it, then its readout refitted on the same features with max_train 3000, 6000, 10000.
+as ``sfanav train`` trains it; its readout (the DTC posterior over every sample since 2026-12-07) against the same
+kernel's exact GP on the 3000 kept samples alone (the readout before: the rest thinned away) and on all samples.
 
-    sfanav experiment 6.2.2 --out runs/exp622      # or any run that simulated the preset (its data/ folder)
-    PYTHONPATH=python python3 scripts/investigations/readout_thinning_622.py runs/exp622/data/thesis-6.2.2-conditions-seed0 OUT.json
+    sfanav simulate --preset thesis-6.2.2-conditions --out DATA      # or an experiment's data/ folder
+    PYTHONPATH=python python3 scripts/investigations/readout_thinning_622.py DATA OUT.json
 """
 import json
 import sys
@@ -18,7 +19,7 @@ from sfanav.experiments.product_rows import configuration as product_configurati
 from sfanav.loopclosure.conditions import correspondences, place_major_order
 from sfanav.localization.error_metrics import localization_metrics
 from sfanav.localization.localizer import Localizer
-import sfanav.localization.signature_readout as sr
+from sfanav.localization.signature_readout import SignatureGPReadout
 from sfanav.pipeline import train_localizer
 
 ds = Dataset(sys.argv[1])
@@ -44,14 +45,21 @@ t = time.perf_counter()
 loc = train_localizer(X, xy=xy, supervision="ground-truth", network=make_net(), recipe=recipe, camera_elevation=elev, seed=0)
 Localizer.fit_features = orig
 print("trained", time.perf_counter() - t, "s; readout", loc.info.get("readout"), flush=True)
-res = {"default": localization_metrics(loc.predict(X_te), xy_te)["med"]}
-print(res, flush=True)
-d = list(sr.SignatureGPReadout.__init__.__defaults__)
-for mt in (3000, 6000, 10000):
-    d[3] = mt
-    sr.SignatureGPReadout.__init__.__defaults__ = tuple(d)
+reg = loc.regression_
+n, q = reg.n_outputs, reg.n_signature
+F, G = seen["args"][0], seen["kw"]["signatures"]
+Fa, Ga = seen["kw"]["augmented"]
+X = np.stack([np.hstack([F, G]), np.hstack([Fa, Ga])], axis=1).reshape(2 * len(F), -1)  # as fit_features pairs them
+Y = np.repeat(np.asarray(xy, float), 2, axis=0)
+Xr_te = loc.readout_features(loc.features(X_te), loc.signatures(X_te))
+keep = np.unique(np.linspace(0, len(X) - 1, min(len(X), reg.max_train)).round().astype(int))
+res = {"samples": len(X), "kept": len(keep), "readout": loc.info.get("readout"),
+       "MED (m)": {"DTC over every sample (the default)": localization_metrics(reg.predict(Xr_te), xy_te)["med"]}}
+for name, rows, mt in (("kept samples only (the thinning before)", keep, reg.max_train),
+                       ("exact GP on every sample", np.arange(len(X)), 10**6)):
     t = time.perf_counter()
-    loc.fit_features(*seen["args"], **seen["kw"])
-    res[f"max_train {mt}"] = localization_metrics(loc.predict(X_te), xy_te)["med"]
-    print(mt, res[f"max_train {mt}"], time.perf_counter() - t, "s", flush=True)
+    r = SignatureGPReadout(n, q, max_train=mt, **reg.hyperparameters()).fit(X[rows], Y[rows])
+    res["MED (m)"][name] = localization_metrics(r.predict(Xr_te), xy_te)["med"]
+    print(name, res["MED (m)"][name], round(time.perf_counter() - t, 1), "s", flush=True)
+print(res, flush=True)
 json.dump(res, open(sys.argv[2], "w"), indent=1)

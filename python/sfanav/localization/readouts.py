@@ -24,6 +24,7 @@ from .._checks import NotFittedError, as_matrix, check_same_length
 from .._threads import one_blas_thread
 from .quadratic import QuadraticRegression
 from .signature_readout import SignatureGPReadout
+from .sparse_gp import dtc_weights
 
 try:  # loaded here, before any threadpool_limits: a BLAS library loaded inside one escapes the limit
     from scipy.linalg import cho_factor, cho_solve
@@ -170,8 +171,10 @@ class KernelRidgeReadout(_KernelMachine):
     """Kernel ridge regression with the Gaussian kernel ``exp(-gamma |a -
     b|^2 / n)`` on the standardised features (``gamma`` relative to the
     number of features ``n``), ridge ``alpha``; the intercept is the
-    training mean. Training runs longer than ``max_train`` samples are
-    subsampled evenly (the solve is cubic in the number of samples)."""
+    training mean. The model keeps at most ``max_train`` evenly spaced
+    samples (the solve is cubic in their number); a longer run's weights are
+    the DTC's, every sample informing them
+    (:func:`sfanav.localization.sparse_gp.dtc_weights`)."""
 
     def __init__(self, n_outputs: int | None = 8, gamma: float = 1.0, alpha: float = 1e-2,
                  max_train: int = 3000) -> None:
@@ -190,9 +193,13 @@ class KernelRidgeReadout(_KernelMachine):
         X = _cols(features, self.n_outputs)
         Y = as_matrix(xy, "xy")
         check_same_length(X, Y, "features", "xy")
-        if len(X) > self.max_train:
+        if len(X) > self.max_train:  # the kept samples as inducing points, every sample as data
             keep = np.unique(np.linspace(0, len(X) - 1, self.max_train).round().astype(int))
-            X, Y = X[keep], Y[keep]
+            Xa = self._fit_scale(X)
+            self.X_, self.y_mean_ = Xa[keep], Y.mean(axis=0)
+            self.dual_ = dtc_weights(self._kernel(self.X_, self.X_), lambda sl: self._kernel(Xa[sl], self.X_),
+                                     Y - self.y_mean_, self.alpha)
+            return self
         Xs = self._fit_scale(X)
         self.X_ = Xs
         self.y_mean_ = Y.mean(axis=0)
@@ -292,8 +299,10 @@ class GPReadout(_KernelMachine):
     training run (type-II maximum likelihood, scikit-learn's optimiser) on at
     most ``max_fit`` evenly spaced samples; no cross-validation is needed.
     Given ``length_scale`` and ``noise`` (noise / signal variance) they are
-    fixed instead. The posterior mean uses at most ``max_train`` evenly
-    spaced samples (the solve is cubic in their number).
+    fixed instead. The model keeps at most ``max_train`` evenly spaced
+    samples; a longer run's posterior mean is the DTC's with them as
+    inducing points and every sample as data
+    (:func:`sfanav.localization.sparse_gp.dtc_weights`).
 
     Fitted attributes: ``length_scale_`` (n_outputs,), ``noise_`` (noise /
     signal variance), ``log_marginal_likelihood_`` (None if fixed)."""
@@ -361,6 +370,13 @@ class GPReadout(_KernelMachine):
         self.length_scale_, self.noise_, self.log_marginal_likelihood_ = ls, noise, lml
         keep = self._even(len(Xs), self.max_train)
         A, Yk = Xs[keep] / ls, Y[keep]
+        if len(keep) < len(Xs):  # the kept samples as inducing points, every sample as data
+            self.y_mean_ = Y.mean(axis=0)
+            Z = Xs / ls
+            self.dual_ = dtc_weights(self._kernel(A, A), lambda sl: self._kernel(Z[sl], A), Y - self.y_mean_,
+                                     max(noise, 1e-10))
+            self.X_ = A
+            return self
         self.y_mean_ = Yk.mean(axis=0)
         K = self._kernel(A, A)
         K[np.diag_indices_from(K)] += max(noise, 1e-10)

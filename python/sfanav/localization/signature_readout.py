@@ -31,14 +31,15 @@ import numpy as np
 from .._checks import NotFittedError, as_matrix, check_int, check_same_length
 from .._resources import get_num_threads
 from .._threads import one_blas_thread
+from .sparse_gp import dtc_weights
 
 try:  # loaded before any threadpool limit (see readouts.py)
-    from scipy.linalg import cho_factor, cho_solve, cholesky, solve_triangular
+    from scipy.linalg import cho_factor, cho_solve
     from scipy.linalg.lapack import dpotri
     from scipy.optimize import minimize
     from scipy.spatial.distance import cdist
 except ImportError:  # pragma: no cover - scipy is a dependency
-    cho_factor = cho_solve = cholesky = solve_triangular = minimize = cdist = dpotri = None
+    cho_factor = cho_solve = minimize = cdist = dpotri = None
 
 _LOG_BOUNDS = {"length": (np.log(1e-2), np.log(1e3)), "signature": (np.log(1e-3), np.log(1e4)),
                "noise": (np.log(1e-8), np.log(1.0))}
@@ -73,7 +74,7 @@ class SignatureGPReadout:
         posterior mean is then the deterministic training conditional's
         (DTC; Quinonero-Candela and Rasmussen 2005) with the kept samples as
         inducing points and every training sample as data, which is the
-        exact GP's when every sample is kept (docs/gardens-suite.md).
+        exact GP's when every sample is kept (docs/localization.md).
     length_scale, signature_scale, noise : optional
         Fixed kernel hyperparameters (all three or none): ``length_scale``
         (n_outputs,) in standard deviations of the slow features,
@@ -311,44 +312,22 @@ class SignatureGPReadout:
     def _dtc_dual(self, Kmm: np.ndarray, Z: np.ndarray, G: np.ndarray, Gk: np.ndarray, Yc: np.ndarray,
                   tau: float, Dnm: np.ndarray | None = None, chunk: int = 1024
                   ) -> tuple[np.ndarray, np.ndarray | None]:
-        """Weights ``w`` (m, 2) of the kept (inducing) samples ``self.X_``,
-        ``Gk`` whose predictions ``K(x, kept) w`` are the DTC posterior mean
-        given all N samples (``Z``: scaled slow features, ``G``: signatures,
-        ``Yc``: centred positions), and those predictions at the N samples
-        (centred; None without ``Dnm``, the cached signature distances of the
-        N samples to the kept ones). ``w`` minimises ``|Yc - K_nm w|^2 + tau
-        w' K_mm w``, solved as ``L' w = (V V' + tau I)^-1 V Yc`` with ``K_mm =
-        L L'`` and ``V = L^-1 K_mn`` accumulated over blocks of N (memory m x
-        ``chunk``): the matrix inverted is bounded below by ``tau``, unlike
-        the normal equations."""
-        m = len(Kmm)
-        L = None
-        for jitter in (1e-10, 1e-8, 1e-6, 1e-4):  # K_mm is singular where kept samples coincide
-            try:
-                L = cholesky(Kmm + jitter * np.eye(m), lower=True, check_finite=False)
-                break
-            except np.linalg.LinAlgError:
-                continue
-        if L is None:
-            raise np.linalg.LinAlgError("the kept samples' kernel matrix is not positive definite")
+        """Weights ``w`` (m, 2) of the kept samples (``self.X_``, signatures
+        ``Gk``) as inducing points of the DTC posterior given all N samples
+        (``Z``: scaled slow features, ``G``: signatures, ``Yc``: centred
+        positions; :func:`sfanav.localization.sparse_gp.dtc_weights`), and
+        its centred predictions at the N samples (None without ``Dnm``, the
+        cached signature distances of the N samples to the kept ones)."""
         width = self.distance_unit_ * self.signature_scale_
 
-        def block(s: int) -> np.ndarray:
-            d1 = Dnm[s : s + chunk] if Dnm is not None else self._l1(G[s : s + chunk], Gk)
-            return np.exp(-0.5 * self._sq_dists(Z[s : s + chunk], self.X_) - d1 / width)
+        def rows(sl: slice) -> np.ndarray:
+            d1 = Dnm[sl] if Dnm is not None else self._l1(G[sl], Gk)
+            return np.exp(-0.5 * self._sq_dists(Z[sl], self.X_) - d1 / width)
 
-        A = np.zeros((m, m))
-        b = np.zeros((m, Yc.shape[1]))
-        for s in range(0, len(Z), chunk):
-            V = solve_triangular(L, block(s).T, lower=True, check_finite=False)
-            A += V @ V.T
-            b += V @ Yc[s : s + chunk]
-        A[np.diag_indices_from(A)] += tau
-        u = cho_solve(cho_factor(A, lower=True, overwrite_a=True, check_finite=False), b, check_finite=False)
-        w = solve_triangular(L, u, lower=True, trans="T", check_finite=False)
+        w = dtc_weights(Kmm, rows, Yc, tau, chunk)
         if Dnm is None:
             return w, None
-        return w, np.concatenate([block(s) @ w for s in range(0, len(Z), chunk)])
+        return w, np.concatenate([rows(slice(s, s + chunk)) @ w for s in range(0, len(Z), chunk)])
 
     def predict(self, features: Any, chunk: int = 1024) -> np.ndarray:
         """Positions (N, 2) of features (N, >= n_outputs + n_signature)."""
