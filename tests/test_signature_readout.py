@@ -265,48 +265,68 @@ def _kernel(r, A, B):
     return np.exp(-0.5 * d2 - d1 / (r.distance_unit_ * r.signature_scale_))
 
 
+def _dtc_check(r, F, xy, inducing):
+    """The readout's predictions at F against the DTC normal equations solved
+    directly with those inducing samples and the readout's kernel."""
+    kept = F[inducing]
+    Knm, Kmm = _kernel(r, F, kept), _kernel(r, kept, kept)
+    w = np.linalg.solve(Knm.T @ Knm + r.noise_ * Kmm, Knm.T @ (xy - xy.mean(axis=0)))
+    np.testing.assert_allclose(r.predict(F), Knm @ w + xy.mean(axis=0), atol=2e-3)
+    return Knm, Kmm
+
+
 def test_a_thinned_fit_is_the_dtc_posterior_of_every_sample():
     """With max_train below N the weights of the kept samples minimise
     |Y - mean - K_nm w|^2 + noise w' K_mm w over all N samples (the normal
-    equations solved directly here), not the kept samples' exact GP."""
+    equations solved directly here), not the kept samples' exact GP; the
+    training predictions are its posterior mean at the N samples."""
     rng = np.random.default_rng(7)
     xy, slow, sig = _place_data(240, rng, 0.02, 0.01)
     F = np.hstack([slow, sig])
     r = SignatureGPReadout(4, 20, max_train=60).fit(F, xy)
-    keep = np.unique(np.linspace(0, len(F) - 1, 60).round().astype(int))
-    kept = F[keep]
-    Knm, Kmm = _kernel(r, F, kept), _kernel(r, kept, kept)
-    w = np.linalg.solve(Knm.T @ Knm + r.noise_ * Kmm, Knm.T @ (xy - xy.mean(axis=0)))
-    np.testing.assert_allclose(r.predict(F), Knm @ w + xy.mean(axis=0), atol=2e-3)
-    # and it uses what the thinning dropped: closer to the full GP than the kept samples' exact GP
+    assert r.inducing_.shape == (60,) and len(np.unique(r.inducing_)) == 60 and r.inducing_[0] == 0
+    Knm, Kmm = _dtc_check(r, F, xy, r.inducing_)
+    np.testing.assert_allclose(r.training_predictions_, r.predict(F), atol=1e-4)
+    # it uses what the thinning dropped: closer to the full GP than the kept samples' exact GP
     full = SignatureGPReadout(4, 20, **r.hyperparameters()).fit(F, xy).predict(F)
-    subset_gp = np.linalg.solve(Kmm + r.noise_ * np.eye(len(kept)), xy[keep] - xy.mean(axis=0))
+    subset_gp = np.linalg.solve(Kmm + r.noise_ * np.eye(60), xy[r.inducing_] - xy.mean(axis=0))
     assert np.abs(r.predict(F) - full).mean() < np.abs(Knm @ subset_gp + xy.mean(axis=0) - full).mean()
 
 
-def test_with_every_sample_kept_the_dtc_weights_are_the_exact_gps():
-    rng = np.random.default_rng(8)
-    xy, slow, sig = _place_data(120, rng, 0.02, 0.01)
-    F = np.hstack([slow, sig])
-    r = SignatureGPReadout(4, 20).fit(F, xy)
-    S, G = r._split(F)
-    K = np.exp(-0.5 * r._sq_dists(r.X_, r.X_) - r._l1(G, G) / (r.distance_unit_ * r.signature_scale_))
-    w, P = r._dtc_dual(K, r.X_, G, G, xy - r.y_mean_, r.noise_, r._l1(G, G, dtype=np.float32))
-    np.testing.assert_allclose(K @ w, K @ r.dual_, atol=1e-5)
-    np.testing.assert_allclose(P + r.y_mean_, r.training_predictions_, atol=1e-5)
+def test_the_inducing_samples_cover_the_run_farthest_first():
+    """A run that lingers: 200 samples in one corner, 100 over the rest.
+    Evenly spaced inducing samples crowd the corner; farthest-first ones
+    cover the whole run better (the least covered sample's largest kernel
+    value is higher). With every place twice (an image beside its corrupted
+    copy) and fewer inducing samples than places, no place is taken twice."""
+    rng = np.random.default_rng(11)
+    xy = rng.uniform(-2, 2, (300, 2))
+    xy[:200] = 0.2 * xy[:200] - 1.6  # the corner
+    centres = rng.uniform(-3, 3, (20, 2))
+    sig = 1.0 / (1.0 + np.hypot(*(xy[:, None, :] - centres[None]).transpose(2, 0, 1)))
+    F = np.hstack([np.column_stack([xy[:, 0], xy[:, 1], np.sin(xy[:, 0]), np.cos(xy[:, 1])]), sig])
+    kw = dict(length_scale=[0.3] * 4, signature_scale=0.5, noise=1e-3)
+    r = SignatureGPReadout(4, 20, max_train=40, **kw).fit(F, xy)
+    even = np.unique(np.linspace(0, 299, 40).round().astype(int))
+    worst = lambda ind: _kernel(r, F, F[ind]).max(axis=1).min()  # the least covered sample's best kernel value
+    assert worst(r.inducing_) > worst(even)
+    F2 = np.stack([F, F + 1e-3 * rng.normal(size=F.shape)], axis=1).reshape(600, -1)
+    r2 = SignatureGPReadout(4, 20, max_train=250, **kw).fit(F2, np.repeat(xy, 2, axis=0))
+    assert len(np.unique(r2.inducing_ // 2)) == 250
 
 
-def test_a_run_too_long_for_the_distance_cache_gets_the_same_dtc_fit(monkeypatch):
-    """Without the cached distances (a run whose N x max_train table exceeds
-    the cache) the distances are computed per block: the same weights, no
-    training predictions."""
+def test_a_run_too_long_for_the_distance_cache_keeps_evenly_spaced_samples(monkeypatch):
+    """Without room for the distance table the inducing samples are evenly
+    spaced and the distances computed per block: still the DTC posterior,
+    without training predictions."""
     import sfanav.localization.signature_readout as sr
 
     rng = np.random.default_rng(9)
     xy, slow, sig = _place_data(200, rng, 0.02, 0.01)
     F = np.hstack([slow, sig])
-    cached = SignatureGPReadout(4, 20, max_train=50).fit(F, xy)
     monkeypatch.setattr(sr, "_DISTANCE_CACHE_BYTES", 0)
-    blocks = SignatureGPReadout(4, 20, max_train=50, **cached.hyperparameters()).fit(F, xy)
-    np.testing.assert_allclose(blocks.predict(F), cached.predict(F), atol=1e-4)
-    assert blocks.training_predictions_ is None
+    r = SignatureGPReadout(4, 20, max_train=50).fit(F, xy)
+    even = np.unique(np.linspace(0, 199, 50).round().astype(int))
+    np.testing.assert_array_equal(r.inducing_, even)
+    _dtc_check(r, F, xy, even)
+    assert r.training_predictions_ is None

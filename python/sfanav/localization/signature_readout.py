@@ -67,14 +67,15 @@ class SignatureGPReadout:
         Length of the signature: the last ``n_signature`` columns.
     max_fit : int, default 800
         Evenly spaced training samples the hyperparameters are fitted on
-        (each step of the optimiser is cubic in their number).
+        (each step of the optimiser is cubic in their number; of the
+        ``max_train`` evenly spaced ones in a longer run).
     max_train : int, default 3000
-        Evenly spaced training samples the model keeps (its size and query
-        time grow with them). Longer runs are not thinned away: the
-        posterior mean is then the deterministic training conditional's
-        (DTC; Quinonero-Candela and Rasmussen 2005) with the kept samples as
-        inducing points and every training sample as data, which is the
-        exact GP's when every sample is kept (docs/localization.md).
+        Training samples the model keeps (its size and query time grow with
+        them). Longer runs are not thinned away: the posterior mean is then
+        the deterministic training conditional's (DTC; Quinonero-Candela and
+        Rasmussen 2005) with ``max_train`` inducing samples, chosen
+        farthest-first in the learned kernel, and every training sample as
+        data; the exact GP's when every sample is kept (docs/localization.md).
     length_scale, signature_scale, noise : optional
         Fixed kernel hyperparameters (all three or none): ``length_scale``
         (n_outputs,) in standard deviations of the slow features,
@@ -83,7 +84,8 @@ class SignatureGPReadout:
         Cholesky factorisation) instead of learning them; an updated
         localizer keeps its readout's kernel this way.
 
-    Fitted attributes: ``training_predictions_`` ((N, 2): the posterior
+    Fitted attributes: ``inducing_`` (m,): the indices of the training
+    samples kept; ``training_predictions_`` ((N, 2): the posterior
     mean at the N training samples, computed from the fit; None after
     loading, and when a run too long for the distance cache was thinned),
     ``length_scale_`` (n_outputs,), ``signature_scale_`` (``l_g``, in units of ``distance_unit_``, the median L1 distance between
@@ -255,53 +257,54 @@ class SignatureGPReadout:
         return both._fit_prepared(S, prepared), alone._fit_prepared(S[:, :0], prepared)
 
     def _distances(self, G: np.ndarray, Y: np.ndarray) -> dict[str, Any]:
-        """The training samples kept, the L1 distances between their
-        signatures and the distance unit: what every fit on ``G`` shares."""
+        """What every fit on ``G`` shares: the evenly spaced samples the
+        hyperparameters are learned on (``fit``) and the L1 distances between
+        their signatures, the samples kept when the run is not longer than
+        ``max_train`` (``keep``, with all their distances ``D``), the distance
+        unit, and (filled by the first thinned fit, reused by a nested one)
+        the inducing samples of a longer run."""
         check_same_length(G, Y, "features", "xy")
         if len(G) < 3:
             raise ValueError(f"a GP readout needs at least 3 training samples, got {len(G)}")
         G = G.astype(np.float64)
-        keep = _even(len(G), self.max_train)
+        even = _even(len(G), self.max_train)
+        fit = even[_even(len(even), self.max_fit)]
         sub = G[_even(len(G), 300)]
         dg = self._l1(sub, sub)[np.triu_indices(len(sub), 1)]
         unit = float(np.median(dg)) if dg.size else 0.0
-        Dnm = None  # every sample to the kept ones, for the DTC posterior: computed once, shared by nested fits
-        if len(keep) < len(G) and len(G) * len(keep) * 4 <= _DISTANCE_CACHE_BYTES:
-            Dnm = self._l1(G, G[keep], dtype=np.float32)
-            D = Dnm[keep].astype(np.float64)
-        else:
-            D = self._l1(G[keep], G[keep])
-        return {"G": G, "Y": Y, "keep": keep, "D": D, "Dnm": Dnm, "unit": unit if unit > 0 else 1.0}
+        thinned = len(even) < len(G)
+        D = None if thinned else self._l1(G, G)
+        Dfit = self._l1(G[fit], G[fit]) if thinned else D[np.ix_(fit, fit)]
+        return {"G": G, "Y": Y, "fit": fit, "Dfit": Dfit, "keep": None if thinned else even, "D": D,
+                "even": even, "inducing": None, "unit": unit if unit > 0 else 1.0}
 
     def _fit_prepared(self, S: np.ndarray, prep: dict[str, Any],
                       fixed: tuple[np.ndarray, float, float] | None = None) -> "SignatureGPReadout":
-        G, Y, keep, D = prep["G"], prep["Y"], prep["keep"], prep["D"]
+        G, Y, fit_idx = prep["G"], prep["Y"], prep["fit"]
         self.distance_unit_ = prep["unit"]
         self.mean_ = S.mean(axis=0)
         sd = S.std(axis=0)
         self.scale_ = np.where(sd > 0, sd, 1.0)
         Ss = (S - self.mean_) / self.scale_
-        fit_pos = _even(len(keep), self.max_fit)  # positions within keep
-        fit_idx = keep[fit_pos]
         y_mean, y_sd = Y.mean(axis=0), Y.std(axis=0)
         y_sd = np.where(y_sd > 0, y_sd, 1.0)
         Yf = (Y[fit_idx] - y_mean) / y_sd
-        Dg = D[np.ix_(fit_pos, fit_pos)] / self.distance_unit_
+        Dg = prep["Dfit"] / self.distance_unit_
         if fixed is None:
             ls, lg, tau, lml = self._learn(Ss[fit_idx], Dg, Yf)
         else:
             ls, lg, tau = fixed
             lml = float(-self._neg_lml(np.r_[np.log(ls), np.log(lg), np.log(tau)], Ss[fit_idx], Dg, Yf)[0])
         self.length_scale_, self.signature_scale_, self.noise_, self.log_marginal_likelihood_ = ls, lg, tau, lml
-        self.X_, self.G_ = Ss[keep] / ls, G[keep].astype(np.float32)
-        K = np.exp(-0.5 * self._sq_dists(self.X_, self.X_) - D / (self.distance_unit_ * lg))
-        if len(keep) < len(Y):
-            self.y_mean_ = Y.mean(axis=0)
-            self.dual_, P = self._dtc_dual(K, Ss / ls, G, G[keep], Y - self.y_mean_, max(tau, 1e-10), prep["Dnm"])
-            self.training_predictions_ = None if P is None else P + self.y_mean_
-            return self
-        K[np.diag_indices_from(K)] += max(tau, 1e-10)
         self.y_mean_ = Y.mean(axis=0)
+        Z = Ss / ls
+        if prep["keep"] is None:
+            return self._fit_dtc(Z, G, Y - self.y_mean_, max(tau, 1e-10), prep)
+        keep = prep["keep"]
+        self.inducing_ = keep
+        self.X_, self.G_ = Z[keep], G[keep].astype(np.float32)
+        K = np.exp(-0.5 * self._sq_dists(self.X_, self.X_) - prep["D"] / (self.distance_unit_ * lg))
+        K[np.diag_indices_from(K)] += max(tau, 1e-10)
         self.dual_ = cho_solve(cho_factor(K, overwrite_a=True, check_finite=False), Y - self.y_mean_,
                                check_finite=False)
         # K dual = (K + tau I) dual - tau dual = Y - mean - tau dual: the posterior mean at the training
@@ -309,25 +312,66 @@ class SignatureGPReadout:
         self.training_predictions_ = Y - max(tau, 1e-10) * self.dual_
         return self
 
-    def _dtc_dual(self, Kmm: np.ndarray, Z: np.ndarray, G: np.ndarray, Gk: np.ndarray, Yc: np.ndarray,
-                  tau: float, Dnm: np.ndarray | None = None, chunk: int = 1024
-                  ) -> tuple[np.ndarray, np.ndarray | None]:
-        """Weights ``w`` (m, 2) of the kept samples (``self.X_``, signatures
-        ``Gk``) as inducing points of the DTC posterior given all N samples
-        (``Z``: scaled slow features, ``G``: signatures, ``Yc``: centred
-        positions; :func:`sfanav.localization.sparse_gp.dtc_weights`), and
-        its centred predictions at the N samples (None without ``Dnm``, the
-        cached signature distances of the N samples to the kept ones)."""
+    def _inducing(self, Z: np.ndarray, G: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``max_train`` inducing samples chosen farthest-first in this
+        readout's kernel (each next one the sample least covered, by its
+        largest kernel value, by those chosen so far; the first the run's
+        first), and every sample's signature distance to them (N, m)
+        float32: a covering of the run without the near-duplicates that
+        evenly spaced samples of a dense run (or an image beside its
+        corrupted copy) hold. The choice reads the signatures' L1 distance
+        on every ``q // 128``-th value (scaled up): a row of distances per
+        chosen sample over all N is memory-bound, and the covering needs no
+        exact distances; the table is then computed exactly, in blocks."""
+        n, m = len(G), min(self.max_train, len(G))
         width = self.distance_unit_ * self.signature_scale_
+        stride = max(1, G.shape[1] // 128)
+        Gs = np.ascontiguousarray(G[:, ::stride])
+        scale = G.shape[1] / Gs.shape[1]
+        idx = np.empty(m, np.intp)
+        cover = np.full(n, -np.inf)
+        i = 0
+        for j in range(m):
+            idx[j] = i
+            d1 = cdist(Gs, Gs[i : i + 1], "cityblock")[:, 0] * scale
+            np.maximum(cover, -0.5 * ((Z - Z[i]) ** 2).sum(axis=1) - d1 / width, out=cover)  # log kernel
+            i = int(np.argmin(cover))
+        return idx, self._l1(G, G[idx], dtype=np.float32)
+
+    def _fit_dtc(self, Z: np.ndarray, G: np.ndarray, Yc: np.ndarray, tau: float,
+                 prep: dict[str, Any]) -> "SignatureGPReadout":
+        """The fit of a run longer than ``max_train``: the DTC posterior
+        (:func:`sfanav.localization.sparse_gp.dtc_weights`) with ``max_train``
+        inducing samples and every sample as data. The inducing samples are
+        chosen farthest-first (:meth:`_inducing`) when the (N, max_train)
+        float32 distance table fits ``_DISTANCE_CACHE_BYTES``, else evenly
+        spaced with the distances computed per block (and no training
+        predictions). A nested fit on the same samples reuses the first
+        fit's choice."""
+        width = self.distance_unit_ * self.signature_scale_
+        if prep["inducing"] is None:
+            if len(G) * min(self.max_train, len(G)) * 4 <= _DISTANCE_CACHE_BYTES:
+                prep["inducing"] = self._inducing(Z, G)
+            else:
+                prep["inducing"] = (prep["even"], None)
+        idx, Dnm = prep["inducing"]
+        self.inducing_ = idx
+        self.X_, self.G_ = Z[idx], G[idx].astype(np.float32)
+        Gk = G[idx]
+        Dmm = Dnm[idx].astype(np.float64) if Dnm is not None else self._l1(Gk, Gk)
+        Kmm = np.exp(-0.5 * self._sq_dists(self.X_, self.X_) - Dmm / width)
+        chunk = 1024
 
         def rows(sl: slice) -> np.ndarray:
             d1 = Dnm[sl] if Dnm is not None else self._l1(G[sl], Gk)
             return np.exp(-0.5 * self._sq_dists(Z[sl], self.X_) - d1 / width)
 
-        w = dtc_weights(Kmm, rows, Yc, tau, chunk)
-        if Dnm is None:
-            return w, None
-        return w, np.concatenate([rows(slice(s, s + chunk)) @ w for s in range(0, len(Z), chunk)])
+        self.dual_ = dtc_weights(Kmm, rows, Yc, tau, chunk)
+        self.training_predictions_ = None
+        if Dnm is not None:
+            self.training_predictions_ = np.concatenate(
+                [rows(slice(s, s + chunk)) @ self.dual_ for s in range(0, len(Z), chunk)]) + self.y_mean_
+        return self
 
     def predict(self, features: Any, chunk: int = 1024) -> np.ndarray:
         """Positions (N, 2) of features (N, >= n_outputs + n_signature)."""
