@@ -2,8 +2,9 @@
 """Why the product is 2.0x the peers in 6.2.2 (issue 44): its GP readout keeps at most ``max_train`` (3000) training
 samples, and it is fitted on each image and its corrupted copy (9 x 279 recordings -> 5022 samples, 60 % kept). The
 product of the experiment's first permutation (nine recordings in place-major order, the tenth as test), trained
-as ``sfanav train`` trains it; its readout (the DTC posterior over every sample since 2026-12-07) against the same
-kernel's exact GP on the 3000 kept samples alone (the readout before: the rest thinned away) and on all samples.
+as ``sfanav train`` trains it; its readout (since 2026-12-07 the DTC posterior over every sample, 3000 inducing samples
+chosen farthest-first) against the same kernel's DTC with evenly spaced inducing samples, its exact GP on the 3000
+evenly spaced samples alone (the readout before: the rest thinned away) and on all samples.
 
     sfanav simulate --preset thesis-6.2.2-conditions --out DATA      # or an experiment's data/ folder
     PYTHONPATH=python python3 scripts/investigations/readout_thinning_622.py DATA OUT.json
@@ -19,6 +20,7 @@ from sfanav.experiments.product_rows import configuration as product_configurati
 from sfanav.loopclosure.conditions import correspondences, place_major_order
 from sfanav.localization.error_metrics import localization_metrics
 from sfanav.localization.localizer import Localizer
+import sfanav.localization.signature_readout as sr
 from sfanav.localization.signature_readout import SignatureGPReadout
 from sfanav.pipeline import train_localizer
 
@@ -47,17 +49,18 @@ Localizer.fit_features = orig
 print("trained", time.perf_counter() - t, "s; readout", loc.info.get("readout"), flush=True)
 reg = loc.regression_
 n, q = reg.n_outputs, reg.n_signature
-F, G = seen["args"][0], seen["kw"]["signatures"]
-Fa, Ga = seen["kw"]["augmented"]
-X = np.stack([np.hstack([F, G]), np.hstack([Fa, Ga])], axis=1).reshape(2 * len(F), -1)  # as fit_features pairs them
-Y = np.repeat(np.asarray(xy, float), 2, axis=0)
+# the last call: the images and their corrupted copies, paired (fit_features(augmented=) calls itself so)
+X = np.hstack([seen["args"][0], seen["kw"]["signatures"]])
+Y = np.asarray(seen["args"][1], float)
 Xr_te = loc.readout_features(loc.features(X_te), loc.signatures(X_te))
 keep = np.unique(np.linspace(0, len(X) - 1, min(len(X), reg.max_train)).round().astype(int))
 res = {"samples": len(X), "kept": len(keep), "readout": loc.info.get("readout"),
        "MED (m)": {"DTC over every sample (the default)": localization_metrics(reg.predict(Xr_te), xy_te)["med"]}}
-for name, rows, mt in (("kept samples only (the thinning before)", keep, reg.max_train),
+for name, rows, mt in (("DTC, evenly spaced inducing samples", np.arange(len(X)), reg.max_train),
+                       ("kept samples only (the thinning before)", keep, reg.max_train),
                        ("exact GP on every sample", np.arange(len(X)), 10**6)):
     t = time.perf_counter()
+    sr._DISTANCE_CACHE_BYTES = 0 if name.startswith("DTC, evenly") else 2**29  # no table: evenly spaced samples
     r = SignatureGPReadout(n, q, max_train=mt, **reg.hyperparameters()).fit(X[rows], Y[rows])
     res["MED (m)"][name] = localization_metrics(r.predict(Xr_te), xy_te)["med"]
     print(name, res["MED (m)"][name], round(time.perf_counter() - t, 1), "s", flush=True)
