@@ -85,11 +85,12 @@ class SignatureGPReadout:
         localizer keeps its readout's kernel this way.
 
     Fitted attributes: ``inducing_`` (m,): the indices of the training
-    samples kept; ``training_predictions_`` ((N, 2): the posterior
-    mean at the N training samples, computed from the fit; None after
-    loading, and when a run too long for the distance cache was thinned),
-    ``length_scale_`` (n_outputs,), ``signature_scale_`` (``l_g``, in units of ``distance_unit_``, the median L1 distance between
-    training signatures), ``noise_`` (noise / signal variance),
+    samples kept (None after loading); ``training_predictions_`` ((N, 2): the posterior mean at
+    the N training samples, computed from the fit; None after loading, and
+    when a run too long for the distance cache was thinned);
+    ``length_scale_`` (n_outputs,); ``signature_scale_`` (``l_g``, in units
+    of ``distance_unit_``, the median L1 distance between training
+    signatures); ``noise_`` (noise / signal variance);
     ``log_marginal_likelihood_``.
 
     Examples
@@ -407,7 +408,7 @@ class SignatureGPReadout:
         r.length_scale_ = np.asarray(state["length_scale"], float)
         r.signature_scale_, r.distance_unit_ = float(state["signature_scale"]), float(state["distance_unit"])
         r.noise_, r.log_marginal_likelihood_ = float(state["noise"]), None
-        r.training_predictions_ = None
+        r.training_predictions_ = r.inducing_ = None
         m, q = r.n_outputs, r.n_signature
         if (r.X_.shape[1:] != (m,) or r.G_.shape != (len(r.X_), q) or r.dual_.ndim != 2
                 or len(r.dual_) != len(r.X_) or r.mean_.shape != (m,) or r.scale_.shape != (m,)
