@@ -319,3 +319,17 @@ def test_train_with_relative_pose_closures(tiny, tmp_path, capsys):
                        "--metric-map", "metric-learning", "--no-progress")
     assert_one_line_error(code, err, "--closures relative-pose needs --metric-map pose-graph")
     assert not (tmp_path / "ml.sfa").exists()
+
+
+def test_the_closures_choices_are_the_librarys():
+    """`sfanav train --closures` lists its choices literally (the CLI imports
+    the library lazily): they must stay the pipeline's."""
+    import argparse
+
+    from sfanav.app.cli import build_parser
+    from sfanav.pipeline import CLOSURES
+
+    sub = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction))
+    train = sub.choices["train"]
+    action = next(a for a in train._actions if "--closures" in a.option_strings)
+    assert tuple(action.choices) == tuple(CLOSURES)
