@@ -1,0 +1,26 @@
+"""benches/bench_readout.py --small runs end to end (a smoke test: no timed
+assertions) and reports both fits' seconds and their ratio."""
+
+import json
+import math
+import sys
+from pathlib import Path
+
+BENCHES = Path(__file__).resolve().parents[1] / "benches"
+
+
+def test_bench_readout_small(tmp_path, capsys):
+    sys.path.insert(0, str(BENCHES))
+    try:
+        import bench_readout
+    finally:
+        sys.path.remove(str(BENCHES))
+    out = tmp_path / "bench.json"
+    assert bench_readout.main(["--small", "--json", str(out)]) == 0
+    assert "ratio" in capsys.readouterr().out
+    res = json.loads(out.read_text())
+    assert res["small"] and [r["samples"] for r in res["rows"]] == [600, 900]
+    for r in res["rows"]:
+        assert r["kept"] == 400
+        for k in ("seconds DTC", "seconds thinned", "ratio DTC to thinned"):
+            assert math.isfinite(r[k]) and r[k] > 0
