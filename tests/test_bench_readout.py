@@ -3,18 +3,13 @@ assertions) and reports both fits' seconds and their ratio."""
 
 import json
 import math
-import sys
-from pathlib import Path
 
-BENCHES = Path(__file__).resolve().parents[1] / "benches"
+from benchtools import import_bench
+
 
 
 def test_bench_readout_small(tmp_path, capsys):
-    sys.path.insert(0, str(BENCHES))
-    try:
-        import bench_readout
-    finally:
-        sys.path.remove(str(BENCHES))
+    bench_readout = import_bench("bench_readout")
     out = tmp_path / "bench.json"
     assert bench_readout.main(["--small", "--json", str(out)]) == 0
     assert "ratio" in capsys.readouterr().out

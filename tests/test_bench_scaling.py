@@ -6,22 +6,17 @@ bytes split into network and readout, and the crossovers."""
 
 import json
 import math
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 
-BENCHES = Path(__file__).resolve().parents[1] / "benches"
+from benchtools import import_bench
+
 
 
 @pytest.fixture(scope="module")
 def bench():
-    sys.path.insert(0, str(BENCHES))
-    try:
-        import bench_scaling
-    finally:
-        sys.path.remove(str(BENCHES))
+    bench_scaling = import_bench("bench_scaling")
     return bench_scaling
 
 

@@ -4,20 +4,15 @@ ratios, and bounded statistics and model file as runs accumulate."""
 
 import json
 import math
-import sys
-from pathlib import Path
 
 import pytest
 
-BENCHES = Path(__file__).resolve().parents[1] / "benches"
+from benchtools import import_bench
+
 
 
 def test_bench_updates_small(tmp_path, capsys):
-    sys.path.insert(0, str(BENCHES))
-    try:
-        import bench_updates
-    finally:
-        sys.path.remove(str(BENCHES))
+    bench_updates = import_bench("bench_updates")
     out = tmp_path / "bench.json"
     assert bench_updates.main(["--small", "--runs", "2", "--data", str(tmp_path / "data"), "--json", str(out)]) == 0
     printed = capsys.readouterr().out
