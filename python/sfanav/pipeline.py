@@ -83,8 +83,8 @@ def train_localizer(images: Any, *, xy: Any = None, odometry: Any = None, timest
                     closure_weights: Any = None, network_images: Any = None,
                     network_fit: Mapping[str, Any] | None = None, readout_memory: int | None = None,
                     readout_memory_images: bool = False, filter_noise: bool = True,
-                    info: Mapping[str, Any] | None = None, seed: int = 0, progress: bool = False,
-                    log: Log = quiet_log) -> Any:
+                    info: Mapping[str, Any] | None = None, groups: Any = None, seed: int = 0,
+                    progress: bool = False, log: Log = quiet_log) -> Any:
     """Trains a localizer on one run as ``sfanav train`` does.
 
     Parameters
@@ -143,6 +143,11 @@ def train_localizer(images: Any, *, xy: Any = None, odometry: Any = None, timest
         a run on which it cannot be chosen is logged, not an error.
     info : mapping or None
         Extra entries for the model's ``info``.
+    groups : array (N,) or None
+        The recording (or condition) each image comes from, when ``images``
+        are several recordings of the same places: the default readout is
+        then chosen by holding out one recording at a time
+        (:func:`sfanav.localization.select_auto_readout`).
     seed : int
         Seed of the robustness's corrupted copies.
     log : callable
@@ -188,7 +193,8 @@ def train_localizer(images: Any, *, xy: Any = None, odometry: Any = None, timest
     fit_kw.update(rotation=rotation or Rotation(step=ROTATION_STEP), prep=prep, progress=progress,
                   loop_closures=loop_closures, closure_weights=closure_weights, network_images=network_images,
                   network_fit=dict(network_fit or {}), info={**dict(info or {}), **recipe.info()},
-                  seed=seed, **({"readout_memory_images": True} if readout_memory_images else {}))
+                  seed=seed, **({"readout_memory_images": True} if readout_memory_images else {}),
+                  **({"groups": groups} if groups is not None else {}))
     if supervision == "odometry":
         graph = None
         if closures in CLOSURE_METHOD:

@@ -89,6 +89,11 @@ class ProductRun:
     gyro : array (N,) or None
         A yaw gyro's integrated heading (rad), if the run has one: the
         training run's goes to the pose graph as ``sfanav train`` passes it.
+    groups : array (N,) or None
+        The recording each frame comes from, when the training run is
+        several recordings of the same places: the default's readout is then
+        chosen by holding out one recording at a time (``train_localizer``'s
+        ``groups``).
     """
 
     images: Any
@@ -96,6 +101,7 @@ class ProductRun:
     odometry: Any = None
     label: str = ""
     gyro: Any = None
+    groups: Any = None
 
     def __post_init__(self) -> None:
         self.images = as_images(self.images, "images")
@@ -111,6 +117,11 @@ class ProductRun:
             if len(g) != len(self.images):
                 raise ValueError(f"gyro must have {len(self.images)} values, got {len(g)}")
             self.gyro = g if np.isfinite(g).all() else None
+        if self.groups is not None:
+            self.groups = np.asarray(self.groups)
+            if self.groups.shape != (len(self.images),):
+                raise ValueError(f"groups must hold one label per frame ({len(self.images)}), got shape "
+                                 f"{self.groups.shape}")
 
     @property
     def has_odometry(self) -> bool:
@@ -253,7 +264,8 @@ def product_rows(train: ProductRun, tests: Sequence[ProductRun], *, thesis: Sequ
     seconds: dict[str, float] = {}
     t0 = time.perf_counter()
     models["ground truth"] = train_localizer(train.images, xy=train.xy, odometry=train.odometry,
-                                             supervision="ground-truth", **{**kw, "network": make()})
+                                             supervision="ground-truth", groups=train.groups,
+                                             **{**kw, "network": make()})
     seconds["ground truth"] = time.perf_counter() - t0
     frames = {"ground truth": None}
     missing = ""
@@ -261,7 +273,7 @@ def product_rows(train: ProductRun, tests: Sequence[ProductRun], *, thesis: Sequ
         try:
             t0 = time.perf_counter()
             ngt = train_localizer(train.images, odometry=train.odometry, gyro=train.gyro, supervision="odometry",
-                                  closures=closures, **{**kw, "network": make()})
+                                  closures=closures, groups=train.groups, **{**kw, "network": make()})
             seconds["no ground truth"] = time.perf_counter() - t0
         except ValueError as exc:  # the run's odometry fixes no metric map (too short, never straight, ...)
             missing = f"no '[no ground truth]' rows: the training run's odometry fixes no map ({exc}); "
@@ -385,13 +397,17 @@ def configuration(quick: bool) -> tuple[Callable[[], Network], Recipe | None]:
 
 
 def quick_subsample(run: ProductRun, limit: int = QUICK_TRAIN_FRAMES) -> ProductRun:
-    """Every k-th frame of ``run`` (images, positions and odometry alike),
-    at most ``limit`` frames: a quick run's training set."""
+    """Every k-th frame of ``run`` (images, positions, odometry, gyro and
+    recordings alike), at most ``limit`` frames: a quick run's training set."""
     step = -(-len(run.xy) // limit)
     if step <= 1:
         return run
-    return ProductRun(run.images[::step], run.xy[::step], None if run.odometry is None else run.odometry[::step],
-                      run.label)
+
+    def every(a: Any) -> Any:
+        return None if a is None else a[::step]
+
+    return ProductRun(run.images[::step], run.xy[::step], every(run.odometry), run.label, every(run.gyro),
+                      every(run.groups))
 
 
 def scene_rows(dataset: Any, *, quick: bool, thesis: Sequence[Any] | None = None, tests: Sequence[str] = ("test",),

@@ -422,7 +422,8 @@ def _product_622(ds: Any, conds: list[str], train: Any, order: Any, test: int, t
     make_net, recipe = product_configuration(quick)
     prep = Preprocessing.for_network(make_net())
     recs = [load_run(ds.select(condition=conds[s]), prep, log=log) for s in train]
-    run = ProductRun(np.concatenate([r[0] for r in recs])[order], np.concatenate([r[1] for r in recs])[order])
+    run = ProductRun(np.concatenate([r[0] for r in recs])[order], np.concatenate([r[1] for r in recs])[order],
+                     groups=np.concatenate([np.full(len(r[1]), conds[s]) for r, s in zip(recs, train)])[order])
     rec = ds.select(condition=conds[test])
     X_te, xy_te = load_run(rec, prep, log=log)
     elev = tuple(ds.metadata["camera"].get("elevation_deg", (-30.0, 20.0)))

@@ -49,6 +49,7 @@ from .readout_selection import (
     block_folds,
     cross_val_predict,
     default_candidates,
+    group_folds,
     select_auto_readout,
     select_readout,
 )
@@ -72,7 +73,8 @@ from .recipe import (
     recipe_for,
 )
 from .report import write_report
+from .signature_knn import SignatureKNNReadout
 from .signature_readout import SignatureGPReadout
 from .training import fit_localizer
 
-__all__ = ["cross_val_predict", "AUTO_BLOCK", "AUTO_FOLDS", "AUTO_TOLERANCE", "Alignment", "BAND", "ErrorCurve", "Evaluation", "FourierSignature", "GPReadout", "KNNReadout", "KernelRidgeReadout", "Localizer", "NETWORK_PRESET", "PerfectMemory", "QuadraticRegression", "RANDOM_SPLITS", "READOUT", "Recipe", "ReadoutSelection", "SignatureGPReadout", "fourier_signature", "SIGNATURE", "RegressionResult", "TEST_RUN", "align", "auto_candidates", "benchmark", "block_folds", "default_candidates", "default_network", "default_rows", "error_vs_n", "euclidean_errors", "evaluate", "evaluate_random_splits", "evaluate_test_run", "evaluation_rows", "fit_localizer", "localization_metrics", "mae", "mae_percent", "make_readout", "med", "plot_error_vs_n", "plot_firing_maps", "plot_trajectory", "pooled_transform", "pooling_step", "readout_from_state", "pooling_for", "readout_state", "recipe_for", "select_auto_readout", "select_readout", "write_report"]
+__all__ = ["cross_val_predict", "AUTO_BLOCK", "AUTO_FOLDS", "AUTO_TOLERANCE", "Alignment", "BAND", "ErrorCurve", "Evaluation", "FourierSignature", "GPReadout", "KNNReadout", "KernelRidgeReadout", "Localizer", "NETWORK_PRESET", "PerfectMemory", "QuadraticRegression", "RANDOM_SPLITS", "READOUT", "Recipe", "ReadoutSelection", "SignatureGPReadout", "SignatureKNNReadout", "group_folds", "fourier_signature", "SIGNATURE", "RegressionResult", "TEST_RUN", "align", "auto_candidates", "benchmark", "block_folds", "default_candidates", "default_network", "default_rows", "error_vs_n", "euclidean_errors", "evaluate", "evaluate_random_splits", "evaluate_test_run", "evaluation_rows", "fit_localizer", "localization_metrics", "mae", "mae_percent", "make_readout", "med", "plot_error_vs_n", "plot_firing_maps", "plot_trajectory", "pooled_transform", "pooling_step", "readout_from_state", "pooling_for", "readout_state", "recipe_for", "select_auto_readout", "select_readout", "write_report"]

@@ -398,7 +398,7 @@ class Localizer:
         return self
 
     def fit_features(self, features: Any, xy: Any, *, signatures: Any = None,
-                     augmented: tuple[Any, Any] | None = None) -> "Localizer":
+                     augmented: tuple[Any, Any] | None = None, groups: Any = None) -> "Localizer":
         """Fits on precomputed features (N, m >= n_outputs), slowest first,
         and positions (N, 2) in metres: what :meth:`features` returns (rotation
         pooled as ``rotation_pooling`` says); with ``signature`` set also the
@@ -412,10 +412,23 @@ class Localizer:
         cross-validation of ``readout="auto"`` never holds out an image
         while training on its copy), and learns what of the features
         survives the alteration (docs/robustness.md). The training
-        positions and metrics stay those of the N originals."""
-        n, ridge, degree = self._check_params()
+        positions and metrics stay those of the N originals.
+
+        ``groups`` (N,): the recording each sample comes from, when the
+        training set is several recordings of the same places (in different
+        light or seasons): ``readout="auto"`` then chooses its readout by
+        holding out one recording at a time
+        (:func:`sfanav.localization.select_auto_readout`); ignored by the
+        other readouts."""
+        self._check_params()
         if augmented is not None:
-            return self._fit_augmented(features, xy, signatures, augmented)
+            return self._fit_augmented(features, xy, signatures, augmented, groups)
+        return self._fit_samples(features, xy, signatures, groups, None)
+
+    def _fit_samples(self, features: Any, xy: Any, signatures: Any, groups: Any, views: Any) -> "Localizer":
+        """:meth:`fit_features` on samples as given; ``views``: the originals
+        among them (None: all), for a readout that stores views."""
+        n, ridge, degree = self._check_params()
         self.rotation_pooling_ = self._resolve_pooling()
         F = as_matrix(features, "features")
         Y = as_matrix(xy, "xy", n_cols=2)
@@ -442,16 +455,20 @@ class Localizer:
             if n is not None:
                 spec["n_outputs"] = n
             if q:
-                if spec.get("kind") != "gp-signature":
+                if spec.get("kind") not in ("gp-signature", "knn-signature"):
                     raise ValueError(f"a readout of kind {spec.get('kind')!r} reads no appearance signature: use "
                                      "{'kind': 'gp-signature'} or signature=None")
                 spec["n_signature"] = q
-            reg = make_readout(spec).fit(X, Y)
+            if spec.get("kind") == "knn-signature":
+                spec["n_outputs"] = 0
+                reg = make_readout(spec).fit(X, Y, views=views)
+            else:
+                reg = make_readout(spec).fit(X, Y)
         elif self.readout == "quadratic":
             spec = {"kind": "quadratic", "n_outputs": 8 if n is None else n, "ridge": float(ridge), "degree": degree}
             reg = QuadraticRegression(spec["n_outputs"], ridge, degree).fit(F, Y)
         else:
-            sel = select_auto_readout(X, Y, n_outputs=n, n_signature=q)
+            sel = select_auto_readout(X, Y, n_outputs=n, n_signature=q, groups=groups, views=views)
             spec, reg, self.selection_ = sel.spec, sel.readout, sel
         self.regression_ = reg
         self.readout_spec_ = spec
@@ -466,7 +483,7 @@ class Localizer:
         self.train_metrics_ = localization_metrics(_training_predictions(reg, X), Y, coordinate_range=rng)
         return self
 
-    def _fit_augmented(self, features: Any, xy: Any, signatures: Any, augmented: Any) -> "Localizer":
+    def _fit_augmented(self, features: Any, xy: Any, signatures: Any, augmented: Any, groups: Any) -> "Localizer":
         if not isinstance(augmented, (tuple, list)) or len(augmented) != 2:
             raise TypeError("augmented must be a tuple (features, signatures) of the altered copies")
         F, Y = as_matrix(features, "features"), as_matrix(xy, "xy", n_cols=2)
@@ -486,8 +503,13 @@ class Localizer:
         def pairwise(a: np.ndarray, b: np.ndarray) -> np.ndarray:  # a0, b0, a1, b1, ...
             return np.stack([a, b], axis=1).reshape((-1,) + a.shape[1:])
 
-        self.fit_features(pairwise(F, Fa), pairwise(Y, Y),
-                          signatures=None if G is None else pairwise(G, Ga))
+        if groups is not None:
+            groups = np.asarray(groups)
+            if groups.shape != (len(F),):
+                raise ValueError(f"groups must hold one label per image ({len(F)}), got shape {groups.shape}")
+            groups = np.repeat(groups, 2)
+        self._fit_samples(pairwise(F, Fa), pairwise(Y, Y), None if G is None else pairwise(G, Ga), groups,
+                          np.arange(0, 2 * len(F), 2))
         self.training_positions_ = np.array(Y, dtype=np.float64)
         X = F if G is None else np.hstack([F, G])
         rng = np.ptp(Y, axis=0)

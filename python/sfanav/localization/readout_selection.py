@@ -1,7 +1,9 @@
 """Choosing a readout by cross-validation on the training run only, in
 contiguous blocks of the run (neighbouring frames are near copies: random
-folds would leak them into the held-out part). The test run never influences
-the choice. :func:`select_readout` picks among candidate specs;
+folds would leak them into the held-out part), or, when the training set is
+several recordings (``groups``), one recording held out at a time (as a
+robot will meet a light or season none of them showed). The test run never
+influences the choice. :func:`select_readout` picks among candidate specs;
 :func:`select_auto_readout` is the ``readout="auto"`` rule of
 :class:`sfanav.Localizer`."""
 
@@ -15,6 +17,7 @@ import numpy as np
 from .._checks import as_matrix, check_same_length
 from .extrapolation import quiet_extrapolation
 from .readouts import GPReadout, describe_spec, make_readout
+from .signature_knn import SignatureKNNReadout
 from .signature_readout import SignatureGPReadout
 
 
@@ -60,6 +63,46 @@ def block_folds(n: int, n_folds: int = 5, block: int | None = None) -> list[tupl
     return [(idx[fold != k], idx[fold == k]) for k in range(n_folds)]
 
 
+def group_folds(groups: Any, max_folds: int | None = None) -> list[tuple[np.ndarray, np.ndarray]]:
+    """(train, held-out) index pairs that hold out one group at a time.
+
+    ``groups`` (N,): a label per sample (any values; e.g. the recording or
+    condition each training image comes from). ``max_folds``: hold out at
+    most that many groups, evenly spaced in the order of their first
+    appearance (all when None). Raises ValueError for fewer than two groups.
+
+    Example
+    -------
+    >>> [h.tolist() for _, h in group_folds(["a", "a", "b", "c", "b"])]
+    [[0, 1], [2, 4], [3]]
+    """
+    g = np.asarray(groups)
+    if g.ndim != 1:
+        raise ValueError(f"groups must be one label per sample (1-D), got shape {g.shape}")
+    _, first, inverse = np.unique(g, return_index=True, return_inverse=True)
+    order = np.argsort(first)  # groups in the order they first appear
+    if len(order) < 2:
+        raise ValueError(f"leave-one-group-out needs at least 2 groups, got {len(order)}")
+    if max_folds is not None:
+        if int(max_folds) < 1:
+            raise ValueError(f"max_folds must be at least 1, got {max_folds}")
+        order = order[np.unique(np.linspace(0, len(order) - 1, min(int(max_folds), len(order))).round().astype(int))]
+    idx = np.arange(len(g))
+    return [(idx[inverse != k], idx[inverse == k]) for k in order]
+
+
+def _group_labels(groups: Any, n: int) -> np.ndarray | None:
+    """``groups`` checked against ``n`` samples; None when absent or one group."""
+    if groups is None:
+        return None
+    g = np.asarray(groups)
+    if g.ndim != 1 or len(g) != n:
+        raise ValueError(f"groups must hold one label per training sample ({n}), got shape {g.shape}")
+    if g.dtype.kind == "f" and not np.all(np.isfinite(g)):
+        raise ValueError("groups must not hold NaN or infinite labels")
+    return g if len(np.unique(g)) >= 2 else None
+
+
 def cross_val_predict(spec: dict[str, Any], features: Any, xy: Any, *, n_folds: int = 5,
                       block: int | None = 20) -> np.ndarray:
     """Held-out estimates (N, 2) of a training run: each frame's position
@@ -98,6 +141,14 @@ AUTO_TOLERANCE = 0.1
 
 
 AUTO_MAX_CV_SAMPLES = 1500
+
+
+# With several recordings (groups): recordings held out at most when the signature readouts are compared
+# (each fold refits the GP readout's posterior), and the kNN sizes tried. docs/localization.md, "Several recordings".
+AUTO_GROUP_FOLDS = 5
+
+
+SIGNATURE_KNN_K = (1, 3)
 
 
 def auto_candidates(n_outputs: Sequence[int] = (8, 12)) -> list[dict[str, Any]]:
@@ -163,11 +214,12 @@ def select_readout(features: Any, xy: Any, candidates: Sequence[dict[str, Any]] 
 
 
 def _scores(cands: list[dict[str, Any]], F: np.ndarray, Y: np.ndarray, n_folds: int,
-            max_cv_samples: int | None, block: int | None = None) -> np.ndarray:
+            max_cv_samples: int | None, block: int | None = None, groups: np.ndarray | None = None) -> np.ndarray:
     if max_cv_samples is not None and len(F) > max_cv_samples:
         keep = np.unique(np.linspace(0, len(F) - 1, int(max_cv_samples)).round().astype(int))
         F, Y = F[keep], Y[keep]
-    folds = block_folds(len(F), n_folds, block)
+        groups = None if groups is None else groups[keep]
+    folds = block_folds(len(F), n_folds, block) if groups is None else group_folds(groups, n_folds)
     from threadpoolctl import threadpool_limits
 
     with threadpool_limits(limits=1, user_api="blas"):  # many small solves: threads only thrash
@@ -178,12 +230,13 @@ def select_auto_readout(features: Any, xy: Any, *, n_outputs: int | Sequence[int
                         n_folds: int = AUTO_FOLDS, block: int | None = AUTO_BLOCK,
                         tolerance: float = AUTO_TOLERANCE,
                         max_cv_samples: int | None = AUTO_MAX_CV_SAMPLES, gp: bool = True,
-                        n_signature: int = 0) -> ReadoutSelection:
+                        n_signature: int = 0, groups: Any = None, views: Any = None) -> ReadoutSelection:
     """The sfanav default readout (``"auto"``), chosen on the training run only.
 
     With ``n_signature > 0`` the last ``n_signature`` columns of ``features``
     are an appearance signature (the sfanav default's Fourier signature) and
-    :func:`select_signature_readout` decides instead. Without:
+    :func:`select_signature_readout` decides instead (``groups`` and
+    ``views`` go to it). Without:
 
     1. A Gaussian-process readout (:class:`GPReadout`) on the most slowest
        outputs offered (12, or ``max(n_outputs)``), its ARD hyperparameters
@@ -193,7 +246,10 @@ def select_auto_readout(features: Any, xy: Any, *, n_outputs: int | Sequence[int
        have) and the GP with its hyperparameters fixed are scored by blocked
        CV (mean held-out Euclidean error, m): the run cut into blocks of
        ``block`` consecutive images, block ``i`` held out in fold ``i mod
-       n_folds`` (``block=None``: ``n_folds`` contiguous stretches).
+       n_folds`` (``block=None``: ``n_folds`` contiguous stretches); with
+       ``groups`` (a label per sample, at least two distinct: the recording
+       each sample comes from) one group held out per fold instead
+       (:func:`group_folds`, at most ``n_folds`` of them).
     3. The GP is taken unless the best other candidate's CV error is lower by
        more than ``tolerance`` (relative); among the others kNN only if it
        beats kernel ridge by more than ``tolerance``.
@@ -209,7 +265,9 @@ def select_auto_readout(features: Any, xy: Any, *, n_outputs: int | Sequence[int
     Y = as_matrix(xy, "xy")
     check_same_length(F, Y, "features", "xy")
     if n_signature:
-        return select_signature_readout(F, Y, n_signature, n_outputs=n_outputs)
+        return select_signature_readout(F, Y, n_signature, n_outputs=n_outputs, groups=groups, views=views,
+                                        tolerance=tolerance)
+    g = _group_labels(groups, len(F))
     if not 0.0 <= float(tolerance) < 1.0:
         raise ValueError(f"tolerance must be in [0, 1), got {tolerance}")
     if n_outputs is None:
@@ -229,7 +287,7 @@ def select_auto_readout(features: Any, xy: Any, *, n_outputs: int | Sequence[int
     if gp:
         gp_fit = GPReadout(n_outputs=max(ns)).fit(F, Y)
         cands.append(gp_fit.fixed_spec())
-    scores = _scores(cands, F, Y, folds, max_cv_samples, blk)
+    scores = _scores(cands, F, Y, folds, max_cv_samples, blk, g)
     sel = ReadoutSelection({}, None, [dict(c) for c in cands], scores)
     k_spec, k_err = sel.best_of("kernel")
     n_spec, n_err = sel.best_of("knn")
@@ -238,6 +296,8 @@ def select_auto_readout(features: Any, xy: Any, *, n_outputs: int | Sequence[int
     else:
         spec, err, why = k_spec, k_err, f"kernel ridge: CV {k_err:.3f} m (kNN {n_err:.3f} m not {tolerance:.0%} lower)"
     how = f"{folds}-fold blocked CV" + (f" (blocks of {blk} images)" if blk is not None else " (contiguous)")
+    if g is not None:
+        how = f"leave-one-group-out CV ({min(folds, len(np.unique(g)))} of {len(np.unique(g))} groups held out)"
     if gp_fit is not None:
         g_err = float(scores[-1])
         if not (np.isfinite(err) and err < (1.0 - tolerance) * g_err):
@@ -269,7 +329,9 @@ def _cv_scores(cands: list[dict[str, Any]], folds: list[tuple[np.ndarray, np.nda
 
 
 def select_signature_readout(features: Any, xy: Any, n_signature: int, *,
-                             n_outputs: int | Sequence[int] | None = None) -> ReadoutSelection:
+                             n_outputs: int | Sequence[int] | None = None, groups: Any = None,
+                             views: Any = None, tolerance: float = AUTO_TOLERANCE,
+                             max_group_folds: int = AUTO_GROUP_FOLDS) -> ReadoutSelection:
     """The default readout of slow features plus an appearance signature.
 
     ``features`` (N, m + n_signature): the slow features, slowest first, then
@@ -280,7 +342,20 @@ def select_signature_readout(features: Any, xy: Any, n_signature: int, *,
     the combination is taken unless its log marginal likelihood exceeds the
     signature's by less than the Bayesian information criterion's price of
     those length scales, ``0.5 * m' * ln(n)`` (n: the samples the
-    hyperparameters were fitted on). The choice needs no cross-validation.
+    hyperparameters were fitted on). This choice needs no cross-validation.
+
+    ``groups`` (N,): the recording each sample comes from. With two or more,
+    the chosen GP (its kernel kept, the posterior refitted per fold) is
+    compared by leave-one-group-out cross-validation (at most
+    ``max_group_folds`` recordings held out, :func:`group_folds`) with the
+    nearest training views by the signature alone
+    (:class:`SignatureKNNReadout`, k in :data:`SIGNATURE_KNN_K`); the views
+    are taken if their mean held-out error is lower by more than
+    ``tolerance`` (relative). On the nine lights of 6.2.2 the views win
+    (docs/localization.md, "Several recordings"). ``views``: indices of the
+    samples the nearest-view readout stores (default all; the originals of a
+    run fitted together with corrupted copies).
+
     Returns a :class:`ReadoutSelection` whose ``rule`` says why."""
     F = as_matrix(features, "features")
     Y = as_matrix(xy, "xy")
@@ -295,20 +370,72 @@ def select_signature_readout(features: Any, xy: Any, n_signature: int, *,
         n = int(n_outputs) if np.isscalar(n_outputs) else max(int(v) for v in n_outputs)  # type: ignore[arg-type]
         if not 0 <= n <= m:
             raise ValueError(f"n_outputs {n} out of range: the features have {m} slow-feature columns")
+    if not 0.0 <= float(tolerance) < 1.0:
+        raise ValueError(f"tolerance must be in [0, 1), got {tolerance}")
+    g = _group_labels(groups, len(F))
+    view_idx = None if views is None else _views(views, len(F))
     spec_alone = {"kind": "gp-signature", "n_outputs": 0, "n_signature": q}
     if n == 0:
-        return ReadoutSelection(spec_alone, SignatureGPReadout(0, q).fit(F, Y),
-                                rule="the signature alone (no slow features offered)")
-    both, alone = SignatureGPReadout.fit_nested(F, Y, n, q)
-    n_fit = min(len(F), both.max_fit)
-    price = 0.5 * n * np.log(n_fit)
-    gain = both.log_marginal_likelihood_ - alone.log_marginal_likelihood_
-    cands = [{"kind": "gp-signature", "n_outputs": n, "n_signature": q}, spec_alone]
-    scores = np.array([-both.log_marginal_likelihood_, -alone.log_marginal_likelihood_])
-    if gain > price:
-        return ReadoutSelection(cands[0], both, cands, scores,
-                                rule=(f"slow features and signature: log marginal likelihood {gain:.1f} above the "
-                                      f"signature alone's, more than the BIC price {price:.1f} of {n} length scales"))
-    return ReadoutSelection(spec_alone, alone, cands, scores,
-                            rule=(f"the signature alone: {n} slow features raise the log marginal likelihood by "
-                                  f"{gain:.1f}, not more than their BIC price {price:.1f}"))
+        sel = ReadoutSelection(spec_alone, SignatureGPReadout(0, q).fit(F, Y),
+                               rule="the signature alone (no slow features offered)")
+    else:
+        both, alone = SignatureGPReadout.fit_nested(F, Y, n, q)
+        n_fit = min(len(F), both.max_fit)
+        price = 0.5 * n * np.log(n_fit)
+        gain = both.log_marginal_likelihood_ - alone.log_marginal_likelihood_
+        cands = [{"kind": "gp-signature", "n_outputs": n, "n_signature": q}, spec_alone]
+        scores = np.array([-both.log_marginal_likelihood_, -alone.log_marginal_likelihood_])
+        if gain > price:
+            sel = ReadoutSelection(cands[0], both, cands, scores,
+                                   rule=(f"slow features and signature: log marginal likelihood {gain:.1f} above "
+                                         f"the signature alone's, more than the BIC price {price:.1f} of {n} length "
+                                         "scales"))
+        else:
+            sel = ReadoutSelection(spec_alone, alone, cands, scores,
+                                   rule=(f"the signature alone: {n} slow features raise the log marginal likelihood "
+                                         f"by {gain:.1f}, not more than their BIC price {price:.1f}"))
+    if g is None:
+        return sel
+    return _by_recordings(sel, F, Y, q, g, view_idx, float(tolerance), max_group_folds)
+
+
+def _views(views: Any, n: int) -> np.ndarray:
+    v = np.asarray(views)
+    if v.ndim != 1 or v.size == 0 or v.dtype.kind not in "iu" or v.min() < 0 or v.max() >= n:
+        raise ValueError(f"views must be a non-empty 1-D array of indices into the {n} samples")
+    return np.unique(v)
+
+
+def _by_recordings(sel: ReadoutSelection, F: np.ndarray, Y: np.ndarray, q: int, groups: np.ndarray,
+                   views: np.ndarray | None, tolerance: float, max_folds: int) -> ReadoutSelection:
+    """``sel``'s GP against the nearest views by signature, one recording
+    held out at a time: the views replace it when clearly better."""
+    folds = group_folds(groups, max_folds)
+    gp_spec, gp = dict(sel.spec), sel.readout
+    knn_specs = [{"kind": "knn-signature", "n_outputs": 0, "n_signature": q, "k": k} for k in SIGNATURE_KNN_K]
+    errs = np.zeros(1 + len(knn_specs))
+    held_total = 0
+    for tr, te in folds:
+        fold_gp = SignatureGPReadout(gp.n_outputs, q, max_fit=gp.max_fit, max_train=gp.max_train)
+        preds = [fold_gp.fit(F[tr], Y[tr], hyperparameters_from=gp).predict(F[te])]
+        local = None if views is None else np.flatnonzero(np.isin(tr, views))
+        if local is not None and local.size == 0:
+            local = None
+        for spec in knn_specs:
+            preds.append(make_readout(spec).fit(F[tr], Y[tr], views=local).predict(F[te]))
+        errs += [float(np.hypot(*(p - Y[te]).T).sum()) for p in preds]
+        held_total += len(te)
+    errs /= held_total
+    best = 1 + int(np.argmin(errs[1:]))
+    n_groups = len(np.unique(groups))
+    how = f"leave-one-recording-out CV ({len(folds)} of {n_groups} recordings held out)"
+    cands = [gp_spec] + knn_specs
+    if errs[best] < (1.0 - tolerance) * errs[0]:
+        spec = knn_specs[best - 1]
+        readout = make_readout(spec).fit(F, Y, views=views)
+        rule = (f"{how}: the nearest training views by the signature ({describe_spec(spec)}) {errs[best]:.3f} m, "
+                f"more than {tolerance:.0%} below the GP's {errs[0]:.3f} m ({sel.rule})")
+        return ReadoutSelection(spec, readout, cands, errs, rule=rule)
+    rule = (f"{sel.rule}; {how}: GP {errs[0]:.3f} m, the nearest views by the signature "
+            f"{errs[best]:.3f} m not {tolerance:.0%} lower")
+    return ReadoutSelection(gp_spec, gp, cands, errs, rule=rule)

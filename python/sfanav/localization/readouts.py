@@ -23,6 +23,7 @@ import numpy as np
 from .._checks import NotFittedError, as_matrix, check_same_length
 from .._threads import one_blas_thread
 from .quadratic import QuadraticRegression
+from .signature_knn import SignatureKNNReadout
 from .signature_readout import SignatureGPReadout
 from .sparse_gp import dtc_weights
 
@@ -238,7 +239,7 @@ def readout_from_state(state: dict[str, Any]) -> Any:
     try:
         kind = state["spec"]["kind"]
         cls = {"quadratic": QuadraticRegression, "knn": KNNReadout, "kernel": KernelRidgeReadout,
-               "gp": GPReadout, "gp-signature": SignatureGPReadout}[kind]
+               "gp": GPReadout, "gp-signature": SignatureGPReadout, "knn-signature": SignatureKNNReadout}[kind]
         return cls.from_state(state["state"])
     except (KeyError, TypeError) as exc:
         raise ValueError(f"invalid readout state: {exc}") from None
@@ -251,7 +252,9 @@ def make_readout(spec: dict[str, Any]) -> Any:
     ``length_scale`` and ``noise`` to fix its hyperparameters) or
     ``{"kind": "gp-signature", "n_outputs", "n_signature"}`` (slow features
     and an appearance signature,
-    :class:`sfanav.localization.SignatureGPReadout`)."""
+    :class:`sfanav.localization.SignatureGPReadout`) or ``{"kind":
+    "knn-signature", "n_signature", "k"}`` (the nearest training views by
+    the signature alone, :class:`sfanav.localization.SignatureKNNReadout`)."""
     s = dict(spec)
     kind = s.pop("kind", None)
     if kind == "quadratic":
@@ -264,7 +267,10 @@ def make_readout(spec: dict[str, Any]) -> Any:
         return GPReadout(**s)
     if kind == "gp-signature":
         return SignatureGPReadout(**s)
-    raise ValueError(f"unknown readout kind {kind!r}; use 'quadratic', 'knn', 'kernel', 'gp' or 'gp-signature'")
+    if kind == "knn-signature":
+        return SignatureKNNReadout(**s)
+    raise ValueError(f"unknown readout kind {kind!r}; use 'quadratic', 'knn', 'kernel', 'gp', 'gp-signature' or "
+                     "'knn-signature'")
 
 
 

@@ -23,14 +23,13 @@ Why a product of these two kernels, and what it measured: docs/gardens-suite.md.
 
 from __future__ import annotations
 
-from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
 import numpy as np
 
 from .._checks import NotFittedError, as_matrix, check_int, check_same_length
-from .._resources import get_num_threads
 from .._threads import one_blas_thread
+from .signature_distance import l1_distances
 from .sparse_gp import dtc_weights
 
 try:  # loaded before any threadpool limit (see readouts.py)
@@ -153,24 +152,10 @@ class SignatureGPReadout:
         return np.maximum(d2, 0.0)
 
     def _l1(self, A: np.ndarray, B: np.ndarray, chunk: int = 128, dtype: Any = np.float64) -> np.ndarray:
-        """L1 distances (len(A), len(B)) as ``dtype``, blocks of rows on the
-        Rust core's worker threads (:func:`sfanav.get_num_threads`; SciPy's
-        cdist releases the GIL): the signature distances are most of a fit's
-        and an update's time."""
-        out = np.empty((len(A), len(B)), dtype)
-
-        def block(s: int) -> None:
-            out[s : s + chunk] = cdist(A[s : s + chunk], B, "cityblock")
-
-        starts = range(0, len(A), chunk)
-        workers = min(get_num_threads(), len(starts))
-        if workers <= 1:
-            for s in starts:
-                block(s)
-        else:
-            with ThreadPoolExecutor(workers) as pool:
-                list(pool.map(block, starts))
-        return out
+        """L1 distances (len(A), len(B)) as ``dtype``
+        (:func:`~sfanav.localization.signature_distance.l1_distances`): the
+        signature distances are most of a fit's and an update's time."""
+        return l1_distances(A, B, chunk, dtype)
 
     # ------------------------------------------------------------ likelihood
     def _neg_lml(self, theta: np.ndarray, S: np.ndarray, Dg: np.ndarray, Y: np.ndarray) -> tuple[float, np.ndarray]:

@@ -44,6 +44,7 @@ def fit_localizer(
     seed: int = 0,
     readout_memory: int | None = None,
     readout_memory_images: bool = False,
+    groups: Any = None,
 ) -> Localizer:
     """Trains ``network`` on ``images`` (the training run, in temporal order)
     under simulated rotation and fits the readout of its slowest outputs to
@@ -96,6 +97,11 @@ def fit_localizer(
     ``readout_memory_images``: the memory keeps the views' images too, for
     updates that train every layer again (``UpdatePolicy(resolve="all")``).
 
+    ``groups`` (N,): the recording each image comes from, when ``images``
+    are several recordings of the same places (say in different light, in
+    place-major order): the default readout is then chosen by holding out
+    one recording at a time (:meth:`Localizer.fit_features`).
+
     ``network_fit``: more keyword arguments of the network's
     :meth:`~sfanav.Network.fit`, e.g. ``{"client": dask_client, "breaks":
     [...]}`` to train it on a Dask cluster (docs/distributed.md).
@@ -116,6 +122,9 @@ def fit_localizer(
     if rows is not None and rows.identity:
         rows = None
     seed = check_int(seed, "seed", minimum=0)
+    if groups is not None and np.shape(groups) != (len(images),):
+        raise ValueError(f"groups must hold one label per training image ({len(images)}), got shape "
+                         f"{np.shape(groups)}")
     for name, model in (("readout_augmentation", readout_augmentation), ("invariance", invariance)):
         if model is not None:
             if not isinstance(model, CorruptionModel):
@@ -144,9 +153,10 @@ def fit_localizer(
     G = loc.signatures(raw) if signature is not None else None
     Y = xy(F) if callable(xy) else xy
     if readout_augmentation is None:
-        loc.fit_features(F, Y, signatures=G)
+        loc.fit_features(F, Y, signatures=G, groups=groups)
     else:
-        loc.fit_features(F, Y, signatures=G, augmented=augmented_features(loc, raw, readout_augmentation, seed=seed))
+        loc.fit_features(F, Y, signatures=G, augmented=augmented_features(loc, raw, readout_augmentation, seed=seed),
+                         groups=groups)
     readout_s = time.perf_counter() - t1
     if readout_memory is not None:
         from .updates import remember

@@ -135,6 +135,13 @@ def _add_train(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                    help="with --updatable: the readout memory keeps the views' images too (about W x H x C bytes "
                         "each), so that sfanav update --resolve all can train every layer again on the old and new "
                         "runs")
+    p.add_argument("--recordings", choices=("auto", "conditions", "runs", "none"), default="auto",
+                   help="when the training images are several recordings of the same places (say in different "
+                        "light or seasons), the default readout is chosen by holding out one recording at a time "
+                        "(its GP against the nearest training views by the panorama's signature; docs/"
+                        "localization.md, 'Several recordings'): conditions = the dataset's condition column names "
+                        "the recording, runs = its run column; auto (default): conditions when the training images "
+                        "hold two or more; none = one recording")
     p.add_argument("--overwrite", action="store_true", help="replace an existing model file")
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
     add_train_arguments(p)
@@ -155,6 +162,18 @@ def _network_from_args(args: argparse.Namespace) -> "Any":
             raise UsageError(f"{args.config}: not a network config")
         config.setdefault("network", {})["precision"] = args.precision
     return Network(config)
+
+
+def _recordings(train: Any, how: str) -> Any:
+    """The recording of every training image (``--recordings``), or None."""
+    if how == "none":
+        return None
+    labels = train.runs if how == "runs" else train.conditions
+    if len(set(labels.tolist())) < 2:
+        if how != "auto":
+            raise UsageError(f"--recordings {how}: the training images hold one {how[:-1]} only")
+        return None
+    return labels
 
 
 def _run_breaks(runs: Any) -> list[int] | None:
@@ -263,6 +282,7 @@ def _train(args: argparse.Namespace, stack: Any) -> int:
     supervision = supervision_for(args.supervision, has_ground_truth=bool(np.isfinite(train.poses[:, :2]).all()),
                                   has_odometry=bool(np.isfinite(odometry).all()))
     times = _run_times(train) if supervision == "odometry" else None  # checked before any training
+    groups = _recordings(train, args.recordings)
     if args.loop_closures is None and args.closure_weights != "uniform":
         raise UsageError("--closure-weights needs --loop-closures")
     if args.closures is not None and args.metric_map != "pose-graph":
@@ -306,7 +326,10 @@ def _train(args: argparse.Namespace, stack: Any) -> int:
              "metres in the odometry's frame")
         if train.gyro is not None:
             log("the run has a gyro (gyro_heading): its turns are fused with the odometry's")
-    loc = train_localizer(images, xy=xy, odometry=odometry, timestamps=times, gyro=train.gyro,
+    if groups is not None:
+        log(f"{len(set(groups.tolist()))} recordings ({args.recordings}): the readout is chosen by holding out one "
+            "at a time")
+    loc = train_localizer(images, xy=xy, odometry=odometry, timestamps=times, gyro=train.gyro, groups=groups,
                           supervision=supervision, network=net, recipe=recipe, camera_elevation=elev,
                           rotation=Rotation(step=args.step, window=args.window), prep=prep,
                           metric_map=args.metric_map, closures=args.closures, loop_closures=closures,
