@@ -20,6 +20,7 @@ from sfanav.localization import (
     select_auto_readout,
 )
 from sfanav.localization.signature_distance import l1_distances
+from sfanav.sfa.modelfile import read_model
 
 
 def _naive_knn(G_tr, y_tr, G_q, k):
@@ -194,7 +195,9 @@ def test_a_localizer_with_copies_stores_only_the_originals_and_round_trips(tmp_p
     assert loc.readout_spec_["kind"] == "knn-signature" and loc.readout_spec_["n_outputs"] == 0
     assert len(loc.regression_.G_) == len(imgs)  # the originals, not their corrupted copies
     np.testing.assert_allclose(loc.predict(imgs[:6]), xy[:6], atol=1e-9)
-    back = sfanav.load(loc.save(tmp_path / "m.sfa"))
+    path = loc.save(tmp_path / "m.sfa")
+    assert read_model(path)[2]["version"] == 7  # format 7: older readers refuse the nearest views
+    back = sfanav.load(path)
     np.testing.assert_allclose(back.predict(imgs[::7]), loc.predict(imgs[::7]), atol=1e-9)
     # the default readout with the recordings: a choice with a rule that names them
     auto = fit_localizer(_tiny_net(), imgs, xy, rotation=sfanav.Rotation(step=3, window=1.0), progress=False,

@@ -12,47 +12,22 @@ evenly spaced samples alone (the readout before: the rest thinned away) and on a
 import json
 import sys
 import time
-import numpy as np
-from sfanav.data import Dataset
-from sfanav.data.preprocessing import Preprocessing
-from sfanav.data.sources import load_run
-from sfanav.experiments.product_rows import configuration as product_configuration
-from sfanav.loopclosure.conditions import correspondences, place_major_order
-from sfanav.localization.error_metrics import localization_metrics
-from sfanav.localization.localizer import Localizer
-import sfanav.localization.signature_readout as sr
-from sfanav.localization.signature_readout import SignatureGPReadout
-from sfanav.pipeline import train_localizer
+from pathlib import Path
 
-ds = Dataset(sys.argv[1])
-conds = sorted(set(ds.conditions.tolist()), key=lambda c: int(c.lstrip("c")) if c.lstrip("c").isdigit() else c)
-perm = np.random.default_rng(0).permutation(len(conds))
-train, test = perm[:9], perm[9]
-make_net, recipe = product_configuration(False)
-prep = Preprocessing.for_network(make_net())
-recs = [load_run(ds.select(condition=c), prep) for c in conds]
-places = [correspondences(recs[0][1], r[1]) for r in recs]
-order = place_major_order([places[s] for s in train])
-X = np.concatenate([recs[s][0] for s in train])[order]
-xy = np.concatenate([recs[s][1] for s in train])[order]
-X_te, xy_te = recs[test]
-elev = tuple(ds.metadata["camera"].get("elevation_deg", (-30.0, 20.0)))
-seen = {}
-orig = Localizer.fit_features
-def spy(self, *a, **k):
-    seen["args"], seen["kw"] = a, k
-    return orig(self, *a, **k)
-Localizer.fit_features = spy
-t = time.perf_counter()
-loc = train_localizer(X, xy=xy, supervision="ground-truth", network=make_net(), recipe=recipe, camera_elevation=elev, seed=0)
-Localizer.fit_features = orig
-print("trained", time.perf_counter() - t, "s; readout", loc.info.get("readout"), flush=True)
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).parent))
+from _split622 import trained_split  # noqa: E402
+import sfanav.localization.signature_readout as sr  # noqa: E402
+from sfanav.localization.error_metrics import localization_metrics  # noqa: E402
+from sfanav.localization.signature_readout import SignatureGPReadout  # noqa: E402
+
+# the product as before 2026-12-07's choice by recordings: one run, the GP readout
+split = trained_split(sys.argv[1], groups=False)
+loc, X, Y, Xr_te, xy_te = split["loc"], split["X"], split["Y"], split["X_te"], split["xy_te"]
+print("trained", split["seconds"], "s; readout", loc.info.get("readout"), flush=True)
 reg = loc.regression_
 n, q = reg.n_outputs, reg.n_signature
-# the last call: the images and their corrupted copies, paired (fit_features(augmented=) calls itself so)
-X = np.hstack([seen["args"][0], seen["kw"]["signatures"]])
-Y = np.asarray(seen["args"][1], float)
-Xr_te = loc.readout_features(loc.features(X_te), loc.signatures(X_te))
 keep = np.unique(np.linspace(0, len(X) - 1, min(len(X), reg.max_train)).round().astype(int))
 res = {"samples": len(X), "kept": len(keep), "readout": loc.info.get("readout"),
        "MED (m)": {"DTC over every sample (the default)": localization_metrics(reg.predict(Xr_te), xy_te)["med"]}}

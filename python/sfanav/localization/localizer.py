@@ -682,6 +682,9 @@ class Localizer:
         # format version 6: a photometric normalisation (older readers would silently skip it)
         if self.photometric is not None:
             version = 6
+        # format version 7: the nearest training views by the signature (older readers cannot rebuild them)
+        if kind == "knn-signature":
+            version = 7
         return save_model(path, "Localizer", state, version=version)
 
     @classmethod
