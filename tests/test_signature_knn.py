@@ -232,3 +232,10 @@ def test_cli_train_chooses_the_readout_by_recordings(tmp_path, capsys):
                          "--no-progress", "--recordings", "runs")
     assert_one_line_error(code, err, "--recordings runs", "one run")
     assert not (tmp_path / "r.sfa").exists()
+
+
+def test_without_a_signature_groups_replace_the_blocks_of_the_cv():
+    F, xy, rec = _recordings(n_rec=3, n_places=30)
+    sel = select_auto_readout(F[:, :4], xy, groups=rec)
+    assert "leave-one-group-out CV (3 of 3 groups held out)" in sel.rule, sel.rule
+    assert "blocked" in select_auto_readout(F[:, :4], xy).rule

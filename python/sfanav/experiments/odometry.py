@@ -35,6 +35,7 @@ from typing import Any
 import numpy as np
 
 from .. import sim
+from .._sampling import evenly_spaced
 from ..data.preprocessing import Preprocessing
 from ..data.sources import load_run
 from ..localization.error_metrics import align, med
@@ -323,7 +324,7 @@ def peer_rows(out: Path, variant: str, seed: int, *, quick: bool, progress: bool
     log = progress_log(progress)
     X_tr, xy_tr = load_run(ds.select(run="train"), prep, log=log)
     te = ds.select(run="test")
-    q = np.unique(np.linspace(0, len(te) - 1, min(PEER_QUERIES, len(te))).round().astype(int))
+    q = evenly_spaced(len(te), PEER_QUERIES)
     X_te, xy_te = load_run(te.subset(q), prep, log=log)
     rows: list[dict[str, Any]] = []
     for name, model in (("perfect memory", baselines.PerfectMemory()),

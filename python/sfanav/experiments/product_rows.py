@@ -56,6 +56,7 @@ import numpy as np
 
 from .._checks import as_images, as_matrix, check_same_length
 from .._progress import Log, quiet_log
+from .._sampling import evenly_spaced
 from ..localization import baselines
 from ..localization.error_metrics import align, localization_metrics
 from ..localization.evaluation import coordinate_range
@@ -192,9 +193,7 @@ def _name(config: str, qualifiers: Sequence[str], label: str) -> str:
 
 
 def _peer_queries(n: int, limit: int | None) -> np.ndarray:
-    if limit is None or n <= limit:
-        return np.arange(n)
-    return np.unique(np.linspace(0, n - 1, int(limit)).round().astype(int))
+    return np.arange(n) if limit is None else evenly_spaced(n, int(limit))
 
 
 def product_rows(train: ProductRun, tests: Sequence[ProductRun], *, thesis: Sequence[Any] | None = None,

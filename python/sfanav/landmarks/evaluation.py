@@ -19,6 +19,7 @@ import numpy as np
 from .._checks import as_matrix, check_same_length
 from .._plotting import figure, save_figure
 from .._progress import Log, quiet_log
+from .._sampling import evenly_spaced
 from ..localization import baselines
 from ..localization.error_metrics import localization_metrics
 from ..localization.evaluation import Evaluation, coordinate_range, write_evaluation_report
@@ -151,7 +152,7 @@ def evaluate_landmarks(
         P_tr, P_te = panoramas
         q = np.arange(len(P_te))
         if baseline_queries is not None and len(q) > baseline_queries:
-            q = np.unique(np.linspace(0, len(q) - 1, int(baseline_queries)).round().astype(int))
+            q = evenly_spaced(len(q), int(baseline_queries))
         ev.baseline_queries = len(q)
         for name, model in (("perfect memory", baselines.PerfectMemory()),
                             ("Fourier signature", baselines.FourierSignature(min(15, P_tr.shape[2] // 2 + 1)))):

@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 
 from .._progress import Log, quiet_log
+from .._sampling import evenly_spaced
 from ..sfa.diagnostics import eta_values, orientation_angles, plot_eta
 from . import baselines
 from .error_metrics import align, localization_metrics
@@ -214,7 +215,7 @@ def evaluate(
     if run_baselines and train_images is not None and train_xy is not None:
         q = np.arange(len(test_images))
         if baseline_queries is not None and len(q) > baseline_queries:
-            q = np.unique(np.linspace(0, len(q) - 1, int(baseline_queries)).round().astype(int))
+            q = evenly_spaced(len(q), int(baseline_queries))
         ev.baseline_queries = len(q)
         Xq, Yq = raw_test[q], test_xy[q]
         for name, model in (("perfect memory", baselines.PerfectMemory()),

@@ -15,6 +15,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from .._checks import as_matrix, check_same_length
+from .._sampling import evenly_spaced
 from .extrapolation import quiet_extrapolation
 from .readouts import GPReadout, describe_spec, make_readout
 from .signature_knn import SignatureKNNReadout
@@ -86,7 +87,7 @@ def group_folds(groups: Any, max_folds: int | None = None) -> list[tuple[np.ndar
     if max_folds is not None:
         if int(max_folds) < 1:
             raise ValueError(f"max_folds must be at least 1, got {max_folds}")
-        order = order[np.unique(np.linspace(0, len(order) - 1, min(int(max_folds), len(order))).round().astype(int))]
+        order = order[evenly_spaced(len(order), int(max_folds))]
     idx = np.arange(len(g))
     return [(idx[inverse != k], idx[inverse == k]) for k in order]
 
@@ -216,7 +217,7 @@ def select_readout(features: Any, xy: Any, candidates: Sequence[dict[str, Any]] 
 def _scores(cands: list[dict[str, Any]], F: np.ndarray, Y: np.ndarray, n_folds: int,
             max_cv_samples: int | None, block: int | None = None, groups: np.ndarray | None = None) -> np.ndarray:
     if max_cv_samples is not None and len(F) > max_cv_samples:
-        keep = np.unique(np.linspace(0, len(F) - 1, int(max_cv_samples)).round().astype(int))
+        keep = evenly_spaced(len(F), int(max_cv_samples))
         F, Y = F[keep], Y[keep]
         groups = None if groups is None else groups[keep]
     folds = block_folds(len(F), n_folds, block) if groups is None else group_folds(groups, n_folds)

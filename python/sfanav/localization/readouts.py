@@ -21,6 +21,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from .._checks import NotFittedError, as_matrix, check_same_length
+from .._sampling import evenly_spaced
 from .._threads import one_blas_thread
 from .quadratic import QuadraticRegression
 from .signature_knn import SignatureKNNReadout
@@ -195,7 +196,7 @@ class KernelRidgeReadout(_KernelMachine):
         Y = as_matrix(xy, "xy")
         check_same_length(X, Y, "features", "xy")
         if len(X) > self.max_train:  # the kept samples as inducing points, every sample as data
-            keep = np.unique(np.linspace(0, len(X) - 1, self.max_train).round().astype(int))
+            keep = evenly_spaced(len(X), self.max_train)
             Xa = self._fit_scale(X)
             self.X_, self.y_mean_ = Xa[keep], Y.mean(axis=0)
             self.dual_ = dtc_weights(self._kernel(self.X_, self.X_), lambda sl: self._kernel(Xa[sl], self.X_),
@@ -333,10 +334,6 @@ class GPReadout(_KernelMachine):
     def __repr__(self) -> str:
         return f"GPReadout(n_outputs={self.n_outputs})"
 
-    @staticmethod
-    def _even(n: int, m: int) -> np.ndarray:
-        return np.unique(np.linspace(0, n - 1, min(n, m)).round().astype(int))
-
     def _learn(self, Xs: np.ndarray, Y: np.ndarray) -> tuple[np.ndarray, float, float]:
         import warnings
 
@@ -347,7 +344,7 @@ class GPReadout(_KernelMachine):
         d = Xs.shape[1]
         kernel = (ConstantKernel(1.0, (1e-3, 1e3)) * RBF(np.ones(d), (1e-2, 1e3))
                   + WhiteKernel(1e-2, (1e-8, 1e1)))
-        keep = self._even(len(Xs), self.max_fit)
+        keep = evenly_spaced(len(Xs), self.max_fit)
         with warnings.catch_warnings(), one_blas_thread():  # many factorisations: threads thrash when busy
             warnings.simplefilter("ignore", ConvergenceWarning)  # a length scale at its bound: feature unused
             gp = GaussianProcessRegressor(kernel, normalize_y=True, random_state=0).fit(Xs[keep], Y[keep])
@@ -374,7 +371,7 @@ class GPReadout(_KernelMachine):
             if len(ls) != X.shape[1]:
                 raise ValueError(f"length_scale has {len(ls)} entries for {X.shape[1]} features")
         self.length_scale_, self.noise_, self.log_marginal_likelihood_ = ls, noise, lml
-        keep = self._even(len(Xs), self.max_train)
+        keep = evenly_spaced(len(Xs), self.max_train)
         A, Yk = Xs[keep] / ls, Y[keep]
         if len(keep) < len(Xs):  # the kept samples as inducing points, every sample as data
             self.y_mean_ = Y.mean(axis=0)

@@ -26,6 +26,7 @@ from typing import Any
 import numpy as np
 
 from .._checks import NotFittedError, as_matrix, check_int, check_same_length
+from .._sampling import evenly_spaced
 from .signature_distance import l1_distances
 
 
@@ -100,7 +101,7 @@ class SignatureKNNReadout:
         if idx.min() < 0 or idx.max() >= len(G):
             raise ValueError(f"views must index the {len(G)} samples, got indices {idx.min()}..{idx.max()}")
         if len(idx) > self.max_train:
-            idx = idx[np.unique(np.linspace(0, len(idx) - 1, self.max_train).round().astype(int))]
+            idx = idx[evenly_spaced(len(idx), self.max_train)]
         self.views_ = idx.astype(np.int64)
         self.G_ = np.ascontiguousarray(G[idx], dtype=np.float32)
         self.y_ = np.array(Y[idx], dtype=np.float64)

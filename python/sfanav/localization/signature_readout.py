@@ -29,6 +29,7 @@ import numpy as np
 
 from .._checks import NotFittedError, as_matrix, check_int, check_same_length
 from .._threads import one_blas_thread
+from .._sampling import evenly_spaced
 from .signature_distance import l1_distances
 from .sparse_gp import dtc_weights
 
@@ -47,10 +48,6 @@ _LOG_BOUNDS = {"length": (np.log(1e-2), np.log(1e3)), "signature": (np.log(1e-3)
 # the largest float32 table of every training sample's signature distance to the kept samples a fit keeps
 # (a 12000-sample run with 3000 kept: 144 MB); longer runs recompute the distances per block
 _DISTANCE_CACHE_BYTES = 2**29
-
-
-def _even(n: int, m: int) -> np.ndarray:
-    return np.unique(np.linspace(0, n - 1, min(n, m)).round().astype(int))
 
 
 class SignatureGPReadout:
@@ -253,9 +250,9 @@ class SignatureGPReadout:
         if len(G) < 3:
             raise ValueError(f"a GP readout needs at least 3 training samples, got {len(G)}")
         G = G.astype(np.float64)
-        even = _even(len(G), self.max_train)
-        fit = even[_even(len(even), self.max_fit)]
-        sub = G[_even(len(G), 300)]
+        even = evenly_spaced(len(G), self.max_train)
+        fit = even[evenly_spaced(len(even), self.max_fit)]
+        sub = G[evenly_spaced(len(G), 300)]
         dg = self._l1(sub, sub)[np.triu_indices(len(sub), 1)]
         unit = float(np.median(dg)) if dg.size else 0.0
         thinned = len(even) < len(G)

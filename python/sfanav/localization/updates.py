@@ -44,6 +44,7 @@ import numpy as np
 
 from .. import _core
 from .._checks import NotFittedError, as_matrix, check_int, check_same_length
+from .._sampling import evenly_spaced
 from ..data.corruptions import CAMERA, CorruptionModel
 from ..sfa.modelfile import state_from_bytes
 from ..sfa.updates import NetworkUpdater, UpdatePolicy, statistics_bytes
@@ -55,13 +56,6 @@ __all__ = ["MAX_VIEWS", "ReadoutMemory", "remember", "top_stage_inputs", "top_st
 
 MAX_VIEWS = 3000
 """Default bound on the views a readout memory keeps."""
-
-
-def _even(n: int, m: int) -> np.ndarray:
-    """Indices of ``min(n, m)`` evenly spaced items of ``n`` (all if n <= m)."""
-    if n <= m:
-        return np.arange(n)
-    return np.unique(np.round(np.linspace(0, n - 1, m)).astype(int))
 
 
 class ReadoutMemory:
@@ -172,7 +166,7 @@ class ReadoutMemory:
                              cat(self.signatures, other.signatures), aug, max_views=self.max_views,
                              n_seen=self.n_seen + other.n_seen, images=cat(self.images, other.images),
                              runs=np.concatenate([self.runs, first + other.runs]))
-        return both.subset(_even(len(both), self.max_views))
+        return both.subset(evenly_spaced(len(both), self.max_views))
 
     def get_state(self) -> dict[str, Any]:
         """The memory as a model-file state (arrays; no pickle)."""
@@ -296,7 +290,7 @@ def _memory_of(localizer: Localizer, images: Any, xy: Any, augmentation: Corrupt
     a = np.asarray(images)
     Y = as_matrix(xy, "xy", n_cols=2)
     check_same_length(a, Y, "images", "xy")
-    idx = _even(len(a), max_views)
+    idx = evenly_spaced(len(a), max_views)
     a, Y = a[idx], Y[idx]
     sig = localizer.n_signature_ > 0
     aug = None
@@ -614,7 +608,7 @@ class LocalizerUpdater:
                                                                 "resolve": "all", "cross_run_pairs": int(len(pa)),
                                                                 "cross_run_pairs_turned": int(n_found - len(pa))}]
         new.info["readout_kernel_images"] = int(views.n_seen)
-        new.readout_memory_ = memory.subset(_even(len(memory), memory.max_views))
+        new.readout_memory_ = memory.subset(evenly_spaced(len(memory), memory.max_views))
         new.readout, new.n_outputs, new.rotation_pooling = old.readout, old.n_outputs, old.rotation_pooling
         self.localizer_ = new
         self._pending = None

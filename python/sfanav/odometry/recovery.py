@@ -21,6 +21,7 @@ from typing import Any
 import numpy as np
 
 from .._checks import as_real_array
+from .._sampling import evenly_spaced
 from ..localization.error_metrics import align
 from .dead_reckoning import wrap_angle
 
@@ -198,7 +199,7 @@ def _best_pair_residuals(X: np.ndarray, Z: np.ndarray) -> np.ndarray | None:
     noise); None without such a pair. A least-squares fit of four frames
     spreads one outlier over all of them, so that trimming at 3 times the
     median residual keeps it; the pair fit of the others leaves it alone."""
-    idx = np.unique(np.linspace(0, len(X) - 1, min(len(X), _MAX_PAIR_POINTS)).round().astype(int))
+    idx = evenly_spaced(len(X), _MAX_PAIR_POINTS)
     span = float(np.ptp(X, axis=0).max())
     best, best_med = None, np.inf
     for ai, a in enumerate(idx):
