@@ -239,3 +239,20 @@ def test_without_a_signature_groups_replace_the_blocks_of_the_cv():
     sel = select_auto_readout(F[:, :4], xy, groups=rec)
     assert "leave-one-group-out CV (3 of 3 groups held out)" in sel.rule, sel.rule
     assert "blocked" in select_auto_readout(F[:, :4], xy).rule
+
+
+def test_a_localizer_reading_the_signature_alone_takes_updates():
+    """Its readout reads no slow feature (n_outputs 0): an update refits it on the old and new views."""
+    from sfanav.localization.updates import LocalizerUpdater
+
+    imgs, xy, rec = _tiny_recordings()
+    old = rec < 2
+    for spec in ({"kind": "knn-signature", "k": 1}, {"kind": "gp-signature", "n_outputs": 0}):
+        loc = fit_localizer(_tiny_net(), imgs[old], xy[old], rotation=sfanav.Rotation(step=3, window=1.0),
+                            progress=False, rotation_pooling=None, signature="fourier", readout=spec,
+                            readout_memory=1000)
+        new = LocalizerUpdater(loc).partial_fit(imgs[~old], xy[~old]).solve()
+        assert new.readout_spec_["kind"] == spec["kind"] and new.readout_spec_["n_outputs"] == 0
+        if spec["kind"] == "knn-signature":  # the new run's views are stored: they answer with their places
+            assert len(new.regression_.G_) == len(imgs)
+            np.testing.assert_allclose(new.predict(imgs[~old][:5]), xy[~old][:5], atol=1e-9)

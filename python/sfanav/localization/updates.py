@@ -530,7 +530,7 @@ class LocalizerUpdater:
         learned_on = int((old.info or {}).get("readout_kernel_images", mem.n_seen))
         learn = self.kernel == "learn" or (self.kernel == "auto" and n_seen >= 2 * learned_on)
         new = old.sibling(network=net, readout=readout_spec_for_update(old, "learn" if learn else "keep"),
-                          n_outputs=old.n_outputs_, rotation_pooling=old.rotation_pooling_)
+                          n_outputs=old.n_outputs_ or None, rotation_pooling=old.rotation_pooling_)
         new.fit_features(F, views.positions, signatures=views.signatures, augmented=aug)
         # the parameters as the user gave them
         new.readout, new.n_outputs, new.rotation_pooling = old.readout, old.n_outputs, old.rotation_pooling
@@ -594,7 +594,8 @@ class LocalizerUpdater:
         if len(pa):
             fit["pairs"] = (pa, pb, np.full(len(pa), self._net.transition_weight))
         new = fit_localizer(Network(net0.config), views.images, P, rotation=rotation,
-                            readout=readout_spec_for_update(old, "learn"), n_outputs=old.n_outputs_, rows=old.rows,
+                            readout=readout_spec_for_update(old, "learn"), n_outputs=old.n_outputs_ or None,
+                            rows=old.rows,
                             rotation_pooling=old.rotation_pooling_, signature=old.signature, photometric=old.photometric,
                             readout_augmentation=self.augmentation, invariance=invariance,
                             invariance_weight=float(info.get("invariance_weight", 1.0)), network_fit=fit,
