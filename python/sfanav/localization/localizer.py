@@ -137,7 +137,10 @@ class Localizer:
         :func:`sfanav.localization.fourier_signature`). The
         readout is then :class:`sfanav.localization.SignatureGPReadout`
         (``readout="auto"``: the slow features with the signature, or the
-        signature alone, by marginal likelihood). The sfanav default sets it
+        signature alone, by marginal likelihood; with several recordings,
+        ``fit_features(groups=)``, the nearest training views by the
+        signature, :class:`sfanav.localization.SignatureKNNReadout`, if
+        clearly better with one recording held out). The sfanav default sets it
         (:func:`sfanav.localization.recipe_for`); it stores the signature of
         every training place (docs/gardens.md).
     photometric : {"log-contrast", "lowpass-log-contrast"} or None, default None
