@@ -6,8 +6,10 @@ and ground truth where the run has it) in, a trained
 the demo, the garden suites and the experiments train the sfanav default
 (or the thesis's configuration, through ``recipe``): the network under
 simulated rotation, the readout fitted to ground truth or, without it, to
-the positions learned from the run's images and odometry (pose graph), and
-the EKF noise for fusing odometry, chosen on the training run's held-out
+the positions learned from the run's images and odometry (pose graph),
+trained again with loop-closure feedback where the network's code changes
+between visits of one place (a light or objects changing through the run),
+and the EKF noise for fusing odometry, chosen on the training run's held-out
 estimates. What each step does and why: docs/localization.md,
 docs/odometry.md, docs/robustness.md.
 """
@@ -22,6 +24,8 @@ import numpy as np
 from ._progress import Log, quiet_log
 from .localization.recipe import CAMERA_ELEVATION, Recipe, default_network, recipe_for, supervision_for
 from .localization.training import fit_localizer
+from .loopclosure.factory import make_detector
+from .loopclosure.revisits import FEEDBACK_RATIO, MIN_REVISITS, revisit_change
 from .odometry.fusion import noise_for_localizer
 from .odometry.self_supervision import fit_localizer_from_odometry
 from .sfa.network import Network, Rotation
@@ -43,6 +47,14 @@ DEFAULT_CLOSURES = "auto"
 """The closures of ``closures=None`` with the pose graph."""
 ROTATION_STEP = 5
 """The simulated rotation's step in pixels (the thesis's)."""
+FEEDBACK = ("auto", "none")
+"""Loop-closure feedback of ``train_localizer(feedback=)`` when no closures are given: ``auto`` (the default since
+2026-12-07) trains once, measures how much the network's code changes between two visits of one place
+(:func:`sfanav.loopclosure.revisits.revisit_change` on the training positions, ground truth or learned) and, above
+:data:`sfanav.loopclosure.revisits.FEEDBACK_RATIO`, trains again with the closures a bag of visual words finds
+(thesis 6.2.1); ``none`` never does. docs/loop-closures.md, "When feedback is used"."""
+FEEDBACK_DETECTOR = "bow"
+"""The closures of ``feedback="auto"``: found from the images alone and robust to light (docs/loop-closures.md)."""
 
 
 def describe_closures(info: Mapping[str, Any]) -> str:
@@ -83,8 +95,8 @@ def train_localizer(images: Any, *, xy: Any = None, odometry: Any = None, timest
                     closure_weights: Any = None, network_images: Any = None,
                     network_fit: Mapping[str, Any] | None = None, readout_memory: int | None = None,
                     readout_memory_images: bool = False, filter_noise: bool = True,
-                    info: Mapping[str, Any] | None = None, groups: Any = None, seed: int = 0,
-                    progress: bool = False, log: Log = quiet_log) -> Any:
+                    info: Mapping[str, Any] | None = None, groups: Any = None, feedback: str | None = None,
+                    seed: int = 0, progress: bool = False, log: Log = quiet_log) -> Any:
     """Trains a localizer on one run as ``sfanav train`` does.
 
     Parameters
@@ -148,6 +160,16 @@ def train_localizer(images: Any, *, xy: Any = None, odometry: Any = None, timest
         are several recordings of the same places: the default readout is
         then chosen by holding out one recording at a time
         (:func:`sfanav.localization.select_auto_readout`).
+    feedback : "auto", "none" or None
+        None: ``"auto"`` with the sfanav default's recipe, ``"none"`` with
+        any other (the thesis's configuration trains as the thesis did).
+        Without ``loop_closures``: whether the recipe may train again with
+        loop-closure feedback when the trained network's code changes
+        between visits of one place more than their positions explain
+        (:data:`FEEDBACK`; a light or objects changing through the run).
+        The measurement is in ``info["revisit change"]``, the closures used
+        in ``info["feedback"]``. Not with ``groups`` (several recordings
+        train in their own order) or ``metric_map="metric-learning"``.
     seed : int
         Seed of the robustness's corrupted copies.
     log : callable
@@ -182,7 +204,11 @@ def train_localizer(images: Any, *, xy: Any = None, odometry: Any = None, timest
         raise ValueError(f"closures={closures!r} needs metric_map='pose-graph', got {metric_map!r}")
     if closures is None and metric_map == "pose-graph":
         closures = DEFAULT_CLOSURES
+    if feedback is not None and feedback not in FEEDBACK:
+        raise ValueError(f"feedback must be one of {FEEDBACK} or None, got {feedback!r}")
     recipe = recipe if recipe is not None else recipe_for()
+    if feedback is None:
+        feedback = "auto" if recipe.name == "sfanav default" else "none"
     net = network if network is not None else default_network()
     has_odometry = _all_finite(odometry, 3)
     supervision = supervision_for(supervision, has_ground_truth=_all_finite(xy, 2), has_odometry=has_odometry)
@@ -191,29 +217,57 @@ def train_localizer(images: Any, *, xy: Any = None, odometry: Any = None, timest
     except ValueError as exc:
         raise ValueError(f"horizon band: {exc}") from None
     fit_kw.update(rotation=rotation or Rotation(step=ROTATION_STEP), prep=prep, progress=progress,
-                  loop_closures=loop_closures, closure_weights=closure_weights, network_images=network_images,
+                  closure_weights=closure_weights, network_images=network_images,
                   network_fit=dict(network_fit or {}), info={**dict(info or {}), **recipe.info()},
                   seed=seed, **({"readout_memory_images": True} if readout_memory_images else {}),
                   **({"groups": groups} if groups is not None else {}))
-    if supervision == "odometry":
-        graph = None
-        if closures in CLOSURE_METHOD:
-            graph = {"solver": "gtsam", "pair_closures": "relative-pose", "closure_method": CLOSURE_METHOD[closures]}
-        if graph is not None:
-            from .odometry.pose_graph_gtsam import require_gtsam
+    graph = None
+    if supervision == "odometry" and closures in CLOSURE_METHOD:
+        graph = {"solver": "gtsam", "pair_closures": "relative-pose", "closure_method": CLOSURE_METHOD[closures]}
+        from .odometry.pose_graph_gtsam import require_gtsam
 
-            require_gtsam()  # a clear error before any training
-        loc = fit_localizer_from_odometry(net, images, odometry, method=metric_map, timestamps=timestamps,
-                                          gyro=gyro, readout_memory=readout_memory, pose_graph=graph, **fit_kw)
-        loc.info["gyro"] = gyro is not None
-        if closures is not None:
-            loc.info["closures"] = closures
-    else:
-        loc = fit_localizer(net, images, np.asarray(xy, float)[:, :2], readout_memory=readout_memory, **fit_kw)
-        loc.info["supervision"] = "ground-truth"
+        require_gtsam()  # a clear error before any training
+
+    def fit(network: Network, found: Any) -> Any:
+        if supervision == "odometry":
+            loc = fit_localizer_from_odometry(network, images, odometry, method=metric_map, timestamps=timestamps,
+                                              gyro=gyro, readout_memory=readout_memory, pose_graph=graph,
+                                              loop_closures=found, **fit_kw)
+            loc.info["gyro"] = gyro is not None
+            if closures is not None:
+                loc.info["closures"] = closures
+        else:
+            loc = fit_localizer(network, images, np.asarray(xy, float)[:, :2], readout_memory=readout_memory,
+                                loop_closures=found, **fit_kw)
+            loc.info["supervision"] = "ground-truth"
+        return loc
+
+    loc = fit(net, loop_closures)
+    F = None
+    if feedback == "auto" and loop_closures is None and groups is None and metric_map == "pose-graph":
+        F = loc.features(images)
+        change = revisit_change(F, loc.training_positions_)
+        loc.info["revisit change"] = change.to_dict()
+        if not change.needs_feedback():
+            log(f"revisits: the network's code changes {change.ratio:.2f}x what the positions explain over "
+                f"{change.n_revisits} revisits (feedback above {FEEDBACK_RATIO:g}): no feedback needed"
+                if np.isfinite(change.ratio) else
+                f"revisits: {change.n_revisits} found, too few (under {MIN_REVISITS}) or no moving frames to "
+                "measure the change: no feedback")
+        else:
+            found = make_detector(FEEDBACK_DETECTOR).detect(images)
+            log(f"the network's code changes between visits of one place {change.ratio:.1f}x what their "
+                f"positions explain (above {FEEDBACK_RATIO:g}): training again with {len(found)} loop closures "
+                f"({FEEDBACK_DETECTOR}) as feedback")
+            if len(found):
+                loc = fit(Network(net.config), found)
+                loc.info["revisit change"] = change.to_dict()
+                loc.info["feedback"] = {"closures": FEEDBACK_DETECTOR, "count": int(len(found))}
+                F = None
     if filter_noise and has_odometry:
         try:
-            feats = loc.readout_features(loc.features(images), loc.signatures(images) if loc.n_signature_ else None)
+            F = loc.features(images) if F is None else F
+            feats = loc.readout_features(F, loc.signatures(images) if loc.n_signature_ else None)
             loc.info["ekf_noise"] = noise_for_localizer(loc, feats, loc.training_positions_, odometry)
         except ValueError as exc:
             log(f"no EKF noise stored (fusing odometry will not be available): {exc}")

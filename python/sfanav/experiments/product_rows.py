@@ -292,6 +292,12 @@ def product_rows(train: ProductRun, tests: Sequence[ProductRun], *, thesis: Sequ
     for sup, sec in seconds.items():
         rows.append({"metric": f"training (s) {_name(DEFAULT, (sup,), scene)}", "thesis": None, "sfanav": sec,
                      "configuration": DEFAULT, "supervision": sup})
+    for sup, loc in models.items():  # the recipe's feedback decision (sfanav.pipeline.FEEDBACK)
+        change = loc.info.get("revisit change")
+        if change is not None:
+            rows.append({"metric": f"revisit ratio {_name(DEFAULT, (sup,), scene)}", "thesis": None,
+                         "sfanav": change.get("ratio"), "configuration": DEFAULT, "supervision": sup,
+                         "feedback closures": (loc.info.get("feedback") or {}).get("count", 0)})
     if len(seconds) == 2:
         rows.append({"metric": "training time ratio sfanav default [no ground truth] / [ground truth]"
                                + (f" [{scene}]" if scene else ""), "thesis": None,

@@ -13,6 +13,9 @@ order of several recordings of one route (thesis 6.2).
 * :func:`relative_poses` (``relative_pose``): the relative heading, the
   baseline's direction and (given a distance) the offset of two panoramas
   with a covariance (:class:`RelativePoses`), :func:`gradient_offsets`;
+* :func:`revisit_change` (``revisits``): how much a network's code changes
+  between two visits of one place against what their positions explain,
+  the test behind the training recipe's ``feedback="auto"``;
 * ``conditions``: position correspondences between recordings and the
   place-major order of long-term training.
 
@@ -45,8 +48,9 @@ from .factory import DETECTORS, make_detector
 from .partners import closure_partners
 from .plots import plot_closures, plot_precision_recall
 from .relative_pose import RelativePoses, gradient_offsets, relative_poses
+from .revisits import RevisitChange, revisit_change, revisits
 
 __all__ = ["BagOfWordsDetector", "ClosureQuality", "DETECTORS", "FourierDetector", "GroundTruthDetector", "LoopClosureDetector",
-           "LoopClosures", "RelativePoses", "align", "arc_fraction", "closure_partners", "closure_precision_recall", "correspondences",
+           "LoopClosures", "RelativePoses", "RevisitChange", "align", "arc_fraction", "closure_partners", "closure_precision_recall", "correspondences",
            "find_loop_closures", "fourier_signatures", "gradient_offsets", "interleave", "make_detector", "panorama_rows", "place_major_order", "plot_closures",
-           "plot_precision_recall", "relative_poses", "suppress"]
+           "plot_precision_recall", "relative_poses", "revisit_change", "revisits", "suppress"]

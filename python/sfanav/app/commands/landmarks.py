@@ -17,7 +17,7 @@ if TYPE_CHECKING:
 #: sfanav train options that belong to whole-image models: (dest, value when not given, flag)
 WHOLE_IMAGE_OPTIONS = (("step", 5, "--step"), ("window", 1.0, "--window"), ("rows", None, "--rows"),
                        ("signature", None, "--signature"), ("rotation_pooling", None, "--rotation-pooling"),
-                       ("loop_closures", None, "--loop-closures"), ("closure_weights", "uniform", "--closure-weights"),
+                       ("loop_closures", "auto", "--loop-closures"), ("closure_weights", "uniform", "--closure-weights"),
                        ("normalize", False, "--normalize"), ("metric_map", "pose-graph", "--metric-map"))
 
 

@@ -91,12 +91,15 @@ def _add_train(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                         "heading drift corrected by loop closures found by the slow features and the panoramas) "
                         "or metric-learning (thesis 5.3.1: a map of the slow features fitted along the "
                         "odometry's straight lines)")
-    p.add_argument("--loop-closures", choices=("gt", "bow", "fourier"), default=None,
+    p.add_argument("--loop-closures", choices=("auto", "none", "gt", "bow", "fourier"), default="auto",
                    help="loop-closure feedback (thesis 6.2.1): places the run visits again, found from ground truth "
                         "(gt), a bag of visual words (bow; robust to light) or the Fourier signature (fourier; fast, "
                         "but not robust to light), are trained with the earlier image interleaved "
                         "in the current one's simulated rotation, so the network learns to ignore what changed "
-                        "between the visits (light, weather). Default: none")
+                        "between the visits (light, weather, objects moved). auto (default): with the sfanav default "
+                        "network, trained once, and again with bow closures when the network's code changes "
+                        "between visits of one place more than their positions explain (docs/loop-closures.md, "
+                        "'When feedback is used'); other networks train without feedback; none: never")
     p.add_argument("--closure-weights", choices=("uniform", "score"), default="uniform",
                    help="with --loop-closures: weight every closure 1 (uniform, the thesis) or by the detector's "
                         "match confidence (score)")
@@ -283,8 +286,9 @@ def _train(args: argparse.Namespace, stack: Any) -> int:
                                   has_odometry=bool(np.isfinite(odometry).all()))
     times = _run_times(train) if supervision == "odometry" else None  # checked before any training
     groups = _recordings(train, args.recordings)
-    if args.loop_closures is None and args.closure_weights != "uniform":
-        raise UsageError("--closure-weights needs --loop-closures")
+    explicit = args.loop_closures not in ("auto", "none")
+    if not explicit and args.closure_weights != "uniform":
+        raise UsageError("--closure-weights needs --loop-closures gt, bow or fourier")
     if args.closures is not None and args.metric_map != "pose-graph":
         raise UsageError(f"--closures {args.closures} needs --metric-map pose-graph")
     if args.loop_closures == "gt" and supervision != "ground-truth":
@@ -306,7 +310,7 @@ def _train(args: argparse.Namespace, stack: Any) -> int:
         log(f"centre jitter ({args.jitter:g} px) applies to omnidirectional images only: these images are not "
             "unwarped, so the model is trained without it")
     closures = None
-    if args.loop_closures is not None:  # image detectors without an odometry gate: dead reckoning drifts
+    if explicit:  # image detectors without an odometry gate: dead reckoning drifts
         from ...loopclosure import make_detector
 
         gt = xy if args.loop_closures == "gt" else None
@@ -333,7 +337,7 @@ def _train(args: argparse.Namespace, stack: Any) -> int:
                           supervision=supervision, network=net, recipe=recipe, camera_elevation=elev,
                           rotation=Rotation(step=args.step, window=args.window), prep=prep,
                           metric_map=args.metric_map, closures=args.closures, loop_closures=closures,
-                          closure_weights=weights,
+                          closure_weights=weights, feedback={"none": "none"}.get(args.loop_closures),
                           network_images=network_images, network_fit=network_fit, readout_memory=args.updatable,
                           readout_memory_images=args.keep_images,
                           info={"dataset": str(args.dataset), "run": run,

@@ -1,0 +1,55 @@
+#!/usr/bin/env python3
+"""An experiment's product rows rerun alone, spliced into its committed results JSON (issue 44): when only the
+product's recipe changed, the thesis-configuration and feedback rows of a 20-30 min experiment need no rerun.
+
+    sfanav simulate --preset thesis-6.2.1-light --seed 0 --out runs/light       # the experiment's own scene
+    PYTHONPATH=python python3 scripts/investigations/product_rows_rerun.py \\
+        docs/results/experiments/6.2.1-light.json runs/light OUT.json --why "feedback chosen by the recipe"
+
+Runs :func:`sfanav.experiments.product_rows.scene_rows` on the dataset (what the experiment runs for its product
+rows, without the thesis configuration's estimates), replaces every committed row of the same metric with the new
+one, keeps the others (the thesis configuration's, the experiment's own variants), adds new product rows, and
+prepends a note naming the rerun. OUT may be the committed JSON itself.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import json
+import time
+from pathlib import Path
+
+from sfanav.data import Dataset
+from sfanav.experiments.product_rows import scene_rows
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("results", help="the experiment's committed results JSON")
+    ap.add_argument("dataset", help="the experiment's dataset (sfanav simulate with its preset and seed)")
+    ap.add_argument("out")
+    ap.add_argument("--why", required=True, help="what changed in the recipe (goes into the note)")
+    ap.add_argument("--seed", type=int, default=0)
+    a = ap.parse_args()
+    old = json.loads(Path(a.results).read_text())
+    t0 = time.perf_counter()
+    product = scene_rows(Dataset(a.dataset), quick=False, seed=a.seed, log=lambda s: print(s, flush=True))
+    secs = time.perf_counter() - t0
+    new = {r["metric"]: r for r in product.rows}
+    rows = [new.pop(r["metric"], r) for r in old["rows"]]
+    rows += list(new.values())
+    note = (f"Product rows rerun on {datetime.date.today().isoformat()} ({a.why}; "
+            f"scripts/investigations/product_rows_rerun.py, {secs:.0f} s): every 'sfanav default' and 'peer' row is "
+            "from that rerun, the thesis-configuration rows and the experiment's own variants from the run below.")
+    out = {**old, "rows": rows, "notes": note + "\n" + old.get("notes", "")}
+    tmp = Path(a.out).with_suffix(".tmp")
+    tmp.write_text(json.dumps(out, indent=1) + "\n")
+    tmp.replace(a.out)
+    for r in product.rows:
+        if r["metric"].startswith(("MED (m)", "MED ratio", "revisit")):
+            print(f"{r['metric']}: {r['sfanav']}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,61 @@
+#!/usr/bin/env python3
+"""The revisit ratio (sfanav.loopclosure.revisits) of the sfanav default's network on a dataset's training run:
+how much its code changes between two visits of one place against what their positions explain, with the
+positions the readout is fitted to (ground truth, or ``--no-ground-truth``: the positions the recipe learns from
+the run's images and odometry) and, for comparison, ground truth. The recipe's ``feedback="auto"`` trains again
+with loop-closure feedback above ``FEEDBACK_RATIO``; here the model is trained without it (``feedback="none"``).
+
+    sfanav simulate --preset thesis-6.2.1-light --seed 0 --out runs/light
+    PYTHONPATH=python python3 scripts/investigations/revisit_ratio.py light runs/light OUT.json [--no-ground-truth]
+
+Adds one entry ``NAME|ground truth`` or ``NAME|no ground truth`` to OUT.json (created if missing).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+
+from sfanav.data import Dataset
+from sfanav.experiments.product_rows import product_runs
+from sfanav.localization.recipe import default_network
+from sfanav.loopclosure.revisits import FEEDBACK_RATIO, revisit_change
+from sfanav.pipeline import train_localizer
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("name")
+    ap.add_argument("dataset")
+    ap.add_argument("out")
+    ap.add_argument("--no-ground-truth", action="store_true")
+    a = ap.parse_args()
+    ds = Dataset(a.dataset)
+    elev = tuple(ds.metadata["camera"].get("elevation_deg", (-30.0, 20.0)))
+    train, _ = product_runs(ds, default_network())
+    t0 = time.perf_counter()
+    if a.no_ground_truth:
+        loc = train_localizer(train.images, odometry=train.odometry, gyro=train.gyro, supervision="odometry",
+                              camera_elevation=elev, filter_noise=False, feedback="none")
+    else:
+        loc = train_localizer(train.images, xy=train.xy, supervision="ground-truth", camera_elevation=elev,
+                              filter_noise=False, feedback="none")
+    F = loc.features(train.images)
+    sup = "no ground truth" if a.no_ground_truth else "ground truth"
+    entry = {"scene": a.name, "positions": sup, "frames": int(len(F)), "training (s)": time.perf_counter() - t0,
+             "threshold": FEEDBACK_RATIO,
+             "revisit change": revisit_change(F, loc.training_positions_).to_dict(),
+             "with ground-truth positions": revisit_change(F, train.xy).to_dict()}
+    entry["feedback"] = bool(entry["revisit change"]["ratio"] is not None
+                             and entry["revisit change"]["ratio"] > FEEDBACK_RATIO)
+    out = Path(a.out)
+    res = json.loads(out.read_text()) if out.exists() else {}
+    res[f"{a.name}|{sup}"] = entry
+    out.write_text(json.dumps(res, indent=1, sort_keys=True) + "\n")
+    print(json.dumps(entry), flush=True)
+
+
+if __name__ == "__main__":
+    main()
