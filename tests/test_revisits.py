@@ -9,7 +9,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from sfanav.loopclosure import GroundTruthDetector
-from sfanav.loopclosure.revisits import FEEDBACK_RATIO, MIN_REVISITS, RevisitChange, revisit_change, revisits
+from sfanav.loopclosure.revisits import FEEDBACK_RATIO, MIN_REVISITS, RevisitChange, revisit_change, revisit_pairs
 
 
 def _loop(n=400, laps=2, radius=3.0):
@@ -33,10 +33,20 @@ def test_a_position_code_gives_one_and_a_time_code_needs_feedback():
     assert rc.to_dict()["n_revisits"] == rc.n_revisits
 
 
+def test_only_the_slowest_features_count():
+    """A faster feature that tells a pass from the next (the direction of travel in a closed room) is not what
+    feedback is for: beyond ``n_features`` it is not compared."""
+    xy = _loop()
+    lap = (np.arange(len(xy)) >= len(xy) // 2).astype(float)
+    F = np.c_[xy, xy[:, ::-1] * 0.5, lap * 10]
+    assert not revisit_change(F, xy).needs_feedback()
+    assert revisit_change(F, xy, n_features=5).needs_feedback()
+
+
 def test_revisits_are_the_ground_truth_detectors_closures():
     rng = np.random.default_rng(0)
     xy = _loop(300, 3) + rng.normal(0, 0.02, (300, 2))
-    cur, past = revisits(xy, max_distance=0.1, min_gap=40)
+    cur, past = revisit_pairs(xy, max_distance=0.1, min_gap=40)
     lc = GroundTruthDetector(max_distance=0.1, min_gap=40).detect(np.zeros((len(xy), 2, 8)), positions=xy)
     np.testing.assert_array_equal(cur, lc.current)
     np.testing.assert_array_equal(past, lc.past)
@@ -73,9 +83,9 @@ def test_bad_input_is_refused():
     with pytest.raises(ValueError, match="positions"):
         revisit_change(np.zeros((100, 3)), np.zeros((100, 3, 1)))
     with pytest.raises(ValueError, match="max_distance"):
-        revisits(xy, max_distance=0)
+        revisit_pairs(xy, max_distance=0)
     with pytest.raises(ValueError, match="min_gap"):
-        revisits(xy, min_gap=0)
+        revisit_pairs(xy, min_gap=0)
     with pytest.raises(ValueError, match="n_features"):
         revisit_change(np.zeros((100, 3)), xy, n_features=0)
 

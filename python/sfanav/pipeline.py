@@ -259,7 +259,9 @@ def train_localizer(images: Any, *, xy: Any = None, odometry: Any = None, timest
             log(f"the network's code changes between visits of one place {change.ratio:.1f}x what their "
                 f"positions explain (above {FEEDBACK_RATIO:g}): training again with {len(found)} loop closures "
                 f"({FEEDBACK_DETECTOR}) as feedback")
-            if len(found):
+            if len(found) < MIN_REVISITS:
+                log(f"only {len(found)} loop closures found (fewer than {MIN_REVISITS}): no feedback")
+            else:
                 loc = fit(Network(net.config), found)
                 loc.info["revisit change"] = change.to_dict()
                 loc.info["feedback"] = {"closures": FEEDBACK_DETECTOR, "count": int(len(found))}

@@ -31,10 +31,12 @@ def main() -> None:
     ap.add_argument("out")
     ap.add_argument("--why", required=True, help="what changed in the recipe (goes into the note)")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--label", default=None, help="the test run's label in the rows (5.2: 'indoor I', 'indoor II')")
     a = ap.parse_args()
     old = json.loads(Path(a.results).read_text())
     t0 = time.perf_counter()
-    product = scene_rows(Dataset(a.dataset), quick=False, seed=a.seed, log=lambda s: print(s, flush=True))
+    product = scene_rows(Dataset(a.dataset), quick=False, seed=a.seed,
+                         labels=None if a.label is None else [a.label], log=lambda s: print(s, flush=True))
     secs = time.perf_counter() - t0
     new = {r["metric"]: r for r in product.rows}
     rows = [new.pop(r["metric"], r) for r in old["rows"]]

@@ -48,9 +48,9 @@ from .factory import DETECTORS, make_detector
 from .partners import closure_partners
 from .plots import plot_closures, plot_precision_recall
 from .relative_pose import RelativePoses, gradient_offsets, relative_poses
-from .revisits import RevisitChange, revisit_change, revisits
+from .revisits import RevisitChange, revisit_change, revisit_pairs
 
 __all__ = ["BagOfWordsDetector", "ClosureQuality", "DETECTORS", "FourierDetector", "GroundTruthDetector", "LoopClosureDetector",
            "LoopClosures", "RelativePoses", "RevisitChange", "align", "arc_fraction", "closure_partners", "closure_precision_recall", "correspondences",
            "find_loop_closures", "fourier_signatures", "gradient_offsets", "interleave", "make_detector", "panorama_rows", "place_major_order", "plot_closures",
-           "plot_precision_recall", "relative_poses", "revisit_change", "revisits", "suppress"]
+           "plot_precision_recall", "relative_poses", "revisit_change", "revisit_pairs", "suppress"]
