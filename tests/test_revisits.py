@@ -53,6 +53,19 @@ def test_revisits_are_the_ground_truth_detectors_closures():
     assert (cur - past >= 40).all()
 
 
+def test_given_pairs_replace_the_positions_revisits():
+    xy = _loop()
+    timed = np.c_[np.linspace(0, 20, len(xy)), xy]
+    cur, past = revisit_pairs(xy)
+    assert revisit_change(timed, xy, pairs=(cur, past)).ratio == pytest.approx(revisit_change(timed, xy).ratio)
+    near = np.arange(10, 60), np.arange(9, 59)  # neighbours in time: the time code hardly differs there
+    assert not revisit_change(timed, xy, pairs=near).needs_feedback()
+    with pytest.raises(ValueError, match="pairs must be"):
+        revisit_change(timed, xy, pairs=(cur, past[:-1]))
+    with pytest.raises(ValueError, match="pairs must index"):
+        revisit_change(timed, xy, pairs=(cur, past + len(xy)))
+
+
 def test_too_few_revisits_decide_nothing():
     xy = np.c_[np.linspace(0, 10, 200), np.zeros(200)]  # one straight pass: no place seen twice
     rc = revisit_change(np.c_[xy[:, :1], np.linspace(0, 50, 200)], xy)

@@ -46,7 +46,7 @@ def main() -> None:
             "from that rerun, the thesis-configuration rows and the experiment's own variants from the run below.")
     out = {**old, "rows": rows, "notes": note + "\n" + old.get("notes", "")}
     tmp = Path(a.out).with_suffix(".tmp")
-    tmp.write_text(json.dumps(out, indent=1) + "\n")
+    tmp.write_text(json.dumps(out, indent=2) + "\n")
     tmp.replace(a.out)
     for r in product.rows:
         if r["metric"].startswith(("MED (m)", "MED ratio", "revisit")):

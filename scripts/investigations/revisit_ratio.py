@@ -2,7 +2,8 @@
 """The revisit ratio (sfanav.loopclosure.revisits) of the sfanav default's network on a dataset's training run:
 how much its code changes between two visits of one place against what their positions explain, with the
 positions the readout is fitted to (ground truth, or ``--no-ground-truth``: the positions the recipe learns from
-the run's images and odometry) and, for comparison, ground truth. The recipe's ``feedback="auto"`` trains again
+the run's images and odometry) and, for comparison, ground truth; and with the loop closures the bag of words finds
+on the images as the revisits instead (``pairs=``), the positions scaling their distances. The recipe's ``feedback="auto"`` trains again
 with loop-closure feedback above ``FEEDBACK_RATIO``; here the model is trained without it (``feedback="none"``).
 
     sfanav simulate --preset thesis-6.2.1-light --seed 0 --out runs/light
@@ -21,6 +22,7 @@ from pathlib import Path
 from sfanav.data import Dataset
 from sfanav.experiments.product_rows import product_runs
 from sfanav.localization.recipe import default_network
+from sfanav.loopclosure import make_detector
 from sfanav.loopclosure.revisits import FEEDBACK_RATIO, revisit_change
 from sfanav.pipeline import train_localizer
 
@@ -48,6 +50,9 @@ def main() -> None:
              "threshold": FEEDBACK_RATIO,
              "revisit change": revisit_change(F, loc.training_positions_).to_dict(),
              "with ground-truth positions": revisit_change(F, train.xy).to_dict()}
+    bow = make_detector("bow").detect(train.images)
+    entry["bag-of-words pairs"] = {"count": int(len(bow)), **revisit_change(
+        F, loc.training_positions_, pairs=(bow.current, bow.past)).to_dict()}
     entry["feedback"] = bool(entry["revisit change"]["ratio"] is not None
                              and entry["revisit change"]["ratio"] > FEEDBACK_RATIO)
     out = Path(a.out)

@@ -119,7 +119,7 @@ def revisit_pairs(positions: Any, *, max_distance: float = 0.1, min_gap: int = 5
 
 
 def revisit_change(features: Any, positions: Any, *, n_features: int = 4, max_distance: float = 0.1,
-                   min_gap: int = 50) -> RevisitChange:
+                   min_gap: int = 50, pairs: Any = None) -> RevisitChange:
     """The revisit ratio of a training run (module docstring).
 
     Parameters
@@ -132,11 +132,18 @@ def revisit_change(features: Any, positions: Any, *, n_features: int = 4, max_di
         Slowest features compared (fewer if ``m`` is smaller).
     max_distance, min_gap
         What counts as a revisit (:func:`revisit_pairs`).
+    pairs : (current, past) or None
+        The revisits given instead (frame indices, e.g. the ``current`` and
+        ``past`` of loop closures found from the images): for positions
+        learned from the same features, whose own revisits are biased
+        towards frames whose features agree (the pose graph pairs places by
+        them). The positions then only scale the pairs' distances.
 
     Raises
     ------
     ValueError
-        Non-finite features or positions, or row counts that differ.
+        Non-finite features or positions, row counts that differ, or pairs
+        that are not frame indices of equal length.
     """
     F = as_matrix(features, "features")
     xy = as_matrix(positions, "positions", n_cols=2)
@@ -146,7 +153,16 @@ def revisit_change(features: Any, positions: Any, *, n_features: int = 4, max_di
     F = F[:, :k]
     sd = F.std(axis=0)
     F = F[:, sd > 0] / sd[sd > 0]
-    cur, past = revisit_pairs(xy, max_distance=max_distance, min_gap=min_gap)
+    if pairs is None:
+        cur, past = revisit_pairs(xy, max_distance=max_distance, min_gap=min_gap)
+    else:
+        cur, past = (np.asarray(a) for a in pairs)
+        if (cur.ndim != 1 or cur.shape != past.shape or (cur.size and (cur.dtype.kind not in "iu"
+                                                                      or past.dtype.kind not in "iu"))):
+            raise ValueError(f"pairs must be two 1-D integer arrays of one length, got shapes {cur.shape} and "
+                             f"{past.shape}")
+        if cur.size and (min(cur.min(), past.min()) < 0 or max(cur.max(), past.max()) >= len(xy)):
+            raise ValueError(f"pairs must index the run's {len(xy)} frames")
     s = np.hypot(*np.diff(xy, axis=0).T)
     moving = s > 1e-9
     nan = float("nan")
