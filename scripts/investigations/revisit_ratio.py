@@ -19,12 +19,28 @@ import json
 import time
 from pathlib import Path
 
+import numpy as np
+
 from sfanav.data import Dataset
 from sfanav.experiments.product_rows import product_runs
 from sfanav.localization.recipe import default_network
 from sfanav.loopclosure import make_detector
-from sfanav.loopclosure.revisits import FEEDBACK_RATIO, revisit_change
+from sfanav.loopclosure.revisits import FEEDBACK_RATIO, revisit_change, revisit_pairs
 from sfanav.pipeline import train_localizer
+
+
+def by_direction(F: np.ndarray, xy: np.ndarray) -> dict:
+    """The revisit ratio on eight features with the revisits split by the angle between the two passes' directions
+    of travel (from the positions): the same direction (< 30 deg), across, the reverse (> 150 deg)."""
+    cur, past = revisit_pairs(xy)
+    d = np.gradient(xy, axis=0)
+    h = np.arctan2(d[:, 1], d[:, 0])
+    turn = np.degrees(np.abs(np.angle(np.exp(1j * (h[cur] - h[past])))))
+    out = {}
+    for name, m in (("same", turn < 30), ("across", (turn >= 30) & (turn <= 150)), ("reverse", turn > 150)):
+        rc = revisit_change(F, xy, n_features=8, pairs=(cur[m], past[m]))
+        out[name] = {"revisits": int(m.sum()), "ratio": rc.to_dict()["ratio"]}
+    return out
 
 
 def main() -> None:
@@ -50,6 +66,9 @@ def main() -> None:
              "threshold": FEEDBACK_RATIO,
              "revisit change": revisit_change(F, loc.training_positions_).to_dict(),
              "with ground-truth positions": revisit_change(F, train.xy).to_dict()}
+    entry["by number of features"] = {k: revisit_change(F, loc.training_positions_, n_features=k).ratio
+                                      for k in range(1, min(8, F.shape[1]) + 1)}
+    entry["eight features, by direction of travel"] = by_direction(F, loc.training_positions_)
     bow = make_detector("bow").detect(train.images)
     entry["bag-of-words pairs"] = {"count": int(len(bow)), **revisit_change(
         F, loc.training_positions_, pairs=(bow.current, bow.past)).to_dict()}
