@@ -31,23 +31,30 @@ def main() -> None:
     ap.add_argument("out")
     ap.add_argument("--why", required=True, help="what changed in the recipe (goes into the note)")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--peer-queries", type=int, default=1000,
+                    help="test images the peers answer (the experiment's: 1000, 400 in 5.3.x)")
+    ap.add_argument("--also", nargs=2, action="append", default=[], metavar=("RESULTS", "OUT"),
+                    help="splice the same product rows into another experiment's results too (5.3.1-real and "
+                         "5.3.2 share their scene and product rows)")
     ap.add_argument("--label", default=None, help="the test run's label in the rows (5.2: 'indoor I', 'indoor II')")
     a = ap.parse_args()
-    old = json.loads(Path(a.results).read_text())
+    json.loads(Path(a.results).read_text())  # readable before the long run
     t0 = time.perf_counter()
-    product = scene_rows(Dataset(a.dataset), quick=False, seed=a.seed,
+    product = scene_rows(Dataset(a.dataset), quick=False, seed=a.seed, peer_queries=a.peer_queries,
                          labels=None if a.label is None else [a.label], log=lambda s: print(s, flush=True))
     secs = time.perf_counter() - t0
-    new = {r["metric"]: r for r in product.rows}
-    rows = [new.pop(r["metric"], r) for r in old["rows"]]
-    rows += list(new.values())
     note = (f"Product rows rerun on {datetime.date.today().isoformat()} ({a.why}; "
             f"scripts/investigations/product_rows_rerun.py, {secs:.0f} s): every 'sfanav default' and 'peer' row is "
             "from that rerun, the thesis-configuration rows and the experiment's own variants from the run below.")
-    out = {**old, "rows": rows, "notes": note + "\n" + old.get("notes", "")}
-    tmp = Path(a.out).with_suffix(".tmp")
-    tmp.write_text(json.dumps(out, indent=2) + "\n")
-    tmp.replace(a.out)
+    for src, dst in [(a.results, a.out), *a.also]:
+        old = json.loads(Path(src).read_text())
+        new = {r["metric"]: r for r in product.rows}
+        rows = [new.pop(r["metric"], r) for r in old["rows"]]
+        rows += list(new.values())
+        out = {**old, "rows": rows, "notes": note + "\n" + old.get("notes", "")}
+        tmp = Path(dst).with_suffix(".tmp")
+        tmp.write_text(json.dumps(out, indent=2) + "\n")
+        tmp.replace(dst)
     for r in product.rows:
         if r["metric"].startswith(("MED (m)", "MED ratio", "revisit")):
             print(f"{r['metric']}: {r['sfanav']}")
