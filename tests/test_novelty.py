@@ -76,8 +76,8 @@ def test_novelty_scale_with_an_exponent_and_a_knee():
 @given(p=st.floats(0.0, 1.0), seed=st.integers(0, 10_000))
 def test_novelty_exponent_recovers_a_power_law(p, seed):
     rng = np.random.default_rng(seed)
-    nov = rng.uniform(0.5, 12.0, 400)
-    err = 0.05 * nov**p * rng.exponential(1.0, 400)  # errors of a power of the novelty, noisy
+    nov = rng.uniform(0.5, 12.0, 2000)  # 400 frames left the slope 0.25 off at p = 0 for seed 2022 (4 sd)
+    err = 0.05 * nov**p * rng.exponential(1.0, 2000)  # errors of a power of the novelty, noisy
     assert novelty_exponent(err, nov) == pytest.approx(p, abs=0.2)
 
 
