@@ -18,15 +18,16 @@ the run: a change that runs through the whole run, such as a rising light,
 is the slowest signal there is and lands in the slowest features, while the
 next ones may code the direction of travel, which differs between the passes
 of a crossing: in the closely walled rooms of 5.2 the fifth to eighth tell a
-pass from its reverse), ``x`` the training positions (ground truth, or the positions
-learned without it) and a revisit the nearest frame at least ``min_gap``
+pass from its reverse), ``x`` the training positions (ground truth, or the
+positions learned without it, which read lower: the pose graph pairs the
+passes of a place by these same features) and a revisit the nearest frame at least ``min_gap``
 frames earlier within ``max_distance`` metres; ``step`` is the median
 distance between consecutive moving frames (a floor for revisits closer
 than a quarter step). About 1 means the position code explains the
 revisits (``g`` is measured along the path, the revisits' offsets lie in
 any direction: a code that changes much faster across the path than along
-it reads above 1 too; on grids with crossings the directions mix); :data:`FEEDBACK_RATIO` and above means something else changes the
-code, and the recipe (:func:`sfanav.pipeline.train_localizer`,
+it reads above 1 too; on grids with crossings the directions mix); above
+:data:`FEEDBACK_RATIO` something else changes the code, and the recipe (:func:`sfanav.pipeline.train_localizer`,
 ``feedback="auto"``) then trains again with loop-closure feedback.
 Measurements (6.2.1's static, dynamic and changing-light gardens and the
 other scenes): docs/loop-closures.md, "When feedback is used".
@@ -52,11 +53,11 @@ import numpy as np
 from .._checks import as_matrix, check_int, check_positive_float
 
 FEEDBACK_RATIO = 1.25
-"""The revisit ratio above which ``feedback="auto"`` trains with loop-closure feedback (the four slowest features of
-the sfanav default measured 0.84 in 6.2.1's static garden, 1.62 with a moving object, 68 under a rising light, 0.99
-in the closely walled room of 5.2; docs/loop-closures.md, "When feedback is used")."""
+"""The revisit ratio above which ``feedback="auto"`` trains with loop-closure feedback (chosen between the static
+and the changing scenes measured: docs/loop-closures.md, "When feedback is used")."""
 MIN_REVISITS = 10
-"""Fewer revisits than this decide nothing (``RevisitChange.ratio`` is NaN, no feedback)."""
+"""Fewer revisits than this decide nothing (``RevisitChange.ratio`` is NaN, no feedback); the recipe also trains
+with no fewer closures."""
 
 
 @dataclass(frozen=True)
