@@ -3,7 +3,7 @@
 feedback, before (the results JSONs at git revision REV) and after (the committed ones), in one JSON for
 docs/loop-closures.md:
 
-    python3 scripts/investigations/feedback_auto_summary.py OUT.json 1de5f3a 6.2.1-light 6.2.1-dynamic 6.2.1-gain 5.2.3 5.3.1-real
+    python3 scripts/investigations/feedback_auto_summary.py OUT.json 1de5f3a 6.2.1-light 6.2.1-dynamic 6.2.1-gain 5.2.3 5.3.1-real 5.3.1-sim
 
 Each row: the experiment, "without feedback" or "feedback chosen by the recipe", and the product summary's columns
 (scripts/product_summary.py) with the supervised and no-ground-truth MEDs.
