@@ -256,12 +256,13 @@ def train_localizer(images: Any, *, xy: Any = None, odometry: Any = None, timest
                 "measure the change: no feedback")
         else:
             found = make_detector(FEEDBACK_DETECTOR).detect(images)
-            log(f"the network's code changes between visits of one place {change.ratio:.1f}x what their "
-                f"positions explain (above {FEEDBACK_RATIO:g}): training again with {len(found)} loop closures "
-                f"({FEEDBACK_DETECTOR}) as feedback")
+            said = (f"the network's code changes between visits of one place {change.ratio:.1f}x what their "
+                    f"positions explain (above {FEEDBACK_RATIO:g})")
             if len(found) < MIN_REVISITS:
-                log(f"only {len(found)} loop closures found (fewer than {MIN_REVISITS}): no feedback")
+                log(f"{said}, but only {len(found)} loop closures ({FEEDBACK_DETECTOR}) were found (fewer than "
+                    f"{MIN_REVISITS}): no feedback")
             else:
+                log(f"{said}: training again with {len(found)} loop closures ({FEEDBACK_DETECTOR}) as feedback")
                 loc = fit(Network(net.config), found)
                 loc.info["revisit change"] = change.to_dict()
                 loc.info["feedback"] = {"closures": FEEDBACK_DETECTOR, "count": int(len(found))}

@@ -115,21 +115,29 @@ class GroundTruthDetector(LoopClosureDetector):
         max_d = check_positive_float(self.max_distance, "max_distance")
         self.min_gap = check_int(self.min_gap, "min_gap", minimum=1)
         check_int(self.suppress, "suppress", minimum=0)
-        n = len(pos)
-        cur, past, dist = [], [], []
-        for s in range(self.min_gap, n, 512):
-            q = np.arange(s, min(n, s + 512))
-            D = np.hypot(*(pos[q][:, None, :] - pos[None, :, :]).transpose(2, 0, 1))
-            D = np.where(self._gate(n, q, None, 0.0), D, np.inf)
-            j = np.argmin(D, axis=1)
-            cur.append(q)
-            past.append(j)
-            dist.append(D[np.arange(len(q)), j])
-        if not cur:
-            z = np.zeros(0, np.int64)
-            return z, z, np.zeros(0), np.zeros(0), np.zeros(0, bool)
-        c, p, d = np.concatenate(cur), np.concatenate(past), np.concatenate(dist)
+        c, p, d = nearest_earlier_position(pos, self.min_gap)
         return c, p, d, 1.0 / (1.0 + d / max_d), d <= max_d
+
+
+def nearest_earlier_position(positions: np.ndarray, min_gap: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(current, past, distance)``: for every frame at least ``min_gap``
+    frames into a run, the frame at least ``min_gap`` earlier nearest to it
+    by ``positions`` (N, 2) metres (ties: the earliest), and their distance
+    (m); computed in blocks of 512 frames. What :class:`GroundTruthDetector`
+    ranks and :func:`~sfanav.loopclosure.revisits.revisit_pairs` keeps."""
+    n = len(positions)
+    cur, past, dist = [], [], []
+    for s in range(min_gap, n, 512):
+        q = np.arange(s, min(n, s + 512))
+        D = np.hypot(*(positions[q][:, None, :] - positions[None, : q[-1] - min_gap + 1, :]).transpose(2, 0, 1))
+        D[np.arange(D.shape[1])[None, :] > (q[:, None] - min_gap)] = np.inf
+        j = np.argmin(D, axis=1)
+        cur.append(q)
+        past.append(j)
+        dist.append(D[np.arange(len(q)), j])
+    if not cur:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0)
+    return np.concatenate(cur).astype(np.int64), np.concatenate(past).astype(np.int64), np.concatenate(dist)
 
 
 def fourier_signatures(images: Any, n_coefficients: int = 15, normalize: bool = False) -> np.ndarray:

@@ -51,6 +51,7 @@ from typing import Any
 import numpy as np
 
 from .._checks import as_matrix, check_int, check_positive_float
+from .detectors import nearest_earlier_position
 
 FEEDBACK_RATIO = 1.25
 """The revisit ratio above which ``feedback="auto"`` trains with loop-closure feedback (chosen between the static
@@ -103,20 +104,9 @@ def revisit_pairs(positions: Any, *, max_distance: float = 0.1, min_gap: int = 5
     from positions alone)."""
     xy = as_matrix(positions, "positions", n_cols=2)
     max_d = check_positive_float(max_distance, "max_distance")
-    gap = check_int(min_gap, "min_gap", minimum=1)
-    n = len(xy)
-    cur, past = [], []
-    for s in range(gap, n, 512):
-        q = np.arange(s, min(n, s + 512))
-        D = np.hypot(*(xy[q][:, None, :] - xy[None, : q[-1] - gap + 1, :]).transpose(2, 0, 1))
-        D[np.arange(D.shape[1])[None, :] > (q[:, None] - gap)] = np.inf
-        j = np.argmin(D, axis=1)
-        ok = D[np.arange(len(q)), j] <= max_d
-        cur.append(q[ok])
-        past.append(j[ok])
-    if not cur:
-        return np.zeros(0, np.int64), np.zeros(0, np.int64)
-    return np.concatenate(cur).astype(np.int64), np.concatenate(past).astype(np.int64)
+    cur, past, dist = nearest_earlier_position(xy, check_int(min_gap, "min_gap", minimum=1))
+    ok = dist <= max_d
+    return cur[ok], past[ok]
 
 
 def revisit_change(features: Any, positions: Any, *, n_features: int = 4, max_distance: float = 0.1,
@@ -167,13 +157,11 @@ def revisit_change(features: Any, positions: Any, *, n_features: int = 4, max_di
     s = np.hypot(*np.diff(xy, axis=0).T)
     moving = s > 1e-9
     nan = float("nan")
+    s_rev = float(np.median(np.hypot(*(xy[cur] - xy[past]).T))) if len(cur) else nan
+    step = float(np.median(s[moving])) if moving.any() else nan
     if len(cur) < MIN_REVISITS or moving.sum() < 2 or F.shape[1] == 0:
-        return RevisitChange(nan, int(len(cur)), float(np.median(np.hypot(*(xy[cur] - xy[past]).T))) if len(cur)
-                             else nan, float(np.median(s[moving])) if moving.any() else nan, nan)
-    d_step = np.linalg.norm(np.diff(F, axis=0), axis=1)[moving]
-    step = float(np.median(s[moving]))
-    g = float(np.median(d_step / s[moving]))
-    s_rev = float(np.median(np.hypot(*(xy[cur] - xy[past]).T)))
+        return RevisitChange(nan, int(len(cur)), s_rev, step, nan)
+    g = float(np.median(np.linalg.norm(np.diff(F, axis=0), axis=1)[moving] / s[moving]))
     d_rev = float(np.median(np.linalg.norm(F[cur] - F[past], axis=1)))
     ratio = d_rev / (g * max(s_rev, step / 4)) if g > 0 else nan
     return RevisitChange(float(ratio), int(len(cur)), s_rev, step, g)

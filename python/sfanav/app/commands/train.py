@@ -337,7 +337,7 @@ def _train(args: argparse.Namespace, stack: Any) -> int:
                           supervision=supervision, network=net, recipe=recipe, camera_elevation=elev,
                           rotation=Rotation(step=args.step, window=args.window), prep=prep,
                           metric_map=args.metric_map, closures=args.closures, loop_closures=closures,
-                          closure_weights=weights, feedback={"none": "none"}.get(args.loop_closures),
+                          closure_weights=weights, feedback="none" if args.loop_closures == "none" else None,
                           network_images=network_images, network_fit=network_fit, readout_memory=args.updatable,
                           readout_memory_images=args.keep_images,
                           info={"dataset": str(args.dataset), "run": run,
