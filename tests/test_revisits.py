@@ -9,7 +9,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from sfanav.loopclosure import GroundTruthDetector
-from sfanav.loopclosure.revisits import FEEDBACK_RATIO, MIN_REVISITS, RevisitChange, revisit_change, revisit_pairs
+from sfanav.loopclosure.revisits import (FEEDBACK_RATIO, FEEDBACK_RATIO_LEARNED, MIN_REVISITS, RevisitChange,
+                                         revisit_change, revisit_pairs)
 
 
 def _loop(n=400, laps=2, radius=3.0):
@@ -125,7 +126,10 @@ def tiny_run():
     return _run()
 
 
-def _train(X, xy, monkeypatch, ratio, **kw):
+def _train(X, xy, monkeypatch, ratio, *, learned=False, **kw):
+    """train_localizer with the revisit measure replaced by ``ratio`` and the bag of words by ground-truth
+    closures; ``learned``: without ground truth, the pose graph's map replaced by the ground truth (the policy's
+    threshold is what is tested, not the map)."""
     import sfanav.pipeline as pipeline
     from sfanav import Network, Rotation
     from sfanav.localization.recipe import recipe_for
@@ -142,8 +146,19 @@ def _train(X, xy, monkeypatch, ratio, **kw):
 
     monkeypatch.setattr(pipeline, "revisit_change", measured)
     monkeypatch.setattr(pipeline, "make_detector", lambda kind: Detector())
+    if learned:
+        def mapped(network, images, odometry, *, method, timestamps, gyro, readout_memory, pose_graph,
+                   loop_closures, **fit_kw):
+            return pipeline.fit_localizer(network, images, xy, readout_memory=readout_memory,
+                                          loop_closures=loop_closures, **fit_kw)
+
+        monkeypatch.setattr(pipeline, "fit_localizer_from_odometry", mapped)
+        heading = np.arctan2(*np.gradient(xy, axis=0).T[::-1])
+        kw = {"odometry": np.c_[xy, heading], "supervision": "odometry", **kw}
+    else:
+        kw = {"xy": xy, **kw}
     log = []
-    loc = pipeline.train_localizer(X, xy=xy, network=Network(CONFIG), rotation=Rotation(step=6),
+    loc = pipeline.train_localizer(X, network=Network(CONFIG), rotation=Rotation(step=6),
                                    recipe=recipe_for(config=True, readout="quadratic", robustness="none"),
                                    log=log.append, filter_noise=False, **kw)
     return loc, calls, log
@@ -164,6 +179,20 @@ def test_auto_feedback_keeps_the_first_model_when_the_code_holds(tiny_run, monke
     loc, calls, log = _train(X, xy, monkeypatch, 1.0, feedback="auto")
     assert calls == [len(X)] and "feedback" not in loc.info and loc.info["loop_closures"] == 0
     assert any("no feedback needed" in line for line in log)
+
+
+def test_learned_positions_send_a_lower_ratio_to_feedback(tiny_run, monkeypatch):
+    """Between the two thresholds: ground-truth positions keep the first model, learned ones train again."""
+    X, xy = tiny_run
+    ratio = (FEEDBACK_RATIO + FEEDBACK_RATIO_LEARNED) / 2
+    loc, _, _ = _train(X, xy, monkeypatch, ratio, feedback="auto")
+    assert "feedback" not in loc.info and loc.info["revisit change"]["threshold"] == FEEDBACK_RATIO
+    loc, calls, log = _train(X, xy, monkeypatch, ratio, feedback="auto", learned=True)
+    assert calls == [len(X)] and loc.info["feedback"]["closures"] == "bow"
+    assert loc.info["revisit change"]["threshold"] == FEEDBACK_RATIO_LEARNED < FEEDBACK_RATIO
+    assert any(f"above {FEEDBACK_RATIO_LEARNED:g}" in line for line in log)
+    loc, _, _ = _train(X, xy, monkeypatch, FEEDBACK_RATIO_LEARNED * 0.9, feedback="auto", learned=True)
+    assert "feedback" not in loc.info
 
 
 def test_feedback_none_and_other_recipes_never_measure(tiny_run, monkeypatch):

@@ -25,7 +25,7 @@ from ._progress import Log, quiet_log
 from .localization.recipe import CAMERA_ELEVATION, Recipe, default_network, recipe_for, supervision_for
 from .localization.training import fit_localizer
 from .loopclosure.factory import make_detector
-from .loopclosure.revisits import FEEDBACK_RATIO, MIN_REVISITS, revisit_change
+from .loopclosure.revisits import FEEDBACK_RATIO, FEEDBACK_RATIO_LEARNED, MIN_REVISITS, revisit_change
 from .odometry.fusion import noise_for_localizer
 from .odometry.self_supervision import fit_localizer_from_odometry
 from .sfa.network import Network, Rotation
@@ -51,7 +51,8 @@ FEEDBACK = ("auto", "none")
 """Loop-closure feedback of ``train_localizer(feedback=)`` when no closures are given: ``auto`` (the default since
 2026-12-07) trains once, measures how much the network's code changes between two visits of one place
 (:func:`sfanav.loopclosure.revisits.revisit_change` on the training positions, ground truth or learned) and, above
-:data:`sfanav.loopclosure.revisits.FEEDBACK_RATIO`, trains again with the closures a bag of visual words finds
+:data:`sfanav.loopclosure.revisits.FEEDBACK_RATIO` (ground truth) or ``FEEDBACK_RATIO_LEARNED`` (learned positions,
+which read it lower), trains again with the closures a bag of visual words finds
 (thesis 6.2.1); ``none`` never does. docs/loop-closures.md, "When feedback is used"."""
 FEEDBACK_DETECTOR = "bow"
 """The closures of ``feedback="auto"``: found from the images alone and robust to light (docs/loop-closures.md)."""
@@ -247,24 +248,26 @@ def train_localizer(images: Any, *, xy: Any = None, odometry: Any = None, timest
     if feedback == "auto" and loop_closures is None and groups is None and metric_map == "pose-graph":
         F = loc.features(images)
         change = revisit_change(F, loc.training_positions_)
-        loc.info["revisit change"] = change.to_dict()
-        if not change.needs_feedback():
+        threshold = FEEDBACK_RATIO if supervision == "ground-truth" else FEEDBACK_RATIO_LEARNED
+        measured = {**change.to_dict(), "threshold": threshold}
+        loc.info["revisit change"] = measured
+        if not change.needs_feedback(threshold):
             log(f"revisits: the network's code changes {change.ratio:.2f}x what the positions explain over "
-                f"{change.n_revisits} revisits (feedback above {FEEDBACK_RATIO:g}): no feedback needed"
+                f"{change.n_revisits} revisits (feedback above {threshold:g}): no feedback needed"
                 if np.isfinite(change.ratio) else
                 f"revisits: {change.n_revisits} found, too few (under {MIN_REVISITS}) or no moving frames to "
                 "measure the change: no feedback")
         else:
             found = make_detector(FEEDBACK_DETECTOR).detect(images)
             said = (f"the network's code changes between visits of one place {change.ratio:.1f}x what their "
-                    f"positions explain (above {FEEDBACK_RATIO:g})")
+                    f"positions explain (above {threshold:g})")
             if len(found) < MIN_REVISITS:
                 log(f"{said}, but only {len(found)} loop closures ({FEEDBACK_DETECTOR}) were found (fewer than "
                     f"{MIN_REVISITS}): no feedback")
             else:
                 log(f"{said}: training again with {len(found)} loop closures ({FEEDBACK_DETECTOR}) as feedback")
                 loc = fit(Network(net.config), found)
-                loc.info["revisit change"] = change.to_dict()
+                loc.info["revisit change"] = measured
                 loc.info["feedback"] = {"closures": FEEDBACK_DETECTOR, "count": int(len(found))}
                 F = None
     if filter_noise and has_odometry:

@@ -20,7 +20,8 @@ next ones may code the direction of travel, which differs between the passes
 of a crossing: in the closely walled rooms of 5.2 the fifth to eighth tell a
 pass from its reverse), ``x`` the training positions (ground truth, or the
 positions learned without it, which read lower: the pose graph pairs the
-passes of a place by these same features) and a revisit the nearest frame at least ``min_gap``
+passes of a place by these same features, hence
+:data:`FEEDBACK_RATIO_LEARNED`) and a revisit the nearest frame at least ``min_gap``
 frames earlier within ``max_distance`` metres; ``step`` is the median
 distance between consecutive moving frames (a floor for revisits closer
 than a quarter step). About 1 means the position code explains the
@@ -54,8 +55,13 @@ from .._checks import as_matrix, check_int, check_positive_float
 from .detectors import nearest_earlier_position
 
 FEEDBACK_RATIO = 1.25
-"""The revisit ratio above which ``feedback="auto"`` trains with loop-closure feedback (chosen between the static
-and the changing scenes measured: docs/loop-closures.md, "When feedback is used")."""
+"""The revisit ratio on ground-truth positions above which ``feedback="auto"`` trains with loop-closure feedback
+(chosen between the static and the changing scenes measured: docs/loop-closures.md, "When feedback is used")."""
+FEEDBACK_RATIO_LEARNED = 1.0
+"""The same threshold on positions learned without ground truth. The pose graph pairs the passes of a place by the
+slow features themselves, so a learned map puts frames whose codes agree together and reads the ratio lower (in
+6.2.1's gardens 0.58-0.69x the ground truth's); every scene measured between 1.0 and 1.25 on its learned map trained
+a more precise model with feedback (docs/loop-closures.md)."""
 MIN_REVISITS = 10
 """Fewer revisits than this decide nothing (``RevisitChange.ratio`` is NaN, no feedback); the recipe also trains
 with no fewer closures."""

@@ -1,0 +1,61 @@
+#!/usr/bin/env python3
+"""Can the training run choose the photometric low-pass width? The sfanav default (ground truth, no feedback) trained
+with each width of lowpass_log_contrast (sfanav.data.photometric; 2 px the default), on an experiment's scene: the
+readout's blocked cross-validation MED on the training run (what a robot can measure) beside the test run's MED
+(what it cannot); docs/robustness.md, "A 1 px low-pass in the omnidirectional experiments".
+
+    sfanav simulate --preset thesis-6.2.1-dynamic --seed 0 --out runs/dynamic
+    PYTHONPATH=python python3 scripts/investigations/lowpass_cv.py 6.2.1-dynamic runs/dynamic OUT.json [--sigmas 2,1]
+
+Adds OUT.json[NAME][sigma] = {"cv MED (m)", "test MED (m)", "seconds"} (5 folds of 20-frame blocks, the readout's
+spec refitted per fold on the clean training features, as the EKF noise's held-out estimates are made).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+
+import sfanav.data.photometric as photometric
+from sfanav.data import Dataset
+from sfanav.experiments.product_rows import product_runs
+from sfanav.localization import cross_val_predict
+from sfanav.localization.error_metrics import localization_metrics
+from sfanav.localization.recipe import CAMERA_ELEVATION, default_network
+from sfanav.pipeline import train_localizer
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("name")
+    ap.add_argument("dataset")
+    ap.add_argument("out")
+    ap.add_argument("--sigmas", default="2,1")
+    a = ap.parse_args()
+    ds = Dataset(a.dataset)
+    elev = tuple(ds.metadata.get("camera", {}).get("elevation_deg", CAMERA_ELEVATION))
+    train, (test,) = product_runs(ds, default_network())
+    out_path = Path(a.out)
+    for sigma in (float(s) for s in a.sigmas.split(",")):
+        photometric.lowpass_log_contrast.__kwdefaults__["sigma"] = sigma
+        t0 = time.perf_counter()
+        loc = train_localizer(train.images, xy=train.xy, odometry=train.odometry, supervision="ground-truth",
+                              camera_elevation=elev, feedback="none", filter_noise=False, seed=0)
+        F = loc.features(train.images)
+        feats = loc.readout_features(F, loc.signatures(train.images) if loc.n_signature_ else None)
+        held = cross_val_predict(loc.readout_spec_, feats, train.xy, n_folds=5, block=20)
+        cv = float(np.median(np.hypot(*(held - np.asarray(train.xy)[:, :2]).T)))
+        med = localization_metrics(loc.predict(test.images), test.xy)["med"]
+        entry = {"cv MED (m)": cv, "test MED (m)": med, "seconds": time.perf_counter() - t0}
+        res = json.loads(out_path.read_text()) if out_path.exists() else {}
+        res.setdefault(a.name, {})[f"{sigma:g}"] = entry
+        out_path.write_text(json.dumps(res, indent=1, sort_keys=True) + "\n")
+        print(a.name, sigma, json.dumps(entry), flush=True)
+
+
+if __name__ == "__main__":
+    main()
