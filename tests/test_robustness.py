@@ -104,11 +104,27 @@ def test_lowpass_log_contrast_takes_away_fine_structure():
         assert lp < 0.5 * plain, (c, lp, plain)
 
 
+def test_lowpass_log_contrast_per_axis_widths():
+    """(rows, columns) widths: one number is both; each axis is the separable Gaussian's (scipy's, wrapping in
+    columns) before the logarithm."""
+    from scipy.ndimage import gaussian_filter
+
+    x = scene()
+    np.testing.assert_array_equal(lowpass_log_contrast(x, sigma=(1.5, 1.5)), lowpass_log_contrast(x, sigma=1.5))
+    rows_only = lowpass_log_contrast(x, sigma=(2.0, 0.0), flat=False)
+    blurred = gaussian_filter(x.astype(np.float32), (0, 2.0, 0, 0), mode=("nearest", "nearest", "wrap", "nearest"))
+    np.testing.assert_allclose(rows_only, log_contrast(blurred), atol=1e-3)
+    assert np.abs(lowpass_log_contrast(x, sigma=(1, 2)) - lowpass_log_contrast(x, sigma=(2, 1))).max() > 1
+
+
 def test_lowpass_log_contrast_bad_input():
     with pytest.raises(ValueError, match="sigma must be finite"):
         lowpass_log_contrast(scene(), sigma=-1)
     with pytest.raises(ValueError, match="sigma must be finite"):
         lowpass_log_contrast(scene(), sigma=float("nan"))
+    for bad in ((1.0, -1.0), (1.0, 2.0, 3.0), "2"):
+        with pytest.raises(ValueError, match="sigma must be finite"):
+            lowpass_log_contrast(scene(), sigma=bad)
     with pytest.raises(ValueError, match="offset and scale"):
         lowpass_log_contrast(scene(), scale=0)
     np.testing.assert_array_equal(normalize(scene(), "lowpass-log-contrast"), lowpass_log_contrast(scene()))

@@ -5,9 +5,9 @@ readout's blocked cross-validation MED on the training run (what a robot can mea
 (what it cannot); docs/robustness.md, "A 1 px low-pass in the omnidirectional experiments".
 
     sfanav simulate --preset thesis-6.2.1-dynamic --seed 0 --out runs/dynamic
-    PYTHONPATH=python python3 scripts/investigations/lowpass_cv.py 6.2.1-dynamic runs/dynamic OUT.json [--sigmas 2,1]
+    PYTHONPATH=python python3 scripts/investigations/lowpass_cv.py 6.2.1-dynamic runs/dynamic OUT.json [--sigmas 2,1,1.33x2]
 
-Adds OUT.json[NAME][sigma] = {"cv MED (m)", "test MED (m)", "seconds"} (5 folds of 20-frame blocks, the readout's
+Adds OUT.json[NAME][width] = {"cv MED (m)", "test MED (m)", "seconds"} (5 folds of 20-frame blocks, the readout's
 spec refitted per fold on the clean training features, as the EKF noise's held-out estimates are made).
 """
 
@@ -34,17 +34,21 @@ def main() -> None:
     ap.add_argument("name")
     ap.add_argument("dataset")
     ap.add_argument("out")
-    ap.add_argument("--sigmas", default="2,1")
+    ap.add_argument("--sigmas", default="2,1", help="widths in pixels, each one number or ROWSxCOLUMNS")
+    ap.add_argument("--seed", type=int, default=0, help="the robustness's draw (train_localizer(seed=)); entries "
+                                                        "of seeds other than 0 are keyed WIDTH@SEED")
     a = ap.parse_args()
     ds = Dataset(a.dataset)
     elev = tuple(ds.metadata.get("camera", {}).get("elevation_deg", CAMERA_ELEVATION))
     train, (test,) = product_runs(ds, default_network())
     out_path = Path(a.out)
-    for sigma in (float(s) for s in a.sigmas.split(",")):
+    for key in a.sigmas.split(","):
+        rows, _, cols = key.partition("x")
+        sigma = (float(rows), float(cols)) if cols else float(rows)
         photometric.lowpass_log_contrast.__kwdefaults__["sigma"] = sigma
         t0 = time.perf_counter()
         loc = train_localizer(train.images, xy=train.xy, odometry=train.odometry, supervision="ground-truth",
-                              camera_elevation=elev, feedback="none", filter_noise=False, seed=0)
+                              camera_elevation=elev, feedback="none", filter_noise=False, seed=a.seed)
         F = loc.features(train.images)
         feats = loc.readout_features(F, loc.signatures(train.images) if loc.n_signature_ else None)
         held = cross_val_predict(loc.readout_spec_, feats, train.xy, n_folds=5, block=20)
@@ -52,7 +56,7 @@ def main() -> None:
         med = localization_metrics(loc.predict(test.images), test.xy)["med"]
         entry = {"cv MED (m)": cv, "test MED (m)": med, "seconds": time.perf_counter() - t0}
         res = json.loads(out_path.read_text()) if out_path.exists() else {}
-        res.setdefault(a.name, {})[f"{sigma:g}"] = entry
+        res.setdefault(a.name, {})[key if a.seed == 0 else f"{key}@{a.seed}"] = entry
         out_path.write_text(json.dumps(res, indent=1, sort_keys=True) + "\n")
         print(a.name, sigma, json.dumps(entry), flush=True)
 

@@ -67,10 +67,10 @@ def log_contrast(images: Any, *, offset: float = LOG_OFFSET, scale: float = LOG_
     return out
 
 
-def lowpass_log_contrast(images: Any, *, sigma: float = LOWPASS_SIGMA, offset: float = LOG_OFFSET,
+def lowpass_log_contrast(images: Any, *, sigma: float | tuple[float, float] = LOWPASS_SIGMA, offset: float = LOG_OFFSET,
                          scale: float = LOG_SCALE, flat: bool = True) -> np.ndarray:
     """:func:`log_contrast` of images (N, H, W[, C]) after a Gaussian
-    low-pass of ``sigma`` pixels (wrapping around the panorama's seam in
+    low-pass of ``sigma`` pixels (or ``(rows, columns)`` pixels; wrapping around the panorama's seam in
     columns, edge rows repeated), and with ``flat`` a flat field: the
     quadratic profile over the rows of each channel's row means removed in
     the log domain before the contrast is fixed.
@@ -88,11 +88,10 @@ def lowpass_log_contrast(images: Any, *, sigma: float = LOWPASS_SIGMA, offset: f
     from scipy.ndimage import gaussian_filter
 
     a = as_image_batch(images)
-    if not (np.isfinite(sigma) and sigma >= 0):
-        raise ValueError(f"sigma must be finite and >= 0 pixels, got {sigma!r}")
+    sy, sx = _sigma_pair(sigma)
     if not (np.isfinite(offset) and offset > 0 and np.isfinite(scale) and scale > 0):
         raise ValueError(f"offset and scale must be finite and > 0, got {offset!r} and {scale!r}")
-    sig = (sigma, sigma, 0.0)[: a.ndim - 1]
+    sig = (sy, sx, 0.0)[: a.ndim - 1]
     modes = ("nearest", "wrap", "nearest")[: a.ndim - 1]
     h = a.shape[1]
     t = np.linspace(-1.0, 1.0, h)
@@ -102,7 +101,7 @@ def lowpass_log_contrast(images: Any, *, sigma: float = LOWPASS_SIGMA, offset: f
     axes = (0, 1) if a.ndim == 4 else None
     for i, im in enumerate(a):
         v = im.astype(np.float32)
-        if sigma > 0:
+        if sy > 0 or sx > 0:
             v = gaussian_filter(v, sig, mode=modes)
         v = np.log(np.maximum(v, 0.0) + np.float32(offset))
         if flat:
@@ -112,6 +111,19 @@ def lowpass_log_contrast(images: Any, *, sigma: float = LOWPASS_SIGMA, offset: f
         sd = float(v.std(dtype=np.float64))
         out[i] = v * np.float32(scale / sd) if sd > 1e-6 else v
     return out
+
+
+def _sigma_pair(sigma: Any) -> tuple[float, float]:
+    """``sigma`` (pixels, or (rows, columns) pixels) as two floats; ValueError unless each is finite and >= 0."""
+    try:
+        if isinstance(sigma, (str, bytes)):
+            raise TypeError
+        pair = np.broadcast_to(np.asarray(sigma, dtype=np.float64), (2,))
+    except (TypeError, ValueError):
+        raise ValueError(f"sigma must be finite and >= 0 pixels, or (rows, columns) of them, got {sigma!r}") from None
+    if not (np.all(np.isfinite(pair)) and np.all(pair >= 0)):
+        raise ValueError(f"sigma must be finite and >= 0 pixels, or (rows, columns) of them, got {sigma!r}")
+    return float(pair[0]), float(pair[1])
 
 
 def normalize(images: Any, kind: str | None) -> Any:
