@@ -231,6 +231,57 @@ def test_photometric_localizer_round_trip(run_images, tmp_path, kind):
     assert sib.photometric == kind and sib.network is loc.network and not sib.is_fitted_
 
 
+def test_lowpass_for_keeps_the_angle_of_the_rows():
+    from sfanav.data.photometric import LOWPASS_ROW_DEGREES, LOWPASS_SIGMA, lowpass_for
+
+    assert lowpass_for((-30, 20), 40) == (LOWPASS_SIGMA, LOWPASS_SIGMA)  # the default camera: as before
+    rows, cols = lowpass_for((-55, 20), 40)
+    assert cols == LOWPASS_SIGMA and rows * 75 / 40 == pytest.approx(LOWPASS_SIGMA * LOWPASS_ROW_DEGREES)
+    assert lowpass_for((-30, 20), 80)[0] == pytest.approx(2 * LOWPASS_SIGMA)  # twice the rows: twice the pixels
+    for elevation, height in (((20, -30), 40), ((0, float("nan")), 40), ((-30, 20), 0)):
+        with pytest.raises(ValueError, match="elevation_deg|height"):
+            lowpass_for(elevation, height)
+
+
+def test_lowpass_widths_are_stored_and_refused_without_their_normalisation(run_images, tmp_path):
+    from sfanav.sfa.modelfile import read_model
+
+    imgs, xy = run_images
+    loc = fit_localizer(_net(), imgs, xy, rotation=sfanav.Rotation(4), progress=False,
+                        photometric="lowpass-log-contrast", lowpass=(1.0, 2.0))
+    assert loc.photometric_lowpass() == (1.0, 2.0) and loc.info["lowpass"] == [1.0, 2.0]
+    np.testing.assert_array_equal(loc.normalized(imgs[:2]), lowpass_log_contrast(imgs[:2], sigma=(1.0, 2.0)))
+    loc.save(tmp_path / "m.sfa")
+    assert read_model(tmp_path / "m.sfa")[2]["version"] == 8  # older readers would normalise with 2 px
+    back = sfanav.load(tmp_path / "m.sfa")
+    assert back.photometric_lowpass() == (1.0, 2.0) and back.sibling().photometric_lowpass() == (1.0, 2.0)
+    np.testing.assert_allclose(back.predict(imgs[:5]), loc.predict(imgs[:5]))
+    # the default's widths are written as before (no format 8)
+    two = fit_localizer(_net(), imgs, xy, rotation=sfanav.Rotation(4), progress=False,
+                        photometric="lowpass-log-contrast", lowpass=(2.0, 2.0))
+    assert two.photometric_lowpass() is None and "lowpass" not in two.info
+    two.save(tmp_path / "two.sfa")
+    assert read_model(tmp_path / "two.sfa")[2]["version"] == 6
+    for kw, match in (({"photometric": "log-contrast", "lowpass": 1.0}, "lowpass needs"),
+                      ({"photometric": "lowpass-log-contrast", "lowpass": (1.0, -1.0)}, "sigma must be finite")):
+        with pytest.raises(ValueError, match=match):
+            fit_localizer(_net(), imgs, xy, rotation=sfanav.Rotation(4), progress=False, **kw)
+
+
+def test_the_recipe_scales_the_rows_low_pass_to_the_elevation_span(run_images):
+    from sfanav.pipeline import train_localizer
+
+    imgs, xy = run_images
+    kw = dict(xy=xy, network=_net(), rotation=sfanav.Rotation(4), filter_noise=False, feedback="none",
+              recipe=recipe_for(rows="all", signature=None))
+    wide = train_localizer(imgs, camera_elevation=(-55.0, 20.0), **kw)
+    rows = wide.photometric_lowpass()[0]
+    assert rows == pytest.approx(2.0 * 1.25 / (75.0 / imgs.shape[1]))
+    kw["network"] = _net()
+    same = train_localizer(imgs, camera_elevation=(-30.0, -30.0 + 1.25 * imgs.shape[1]), **kw)  # 1.25 deg a row
+    assert same.photometric_lowpass() is None
+
+
 def test_fit_features_augmented_checks(run_images):
     imgs, xy = run_images
     loc = fit_localizer(_net(), imgs, xy, rotation=sfanav.Rotation(4), progress=False)

@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 
 from ._progress import Log, quiet_log
+from .data.photometric import lowpass_for
 from .localization.recipe import CAMERA_ELEVATION, Recipe, default_network, recipe_for, supervision_for
 from .localization.training import fit_localizer
 from .loopclosure.factory import make_detector
@@ -86,6 +87,16 @@ def _all_finite(a: Any, n_cols: int) -> bool:
         return False
     A = np.asarray(a, dtype=float)
     return A.ndim == 2 and A.shape[1] >= n_cols and bool(np.isfinite(A[:, :n_cols]).all())
+
+
+def _image_height(images: Any) -> int:
+    """Rows of the training images (N, H, W[, C]) without copying them."""
+    shape = getattr(images, "shape", None)
+    if shape is None:
+        shape = (len(images), *np.shape(images[0])) if len(images) else (0,)
+    if len(shape) < 3:
+        raise ValueError(f"images must be (N, H, W[, C]), got shape {tuple(shape)}")
+    return int(shape[1])
 
 
 def train_localizer(images: Any, *, xy: Any = None, odometry: Any = None, timestamps: Any = None, gyro: Any = None,
@@ -213,10 +224,13 @@ def train_localizer(images: Any, *, xy: Any = None, odometry: Any = None, timest
     net = network if network is not None else default_network()
     has_odometry = _all_finite(odometry, 3)
     supervision = supervision_for(supervision, has_ground_truth=_all_finite(xy, 2), has_odometry=has_odometry)
+    elevation = CAMERA_ELEVATION if camera_elevation is None else camera_elevation
     try:
-        fit_kw = recipe.fit_kwargs(CAMERA_ELEVATION if camera_elevation is None else camera_elevation)
+        fit_kw = recipe.fit_kwargs(elevation)
     except ValueError as exc:
         raise ValueError(f"horizon band: {exc}") from None
+    if fit_kw.get("photometric") == "lowpass-log-contrast":  # the low-pass's rows in degrees of elevation
+        fit_kw["lowpass"] = lowpass_for(elevation, _image_height(images))
     fit_kw.update(rotation=rotation or Rotation(step=ROTATION_STEP), prep=prep, progress=progress,
                   closure_weights=closure_weights, network_images=network_images,
                   network_fit=dict(network_fit or {}), info={**dict(info or {}), **recipe.info()},

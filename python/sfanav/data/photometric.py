@@ -44,7 +44,12 @@ LOG_SCALE = 40.0
 """The standard deviation of a normalised image (pixel-like units, so that networks and signatures keep their
 usual scale)."""
 LOWPASS_SIGMA = 2.0
-"""The Gaussian low-pass of ``"lowpass-log-contrast"``, in pixels of the image it is applied to."""
+"""The Gaussian low-pass of ``"lowpass-log-contrast"``, in pixels of the image it is applied to: in columns, and in
+rows of a panorama whose rows span :data:`LOWPASS_ROW_DEGREES` each (:func:`lowpass_for` scales the rows' width to
+other elevation spans)."""
+LOWPASS_ROW_DEGREES = 1.25
+"""Degrees of elevation per row at which the rows' low-pass is :data:`LOWPASS_SIGMA` pixels: the default camera's
+-30..20 deg over the network's 40 rows."""
 PHOTOMETRIC = ("log-contrast", "lowpass-log-contrast")
 """The photometric normalisations a :class:`sfanav.Localizer` knows (``photometric=``)."""
 
@@ -113,6 +118,36 @@ def lowpass_log_contrast(images: Any, *, sigma: float | tuple[float, float] = LO
     return out
 
 
+def lowpass_for(elevation_deg: Any, height: int) -> tuple[float, float]:
+    """The (rows, columns) widths in pixels of the ``"lowpass-log-contrast"``
+    low-pass for panoramas of ``height`` rows spanning ``elevation_deg``
+    (lowest, highest) degrees: :data:`LOWPASS_SIGMA` columns, and in rows the
+    same angle as :data:`LOWPASS_SIGMA` rows of :data:`LOWPASS_ROW_DEGREES`
+    each (2.5 deg of elevation). An omnidirectional camera unwarped over
+    -55..20 deg to 40 rows gets 1.33 rows: its rows are coarser in angle, and
+    the 2 rows of the panoramic cameras cost it precision (docs/robustness.md,
+    "The low-pass in degrees of elevation"). ValueError for a span that is
+    not finite and increasing, or a height < 1.
+
+    >>> lowpass_for((-30, 20), 40)
+    (2.0, 2.0)
+    >>> [round(v, 2) for v in lowpass_for((-55, 20), 40)]
+    [1.33, 2.0]
+    """
+    lo, hi = (float(v) for v in np.asarray(elevation_deg, dtype=np.float64).reshape(2))
+    if not (np.isfinite(lo) and np.isfinite(hi) and hi > lo):
+        raise ValueError(f"elevation_deg must be (lowest, highest) finite degrees, got {elevation_deg!r}")
+    if int(height) < 1:
+        raise ValueError(f"height must be >= 1 rows, got {height!r}")
+    return LOWPASS_SIGMA * LOWPASS_ROW_DEGREES / ((hi - lo) / int(height)), LOWPASS_SIGMA
+
+
+def lowpass_widths(sigma: Any) -> tuple[float, float]:
+    """``sigma`` (pixels, or (rows, columns) pixels; None: :data:`LOWPASS_SIGMA`) as two floats; ValueError unless
+    each is finite and >= 0."""
+    return _sigma_pair(LOWPASS_SIGMA if sigma is None else sigma)
+
+
 def _sigma_pair(sigma: Any) -> tuple[float, float]:
     """``sigma`` (pixels, or (rows, columns) pixels) as two floats; ValueError unless each is finite and >= 0."""
     try:
@@ -126,13 +161,15 @@ def _sigma_pair(sigma: Any) -> tuple[float, float]:
     return float(pair[0]), float(pair[1])
 
 
-def normalize(images: Any, kind: str | None) -> Any:
+def normalize(images: Any, kind: str | None, *, lowpass: Any = None) -> Any:
     """``images`` with the photometric normalisation ``kind`` (one of
-    :data:`PHOTOMETRIC`) applied, or as given for None."""
+    :data:`PHOTOMETRIC`) applied, or as given for None; ``lowpass``: the
+    widths of ``"lowpass-log-contrast"`` (as its ``sigma``; None: the
+    default)."""
     if kind is None:
         return images
     if kind == "log-contrast":
         return log_contrast(images)
     if kind == "lowpass-log-contrast":
-        return lowpass_log_contrast(images)
+        return lowpass_log_contrast(images) if lowpass is None else lowpass_log_contrast(images, sigma=lowpass)
     raise ValueError(f"photometric normalisation must be one of {PHOTOMETRIC} or None, got {kind!r}")

@@ -32,6 +32,7 @@ from .._checks import (
 )
 from ..data.image_rows import ImageRows
 from ..data.photometric import PHOTOMETRIC
+from ..data.photometric import lowpass_widths
 from ..data.photometric import normalize as photometric_normalize
 from ..sfa.modelfile import read_model, register_loader, save_model
 from ..sfa.network import Network
@@ -154,6 +155,11 @@ class Localizer:
         It must be what
         the network was trained on (:func:`fit_localizer` takes care of
         that); the sfanav default sets it (docs/robustness.md).
+    lowpass : float, (float, float) or None, default None
+        The low-pass widths in pixels, (rows, columns), of
+        ``photometric="lowpass-log-contrast"`` (None: 2 px on both; the
+        sfanav default scales the rows' width to the panorama's elevation
+        span, :func:`sfanav.data.photometric.lowpass_for`).
 
     Attributes
     ----------
@@ -201,7 +207,7 @@ class Localizer:
     def __init__(self, network: Network | None, n_outputs: int | None = None, ridge: float = 0.0, degree: int = 2,
                  readout: str | dict[str, Any] = "auto", rows: ImageRows | None = None,
                  rotation_pooling: int | str | None = "auto", signature: str | None = None,
-                 photometric: str | None = None) -> None:
+                 photometric: str | None = None, lowpass: Any = None) -> None:
         if network is not None and not isinstance(network, Network):
             raise TypeError(f"network must be a sfanav.Network or None, got {type(network).__name__}")
         if rows is not None and not isinstance(rows, ImageRows):
@@ -215,6 +221,7 @@ class Localizer:
         self.rotation_pooling = rotation_pooling
         self.signature = signature
         self.photometric = photometric
+        self.lowpass = lowpass
         self.info: dict[str, Any] = {}
         self.readout_memory_: Any = None
         self.novelty_: NoveltyReference | None = None
@@ -222,7 +229,7 @@ class Localizer:
     def get_params(self, deep: bool = True) -> dict[str, Any]:
         return {"network": self.network, "n_outputs": self.n_outputs, "ridge": self.ridge, "degree": self.degree,
                 "readout": self.readout, "rows": self.rows, "rotation_pooling": self.rotation_pooling,
-                "signature": self.signature, "photometric": self.photometric}
+                "signature": self.signature, "photometric": self.photometric, "lowpass": self.lowpass}
 
     def __repr__(self) -> str:
         net = "None" if self.network is None else repr(self.network)
@@ -232,6 +239,7 @@ class Localizer:
         pool = "" if self.rotation_pooling == "auto" else f", rotation_pooling={self.rotation_pooling!r}"
         pool += "" if self.signature is None else f", signature={self.signature!r}"
         pool += "" if self.photometric is None else f", photometric={self.photometric!r}"
+        pool += "" if self.photometric_lowpass() is None else f", lowpass={self.photometric_lowpass()!r}"
         return (f"<sfanav.Localizer readout={ro!r}, n_outputs={self.n_outputs}{rows}{pool}, {state}, "
                 f"network={net}>")
 
@@ -275,7 +283,7 @@ class Localizer:
         """Images (N, H, W[, C]) after the localizer's photometric
         normalisation (as given without one): what its rows and signature
         start from."""
-        return photometric_normalize(images, self._check_photometric())
+        return photometric_normalize(images, self._check_photometric(), lowpass=self.photometric_lowpass())
 
     def network_input(self, images: Any) -> Any:
         """What the network sees of images (N, H, W[, C]): the photometric
@@ -289,6 +297,17 @@ class Localizer:
         if self.photometric is not None and self.photometric not in PHOTOMETRIC:
             raise ValueError(f"photometric must be one of {PHOTOMETRIC} or None, got {self.photometric!r}")
         return self.photometric
+
+    def photometric_lowpass(self) -> tuple[float, float] | None:
+        """The low-pass widths (rows, columns) in pixels of ``photometric="lowpass-log-contrast"`` when they are
+        not the default's 2 px (None then, and without ``lowpass``); ValueError for bad widths, or widths without
+        that normalisation."""
+        if self.lowpass is None:
+            return None
+        pair = lowpass_widths(self.lowpass)
+        if self._check_photometric() != "lowpass-log-contrast":
+            raise ValueError(f"lowpass needs photometric='lowpass-log-contrast', got {self.photometric!r}")
+        return None if pair == lowpass_widths(None) else pair
 
     def transform_rows(self, images: Any, *, rotations: bool = False) -> np.ndarray:
         """As :meth:`features` for images the localizer's ``rows`` were
@@ -657,6 +676,7 @@ class Localizer:
             "readout_param": dict(self.readout) if isinstance(self.readout, dict) else str(self.readout),
             "rows": None if self.rows is None else self.rows.to_dict(),
             **({} if self.photometric is None else {"photometric": self._check_photometric()}),
+            **({} if self.photometric_lowpass() is None else {"lowpass": list(self.photometric_lowpass())}),
             "network": net_state,
             "readout": readout_state(self.readout_spec_, reg),
             # the thesis's readout also as version 1 had it, so older sfanav reads such files
@@ -688,6 +708,9 @@ class Localizer:
         # format version 7: the nearest training views by the signature (older readers cannot rebuild them)
         if kind == "knn-signature":
             version = 7
+        # format version 8: the low-pass's widths other than 2 px (older readers would silently use 2 px)
+        if self.photometric_lowpass() is not None:
+            version = 8
         return save_model(path, "Localizer", state, version=version)
 
     @classmethod
@@ -699,8 +722,10 @@ class Localizer:
             params.setdefault("rotation_pooling", None)  # files before format 4: no pooling
             sig = state.get("signature")  # files before format 5: none
             loc = cls(net, rows=None if rows is None else ImageRows.from_dict(rows), **params,
-                      signature=None if sig is None else sig["kind"], photometric=state.get("photometric"))
+                      signature=None if sig is None else sig["kind"], photometric=state.get("photometric"),
+                      lowpass=None if state.get("lowpass") is None else tuple(state["lowpass"]))
             loc._check_photometric()
+            loc.photometric_lowpass()
             loc.n_signature_ = 0 if sig is None else check_int(sig["n_values"], "signature n_values")
             if sig is not None and (loc._check_signature() is None
                                     or int(sig["n_coefficients"]) != SIGNATURE_COEFFICIENTS):

@@ -38,6 +38,7 @@ def fit_localizer(
     network_images: np.ndarray | None = None,
     network_fit: dict[str, Any] | None = None,
     photometric: str | None = None,
+    lowpass: Any = None,
     readout_augmentation: CorruptionModel | None = None,
     invariance: CorruptionModel | None = None,
     invariance_weight: float = 1.0,
@@ -77,7 +78,8 @@ def fit_localizer(
 
     ``photometric``: a photometric normalisation of every image before the
     rows, the network and the signature (``"log-contrast"`` or ``"lowpass-log-contrast"``, the sfanav
-    default's: :mod:`sfanav.data.photometric`), stored in the localizer.
+    default's: :mod:`sfanav.data.photometric`), stored in the localizer; ``lowpass``: the latter's widths
+    in pixels, (rows, columns) (None: 2 px on both; :class:`Localizer`).
 
     ``readout_augmentation``: a :class:`~sfanav.data.corruptions.CorruptionModel`;
     the readout is then fitted on the run and on a copy of it with one
@@ -135,7 +137,7 @@ def fit_localizer(
                                  f"(uint8), got {np.asarray(images).dtype} (train without image normalisation)")
     # an unfitted localizer holds how images become the network's input (photometric, rows)
     loc = Localizer(network, n_outputs=n_outputs, readout=readout, rows=rows, rotation_pooling=rotation_pooling,
-                    signature=signature, photometric=photometric)
+                    signature=signature, photometric=photometric, lowpass=lowpass)
     images = loc.network_input(raw)
     fit_kw = dict(loop_closures=loop_closures, closure_weights=closure_weights)
     if invariance is not None:
@@ -171,6 +173,7 @@ def fit_localizer(
                      "readout_seconds": round(readout_s, 2), "readout": loc.describe_readout(),
                      "loop_closures": int(getattr(network, "n_loop_closures_", 0)),
                      **({"photometric": photometric} if photometric else {}),
+                     **({"lowpass": list(loc.photometric_lowpass())} if loc.photometric_lowpass() else {}),
                      **({"readout_augmentation": readout_augmentation.describe()} if readout_augmentation else {}),
                      **({"invariance": invariance.describe(), "invariance_weight": float(invariance_weight)}
                         if invariance else {}),

@@ -597,6 +597,7 @@ class LocalizerUpdater:
                             readout=readout_spec_for_update(old, "learn"), n_outputs=old.n_outputs_ or None,
                             rows=old.rows,
                             rotation_pooling=old.rotation_pooling_, signature=old.signature, photometric=old.photometric,
+                            lowpass=old.lowpass,
                             readout_augmentation=self.augmentation, invariance=invariance,
                             invariance_weight=float(info.get("invariance_weight", 1.0)), network_fit=fit,
                             progress=False, seed=self.seed)

@@ -39,7 +39,7 @@ from .._files import write_bytes_atomic
 FORMAT = "sfanav-model"
 
 
-VERSION = 7  # the newest version this sfanav reads and writes (see docs/model-format.md)
+VERSION = 8  # the newest version this sfanav reads and writes (see docs/model-format.md)
 
 MAX_DEPTH = 64  # deepest nesting of the manifest's JSON tree
 
