@@ -55,7 +55,8 @@ ROBUSTNESS = ("none", "light", "standard", "full")
 (JPEG, noise, blur, exposure, ...; docs/robustness.md):
 
 * ``"none"``: nothing (the thesis; the sfanav default before the corruption study);
-* ``"light"``: the photometric normalisation (:data:`PHOTOMETRIC`: a 2 px low-pass, then log intensities
+* ``"light"``: the photometric normalisation (:data:`PHOTOMETRIC`: a 2 px low-pass, its rows 2.5 deg of elevation
+  (:func:`sfanav.data.photometric.lowpass_for`), then log intensities
   with a flat field and a fixed contrast, so that exposure, white balance, gamma and vignetting do not
   move the features and JPEG, noise and defocus move them less) and a readout fitted on the run and on a
   copy of it corrupted as a robot camera may (:data:`sfanav.data.corruptions.CAMERA`);
