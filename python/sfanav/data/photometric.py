@@ -72,8 +72,8 @@ def log_contrast(images: Any, *, offset: float = LOG_OFFSET, scale: float = LOG_
     return out
 
 
-def lowpass_log_contrast(images: Any, *, sigma: float | tuple[float, float] = LOWPASS_SIGMA, offset: float = LOG_OFFSET,
-                         scale: float = LOG_SCALE, flat: bool = True) -> np.ndarray:
+def lowpass_log_contrast(images: Any, *, sigma: float | tuple[float, float] = LOWPASS_SIGMA,
+                         offset: float = LOG_OFFSET, scale: float = LOG_SCALE, flat: bool = True) -> np.ndarray:
     """:func:`log_contrast` of images (N, H, W[, C]) after a Gaussian
     low-pass of ``sigma`` pixels (or ``(rows, columns)`` pixels; wrapping around the panorama's seam in
     columns, edge rows repeated), and with ``flat`` a flat field: the

@@ -239,7 +239,7 @@ class Localizer:
         pool = "" if self.rotation_pooling == "auto" else f", rotation_pooling={self.rotation_pooling!r}"
         pool += "" if self.signature is None else f", signature={self.signature!r}"
         pool += "" if self.photometric is None else f", photometric={self.photometric!r}"
-        pool += "" if self.photometric_lowpass() is None else f", lowpass={self.photometric_lowpass()!r}"
+        pool += "" if self.lowpass is None else f", lowpass={self.lowpass!r}"
         return (f"<sfanav.Localizer readout={ro!r}, n_outputs={self.n_outputs}{rows}{pool}, {state}, "
                 f"network={net}>")
 
