@@ -1,0 +1,50 @@
+#!/usr/bin/env python3
+"""The recipe's loop-closure feedback with each closure weighted by the bag of words' match score
+(``closure_weights="score"``) against uniform weights (the recipe's), supervised, on an experiment's scene: the
+bag-of-words closures the recipe's feedback finds, the sfanav default trained with them both ways, the test run's MED
+(docs/loop-closures.md, "When feedback is used").
+
+    sfanav simulate --preset thesis-6.2.1-light --seed 0 --out runs/light
+    PYTHONPATH=python python3 scripts/investigations/closure_weights.py 6.2.1-light runs/light OUT.json
+
+Adds OUT.json[NAME] = {"closures", "uniform": {"MED (m)", "seconds"}, "score": {...}}.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+import time
+from pathlib import Path
+
+from sfanav.data import Dataset
+from sfanav.experiments.product_rows import product_runs
+from sfanav.localization.error_metrics import localization_metrics
+from sfanav.localization.recipe import CAMERA_ELEVATION, default_network
+from sfanav.loopclosure import make_detector
+from sfanav.pipeline import FEEDBACK_DETECTOR, train_localizer
+
+
+def main() -> None:
+    if len(sys.argv) != 4:
+        sys.exit(__doc__)
+    name, root, out_path = sys.argv[1], sys.argv[2], Path(sys.argv[3])
+    ds = Dataset(root)
+    elev = tuple(ds.metadata.get("camera", {}).get("elevation_deg", CAMERA_ELEVATION))
+    train, (test,) = product_runs(ds, default_network())
+    found = make_detector(FEEDBACK_DETECTOR).detect(train.images)
+    entry = {"closures": int(len(found))}
+    for label, weights in (("score", "score"), ("uniform", None)):
+        t0 = time.perf_counter()
+        loc = train_localizer(train.images, xy=train.xy, supervision="ground-truth", camera_elevation=elev,
+                              loop_closures=found, closure_weights=weights, filter_noise=False)
+        entry[label] = {"MED (m)": localization_metrics(loc.predict(test.images), test.xy)["med"],
+                        "seconds": time.perf_counter() - t0}
+        res = json.loads(out_path.read_text()) if out_path.exists() else {}
+        res[name] = entry
+        out_path.write_text(json.dumps(res, indent=1, sort_keys=True) + "\n")
+        print(name, label, json.dumps(entry[label]), flush=True)
+
+
+if __name__ == "__main__":
+    main()
