@@ -3,10 +3,12 @@
 feedback, before (the results JSONs at git revision REV) and after (the committed ones), in one JSON for
 docs/loop-closures.md:
 
-    python3 scripts/investigations/feedback_auto_summary.py OUT.json 1de5f3a 6.2.1-light 6.2.1-dynamic 6.2.1-gain 5.2.3 5.3.1-real 5.3.1-sim
+    python3 scripts/investigations/feedback_auto_summary.py OUT.json 1de5f3a 6.2.1-light 6.2.1-dynamic 6.2.1-gain 5.2.3 \\
+        5.3.1-real 5.3.1-sim 5.4
 
-Each row: the experiment, "without feedback" or "feedback chosen by the recipe", and the product summary's columns
-(scripts/product_summary.py) with the supervised and no-ground-truth MEDs.
+Each row: the experiment, "without feedback" or "the recipe now" (its feedback chosen by itself; in the 6.2.1 scenes
+also the low-pass in degrees of elevation), and the product summary's columns (scripts/product_summary.py) with the
+supervised and no-ground-truth MEDs.
 """
 import json
 import subprocess
@@ -30,7 +32,7 @@ def main() -> None:
         before = json.loads(subprocess.run(["git", "show", f"{rev}:{path}"], cwd=ROOT, check=True,
                                            capture_output=True, text=True).stdout)
         after = json.loads((ROOT / path).read_text())
-        for label, data in (("without feedback", before), ("feedback chosen by the recipe", after)):
+        for label, data in (("without feedback", before), ("the recipe now", after)):
             r = summary_row(name, data["rows"], "")
             rows.append({"experiment": name, "training": label,
                          "supervised (m)": med(data["rows"], "MED (m) sfanav default [ground truth]"),
