@@ -142,7 +142,9 @@ def train_localizer(images: Any, *, xy: Any = None, odometry: Any = None, timest
         default's).
     camera_elevation : (float, float) or None
         Elevations (degrees) of the panoramas' lowest and highest rows, for
-        the horizon band (default: the simulator's, -30..20).
+        the horizon band and the photometric low-pass's rows (2.5 degrees of
+        elevation: :func:`sfanav.data.photometric.lowpass_for`; default: the
+        simulator's, -30..20).
     rotation : Rotation or None
         The simulated rotation (default: a 5 px step, the whole panorama).
     prep : Preprocessing or None
