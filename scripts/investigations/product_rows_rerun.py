@@ -27,6 +27,7 @@ import argparse
 import datetime
 import json
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -34,10 +35,10 @@ import numpy as np
 from sfanav import sim
 from sfanav.data import Dataset
 from sfanav.experiments.landmarks import PANORAMA_ELEVATION
-from sfanav.experiments.product_rows import ProductRun, configuration, product_rows, scene_rows
+from sfanav.experiments.product_rows import ProductResult, ProductRun, configuration, product_rows, scene_rows
 
 
-def unwarped_rows(ds: Dataset, seed: int, peer_queries: int, log) -> object:
+def unwarped_rows(ds: Dataset, seed: int, peer_queries: int, log: Callable[[str], None]) -> ProductResult:
     """5.4's product rows: the omnidirectional frames unwarped with the dataset's camera to the network's input."""
     make_net, recipe = configuration(False)
     h, w, _ = make_net().input_shape
