@@ -428,3 +428,19 @@ def test_resolve_all_pairs_only_views_that_face_the_same_way():
                         progress=False, readout={"kind": "quadratic", "n_outputs": 5, "ridge": 0.0, "degree": 2},
                         n_outputs=5, rotation_pooling=1, network_fit={"pairs": (i, len(A) + i, np.ones(len(i)))})
     _close(new.predict(C), ref.predict(C))
+
+
+def test_updates_keep_the_low_pass_widths():
+    """A localizer whose photometric low-pass is not 2 px (the recipe's rows in degrees of elevation) keeps its
+    widths through a top-stage update and through resolve="all", so the updated network sees images as before."""
+    from sfanav.data.photometric import lowpass_log_contrast
+
+    widths = (1.0, 2.0)
+    loc = fit_localizer(Network(TINY), A, YA, rotation=ROT, progress=False, readout="quadratic", n_outputs=5,
+                        photometric="lowpass-log-contrast", lowpass=widths, readout_memory=1000)
+    top = LocalizerUpdater(loc).partial_fit(B, YB).solve()
+    remember(loc, A, YA, max_views=1000, keep_images=True)
+    every = LocalizerUpdater(loc, UpdatePolicy(resolve="all"), pair_radius=0.4).partial_fit(B, YB).solve()
+    for new in (top, every):
+        assert new.photometric_lowpass() == widths
+        np.testing.assert_array_equal(new.normalized(C[:2]), lowpass_log_contrast(C[:2], sigma=widths))
