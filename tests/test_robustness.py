@@ -349,6 +349,16 @@ def test_bad_partners(run_images, partners, match):
                    loop_closures=(np.array([1]), np.array([30]), np.array([0])))
 
 
+def test_closures_among_the_invariance_partners_are_counted(run_images):
+    """With invariance partners the feedback closures train as partners (the network counts none as loop
+    closures); the model's info still says how many closures it trained with."""
+    imgs, xy = run_images
+    closures = (np.array([1, 2]), np.array([30, 33]), np.array([4, 0]))
+    loc = fit_localizer(_net(), imgs, xy, rotation=sfanav.Rotation(4), progress=False, loop_closures=closures,
+                        **recipe_for(robustness="standard").fit_kwargs() | {"rows": None})
+    assert loc.network.n_loop_closures_ == 0 and loc.info["loop_closures"] == 2
+
+
 def test_augmented_features_are_the_fit_draw(run_images):
     imgs, xy = run_images
     loc = fit_localizer(_net(), imgs, xy, rotation=sfanav.Rotation(4), progress=False, readout_augmentation=CAMERA,

@@ -14,7 +14,7 @@ import numpy as np
 from .._checks import check_int, check_n_outputs
 from ..data.corruptions import CorruptionModel
 from ..data.preprocessing import Preprocessing
-from ..loopclosure.partners import closure_partners
+from ..loopclosure.partners import check_closures, closure_partners
 from ..sfa.network import Network, Rotation
 from .localizer import Localizer
 
@@ -171,7 +171,10 @@ def fit_localizer(
     loc.info.update({"rotation": {"step": rotation.step, "window": rotation.window},
                      "n_train_images": int(len(images)), "fit_seconds": round(fit_s, 2),
                      "readout_seconds": round(readout_s, 2), "readout": loc.describe_readout(),
-                     "loop_closures": int(getattr(network, "n_loop_closures_", 0)),
+                     # with invariance partners the closures' partners are among them (the network counts none)
+                     "loop_closures": (int(getattr(network, "n_loop_closures_", 0)) if invariance is None
+                                       or loop_closures is None else
+                                       len(check_closures(loop_closures, len(raw), closure_weights)[1])),
                      **({"photometric": photometric} if photometric else {}),
                      **({"lowpass": list(loc.photometric_lowpass())} if loc.photometric_lowpass() else {}),
                      **({"readout_augmentation": readout_augmentation.describe()} if readout_augmentation else {}),
