@@ -1,0 +1,59 @@
+#!/usr/bin/env python3
+"""The model without ground truth trained with and without the bag-of-words feedback (whatever the revisit ratio
+says): the learned map's error against ground truth (the training positions moved into the world frame by the rigid
+fit, for scoring only) beside the test MED, to tell whether feedback costs the map or the readout
+(docs/loop-closures.md, "When feedback is used"; 5.2.3).
+
+    sfanav simulate --preset thesis-5.2.3-outdoor --seed 0 --out runs/523
+    PYTHONPATH=python python3 scripts/investigations/feedback_learned_map.py 5.2.3 runs/523 OUT.json
+
+Adds OUT.json[NAME] = {"no feedback": {...}, "feedback": {...}}, each with the map's MED and 90th percentile (m),
+the training run's estimates against ground truth, the test MED (m), the closures and the seconds.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from sfanav.data import Dataset
+from sfanav.experiments.product_rows import product_runs
+from sfanav.localization.error_metrics import align, localization_metrics
+from sfanav.localization.recipe import CAMERA_ELEVATION, default_network
+from sfanav.loopclosure import make_detector
+from sfanav.pipeline import FEEDBACK_DETECTOR, train_localizer
+
+
+def main() -> None:
+    if len(sys.argv) != 4:
+        sys.exit(__doc__)
+    name, root, out_path = sys.argv[1], sys.argv[2], Path(sys.argv[3])
+    ds = Dataset(root)
+    elev = tuple(ds.metadata.get("camera", {}).get("elevation_deg", CAMERA_ELEVATION))
+    train, (test,) = product_runs(ds, default_network())
+    found = make_detector(FEEDBACK_DETECTOR).detect(train.images)
+    entry = {}
+    for label, closures in (("no feedback", None), ("feedback", found)):
+        t0 = time.perf_counter()
+        loc = train_localizer(train.images, odometry=train.odometry, gyro=train.gyro, supervision="odometry",
+                              camera_elevation=elev, loop_closures=closures, feedback="none", filter_noise=False)
+        world = align(loc.training_positions_, train.xy)
+        map_err = np.hypot(*(world.apply(loc.training_positions_) - train.xy[:, :2]).T)
+        est = np.hypot(*(world.apply(loc.predict(train.images)) - train.xy[:, :2]).T)
+        entry[label] = {"map MED (m)": float(np.median(map_err)), "map p90 (m)": float(np.quantile(map_err, 0.9)),
+                        "training-run estimates vs GT MED (m)": float(np.median(est)),
+                        "test MED (m)": localization_metrics(world.apply(loc.predict(test.images)), test.xy)["med"],
+                        "closures": 0 if closures is None else int(len(closures)),
+                        "seconds": time.perf_counter() - t0}
+        print(name, label, json.dumps(entry[label]), flush=True)
+    res = json.loads(out_path.read_text()) if out_path.exists() else {}
+    res[name] = entry
+    out_path.write_text(json.dumps(res, indent=1, sort_keys=True) + "\n")
+
+
+if __name__ == "__main__":
+    main()
