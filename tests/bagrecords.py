@@ -36,7 +36,8 @@ class Record:
 
     @property
     def op(self) -> int:
-        return self.fields.get(b"op", b"\xff")[0]
+        """The record's op code; 0xff for a record without one (or with an empty one: a mutated bag)."""
+        return (self.fields.get(b"op") or b"\xff")[0]
 
 
 def records(data: bytes) -> list[Record]:

@@ -256,3 +256,12 @@ def test_train_names_repeated_stamps_exactly_and_trains_on_stamps_1_ns_apart(tmp
         else:
             assert code == 0, err
             assert stamps[k] / 1e9 == stamps[k + 1] / 1e9
+
+
+def test_a_record_with_an_empty_op_field_reads_as_unknown():
+    """The fuzz harness's bag mutator met a record whose op field was empty (an IndexError in the harness, not in
+    sfanav): such a record reads as op 0xff, like one without the field."""
+    from bagrecords import Record
+
+    assert Record(0, {b"op": b""}, 0, 0).op == 0xFF == Record(0, {}, 0, 0).op
+    assert Record(0, {b"op": b"\x05"}, 0, 0).op == 5
