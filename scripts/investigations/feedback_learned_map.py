@@ -14,28 +14,17 @@ the training run's estimates against ground truth, the test MED (m), the closure
 from __future__ import annotations
 
 import json
-import sys
 import time
-from pathlib import Path
 
 import numpy as np
 
-from sfanav.data import Dataset
-from sfanav.experiments.product_rows import product_runs
+from _feedback_scene import feedback_scene
 from sfanav.localization.error_metrics import align, localization_metrics
-from sfanav.localization.recipe import CAMERA_ELEVATION, default_network
-from sfanav.loopclosure import make_detector
-from sfanav.pipeline import FEEDBACK_DETECTOR, train_localizer
+from sfanav.pipeline import train_localizer
 
 
 def main() -> None:
-    if len(sys.argv) != 4:
-        sys.exit(__doc__)
-    name, root, out_path = sys.argv[1], sys.argv[2], Path(sys.argv[3])
-    ds = Dataset(root)
-    elev = tuple(ds.metadata.get("camera", {}).get("elevation_deg", CAMERA_ELEVATION))
-    train, (test,) = product_runs(ds, default_network())
-    found = make_detector(FEEDBACK_DETECTOR).detect(train.images)
+    name, out_path, train, test, elev, found = feedback_scene(__doc__)
     entry = {}
     for label, closures in (("no feedback", None), ("feedback", found)):
         t0 = time.perf_counter()
