@@ -238,6 +238,10 @@ def test_lowpass_for_keeps_the_angle_of_the_rows():
     rows, cols = lowpass_for((-55, 20), 40)
     assert cols == LOWPASS_SIGMA and rows * 75 / 40 == pytest.approx(LOWPASS_SIGMA * LOWPASS_ROW_DEGREES)
     assert lowpass_for((-30, 20), 80)[0] == pytest.approx(2 * LOWPASS_SIGMA)  # twice the rows: twice the pixels
+    # the recipe decides it with the rest of fit_localizer's arguments, given the panoramas' height
+    assert recipe_for().fit_kwargs((-55, 20), 40)["lowpass"] == lowpass_for((-55, 20), 40)
+    assert "lowpass" not in recipe_for().fit_kwargs((-55, 20))
+    assert "lowpass" not in recipe_for(robustness="none").fit_kwargs((-55, 20), 40)
     for elevation, height in (((20, -30), 40), ((0, float("nan")), 40), ((-30, 20), 0)):
         with pytest.raises(ValueError, match="elevation_deg|height"):
             lowpass_for(elevation, height)

@@ -22,7 +22,6 @@ from typing import Any
 import numpy as np
 
 from ._progress import Log, quiet_log
-from .data.photometric import lowpass_for
 from .localization.recipe import CAMERA_ELEVATION, Recipe, default_network, recipe_for, supervision_for
 from .localization.training import fit_localizer
 from .loopclosure.factory import make_detector
@@ -226,13 +225,11 @@ def train_localizer(images: Any, *, xy: Any = None, odometry: Any = None, timest
     net = network if network is not None else default_network()
     has_odometry = _all_finite(odometry, 3)
     supervision = supervision_for(supervision, has_ground_truth=_all_finite(xy, 2), has_odometry=has_odometry)
-    elevation = CAMERA_ELEVATION if camera_elevation is None else camera_elevation
+    height = _image_height(images)
     try:
-        fit_kw = recipe.fit_kwargs(elevation)
+        fit_kw = recipe.fit_kwargs(CAMERA_ELEVATION if camera_elevation is None else camera_elevation, height)
     except ValueError as exc:
         raise ValueError(f"horizon band: {exc}") from None
-    if fit_kw.get("photometric") == "lowpass-log-contrast":  # the low-pass's rows in degrees of elevation
-        fit_kw["lowpass"] = lowpass_for(elevation, _image_height(images))
     fit_kw.update(rotation=rotation or Rotation(step=ROTATION_STEP), prep=prep, progress=progress,
                   closure_weights=closure_weights, network_images=network_images,
                   network_fit=dict(network_fit or {}), info={**dict(info or {}), **recipe.info()},

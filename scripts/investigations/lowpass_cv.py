@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 import sfanav.data.photometric as photometric
-from sfanav import pipeline
+import sfanav.localization.recipe as recipe
 from sfanav.data import Dataset
 from sfanav.data.corruptions import corrupt
 from sfanav.experiments.product_rows import product_runs
@@ -53,7 +53,7 @@ def main() -> None:
     for key in a.sigmas.split(","):
         rows, _, cols = key.partition("x")
         sigma = (float(rows), float(cols)) if cols else float(rows)
-        pipeline.lowpass_for = lambda elevation, height, pair=photometric.lowpass_widths(sigma): pair  # the recipe's
+        recipe.lowpass_for = lambda elevation, height, pair=photometric.lowpass_widths(sigma): pair  # the recipe's
         t0 = time.perf_counter()
         loc = train_localizer(train.images, xy=train.xy, odometry=train.odometry, supervision="ground-truth",
                               camera_elevation=elev, feedback="none", filter_noise=False, seed=a.seed)

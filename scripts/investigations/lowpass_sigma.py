@@ -9,10 +9,10 @@ Only the width of the invariance partners', the readout copies' and the queries'
 import sys
 
 import sfanav.data.photometric as photometric
-import sfanav.pipeline as pipeline
+import sfanav.localization.recipe as recipe
 
 photometric.lowpass_log_contrast.__kwdefaults__["sigma"] = float(sys.argv[1])
-pipeline.lowpass_for = lambda elevation, height: (float(sys.argv[1]),) * 2  # the recipe's rows in degrees, replaced
+recipe.lowpass_for = lambda elevation, height: (float(sys.argv[1]),) * 2  # the recipe's rows in degrees, replaced
 from sfanav.app.cli import main  # noqa: E402
 
 sys.exit(main(["experiment", sys.argv[2], "--no-progress", "--out", sys.argv[3]]))

@@ -29,6 +29,7 @@ from typing import Any
 from .._checks import check_int
 from ..data.corruptions import CAMERA, CorruptionModel
 from ..data.image_rows import ImageRows
+from ..data.photometric import lowpass_for
 from ..sfa.network import Network
 
 NETWORK_PRESET = "sfanav-default"
@@ -135,13 +136,19 @@ class Recipe:
                 "readout_augmentation": model if r != "none" else None,
                 "invariance": model if weight else None, "invariance_weight": weight or 1.0}
 
-    def fit_kwargs(self, camera_elevation: Sequence[float] | None = None) -> dict[str, Any]:
+    def fit_kwargs(self, camera_elevation: Sequence[float] | None = None,
+                   height: int | None = None) -> dict[str, Any]:
         """Every :func:`~sfanav.localization.fit_localizer` argument the recipe
         decides (readout, rows for panoramas spanning ``camera_elevation``,
-        n_outputs, rotation pooling, signature and robustness): one place,
-        so that ``sfanav train``, the demo and the experiments train alike."""
-        return {"readout": self.readout, "rows": self.image_rows(camera_elevation), "n_outputs": self.n_outputs,
-                "rotation_pooling": self.rotation_pooling, "signature": self.signature, **self.robust_kwargs()}
+        n_outputs, rotation pooling, signature and robustness, and for
+        panoramas of ``height`` rows the photometric low-pass's widths,
+        :func:`sfanav.data.photometric.lowpass_for`): one place, so that
+        ``sfanav train``, the demo and the experiments train alike."""
+        out = {"readout": self.readout, "rows": self.image_rows(camera_elevation), "n_outputs": self.n_outputs,
+               "rotation_pooling": self.rotation_pooling, "signature": self.signature, **self.robust_kwargs()}
+        if height is not None and out["photometric"] == "lowpass-log-contrast":  # the rows in degrees of elevation
+            out["lowpass"] = lowpass_for(CAMERA_ELEVATION if camera_elevation is None else camera_elevation, height)
+        return out
 
 
 def recipe_for(preset: str | None = None, *, config: bool = False, readout: Any = None, rows: str | None = None,
