@@ -146,11 +146,15 @@ def _train(X, xy, monkeypatch, ratio, *, learned=False, **kw):
 
     monkeypatch.setattr(pipeline, "revisit_change", measured)
     monkeypatch.setattr(pipeline, "make_detector", lambda kind: Detector())
+    maps = []
     if learned:
         def mapped(network, images, odometry, *, method, timestamps, gyro, readout_memory, pose_graph,
-                   loop_closures, **fit_kw):
-            return pipeline.fit_localizer(network, images, xy, readout_memory=readout_memory,
-                                          loop_closures=loop_closures, **fit_kw)
+                   loop_closures, learned, **fit_kw):
+            maps.append(learned)  # the map the recipe hands over (None: learn one)
+            loc = pipeline.fit_localizer(network, images, xy, readout_memory=readout_memory,
+                                         loop_closures=loop_closures, **fit_kw)
+            loc.learned_positions_ = learned if learned is not None else object()
+            return loc
 
         monkeypatch.setattr(pipeline, "fit_localizer_from_odometry", mapped)
         heading = np.arctan2(*np.gradient(xy, axis=0).T[::-1])
@@ -161,6 +165,8 @@ def _train(X, xy, monkeypatch, ratio, *, learned=False, **kw):
     loc = pipeline.train_localizer(X, network=Network(CONFIG), rotation=Rotation(step=6),
                                    recipe=recipe_for(config=True, readout="quadratic", robustness="none"),
                                    log=log.append, filter_noise=False, **kw)
+    if learned:
+        log.append(maps)
     return loc, calls, log
 
 
@@ -189,10 +195,26 @@ def test_learned_positions_send_a_lower_ratio_to_feedback(tiny_run, monkeypatch)
     assert "feedback" not in loc.info and loc.info["revisit change"]["threshold"] == FEEDBACK_RATIO
     loc, calls, log = _train(X, xy, monkeypatch, ratio, feedback="auto", learned=True)
     assert calls == [len(X)] and loc.info["feedback"]["closures"] == "bow"
+    # the second training keeps the first one's learned map rather than learning one from its features
+    first, again = log.pop()
+    assert first is None and again is not None and loc.learned_positions_ is again
+    assert loc.info["feedback"]["map"] == "the first training's"
     assert loc.info["revisit change"]["threshold"] == FEEDBACK_RATIO_LEARNED < FEEDBACK_RATIO
-    assert any(f"above {FEEDBACK_RATIO_LEARNED:g}" in line for line in log)
+    assert any(f"above {FEEDBACK_RATIO_LEARNED:g}" in str(line) for line in log)
     loc, _, _ = _train(X, xy, monkeypatch, FEEDBACK_RATIO_LEARNED * 0.9, feedback="auto", learned=True)
     assert "feedback" not in loc.info
+
+
+def test_a_code_changing_too_much_learns_the_map_again(tiny_run, monkeypatch):
+    """Above FIRST_MAP_MAX_RATIO the first network's map is not kept: the second training learns its own."""
+    from sfanav.pipeline import FIRST_MAP_MAX_RATIO
+
+    X, xy = tiny_run
+    loc, calls, log = _train(X, xy, monkeypatch, FIRST_MAP_MAX_RATIO * 1.5, feedback="auto", learned=True)
+    assert calls == [len(X)] and log.pop() == [None, None]
+    assert loc.info["feedback"]["map"] == "learned again"
+    loc, _, _ = _train(X, xy, monkeypatch, FIRST_MAP_MAX_RATIO * 1.5, feedback="auto")
+    assert loc.info["feedback"]["map"] == "ground truth"
 
 
 def test_feedback_none_and_other_recipes_never_measure(tiny_run, monkeypatch):

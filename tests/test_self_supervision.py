@@ -240,3 +240,40 @@ def test_describe_closures_says_what_the_pose_graph_measured():
     assert describe_closures({"loop closures": 3, "loop closures kept": 2, "closures": "min-warping",
                               "closure method": "min-warping"}) == \
         "2 of 3 loop closures kept, relative poses by min-warping"
+
+
+def test_a_map_learned_before_is_kept_and_no_map_is_learned(monkeypatch):
+    """``learned=``: the readout is fitted to the given positions (the recipe's first training's map when it
+    trains again with feedback); the run's features are not mapped again; a map of another run is refused."""
+    import sfanav.odometry.self_supervision as ss
+    from sfanav import Network, Rotation
+    from sfanav.odometry import segment_lines
+    from sfanav.odometry.self_supervision import LearnedPositions, fit_localizer_from_odometry
+
+    n = 120
+    t = np.linspace(0, 4 * np.pi, n)
+    xy = np.c_[2 * np.cos(t), 2 * np.sin(t)]
+    odometry = np.c_[xy, t + np.pi / 2]
+    rng = np.random.default_rng(0)
+    cols = np.arange(60)
+    X = np.empty((n, 8, 60, 3), np.uint8)
+    for i, (x, y) in enumerate(xy):
+        row = 120 + 60 * np.sin(cols / 60 * 2 * np.pi + x) + 30 * np.cos(cols / 20 + y)
+        X[i] = np.clip(row[None, :, None] + rng.normal(0, 2, (8, 60, 3)), 0, 255).astype(np.uint8)
+    config = {"input": {"width": 60, "height": 8, "channels": 3}, "network": {"precision": "double"},
+              "layers": [{"rf": [6, 4], "stride": [3, 4], "out": 10}, {"rf": "full", "out": 10}]}
+    lp = LearnedPositions(xy + [0.3, -0.2], "pose-graph", segment_lines(odometry))
+
+    def never(*a, **k):
+        raise AssertionError("a map was learned although one was given")
+
+    monkeypatch.setattr(ss, "learn_positions", never)
+    kw = dict(rotation=Rotation(step=6), readout="quadratic", n_outputs=4, progress=False)
+    loc = fit_localizer_from_odometry(Network(config), X, odometry, learned=lp, **kw)
+    assert loc.learned_positions_ is lp and loc.info["supervision"] == "odometry"
+    np.testing.assert_array_equal(loc.training_positions_, lp.positions)
+    with pytest.raises(ValueError, match="holds 119 positions but the run has 120"):
+        fit_localizer_from_odometry(Network(config), X, odometry, learned=LearnedPositions(
+            lp.positions[:-1], "pose-graph", lp.lines), **kw)
+    with pytest.raises(TypeError, match="LearnedPositions"):
+        fit_localizer_from_odometry(Network(config), X, odometry, learned=lp.positions, **kw)

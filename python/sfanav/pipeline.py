@@ -56,6 +56,12 @@ which read it lower), trains again with the closures a bag of visual words finds
 (thesis 6.2.1); ``none`` never does. docs/loop-closures.md, "When feedback is used"."""
 FEEDBACK_DETECTOR = "bow"
 """The closures of ``feedback="auto"``: found from the images alone and robust to light (docs/loop-closures.md)."""
+FIRST_MAP_MAX_RATIO = 4.0
+"""Without ground truth, the feedback's second training keeps the map the first network's features learned while
+their revisit ratio (on that map) stays below this: the feedback makes the passes of one place alike in the code,
+and a pose graph that pairs places by that code places them less precisely. Above it the first network's code
+changes so much between visits (a light dominating it) that its own map is the worse one, and the map is learned
+again from the second network's features (docs/loop-closures.md, "The map of a run trained with feedback")."""
 
 
 def describe_closures(info: Mapping[str, Any]) -> str:
@@ -181,7 +187,9 @@ def train_localizer(images: Any, *, xy: Any = None, odometry: Any = None, timest
         between visits of one place more than their positions explain
         (:data:`FEEDBACK`; a light or objects changing through the run).
         The measurement is in ``info["revisit change"]``, the closures used
-        in ``info["feedback"]``. Not with ``groups`` (several recordings
+        in ``info["feedback"]``; without ground truth the second training's
+        readout keeps the positions the first one learned while the ratio is
+        below :data:`FIRST_MAP_MAX_RATIO`. Not with ``groups`` (several recordings
         train in their own order) or ``metric_map="metric-learning"``.
     seed : int
         Seed of the robustness's corrupted copies.
@@ -242,11 +250,11 @@ def train_localizer(images: Any, *, xy: Any = None, odometry: Any = None, timest
 
         require_gtsam()  # a clear error before any training
 
-    def fit(network: Network, found: Any) -> Any:
+    def fit(network: Network, found: Any, learned: Any = None) -> Any:
         if supervision == "odometry":
             loc = fit_localizer_from_odometry(network, images, odometry, method=metric_map, timestamps=timestamps,
                                               gyro=gyro, readout_memory=readout_memory, pose_graph=graph,
-                                              loop_closures=found, **fit_kw)
+                                              loop_closures=found, learned=learned, **fit_kw)
             loc.info["gyro"] = gyro is not None
             if closures is not None:
                 loc.info["closures"] = closures
@@ -279,9 +287,15 @@ def train_localizer(images: Any, *, xy: Any = None, odometry: Any = None, timest
                     f"{MIN_REVISITS}): no feedback")
             else:
                 log(f"{said}: training again with {len(found)} loop closures ({FEEDBACK_DETECTOR}) as feedback")
-                loc = fit(Network(net.config), found)
+                # without ground truth: the first map, unless the first code changed too much to learn it
+                keep = supervision == "odometry" and change.ratio < FIRST_MAP_MAX_RATIO
+                first_map = loc.learned_positions_ if keep else None
+                loc = fit(Network(net.config), found, first_map)
                 loc.info["revisit change"] = measured
-                loc.info["feedback"] = {"closures": FEEDBACK_DETECTOR, "count": int(len(found))}
+                loc.info["feedback"] = {"closures": FEEDBACK_DETECTOR, "count": int(len(found)),
+                                        "map": ("the first training's" if first_map is not None
+                                                else "learned again" if supervision == "odometry" else
+                                                "ground truth")}
                 F = None
     if filter_noise and has_odometry:
         try:

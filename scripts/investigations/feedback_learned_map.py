@@ -7,13 +7,17 @@ fit, for scoring only) beside the test MED, to tell whether feedback costs the m
     sfanav simulate --preset thesis-5.2.3-outdoor --seed 0 --out runs/523
     PYTHONPATH=python python3 scripts/investigations/feedback_learned_map.py 5.2.3 runs/523 OUT.json
 
-Adds OUT.json[NAME] = {"no feedback": {...}, "feedback": {...}}, each with the map's MED and 90th percentile (m),
+A third variant, "feedback, first map": the feedback network's readout fitted to the map the first (no feedback)
+network's features learned. SKIP=feedback (environment) leaves the second variant out.
+
+Adds OUT.json[NAME] = {"no feedback": {...}, "feedback": {...}, "feedback, first map": {...}}, each with the map's MED and 90th percentile (m),
 the training run's estimates against ground truth, the test MED (m), the closures and the seconds.
 """
 
 from __future__ import annotations
 
 import json
+import os
 import time
 
 import numpy as np
@@ -22,16 +26,32 @@ from _feedback_scene import feedback_scene
 from sfanav.localization.error_metrics import align, localization_metrics
 from sfanav.pipeline import train_localizer
 
+# variants to leave out, from the environment (e.g. SKIP='feedback' when the product rows measured it)
+SKIP = set(filter(None, os.environ.get("SKIP", "").split(",")))
+
 
 def main() -> None:
     name, out_path, train, test, elev, found = feedback_scene(__doc__)
     entry = {}
-    for label, closures in (("no feedback", None), ("feedback", found)):
+    first_map = None
+    variants = (("no feedback", None, None), ("feedback", found, None), ("feedback, first map", found, "first"))
+    for label, closures, on in variants:
+        if label in SKIP:
+            continue
         t0 = time.perf_counter()
-        loc = train_localizer(train.images, odometry=train.odometry, gyro=train.gyro, supervision="odometry",
-                              camera_elevation=elev, loop_closures=closures, feedback="none", filter_noise=False)
-        world = align(loc.training_positions_, train.xy)
-        map_err = np.hypot(*(world.apply(loc.training_positions_) - train.xy[:, :2]).T)
+        if on is None:
+            loc = train_localizer(train.images, odometry=train.odometry, gyro=train.gyro, supervision="odometry",
+                                  camera_elevation=elev, loop_closures=closures, feedback="none",
+                                  filter_noise=False)
+            positions = loc.learned_positions_.positions
+        else:  # the feedback network's readout fitted to the map the first network's features learned
+            positions = first_map
+            loc = train_localizer(train.images, xy=first_map, camera_elevation=elev, loop_closures=closures,
+                                  feedback="none", filter_noise=False)
+        if closures is None:
+            first_map = positions
+        world = align(positions, train.xy)
+        map_err = np.hypot(*(world.apply(positions) - train.xy[:, :2]).T)
         est = np.hypot(*(world.apply(loc.predict(train.images)) - train.xy[:, :2]).T)
         entry[label] = {"map MED (m)": float(np.median(map_err)), "map p90 (m)": float(np.quantile(map_err, 0.9)),
                         "training-run estimates vs GT MED (m)": float(np.median(est)),
@@ -40,7 +60,7 @@ def main() -> None:
                         "seconds": time.perf_counter() - t0}
         print(name, label, json.dumps(entry[label]), flush=True)
     res = json.loads(out_path.read_text()) if out_path.exists() else {}
-    res[name] = entry
+    res[name] = {**res.get(name, {}), **entry}
     out_path.write_text(json.dumps(res, indent=1, sort_keys=True) + "\n")
 
 

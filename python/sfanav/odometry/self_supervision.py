@@ -266,7 +266,8 @@ def fit_localizer_from_odometry(network: Any, images: Any, odometry: Any, *, n_m
                                 method: str = "auto", pose_graph: Mapping[str, Any] | None = None,
                                 learner: MetricLearner | None = None, segmentation: Mapping[str, Any] | None = None,
                                 odometry_noise: Any = None, timestamps: Any = None, gyro: Any = None,
-                                info: dict[str, Any] | None = None, **fit_kwargs: Any) -> Any:
+                                info: dict[str, Any] | None = None, learned: LearnedPositions | None = None,
+                                **fit_kwargs: Any) -> Any:
     """Trains a :class:`~sfanav.Localizer` on a run's images and odometry
     alone: the network on the images (simulated rotation), the metric map on
     the network's features, the odometry and (the default pose graph) the
@@ -284,6 +285,12 @@ def fit_localizer_from_odometry(network: Any, images: Any, odometry: Any, *, n_m
     passed to :func:`learn_positions`;
     ``learned_positions_`` holds the :class:`LearnedPositions`. Raises as
     :func:`learn_positions`.
+
+    ``learned``: a map learned before on the same run (another localizer's
+    ``learned_positions_``, e.g. the first training's when the recipe trains
+    again with loop-closure feedback): the readout is fitted to its
+    positions and no map is learned from this network's features. A
+    ValueError if it holds another number of frames.
     """
     P = as_poses(odometry, "odometry")
     if len(P) != len(images):
@@ -294,16 +301,25 @@ def fit_localizer_from_odometry(network: Any, images: Any, odometry: Any, *, n_m
         from .gyro import as_gyro
 
         gyro = as_gyro(gyro, len(P))  # before the network's training too
-    learned: list[LearnedPositions] = []
+    if learned is not None:
+        if not isinstance(learned, LearnedPositions):
+            raise TypeError(f"learned must be a LearnedPositions, got {type(learned).__name__}")
+        if len(learned.positions) != len(P):
+            raise ValueError(f"learned holds {len(learned.positions)} positions but the run has {len(P)} frames")
+        loc = fit_localizer(network, images, learned.positions, info=info, **fit_kwargs)
+        loc.info.update(learned.info())
+        loc.learned_positions_ = learned
+        return loc
+    learned_now: list[LearnedPositions] = []
 
     def positions(features: np.ndarray) -> np.ndarray:
-        learned.append(learn_positions(features, P, images=images, method=method, pose_graph=pose_graph,
+        learned_now.append(learn_positions(features, P, images=images, method=method, pose_graph=pose_graph,
                                        n_outputs=n_metric_outputs, learner=learner,
                                        segmentation=segmentation, odometry_noise=odometry_noise,
                                        progress=bool(fit_kwargs.get("progress", False)), gyro=gyro))
-        return learned[-1].positions
+        return learned_now[-1].positions
 
     loc = fit_localizer(network, images, positions, info=info, **fit_kwargs)
-    loc.info.update(learned[-1].info())
-    loc.learned_positions_ = learned[-1]
+    loc.info.update(learned_now[-1].info())
+    loc.learned_positions_ = learned_now[-1]
     return loc
