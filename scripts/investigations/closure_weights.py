@@ -4,7 +4,8 @@
 bag-of-words closures the recipe's feedback finds, the sfanav default trained with them both ways, the test run's MED
 (docs/loop-closures.md, "When feedback is used"). A third variant, "mean score", weighs every closure alike by the
 scores' mean: whether the score's order or only the closures' total weight matters. SKIP=score,uniform (environment)
-leaves variants out.
+leaves variants out; SEED=N (environment) draws the robustness's corrupted copies with seed N (entries keyed
+LABEL@N), to compare the weights' effect with the draw's.
 
     sfanav simulate --preset thesis-6.2.1-light --seed 0 --out runs/light
     PYTHONPATH=python python3 scripts/investigations/closure_weights.py 6.2.1-light runs/light OUT.json
@@ -26,6 +27,8 @@ from sfanav.pipeline import train_localizer
 
 # variants to leave out (environment, comma-separated labels)
 SKIP = set(filter(None, os.environ.get("SKIP", "").split(",")))
+# the robustness's draw (train_localizer(seed=)); entries of seeds other than 0 are keyed LABEL@SEED
+SEED = int(os.environ.get("SEED", "0"))
 
 
 def main() -> None:
@@ -37,7 +40,8 @@ def main() -> None:
             continue
         t0 = time.perf_counter()
         loc = train_localizer(train.images, xy=train.xy, supervision="ground-truth", camera_elevation=elev,
-                              loop_closures=found, closure_weights=weights, filter_noise=False)
+                              loop_closures=found, closure_weights=weights, filter_noise=False, seed=SEED)
+        label = label if SEED == 0 else f"{label}@{SEED}"
         entry[label] = {"MED (m)": localization_metrics(loc.predict(test.images), test.xy)["med"],
                         "seconds": time.perf_counter() - t0}
         res = json.loads(out_path.read_text()) if out_path.exists() else {}

@@ -8,7 +8,8 @@ fit, for scoring only) beside the test MED, to tell whether feedback costs the m
     PYTHONPATH=python python3 scripts/investigations/feedback_learned_map.py 5.2.3 runs/523 OUT.json
 
 A third variant, "feedback, first map": the feedback network's readout fitted to the map the first (no feedback)
-network's features learned. SKIP=feedback (environment) leaves the second variant out.
+network's features learned. SKIP (environment, labels separated by ';') leaves variants out, e.g. SKIP=feedback,
+or SKIP='no feedback;feedback, first map' for the second alone.
 
 Adds OUT.json[NAME] = {"no feedback": {...}, "feedback": {...}, "feedback, first map": {...}}, each with the map's MED and 90th percentile (m),
 the training run's estimates against ground truth, the test MED (m), the closures and the seconds.
@@ -26,8 +27,9 @@ from _feedback_scene import feedback_scene
 from sfanav.localization.error_metrics import align, localization_metrics
 from sfanav.pipeline import train_localizer
 
-# variants to leave out, from the environment (e.g. SKIP='feedback' when the product rows measured it)
-SKIP = set(filter(None, os.environ.get("SKIP", "").split(",")))
+# variants to leave out, from the environment, separated by ';' (e.g. SKIP='feedback' when the product rows
+# measured it)
+SKIP = set(filter(None, os.environ.get("SKIP", "").split(";")))
 
 
 def main() -> None:
