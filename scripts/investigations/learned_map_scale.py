@@ -1,0 +1,60 @@
+#!/usr/bin/env python3
+"""How much of the learned map's error (the model without ground truth) is a scale: the sfanav default trained
+without ground truth and without feedback on an experiment's scene, its learned training positions and its test
+estimates scored against ground truth after a rigid fit (what the experiments do) and after a similarity fit (the
+scale left free), beside the odometry's own scale (its path length over the true path's) and the supervised test
+MED (docs/odometry.md, "The learned map's scale").
+
+    sfanav simulate --preset thesis-5.2-indoor-II --seed 0 --out runs/indoor2
+    PYTHONPATH=python python3 scripts/investigations/learned_map_scale.py 5.2-indoor-II runs/indoor2 OUT.json
+
+Adds OUT.json[NAME] = {"odometry path / true path", "map MED rigid (m)", "map MED similarity (m)",
+"similarity scale", "test MED rigid (m)", "test MED similarity (m)", "seconds"} (both fits on the training run, for
+scoring only).
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from sfanav.data import Dataset
+from sfanav.experiments.product_rows import product_runs
+from sfanav.localization.error_metrics import align, localization_metrics
+from sfanav.localization.recipe import CAMERA_ELEVATION, default_network
+from sfanav.pipeline import train_localizer
+
+
+def main() -> None:
+    if len(sys.argv) != 4:
+        sys.exit(__doc__)
+    name, root, out_path = sys.argv[1], sys.argv[2], Path(sys.argv[3])
+    ds = Dataset(root)
+    elev = tuple(ds.metadata.get("camera", {}).get("elevation_deg", CAMERA_ELEVATION))
+    train, (test,) = product_runs(ds, default_network())
+    t0 = time.perf_counter()
+    loc = train_localizer(train.images, odometry=train.odometry, gyro=train.gyro, supervision="odometry",
+                          camera_elevation=elev, feedback="none", filter_noise=False)
+    positions = loc.learned_positions_.positions
+    est = loc.predict(test.images)
+    entry = {"seconds": time.perf_counter() - t0,
+             "odometry path / true path": float(np.hypot(*np.diff(train.odometry[:, :2], axis=0).T).sum()
+                                                / np.hypot(*np.diff(train.xy[:, :2], axis=0).T).sum())}
+    for label, scale in (("rigid", False), ("similarity", True)):
+        fit = align(positions, train.xy[:, :2], scale=scale)
+        entry[f"map MED {label} (m)"] = float(np.median(np.hypot(*(fit.apply(positions) - train.xy[:, :2]).T)))
+        entry[f"test MED {label} (m)"] = localization_metrics(fit.apply(est), test.xy)["med"]
+        if scale:
+            entry["similarity scale"] = float(fit.scale)
+    res = json.loads(out_path.read_text()) if out_path.exists() else {}
+    res[name] = entry
+    out_path.write_text(json.dumps(res, indent=1, sort_keys=True) + "\n")
+    print(name, json.dumps(entry), flush=True)
+
+
+if __name__ == "__main__":
+    main()
