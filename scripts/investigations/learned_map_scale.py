@@ -8,7 +8,7 @@ MED (docs/odometry.md, "The learned map's scale").
     sfanav simulate --preset thesis-5.2-indoor-II --seed 0 --out runs/indoor2
     PYTHONPATH=python python3 scripts/investigations/learned_map_scale.py 5.2-indoor-II runs/indoor2 OUT.json
 
-Adds OUT.json[NAME] = {"odometry path / true path", "map MED rigid (m)", "map MED similarity (m)",
+Adds OUT.json[NAME] = {"odometry path over true path", "map MED rigid (m)", "map MED similarity (m)",
 "similarity scale", "test MED rigid (m)", "test MED similarity (m)", "seconds"} (both fits on the training run, for
 scoring only).
 """
@@ -42,7 +42,7 @@ def main() -> None:
     positions = loc.learned_positions_.positions
     est = loc.predict(test.images)
     entry = {"seconds": time.perf_counter() - t0,
-             "odometry path / true path": float(np.hypot(*np.diff(train.odometry[:, :2], axis=0).T).sum()
+             "odometry path over true path": float(np.hypot(*np.diff(train.odometry[:, :2], axis=0).T).sum()
                                                 / np.hypot(*np.diff(train.xy[:, :2], axis=0).T).sum())}
     for label, scale in (("rigid", False), ("similarity", True)):
         fit = align(positions, train.xy[:, :2], scale=scale)
