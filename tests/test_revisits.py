@@ -109,7 +109,7 @@ CONFIG = {"input": {"width": 60, "height": 8, "channels": 3}, "network": {"preci
           "layers": [{"rf": [6, 4], "stride": [3, 4], "out": 10}, {"rf": "full", "out": 10}]}
 
 
-def _run(n=160):
+def tiny_loop_run(n=160):
     """A tiny synthetic run that drives a circle twice: images (n, 8, 60, 3) uint8 and positions."""
     xy = _loop(n, 2, 2.0)
     rng = np.random.default_rng(0)
@@ -123,7 +123,7 @@ def _run(n=160):
 
 @pytest.fixture(scope="module")
 def tiny_run():
-    return _run()
+    return tiny_loop_run()
 
 
 def _train(X, xy, monkeypatch, ratio, *, learned=False, **kw):

@@ -250,18 +250,11 @@ def test_a_map_learned_before_is_kept_and_no_map_is_learned(monkeypatch):
     from sfanav.odometry import segment_lines
     from sfanav.odometry.self_supervision import LearnedPositions, fit_localizer_from_odometry
 
-    n = 120
-    t = np.linspace(0, 4 * np.pi, n)
-    xy = np.c_[2 * np.cos(t), 2 * np.sin(t)]
-    odometry = np.c_[xy, t + np.pi / 2]
-    rng = np.random.default_rng(0)
-    cols = np.arange(60)
-    X = np.empty((n, 8, 60, 3), np.uint8)
-    for i, (x, y) in enumerate(xy):
-        row = 120 + 60 * np.sin(cols / 60 * 2 * np.pi + x) + 30 * np.cos(cols / 20 + y)
-        X[i] = np.clip(row[None, :, None] + rng.normal(0, 2, (8, 60, 3)), 0, 255).astype(np.uint8)
-    config = {"input": {"width": 60, "height": 8, "channels": 3}, "network": {"precision": "double"},
-              "layers": [{"rf": [6, 4], "stride": [3, 4], "out": 10}, {"rf": "full", "out": 10}]}
+    from test_revisits import CONFIG as config
+    from test_revisits import tiny_loop_run
+
+    X, xy = tiny_loop_run(120)
+    odometry = np.c_[xy, np.arctan2(*np.gradient(xy, axis=0).T[::-1])]
     lp = LearnedPositions(xy + [0.3, -0.2], "pose-graph", segment_lines(odometry))
 
     def never(*a, **k):

@@ -15,27 +15,17 @@ scoring only).
 
 from __future__ import annotations
 
-import json
-import sys
 import time
-from pathlib import Path
 
 import numpy as np
 
-from sfanav.data import Dataset
-from sfanav.experiments.product_rows import product_runs
+from _feedback_scene import add_entry, scene
 from sfanav.localization.error_metrics import align, localization_metrics
-from sfanav.localization.recipe import CAMERA_ELEVATION, default_network
 from sfanav.pipeline import train_localizer
 
 
 def main() -> None:
-    if len(sys.argv) != 4:
-        sys.exit(__doc__)
-    name, root, out_path = sys.argv[1], sys.argv[2], Path(sys.argv[3])
-    ds = Dataset(root)
-    elev = tuple(ds.metadata.get("camera", {}).get("elevation_deg", CAMERA_ELEVATION))
-    train, (test,) = product_runs(ds, default_network())
+    name, out_path, train, test, elev = scene(__doc__)
     t0 = time.perf_counter()
     loc = train_localizer(train.images, odometry=train.odometry, gyro=train.gyro, supervision="odometry",
                           camera_elevation=elev, feedback="none", filter_noise=False)
@@ -50,10 +40,7 @@ def main() -> None:
         entry[f"test MED {label} (m)"] = localization_metrics(fit.apply(est), test.xy)["med"]
         if scale:
             entry["similarity scale"] = float(fit.scale)
-    res = json.loads(out_path.read_text()) if out_path.exists() else {}
-    res[name] = entry
-    out_path.write_text(json.dumps(res, indent=1, sort_keys=True) + "\n")
-    print(name, json.dumps(entry), flush=True)
+    add_entry(out_path, name, entry)
 
 
 if __name__ == "__main__":

@@ -12,26 +12,16 @@ world frame by the rigid fit on the training run, for scoring only) and the seco
 
 from __future__ import annotations
 
-import json
-import sys
 import time
-from pathlib import Path
 
-from sfanav.data import Dataset
-from sfanav.experiments.product_rows import product_runs
+from _feedback_scene import add_entry, scene
 from sfanav.localization.error_metrics import align, localization_metrics
-from sfanav.localization.recipe import default_network
 from sfanav.loopclosure import make_detector
 from sfanav.pipeline import train_localizer
 
 
 def main() -> None:
-    if len(sys.argv) != 4:
-        sys.exit(__doc__)
-    name, root, out_path = sys.argv[1], sys.argv[2], Path(sys.argv[3])
-    ds = Dataset(root)
-    elev = tuple(ds.metadata["camera"].get("elevation_deg", (-30.0, 20.0)))
-    train, (test,) = product_runs(ds, default_network())
+    name, out_path, train, test, elev = scene(__doc__)
     t0 = time.perf_counter()
     found = make_detector("bow").detect(train.images)
     loc = train_localizer(train.images, odometry=train.odometry, gyro=train.gyro, supervision="odometry",
@@ -40,10 +30,7 @@ def main() -> None:
     med = localization_metrics(world.apply(loc.predict(test.images)), test.xy)["med"]
     entry = {"closures": int(len(found)), "no ground truth + feedback MED (m)": med,
              "seconds": time.perf_counter() - t0}
-    res = json.loads(out_path.read_text()) if out_path.exists() else {}
-    res[name] = entry
-    out_path.write_text(json.dumps(res, indent=1, sort_keys=True) + "\n")
-    print(name, json.dumps(entry), flush=True)
+    add_entry(out_path, name, entry)
 
 
 if __name__ == "__main__":
