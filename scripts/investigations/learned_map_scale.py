@@ -9,7 +9,8 @@ MED (docs/odometry.md, "The learned map's scale").
     PYTHONPATH=python python3 scripts/investigations/learned_map_scale.py 5.2-indoor-II runs/indoor2 OUT.json
 
 Adds OUT.json[NAME] = {"odometry path over true path", "map MED rigid (m)", "map MED similarity (m)",
-"similarity scale", "test MED rigid (m)", "test MED similarity (m)", "seconds"} (both fits on the training run, for
+"similarity scale", "test MED rigid (m)", "test MED similarity (m)", "map MED affine (m)", "map MED quadratic warp
+(m)", "step error median (m)" (consecutive frames' learned step against the true one), "seconds"} (both fits on the training run, for
 scoring only).
 """
 
@@ -40,6 +41,16 @@ def main() -> None:
         entry[f"test MED {label} (m)"] = localization_metrics(fit.apply(est), test.xy)["med"]
         if scale:
             entry["similarity scale"] = float(fit.scale)
+    # smooth distortions beyond a similarity: the map's residual after an affine and a quadratic warp to the truth
+    # (least squares on the training run), and how far the consecutive frames' steps disagree (local noise)
+    x, y = positions[:, 0] - positions[:, 0].mean(), positions[:, 1] - positions[:, 1].mean()
+    for label, cols in (("affine", [np.ones_like(x), x, y]),
+                        ("quadratic warp", [np.ones_like(x), x, y, x * x, x * y, y * y])):
+        A = np.stack(cols, axis=1)
+        coef, *_ = np.linalg.lstsq(A, train.xy[:, :2], rcond=None)
+        entry[f"map MED {label} (m)"] = float(np.median(np.hypot(*(A @ coef - train.xy[:, :2]).T)))
+    steps = np.diff(positions, axis=0) - np.diff(train.xy[:, :2], axis=0)
+    entry["step error median (m)"] = float(np.median(np.hypot(*steps.T)))
     add_entry(out_path, name, entry)
 
 
