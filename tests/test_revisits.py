@@ -199,6 +199,7 @@ def test_learned_positions_send_a_lower_ratio_to_feedback(tiny_run, monkeypatch)
     first, again = log.pop()
     assert first is None and again is not None and loc.learned_positions_ is again
     assert loc.info["feedback"]["map"] == "the first training's"
+    assert any("keeping the positions the first training learned" in str(line) for line in log)
     assert loc.info["revisit change"]["threshold"] == FEEDBACK_RATIO_LEARNED < FEEDBACK_RATIO
     assert any(f"above {FEEDBACK_RATIO_LEARNED:g}" in str(line) for line in log)
     loc, _, _ = _train(X, xy, monkeypatch, FEEDBACK_RATIO_LEARNED * 0.9, feedback="auto", learned=True)
@@ -213,6 +214,7 @@ def test_a_code_changing_too_much_learns_the_map_again(tiny_run, monkeypatch):
     loc, calls, log = _train(X, xy, monkeypatch, FIRST_MAP_MAX_RATIO * 1.5, feedback="auto", learned=True)
     assert calls == [len(X)] and log.pop() == [None, None]
     assert loc.info["feedback"]["map"] == "learned again"
+    assert any("learning the positions again" in str(line) for line in log)
     loc, _, _ = _train(X, xy, monkeypatch, FIRST_MAP_MAX_RATIO * 1.5, feedback="auto")
     assert loc.info["feedback"]["map"] == "ground truth"
 

@@ -286,10 +286,13 @@ def train_localizer(images: Any, *, xy: Any = None, odometry: Any = None, timest
                 log(f"{said}, but only {len(found)} loop closures ({FEEDBACK_DETECTOR}) were found (fewer than "
                     f"{MIN_REVISITS}): no feedback")
             else:
-                log(f"{said}: training again with {len(found)} loop closures ({FEEDBACK_DETECTOR}) as feedback")
                 # without ground truth: the first map, unless the first code changed too much to learn it
                 keep = supervision == "odometry" and change.ratio < FIRST_MAP_MAX_RATIO
                 first_map = loc.learned_positions_ if keep else None
+                kept = (", keeping the positions the first training learned" if keep else
+                        f", learning the positions again (the code changed {FIRST_MAP_MAX_RATIO:g}x or more)"
+                        if supervision == "odometry" else "")
+                log(f"{said}: training again with {len(found)} loop closures ({FEEDBACK_DETECTOR}) as feedback{kept}")
                 loc = fit(Network(net.config), found, first_map)
                 loc.info["revisit change"] = measured
                 loc.info["feedback"] = {"closures": FEEDBACK_DETECTOR, "count": int(len(found)),
