@@ -35,9 +35,10 @@ def feedback_scene(doc: str) -> tuple[str, Path, Any, Any, tuple[float, float], 
     return name, out_path, train, test, elev, make_detector(FEEDBACK_DETECTOR).detect(train.images)
 
 
-def add_entry(out_path: Path, name: str, entry: dict[str, Any]) -> None:
-    """``OUT.json[name] = entry`` (the file created or its other entries kept), and the entry printed."""
+def add_entry(out_path: Path, name: str, entry: dict[str, Any], *, merge: bool = False) -> None:
+    """``OUT.json[name] = entry`` (the file created or its other entries kept; ``merge``: ``entry``'s keys added to
+    what ``OUT.json[name]`` holds), and the entry printed."""
     res = json.loads(out_path.read_text()) if out_path.exists() else {}
-    res[name] = entry
+    res[name] = {**res.get(name, {}), **entry} if merge else entry
     out_path.write_text(json.dumps(res, indent=1, sort_keys=True) + "\n")
     print(name, json.dumps(entry), flush=True)

@@ -15,13 +15,12 @@ Adds OUT.json[NAME] = {"closures", "uniform": {"MED (m)", "seconds"}, "score": {
 
 from __future__ import annotations
 
-import json
 import os
 import time
 
 import numpy as np
 
-from _feedback_scene import feedback_scene
+from _feedback_scene import add_entry, feedback_scene
 from sfanav.localization.error_metrics import localization_metrics
 from sfanav.pipeline import train_localizer
 
@@ -44,10 +43,7 @@ def main() -> None:
         label = label if SEED == 0 else f"{label}@{SEED}"
         entry[label] = {"MED (m)": localization_metrics(loc.predict(test.images), test.xy)["med"],
                         "seconds": time.perf_counter() - t0}
-        res = json.loads(out_path.read_text()) if out_path.exists() else {}
-        res[name] = {**res.get(name, {}), **entry}
-        out_path.write_text(json.dumps(res, indent=1, sort_keys=True) + "\n")
-        print(name, label, json.dumps(entry[label]), flush=True)
+        add_entry(out_path, name, {"closures": entry["closures"], label: entry[label]}, merge=True)
 
 
 if __name__ == "__main__":

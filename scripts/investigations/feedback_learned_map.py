@@ -17,13 +17,13 @@ the training run's estimates against ground truth, the test MED (m), the closure
 
 from __future__ import annotations
 
-import json
 import os
+import sys
 import time
 
 import numpy as np
 
-from _feedback_scene import feedback_scene
+from _feedback_scene import add_entry, feedback_scene
 from sfanav.localization.error_metrics import align, localization_metrics
 from sfanav.pipeline import train_localizer
 
@@ -34,37 +34,34 @@ SKIP = set(filter(None, os.environ.get("SKIP", "").split(";")))
 
 def main() -> None:
     name, out_path, train, test, elev, found = feedback_scene(__doc__)
-    entry = {}
-    first_map = None
-    variants = (("no feedback", None, None), ("feedback", found, None), ("feedback, first map", found, "first"))
-    for label, closures, on in variants:
+    first_map = None  # the no-feedback training's learned positions
+    variants = (("no feedback", None, False), ("feedback", found, False), ("feedback, first map", found, True))
+    for label, closures, on_first_map in variants:
         if label in SKIP:
             continue
+        if on_first_map and first_map is None:
+            sys.exit(f"{label!r} needs the 'no feedback' variant's map: do not skip it")
         t0 = time.perf_counter()
-        if on is None:
+        if on_first_map:  # the feedback network's readout fitted to the map the first network's features learned
+            positions = first_map
+            loc = train_localizer(train.images, xy=first_map, camera_elevation=elev, loop_closures=closures,
+                                  feedback="none", filter_noise=False)
+        else:
             loc = train_localizer(train.images, odometry=train.odometry, gyro=train.gyro, supervision="odometry",
                                   camera_elevation=elev, loop_closures=closures, feedback="none",
                                   filter_noise=False)
             positions = loc.learned_positions_.positions
-        else:  # the feedback network's readout fitted to the map the first network's features learned
-            positions = first_map
-            loc = train_localizer(train.images, xy=first_map, camera_elevation=elev, loop_closures=closures,
-                                  feedback="none", filter_noise=False)
-        if closures is None:
-            first_map = positions
+            if closures is None:
+                first_map = positions
         world = align(positions, train.xy)
         map_err = np.hypot(*(world.apply(positions) - train.xy[:, :2]).T)
         est = np.hypot(*(world.apply(loc.predict(train.images)) - train.xy[:, :2]).T)
-        entry[label] = {"map MED (m)": float(np.median(map_err)), "map p90 (m)": float(np.quantile(map_err, 0.9)),
-                        "training-run estimates vs GT MED (m)": float(np.median(est)),
-                        "test MED (m)": localization_metrics(world.apply(loc.predict(test.images)), test.xy)["med"],
-                        "closures": 0 if closures is None else int(len(closures)),
-                        "seconds": time.perf_counter() - t0}
-        print(name, label, json.dumps(entry[label]), flush=True)
-    res = json.loads(out_path.read_text()) if out_path.exists() else {}
-    res[name] = {**res.get(name, {}), **entry}
-    out_path.write_text(json.dumps(res, indent=1, sort_keys=True) + "\n")
-
+        add_entry(out_path, name, {label: {
+            "map MED (m)": float(np.median(map_err)), "map p90 (m)": float(np.quantile(map_err, 0.9)),
+            "training-run estimates vs GT MED (m)": float(np.median(est)),
+            "test MED (m)": localization_metrics(world.apply(loc.predict(test.images)), test.xy)["med"],
+            "closures": 0 if closures is None else int(len(closures)), "seconds": time.perf_counter() - t0}},
+            merge=True)
 
 if __name__ == "__main__":
     main()

@@ -18,12 +18,12 @@ times the fixed scale). Adds OUT.json[NAME][variant] =
 from __future__ import annotations
 
 import functools
-import json
 import sys
 import time
 from pathlib import Path
 
 import sfanav.data.photometric as ph
+from _feedback_scene import add_entry
 from sfanav.data import Dataset
 from sfanav.experiments.product_rows import product_runs
 from sfanav.localization.error_metrics import localization_metrics
@@ -90,10 +90,7 @@ def main() -> None:
                             progress=False, **kw)
         entry = {"MED (m)": localization_metrics(loc.predict(test.images), test.xy)["med"],
                  "seconds": time.perf_counter() - t0}
-        res = json.loads(out_path.read_text()) if out_path.exists() else {}
-        res.setdefault(name, {})[label] = entry
-        out_path.write_text(json.dumps(res, indent=1, sort_keys=True) + "\n")
-        print(name, label, json.dumps(entry), flush=True)
+        add_entry(out_path, name, {label: entry}, merge=True)
 
 
 if __name__ == "__main__":
