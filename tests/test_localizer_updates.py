@@ -444,3 +444,49 @@ def test_updates_keep_the_low_pass_widths():
     for new in (top, every):
         assert new.photometric_lowpass() == widths
         np.testing.assert_array_equal(new.normalized(C[:2]), lowpass_log_contrast(C[:2], sigma=widths))
+
+
+def test_an_auto_readout_is_chosen_again_by_runs_when_the_kernel_is_learned():
+    """readout="auto" (the default): a localizer whose readout was chosen
+    automatically gets it chosen again, leave-one-run-out over the memory's
+    runs, at a solve that learns the kernel again; exactly the selection
+    select_auto_readout makes on the same features, signatures and run
+    labels. readout="keep", a readout given by kind, or a solve that keeps
+    the kernel refit the fitted kind."""
+    from sfanav.localization.readout_selection import select_auto_readout
+
+    loc = _trained(signature="fourier", rotation_pooling=3)  # readout="auto"
+    assert loc.readout == "auto"
+    new = LocalizerUpdater(loc, kernel="learn").partial_fit(B, YB).localizer_
+    note = new.info["updates"][-1]["readout"]
+    assert note.startswith("chosen again by runs") and "2 of 2 recordings held out" in note
+    mem = new.readout_memory_
+    assert mem.runs.tolist() == [0] * len(A) + [1] * len(B)
+    F = top_stage_features(new.network, mem.inputs)
+    ref = select_auto_readout(np.hstack([F, mem.signatures]), mem.positions, n_outputs=loc.n_outputs_ or None,
+                              n_signature=mem.signatures.shape[1], groups=mem.runs)
+    assert new.readout_spec_["kind"] == ref.spec["kind"] and new.selection_.rule == ref.rule
+    np.testing.assert_allclose(new.selection_.scores, ref.scores, rtol=1e-9)
+    assert new.readout == "auto"  # as the user gave it: the next update may choose again
+    # refitted as fitted: on request, when the kernel is kept, and for a readout given by kind
+    kept = LocalizerUpdater(loc, kernel="learn", readout="keep").partial_fit(B, YB).localizer_
+    assert kept.info["updates"][-1]["readout"].startswith("refitted") and kept.selection_ is None
+    assert kept.readout_spec_["kind"] == loc.readout_spec_["kind"]
+    small = LocalizerUpdater(loc).partial_fit(B[:10], YB[:10]).localizer_  # 50 of 2 x 40: kernel kept
+    assert small.info["updates"][-1]["readout"].startswith("refitted")
+    by_kind = _trained(readout=SIG_GP, signature="fourier", rotation_pooling=3)
+    assert LocalizerUpdater(by_kind, kernel="learn").partial_fit(B, YB).localizer_.info["updates"][-1][
+        "readout"].startswith("refitted")
+    with pytest.raises(ValueError, match="readout must be one of auto, keep"):
+        LocalizerUpdater(loc, readout="again")
+
+
+def test_resolve_all_chooses_an_auto_readout_again_by_runs():
+    loc = fit_localizer(Network(TINY), A, YA, rotation=ROT, progress=False, signature="fourier")
+    remember(loc, A, YA, max_views=1000, keep_images=True)
+    new = LocalizerUpdater(loc, UpdatePolicy(resolve="all"), pair_radius=0.4).partial_fit(B, YB).localizer_
+    assert new.info["updates"][-1]["readout"].startswith("chosen again by runs")
+    assert "recordings held out" in new.selection_.rule and new.readout == "auto"
+    kept = LocalizerUpdater(loc, UpdatePolicy(resolve="all"), pair_radius=0.4,
+                            readout="keep").partial_fit(B, YB).localizer_
+    assert kept.info["updates"][-1]["readout"].startswith("refitted")

@@ -111,16 +111,18 @@ def _detect(kind: str, X: np.ndarray, xy: np.ndarray, quick: bool = False) -> tu
 
 def _train(make_net: Any, X: np.ndarray, xy: np.ndarray, recipe: Recipe, elev: tuple[float, float],
            closures: Any = None, weights: Any = None, rotate: bool = True,
-           readout_memory: int | None = None) -> tuple[Any, float]:
+           readout_memory: int | None = None, groups: Any = None) -> tuple[Any, float]:
     """Fits a localizer under simulated rotation (5 px, whole panorama), or
     with ``rotate=False`` on the images as they come (one view each, no
     rotation invariance: the long-term model of 6.2.2); ``readout_memory``:
-    made updatable (:func:`sfanav.pipeline.train_localizer`)."""
+    made updatable (:func:`sfanav.pipeline.train_localizer`); ``groups``:
+    the recording of each image (the readout chosen by recordings)."""
     t0 = time.perf_counter()
     rotation = Rotation(5, 1.0) if rotate else Rotation(X.shape[2], 1.0)
     recipe = recipe if rotate else dataclasses.replace(recipe, rotation_pooling=None)
     loc = train_localizer(X, xy=xy, network=make_net(), recipe=recipe, camera_elevation=elev, rotation=rotation,
-                          loop_closures=closures, closure_weights=weights, readout_memory=readout_memory)
+                          loop_closures=closures, closure_weights=weights, readout_memory=readout_memory,
+                          **({"groups": groups} if groups is not None else {}))
     return loc, time.perf_counter() - t0
 
 
@@ -289,7 +291,8 @@ THESIS_622 = {"thesis-6.2.2-conditions": {1: None, 9: 0.35}, "thesis-6.2.2-seaso
 
 def run_622(out: Path, *, quick: bool, seed: int, progress: bool, permutations: int = 10,
             configs: tuple[str, ...] = CONFIGS, max_sets: int = 9, by: str = "position", rotate: bool = False,
-            preset: str = "thesis-6.2.2-conditions", orders: list[list[int]] | None = None) -> ExperimentResult:
+            preset: str = "thesis-6.2.2-conditions", orders: list[list[int]] | None = None,
+            by_recordings: bool = False) -> ExperimentResult:
     """Train on 1..``max_sets`` recordings in different light, place-major
     (every recording's image of a place, then the next place), and measure
     on the next unseen recording; ``permutations`` random orders of the 10
@@ -301,7 +304,10 @@ def run_622(out: Path, *, quick: bool, seed: int, progress: bool, permutations: 
     may code the heading, which the route fixes at every place).
     ``orders``: explicit orders of the recordings (each a permutation of
     the indices of the sorted conditions) instead of random ones
-    (``permutations`` is then their number)."""
+    (``permutations`` is then their number). ``by_recordings``: every
+    model is told which recording each image comes from, so its readout is
+    chosen by recordings as ``sfanav train --recordings`` chooses it (the
+    curves of 6.2.2 itself are without: the thesis's long-term model)."""
     from ..loopclosure.conditions import arc_fraction, correspondences, place_major_order
 
     if by not in ("position", "arc"):
@@ -353,7 +359,8 @@ def run_622(out: Path, *, quick: bool, seed: int, progress: bool, permutations: 
                 order = place_major_order([places[s] for s in train])
                 X = np.concatenate([sets[s][0] for s in train])[order]
                 xy = np.concatenate([sets[s][1] for s in train])[order]
-                loc, t = _train(make_net, X, xy, recipe, elev, rotate=rotate)
+                groups = np.concatenate([np.full(len(sets[s][1]), s) for s in train])[order] if by_recordings else None
+                loc, t = _train(make_net, X, xy, recipe, elev, rotate=rotate, groups=groups)
                 secs[p, k - 1] = t
                 X_te, xy_te = sets[test]
                 med[p, k - 1] = _med(loc, X_te, xy_te)["med"]

@@ -99,7 +99,8 @@ def run_online(out: Path, *, quick: bool, seed: int, progress: bool, preset: str
     permutations = permutations if permutations is not None else (1 if quick else FULL_PERMUTATIONS)
     max_sets = max_sets if max_sets is not None else (3 if quick else 9)
     batch = run_622(out, quick=quick, seed=seed, progress=progress, permutations=permutations, configs=(CONFIG,),
-                    max_sets=max_sets, preset=preset, orders=[list(range(N_RECORDINGS))] if chronological else None)
+                    max_sets=max_sets, preset=preset, orders=[list(range(N_RECORDINGS))] if chronological else None,
+                    by_recordings=True)
     d = batch.details
     ds, conds, perms = d["dataset"], d["conditions"], d["permutations"][CONFIG]
     med_batch = np.asarray(d["curves"][CONFIG], dtype=np.float64)
@@ -169,10 +170,12 @@ def run_online(out: Path, *, quick: bool, seed: int, progress: bool, preset: str
              f"sfanav default ({'tiny network, 60x8' if quick else '350x40'}, 6.2.2's training: no simulated "
              f"rotation) trained on the permutation's first recording with a readout memory of {readout_memory} "
              "views, then updated (network top stage re-solved, readout refitted) with each further recording as its "
-             f"own run at its ground-truth positions. '{LABEL_ALL}': the same updates with UpdatePolicy(resolve='all'): "
+             "own run at its ground-truth positions, its readout chosen again over the runs whenever the kernel is "
+             f"learned again (LocalizerUpdater(readout='auto'), the default). '{LABEL_ALL}': the same updates with UpdatePolicy(resolve='all'): "
              "every layer trained again on the remembered images of every recording so far, each view paired with "
              "the nearest view of an earlier recording. Batch place-major: 6.2.2's training on the same k recordings, "
-             "retrained from scratch each time. Test: the next unseen recording of the permutation (and the "
+             "retrained from scratch each time, told which recording each image comes from (its readout chosen by "
+             "recordings, as sfanav train --recordings chooses it). Test: the next unseen recording of the permutation (and the "
              "permutation's last recording). Times: update of the localizer with one recording against the batch "
              "retrain on all k recordings, same process.")
     return ExperimentResult(name, rows, [str(path)] + list(batch.plots), notes,

@@ -49,6 +49,7 @@ from ..data.corruptions import CAMERA, CorruptionModel
 from ..sfa.modelfile import state_from_bytes
 from ..sfa.updates import NetworkUpdater, UpdatePolicy, statistics_bytes
 from .localizer import Localizer, pooling_step
+from .readouts import describe_spec
 
 __all__ = ["MAX_VIEWS", "ReadoutMemory", "remember", "top_stage_inputs", "top_stage_features",
            "top_stage_training_inputs", "top_stage_degree", "LocalizerUpdater", "readout_memory_bytes",
@@ -424,6 +425,17 @@ class LocalizerUpdater:
         spaced sizes and its cost per added image stays bounded. Other
         readouts are refitted as trained in every case. Measured in
         docs/updates-measured.md.
+    readout : {"auto", "keep"}, default "auto"
+        ``"keep"``: the readout is refitted as the model fitted it (its kind
+        and settings). ``"auto"``: when the model's readout was chosen
+        automatically (``readout="auto"``, the default) and the map holds
+        views of two or more runs, the readout is chosen again, as training
+        on several recordings chooses it (leave-one-run-out cross-validation
+        over the runs, ``fit_localizer(groups=)``), at every solve that
+        learns the kernel again (``kernel``): its kind can change, e.g. to
+        the nearest views by the appearance signature, which training on
+        several recordings in different light chooses (docs/updates-measured.md).
+        Elsewhere (a readout given by kind, one run) as ``"keep"``.
 
     Attributes
     ----------
@@ -440,11 +452,14 @@ class LocalizerUpdater:
     def __init__(self, localizer: Localizer, policy: UpdatePolicy | None = None, *,
                  augmentation: CorruptionModel | None = None, seed: int = 0, kernel: str = "auto",
                  cross_pairs: bool = False, pair_radius: float | None = None,
-                 pair_max_turn_deg: float | None = PAIR_MAX_TURN_DEG) -> None:
+                 pair_max_turn_deg: float | None = PAIR_MAX_TURN_DEG, readout: str = "auto") -> None:
         mem = updatable_memory(localizer, "its readout cannot be refitted after an update")
         if kernel not in KERNEL:
             raise ValueError(f"kernel must be one of {', '.join(KERNEL)}, got {kernel!r}")
+        if readout not in READOUT:
+            raise ValueError(f"readout must be one of {', '.join(READOUT)}, got {readout!r}")
         self.kernel = kernel
+        self.readout = readout
         self.cross_pairs = bool(cross_pairs)
         if pair_radius is not None and not (np.isfinite(pair_radius) and pair_radius > 0):
             raise ValueError(f"pair_radius must be a positive number of metres or None, got {pair_radius!r}")
@@ -525,13 +540,16 @@ class LocalizerUpdater:
         aug = None
         if views.augmented is not None:
             aug = (top_stage_features(net, views.augmented[0]), views.augmented[1])
-        # the fitted readout's kind and settings (not "auto": no new selection), the fitted pooling
+        # the fitted readout's kind and settings, the fitted pooling; chosen again by runs when the kernel is learned
         n_seen = views.n_seen
         learned_on = int((old.info or {}).get("readout_kernel_images", mem.n_seen))
         learn = self.kernel == "learn" or (self.kernel == "auto" and n_seen >= 2 * learned_on)
-        new = old.sibling(network=net, readout=readout_spec_for_update(old, "learn" if learn else "keep"),
+        reselect = learn and self._reselects(old, views)
+        new = old.sibling(network=net, readout="auto" if reselect else
+                          readout_spec_for_update(old, "learn" if learn else "keep"),
                           n_outputs=old.n_outputs_ or None, rotation_pooling=old.rotation_pooling_)
-        new.fit_features(F, views.positions, signatures=views.signatures, augmented=aug)
+        new.fit_features(F, views.positions, signatures=views.signatures, augmented=aug,
+                         groups=views.runs if reselect else None)
         # the parameters as the user gave them
         new.readout, new.n_outputs, new.rotation_pooling = old.readout, old.n_outputs, old.rotation_pooling
         new.info = dict(old.info or {})
@@ -540,6 +558,7 @@ class LocalizerUpdater:
         new.info["updates"] = list(new.info.get("updates", [])) + [{"n_images": int(n_added),
                                                                      "readout_views": int(len(views)),
                                                                      "kernel": "learned" if learn else "kept",
+                                                                     "readout": _readout_note(new, reselect),
                                                                      "cross_pairs": int(self.n_pairs_
                                                                                         - self._pairs_at_solve)}]
         self._pairs_at_solve = self.n_pairs_
@@ -590,17 +609,18 @@ class LocalizerUpdater:
             shift = align(views.images, pa, pb)
             keep = np.minimum(shift, W - shift) * (360.0 / W) <= self.pair_max_turn_deg
             pa, pb = pa[keep], pb[keep]
+        reselect = self._reselects(old, views)
         fit = {"transition_weight": self._net.transition_weight}
         if len(pa):
             fit["pairs"] = (pa, pb, np.full(len(pa), self._net.transition_weight))
         new = fit_localizer(Network(net0.config), views.images, P, rotation=rotation,
-                            readout=readout_spec_for_update(old, "learn"), n_outputs=old.n_outputs_ or None,
-                            rows=old.rows,
+                            readout="auto" if reselect else readout_spec_for_update(old, "learn"),
+                            n_outputs=old.n_outputs_ or None, rows=old.rows,
                             rotation_pooling=old.rotation_pooling_, signature=old.signature, photometric=old.photometric,
                             lowpass=old.lowpass,
                             readout_augmentation=self.augmentation, invariance=invariance,
                             invariance_weight=float(info.get("invariance_weight", 1.0)), network_fit=fit,
-                            progress=False, seed=self.seed)
+                            progress=False, seed=self.seed, **({"groups": views.runs} if reselect else {}))
         memory = _memory_of(new, views.images, P, self.augmentation, self.seed, max_views=len(P), keep_images=True)
         memory.runs, memory.max_views, memory.n_seen = views.runs.copy(), views.max_views, views.n_seen
         n_added = 0 if self._pending is None else self._pending.n_seen
@@ -608,7 +628,8 @@ class LocalizerUpdater:
         new.info["n_train_images"] = int(info.get("n_train_images", old.readout_memory_.n_seen)) + n_added
         new.info["updates"] = list(info.get("updates", [])) + [{"n_images": int(n_added), "readout_views": int(len(P)),
                                                                 "resolve": "all", "cross_run_pairs": int(len(pa)),
-                                                                "cross_run_pairs_turned": int(n_found - len(pa))}]
+                                                                "cross_run_pairs_turned": int(n_found - len(pa)),
+                                                                "readout": _readout_note(new, reselect)}]
         new.info["readout_kernel_images"] = int(views.n_seen)
         new.readout_memory_ = memory.subset(evenly_spaced(len(memory), memory.max_views))
         new.readout, new.n_outputs, new.rotation_pooling = old.readout, old.n_outputs, old.rotation_pooling
@@ -617,6 +638,20 @@ class LocalizerUpdater:
         self.n_pending_ = 0
         self.n_solves_ += 1
         return new
+
+    def _reselects(self, old: Localizer, views: ReadoutMemory) -> bool:
+        """Whether this solve chooses the readout again by runs (``readout="auto"``)."""
+        return (self.readout == "auto" and isinstance(old.readout, str) and old.readout == "auto"
+                and len(np.unique(views.runs)) >= 2)
+
+
+def _readout_note(localizer: Localizer, reselected: bool) -> str:
+    """What an update's record says of the readout: its kind, and the rule when it was chosen again."""
+    kind = describe_spec(localizer.readout_spec_)
+    sel = getattr(localizer, "selection_", None)
+    if reselected and sel is not None:
+        return f"chosen again by runs: {kind} ({sel.rule})"
+    return f"refitted: {kind}"
 
 
 def cross_run_pairs(old_xy: Any, new_xy: Any, radius: float | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -648,6 +683,9 @@ def cross_run_pairs(old_xy: Any, new_xy: Any, radius: float | None = None) -> tu
     keep = np.flatnonzero(d < radius)
     return i[keep].astype(np.int64), keep.astype(np.int64)
 
+
+READOUT = ("auto", "keep")
+"""What an update does with the readout's kind (:class:`LocalizerUpdater` ``readout``)."""
 
 KERNEL = ("auto", "keep", "learn")
 """What an update does with a Gaussian-process readout's kernel."""

@@ -50,6 +50,9 @@ def _add_update(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                    help="a Gaussian-process readout's kernel: keep the fitted one and refit the posterior (fast), "
                         "learn it again as training does, or (auto, default) learn it again once the model has "
                         "seen twice the images it was learned on")
+    p.add_argument("--readout", choices=("auto", "keep"), default="auto",
+                   help="the readout's kind: chosen again over the map's runs (auto, default: a model whose readout "
+                        "was chosen automatically, whenever the kernel is learned again) or refitted as fitted (keep)")
     p.add_argument("--resolve", choices=("top", "all"), default="top",
                    help="re-solve the top stage from the stored statistics (default; exact, a fraction of a "
                         "retrain), or train every layer again on the images the model keeps (sfanav train "
@@ -169,7 +172,7 @@ def _update_localizer(args: argparse.Namespace, model: "Any", out: "Any", loc: "
     try:
         # refuses a network without statistics
         updater = LocalizerUpdater(loc, UpdatePolicy(resolve=args.resolve), augmentation=augmentation,
-                                   kernel=args.kernel)
+                                   kernel=args.kernel, readout=args.readout)
     except ValueError as exc:
         raise UsageError(f"{model}: {exc}") from None
     ds = select_run(_open_run(args, stack), args.run_name, args.camera)
@@ -203,7 +206,9 @@ def _update_localizer(args: argparse.Namespace, model: "Any", out: "Any", loc: "
     kept = ("dropped" if args.drop_statistics else
             f"kept ({sizes['readout_memory']} bytes of readout memory, {len(new.readout_memory_)} views; "
             f"{sizes['network_statistics']} bytes of network statistics)")
-    print(f"updated with {len(images)} images; readout {new.describe_readout()} refitted on "
+    how = "chosen again over the map's runs and fitted" if new.info["updates"][-1].get("readout", "").startswith(
+        "chosen again") else "refitted"
+    print(f"updated with {len(images)} images; readout {new.describe_readout()} {how} on "
           f"{new.info['updates'][-1]['readout_views']} views; update data {kept}; wrote {out}")
     return 0
 
