@@ -55,6 +55,13 @@ def test_622_online_quick(out):
     assert upd[0, -1] < 10 * batch[0, -1]
     assert 0 < rows["updated / batch MED after 3 recordings"]["sfanav"] < 10
     assert "own run" in res.notes and any(p.endswith("6.2.2-online-error-vs-recordings.png") for p in res.plots)
+    # the online peer on the same stream: IncSFA's top stage, the readout chosen again over the recordings
+    from sfanav.experiments.updates import LABEL_INCSFA
+
+    inc = np.asarray(c[LABEL_INCSFA])
+    assert inc.shape == (1, 3) and np.isfinite(inc).all() and LABEL_INCSFA in res.notes
+    assert rows[f"update time / retrain time after 2 recordings [{LABEL_INCSFA}]"]["sfanav"] > 0
+    assert f"MED (m) after 3 recordings, last recording held out [{LABEL_INCSFA}]" in rows
 
 
 def test_622_seasons_online_quick(out):

@@ -77,6 +77,37 @@ def test_readout_on_incsfa_features_predicts(loc):
     np.testing.assert_allclose(model.readout_.training_positions_, np.concatenate([YA, YB]))
 
 
+def test_an_auto_readout_is_chosen_again_over_the_runs():
+    """As the exact update: a localizer whose readout was chosen automatically
+    gets it chosen again over the views' runs (leave-one-run-out), a readout
+    given by kind is refitted as given, and one run refits as fitted."""
+    from sfanav.experiments.incsfa_peer import memory_views, views_with_run
+    from sfanav.localization.readout_selection import select_auto_readout
+
+    auto = fit_localizer(Network(TINY), A, YA, rotation=ROT, progress=False, signature="fourier",
+                         readout_memory=1000)
+    model = IncSFATopStage(auto, n_whitened=20, mca_rates=(0.5,)).partial_fit(A).partial_fit(B)
+    views = views_with_run(auto, memory_views(auto.readout_memory_), B, YB)
+    assert views.runs.tolist() == [0] * len(A) + [1] * len(B)
+    model.fit_readout(views.inputs, views.positions, views.signatures, runs=views.runs)
+    sel = model.readout_.selection_
+    assert sel is not None and "2 of 2 recordings held out" in sel.rule
+    F = np.hstack([model.features_of_inputs(views.inputs), views.signatures])
+    ref = select_auto_readout(F, views.positions, n_outputs=auto.n_outputs_ or None,
+                              n_signature=views.signatures.shape[1], groups=views.runs)
+    assert sel.rule == ref.rule and model.readout_.readout_spec_["kind"] == ref.spec["kind"]
+    one = memory_views(auto.readout_memory_)
+    model.fit_readout(one.inputs, one.positions, one.signatures, runs=one.runs)
+    assert model.readout_.readout_spec_["kind"] == auto.readout_spec_["kind"]
+    assert "recordings held out" not in (model.readout_.selection_.rule if model.readout_.selection_ else "")
+    quad = fit_localizer(Network(TINY), A, YA, rotation=ROT, progress=False, readout="quadratic", n_outputs=3,
+                         readout_memory=1000)
+    by_kind = IncSFATopStage(quad, n_whitened=20, mca_rates=(0.5,)).partial_fit(A)
+    v = views_with_run(quad, memory_views(quad.readout_memory_), B, YB)
+    by_kind.fit_readout(v.inputs, v.positions, runs=v.runs)
+    assert by_kind.readout_.readout_spec_["kind"] == "quadratic" and by_kind.readout_.selection_ is None
+
+
 def test_canonical_correlations():
     rng = np.random.default_rng(0)
     F = rng.standard_normal((500, 3))

@@ -47,7 +47,8 @@ from ..localization.updates import (
 )
 from ..sfa.incsfa import IncSFA
 
-__all__ = ["INCSFA_MCA_RATES", "INCSFA_WHITENED", "IncSFATopStage", "canonical_correlations", "incsfa_update"]
+__all__ = ["INCSFA_MCA_RATES", "INCSFA_WHITENED", "IncSFATopStage", "canonical_correlations", "incsfa_update",
+           "memory_views", "views_with_run"]
 
 INCSFA_MCA_RATES = (0.5, 0.1, 0.02)
 """One pass over each run's top-stage sequence per value: IncSFA's
@@ -158,16 +159,23 @@ class IncSFATopStage:
         return self.features_of_inputs(top_stage_inputs(self.localizer, images))
 
     def fit_readout(self, inputs: Any, positions: Any, signatures: Any = None, *,
-                    kernel: str = "learn") -> "IncSFATopStage":
+                    kernel: str = "learn", runs: Any = None) -> "IncSFATopStage":
         """Fits the localizer's kind of readout (its settings; a Gaussian
         process's kernel learned again with ``kernel="learn"``, or kept)
         on the IncSFA's features of views given by their top-stage inputs
         (N, K, k), at ``positions`` (N, 2), with their signatures (N, q)
-        if the readout reads them. Returns ``self``."""
+        if the readout reads them. ``runs`` (N,): the run of each view; with
+        two or more and a localizer whose readout was chosen automatically,
+        the readout is chosen again over the runs, as the exact update
+        chooses it (:class:`sfanav.localization.updates.LocalizerUpdater`
+        ``readout="auto"``). Returns ``self``."""
         old = self.localizer
-        self.readout_ = old.sibling(readout=readout_spec_for_update(old, kernel), n_outputs=old.n_outputs_,
-                                    rotation_pooling=old.rotation_pooling_)
-        self.readout_.fit_features(self.features_of_inputs(inputs), positions, signatures=signatures)
+        again = (runs is not None and isinstance(old.readout, str) and old.readout == "auto"
+                 and len(np.unique(np.asarray(runs))) >= 2)
+        self.readout_ = old.sibling(readout="auto" if again else readout_spec_for_update(old, kernel),
+                                    n_outputs=old.n_outputs_ or None, rotation_pooling=old.rotation_pooling_)
+        self.readout_.fit_features(self.features_of_inputs(inputs), positions, signatures=signatures,
+                                   groups=np.asarray(runs) if again else None)
         return self
 
     @property
@@ -182,6 +190,25 @@ class IncSFATopStage:
         a = np.asarray(images)
         G = self.localizer.signatures(a) if self.readout_.n_signature_ else None
         return self.readout_.predict_features(self.features(a), signatures=G)
+
+
+def memory_views(mem: ReadoutMemory) -> ReadoutMemory:
+    """The views of a readout memory without their images (what a readout
+    refit reads: stage inputs, positions, signatures, runs)."""
+    return ReadoutMemory(mem.inputs, mem.positions, mem.signatures, max_views=mem.max_views, n_seen=mem.n_seen,
+                         runs=mem.runs)
+
+
+def views_with_run(localizer: Any, views: ReadoutMemory, images: Any, xy: Any) -> ReadoutMemory:
+    """``views`` extended by a new run's, images (N, H, W[, C]) at ``xy``
+    (N, 2) m, their top-stage inputs under ``localizer``'s frozen lower
+    layers: the views the exact update's readout sees (the memory extended
+    and thinned alike, the run labelled as the next)."""
+    a = np.asarray(images)
+    new = ReadoutMemory(top_stage_inputs(localizer, a), xy, localizer.signatures(a) if localizer.n_signature_ else None,
+                        max_views=len(a))
+    new.max_views = views.max_views
+    return views.extended(new)
 
 
 def incsfa_update(stale: Any, run_a: tuple[Any, Any], run_b: tuple[Any, Any], *,
@@ -224,15 +251,8 @@ def incsfa_update(stale: Any, run_a: tuple[Any, Any], run_b: tuple[Any, Any], *,
     canonical_a = canonical_correlations(model.features_of_inputs(mem.inputs), exact_a)
     t0 = time.perf_counter()
     model.partial_fit(run_b[0])
-    images_b = np.asarray(run_b[0])
-    new = ReadoutMemory(top_stage_inputs(stale, images_b), run_b[1],
-                        stale.signatures(images_b) if stale.n_signature_ else None, max_views=len(images_b))
-    new.max_views = mem.max_views
-    # the views the updated arm's readout sees (the memory extended and thinned alike), without their images
-    kept = ReadoutMemory(mem.inputs, mem.positions, mem.signatures, max_views=mem.max_views, n_seen=mem.n_seen,
-                         runs=mem.runs)
-    views = kept.extended(new)
-    model.fit_readout(views.inputs, views.positions, views.signatures, kernel=kernel)
+    views = views_with_run(stale, memory_views(mem), *run_b)
+    model.fit_readout(views.inputs, views.positions, views.signatures, kernel=kernel, runs=views.runs)
     t_update = time.perf_counter() - t0
     say(f"IncSFA top stage: {model.passes} pass(es) over A in {t_a:.1f} s, update with B ({model.passes} pass(es), "
         f"readout on {len(views)} views) in {t_update:.1f} s")

@@ -53,7 +53,7 @@ from ..sfa.network import Rotation
 from ..sfa.updates import UpdatePolicy
 from . import ExperimentResult, register
 from .flags import area_diagonal, flag_row
-from .incsfa_peer import INCSFA_MCA_RATES, INCSFA_WHITENED, incsfa_update
+from .incsfa_peer import INCSFA_MCA_RATES, INCSFA_WHITENED, IncSFATopStage, incsfa_update, memory_views, views_with_run
 from .localization import progress_log, simulated
 from .robustness import long_term_configuration, run_622, train_long_term
 
@@ -68,6 +68,8 @@ RESOLVES = ("top", "all")
 """The update policies measured (:class:`sfanav.sfa.updates.UpdatePolicy` ``resolve``)."""
 LABEL_ALL = "updated, every layer"
 """The rows' name for ``resolve="all"``."""
+LABEL_INCSFA = "IncSFA top stage"
+"""The rows' name for the online peer (:mod:`sfanav.experiments.incsfa_peer`): the top stage replaced by IncSFA."""
 
 
 def _med(loc: Any, X: np.ndarray, xy: np.ndarray) -> tuple[float, int]:
@@ -118,9 +120,25 @@ def run_online(out: Path, *, quick: bool, seed: int, progress: bool, preset: str
     held = {r: np.full(shape, np.nan) for r in RESOLVES}
     secs = {r: np.full(shape, np.nan) for r in RESOLVES}  # k = 1: the first training; k > 1: the update with k
     ext = {r: np.zeros(shape, dtype=np.int64) for r in RESOLVES}
+    med_inc, held_inc, secs_inc = np.full(shape, np.nan), np.full(shape, np.nan), np.full(shape, np.nan)
     for p, perm in enumerate(perms):
         first, t_first = train_long_term(make_net, *sets[perm[0]], recipe, elev, readout_memory=readout_memory)
         remember(first, *sets[perm[0]], max_views=readout_memory, keep_images=True)  # for resolve="all"
+        # the online peer: IncSFA as the top stage on the first model's frozen lower layers, fed one recording at a
+        # time (its passes over the first recording stand for the first training and are not timed as an update)
+        inc = IncSFATopStage(first, seed=seed).partial_fit(sets[perm[0]][0])
+        views = memory_views(first.readout_memory_)
+        for k in range(1, n_sets + 1):
+            t0 = time.perf_counter()
+            if k > 1:
+                inc.partial_fit(sets[perm[k - 1]][0])
+                views = views_with_run(first, views, *sets[perm[k - 1]])
+            inc.fit_readout(views.inputs, views.positions, views.signatures, runs=views.runs)
+            secs_inc[p, k - 1] = time.perf_counter() - t0 if k > 1 else t_first
+            med_inc[p, k - 1] = _med(inc, *sets[perm[k]])[0]
+            held_inc[p, k - 1] = _med(inc, *sets[perm[-1]])[0]
+            log(f"{name} permutation {p}, {k} recordings, IncSFA top stage: MED {med_inc[p, k - 1]:.3f} m "
+                f"(readout {inc.readout_.describe_readout()})")
         for r in RESOLVES:
             up, loc = LocalizerUpdater(first, UpdatePolicy(resolve=r)), first
             secs[r][p, 0] = t_first
@@ -142,11 +160,13 @@ def run_online(out: Path, *, quick: bool, seed: int, progress: bool, preset: str
         rec = f"{k} recording{'s' if k > 1 else ''}"
         for label, curve, n_ext in (("updated", med["top"], int(ext["top"][:, k - 1].sum())),
                                     (LABEL_ALL, med["all"], int(ext["all"][:, k - 1].sum())),
+                                    (LABEL_INCSFA, med_inc, 0),
                                     ("batch place-major", med_batch, 0), ("perfect memory", pm, 0)):
             rows.append(flag_row({"metric": f"MED (m) after {rec} [{label}]", "thesis": None,
                                   "sfanav": float(np.nanmean(curve[:, k - 1])), "configuration": label},
                                  extrapolated=n_ext, diagonal=diagonal))
-        for label, curve in (("updated", held["top"]), (LABEL_ALL, held["all"]), ("batch place-major", held_batch)):
+        for label, curve in (("updated", held["top"]), (LABEL_ALL, held["all"]), (LABEL_INCSFA, held_inc),
+                             ("batch place-major", held_batch)):
             rows.append(flag_row({"metric": f"MED (m) after {rec}, last recording held out [{label}]",
                                   "thesis": None, "sfanav": float(np.nanmean(curve[:, k - 1])),
                                   "configuration": label}, diagonal=diagonal))
@@ -155,16 +175,23 @@ def run_online(out: Path, *, quick: bool, seed: int, progress: bool, preset: str
                          "sfanav": float(np.nanmean(secs["top"][:, k - 1] / t_batch[:, k - 1]))})
             rows.append({"metric": f"update time / retrain time after {rec} [{LABEL_ALL}]", "thesis": None,
                          "sfanav": float(np.nanmean(secs["all"][:, k - 1] / t_batch[:, k - 1]))})
+            rows.append({"metric": f"update time / retrain time after {rec} [{LABEL_INCSFA}]", "thesis": None,
+                         "sfanav": float(np.nanmean(secs_inc[:, k - 1] / t_batch[:, k - 1]))})
     rows.append({"metric": f"updated / batch MED after {n_sets} recordings", "thesis": None,
                  "sfanav": float(np.nanmean(med["top"][:, -1]) / np.nanmean(med_batch[:, -1]))})
     rows.append({"metric": f"updated / batch MED after {n_sets} recordings [{LABEL_ALL}]", "thesis": None,
                  "sfanav": float(np.nanmean(med["all"][:, -1]) / np.nanmean(med_batch[:, -1]))})
+    rows.append({"metric": f"updated / batch MED after {n_sets} recordings [{LABEL_INCSFA}]", "thesis": None,
+                 "sfanav": float(np.nanmean(med_inc[:, -1]) / np.nanmean(med_batch[:, -1]))})
     rows.append({"metric": "total update time / total retrain time", "thesis": None,
                  "sfanav": float(np.nansum(secs["top"][:, 1:]) / np.nansum(t_batch[:, 1:]))})
     rows.append({"metric": f"total update time / total retrain time [{LABEL_ALL}]", "thesis": None,
                  "sfanav": float(np.nansum(secs["all"][:, 1:]) / np.nansum(t_batch[:, 1:]))})
+    rows.append({"metric": f"total update time / total retrain time [{LABEL_INCSFA}]", "thesis": None,
+                 "sfanav": float(np.nansum(secs_inc[:, 1:]) / np.nansum(t_batch[:, 1:]))})
     path = _plot(out / f"{name}-error-vs-recordings.png", name,
-                 {"updated": med["top"], LABEL_ALL: med["all"], "batch place-major": med_batch, "perfect memory": pm})
+                 {"updated": med["top"], LABEL_ALL: med["all"], LABEL_INCSFA: med_inc, "batch place-major": med_batch,
+                  "perfect memory": pm})
     notes = (f"Scene: sim preset {preset} (seed {seed}), {len(conds)} recordings of one {len(sets[0][1])}-frame "
              f"loop. {len(perms)} permutation(s) of the recordings, the same as the batch run's. Updated: the "
              f"sfanav default ({'tiny network, 60x8' if quick else '350x40'}, 6.2.2's training: no simulated "
@@ -173,16 +200,21 @@ def run_online(out: Path, *, quick: bool, seed: int, progress: bool, preset: str
              "own run at its ground-truth positions, its readout chosen again over the runs whenever the kernel is "
              f"learned again (LocalizerUpdater(readout='auto'), the default). '{LABEL_ALL}': the same updates with UpdatePolicy(resolve='all'): "
              "every layer trained again on the remembered images of every recording so far, each view paired with "
-             "the nearest view of an earlier recording. Batch place-major: 6.2.2's training on the same k recordings, "
+             f"the nearest view of an earlier recording. '{LABEL_INCSFA}': the online peer, IncSFA "
+             f"({len(INCSFA_MCA_RATES)} passes per recording, {INCSFA_WHITENED} whitened directions) as the top stage on "
+             "the first model's frozen lower layers, fed one recording at a time, the readout refitted (and chosen "
+             "again over the recordings) on its features of every view so far. Batch place-major: 6.2.2's training on the same k recordings, "
              "retrained from scratch each time, told which recording each image comes from (its readout chosen by "
              "recordings, as sfanav train --recordings chooses it). Test: the next unseen recording of the permutation (and the "
              "permutation's last recording). Times: update of the localizer with one recording against the batch "
              "retrain on all k recordings, same process.")
     return ExperimentResult(name, rows, [str(path)] + list(batch.plots), notes,
                             details={"curves": {"updated": med["top"].tolist(), LABEL_ALL: med["all"].tolist(),
+                                                LABEL_INCSFA: med_inc.tolist(),
                                                 "updated, last recording held out": held["top"].tolist(),
                                                 "batch place-major": med_batch.tolist(), "perfect memory": pm.tolist()},
                                      "seconds": {"updated": secs["top"].tolist(), LABEL_ALL: secs["all"].tolist(),
+                                                 LABEL_INCSFA: secs_inc.tolist(),
                                                  "batch place-major": t_batch.tolist()},
                                      "batch": batch})
 
@@ -223,8 +255,6 @@ CHANGES_QUICK_FRAMES = 600
 """Quick mode: the first frames of every run (most of A's and B's lanes), of which every
 :data:`CHANGES_QUICK_STEP`-th is used."""
 CHANGES_QUICK_STEP = 4
-LABEL_INCSFA = "IncSFA top stage"
-"""The rows' name for the online peer: the stale model's top stage replaced by IncSFA."""
 CHANGES_LABELS = ("stale", "updated", LABEL_ALL, LABEL_INCSFA, "retrained", "perfect memory A",
                   "perfect memory A + B")
 """The models of ``6.2.1-changes-online``, as the rows name them."""
