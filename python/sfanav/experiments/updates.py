@@ -82,7 +82,7 @@ def _med(loc: Any, X: np.ndarray, xy: np.ndarray) -> tuple[float, int]:
 
 def run_online(out: Path, *, quick: bool, seed: int, progress: bool, preset: str = "thesis-6.2.2-conditions",
                permutations: int | None = None, max_sets: int | None = None,
-               readout_memory: int = MAX_VIEWS, chronological: bool = False) -> ExperimentResult:
+               readout_memory: int = MAX_VIEWS, chronological: bool = False, readout: str = "auto") -> ExperimentResult:
     """The recordings of ``preset`` fed one at a time to an updatable sfanav
     default beside 6.2.2's batch place-major training and perfect memory
     on the same recordings (same permutations, same test recordings).
@@ -92,8 +92,15 @@ def run_online(out: Path, *, quick: bool, seed: int, progress: bool, preset: str
     ``readout_memory``: views the localizer keeps for its readout (the
     default holds all ten 279-frame recordings). ``chronological``: one
     order, the recordings as their conditions are numbered (the seasons
-    scene: spring to winter), instead of random permutations. ValueError
+    scene: spring to winter), instead of random permutations. ``readout``:
+    ``"auto"`` (the default's behaviour) the updates choose the readout
+    again over the recordings and the batch trainings are told the
+    recordings (both then choose as ``sfanav train --recordings``);
+    ``"keep"`` every model keeps the readout kind its first recording
+    chose (the slow features' own join, compared on equal readouts). ValueError
     for an unknown preset."""
+    if readout not in ("auto", "keep"):
+        raise ValueError(f'readout must be "auto" or "keep", got {readout!r}')
     name = {v: k for k, v in PRESETS.items()}.get(preset)
     if name is None:
         raise ValueError(f"preset must be one of {sorted(PRESETS.values())}, got {preset!r}")
@@ -102,7 +109,7 @@ def run_online(out: Path, *, quick: bool, seed: int, progress: bool, preset: str
     max_sets = max_sets if max_sets is not None else (3 if quick else 9)
     batch = run_622(out, quick=quick, seed=seed, progress=progress, permutations=permutations, configs=(CONFIG,),
                     max_sets=max_sets, preset=preset, orders=[list(range(N_RECORDINGS))] if chronological else None,
-                    by_recordings=True)
+                    by_recordings=readout == "auto")
     d = batch.details
     ds, conds, perms = d["dataset"], d["conditions"], d["permutations"][CONFIG]
     med_batch = np.asarray(d["curves"][CONFIG], dtype=np.float64)
@@ -133,14 +140,15 @@ def run_online(out: Path, *, quick: bool, seed: int, progress: bool, preset: str
             if k > 1:
                 inc.partial_fit(sets[perm[k - 1]][0])
                 views = views_with_run(first, views, *sets[perm[k - 1]])
-            inc.fit_readout(views.inputs, views.positions, views.signatures, runs=views.runs)
+            inc.fit_readout(views.inputs, views.positions, views.signatures,
+                            runs=views.runs if readout == "auto" else None)
             secs_inc[p, k - 1] = time.perf_counter() - t0 if k > 1 else t_first
             med_inc[p, k - 1] = _med(inc, *sets[perm[k]])[0]
             held_inc[p, k - 1] = _med(inc, *sets[perm[-1]])[0]
             log(f"{name} permutation {p}, {k} recordings, IncSFA top stage: MED {med_inc[p, k - 1]:.3f} m "
                 f"(readout {inc.readout_.describe_readout()})")
         for r in RESOLVES:
-            up, loc = LocalizerUpdater(first, UpdatePolicy(resolve=r)), first
+            up, loc = LocalizerUpdater(first, UpdatePolicy(resolve=r), readout=readout), first
             secs[r][p, 0] = t_first
             for k in range(1, n_sets + 1):
                 if k > 1:
@@ -192,22 +200,28 @@ def run_online(out: Path, *, quick: bool, seed: int, progress: bool, preset: str
     path = _plot(out / f"{name}-error-vs-recordings.png", name,
                  {"updated": med["top"], LABEL_ALL: med["all"], LABEL_INCSFA: med_inc, "batch place-major": med_batch,
                   "perfect memory": pm})
+    again = readout == "auto"
     notes = (f"Scene: sim preset {preset} (seed {seed}), {len(conds)} recordings of one {len(sets[0][1])}-frame "
              f"loop. {len(perms)} permutation(s) of the recordings, the same as the batch run's. Updated: the "
              f"sfanav default ({'tiny network, 60x8' if quick else '350x40'}, 6.2.2's training: no simulated "
              f"rotation) trained on the permutation's first recording with a readout memory of {readout_memory} "
              "views, then updated (network top stage re-solved, readout refitted) with each further recording as its "
-             "own run at its ground-truth positions, its readout chosen again over the runs whenever the kernel is "
-             f"learned again (LocalizerUpdater(readout='auto'), the default). '{LABEL_ALL}': the same updates with UpdatePolicy(resolve='all'): "
-             "every layer trained again on the remembered images of every recording so far, each view paired with "
-             f"the nearest view of an earlier recording. '{LABEL_INCSFA}': the online peer, IncSFA "
-             f"({len(INCSFA_MCA_RATES)} passes per recording, {INCSFA_WHITENED} whitened directions) as the top stage on "
-             "the first model's frozen lower layers, fed one recording at a time, the readout refitted (and chosen "
-             "again over the recordings) on its features of every view so far. Batch place-major: 6.2.2's training on the same k recordings, "
-             "retrained from scratch each time, told which recording each image comes from (its readout chosen by "
-             "recordings, as sfanav train --recordings chooses it). Test: the next unseen recording of the permutation (and the "
-             "permutation's last recording). Times: update of the localizer with one recording against the batch "
-             "retrain on all k recordings, same process.")
+             "own run at its ground-truth positions, "
+             + ("its readout chosen again over the runs whenever the kernel is learned again "
+                "(LocalizerUpdater(readout='auto'), the default). " if again else
+                "its readout's kind kept as the first recording chose it (LocalizerUpdater(readout='keep')). ")
+             + f"'{LABEL_ALL}': the same updates with UpdatePolicy(resolve='all'): every layer trained again on the "
+             "remembered images of every recording so far, each view paired with the nearest view of an earlier "
+             f"recording. '{LABEL_INCSFA}': the online peer, IncSFA ({len(INCSFA_MCA_RATES)} passes per recording, "
+             f"{INCSFA_WHITENED} whitened directions) as the top stage on the first model's frozen lower layers, fed "
+             "one recording at a time, the readout refitted "
+             + ("(and chosen again over the recordings) " if again else "(the first recording's kind) ")
+             + "on its features of every view so far. Batch place-major: 6.2.2's training on the same k recordings, "
+             "retrained from scratch each time"
+             + (", told which recording each image comes from (its readout chosen by recordings, as sfanav train "
+                "--recordings chooses it)" if again else ", not told the recordings")
+             + ". Test: the next unseen recording of the permutation (and the permutation's last recording). Times: "
+             "update of the localizer with one recording against the batch retrain on all k recordings, same process.")
     return ExperimentResult(name, rows, [str(path)] + list(batch.plots), notes,
                             details={"curves": {"updated": med["top"].tolist(), LABEL_ALL: med["all"].tolist(),
                                                 LABEL_INCSFA: med_inc.tolist(),
