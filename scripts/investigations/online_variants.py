@@ -35,9 +35,10 @@ def main() -> None:
     ap.add_argument("--permutations", type=int, default=None, help="default: the experiment's (3)")
     ap.add_argument("--preset", default="thesis-6.2.2-conditions")
     args = ap.parse_args()
-    res = run_online(args.out, quick=False, seed=0, progress=True, preset=args.preset,
+    seasons = args.preset == "thesis-6.2.2-seasons"  # as 6.2.2-seasons-online: one order, spring to winter
+    res = run_online(args.out, quick=False, seed=0, progress=True, preset=args.preset, chronological=seasons,
                      permutations=args.permutations, readout_memory=args.memory, readout=args.readout)
-    stem = "6.2.2-online" if args.preset == "thesis-6.2.2-conditions" else "6.2.2-seasons-online"
+    stem = "6.2.2-seasons-online" if seasons else "6.2.2-online"
     tag = f"-memory-{args.memory}" + ("-readout-kept" if args.readout == "keep" else "")
     print(res.write_json(args.out / f"{stem}{tag}.json"))
 
