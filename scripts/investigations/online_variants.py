@@ -15,12 +15,15 @@ full-memory run's, whose every-layer curve is the retrain on all the data (same 
 ``--readout keep``: every model keeps the readout kind its first recording chose and the batch is not told the
 recordings (the experiment before updates chose the readout again: the slow features' own join on equal readouts).
 
-Writes OUT/6.2.2-online-memory-N[-readout-kept].json (the experiment's rows) or the seasons' alike.
+Writes OUT/6.2.2-online-memory-N[-readout-kept].json (the experiment's rows, and ``curves``: every permutation's
+MED per number of recordings and arm) or the seasons' alike.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
+import os
 from pathlib import Path
 
 from sfanav.experiments.updates import run_online
@@ -40,7 +43,14 @@ def main() -> None:
                      permutations=args.permutations, readout_memory=args.memory, readout=args.readout)
     stem = "6.2.2-seasons-online" if seasons else "6.2.2-online"
     tag = f"-memory-{args.memory}" + ("-readout-kept" if args.readout == "keep" else "")
-    print(res.write_json(args.out / f"{stem}{tag}.json"))
+    path = res.write_json(args.out / f"{stem}{tag}.json")
+    # and every permutation's curve (the experiment's rows are means over the permutations)
+    out = json.loads(path.read_text())
+    out["curves"] = {k: v for k, v in res.details["curves"].items()}
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(json.dumps(out, indent=2) + "\n")
+    os.replace(tmp, path)
+    print(path)
 
 
 if __name__ == "__main__":
