@@ -77,35 +77,33 @@ def test_readout_on_incsfa_features_predicts(loc):
     np.testing.assert_allclose(model.readout_.training_positions_, np.concatenate([YA, YB]))
 
 
-def test_an_auto_readout_is_chosen_again_over_the_runs():
-    """As the exact update: a localizer whose readout was chosen automatically
-    gets it chosen again over the views' runs (leave-one-run-out), a readout
-    given by kind is refitted as given, and one run refits as fitted."""
+def test_the_readout_is_of_the_kind_the_exact_update_has():
+    """like=: the peer's readout takes the kind and settings of the exact
+    update's (here one that chose the nearest views over the runs), its
+    kernel learned again; by default the stale localizer's kind."""
     from sfanav.experiments.incsfa_peer import memory_views, views_with_run
-    from sfanav.localization.readout_selection import select_auto_readout
+    from sfanav.localization.updates import LocalizerUpdater
 
     auto = fit_localizer(Network(TINY), A, YA, rotation=ROT, progress=False, signature="fourier",
                          readout_memory=1000)
+    exact = LocalizerUpdater(auto, kernel="learn").partial_fit(B, YB).localizer_
     model = IncSFATopStage(auto, n_whitened=20, mca_rates=(0.5,)).partial_fit(A).partial_fit(B)
     views = views_with_run(auto, memory_views(auto.readout_memory_), B, YB)
-    assert views.runs.tolist() == [0] * len(A) + [1] * len(B)
-    model.fit_readout(views.inputs, views.positions, views.signatures, runs=views.runs)
-    sel = model.readout_.selection_
-    assert sel is not None and "2 of 2 recordings held out" in sel.rule
-    F = np.hstack([model.features_of_inputs(views.inputs), views.signatures])
-    ref = select_auto_readout(F, views.positions, n_outputs=auto.n_outputs_ or None,
-                              n_signature=views.signatures.shape[1], groups=views.runs)
-    assert sel.rule == ref.rule and model.readout_.readout_spec_["kind"] == ref.spec["kind"]
-    one = memory_views(auto.readout_memory_)
-    model.fit_readout(one.inputs, one.positions, one.signatures, runs=one.runs)
+    assert views.runs.tolist() == [0] * len(A) + [1] * len(B) and len(views) == len(exact.readout_memory_)
+    np.testing.assert_allclose(views.inputs, exact.readout_memory_.inputs)
+    model.fit_readout(views.inputs, views.positions, views.signatures, like=exact)
+    assert model.readout_.readout_spec_["kind"] == exact.readout_spec_["kind"]
+    model.fit_readout(views.inputs, views.positions, views.signatures)  # default: the stale kind
     assert model.readout_.readout_spec_["kind"] == auto.readout_spec_["kind"]
-    assert "recordings held out" not in (model.readout_.selection_.rule if model.readout_.selection_ else "")
-    quad = fit_localizer(Network(TINY), A, YA, rotation=ROT, progress=False, readout="quadratic", n_outputs=3,
-                         readout_memory=1000)
-    by_kind = IncSFATopStage(quad, n_whitened=20, mca_rates=(0.5,)).partial_fit(A)
-    v = views_with_run(quad, memory_views(quad.readout_memory_), B, YB)
-    by_kind.fit_readout(v.inputs, v.positions, runs=v.runs)
-    assert by_kind.readout_.readout_spec_["kind"] == "quadratic" and by_kind.readout_.selection_ is None
+    # a readout of the nearest views by signature answers as the exact update's, whatever the top stage
+    knn = fit_localizer(Network(TINY), A, YA, rotation=ROT, progress=False, signature="fourier",
+                        readout={"kind": "knn-signature", "k": 1}, readout_memory=1000)
+    exact_knn = LocalizerUpdater(knn).partial_fit(B, YB).localizer_
+    peer = IncSFATopStage(knn, n_whitened=20, mca_rates=(0.5,)).partial_fit(A).partial_fit(B)
+    v = views_with_run(knn, memory_views(knn.readout_memory_), B, YB)
+    peer.fit_readout(v.inputs, v.positions, v.signatures, like=exact_knn)
+    assert peer.readout_.readout_spec_["kind"] == "knn-signature"
+    np.testing.assert_allclose(peer.predict(C), exact_knn.predict(C))
 
 
 def test_canonical_correlations():

@@ -24,7 +24,8 @@ averaged over the localizer's pooled rotations, as
 :func:`sfanav.localization.updates.top_stage_features` averages the exact
 stage's. The readout is refitted on those features of the readout memory's
 views and the new run's (:meth:`IncSFATopStage.fit_readout`), the kind the
-localizer's readout has (:func:`sfanav.localization.updates.readout_spec_for_update`).
+exact update's readout has (:func:`sfanav.localization.updates.readout_spec_for_update`),
+so that the two differ only in the top stage.
 """
 
 from __future__ import annotations
@@ -159,23 +160,21 @@ class IncSFATopStage:
         return self.features_of_inputs(top_stage_inputs(self.localizer, images))
 
     def fit_readout(self, inputs: Any, positions: Any, signatures: Any = None, *,
-                    kernel: str = "learn", runs: Any = None) -> "IncSFATopStage":
-        """Fits the localizer's kind of readout (its settings; a Gaussian
-        process's kernel learned again with ``kernel="learn"``, or kept)
-        on the IncSFA's features of views given by their top-stage inputs
-        (N, K, k), at ``positions`` (N, 2), with their signatures (N, q)
-        if the readout reads them. ``runs`` (N,): the run of each view; with
-        two or more and a localizer whose readout was chosen automatically,
-        the readout is chosen again over the runs, as the exact update
-        chooses it (:class:`sfanav.localization.updates.LocalizerUpdater`
-        ``readout="auto"``). Returns ``self``."""
+                    kernel: str = "learn", like: Any = None) -> "IncSFATopStage":
+        """Fits a readout on the IncSFA's features of views given by their
+        top-stage inputs (N, K, k), at ``positions`` (N, 2), with their
+        signatures (N, q) if the readout reads them: the kind and settings
+        of ``like``'s fitted readout (a fitted Localizer; default the
+        localizer this stage was made from), a Gaussian process's kernel
+        learned again with ``kernel="learn"``, or kept. The experiments
+        pass the exact update's localizer, so that peer and update read
+        their features alike (an update may have chosen another kind over
+        the runs). Returns ``self``."""
         old = self.localizer
-        again = (runs is not None and isinstance(old.readout, str) and old.readout == "auto"
-                 and len(np.unique(np.asarray(runs))) >= 2)
-        self.readout_ = old.sibling(readout="auto" if again else readout_spec_for_update(old, kernel),
-                                    n_outputs=old.n_outputs_ or None, rotation_pooling=old.rotation_pooling_)
-        self.readout_.fit_features(self.features_of_inputs(inputs), positions, signatures=signatures,
-                                   groups=np.asarray(runs) if again else None)
+        src = old if like is None else like
+        self.readout_ = old.sibling(readout=readout_spec_for_update(src, kernel), n_outputs=src.n_outputs_ or None,
+                                    rotation_pooling=old.rotation_pooling_)
+        self.readout_.fit_features(self.features_of_inputs(inputs), positions, signatures=signatures)
         return self
 
     @property
@@ -213,14 +212,16 @@ def views_with_run(localizer: Any, views: ReadoutMemory, images: Any, xy: Any) -
 
 def incsfa_update(stale: Any, run_a: tuple[Any, Any], run_b: tuple[Any, Any], *,
                   mca_rates: Sequence[float] = INCSFA_MCA_RATES, n_whitened: int = INCSFA_WHITENED,
-                  kernel: str = "learn", seed: int = 0,
+                  kernel: str = "learn", seed: int = 0, like: Any = None,
                   log: Callable[[str], object] | None = None) -> tuple[IncSFATopStage, dict[str, Any]]:
     """The IncSFA arm of ``6.2.1-changes-online``: an :class:`IncSFATopStage`
     on the stale localizer (trained on run A, with a readout memory) learns
     from A's sequence (the analogue of the stale model's training), then
     from B's (the update); the readout is refitted on the IncSFA's features
     of the readout memory's views and B's (the memory extended as the
-    ``updated`` arm extends it). ``run_a``, ``run_b``: (images, xy).
+    ``updated`` arm extends it), of the kind of ``like``'s readout (the
+    exact update's localizer; default the stale one's). ``run_a``,
+    ``run_b``: (images, xy).
 
     Returns (model, info): ``info["seconds_a"]`` the passes over A,
     ``info["seconds_update"]`` the passes over B, the features and the
@@ -252,7 +253,7 @@ def incsfa_update(stale: Any, run_a: tuple[Any, Any], run_b: tuple[Any, Any], *,
     t0 = time.perf_counter()
     model.partial_fit(run_b[0])
     views = views_with_run(stale, memory_views(mem), *run_b)
-    model.fit_readout(views.inputs, views.positions, views.signatures, kernel=kernel, runs=views.runs)
+    model.fit_readout(views.inputs, views.positions, views.signatures, kernel=kernel, like=like)
     t_update = time.perf_counter() - t0
     say(f"IncSFA top stage: {model.passes} pass(es) over A in {t_a:.1f} s, update with B ({model.passes} pass(es), "
         f"readout on {len(views)} views) in {t_update:.1f} s")

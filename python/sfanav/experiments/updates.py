@@ -131,22 +131,7 @@ def run_online(out: Path, *, quick: bool, seed: int, progress: bool, preset: str
     for p, perm in enumerate(perms):
         first, t_first = train_long_term(make_net, *sets[perm[0]], recipe, elev, readout_memory=readout_memory)
         remember(first, *sets[perm[0]], max_views=readout_memory, keep_images=True)  # for resolve="all"
-        # the online peer: IncSFA as the top stage on the first model's frozen lower layers, fed one recording at a
-        # time (its passes over the first recording stand for the first training and are not timed as an update)
-        inc = IncSFATopStage(first, seed=seed).partial_fit(sets[perm[0]][0])
-        views = memory_views(first.readout_memory_)
-        for k in range(1, n_sets + 1):
-            t0 = time.perf_counter()
-            if k > 1:
-                inc.partial_fit(sets[perm[k - 1]][0])
-                views = views_with_run(first, views, *sets[perm[k - 1]])
-            inc.fit_readout(views.inputs, views.positions, views.signatures,
-                            runs=views.runs if readout == "auto" else None)
-            secs_inc[p, k - 1] = time.perf_counter() - t0 if k > 1 else t_first
-            med_inc[p, k - 1] = _med(inc, *sets[perm[k]])[0]
-            held_inc[p, k - 1] = _med(inc, *sets[perm[-1]])[0]
-            log(f"{name} permutation {p}, {k} recordings, IncSFA top stage: MED {med_inc[p, k - 1]:.3f} m "
-                f"(readout {inc.readout_.describe_readout()})")
+        exact: list[Any] = []  # the top-stage update's localizer after each count, whose readout the peer copies
         for r in RESOLVES:
             up, loc = LocalizerUpdater(first, UpdatePolicy(resolve=r), readout=readout), first
             secs[r][p, 0] = t_first
@@ -162,6 +147,24 @@ def run_online(out: Path, *, quick: bool, seed: int, progress: bool, preset: str
                     f"(batch {med_batch[p, k - 1]:.3f} m, perfect memory {pm[p, k - 1]:.3f} m); "
                     f"{'update' if k > 1 else 'first training'} {secs[r][p, k - 1]:.1f} s, "
                     f"retrain {t_batch[p, k - 1]:.1f} s")
+                if r == "top":
+                    exact.append(loc)
+        # the online peer: IncSFA as the top stage on the first model's frozen lower layers, fed one recording at a
+        # time (its passes over the first recording stand for the first training and are not timed as an update),
+        # its readout of the kind the exact top-stage update has at the same count
+        inc = IncSFATopStage(first, seed=seed).partial_fit(sets[perm[0]][0])
+        views = memory_views(first.readout_memory_)
+        for k in range(1, n_sets + 1):
+            t0 = time.perf_counter()
+            if k > 1:
+                inc.partial_fit(sets[perm[k - 1]][0])
+                views = views_with_run(first, views, *sets[perm[k - 1]])
+            inc.fit_readout(views.inputs, views.positions, views.signatures, like=exact[k - 1])
+            secs_inc[p, k - 1] = time.perf_counter() - t0 if k > 1 else t_first
+            med_inc[p, k - 1] = _med(inc, *sets[perm[k]])[0]
+            held_inc[p, k - 1] = _med(inc, *sets[perm[-1]])[0]
+            log(f"{name} permutation {p}, {k} recordings, IncSFA top stage: MED {med_inc[p, k - 1]:.3f} m "
+                f"(readout {inc.readout_.describe_readout()})")
     diagonal = area_diagonal(sets[0][1])
     rows: list[dict[str, Any]] = []
     for k in range(1, n_sets + 1):
@@ -214,9 +217,8 @@ def run_online(out: Path, *, quick: bool, seed: int, progress: bool, preset: str
              "remembered images of every recording so far, each view paired with the nearest view of an earlier "
              f"recording. '{LABEL_INCSFA}': the online peer, IncSFA ({len(INCSFA_MCA_RATES)} passes per recording, "
              f"{INCSFA_WHITENED} whitened directions) as the top stage on the first model's frozen lower layers, fed "
-             "one recording at a time, the readout refitted "
-             + ("(and chosen again over the recordings) " if again else "(the first recording's kind) ")
-             + "on its features of every view so far. Batch place-major: 6.2.2's training on the same k recordings, "
+             "one recording at a time, the readout refitted on its features of every view so far, of the kind the "
+             "exact top-stage update has at the same count (the two differ only in the top stage). Batch place-major: 6.2.2's training on the same k recordings, "
              "retrained from scratch each time"
              + (", told which recording each image comes from (its readout chosen by recordings, as sfanav train "
                 "--recordings chooses it)" if again else ", not told the recordings")
@@ -330,7 +332,7 @@ def run_changes(out: Path, *, quick: bool, seed: int, progress: bool,
     log(f"{name}: retrained on A + B in {secs['retrained']:.1f} s")
     # the online peer: the top stage learned by IncSFA from A's, then B's sequence; the readout refitted
     models[LABEL_INCSFA], incsfa = incsfa_update(models["stale"], run_a, run_b, mca_rates=INCSFA_MCA_RATES,
-                                                 n_whitened=INCSFA_WHITENED, seed=seed,
+                                                 n_whitened=INCSFA_WHITENED, seed=seed, like=models["updated"],
                                                  log=lambda msg: log(f"{name}: {msg}"))
     secs[LABEL_INCSFA] = incsfa["seconds_update"]
     for label in CHANGES_LABELS[:5]:
