@@ -362,6 +362,17 @@ def test_cli_update_of_a_localizer(tmp_path, capsys):
     code, out, err = run(capsys, "train", "--dataset", tmp_path / "a", "--out", tmp_path / "x.sfanav",
                          "--keep-images", *common)
     assert_one_line_error(code, err, "--updatable")
+    # an automatic readout: chosen again over the runs when the kernel is learned, unless --readout keep
+    code, out, err = run(capsys, "train", "--dataset", tmp_path / "a", "--out", tmp_path / "auto.sfanav",
+                         "--updatable", "--config", tmp_path / "tiny.json", "--step", "10", "--no-progress")
+    assert code == 0, err
+    for extra, words in (((), "chosen again over the map's runs"), (("--readout", "keep"), "refitted on 70 views")):
+        code, out, err = run(capsys, "update", tmp_path / "auto.sfanav", "--dataset", tmp_path / "b", "--kernel",
+                             "learn", "--out", tmp_path / "auto2.sfanav", "--overwrite", "--no-progress", *extra)
+        assert code == 0 and words in out, (out, err)
+    code, out, err = run(capsys, "update", tmp_path / "auto.sfanav", "--dataset", tmp_path / "b", "--readout",
+                         "again", "--out", tmp_path / "auto3.sfanav")
+    assert code != 0 and not (tmp_path / "auto3.sfanav").exists()
 
 
 def test_readout_augmentation_copies_are_kept_and_extended():

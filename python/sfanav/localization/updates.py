@@ -577,7 +577,8 @@ class LocalizerUpdater:
         view of an earlier run (:func:`cross_run_pairs`, at every layer and
         simulated rotation: what place-major training gives a place seen in two
         runs), with the training recipe the model file records (rotation,
-        invariance partners, readout augmentation, readout kind)."""
+        invariance partners, readout augmentation, readout kind; an automatic
+        readout chosen again over the runs, ``readout="auto"``)."""
         from ..sfa.network import Network, Rotation
         from .training import fit_localizer
 
