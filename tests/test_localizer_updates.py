@@ -490,6 +490,23 @@ def test_an_auto_readout_is_chosen_again_by_runs_when_the_kernel_is_learned():
         "readout"].startswith("refitted")
     with pytest.raises(ValueError, match="readout must be one of auto, keep"):
         LocalizerUpdater(loc, readout="again")
+    # a run that explores new ground is not a recording of the same places: the kind is kept
+    far = LocalizerUpdater(loc, kernel="learn").partial_fit(B, YB + 50.0).localizer_
+    assert far.info["updates"][-1]["readout"].startswith("refitted") and far.selection_ is None
+
+
+def test_runs_share_places():
+    from sfanav.localization.updates import runs_share_places
+
+    t = np.linspace(0, 6, 60)
+    loop = np.c_[np.cos(t), np.sin(t)]
+    assert runs_share_places(np.r_[loop, loop + 0.02, loop[::2]], np.repeat([0, 1, 2], [60, 60, 30]))
+    assert not runs_share_places(np.r_[loop, loop + 0.02, loop[:30] + 9.0], np.repeat([0, 1, 2], [60, 60, 30]))
+    half = np.r_[loop[:30], loop[:30] + 9.0]  # half of the second run on the first's ground: enough
+    assert runs_share_places(np.r_[loop, half], np.repeat([0, 1], 60))
+    assert not runs_share_places(loop, np.zeros(60))  # one run
+    with pytest.raises(ValueError, match="one label per view"):
+        runs_share_places(loop, np.zeros(59))
 
 
 def test_resolve_all_chooses_an_auto_readout_again_by_runs():

@@ -53,7 +53,7 @@ from .readouts import describe_spec
 
 __all__ = ["MAX_VIEWS", "ReadoutMemory", "remember", "top_stage_inputs", "top_stage_features",
            "top_stage_training_inputs", "top_stage_degree", "LocalizerUpdater", "readout_memory_bytes",
-           "drop_readout_memory", "updatable_memory"]
+           "drop_readout_memory", "updatable_memory", "runs_share_places"]
 
 MAX_VIEWS = 3000
 """Default bound on the views a readout memory keeps."""
@@ -429,7 +429,9 @@ class LocalizerUpdater:
         ``"keep"``: the readout is refitted as the model fitted it (its kind
         and settings). ``"auto"``: when the model's readout was chosen
         automatically (``readout="auto"``, the default) and the map holds
-        views of two or more runs, the readout is chosen again, as training
+        two or more runs of the same places (:func:`runs_share_places`: at
+        least half of every run's views near another run's; a run that
+        explores new ground does not count), the readout is chosen again, as training
         on several recordings chooses it (leave-one-run-out cross-validation
         over the runs, ``fit_localizer(groups=)``), at every solve that
         learns the kernel again (``kernel``): its kind can change, e.g. to
@@ -641,9 +643,10 @@ class LocalizerUpdater:
         return new
 
     def _reselects(self, old: Localizer, views: ReadoutMemory) -> bool:
-        """Whether this solve chooses the readout again by runs (``readout="auto"``)."""
+        """Whether this solve chooses the readout again by runs (``readout="auto"``): an automatic
+        readout, and runs of the same places (:func:`runs_share_places`)."""
         return (self.readout == "auto" and isinstance(old.readout, str) and old.readout == "auto"
-                and len(np.unique(views.runs)) >= 2)
+                and runs_share_places(views.positions, views.runs, self.pair_radius))
 
 
 def _readout_note(localizer: Localizer, reselected: bool) -> str:
@@ -653,6 +656,52 @@ def _readout_note(localizer: Localizer, reselected: bool) -> str:
     if reselected and sel is not None:
         return f"chosen again by runs: {kind} ({sel.rule})"
     return f"refitted: {kind}"
+
+
+SAME_PLACES_FRACTION = 0.5
+"""The share of each run's views that must lie near another run's views for
+an update to treat the runs as recordings of the same places and choose
+the readout again over them (:func:`runs_share_places`)."""
+
+
+def runs_share_places(xy: Any, runs: Any, radius: float | None = None, *,
+                      fraction: float = SAME_PLACES_FRACTION) -> bool:
+    """Whether views at ``xy`` (N, 2) metres from ``runs`` (N,) are two or
+    more recordings of the same places: every run has at least ``fraction``
+    of its views within ``radius`` metres of another run's (None: twice the
+    median distance from a view to the nearest other view of its own run).
+    Leave-one-run-out cross-validation, which chooses a readout over
+    recordings, scores a run that explores new ground as an extrapolation
+    and would choose for the wrong reason: on such runs an update keeps
+    the readout's kind (docs/updates-measured.md).
+
+    >>> import numpy as np
+    >>> loop = np.c_[np.cos(np.linspace(0, 6, 50)), np.sin(np.linspace(0, 6, 50))]
+    >>> runs_share_places(np.r_[loop, loop + 0.01], np.repeat([0, 1], 50))
+    True
+    >>> runs_share_places(np.r_[loop, loop + 5.0], np.repeat([0, 1], 50))
+    False
+    """
+    P = as_matrix(xy, "xy", n_cols=2)
+    R = np.asarray(runs)
+    if R.shape != (len(P),):
+        raise ValueError(f"runs must hold one label per view ({len(P)}), got shape {R.shape}")
+    from scipy.spatial import cKDTree
+
+    labels = np.unique(R)
+    if len(labels) < 2:
+        return False
+    if radius is None:  # the runs' own spacing (pooled views of two runs may coincide)
+        gaps = np.concatenate([cKDTree(P[R == r]).query(P[R == r], k=2)[0][:, 1] for r in labels
+                               if np.count_nonzero(R == r) >= 2] or [np.zeros(0)])
+        spacing = float(np.median(gaps)) if gaps.size else 0.0
+        radius = 2.0 * spacing if spacing > 0 else 1e-9
+    for r in labels:
+        others, this = np.flatnonzero(R != r), np.flatnonzero(R == r)
+        _, j = cross_run_pairs(P[others], P[this], radius)
+        if len(j) < fraction * len(this):
+            return False
+    return True
 
 
 def cross_run_pairs(old_xy: Any, new_xy: Any, radius: float | None = None) -> tuple[np.ndarray, np.ndarray]:
