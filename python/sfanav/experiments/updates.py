@@ -53,7 +53,7 @@ from ..sfa.network import Rotation
 from ..sfa.updates import UpdatePolicy
 from . import ExperimentResult, register
 from .flags import area_diagonal, flag_row
-from .incsfa_peer import INCSFA_MCA_RATES, INCSFA_WHITENED, IncSFATopStage, incsfa_update, memory_views, views_with_run
+from .incsfa_peer import INCSFA_MCA_RATES, INCSFA_WHITENED, IncSFATopStage, incsfa_update, memory_views
 from .localization import progress_log, simulated
 from .robustness import long_term_configuration, run_622, train_long_term
 
@@ -153,12 +153,12 @@ def run_online(out: Path, *, quick: bool, seed: int, progress: bool, preset: str
         # time (its passes over the first recording stand for the first training and are not timed as an update),
         # its readout of the kind the exact top-stage update has at the same count
         inc = IncSFATopStage(first, seed=seed).partial_fit(sets[perm[0]][0])
-        views = memory_views(first.readout_memory_)
         for k in range(1, n_sets + 1):
             t0 = time.perf_counter()
             if k > 1:
                 inc.partial_fit(sets[perm[k - 1]][0])
-                views = views_with_run(first, views, *sets[perm[k - 1]])
+            # the exact update's views: the same frozen lower layers give the same stage inputs
+            views = memory_views(exact[k - 1].readout_memory_)
             inc.fit_readout(views.inputs, views.positions, views.signatures, like=exact[k - 1])
             secs_inc[p, k - 1] = time.perf_counter() - t0 if k > 1 else t_first
             med_inc[p, k - 1] = _med(inc, *sets[perm[k]])[0]

@@ -206,8 +206,7 @@ def _update_localizer(args: argparse.Namespace, model: "Any", out: "Any", loc: "
     kept = ("dropped" if args.drop_statistics else
             f"kept ({sizes['readout_memory']} bytes of readout memory, {len(new.readout_memory_)} views; "
             f"{sizes['network_statistics']} bytes of network statistics)")
-    how = "chosen again over the map's runs and fitted" if new.info["updates"][-1].get("readout", "").startswith(
-        "chosen again") else "refitted"
+    how = "chosen again over the map's runs and fitted" if new.selection_ is not None else "refitted"
     print(f"updated with {len(images)} images; readout {new.describe_readout()} {how} on "
           f"{new.info['updates'][-1]['readout_views']} views; update data {kept}; wrote {out}")
     return 0
