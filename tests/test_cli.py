@@ -52,6 +52,26 @@ def test_train_writes_a_localizer_with_its_preprocessing(tiny, tmp_path, capsys)
     assert_one_line_error(code, err, "--overwrite")
 
 
+def test_train_seed_draws_the_robustness_copies(tiny, tmp_path, capsys):
+    data = tiny["root"] / "data"
+    models = {}
+    for seed in (0, 3):
+        code, _, err = run(capsys, "train", "--dataset", data, "--config", tiny["config"], "--robustness", "light",
+                           "--seed", str(seed), "--out", tmp_path / f"m{seed}.sfa", "--no-progress")
+        assert code == 0, err
+        models[seed] = sfanav.load(tmp_path / f"m{seed}.sfa")
+        assert models[seed].info["robustness_seed"] == seed
+    test = tiny["ds"].select(run="test")
+    X = next(iter(test.images(batch_size=len(test))))
+    # the readout's corrupted copies are drawn by the seed: another draw, another readout
+    assert not np.allclose(models[0].predict(X), models[3].predict(X))
+    # a model without robustness has nothing to draw
+    code, _, err = run(capsys, "train", "--dataset", data, "--config", tiny["config"], "--seed", "1",
+                       "--out", tmp_path / "none.sfa", "--no-progress")
+    assert_one_line_error(code, err, "--seed")
+    assert not (tmp_path / "none.sfa").exists()
+
+
 def test_localize_dataset_folder_and_video(tiny, tmp_path, capsys):
     ds = tiny["ds"]
     test = ds.select(run="test")

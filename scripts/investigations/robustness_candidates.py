@@ -86,6 +86,9 @@ CORRUPTIONS = ["jpeg-90", "jpeg-50", "noise-10", "defocus-1", "defocus-2", "moti
 EXTRA_CORRUPTIONS = ["gamma-0.7", "exposure-0.6"]
 """Measured from 2026-12-06 (--extra): the gamma below 1 and the underexposure the first runs did not have."""
 JPEG_ONLY = CorruptionModel({"jpeg": {"kind": "jpeg", "quality": (50, 95)}})
+GAMMA_CONTRAST = 0.57
+"""canonical_gamma's log contrast (standard deviation of log(I + offset) about the channels' means): near a
+flawless garden panorama's own, so that most images change little."""
 CAMERA_GAMMA = CorruptionModel({**CAMERA.families, "gamma": {"kind": "gamma", "gamma": (0.6, 1.6)}})
 """CAMERA with gamma 0.6..1.6 as an eighth family (what the normalisation leaves of a gamma)."""
 
@@ -161,6 +164,26 @@ def quantile_equalize(images, knots=16, spacing=1.0):
     return out[0] if single else out
 
 
+def canonical_gamma(images, offset=2.0, contrast=GAMMA_CONTRAST):
+    """Every image's gamma made canonical before the low-pass: L = log(I + offset) centred per channel is scaled
+    to the standard deviation ``contrast`` and mapped back to intensities, I' = exp(mean_k + (L - mean_k) s) -
+    offset (the image's own per-channel means kept: a gain commutes with the low-pass). A gamma ``255 (I /
+    255)^g`` is a scale of L (exactly for offset 0), so I' no longer depends on it, and the low-pass that follows
+    sees the same intensities whatever the camera's gamma; a flawless image changes only by its own log
+    contrast's distance from ``contrast``."""
+    b, single = _batch(images)
+    b4 = b if b.ndim == 4 else b[..., None]
+    out = np.empty(b4.shape, np.float32)
+    for i in range(len(b4)):
+        L = np.log(np.maximum(b4[i], 0.0) + np.float32(offset))
+        mu = L.mean(axis=(0, 1), keepdims=True)
+        sd = float((L - mu).std())
+        k = np.float32(contrast / sd) if sd > 1e-6 else np.float32(1.0)
+        out[i] = np.exp(mu + (L - mu) * k) - np.float32(offset)
+    out = out if b.ndim == 4 else out[..., 0]
+    return out[0] if single else out
+
+
 def _batch(images):
     """(float32 batch (N, H, W[, C]), whether ``images`` was a single image)."""
     a = np.asarray(images, np.float32)
@@ -189,7 +212,7 @@ def _flat_contrast(v):
     return (v * (40.0 / np.maximum(sd, 1e-6))).astype(np.float32)
 
 
-def _lowpass_normalize(images, kind):
+def _lowpass_normalize(images, kind, lowpass=None):
     """log-contrast after a Gaussian low-pass: kind 'lowpass-S' (S in px); a prefix 'clipQQ-' first clips every
     channel at its QQ-th percentile (quantile_clip); 'eq[log]-S-flat': low-pass S px, equalise, [log,] flat field."""
     from sfanav.data.photometric import log_contrast, normalize
@@ -199,13 +222,18 @@ def _lowpass_normalize(images, kind):
         b = quantile_equalize(_lowpass(b, float(parts[1])))
         out = _flat_contrast(np.log(b + 8.0) if parts[0] == "eqlog" else b)
         return out[0] if single else out
+    if kind is not None and kind.startswith("gammafix"):  # gammafixO-REST: canonical_gamma(offset O), then REST
+        head, kind = kind.split("-", 1)
+        images = canonical_gamma(images, offset=float(head[8:]))
+        if kind == "default":
+            return normalize(images, "lowpass-log-contrast", lowpass=lowpass)
     if kind is not None and kind.startswith("clip"):
         head, kind = kind.split("-", 1)
         images = quantile_clip(images, float(head[4:]) / 100.0)
         if kind == "default":
-            return normalize(images, "lowpass-log-contrast")
+            return normalize(images, "lowpass-log-contrast", lowpass=lowpass)
     if kind is None or not kind.startswith(("lowpass-", "logfirst-")):
-        return normalize(images, kind)
+        return normalize(images, kind, lowpass=lowpass)
     parts = kind.split("-")
     sigma = float(parts[1])
     log_first = parts[0] == "logfirst"
@@ -226,10 +254,12 @@ localizer_module.photometric_normalize = _lowpass_normalize
 LOWPASS = ("0.7", "1", "1.5", "2", "1-flat", "2-flat", "2-flat-o2", "3-flat")
 LOGFIRST = ("2-o2", "2-o8", "2-o16", "2-o32")
 CLIP = ("80", "90", "95")
+GAMMAFIX = ("1", "2", "4", "8")
 localizer_module.PHOTOMETRIC = (*localizer_module.PHOTOMETRIC, *(f"lowpass-{s}" for s in LOWPASS),
                                 *(f"logfirst-{s}" for s in LOGFIRST),
                                 *(f"clip{q}-{k}" for q in CLIP for k in ("default", "lowpass-1-flat")),
-                                *(f"{e}-{s}-flat" for e in ("eq", "eqlog") for s in ("1", "2", "3")))
+                                *(f"{e}-{s}-flat" for e in ("eq", "eqlog") for s in ("1", "2", "3")),
+                                *(f"gammafix{o}-default" for o in GAMMAFIX))
 
 CANDIDATES = {
     "none": ({"robustness": "none"}, None),
@@ -274,6 +304,8 @@ CANDIDATES = {
     "dealt-0.25": ({"robustness": "standard", "photometric": "lowpass-2-flat", "invariance": CAMERA_DEALT}, None),
     "stratified-0.25": ({"robustness": "standard", "photometric": "lowpass-2-flat", "invariance": CAMERA_STRATIFIED},
                         None),
+    **{f"gammafix{o}-0.25": ({"robustness": "standard", "photometric": f"gammafix{o}-default"}, None)
+       for o in GAMMAFIX},
     **{f"{e}-{s}-flat-0.25": ({"robustness": "standard", "photometric": f"{e}-{s}-flat"}, None)
        for e in ("eq", "eqlog") for s in ("1", "2", "3")},
     **{f"{e}-{s}-flat-gamma-0.25": ({"robustness": "standard", "photometric": f"{e}-{s}-flat",

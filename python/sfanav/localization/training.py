@@ -180,6 +180,7 @@ def fit_localizer(
                      **({"readout_augmentation": readout_augmentation.describe()} if readout_augmentation else {}),
                      **({"invariance": invariance.describe(), "invariance_weight": float(invariance_weight)}
                         if invariance else {}),
+                     **({"robustness_seed": seed} if invariance or readout_augmentation else {}),
                      "rotation_pooling": int(loc.rotation_pooling_)})
     if loc.selection_ is not None:
         loc.info["readout_rule"] = loc.selection_.rule

@@ -111,6 +111,11 @@ def _add_train(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                         "default for the sfanav default); full = the same at weight 1 (holds under all of them, "
                         "less precise on flawless images); none = neither (the thesis; default with --preset "
                         "thesis-*, --config or --normalize)")
+    p.add_argument("--seed", type=arg.nonneg_int, default=0, metavar="N",
+                   help="seed of the robustness's corrupted copies (which corruption, how strong, for each image's "
+                        "invariance partner and readout copy; default 0). The clean precision of a model trained "
+                        "with invariance partners varies with this draw (docs/robustness.md): train at several "
+                        "seeds to see how much")
     p.add_argument("--normalize", action="store_true",
                    help="normalize every image to zero mean and unit variance (thesis 5.2)")
     p.add_argument("--mirror", default=None, metavar="CX,CY,INNER,OUTER",
@@ -269,6 +274,9 @@ def _train(args: argparse.Namespace, stack: Any) -> int:
                         n_outputs=args.n_outputs, rotation_pooling=args.rotation_pooling,
                         signature={None: "auto", "none": None}.get(args.signature, args.signature),
                         robustness=robustness)
+    if args.seed and recipe.robustness == "none":
+        raise UsageError("--seed draws the robustness's corrupted copies, and this model has none (robustness "
+                         "none): give --robustness light, standard or full, or leave --seed out")
     rows, elev = None, None
     if recipe.rows == "band":
         elev = (ds.metadata.get("camera") or {}).get("elevation_deg") if isinstance(ds.metadata, dict) else None
@@ -339,7 +347,7 @@ def _train(args: argparse.Namespace, stack: Any) -> int:
                           metric_map=args.metric_map, closures=args.closures, loop_closures=closures,
                           closure_weights=weights, feedback="none" if args.loop_closures == "none" else None,
                           network_images=network_images, network_fit=network_fit, readout_memory=args.updatable,
-                          readout_memory_images=args.keep_images,
+                          readout_memory_images=args.keep_images, seed=args.seed,
                           info={"dataset": str(args.dataset), "run": run,
                                 "network": args.preset or (str(args.config) if args.config else "sfanav-default")},
                           progress=not args.no_progress, log=log)
