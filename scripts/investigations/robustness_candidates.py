@@ -184,6 +184,59 @@ def canonical_gamma(images, offset=2.0, contrast=GAMMA_CONTRAST):
     return out[0] if single else out
 
 
+QUANTILES = (0.05, 0.35)
+FLAT = True
+"""RunGamma's spread "quantile": between these quantiles of an image's log intensities."""
+
+
+class RunGamma:
+    """A camera's gamma estimated over a run rather than per image: the first call (the training run) records the
+    median over its images of the standard deviation of log(I + offset) about each image's channel means, and
+    returns the images unchanged; every later call (a test run, all of its images at once, as a robot's stream
+    would accumulate them) maps its images through canonical_gamma's power with one factor for the whole run, the
+    training median over the run's own median, so that a run whose camera applies a gamma g is brought back by
+    1 / g and a run of the same camera is left (nearly) as it is. The network and readout are the default's, trained
+    on the unchanged run: paired with the default at the same seed, only the test images differ."""
+
+    def __init__(self, offset=2.0, spread="std"):
+        self.offset, self.reference, self.spread = float(offset), None, spread
+
+    def _spread(self, b4):
+        """The run's median over images of their log spread: ``"std"`` the standard deviation about the channels'
+        means, ``"quantile"`` the distance from the 10th to the 50th percentile of the log intensities (a gamma
+        scales it exactly; a gain and the clipping of up to half the pixels, an overexposure, leave it)."""
+        L = np.log(np.maximum(b4, 0.0) + np.float32(self.offset))
+        mu = L.mean(axis=(1, 2), keepdims=True)
+        if self.spread == "quantile":  # per channel, after the rows' quadratic profile (a vignetting) is removed
+            h = L.shape[1]
+            t = np.linspace(-1.0, 1.0, h)
+            V = np.stack([np.ones(h), t, t * t], axis=1)
+            F = L - np.einsum("ij,nj...->ni...", V @ np.linalg.pinv(V), L.mean(axis=2))[:, :, None] if FLAT else L
+            F = F.mean(axis=-1).reshape(len(F), -1)  # the channels' mean log: a gamma scales it, a white balance moves it
+            q = np.quantile(F, QUANTILES, axis=1)
+            return float(np.median(q[1] - q[0])), L, mu
+        if self.spread == "flat-std":  # per channel, after the rows' quadratic profile (a vignetting) is removed
+            h = L.shape[1]
+            t = np.linspace(-1.0, 1.0, h)
+            V = np.stack([np.ones(h), t, t * t], axis=1)
+            F = L - np.einsum("ij,nj...->ni...", V @ np.linalg.pinv(V), L.mean(axis=2))[:, :, None]
+            return float(np.median(F.reshape(len(F), -1).std(axis=1))), L, mu
+        return float(np.median((L - mu).reshape(len(L), -1).std(axis=1))), L, mu
+
+    def __call__(self, images):
+        b, single = _batch(images)
+        b4 = b if b.ndim == 4 else b[..., None]
+        spread, L, mu = self._spread(b4)
+        if self.reference is None:
+            self.reference = spread
+            return images
+        k = np.float32(self.reference / spread)
+        # not clipped at 255: the power's gain would saturate bright pixels (the normalisation takes any level)
+        out = np.maximum(np.exp(mu + (L - mu) * k) - np.float32(self.offset), 0.0).astype(np.float32)
+        out = out if b.ndim == 4 else out[..., 0]
+        return out[0] if single else out
+
+
 def _batch(images):
     """(float32 batch (N, H, W[, C]), whether ``images`` was a single image)."""
     a = np.asarray(images, np.float32)
@@ -304,6 +357,9 @@ CANDIDATES = {
     "dealt-0.25": ({"robustness": "standard", "photometric": "lowpass-2-flat", "invariance": CAMERA_DEALT}, None),
     "stratified-0.25": ({"robustness": "standard", "photometric": "lowpass-2-flat", "invariance": CAMERA_STRATIFIED},
                         None),
+    "rungamma-0.25": ({"robustness": "standard", "photometric": "lowpass-2-flat"}, "rungamma"),
+    "rungammaq-0.25": ({"robustness": "standard", "photometric": "lowpass-2-flat"}, "rungammaq"),
+    "rungammaf-0.25": ({"robustness": "standard", "photometric": "lowpass-2-flat"}, "rungammaf"),
     **{f"gammafix{o}-0.25": ({"robustness": "standard", "photometric": f"gammafix{o}-default"}, None)
        for o in GAMMAFIX},
     **{f"{e}-{s}-flat-0.25": ({"robustness": "standard", "photometric": f"{e}-{s}-flat"}, None)
@@ -335,6 +391,8 @@ def train(name, X, xy, elev):
     kw = recipe_for(robustness=opts.pop("robustness")).fit_kwargs(elev)
     net = default_network(**opts.pop("network", {}))
     kw.update(opts)
+    if pre in ("rungamma", "rungammaq", "rungammaf"):
+        pre = RunGamma(spread={"rungamma": "std", "rungammaq": "quantile", "rungammaf": "flat-std"}[pre])
     if pre is None:
         return fit_localizer(net, X, xy, rotation=Rotation(5, 1.0), progress=False, **kw)
     return _Normalised(pre, fit_localizer(net, pre(X), xy, rotation=Rotation(5, 1.0), progress=False, **kw))

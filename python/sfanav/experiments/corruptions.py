@@ -21,7 +21,10 @@ image's draw). Rows per garden, mode and corruption: the MED (m) of
   trained to ignore the corruptions at weight 0.25) fitted to ground truth,
   and **without ground truth** (positions learned from the run's odometry;
   its estimates moved into the world frame by the rigid transform fitted on
-  the training run, for evaluation only);
+  the training run, for evaluation only), and that model's estimates
+  **fused with the test run's odometry** (the product path: the EKF noise
+  chosen on the training run, as ``sfanav localize --odometry``; test only,
+  where the test run has odometry);
 * the sfanav network with robustness ``"light"`` (no invariance training),
   ``"full"`` (invariance at weight 1) and ``"none"`` (the default before
   this study);
@@ -55,6 +58,7 @@ from ..localization import baselines
 from ..localization.error_metrics import align, localization_metrics
 from ..localization.localizer import Localizer
 from ..localization.recipe import default_network, recipe_for
+from ..odometry.fusion import fuse_images
 from ..pipeline import train_localizer
 from ..sfa.network import Network
 from . import ExperimentResult, register
@@ -65,7 +69,13 @@ GARDENS = (("demo", "train", "test"), ("suite-inner", "train-grid", "test-walk")
 """(preset, training run, test run) of the gardens measured."""
 METHODS = ("sfanav default", "sfanav default, no ground truth", "sfanav robustness light", "sfanav robustness full",
            "sfanav robustness none", "thesis configuration", "perfect memory", "Fourier signature")
-SFANAV = METHODS[:5]
+FUSED = "sfanav default, no ground truth, fused"
+"""The product path: the ground-truth-free default's estimates of the test run fused with its odometry (EKF, the noise
+chosen on the training run, as ``sfanav localize --odometry``), in the test-only mode of a garden whose test run has
+odometry. Not a model of its own: the same network and readout as the row before it."""
+ROWS = (*METHODS[:2], FUSED, *METHODS[2:])
+"""The rows of a garden's table, in order: the trained METHODS and the fused track."""
+SFANAV = ROWS[:6]
 PEERS = ("perfect memory", "Fourier signature")
 BOTH_RUNS_METHODS = ("sfanav default", "sfanav robustness light", "sfanav robustness full", "sfanav robustness none",
                      "thesis configuration", "perfect memory", "Fourier signature")
@@ -87,6 +97,10 @@ class _Aligned:
 
     def predict(self, X: np.ndarray) -> np.ndarray:
         return self.frame.apply(self.loc.predict(X))
+
+    def fused(self, X: np.ndarray, odometry: np.ndarray) -> np.ndarray:
+        """The fused track's positions (N, 2) of images X with their odometry (N, 3), in the world frame."""
+        return self.frame.apply(fuse_images(self.loc, X, odometry)[1][:, :2])
 
 
 def _train(methods: tuple[str, ...], X: np.ndarray, xy: np.ndarray, odometry: np.ndarray | None,
@@ -110,7 +124,7 @@ def _train(methods: tuple[str, ...], X: np.ndarray, xy: np.ndarray, odometry: np
                 if odometry is None:
                     continue
                 loc = train_localizer(X, odometry=odometry, supervision="odometry", network=net(), recipe=recipe,
-                                      camera_elevation=elev, filter_noise=False, seed=seed)
+                                      camera_elevation=elev, seed=seed)
                 models[m] = _Aligned(loc, X, xy)
             else:
                 models[m] = train_localizer(X, xy=xy, network=net(), recipe=recipe, camera_elevation=elev, seed=seed)
@@ -144,6 +158,7 @@ def run_garden(out: Path, preset: str, train_run: str, test_run: str, *, quick: 
     X0_tr, xy_tr = load_run(train, native)
     X0_te, xy_te = load_run(test, native)
     odometry = train.odometry if train.has_odometry else None
+    odometry_test = test.odometry if test.has_odometry else None
     prep = Preprocessing(X0_tr.shape[2], X0_tr.shape[1], False) if quick else Preprocessing.for_network(
         default_network())
     conform = Preprocessor(prep, log=lambda *a, **k: None)
@@ -158,6 +173,10 @@ def run_garden(out: Path, preset: str, train_run: str, test_run: str, *, quick: 
     for name in ("clean",) + corruptions:
         X_te = images(X0_te, name, 1)
         res["test only"][name] = {m: _med(model.predict(X_te), xy_te) for m, model in models.items()}
+        if odometry_test is not None and "sfanav default, no ground truth" in models:  # the product path
+            r = {m: v for m, v in res["test only"][name].items()}
+            r[FUSED] = _med(models["sfanav default, no ground truth"].fused(X_te, odometry_test), xy_te)
+            res["test only"][name] = {m: r[m] for m in ROWS if m in r}
         r = res["test only"][name]
         log(f"{preset} test only {name}: " + ", ".join(f"{m} {v:.3f}" for m, v in r.items()))
     if both_runs:
@@ -198,6 +217,7 @@ def plot_corruptions(results: dict[str, Any], path: Path) -> Path:
     panels = [(g, mode) for g, r in results.items() for mode in ("test only", "both runs") if r[mode]]
     fig = figure(11, 3.0 * len(panels))
     styles = {"sfanav default": ("C0", "o", 2.2), "sfanav default, no ground truth": ("C0", "s", 1.2),
+              FUSED: ("C0", "*", 1.8),
               "sfanav robustness light": ("C9", "<", 1.0),
               "sfanav robustness full": ("C2", "^", 1.2), "sfanav robustness none": ("C7", "v", 1.0),
               "thesis configuration": ("C3", "x", 1.0), "perfect memory": ("C1", "D", 1.0),
@@ -240,7 +260,7 @@ def markdown(results: dict[str, Any]) -> str:
             table = r[mode]
             if not table:
                 continue
-            methods = [m for m in METHODS if m in table["clean"]]
+            methods = [m for m in ROWS if m in table["clean"]]
             parts.append(f"**{g}, corruption applied to {'the test run only' if mode == 'test only' else 'both runs'}**"
                          " (MED, m)\n")
             parts.append("| corruption | " + " | ".join(methods) + " |")
