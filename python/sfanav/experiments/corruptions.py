@@ -24,7 +24,9 @@ image's draw). Rows per garden, mode and corruption: the MED (m) of
   the training run, for evaluation only), and that model's estimates
   **fused with the test run's odometry** (the product path: the EKF noise
   chosen on the training run, as ``sfanav localize --odometry``; test only,
-  where the test run has odometry);
+  where the test run has odometry), and the supervised default again with
+  the **camera's gamma estimated over the test run** so far and taken out
+  (``sfanav localize --camera-gamma``; test only);
 * the sfanav network with robustness ``"light"`` (no invariance training),
   ``"full"`` (invariance at weight 1) and ``"none"`` (the default before
   this study);
@@ -51,6 +53,7 @@ from typing import Any
 import numpy as np
 
 from .. import sim
+from ..data.camera_gamma import CameraGamma
 from ..data.corruptions import CORRUPTIONS, corrupt
 from ..data.preprocessing import Preprocessing, Preprocessor
 from ..data.sources import load_run
@@ -73,9 +76,13 @@ FUSED = "sfanav default, no ground truth, fused"
 """The product path: the ground-truth-free default's estimates of the test run fused with its odometry (EKF, the noise
 chosen on the training run, as ``sfanav localize --odometry``), in the test-only mode of a garden whose test run has
 odometry. Not a model of its own: the same network and readout as the row before it."""
-ROWS = (*METHODS[:2], FUSED, *METHODS[2:])
-"""The rows of a garden's table, in order: the trained METHODS and the fused track."""
-SFANAV = ROWS[:6]
+GAMMA = "sfanav default, camera gamma"
+"""The supervised default localizing the test run with the camera's gamma estimated over the run so far and taken out
+(:class:`sfanav.data.camera_gamma.CameraGamma`, ``sfanav localize --camera-gamma``), in the test-only mode: the same
+model as the default's row, other test images."""
+ROWS = (METHODS[0], GAMMA, *METHODS[1:2], FUSED, *METHODS[2:])
+"""The rows of a garden's table, in order: the trained METHODS, the camera-gamma row and the fused track."""
+SFANAV = ROWS[:7]
 PEERS = ("perfect memory", "Fourier signature")
 BOTH_RUNS_METHODS = ("sfanav default", "sfanav robustness light", "sfanav robustness full", "sfanav robustness none",
                      "thesis configuration", "perfect memory", "Fourier signature")
@@ -173,10 +180,13 @@ def run_garden(out: Path, preset: str, train_run: str, test_run: str, *, quick: 
     for name in ("clean",) + corruptions:
         X_te = images(X0_te, name, 1)
         res["test only"][name] = {m: _med(model.predict(X_te), xy_te) for m, model in models.items()}
+        r = dict(res["test only"][name])
         if odometry_test is not None and "sfanav default, no ground truth" in models:  # the product path
-            r = {m: v for m, v in res["test only"][name].items()}
             r[FUSED] = _med(models["sfanav default, no ground truth"].fused(X_te, odometry_test), xy_te)
-            res["test only"][name] = {m: r[m] for m in ROWS if m in r}
+        tracker = CameraGamma.for_localizer(models.get("sfanav default"))
+        if tracker is not None:  # the test run in its order, each image with the gamma seen so far
+            r[GAMMA] = _med(models["sfanav default"].predict(tracker.correct(X_te)), xy_te)
+        res["test only"][name] = {m: r[m] for m in ROWS if m in r}
         r = res["test only"][name]
         log(f"{preset} test only {name}: " + ", ".join(f"{m} {v:.3f}" for m, v in r.items()))
     if both_runs:
@@ -217,7 +227,7 @@ def plot_corruptions(results: dict[str, Any], path: Path) -> Path:
     panels = [(g, mode) for g, r in results.items() for mode in ("test only", "both runs") if r[mode]]
     fig = figure(11, 3.0 * len(panels))
     styles = {"sfanav default": ("C0", "o", 2.2), "sfanav default, no ground truth": ("C0", "s", 1.2),
-              FUSED: ("C0", "*", 1.8),
+              FUSED: ("C0", "*", 1.8), GAMMA: ("C0", "d", 1.0),
               "sfanav robustness light": ("C9", "<", 1.0),
               "sfanav robustness full": ("C2", "^", 1.2), "sfanav robustness none": ("C7", "v", 1.0),
               "thesis configuration": ("C3", "x", 1.0), "perfect memory": ("C1", "D", 1.0),

@@ -30,6 +30,7 @@ from typing import Any, Callable
 import numpy as np
 
 from .._checks import as_real_array, check_int, check_nonneg_float, check_positive_float
+from ..data.camera_gamma import CameraGamma
 from ..data.preprocessing import Preprocessing, Preprocessor
 from .dead_reckoning import increments, wrap_angle
 from .ekf import FilterStep, OdometryEKF
@@ -136,6 +137,13 @@ class StreamingLocalizer:
         ``novelty_exponent`` and ``novelty_knee``, as
         :func:`sfanav.odometry.fuse` does. None, or a model file without a
         novelty reference (one line through ``log`` says so): not scaled.
+    camera_gamma : bool, default False
+        Take the camera's gamma out of each image before the localizer sees
+        it, as estimated over the stream so far against the training run's
+        (:class:`sfanav.data.camera_gamma.CameraGamma`; a factor of 1 for
+        the first images). A model file without the training run's reference
+        (trained without a photometric normalisation, or before 2026-12-07):
+        one line through ``log`` says so, and the images are left as they are.
     on_estimate : callable, optional
         Called as ``on_estimate(stamp_ns, estimate)`` (estimate: ndarray (2,),
         metres, map frame) as soon as an image's single-image estimate is
@@ -185,7 +193,7 @@ class StreamingLocalizer:
                  image_shape: Iterable[int] | None = None, mirror: Any = None,
                  log: Callable[[str], None] | None = None, rotations: bool = False,
                  on_estimate: Callable[[int, np.ndarray], None] | None = None,
-                 novelty_threshold: float | None = NOVELTY_THRESHOLD) -> None:
+                 novelty_threshold: float | None = NOVELTY_THRESHOLD, camera_gamma: bool = False) -> None:
         if noise is None:
             noise = getattr(localizer, "info", {}).get("ekf_noise")
             if noise is None:
@@ -208,6 +216,10 @@ class StreamingLocalizer:
                 log("the model holds no novelty reference (a Localizer file written before 2026-12-06, or another "
                     "kind of model): the filter's measurement noise is not scaled by novelty")
             self.novelty_threshold = None
+        self.camera_gamma = CameraGamma.for_localizer(localizer) if camera_gamma else None
+        if camera_gamma and self.camera_gamma is None and log is not None:
+            log("the model holds no camera gamma reference (trained without a photometric normalisation, or before "
+                "2026-12-07): the images' gamma is not corrected")
         if on_estimate is not None and not callable(on_estimate):
             raise TypeError(f"on_estimate must be callable or None, got {type(on_estimate).__name__}")
         self.on_estimate = on_estimate
@@ -261,6 +273,8 @@ class StreamingLocalizer:
         out: list[LiveEstimate] = []
         if keep:
             batch = self._conform(imgs[keep])
+            if self.camera_gamma is not None:
+                batch = self.camera_gamma.correct(batch)
             if self.novelty_threshold is None:
                 xy = np.atleast_2d(self.localizer.predict(batch, rotations=self.rotations))
                 ms = np.ones(len(xy))

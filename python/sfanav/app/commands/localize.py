@@ -105,6 +105,12 @@ def _add_localize(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                    help="fuse the estimates with the run's odometry (EKF, CTRV; a dataset with odom_x, odom_y, "
                         "odom_heading): adds columns fused_x, fused_y, fused_heading; the noise comes from the "
                         "model's training run, the start pose from the first estimates")
+    p.add_argument("--camera-gamma", action="store_true",
+                   help="take the camera's gamma out of the images, estimated over the recording so far against "
+                        "the model's training run (the median log spread of the last 100 images; from the 20th "
+                        "image on): for a camera or image pipeline whose gamma differs from the one the model was "
+                        "trained with (docs/robustness.md, 'The camera's gamma from the stream'); needs a model "
+                        "trained with a photometric normalisation (the sfanav default) since 2026-12-07")
     p.add_argument("--rerun", default=None, metavar="NAME.rrd|viewer",
                    help="also log the images, estimates, fused track with covariance ellipses, the learned map and "
                         "the ground truth to a Rerun recording (NAME.rrd), a spawned viewer (viewer) or a running "
@@ -124,6 +130,7 @@ def _run_localize(args: argparse.Namespace) -> int:
 
     from ..._files import write_csv_atomic
     from ..._progress import progress_bar
+    from ...data.camera_gamma import CameraGamma
     from ...data.preprocessing import Preprocessing, Preprocessor
     from ...data.ros_messages import require_rosbags
     from ...data.rosbag_writer import BAG_SUFFIXES, write_estimates
@@ -189,6 +196,12 @@ def _run_localize(args: argparse.Namespace) -> int:
         if "ekf_noise" not in loc.info:
             raise UsageError(f"{args.model} holds no EKF noise (its training run had no odometry): retrain it on a "
                               "run with odometry to use --odometry")
+    gamma = None
+    if args.camera_gamma:
+        gamma = CameraGamma.for_localizer(loc)
+        if gamma is None:
+            raise UsageError(f"--camera-gamma: {args.model} holds no camera gamma reference (trained without a "
+                             "photometric normalisation, or before 2026-12-07): retrain it, or leave --camera-gamma out")
     prep = Preprocessing.of_model(loc)
     conform = Preprocessor(prep, mirror=mirror_of(args, loc), log=log)
     log(f"localizing {src.description} with {args.model} ({prep.describe()} panoramas)")
@@ -198,13 +211,15 @@ def _run_localize(args: argparse.Namespace) -> int:
     live = None
     if args.odometry:  # the streaming localizer over the recording: what a live robot runs, the same numbers
         live = StreamingLocalizer(loc, loc.info["ekf_noise"], mirror=mirror_of(args, loc), log=log,
+                                  camera_gamma=gamma is not None,
                                   rotations=args.rotations, max_pending=max(100, args.batch_size))
         stamps = _stream_stamps(src)
     i = 0
     for batch in src.batches(args.batch_size):
         n = len(batch)
         if live is None:
-            preds.append(loc.predict(conform(batch), rotations=args.rotations))
+            frames = conform(batch)
+            preds.append(loc.predict(frames if gamma is None else gamma.correct(frames), rotations=args.rotations))
         else:
             preds += live.push_images(stamps[i:i + n], batch)
             for j in range(i, i + n):
@@ -234,6 +249,11 @@ def _run_localize(args: argparse.Namespace) -> int:
         if live.novelty_threshold is not None:
             log(f"novelty: {live.n_novel_} of {live.n_images_} images farther from the training run than its own "
                 f"images are; their estimates weighed as up to {live.max_measurement_scale_:.1f}x noisier")
+    tracker = gamma if live is None else live.camera_gamma
+    if tracker is not None:
+        log(f"camera gamma: the last {min(tracker.n_images_, tracker.window)} images' log spread is "
+            f"{1 / tracker.factor_:.2f}x the training run's; the images were taken through a power of "
+            f"{tracker.factor_:.2f} (1 before the {tracker.min_images}th image)")
     frames = src.frames if src.frames is not None else np.arange(len(xy))
     if view is not None:
         if live is not None:  # the last batch's estimates, emitted at flush

@@ -1,0 +1,182 @@
+"""The camera's gamma from the stream (sfanav.data.camera_gamma): the log
+spread's invariances, the power that undoes a gamma, the causal tracker, the
+reference a model stores, the streaming localizer's and the command line's
+use of it, and bad input."""
+
+import numpy as np
+import pytest
+from clitools import assert_one_line_error, run, tiny_dataset
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+import sfanav
+from sfanav.data.camera_gamma import (MIN_IMAGES, OFFSET, CameraGamma, apply_gamma, log_spread,
+                                      reference_spread)
+from sfanav.data.corruptions import Corruption, corrupt
+from sfanav.data.photometric import lowpass_log_contrast
+
+
+def run_of(n=30, h=12, w=60, seed=0):
+    """Panoramas with a sky gradient, a darker ground and texture (values 15..235)."""
+    rng = np.random.default_rng(seed)
+    rows = np.linspace(1.0, 0.45, h)[:, None, None]
+    cols = 0.8 + 0.2 * np.sin(np.linspace(0, 6 * np.pi, w))[None, :, None]
+    base = 200 * rows * cols * np.array([0.9, 1.0, 1.1])
+    imgs = base[None] * rng.uniform(0.7, 1.15, (n, h, w, 3))
+    return np.clip(imgs, 15, 235).round().astype(np.uint8)
+
+
+def gamma(x, g):
+    return Corruption("gamma", {"gamma": g})(x)
+
+
+# ---------------------------------------------------------------- the spread
+@pytest.mark.parametrize("g", [0.7, 1.4])
+def test_a_gamma_scales_the_log_spread(g):
+    x = run_of()
+    ratio = np.median(log_spread(gamma(x, g))) / np.median(log_spread(x))
+    assert ratio == pytest.approx(g, rel=0.05)
+
+
+@pytest.mark.parametrize("c", [Corruption("exposure", {"gain": 0.6}),
+                               Corruption("white-balance", {"gains": (1.15, 1.0, 0.8)}),
+                               Corruption("vignetting", {"strength": 0.5})])
+def test_a_gain_a_white_balance_and_a_vignetting_leave_the_log_spread(c):
+    x = run_of()
+    ratio = np.median(log_spread(c(x))) / np.median(log_spread(x))
+    assert ratio == pytest.approx(1.0, abs=0.04), c.kind
+
+
+@settings(max_examples=20, deadline=None)
+@given(g=st.one_of(st.floats(0.6, 0.9), st.floats(1.1, 1.6)), seed=st.integers(0, 50))
+def test_apply_gamma_undoes_a_gamma_before_the_normalisation_property(g, seed):
+    # what the default's normalisation keeps of a gamma shrinks; what is left is the 8-bit rounding of the
+    # gamma'd image and the offset before the logarithm (dark pixels), about half at 0.7 and 1.4 on this run
+    x = run_of(n=4, seed=seed)
+    y = gamma(x, g)
+    ref = lowpass_log_contrast(x)
+    before = np.abs(lowpass_log_contrast(y) - ref).mean()
+    after = np.abs(lowpass_log_contrast(apply_gamma(y, 1.0 / g)) - ref).mean()
+    assert after <= (0.65 if abs(np.log(g)) > np.log(1.3) else 0.85) * before, (before, after)
+
+
+def test_apply_gamma_of_one_is_the_images_and_factors_per_image():
+    x = run_of(n=3)
+    np.testing.assert_array_equal(apply_gamma(x, 1.0), x.astype(np.float32))
+    out = apply_gamma(x, [1.0, 0.5, 2.0])
+    assert out.dtype == np.float32 and out.shape == x.shape and (out >= 0).all()
+    np.testing.assert_array_equal(out[0], x[0])
+    # a power about the channels' mean log: the channel means of the log stay, the spread scales
+    L = lambda a: np.log(a.astype(np.float64) + OFFSET)  # noqa: E731
+    np.testing.assert_allclose(L(out[2]).mean(axis=(0, 1)), L(x[2]).mean(axis=(0, 1)), rtol=1e-5)
+    assert log_spread(out[2:]) == pytest.approx(2 * log_spread(x[2:]), rel=1e-4)
+
+
+# ---------------------------------------------------------------- the tracker
+def test_the_tracker_is_causal_and_finds_the_gamma():
+    x = run_of(n=60)
+    cg = CameraGamma(reference_spread(x)["reference"])
+    y = gamma(x, 1.4)
+    out = cg.correct(y[: MIN_IMAGES - 1])  # not enough images yet: left as they are
+    assert out is not None and np.array_equal(out, y[: MIN_IMAGES - 1]) and cg.factor_ == 1.0
+    out = cg.correct(y[MIN_IMAGES - 1:])
+    assert cg.n_images_ == 60 and cg.factor_ == pytest.approx(1 / 1.4, rel=0.05)
+    # image by image, the same as the batch
+    one = CameraGamma(cg.reference)
+    rows = np.concatenate([one.correct(y[i:i + 1]) for i in range(len(y))])
+    np.testing.assert_allclose(rows[MIN_IMAGES - 1:], out, rtol=1e-5)
+
+
+def test_a_stream_like_the_training_run_is_left_nearly_as_it_is():
+    x = run_of(n=40, seed=1)
+    cg = CameraGamma(reference_spread(run_of(n=40, seed=2))["reference"])
+    cg.correct(x)
+    assert cg.factor_ == pytest.approx(1.0, abs=0.03)
+
+
+def test_the_window_forgets():
+    x = run_of(n=40)
+    cg = CameraGamma(reference_spread(x)["reference"], window=20, min_images=5)
+    cg.correct(gamma(x, 1.4))
+    assert cg.factor_ == pytest.approx(1 / 1.4, rel=0.05)
+    cg.correct(x[:20])  # the camera changed back: the last 20 images are the training run's
+    assert cg.factor_ == pytest.approx(1.0, abs=0.02)
+
+
+def test_bad_input():
+    x = run_of(n=2)
+    for kw, err in (({"reference": 0.0}, ValueError), ({"reference": float("nan")}, ValueError),
+                    ({"reference": 0.5, "window": 0}, ValueError),
+                    ({"reference": 0.5, "window": 5, "min_images": 6}, ValueError),
+                    ({"reference": 0.5, "min_images": 2.5}, TypeError)):
+        with pytest.raises(err):
+            CameraGamma(**kw)
+    with pytest.raises(ValueError, match="finite"):
+        log_spread(np.full((1, 4, 6, 3), np.nan))
+    with pytest.raises(ValueError, match="gamma factors"):
+        apply_gamma(x, 0.0)
+    with pytest.raises(ValueError, match="gamma factors"):
+        apply_gamma(x, [1.0, np.inf])
+    with pytest.raises(ValueError, match="shape"):
+        log_spread(np.zeros((4, 6)))
+    assert CameraGamma.for_localizer(object()) is None
+
+
+# ---------------------------------------------------------------- models, stream, command line
+@pytest.fixture(scope="module")
+def model():
+    from sfanav.experiments.localization import tiny_config
+    from sfanav.localization.recipe import recipe_for
+    from sfanav.localization.training import fit_localizer
+
+    x = run_of(n=40, h=8, w=48, seed=3)
+    xy = np.c_[np.linspace(0, 3, 40), np.zeros(40)]
+    loc = fit_localizer(sfanav.Network(tiny_config(48, 8, 3, out=6)), x, xy, rotation=sfanav.Rotation(4),
+                        progress=False, **recipe_for(robustness="light").fit_kwargs() | {"rows": None})
+    return loc, x
+
+
+def test_a_photometric_model_stores_its_reference_and_keeps_it(model, tmp_path):
+    loc, x = model
+    ref = loc.info["camera_gamma"]
+    assert ref == pytest.approx(reference_spread(x))
+    loc.save(tmp_path / "m.sfa")
+    back = sfanav.load(tmp_path / "m.sfa")
+    assert CameraGamma.for_localizer(back).reference == pytest.approx(ref["reference"])
+
+
+def test_the_streaming_localizer_corrects_what_it_sees(model):
+    from sfanav.odometry.streaming import StreamingLocalizer
+
+    loc, x = model
+    y = gamma(np.concatenate([x, x]), 1.4)
+    noise = {"distance_noise": 0.05, "heading_noise": 0.05, "measurement_noise": 0.2}
+    got = []
+    live = StreamingLocalizer(loc, noise, camera_gamma=True, on_estimate=lambda t, z: got.append(z))
+    for k in range(0, len(y), 16):  # in batches, as sfanav localize pushes a recording
+        live.push_images(np.arange(k, min(k + 16, len(y))) * 10**8, y[k:k + 16])
+    want = loc.predict(CameraGamma.for_localizer(loc).correct(y))
+    np.testing.assert_allclose(np.array(got), want, atol=1e-9)
+    assert live.camera_gamma.factor_ == pytest.approx(1 / 1.4, rel=0.06)
+    lines = []
+    plain = loc.sibling()
+    plain.info = {}
+    StreamingLocalizer(plain, noise, camera_gamma=True, log=lines.append)
+    assert any("no camera gamma reference" in m for m in lines)
+
+
+def test_localize_camera_gamma_on_the_command_line(tmp_path, capsys):
+    root = tmp_path
+    ds, cfg = tiny_dataset(root)
+    for name, extra in (("none.sfa", ()), ("light.sfa", ("--robustness", "light"))):
+        code, _, err = run(capsys, "train", "--dataset", root / "data", "--config", cfg, *extra,
+                           "--out", root / name, "--no-progress")
+        assert code == 0, err
+    code, _, err = run(capsys, "localize", root / "none.sfa", root / "data", "--run", "test", "--camera-gamma",
+                       "--out", root / "none.csv", "--no-progress")
+    assert_one_line_error(code, err, "--camera-gamma")
+    assert not (root / "none.csv").exists()
+    code, out, err = run(capsys, "localize", root / "light.sfa", root / "data", "--run", "test", "--camera-gamma",
+                         "--out", root / "light.csv", "--no-progress")
+    assert code == 0, err
+    assert "camera gamma:" in err + out and (root / "light.csv").exists()
