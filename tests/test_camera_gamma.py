@@ -91,7 +91,12 @@ def test_a_stream_like_the_training_run_is_left_nearly_as_it_is():
     x = run_of(n=40, seed=1)
     cg = CameraGamma(reference_spread(run_of(n=40, seed=2))["reference"])
     cg.correct(x)
-    assert cg.factor_ == pytest.approx(1.0, abs=0.03)
+    assert cg.factor_ == 1.0  # within the dead zone: left exactly as it is
+    assert np.array_equal(cg.correct(x[:3]), x[:3])
+    # without the dead zone the few per cent between two runs of one camera apply
+    raw = CameraGamma(cg.reference, dead_zone=0.0)
+    raw.correct(x)
+    assert raw.factor_ == pytest.approx(1.0, abs=0.03)
 
 
 def test_the_window_forgets():
@@ -108,7 +113,8 @@ def test_bad_input():
     for kw, err in (({"reference": 0.0}, ValueError), ({"reference": float("nan")}, ValueError),
                     ({"reference": 0.5, "window": 0}, ValueError),
                     ({"reference": 0.5, "window": 5, "min_images": 6}, ValueError),
-                    ({"reference": 0.5, "min_images": 2.5}, TypeError)):
+                    ({"reference": 0.5, "min_images": 2.5}, TypeError),
+                    ({"reference": 0.5, "dead_zone": -0.1}, ValueError)):
         with pytest.raises(err):
             CameraGamma(**kw)
     with pytest.raises(ValueError, match="finite"):

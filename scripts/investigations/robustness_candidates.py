@@ -237,6 +237,24 @@ class RunGamma:
         return out[0] if single else out
 
 
+class StreamGamma:
+    """The library's camera gamma (sfanav.data.camera_gamma.CameraGamma, what ``sfanav localize --camera-gamma``
+    and the streaming localizer run): the first call (the training run) stores its reference and returns the
+    images unchanged; every later call (a test run, in its order) is corrected by a fresh tracker, causally over
+    the last 200 images, factors within exp(+-0.1) taken as 1 (the library's defaults)."""
+
+    def __init__(self):
+        self.reference = None
+
+    def __call__(self, images):
+        from sfanav.data.camera_gamma import CameraGamma, reference_spread
+
+        if self.reference is None:
+            self.reference = reference_spread(images)["reference"]
+            return images
+        return CameraGamma(self.reference).correct(images)
+
+
 def _batch(images):
     """(float32 batch (N, H, W[, C]), whether ``images`` was a single image)."""
     a = np.asarray(images, np.float32)
@@ -360,6 +378,7 @@ CANDIDATES = {
     "rungamma-0.25": ({"robustness": "standard", "photometric": "lowpass-2-flat"}, "rungamma"),
     "rungammaq-0.25": ({"robustness": "standard", "photometric": "lowpass-2-flat"}, "rungammaq"),
     "rungammaf-0.25": ({"robustness": "standard", "photometric": "lowpass-2-flat"}, "rungammaf"),
+    "camgamma-0.25": ({"robustness": "standard", "photometric": "lowpass-2-flat"}, "camgamma"),
     **{f"gammafix{o}-0.25": ({"robustness": "standard", "photometric": f"gammafix{o}-default"}, None)
        for o in GAMMAFIX},
     **{f"{e}-{s}-flat-0.25": ({"robustness": "standard", "photometric": f"{e}-{s}-flat"}, None)
@@ -391,6 +410,8 @@ def train(name, X, xy, elev):
     kw = recipe_for(robustness=opts.pop("robustness")).fit_kwargs(elev)
     net = default_network(**opts.pop("network", {}))
     kw.update(opts)
+    if pre == "camgamma":
+        pre = StreamGamma()
     if pre in ("rungamma", "rungammaq", "rungammaf"):
         pre = RunGamma(spread={"rungamma": "std", "rungammaq": "quantile", "rungammaf": "flat-std"}[pre])
     if pre is None:

@@ -41,15 +41,19 @@ from typing import Any
 
 import numpy as np
 
-from .._checks import as_image_batch, check_int, check_positive_float
+from .._checks import as_image_batch, check_int, check_nonneg_float, check_positive_float
 
 OFFSET = 2.0
 """Grey levels added before the logarithm of the spread and the correction (a gamma is a scale of ``log(I)``
 exactly; the offset keeps black pixels finite and bends that least at 2)."""
-WINDOW = 100
+WINDOW = 200
 """Recent images whose median spread :class:`CameraGamma` compares with the training run's."""
 MIN_IMAGES = 20
 """Images :class:`CameraGamma` waits for before it corrects (a factor of 1 until then)."""
+DEAD_ZONE = 0.1
+"""Factors within ``exp(+-DEAD_ZONE)`` (0.90..1.11) are taken as 1: a test run that keeps to part of the garden
+sees a spread a few per cent off the training run's (up to 8 % over 200 images of the gardens measured,
+docs/robustness.md), which is no gamma; a camera's gamma of 0.7 or 1.4 is 0.36 or 0.34 in the log."""
 
 
 def log_spread(images: Any, *, offset: float = OFFSET) -> np.ndarray:
@@ -103,7 +107,8 @@ class CameraGamma:
     """The gamma of a stream of images relative to a training run's, taken
     out image by image, causally: each image's factor is ``reference`` over
     the median :func:`log_spread` of the last ``window`` images up to and
-    including it, 1 until ``min_images`` have been seen.
+    including it, 1 until ``min_images`` have been seen and while it is
+    within the ``dead_zone``.
 
     Parameters
     ----------
@@ -113,6 +118,8 @@ class CameraGamma:
         :meth:`for_localizer`).
     window, min_images : int
         See above (:data:`WINDOW`, :data:`MIN_IMAGES`).
+    dead_zone : float
+        A factor whose log is within +-``dead_zone`` is 1 (:data:`DEAD_ZONE`; 0: every factor applies).
     offset : float
         Grey levels before the logarithm (:data:`OFFSET`).
 
@@ -128,13 +135,14 @@ class CameraGamma:
     """
 
     def __init__(self, reference: float, *, window: int = WINDOW, min_images: int = MIN_IMAGES,
-                 offset: float = OFFSET) -> None:
+                 dead_zone: float = DEAD_ZONE, offset: float = OFFSET) -> None:
         self.reference = check_positive_float(reference, "reference")
         self.window = check_int(window, "window", minimum=1)
         self.min_images = check_int(min_images, "min_images", minimum=1)
         if self.min_images > self.window:
             raise ValueError(f"min_images ({self.min_images}) must be at most window ({self.window})")
         self.offset = check_positive_float(offset, "offset")
+        self.dead_zone = check_nonneg_float(dead_zone, "dead_zone")
         self._spreads: deque[float] = deque(maxlen=self.window)
         self.factor_ = 1.0
         self.n_images_ = 0
@@ -160,7 +168,8 @@ class CameraGamma:
             self.n_images_ += 1
             if len(self._spreads) >= self.min_images:
                 med = float(np.median(self._spreads))
-                self.factor_ = self.reference / med if med > 1e-9 else 1.0
+                f = self.reference / med if med > 1e-9 else 1.0
+                self.factor_ = f if abs(np.log(f)) > self.dead_zone else 1.0
             factors[i] = self.factor_
         if np.all(factors == 1.0):
             return a

@@ -107,9 +107,9 @@ def _add_localize(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                         "model's training run, the start pose from the first estimates")
     p.add_argument("--camera-gamma", action="store_true",
                    help="take the camera's gamma out of the images, estimated over the recording so far against "
-                        "the model's training run (the median log spread of the last 100 images; from the 20th "
-                        "image on): for a camera or image pipeline whose gamma differs from the one the model was "
-                        "trained with (docs/robustness.md, 'The camera's gamma from the stream'); needs a model "
+                        "the model's training run (the median log spread of the last 200 images, from the 20th "
+                        "image on; factors within 0.90..1.11 are taken as 1): for a camera or image pipeline "
+                        "whose gamma differs from the one the model was trained with (docs/robustness.md, 'The camera's gamma from the stream'); needs a model "
                         "trained with a photometric normalisation (the sfanav default) since 2026-12-07")
     p.add_argument("--rerun", default=None, metavar="NAME.rrd|viewer",
                    help="also log the images, estimates, fused track with covariance ellipses, the learned map and "
@@ -253,7 +253,7 @@ def _run_localize(args: argparse.Namespace) -> int:
     if tracker is not None:
         log(f"camera gamma: the last {min(tracker.n_images_, tracker.window)} images' log spread is "
             f"{1 / tracker.factor_:.2f}x the training run's; the images were taken through a power of "
-            f"{tracker.factor_:.2f} (1 before the {tracker.min_images}th image)")
+            f"{tracker.factor_:.2f} (1 before the {tracker.min_images}th image and within the dead zone)")
     frames = src.frames if src.frames is not None else np.arange(len(xy))
     if view is not None:
         if live is not None:  # the last batch's estimates, emitted at flush
