@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 
 import sfanav
 from sfanav.data.camera_gamma import (MIN_IMAGES, OFFSET, CameraGamma, apply_gamma, log_spread,
-                                      reference_spread)
+                                      predict_corrected, reference_spread)
 from sfanav.data.corruptions import Corruption, corrupt
 from sfanav.data.photometric import lowpass_log_contrast
 
@@ -52,9 +52,9 @@ def test_the_low_pass_keeps_blur_noise_and_jpeg_out_of_the_spread(c):
     x = run_of(n=30, h=20, w=120)
     y = corrupt(x, c, seed=1)
     ratio = lambda lp: np.median(log_spread(y, lowpass=lp)) / np.median(log_spread(x, lowpass=lp))  # noqa: E731
-    assert abs(np.log(ratio(4.0))) < 0.06  # well inside the dead zone
-    assert abs(np.log(ratio(0.0))) > 0.1  # without the low-pass, read as a gamma
-    assert ratio(4.0) == pytest.approx(np.median(log_spread(y)) / np.median(log_spread(x)))  # the default
+    assert abs(np.log(ratio(2.0))) < 0.1  # well inside the dead zone (0.2)
+    assert abs(np.log(ratio(2.0))) < 0.6 * abs(np.log(ratio(0.0)))  # less than half of it without the low-pass
+    assert ratio(2.0) == pytest.approx(np.median(log_spread(y)) / np.median(log_spread(x)))  # the default
 
 
 @settings(max_examples=20, deadline=None)
@@ -83,50 +83,72 @@ def test_apply_gamma_of_one_is_the_images_and_factors_per_image():
 
 
 # ---------------------------------------------------------------- the tracker
+def places(n):
+    return np.c_[np.arange(n) * 0.25, np.zeros(n)]
+
+
 def test_the_tracker_is_causal_and_finds_the_gamma():
     x = run_of(n=60)
-    cg = CameraGamma(reference_spread(x)["reference"])
+    cg = CameraGamma(log_spread(x), places(60))
     y = gamma(x, 1.4)
-    out = cg.correct(y[: MIN_IMAGES - 1])  # not enough images yet: left as they are
-    assert out is not None and np.array_equal(out, y[: MIN_IMAGES - 1]) and cg.factor_ == 1.0
-    out = cg.correct(y[MIN_IMAGES - 1:])
+    out = cg.correct(y[: MIN_IMAGES - 1], places(60)[: MIN_IMAGES - 1])  # not enough images yet: left as they are
+    assert np.array_equal(out, y[: MIN_IMAGES - 1]) and cg.factor_ == 1.0
+    out = cg.correct(y[MIN_IMAGES - 1:], places(60)[MIN_IMAGES - 1:])
     assert cg.n_images_ == 60 and cg.factor_ == pytest.approx(1 / 1.4, rel=0.05)
     # image by image, the same as the batch
-    one = CameraGamma(cg.reference)
-    rows = np.concatenate([one.correct(y[i:i + 1]) for i in range(len(y))])
+    one = CameraGamma(cg.spreads, cg.positions)
+    rows = np.concatenate([one.correct(y[i:i + 1], places(60)[i:i + 1]) for i in range(len(y))])
     np.testing.assert_allclose(rows[MIN_IMAGES - 1:], out, rtol=1e-5)
 
 
-def test_a_stream_like_the_training_run_is_left_nearly_as_it_is():
+def test_the_reference_is_the_place_s_so_a_scene_of_other_contrast_is_no_gamma():
+    # the training run: half its places low in contrast, half high; a test run that keeps to the high half
+    x = run_of(n=60)
+    flat = apply_gamma(x[:30], 0.6).round().clip(0, 255).astype(np.uint8)  # the first 30 places: less contrast
+    train = np.concatenate([flat, x[30:]])
+    cg = CameraGamma(log_spread(train), places(60))
+    cg.correct(x[30:], places(60)[30:])
+    assert cg.factor_ == 1.0 and abs(cg.log_ratio_) < 0.05
+    # against the run's median spread instead (the place ignored), the same walk reads as a gamma
+    pooled = CameraGamma(np.full(60, np.median(log_spread(train))), places(60))
+    pooled.correct(x[30:], places(60)[30:])
+    assert abs(pooled.log_ratio_) > 0.1
+
+
+def test_a_stream_like_the_training_run_is_left_exactly_as_it_is():
     x = run_of(n=40, seed=1)
-    cg = CameraGamma(reference_spread(run_of(n=40, seed=2))["reference"])
-    cg.correct(x)
-    assert cg.factor_ == 1.0  # within the dead zone: left exactly as it is
-    assert np.array_equal(cg.correct(x[:3]), x[:3])
+    cg = CameraGamma(log_spread(run_of(n=40, seed=2)), places(40))
+    assert np.array_equal(cg.correct(x, places(40)), x) and cg.factor_ == 1.0
+    assert abs(cg.log_ratio_) < 0.05
     # without the dead zone the few per cent between two runs of one camera apply
-    raw = CameraGamma(cg.reference, dead_zone=0.0)
-    raw.correct(x)
-    assert raw.factor_ == pytest.approx(1.0, abs=0.03)
+    raw = CameraGamma(cg.spreads, cg.positions, dead_zone=0.0)
+    raw.correct(x, places(40))
+    assert raw.factor_ == pytest.approx(np.exp(raw.log_ratio_)) and raw.factor_ != 1.0
 
 
 def test_the_window_forgets():
     x = run_of(n=40)
-    cg = CameraGamma(reference_spread(x)["reference"], window=20, min_images=5)
-    cg.correct(gamma(x, 1.4))
+    cg = CameraGamma(log_spread(x), places(40), window=20, min_images=5)
+    cg.correct(gamma(x, 1.4), places(40))
     assert cg.factor_ == pytest.approx(1 / 1.4, rel=0.05)
-    cg.correct(x[:20])  # the camera changed back: the last 20 images are the training run's
-    assert cg.factor_ == pytest.approx(1.0, abs=0.02)
+    cg.correct(x[:20], places(40)[:20])  # the camera changed back: the last 20 images are the training run's
+    assert cg.factor_ == 1.0
 
 
 def test_bad_input():
     x = run_of(n=2)
-    for kw, err in (({"reference": 0.0}, ValueError), ({"reference": float("nan")}, ValueError),
-                    ({"reference": 0.5, "window": 0}, ValueError),
-                    ({"reference": 0.5, "window": 5, "min_images": 6}, ValueError),
-                    ({"reference": 0.5, "min_images": 2.5}, TypeError),
-                    ({"reference": 0.5, "dead_zone": -0.1}, ValueError)):
+    ok = {"spreads": [0.5, 0.6], "positions": [[0, 0], [1, 0]]}
+    for kw, err in (({"spreads": [0.0, 0.5]}, ValueError), ({"spreads": [np.nan, 0.5]}, ValueError),
+                    ({"spreads": []}, ValueError), ({"positions": [[0, 0]]}, ValueError),
+                    ({"window": 0}, ValueError), ({"window": 5, "min_images": 6}, ValueError),
+                    ({"min_images": 2.5}, TypeError), ({"dead_zone": -0.1}, ValueError)):
         with pytest.raises(err):
-            CameraGamma(**kw)
+            CameraGamma(**{**ok, **kw})
+    cg = CameraGamma(**ok)
+    with pytest.raises(ValueError):
+        cg.correct(x, [[0, 0]])  # one position for two images
+    with pytest.raises(ValueError, match="positions contains NaN"):
+        cg.correct(x, [[0, 0], [np.nan, 0]])
     with pytest.raises(ValueError, match="finite"):
         log_spread(np.full((1, 4, 6, 3), np.nan))
     with pytest.raises(ValueError, match="gamma factors"):
@@ -155,10 +177,11 @@ def model():
 def test_a_photometric_model_stores_its_reference_and_keeps_it(model, tmp_path):
     loc, x = model
     ref = loc.info["camera_gamma"]
-    assert ref == pytest.approx(reference_spread(x))
+    assert ref == reference_spread(x, loc.training_positions_)
     loc.save(tmp_path / "m.sfa")
-    back = sfanav.load(tmp_path / "m.sfa")
-    assert CameraGamma.for_localizer(back).reference == pytest.approx(ref["reference"])
+    back = CameraGamma.for_localizer(sfanav.load(tmp_path / "m.sfa"))
+    np.testing.assert_allclose(back.spreads, log_spread(x), atol=1e-5)
+    np.testing.assert_allclose(back.positions, loc.training_positions_, atol=1e-3)
 
 
 def test_the_streaming_localizer_corrects_what_it_sees(model):
@@ -171,14 +194,20 @@ def test_the_streaming_localizer_corrects_what_it_sees(model):
     live = StreamingLocalizer(loc, noise, camera_gamma=True, on_estimate=lambda t, z: got.append(z))
     for k in range(0, len(y), 16):  # in batches, as sfanav localize pushes a recording
         live.push_images(np.arange(k, min(k + 16, len(y))) * 10**8, y[k:k + 16])
-    want = loc.predict(CameraGamma.for_localizer(loc).correct(y))
+    want = predict_corrected(loc, CameraGamma.for_localizer(loc), y)
     np.testing.assert_allclose(np.array(got), want, atol=1e-9)
+    assert not np.allclose(want, loc.predict(y))  # the correction changed the estimates
     assert live.camera_gamma.factor_ == pytest.approx(1 / 1.4, rel=0.06)
     lines = []
     plain = loc.sibling()
     plain.info = {}
     StreamingLocalizer(plain, noise, camera_gamma=True, log=lines.append)
     assert any("no camera gamma reference" in m for m in lines)
+
+
+def test_predict_corrected_without_a_tracker_is_predict(model):
+    loc, x = model
+    np.testing.assert_array_equal(predict_corrected(loc, None, x[:5]), loc.predict(x[:5]))
 
 
 def test_localize_camera_gamma_on_the_command_line(tmp_path, capsys):

@@ -45,8 +45,8 @@ def main() -> None:
     a = ap.parse_args()
     res = json.loads(a.out.read_text()) if a.out.exists() else {}
     prep = Preprocessing.for_network(default_network())
-    conform = Preprocessor(prep, log=lambda *m, **k: None)
     for g in a.gardens.split(","):
+        conform = Preprocessor(prep, log=lambda *m, **k: None)  # one per garden: it keeps the first images' size
         ds = Dataset(a.root / g)
         cam = ds.metadata["camera"]
         native = Preprocessing(int(cam["width"]), int(cam["height"]), False)

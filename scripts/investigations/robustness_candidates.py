@@ -239,20 +239,17 @@ class RunGamma:
 
 class StreamGamma:
     """The library's camera gamma (sfanav.data.camera_gamma.CameraGamma, what ``sfanav localize --camera-gamma``
-    and the streaming localizer run): the first call (the training run) stores its reference and returns the
-    images unchanged; every later call (a test run, in its order) is corrected by a fresh tracker, causally over
-    the last 200 images, factors within exp(+-0.1) taken as 1 (the library's defaults)."""
+    and the streaming localizer run): a test run, in its order, localized once, its images' gamma estimated
+    against the training views where they are placed (the model's stored reference), and localized again where a
+    factor applies (predict_corrected), with a fresh tracker per run."""
 
-    def __init__(self):
-        self.reference = None
+    def __init__(self, loc):
+        self.loc = loc
 
-    def __call__(self, images):
-        from sfanav.data.camera_gamma import CameraGamma, reference_spread
+    def predict(self, X):
+        from sfanav.data.camera_gamma import CameraGamma, predict_corrected
 
-        if self.reference is None:
-            self.reference = reference_spread(images)["reference"]
-            return images
-        return CameraGamma(self.reference).correct(images)
+        return predict_corrected(self.loc, CameraGamma.for_localizer(self.loc), X)
 
 
 def _batch(images):
@@ -411,7 +408,7 @@ def train(name, X, xy, elev):
     net = default_network(**opts.pop("network", {}))
     kw.update(opts)
     if pre == "camgamma":
-        pre = StreamGamma()
+        return StreamGamma(fit_localizer(net, X, xy, rotation=Rotation(5, 1.0), progress=False, **kw))
     if pre in ("rungamma", "rungammaq", "rungammaf"):
         pre = RunGamma(spread={"rungamma": "std", "rungammaq": "quantile", "rungammaf": "flat-std"}[pre])
     if pre is None:

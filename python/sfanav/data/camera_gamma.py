@@ -6,20 +6,22 @@ gain, a white balance and a vignetting exactly, but not a gamma: its
 low-pass acts on the intensities before the logarithm, and a low-pass does
 not commute with a power. A gamma ``255 (I / 255)^g`` scales the logarithm
 of the intensities by ``g``, so it shows in how widely the log intensities
-of a camera's images spread, and no single image tells a gamma from a
-scene of more or less contrast; a run of images does. This module measures
-that spread (:func:`log_spread`: the standard deviation of ``log(I +
-offset)`` once each channel's quadratic profile over the rows, a vignetting
-or the sky's gradient, is removed), compares the median over recent images
-with the training run's (:class:`CameraGamma`) and maps each image through
-the power that brings the two together (:func:`apply_gamma`), before the
-localizer sees it. A camera like the training run's gets a factor near 1
-and its images are left as they were; a camera with gamma ``g`` gets about
-``1 / g``.
+of an image spread (:func:`log_spread`: the standard deviation of ``log(I +
+offset)`` of the low-passed image once each channel's quadratic profile
+over the rows, a vignetting or the sky's gradient, is removed). But so does
+the place: a view into a hedge spreads differently from a view over the
+lawn, and a robot that keeps to part of the garden would read that as a
+gamma. :class:`CameraGamma` therefore compares each image's spread with the
+training images' *at the place the localizer puts it* (the median of its
+nearest training views'), takes the median of those log ratios over recent
+images, and, when it is beyond a dead zone, maps each image through the
+power that brings the two together (:func:`apply_gamma`) before the
+localizer sees it again. A camera like the training run's is left exactly
+as it is; a camera with gamma ``g`` gets about ``1 / g``.
 
 Where it helps and what it costs (the default's network, paired seed by
-seed, four gardens): docs/robustness.md, "The camera's gamma from the
-stream".
+seed, four gardens; the corruption suite): docs/robustness.md, "The
+camera's gamma from the stream".
 
 Examples
 --------
@@ -28,9 +30,10 @@ Examples
 >>> rng = np.random.default_rng(0)
 >>> sky = np.linspace(220, 60, 12)[:, None, None] * (0.8 + 0.2 * np.sin(np.linspace(0, 12, 60)))[None, :, None]
 >>> run = (sky[None] * rng.uniform(0.8, 1.1, (40, 1, 60, 3))).astype(np.uint8)   # 40 panoramas, 12 x 60
+>>> xy = np.c_[np.arange(40) * 0.25, np.zeros(40)]                               # where they were taken
 >>> dark = (255 * (run / 255) ** 1.4).round().astype(np.uint8)       # the same run through a gamma of 1.4
->>> cg = CameraGamma(float(np.median(log_spread(run))), min_images=10)
->>> fixed = cg.correct(dark)
+>>> cg = CameraGamma(log_spread(run), xy, min_images=10)
+>>> fixed = cg.correct(dark, xy)                                       # the localizer's estimates of dark
 >>> round(cg.factor_, 2)                                               # about 1 / 1.4
 0.72
 """
@@ -42,23 +45,27 @@ from typing import Any
 
 import numpy as np
 
-from .._checks import as_image_batch, check_int, check_nonneg_float, check_positive_float
+from .._checks import (as_image_batch, as_matrix, check_int, check_nonneg_float, check_positive_float,
+                       check_same_length)
 
 OFFSET = 2.0
 """Grey levels added before the logarithm of the spread and the correction (a gamma is a scale of ``log(I)``
 exactly; the offset keeps black pixels finite and bends that least at 2)."""
-LOWPASS = 4.0
+LOWPASS = 2.0
 """Gaussian low-pass (pixels, wrapping around the panorama's seam in columns) of the images before their log spread:
 a defocus, motion blur, JPEG, noise and dead pixels change the fine structure's share of the spread (a 2 px defocus
-read as a gamma of 0.6 in a suite garden without it), a gamma scales the coarse structure's as much."""
+read as a gamma of 0.63-0.67 in a suite garden without it, 0.87-0.89 with it), a gamma scales the coarse structure's
+as much. The photometric normalisation's own width."""
 WINDOW = 200
-"""Recent images whose median spread :class:`CameraGamma` compares with the training run's."""
+"""Recent images whose median log ratio :class:`CameraGamma` takes."""
 MIN_IMAGES = 20
 """Images :class:`CameraGamma` waits for before it corrects (a factor of 1 until then)."""
-DEAD_ZONE = 0.1
-"""Factors within ``exp(+-DEAD_ZONE)`` (0.90..1.11) are taken as 1: a test run that keeps to part of the garden
-sees a spread a few per cent off the training run's (up to 8 % over 200 images of the gardens measured,
-docs/robustness.md), which is no gamma; a camera's gamma of 0.7 or 1.4 is 0.36 or 0.34 in the log."""
+NEIGHBOURS = 10
+"""Training views nearest an image's estimate whose median spread is its reference."""
+DEAD_ZONE = 0.2
+"""Factors within ``exp(+-DEAD_ZONE)`` (0.82..1.22) are taken as 1. Measured on four gardens' test walks against
+their training runs (docs/robustness.md): a flawless walk's median log ratio stays within 0.01, a 2 px defocus and
+a clipped overexposure x1.5 within 0.05-0.18 (not a gamma: left alone), a gamma of 0.7 or 1.4 at 0.29-0.36."""
 
 
 def log_spread(images: Any, *, offset: float = OFFSET, lowpass: float = LOWPASS) -> np.ndarray:
@@ -120,46 +127,63 @@ def apply_gamma(images: Any, factors: Any, *, offset: float = OFFSET) -> np.ndar
 
 class CameraGamma:
     """The gamma of a stream of images relative to a training run's, taken
-    out image by image, causally: each image's factor is ``reference`` over
-    the median :func:`log_spread` of the last ``window`` images up to and
-    including it, 1 until ``min_images`` have been seen and while it is
-    within the ``dead_zone``.
+    out image by image, causally: each image's log ratio is the log of the
+    median spread of the ``neighbours`` training views nearest its position
+    estimate over its own :func:`log_spread`; its factor is the exponential
+    of the median log ratio of the last ``window`` images up to and
+    including it, 1 until ``min_images`` have been seen and while that
+    median is within the ``dead_zone``.
 
     Parameters
     ----------
-    reference : float
-        The training run's median log spread (``Localizer.info["camera_gamma"]
-        ["reference"]`` of a model trained with a photometric normalisation;
-        :meth:`for_localizer`).
-    window, min_images : int
-        See above (:data:`WINDOW`, :data:`MIN_IMAGES`).
+    spreads : array (M,)
+        The training images' log spreads (:func:`reference_spread`, stored in
+        a photometric model's ``info["camera_gamma"]``; :meth:`for_localizer`).
+    positions : array (M, 2)
+        Their positions, in the frame of the localizer's estimates (metres).
+    window, min_images, neighbours : int
+        See above (:data:`WINDOW`, :data:`MIN_IMAGES`, :data:`NEIGHBOURS`).
     dead_zone : float
-        A factor whose log is within +-``dead_zone`` is 1 (:data:`DEAD_ZONE`; 0: every factor applies).
-    offset : float
-        Grey levels before the logarithm (:data:`OFFSET`).
+        A median log ratio within +-``dead_zone`` gives a factor of 1
+        (:data:`DEAD_ZONE`; 0: every factor applies).
+    offset, lowpass : float
+        As :func:`log_spread` (the training spreads' own).
 
     Attributes
     ----------
     factor_ : float
         The last image's factor (1 before any).
+    log_ratio_ : float
+        The last median log ratio (0 before ``min_images``).
     n_images_ : int
         Images seen.
 
-    Raises ValueError for a reference that is not finite and > 0, or bad
-    window sizes.
+    Raises ValueError for spreads that are not finite and > 0, positions of
+    another length or shape, or bad window sizes.
     """
 
-    def __init__(self, reference: float, *, window: int = WINDOW, min_images: int = MIN_IMAGES,
-                 dead_zone: float = DEAD_ZONE, offset: float = OFFSET) -> None:
-        self.reference = check_positive_float(reference, "reference")
+    def __init__(self, spreads: Any, positions: Any, *, window: int = WINDOW, min_images: int = MIN_IMAGES,
+                 neighbours: int = NEIGHBOURS, dead_zone: float = DEAD_ZONE, offset: float = OFFSET,
+                 lowpass: float = LOWPASS) -> None:
+        from scipy.spatial import cKDTree
+
+        sp = np.asarray(spreads, dtype=np.float64).reshape(-1)
+        if len(sp) == 0 or not np.all(np.isfinite(sp) & (sp > 0)):
+            raise ValueError("spreads must be a non-empty array of finite values > 0")
+        xy = as_matrix(positions, "positions", n_cols=2)
+        check_same_length(sp, xy, "spreads", "positions")
         self.window = check_int(window, "window", minimum=1)
         self.min_images = check_int(min_images, "min_images", minimum=1)
         if self.min_images > self.window:
             raise ValueError(f"min_images ({self.min_images}) must be at most window ({self.window})")
-        self.offset = check_positive_float(offset, "offset")
+        self.neighbours = min(check_int(neighbours, "neighbours", minimum=1), len(sp))
         self.dead_zone = check_nonneg_float(dead_zone, "dead_zone")
-        self._spreads: deque[float] = deque(maxlen=self.window)
-        self.factor_ = 1.0
+        self.offset = check_positive_float(offset, "offset")
+        self.lowpass = check_nonneg_float(lowpass, "lowpass")
+        self.spreads, self.positions = sp, xy
+        self._tree = cKDTree(xy)
+        self._ratios: deque[float] = deque(maxlen=self.window)
+        self.factor_, self.log_ratio_ = 1.0, 0.0
         self.n_images_ = 0
 
     @classmethod
@@ -168,31 +192,53 @@ class CameraGamma:
         holds no reference (trained without a photometric normalisation, or
         before 2026-12-07)."""
         ref = (getattr(localizer, "info", None) or {}).get("camera_gamma")
-        if not ref:
+        if not ref or "spreads" not in ref:
             return None
-        return cls(float(ref["reference"]), offset=float(ref.get("offset", OFFSET)), **kwargs)
+        return cls(ref["spreads"], ref["positions"], offset=float(ref.get("offset", OFFSET)),
+                   lowpass=float(ref.get("lowpass", LOWPASS)), **kwargs)
 
-    def correct(self, images: Any) -> np.ndarray:
-        """The next images of the stream (N, H, W[, C]), in order, each
-        through its factor: float32, or the images as given while every
-        factor is 1."""
+    def correct(self, images: Any, positions: Any) -> np.ndarray:
+        """The next images of the stream (N, H, W[, C]), in order, with the
+        localizer's estimates of them (N, 2), each through its factor:
+        float32, or the images as given while every factor is 1."""
         a = as_image_batch(images)
+        xy = as_matrix(positions, "positions", n_cols=2)
+        check_same_length(a, xy, "images", "positions")
+        _, nn = self._tree.query(xy, k=self.neighbours)
+        ref = np.median(self.spreads[np.asarray(nn).reshape(len(xy), -1)], axis=1)
         factors = np.ones(len(a))
-        for i, s in enumerate(log_spread(a, offset=self.offset)):
-            self._spreads.append(float(s))
+        for i, s in enumerate(log_spread(a, offset=self.offset, lowpass=self.lowpass)):
+            self._ratios.append(float(np.log(ref[i] / max(s, 1e-12))))
             self.n_images_ += 1
-            if len(self._spreads) >= self.min_images:
-                med = float(np.median(self._spreads))
-                f = self.reference / med if med > 1e-9 else 1.0
-                self.factor_ = f if abs(np.log(f)) > self.dead_zone else 1.0
+            if len(self._ratios) >= self.min_images:
+                self.log_ratio_ = float(np.median(self._ratios))
+                self.factor_ = float(np.exp(self.log_ratio_)) if abs(self.log_ratio_) > self.dead_zone else 1.0
             factors[i] = self.factor_
         if np.all(factors == 1.0):
             return a
         return apply_gamma(a, factors, offset=self.offset)
 
 
-def reference_spread(images: Any, *, offset: float = OFFSET) -> dict[str, float]:
-    """What a model stores of its training images (N, H, W[, C]) for
-    :meth:`CameraGamma.for_localizer`: ``{"reference": median log spread,
-    "offset": offset}``."""
-    return {"reference": float(np.median(log_spread(images, offset=offset))), "offset": float(offset)}
+def predict_corrected(localizer: Any, tracker: "CameraGamma | None", images: Any, **kwargs: Any) -> np.ndarray:
+    """``localizer.predict(images, **kwargs)`` with the camera's gamma taken
+    out by ``tracker`` (None: plain): the images are localized once as they
+    are, which places them for the tracker, and again once corrected when
+    any factor is not 1. Returns the estimates (N, 2)."""
+    xy = np.atleast_2d(localizer.predict(images, **kwargs))
+    if tracker is None:
+        return xy
+    fixed = tracker.correct(images, xy)
+    return xy if fixed is images else np.atleast_2d(localizer.predict(fixed, **kwargs))
+
+
+def reference_spread(images: Any, positions: Any, *, offset: float = OFFSET,
+                     lowpass: float = LOWPASS) -> dict[str, Any]:
+    """What a model stores of its training images (N, H, W[, C]) at their
+    positions (N, 2) for :meth:`CameraGamma.for_localizer`: ``{"spreads":
+    (N,) list, "positions": (N, 2) list, "offset", "lowpass"}`` (rounded to
+    1e-5 and a millimetre)."""
+    xy = as_matrix(positions, "positions", n_cols=2)
+    sp = log_spread(images, offset=offset, lowpass=lowpass)
+    check_same_length(sp, xy, "images", "positions")
+    return {"spreads": [round(float(v), 5) for v in sp], "positions": np.round(xy, 3).tolist(),
+            "offset": float(offset), "lowpass": float(lowpass)}

@@ -53,7 +53,7 @@ from typing import Any
 import numpy as np
 
 from .. import sim
-from ..data.camera_gamma import CameraGamma
+from ..data.camera_gamma import CameraGamma, predict_corrected
 from ..data.corruptions import CORRUPTIONS, corrupt
 from ..data.preprocessing import Preprocessing, Preprocessor
 from ..data.sources import load_run
@@ -185,7 +185,7 @@ def run_garden(out: Path, preset: str, train_run: str, test_run: str, *, quick: 
             r[FUSED] = _med(models["sfanav default, no ground truth"].fused(X_te, odometry_test), xy_te)
         tracker = CameraGamma.for_localizer(models.get("sfanav default"))
         if tracker is not None:  # the test run in its order, each image with the gamma seen so far
-            r[GAMMA] = _med(models["sfanav default"].predict(tracker.correct(X_te)), xy_te)
+            r[GAMMA] = _med(predict_corrected(models["sfanav default"], tracker, X_te), xy_te)
         res["test only"][name] = {m: r[m] for m in ROWS if m in r}
         r = res["test only"][name]
         log(f"{preset} test only {name}: " + ", ".join(f"{m} {v:.3f}" for m, v in r.items()))

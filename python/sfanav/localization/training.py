@@ -176,7 +176,7 @@ def fit_localizer(
                      "loop_closures": (int(getattr(network, "n_loop_closures_", 0)) if invariance is None
                                        or loop_closures is None else
                                        len(check_closures(loop_closures, len(raw), closure_weights)[1])),
-                     **({"photometric": photometric, "camera_gamma": reference_spread(raw)} if photometric else {}),
+                     **({"photometric": photometric, "camera_gamma": reference_spread(raw, Y)} if photometric else {}),
                      **({"lowpass": list(loc.photometric_lowpass())} if loc.photometric_lowpass() else {}),
                      **({"readout_augmentation": readout_augmentation.describe()} if readout_augmentation else {}),
                      **({"invariance": invariance.describe(), "invariance_weight": float(invariance_weight)}

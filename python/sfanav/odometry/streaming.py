@@ -139,9 +139,10 @@ class StreamingLocalizer:
         novelty reference (one line through ``log`` says so): not scaled.
     camera_gamma : bool, default False
         Take the camera's gamma out of each image before the localizer sees
-        it, as estimated over the stream so far against the training run's
-        (:class:`sfanav.data.camera_gamma.CameraGamma`; a factor of 1 for
-        the first images). A model file without the training run's reference
+        it, as estimated over the stream so far against the training views
+        where the images are placed (:class:`sfanav.data.camera_gamma.CameraGamma`;
+        a factor of 1 for the first images and within its dead zone; each
+        batch is localized twice while a factor applies). A model file without the training run's reference
         (trained without a photometric normalisation, or before 2026-12-07):
         one line through ``log`` says so, and the images are left as they are.
     on_estimate : callable, optional
@@ -273,8 +274,8 @@ class StreamingLocalizer:
         out: list[LiveEstimate] = []
         if keep:
             batch = self._conform(imgs[keep])
-            if self.camera_gamma is not None:
-                batch = self.camera_gamma.correct(batch)
+            if self.camera_gamma is not None:  # placed by a first estimate, then localized again if corrected
+                batch = self.camera_gamma.correct(batch, self.localizer.predict(batch, rotations=self.rotations))
             if self.novelty_threshold is None:
                 xy = np.atleast_2d(self.localizer.predict(batch, rotations=self.rotations))
                 ms = np.ones(len(xy))

@@ -107,10 +107,12 @@ def _add_localize(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                         "model's training run, the start pose from the first estimates")
     p.add_argument("--camera-gamma", action="store_true",
                    help="take the camera's gamma out of the images, estimated over the recording so far against "
-                        "the model's training run (the median log spread of the last 200 images, from the 20th "
-                        "image on; factors within 0.90..1.11 are taken as 1): for a camera or image pipeline "
-                        "whose gamma differs from the one the model was trained with (docs/robustness.md, 'The camera's gamma from the stream'); needs a model "
-                        "trained with a photometric normalisation (the sfanav default) since 2026-12-07")
+                        "the training views where the images are placed (the median over the last 200 images, "
+                        "from the 20th on; ratios within 0.82..1.22 are taken as 1; each batch is localized "
+                        "twice while a factor applies): for a camera or image pipeline whose gamma differs "
+                        "from the one the model was trained with (docs/robustness.md, 'The camera's gamma from "
+                        "the stream'); needs a model trained with a photometric normalisation (the sfanav "
+                        "default) since 2026-12-07")
     p.add_argument("--rerun", default=None, metavar="NAME.rrd|viewer",
                    help="also log the images, estimates, fused track with covariance ellipses, the learned map and "
                         "the ground truth to a Rerun recording (NAME.rrd), a spawned viewer (viewer) or a running "
@@ -130,7 +132,7 @@ def _run_localize(args: argparse.Namespace) -> int:
 
     from ..._files import write_csv_atomic
     from ..._progress import progress_bar
-    from ...data.camera_gamma import CameraGamma
+    from ...data.camera_gamma import CameraGamma, predict_corrected
     from ...data.preprocessing import Preprocessing, Preprocessor
     from ...data.ros_messages import require_rosbags
     from ...data.rosbag_writer import BAG_SUFFIXES, write_estimates
@@ -218,8 +220,7 @@ def _run_localize(args: argparse.Namespace) -> int:
     for batch in src.batches(args.batch_size):
         n = len(batch)
         if live is None:
-            frames = conform(batch)
-            preds.append(loc.predict(frames if gamma is None else gamma.correct(frames), rotations=args.rotations))
+            preds.append(predict_corrected(loc, gamma, conform(batch), rotations=args.rotations))
         else:
             preds += live.push_images(stamps[i:i + n], batch)
             for j in range(i, i + n):
@@ -252,8 +253,9 @@ def _run_localize(args: argparse.Namespace) -> int:
     tracker = gamma if live is None else live.camera_gamma
     if tracker is not None:
         log(f"camera gamma: the last {min(tracker.n_images_, tracker.window)} images' log spread is "
-            f"{1 / tracker.factor_:.2f}x the training run's; the images were taken through a power of "
-            f"{tracker.factor_:.2f} (1 before the {tracker.min_images}th image and within the dead zone)")
+            f"{np.exp(-tracker.log_ratio_):.2f}x the training views' where they were placed; the images were taken "
+            f"through a power of {tracker.factor_:.2f} (1 before the {tracker.min_images}th image and while the "
+            f"ratio is within {np.exp(-tracker.dead_zone):.2f}..{np.exp(tracker.dead_zone):.2f})")
     frames = src.frames if src.frames is not None else np.arange(len(xy))
     if view is not None:
         if live is not None:  # the last batch's estimates, emitted at flush
