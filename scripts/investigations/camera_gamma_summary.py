@@ -46,7 +46,7 @@ def summary(entries: dict) -> dict:
         out[key] = {"seeds": sorted(full), "clean": clean, "clean mean": float(np.mean(clean)),
                     "clean min": min(clean), "clean max": max(clean), "mean": mean,
                     "corrupted mean": float(np.mean(list(mean.values()))), "worst corruption": worst,
-                    "worst / clean": mean[worst] / float(np.mean(clean))}
+                    "worst over clean": mean[worst] / float(np.mean(clean))}
     return out
 
 
@@ -63,7 +63,7 @@ def main() -> None:
     tmp.replace(out)
     for k, v in res["summary"].items():
         print(f"{k:40s} seeds {v['seeds']} clean {v['clean mean']:.3f} ({v['clean min']:.3f}-{v['clean max']:.3f}) "
-              f"corrupted {v['corrupted mean']:.3f} worst {v['worst corruption']} x{v['worst / clean']:.2f}")
+              f"corrupted {v['corrupted mean']:.3f} worst {v['worst corruption']} x{v['worst over clean']:.2f}")
 
 
 if __name__ == "__main__":

@@ -8,6 +8,7 @@ corruptions``, 2 h) also trains every model again on corrupted exploration runs;
 part the new rows are in (about 25 min on 2 cores).
 
     PYTHONPATH=python python3 scripts/investigations/corruptions_test_only.py OUT docs/results/investigations/corruptions-test-only.json
+    PYTHONPATH=python python3 scripts/investigations/corruptions_test_only.py --resummarize JSON   # the summary again
 
 OUT/data holds the simulated gardens (reused when there, as the experiment does). Writes the experiment's tables per
 garden ({corruption: {row: MED}}) and their summary ratios.
@@ -24,7 +25,18 @@ from sfanav.data.corruptions import CORRUPTIONS
 from sfanav.experiments.corruptions import GARDENS, run_garden, summarize
 
 
+def summary(table: dict) -> dict:
+    """The experiment's summary ratios of one garden's table, their keys without '/' (the docs' paths split on it)."""
+    return {m: {k.replace(" / ", " over "): v for k, v in r.items()} for m, r in summarize(table).items()}
+
+
 def main() -> None:
+    if len(sys.argv) == 3 and sys.argv[1] == "--resummarize":  # the summary again from a finished run's tables
+        path = Path(sys.argv[2])
+        res = json.loads(path.read_text())
+        res["summary"] = {g: summary(t) for g, t in res["gardens"].items()}
+        path.write_text(json.dumps(res, indent=1) + "\n")
+        return
     if len(sys.argv) != 3:
         sys.exit(__doc__)
     out, path = Path(sys.argv[1]), Path(sys.argv[2])
@@ -34,7 +46,7 @@ def main() -> None:
         r = run_garden(out, preset, tr, te, quick=False, seed=0, progress=True, both_runs=False,
                        corruptions=tuple(CORRUPTIONS))
         res["gardens"][preset] = r["test only"]
-        res["summary"][preset] = summarize(r["test only"])
+        res["summary"][preset] = summary(r["test only"])
         res["training (s)"] = {**res.get("training (s)", {}), preset: r["training (s)"]}
         res["wall (s)"] = time.perf_counter() - t0
         tmp = path.with_name(path.name + ".tmp")
