@@ -76,7 +76,7 @@ from sfanav.sfa import Rotation
 
 GARDENS = {"suite-inner": ("train-grid", "test-walk"), "demo": ("train", "test"),
            "suite-control": ("train-grid", "test-walk"), "suite-dense-trees": ("train-grid", "test-walk"),
-           "6.2.1-static": ("train", "test"), "6.2.1-dynamic": ("train", "test")}
+           "6.2.1-static": ("train", "test"), "6.2.1-dynamic": ("train", "test"), "6.2.1-light": ("train", "test")}
 """The gardens (folder names under ROOT); the 6.2.1 scenes (from 2026-12-06: ``thesis-6.2.1-static`` /
 ``-dynamic`` at seed 0, omnidirectional images) are unwarped to the network's 350x40 and corrupted at that
 size. The default --gardens are the first four."""
@@ -283,7 +283,7 @@ def _flat_contrast(v):
 def _lowpass_normalize(images, kind, lowpass=None):
     """log-contrast after a Gaussian low-pass: kind 'lowpass-S' (S in px); a prefix 'clipQQ-' first clips every
     channel at its QQ-th percentile (quantile_clip); 'eq[log]-S-flat': low-pass S px, equalise, [log,] flat field."""
-    from sfanav.data.photometric import log_contrast, normalize
+    from sfanav.data.photometric import PHOTOMETRIC, log_contrast, normalize
     if kind is not None and kind.startswith("eq"):
         parts = kind.split("-")
         b, single = _batch(images)
@@ -300,7 +300,7 @@ def _lowpass_normalize(images, kind, lowpass=None):
         images = quantile_clip(images, float(head[4:]) / 100.0)
         if kind == "default":
             return normalize(images, "lowpass-log-contrast", lowpass=lowpass)
-    if kind is None or not kind.startswith(("lowpass-", "logfirst-")):
+    if kind is None or kind in PHOTOMETRIC or not kind.startswith(("lowpass-", "logfirst-")):  # the library's own
         return normalize(images, kind, lowpass=lowpass)
     parts = kind.split("-")
     sigma = float(parts[1])
@@ -376,6 +376,8 @@ CANDIDATES = {
     "rungammaq-0.25": ({"robustness": "standard", "photometric": "lowpass-2-flat"}, "rungammaq"),
     "rungammaf-0.25": ({"robustness": "standard", "photometric": "lowpass-2-flat"}, "rungammaf"),
     "camgamma-0.25": ({"robustness": "standard", "photometric": "lowpass-2-flat"}, "camgamma"),
+    "standard": ({"robustness": "standard"}, None),
+    "standard-camgamma": ({"robustness": "standard"}, "camgamma"),
     **{f"gammafix{o}-0.25": ({"robustness": "standard", "photometric": f"gammafix{o}-default"}, None)
        for o in GAMMAFIX},
     **{f"{e}-{s}-flat-0.25": ({"robustness": "standard", "photometric": f"{e}-{s}-flat"}, None)
@@ -515,6 +517,10 @@ def main():
             secs = time.perf_counter() - t0
             med = {c: localization_metrics(model.predict(T), xyt)["med"] for c, T in tests.items()}
             out[f"{g}|{name}"] = {"MED (m)": med, "training (s)": secs}
+            if isinstance(model, StreamGamma):  # the same model without the correction: the paired baseline
+                plain = {c: localization_metrics(model.loc.predict(T), xyt)["med"] for c, T in tests.items()}
+                out[f"{g}|{name.replace('-camgamma', '').replace('camgamma', 'lowpass-2-flat')}"] = {
+                    "MED (m)": plain, "training (s)": secs}
             ratios = {c: v / med["clean"] for c, v in med.items() if c != "clean"}
             print(f"{g:18s} {name:16s} clean {med['clean']:.3f} worst x{max(ratios.values()):.2f} "
                   f"train {secs:.0f} s | " + " ".join(f"{c} {r:.2f}" for c, r in ratios.items()), flush=True)
