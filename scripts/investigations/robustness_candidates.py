@@ -406,9 +406,11 @@ def train(name, X, xy, elev):
         opts["seed"] = int(seed)
     if opts.pop("twice", False):  # the network sees the run twice, each copy with its own partners
         return _twice(opts, X, xy, elev)
-    kw = recipe_for(robustness=opts.pop("robustness")).fit_kwargs(elev)
+    kw = recipe_for(robustness=opts.pop("robustness")).fit_kwargs(elev, X.shape[1])
     net = default_network(**opts.pop("network", {}))
     kw.update(opts)
+    if kw.get("photometric") != "lowpass-log-contrast":  # the script's own kinds set their low-pass in their name
+        kw.pop("lowpass", None)
     if pre == "camgamma":
         return StreamGamma(fit_localizer(net, X, xy, rotation=Rotation(5, 1.0), progress=False, **kw))
     if pre in ("rungamma", "rungammaq", "rungammaf"):
@@ -423,8 +425,10 @@ def _twice(opts, X, xy, elev):
     own draw of invariance partners (seed and seed + 7919); the readout on the run once."""
     import sfanav.localization.training as training
 
-    kw = recipe_for(robustness=opts.pop("robustness")).fit_kwargs(elev)
+    kw = recipe_for(robustness=opts.pop("robustness")).fit_kwargs(elev, X.shape[1])
     kw.update(opts)
+    if kw.get("photometric") != "lowpass-log-contrast":
+        kw.pop("lowpass", None)
     net = default_network()
     original, fit = training.invariance_partners, net.fit
 
