@@ -23,19 +23,12 @@ import sys
 from pathlib import Path
 
 import numpy as np
+from _seeds import seed_groups
 
 
 def summary(entries: dict) -> dict:
-    groups: dict[str, dict[int, dict[str, float]]] = {}
-    for key, v in entries.items():
-        parts = key.split("|")
-        if len(parts) != 2 or "MED (m)" not in v:
-            continue
-        g, name = parts
-        base, _, seed = name.partition("@")
-        groups.setdefault(f"{g}|{base}", {})[int(seed or 0)] = v["MED (m)"]
     out = {}
-    for key, by_seed in sorted(groups.items()):
+    for key, by_seed in sorted(seed_groups(entries).items()):
         full = {s: m for s, m in by_seed.items() if len(m) >= 14}  # clean and the thirteen corruptions
         if len(full) < 2:
             continue

@@ -64,6 +64,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from _seeds import seed_groups
 
 import sfanav.localization.localizer as localizer_module
 from sfanav.data import Dataset, Preprocessing, load_run
@@ -448,7 +449,7 @@ def _twice(opts, X, xy, elev):
 def markdown(out):
     """The candidates' table of docs/robustness.md from the JSON (no training)."""
     gardens = [g for g in GARDENS if any(k.startswith(g + "|") for k in out)]
-    names = list(dict.fromkeys(k.split("|")[1] for k in out if k != "summary"))
+    names = list(dict.fromkeys(k.split("|")[1] for k in out if "|" in k))
     head = " / ".join(gardens)
     lines = [f"| candidate | clean MED (m): {head} | clean / none (geometric mean) | worst ratio to own clean: {head} "
              f"| JPEG 90 ratio: {head} |", "|---|---|---|---|---|"]
@@ -549,16 +550,8 @@ def main():
 def seed_spread(out):
     """Per garden and candidate trained at several seeds (``NAME`` is seed 0, ``NAME@S`` seed S): the clean MEDs,
     their mean, min, max and max / min, and the mean MED under each corruption; keys ``garden|NAME``."""
-    groups = {}
-    for k, v in out.items():
-        parts = k.split("|")
-        if len(parts) != 2 or "MED (m)" not in v:
-            continue
-        g, name = parts
-        base, _, seed = name.partition("@")
-        groups.setdefault(f"{g}|{base}", {})[int(seed or 0)] = v["MED (m)"]
     res = {}
-    for key, by_seed in groups.items():
+    for key, by_seed in seed_groups(out).items():
         if len(by_seed) < 2:
             continue
         clean = [by_seed[s]["clean"] for s in sorted(by_seed)]
