@@ -10,7 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import sfanav
-from sfanav.data.camera_gamma import (MIN_IMAGES, OFFSET, CameraGamma, apply_gamma, log_spread,
+from sfanav.data.camera_gamma import (MAX_FACTOR, MIN_IMAGES, OFFSET, CameraGamma, apply_gamma, log_spread,
                                       predict_corrected, reference_spread)
 from sfanav.data.corruptions import Corruption, corrupt
 from sfanav.data.photometric import lowpass_log_contrast
@@ -133,6 +133,17 @@ def test_the_window_forgets():
     assert cg.factor_ == pytest.approx(1 / 1.4, rel=0.05)
     cg.correct(x[:20], places(40)[:20])  # the camera changed back: the last 20 images are the training run's
     assert cg.factor_ == 1.0
+
+
+def test_a_flat_or_broken_stream_gives_a_bounded_factor_and_finite_images():
+    x = run_of(n=40)
+    cg = CameraGamma(log_spread(x), places(40))
+    black = np.zeros_like(x)
+    out = cg.correct(black, places(40))  # a covered lens: flat images add nothing, the factor stays 1
+    assert cg.factor_ == 1.0 and np.array_equal(out, black)
+    washed = gamma(x, 0.2)  # far beyond any camera's gamma: clipped to MAX_FACTOR's range
+    out = cg.correct(washed, places(40))
+    assert cg.factor_ == pytest.approx(MAX_FACTOR) and np.isfinite(out).all()
 
 
 def test_bad_input():

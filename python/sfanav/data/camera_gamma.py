@@ -62,6 +62,11 @@ MIN_IMAGES = 20
 """Images :class:`CameraGamma` waits for before it corrects (a factor of 1 until then)."""
 NEIGHBOURS = 10
 """Training views nearest an image's estimate whose median spread is its reference."""
+MAX_FACTOR = 2.0
+"""Factors are clipped to ``1 / MAX_FACTOR .. MAX_FACTOR`` (gammas 0.5..2): beyond, the stream is no camera with
+another gamma (a lens cap, night, a broken sensor), and a power that large would overflow."""
+FLAT_SPREAD = 1e-3
+"""Images whose log spread is below this (flat: black, saturated or a covered lens) add no ratio to the window."""
 DEAD_ZONE = 0.2
 """Factors within ``exp(+-DEAD_ZONE)`` (0.82..1.22) are taken as 1. Measured on four gardens' test walks against
 their training runs (docs/robustness.md): a flawless walk's median log ratio stays within 0.01, a 2 px defocus and
@@ -132,7 +137,8 @@ class CameraGamma:
     estimate over its own :func:`log_spread`; its factor is the exponential
     of the median log ratio of the last ``window`` images up to and
     including it, 1 until ``min_images`` have been seen and while that
-    median is within the ``dead_zone``.
+    median is within the ``dead_zone``, and at most :data:`MAX_FACTOR` (or
+    at least its inverse); flat images (:data:`FLAT_SPREAD`) add no ratio.
 
     Parameters
     ----------
@@ -208,11 +214,13 @@ class CameraGamma:
         ref = np.median(self.spreads[np.asarray(nn).reshape(len(xy), -1)], axis=1)
         factors = np.ones(len(a))
         for i, s in enumerate(log_spread(a, offset=self.offset, lowpass=self.lowpass)):
-            self._ratios.append(float(np.log(ref[i] / max(s, 1e-12))))
             self.n_images_ += 1
+            if s >= FLAT_SPREAD:  # a flat image tells nothing about the gamma
+                self._ratios.append(float(np.log(ref[i] / s)))
             if len(self._ratios) >= self.min_images:
                 self.log_ratio_ = float(np.median(self._ratios))
-                self.factor_ = float(np.exp(self.log_ratio_)) if abs(self.log_ratio_) > self.dead_zone else 1.0
+                lr = float(np.clip(self.log_ratio_, -np.log(MAX_FACTOR), np.log(MAX_FACTOR)))
+                self.factor_ = float(np.exp(lr)) if abs(lr) > self.dead_zone else 1.0
             factors[i] = self.factor_
         if np.all(factors == 1.0):
             return a
