@@ -20,7 +20,8 @@ def trained_split(data: str, *, groups: bool = True) -> dict[str, Any]:
     """The product trained on 6.2.2's split of the dataset DATA (``groups``: told which recording each image comes
     from, as the experiment does since 2026-12-07). Returns the localizer ``loc``, the readout's training samples
     ``X`` (images and corrupted copies interleaved, slow features then signature), ``Y``, their recordings
-    ``groups``, the test run's readout features ``X_te`` and positions ``xy_te``, and the training time."""
+    ``groups``, the test run's readout features ``X_te``, images ``images_te`` and positions ``xy_te``, and the
+    training time."""
     ds = Dataset(data)
     conds = sorted(set(ds.conditions.tolist()), key=lambda c: int(c.lstrip("c")) if c.lstrip("c").isdigit() else c)
     perm = np.random.default_rng(0).permutation(len(conds))
@@ -52,5 +53,5 @@ def trained_split(data: str, *, groups: bool = True) -> dict[str, Any]:
     seconds = time.perf_counter() - t
     F, Y, G, g, _ = seen["args"]
     return {"loc": loc, "X": np.hstack([F, G]), "Y": np.asarray(Y, float), "groups": g,
-            "X_te": loc.readout_features(loc.features(X_te), loc.signatures(X_te)), "xy_te": xy_te,
+            "X_te": loc.readout_features(loc.features(X_te), loc.signatures(X_te)), "xy_te": xy_te, "images_te": X_te,
             "seconds": seconds}
