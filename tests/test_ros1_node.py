@@ -154,7 +154,8 @@ def test_the_node_localizes_a_played_bag_like_the_batch(ros, recorded, tmp_path)
     except ImportError:
         rrd = None
     node = subprocess.Popen([sys.executable, "-m", "sfanav", "ros-node", str(recorded["model"]),
-                             "_image_topic:=/cam", "_odom_topic:=/odom", "_silence:=60"]
+                             "_image_topic:=/cam", "_odom_topic:=/odom", "_silence:=60",
+                             "_camera_gamma:=true"]  # the tiny model has no reference: one line, then as without
                             + ([f"_rerun:={rrd}"] if rrd is not None else []),
                             env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             start_new_session=True)
@@ -177,6 +178,7 @@ def test_the_node_localizes_a_played_bag_like_the_batch(ros, recorded, tmp_path)
     log = node.stdout.read() + node.stderr.read()  # rospy: info on stdout, warnings on stderr
     assert node.returncode in (0, -signal.SIGINT), log
     assert "40 images localized, 40 fused poses published" in log and "Traceback" not in log, log
+    assert "no camera gamma reference" in log, log
 
     got = {"/sfanav/estimate": {}, "/sfanav/fused": {}, "/tf": {}}
     with AnyReader([out]) as r:

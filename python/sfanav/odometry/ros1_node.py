@@ -30,7 +30,9 @@ Other parameters: ``~rerun`` (a Rerun recording ``NAME.rrd``, ``viewer`` or
 ``~window`` (s, the reordering window, default 0),
 ``~silence`` (s: a topic without messages this long is logged, default 2),
 ``~resize`` (false: a camera whose panoramas differ in size from the
-model's stops the node with one line; true: they are resized), the filter's
+model's stops the node with one line; true: they are resized),
+``~camera_gamma`` (false; true: the camera's gamma estimated over the stream
+and taken out, as ``sfanav localize --camera-gamma``), the filter's
 ``~distance_noise``, ``~heading_noise``, ``~measurement_noise``,
 ``~turn_noise`` (default: the model's). Running it, the interpreter it
 needs and the launch file: ``docs/live.md``.
@@ -132,7 +134,8 @@ class Ros1Node:
         self.prep = Preprocessing.of_model(localizer)
         self.live = StreamingLocalizer(localizer, noise or None, window_ns=int(round(float(p("~window", 0.0)) * 1e9)),
                                        log=lambda m: rospy.loginfo(f"sfanav: {m}"),
-                                       on_estimate=self._publish_estimate)
+                                       on_estimate=self._publish_estimate,
+                                       camera_gamma=bool(p("~camera_gamma", False)))
         self.r2 = float(self.live.noise["measurement_noise"]) ** 2
         self.view = None
         if p("~rerun", ""):
