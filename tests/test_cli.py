@@ -186,9 +186,11 @@ def test_demo_quick(tmp_path, capsys):
     assert metrics >= {"MED (m) [no ground truth]", "max eta_phi (outputs 1-8) [no ground truth]",
                        "MED (m) [no ground truth, fused with odometry]", "MED (m) [ground truth]",
                        "MED (m) [thesis configuration, ground truth]", "MED (m) perfect memory",
-                       "MED ratio no ground truth / ground truth"}
+                       "MED ratio no ground truth / ground truth", "MED (m) [no ground truth, gamma-1.4 test images]"}
     # the demo's main model was trained without ground truth, the reference one with it
     import sfanav
+    if "camera_gamma" in sfanav.load(tmp_path / "demo" / "model.sfa").info:  # a photometric model: the gamma row
+        assert "MED (m) [no ground truth, gamma-1.4 test images, camera gamma]" in metrics
 
     assert sfanav.load(tmp_path / "demo" / "model.sfa").info["supervision"] == "odometry"
     assert sfanav.load(tmp_path / "demo" / "model-ground-truth.sfa").info["supervision"] == "ground-truth"

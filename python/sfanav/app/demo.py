@@ -25,6 +25,7 @@ from pathlib import Path
 from typing import Any
 
 from .._progress import Log, stderr_log
+from ..data.camera_gamma import CameraGamma, predict_corrected
 from ..data.corruptions import corrupt
 from ..data.preprocessing import Preprocessing, Preprocessor
 from ..data.sources import load_run
@@ -38,6 +39,8 @@ DEMO_NETWORK = "sfanav-default"
 """Network preset of the demo (350x40 RGB input; the garden is rendered at 600x60 and resized)."""
 
 JPEG_TEST = "jpeg-90"
+GAMMA_TEST = "gamma-1.4"
+"""The camera gamma of the demo's row for ``sfanav localize --camera-gamma``."""
 """The corruption of the demo's JPEG rows: the test walk as a ROS camera's image_transport sends it."""
 
 THESIS_NETWORK = "thesis-5.1"
@@ -209,6 +212,16 @@ def run_demo(out: str | Path = "sfanav-demo", *, seed: int = 0, overwrite: bool 
     rows += _compact_rows(f"no ground truth, {JPEG_TEST} test images", m_jpeg)
     m_fj = localization_metrics(world.apply(fused_jpeg[:, :2]), xy_test, coordinate_range=crange)
     rows += _compact_rows(f"no ground truth, fused with odometry, {JPEG_TEST} test images", m_fj)
+    # a camera whose gamma is not the training run's: single images as they are, and with the camera's gamma
+    # estimated over the walk and taken out (sfanav localize --camera-gamma)
+    X_gamma = Preprocessor(prep, log=log)(corrupt(native, GAMMA_TEST, seed=seed))
+    m_g = localization_metrics(world.apply(loc.predict(X_gamma)), xy_test, coordinate_range=crange)
+    rows += _compact_rows(f"no ground truth, {GAMMA_TEST} test images", m_g)
+    tracker = CameraGamma.for_localizer(loc)
+    if tracker is not None:
+        xy_gc = predict_corrected(loc, tracker, X_gamma)
+        m_gc = localization_metrics(world.apply(xy_gc), xy_test, coordinate_range=crange)
+        rows += _compact_rows(f"no ground truth, {GAMMA_TEST} test images, camera gamma", m_gc)
     peers = {"perfect memory": baselines.PerfectMemory(), "Fourier signature": baselines.FourierSignature(
         min(baselines.FourierSignature().n_coefficients, X_train.shape[2] // 2 + 1))}
     for name, peer in peers.items():
