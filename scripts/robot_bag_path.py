@@ -53,14 +53,18 @@ def sh(*args: str) -> str:
     return p.stdout
 
 
-def write_bag(path: Path, run, fmt: str, quality: int) -> np.ndarray:
-    """One run as a ROS 2 bag (.mcap): camera, wheel odometry and ground truth at each image's stamp."""
+def write_bag(path: Path, run, fmt: str, quality: int, corruption: str | None = None) -> np.ndarray:
+    """One run as a ROS 2 bag (.mcap): camera, wheel odometry and ground truth at each image's stamp; with
+    ``corruption`` (a name of sfanav.data.corruptions) every image through it first, as the camera would send it."""
     from sfanav.data import BagWriter
+    from sfanav.data.corruptions import corrupt
 
     stamps = STAMP0 + PERIOD * np.arange(len(run), dtype=np.int64)
     with BagWriter(path, unit="ns") as w:
         for k, (img, pose, odo) in enumerate(zip(run.images(batch_size=1), run.poses, run.odometry)):
             ns = int(stamps[k])
+            if corruption is not None:
+                img = corrupt(img, corruption, seed=0, start=k)
             w.add_image("/camera/image", ns, img[0], fmt=fmt, quality=quality)
             w.add_odometry("/odom", ns, odo)
             w.add_pose("/ground_truth", ns, pose)
@@ -91,6 +95,9 @@ def main() -> int:
     ap.add_argument("--test-run", default="test", help="the preset's test run (default test)")
     ap.add_argument("--seeds", default="0",
                     help="comma-separated seeds of the robustness's draw (sfanav train --seed); default 0")
+    ap.add_argument("--gamma", type=float, default=None, metavar="G",
+                    help="also a raw test bag through a camera gamma of G, localized by the raw recording's model "
+                         "(seed 0) with and without --camera-gamma")
     args = ap.parse_args()
     seeds = [int(v) for v in args.seeds.split(",")]
     from sfanav.data import Dataset
@@ -147,6 +154,31 @@ def main() -> int:
         results[name] = res
         print(f"  {name}: " + ", ".join(f"{k} {v:.3f}" if isinstance(v, float) else f"{k} {v}" for k, v in res.items()),
               flush=True)
+    if args.gamma is not None:  # the raw recording's model on a camera with another gamma
+        name = f"raw-gamma-{args.gamma:g}"
+        print(f"{name}: the raw model, test bag raw through gamma {args.gamma:g}", flush=True)
+        d, raw = out / name, out / "raw"
+        d.mkdir(exist_ok=True)
+        stamps_test = write_bag(d / "test.mcap", runs["test"], "raw", args.quality, corruption=f"gamma-{args.gamma:g}")
+        sh("import", str(d / "test.mcap"), "--image-topic", "/camera/image", "--odom-topic", "/odom",
+           "--pose-topic", "/ground_truth", "--run", "test", "--out", str(d / "dataset"), "--overwrite",
+           "--no-progress")
+        train_csv = np.genfromtxt(raw / "train.csv", delimiter=",", names=True)
+        frame = align(np.c_[train_csv["x"], train_csv["y"]], runs["train"].poses[:, :2])
+        res = {}
+        for tag, extra in (("", ()), (", camera gamma", ("--camera-gamma",))):
+            est_path = d / f"estimates{tag.replace(', ', '-').replace(' ', '-')}.mcap"
+            sh("localize", str(raw / "model.sfa"), str(d / "dataset"), "--run", "test", "--odometry", *extra,
+               "--out", str(est_path), "--overwrite", "--no-progress")
+            est = read_estimates(est_path)
+            for topic, key in (("/sfanav/estimate", "single images"), ("/sfanav/fused", "fused with odometry")):
+                ns, xy = est[topic]
+                res[f"exact stamps ({key}{tag})"] = bool(np.array_equal(ns, stamps_test))
+                res[f"MED (m) {key}{tag}"] = float(np.mean(np.linalg.norm(frame.apply(xy) - runs["test"].poses[:, :2],
+                                                                          axis=1)))
+        results[name] = res
+        print(f"  {name}: " + ", ".join(f"{k} {v:.3f}" if isinstance(v, float) else f"{k} {v}"
+                                        for k, v in res.items()), flush=True)
     for name in ("jpeg", "raw-jpeg"):
         for key in ("single images", "fused with odometry"):
             results[name][f"ratio to raw ({key})"] = (results[name][f"MED (m) {key}"]
