@@ -39,9 +39,9 @@ DEMO_NETWORK = "sfanav-default"
 """Network preset of the demo (350x40 RGB input; the garden is rendered at 600x60 and resized)."""
 
 JPEG_TEST = "jpeg-90"
+"""The corruption of the demo's JPEG rows: the test walk as a ROS camera's image_transport sends it."""
 GAMMA_TEST = "gamma-1.4"
 """The camera gamma of the demo's row for ``sfanav localize --camera-gamma``."""
-"""The corruption of the demo's JPEG rows: the test walk as a ROS camera's image_transport sends it."""
 
 THESIS_NETWORK = "thesis-5.1"
 """Network preset of the demo's thesis-configuration row (Table 5.1, 350x40 RGB)."""

@@ -47,6 +47,7 @@ import numpy as np
 
 from .._checks import (as_image_batch, as_matrix, check_int, check_nonneg_float, check_positive_float,
                        check_same_length)
+from .photometric import panorama_lowpass, row_profile_projector
 
 OFFSET = 2.0
 """Grey levels added before the logarithm of the spread and the correction (a gamma is a scale of ``log(I)``
@@ -81,24 +82,18 @@ def log_spread(images: Any, *, offset: float = OFFSET, lowpass: float = LOWPASS)
     balance and a gain leave it, a blur, JPEG and noise nearly, and a gamma
     ``g`` scales it by about ``g``). Returns float64 (N,). Raises ValueError
     for a bad batch, offset or low-pass."""
-    from scipy.ndimage import gaussian_filter
-
     a = as_image_batch(images)
     off = check_positive_float(offset, "offset")
     sigma = check_nonneg_float(lowpass, "lowpass")
     if a.dtype != np.uint8 and not np.isfinite(a).all():
         raise ValueError("images must be finite (NaN or infinite values found)")
     h = a.shape[1]
-    t = np.linspace(-1.0, 1.0, h)
-    V = np.stack([np.ones(h), t, t * t], axis=1)[:, : min(3, h)]
-    P = V @ np.linalg.pinv(V)
+    P = row_profile_projector(h)
     out = np.empty(len(a))
-    sig = (sigma, sigma, 0.0)[: a.ndim - 1]
-    modes = ("nearest", "wrap", "nearest")[: a.ndim - 1]
     for i, im in enumerate(a):
         v = im.astype(np.float64)
         if sigma > 0:
-            v = gaussian_filter(v, sig, mode=modes)
+            v = panorama_lowpass(v, (sigma, sigma))
         L = np.log(np.maximum(v, 0.0) + off)
         rows = L.mean(axis=1)  # (H[, C])
         out[i] = float((L - (P @ rows.reshape(h, -1)).reshape((h, 1) + L.shape[2:])).std())
@@ -121,10 +116,10 @@ def apply_gamma(images: Any, factors: Any, *, offset: float = OFFSET) -> np.ndar
     out = np.empty(a.shape, np.float32)
     axes = (0, 1) if a.ndim == 4 else None
     for i, im in enumerate(a):
-        L = np.log(np.maximum(im.astype(np.float64), 0.0) + off)
         if f[i] == 1.0:
             out[i] = im
             continue
+        L = np.log(np.maximum(im.astype(np.float64), 0.0) + off)
         m = L.mean(axis=axes, keepdims=axes is not None)
         out[i] = np.maximum(np.exp(m + (L - m) * f[i]) - off, 0.0)
     return out

@@ -90,24 +90,18 @@ def lowpass_log_contrast(images: Any, *, sigma: float | tuple[float, float] = LO
     Raises ValueError for a ``sigma`` that is not finite and >= 0, or the
     errors of :func:`log_contrast`.
     """
-    from scipy.ndimage import gaussian_filter
-
     a = as_image_batch(images)
     sy, sx = _sigma_pair(sigma)
     if not (np.isfinite(offset) and offset > 0 and np.isfinite(scale) and scale > 0):
         raise ValueError(f"offset and scale must be finite and > 0, got {offset!r} and {scale!r}")
-    sig = (sy, sx, 0.0)[: a.ndim - 1]
-    modes = ("nearest", "wrap", "nearest")[: a.ndim - 1]
     h = a.shape[1]
-    t = np.linspace(-1.0, 1.0, h)
-    V = np.stack([np.ones(h), t, t * t], axis=1)[:, : min(3, h)]
-    P = (V @ np.linalg.pinv(V)).astype(np.float32)  # projector onto the rows' quadratic profiles
+    P = row_profile_projector(h).astype(np.float32)
     out = np.empty(a.shape, np.float32)
     axes = (0, 1) if a.ndim == 4 else None
     for i, im in enumerate(a):
         v = im.astype(np.float32)
         if sy > 0 or sx > 0:
-            v = gaussian_filter(v, sig, mode=modes)
+            v = panorama_lowpass(v, (sy, sx))
         v = np.log(np.maximum(v, 0.0) + np.float32(offset))
         if flat:
             v -= (P @ v.mean(axis=1).reshape(h, -1)).reshape((h, 1) + v.shape[2:])
@@ -116,6 +110,28 @@ def lowpass_log_contrast(images: Any, *, sigma: float | tuple[float, float] = LO
         sd = float(v.std(dtype=np.float64))
         out[i] = v * np.float32(scale / sd) if sd > 1e-6 else v
     return out
+
+
+def panorama_lowpass(image: Any, sigma: tuple[float, float]) -> np.ndarray:
+    """One panorama (H, W[, C]) low-passed by a Gaussian of ``sigma`` =
+    (rows, columns) pixels, wrapping around the seam in columns and
+    repeating the edge rows (the channels apart); the image's float dtype is
+    kept."""
+    from scipy.ndimage import gaussian_filter
+
+    im = np.asarray(image)
+    sig = (float(sigma[0]), float(sigma[1]), 0.0)[: im.ndim]
+    return gaussian_filter(im, sig, mode=("nearest", "wrap", "nearest")[: im.ndim])
+
+
+def row_profile_projector(height: int) -> np.ndarray:
+    """(H, H) float64 projector onto the quadratic profiles over ``height``
+    rows (fewer terms for fewer rows): ``P @ row_means`` is the smooth
+    elevation profile a vignetting or the sky's gradient puts on a panorama,
+    which the flat field removes."""
+    t = np.linspace(-1.0, 1.0, height)
+    V = np.stack([np.ones(height), t, t * t], axis=1)[:, : min(3, height)]
+    return V @ np.linalg.pinv(V)
 
 
 def lowpass_for(elevation_deg: Any, height: int) -> tuple[float, float]:

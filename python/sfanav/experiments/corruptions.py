@@ -179,15 +179,13 @@ def run_garden(out: Path, preset: str, train_run: str, test_run: str, *, quick: 
     res["training (s)"] = times
     for name in ("clean",) + corruptions:
         X_te = images(X0_te, name, 1)
-        res["test only"][name] = {m: _med(model.predict(X_te), xy_te) for m, model in models.items()}
-        r = dict(res["test only"][name])
+        r = {m: _med(model.predict(X_te), xy_te) for m, model in models.items()}
         if odometry_test is not None and "sfanav default, no ground truth" in models:  # the product path
             r[FUSED] = _med(models["sfanav default, no ground truth"].fused(X_te, odometry_test), xy_te)
         tracker = CameraGamma.for_localizer(models.get("sfanav default"))
         if tracker is not None:  # the test run in its order, each image with the gamma seen so far
             r[GAMMA] = _med(predict_corrected(models["sfanav default"], tracker, X_te), xy_te)
-        res["test only"][name] = {m: r[m] for m in ROWS if m in r}
-        r = res["test only"][name]
+        res["test only"][name] = r = {m: r[m] for m in ROWS if m in r}
         log(f"{preset} test only {name}: " + ", ".join(f"{m} {v:.3f}" for m, v in r.items()))
     if both_runs:
         for name in ("clean",) + corruptions:

@@ -274,13 +274,14 @@ class StreamingLocalizer:
         out: list[LiveEstimate] = []
         if keep:
             batch = self._conform(imgs[keep])
-            if self.camera_gamma is not None:  # placed by a first estimate, then localized again if corrected
-                batch = self.camera_gamma.correct(batch, self.localizer.predict(batch, rotations=self.rotations))
-            if self.novelty_threshold is None:
-                xy = np.atleast_2d(self.localizer.predict(batch, rotations=self.rotations))
+            xy, nov = self._localize(batch)
+            if self.camera_gamma is not None:  # the estimates place the images; localized again if corrected
+                fixed = self.camera_gamma.correct(batch, xy)
+                if fixed is not batch:
+                    xy, nov = self._localize(fixed)
+            if nov is None:
                 ms = np.ones(len(xy))
             else:
-                xy, nov = self.localizer.predict_with_novelty(batch, rotations=self.rotations)
                 ms = noise_novelty_scale(self.noise, nov, self.novelty_threshold)
                 self.n_novel_ += int((ms > 1).sum())
                 self.max_measurement_scale_ = max(self.max_measurement_scale_, float(ms.max(initial=1.0)))
@@ -292,6 +293,12 @@ class StreamingLocalizer:
                 self._add(stamps[i], 1, np.r_[z, m])  # the estimate and its measurement scale
             out = self._release()
         return out
+
+    def _localize(self, batch: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+        """The estimates (N, 2) of conformed images and their novelty (None without novelty scaling)."""
+        if self.novelty_threshold is None:
+            return np.atleast_2d(self.localizer.predict(batch, rotations=self.rotations)), None
+        return self.localizer.predict_with_novelty(batch, rotations=self.rotations)
 
     def push_odometry(self, stamp_ns: int, pose: Any) -> list[LiveEstimate]:
         """One odometry pose ``(x [m], y [m], heading [rad])`` stamped
