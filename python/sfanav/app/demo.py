@@ -41,7 +41,8 @@ DEMO_NETWORK = "sfanav-default"
 JPEG_TEST = "jpeg-90"
 """The corruption of the demo's JPEG rows: the test walk as a ROS camera's image_transport sends it."""
 GAMMA_TEST = "gamma-1.4"
-"""The camera gamma of the demo's row for ``sfanav localize --camera-gamma``."""
+"""The camera gamma of the demo's rows with and without the camera's gamma taken out (``sfanav localize``'s default
+and ``--no-camera-gamma``)."""
 
 THESIS_NETWORK = "thesis-5.1"
 """Network preset of the demo's thesis-configuration row (Table 5.1, 350x40 RGB)."""
@@ -212,16 +213,16 @@ def run_demo(out: str | Path = "sfanav-demo", *, seed: int = 0, overwrite: bool 
     rows += _compact_rows(f"no ground truth, {JPEG_TEST} test images", m_jpeg)
     m_fj = localization_metrics(world.apply(fused_jpeg[:, :2]), xy_test, coordinate_range=crange)
     rows += _compact_rows(f"no ground truth, fused with odometry, {JPEG_TEST} test images", m_fj)
-    # a camera whose gamma is not the training run's: single images as they are, and with the camera's gamma
-    # estimated over the walk and taken out (sfanav localize --camera-gamma)
+    # a camera whose gamma is not the training run's: the single images as sfanav localize reads them (the camera's
+    # gamma estimated over the walk and taken out, the default) and as they are (sfanav localize --no-camera-gamma)
     X_gamma = Preprocessor(prep, log=log)(corrupt(native, GAMMA_TEST, seed=seed))
-    m_g = localization_metrics(world.apply(loc.predict(X_gamma)), xy_test, coordinate_range=crange)
-    rows += _compact_rows(f"no ground truth, {GAMMA_TEST} test images", m_g)
     tracker = CameraGamma.for_localizer(loc)
     if tracker is not None:
-        xy_gc = predict_corrected(loc, tracker, X_gamma)
-        m_gc = localization_metrics(world.apply(xy_gc), xy_test, coordinate_range=crange)
-        rows += _compact_rows(f"no ground truth, {GAMMA_TEST} test images, camera gamma", m_gc)
+        m_gc = localization_metrics(world.apply(predict_corrected(loc, tracker, X_gamma)), xy_test,
+                                    coordinate_range=crange)
+        rows += _compact_rows(f"no ground truth, {GAMMA_TEST} test images", m_gc)
+    m_g = localization_metrics(world.apply(loc.predict(X_gamma)), xy_test, coordinate_range=crange)
+    rows += _compact_rows(f"no ground truth, {GAMMA_TEST} test images, no camera gamma", m_g)
     peers = {"perfect memory": baselines.PerfectMemory(), "Fourier signature": baselines.FourierSignature(
         min(baselines.FourierSignature().n_coefficients, X_train.shape[2] // 2 + 1))}
     for name, peer in peers.items():

@@ -158,6 +158,13 @@ class CameraGamma:
         The last median log ratio (0 before ``min_images``).
     n_images_ : int
         Images seen.
+    novelty_gain_ : float
+        The median, over the last ``window`` corrected images, of how much
+        nearer the training views the correction brought each one (its
+        novelty as it came over its novelty corrected,
+        :meth:`sfanav.Localizer.novelty`; NaN before any); see :meth:`keeps`.
+    n_reverted_ : int
+        Corrected images whose estimates were left uncorrected by :meth:`keeps`.
 
     Raises ValueError for spreads that are not finite and > 0, positions of
     another length or shape, or bad window sizes.
@@ -184,7 +191,10 @@ class CameraGamma:
         self.spreads, self.positions = sp, xy
         self._tree = cKDTree(xy)
         self._ratios: deque[float] = deque(maxlen=self.window)
+        self._gains: deque[float] = deque(maxlen=self.window)
         self.factor_, self.log_ratio_ = 1.0, 0.0
+        self.novelty_gain_ = float("nan")
+        self.n_reverted_ = 0
         self.n_images_ = 0
 
     @classmethod
@@ -222,16 +232,62 @@ class CameraGamma:
         return apply_gamma(a, factors, offset=self.offset)
 
 
-def predict_corrected(localizer: Any, tracker: "CameraGamma | None", images: Any, **kwargs: Any) -> np.ndarray:
+    def keeps(self, novelty_before: Any, novelty_after: Any) -> bool:
+        """Whether the corrected images of the last :meth:`correct` are to be
+        localized as corrected, from their novelty (N,) as they came and once
+        corrected (:meth:`sfanav.Localizer.predict_with_novelty`): True while
+        the median over the last ``window`` corrected images of ``before -
+        after`` is above 0, i.e. the correction brings the images nearer the
+        training views. A camera with another gamma does (the demo garden's
+        walk through gamma 1.4: median novelty 3.39 -> 3.26); a walk the
+        localizer cannot place (off the training run, a model too coarse to
+        place it) can read as a gamma, and correcting it moves the images
+        away from every training view (a 60x8 test model: 2.46 -> 3.31):
+        those stay as they came. Raises ValueError for arrays of different
+        lengths."""
+        b = np.asarray(novelty_before, dtype=np.float64).reshape(-1)
+        a = np.asarray(novelty_after, dtype=np.float64).reshape(-1)
+        if len(a) != len(b):
+            raise ValueError(f"novelty before ({len(b)}) and after ({len(a)}) the correction must have one value "
+                             "per image")
+        d = b - a
+        self._gains.extend(float(v) for v in d[np.isfinite(d) & (d != 0.0)])
+        if not self._gains:
+            return True
+        self.novelty_gain_ = float(np.median(self._gains))
+        if self.novelty_gain_ > 0:
+            return True
+        self.n_reverted_ += int(np.count_nonzero(d))  # the images the correction changed
+        return False
+
+
+def predict_corrected(localizer: Any, tracker: "CameraGamma | None", images: Any, *, novelty: bool = False,
+                      **kwargs: Any) -> Any:
     """``localizer.predict(images, **kwargs)`` with the camera's gamma taken
     out by ``tracker`` (None: plain): the images are localized once as they
     are, which places them for the tracker, and again once corrected when
-    any factor is not 1. Returns the estimates (N, 2)."""
-    xy = np.atleast_2d(localizer.predict(images, **kwargs))
-    if tracker is None:
-        return xy
-    fixed = tracker.correct(images, xy)
-    return xy if fixed is images else np.atleast_2d(localizer.predict(fixed, **kwargs))
+    any factor is not 1; with a localizer that holds a novelty reference the
+    corrected estimates are kept only while the correction brings the images
+    nearer the training views (:meth:`CameraGamma.keeps`). Returns the
+    estimates (N, 2); with ``novelty``, ``(estimates, novelty (N,))`` from
+    :meth:`sfanav.Localizer.predict_with_novelty` of the images whose
+    estimates are returned."""
+    with_novelty = novelty or (tracker is not None and getattr(localizer, "novelty_", None) is not None)
+
+    def run(x: Any) -> Any:
+        if with_novelty:
+            xy, nov = localizer.predict_with_novelty(x, **kwargs)
+            return np.atleast_2d(xy), nov
+        return np.atleast_2d(localizer.predict(x, **kwargs)), None
+
+    xy, nov = run(images)
+    if tracker is not None:
+        fixed = tracker.correct(images, xy)
+        if fixed is not images:
+            xy2, nov2 = run(fixed)
+            if nov is None or tracker.keeps(nov, nov2):
+                xy, nov = xy2, nov2
+    return (xy, nov) if novelty else xy
 
 
 def reference_spread(images: Any, positions: Any, *, offset: float = OFFSET,

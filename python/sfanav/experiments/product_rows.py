@@ -15,7 +15,10 @@ Every localization experiment reports, on its own training and test runs:
   estimates are in the training run's odometry frame and are moved into the
   world frame for scoring only, by the rigid transform fitted on the
   training run (as ``sfanav demo`` and :func:`sfanav.localization.evaluate`
-  do);
+  do); both sfanav rows localize a test run as ``sfanav localize`` does, the
+  camera's gamma estimated over the run and taken out
+  (:class:`sfanav.data.camera_gamma.CameraGamma`: a factor of 1, the images
+  as they are, on every scene measured);
 * ``..., fused]``: where the test run has odometry, the single-image
   estimates fused with it (:func:`sfanav.odometry.fuse_images`: the
   measurement noise scaled by each image's novelty) with the EKF noise
@@ -57,6 +60,7 @@ import numpy as np
 from .._checks import as_images, as_matrix, check_same_length
 from .._progress import Log, quiet_log
 from .._sampling import evenly_spaced
+from ..data.camera_gamma import CameraGamma, predict_corrected
 from ..localization import baselines
 from ..localization.error_metrics import align, localization_metrics
 from ..localization.evaluation import coordinate_range
@@ -320,8 +324,8 @@ def product_rows(train: ProductRun, tests: Sequence[ProductRun], *, thesis: Sequ
         for sup, loc in models.items():
             if t.has_odometry and noise is not None:  # the estimates and their fused track: the product's path
                 est, fused = fuse_images(loc, t.images, t.odometry, noise)
-            else:
-                est, fused = loc.predict(t.images), None
+            else:  # the camera's gamma over the run taken out, as sfanav localize does (1 on a camera like training's)
+                est, fused = predict_corrected(loc, CameraGamma.for_localizer(loc), t.images), None
             world = frames[sup]
             scored = world.apply(est) if world is not None else est
             name = _name(DEFAULT, (sup,), t.label)

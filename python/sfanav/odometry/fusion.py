@@ -37,6 +37,7 @@ from typing import Any
 import numpy as np
 
 from .._checks import as_matrix, check_int, check_nonneg_float, check_positive_float, check_same_length
+from ..data.camera_gamma import CameraGamma, predict_corrected
 from ..localization.error_metrics import align, euclidean_errors
 from ..localization.novelty import NoveltyReference
 from ..localization.readout_selection import block_folds, cross_val_predict
@@ -360,16 +361,22 @@ def fuse(odometry: Any, estimates: Any, noise: Mapping[str, float], *, start_pos
 
 
 def fuse_images(localizer: Any, images: Any, odometry: Any, noise: Mapping[str, float] | None = None, *,
-                novelty_threshold: float | None = NOVELTY_THRESHOLD, **kwargs: Any) -> tuple[np.ndarray, np.ndarray]:
+                novelty_threshold: float | None = NOVELTY_THRESHOLD, camera_gamma: bool = True,
+                **kwargs: Any) -> tuple[np.ndarray, np.ndarray]:
     """A fitted :class:`sfanav.Localizer`'s estimates (N, 2) of ``images``
-    (N, H, W[, C], the model's input format) and their fused track (N, 3)
-    with ``odometry`` (N, 3): :func:`fuse` with the model's filter noise
-    (``localizer.info["ekf_noise"]`` unless ``noise`` is given) and the
-    images' novelty (:meth:`sfanav.Localizer.predict_with_novelty`; None
+    (N, H, W[, C], the model's input format, in the order they were taken)
+    and their fused track (N, 3) with ``odometry`` (N, 3): :func:`fuse` with
+    the model's filter noise (``localizer.info["ekf_noise"]`` unless
+    ``noise`` is given) and the images' novelty
+    (:meth:`sfanav.Localizer.predict_with_novelty`; None
     ``novelty_threshold``, or a model without a novelty reference: not
-    scaled). ``kwargs`` go to :func:`fuse` (``gyro``, ``stamps``,
-    ``start_pose``, ...). Returns ``(estimates, fused)``. Raises ValueError
-    for a model without filter noise and no ``noise``, and as :func:`fuse`.
+    scaled). ``camera_gamma`` (default True, as ``sfanav localize``): the
+    camera's gamma estimated over the images so far and taken out
+    (:class:`sfanav.data.camera_gamma.CameraGamma`, where the model holds
+    its reference; a camera like the training run's is left as it is).
+    ``kwargs`` go to :func:`fuse` (``gyro``, ``stamps``, ``start_pose``,
+    ...). Returns ``(estimates, fused)``. Raises ValueError for a model
+    without filter noise and no ``noise``, and as :func:`fuse`.
 
     >>> xy, track = fuse_images(loc, test_images, test_odometry)   # doctest: +SKIP
     """
@@ -377,9 +384,10 @@ def fuse_images(localizer: Any, images: Any, odometry: Any, noise: Mapping[str, 
         noise = getattr(localizer, "info", {}).get("ekf_noise")
         if noise is None:
             raise ValueError("the model holds no EKF noise (its training run had no odometry): pass noise")
+    tracker = CameraGamma.for_localizer(localizer) if camera_gamma else None
     if novelty_threshold is not None and getattr(localizer, "novelty_", None) is not None:
-        est, nov = localizer.predict_with_novelty(images)
+        est, nov = predict_corrected(localizer, tracker, images, novelty=True)
         return est, fuse(odometry, est, noise, novelty=nov, novelty_threshold=novelty_threshold, **kwargs)
-    est = localizer.predict(images)
+    est = predict_corrected(localizer, tracker, images)
     return est, fuse(odometry, est, noise, **kwargs)
 

@@ -31,8 +31,10 @@ Other parameters: ``~rerun`` (a Rerun recording ``NAME.rrd``, ``viewer`` or
 ``~silence`` (s: a topic without messages this long is logged, default 2),
 ``~resize`` (false: a camera whose panoramas differ in size from the
 model's stops the node with one line; true: they are resized),
-``~camera_gamma`` (false; true: the camera's gamma estimated over the stream
-and taken out, as ``sfanav localize --camera-gamma``), the filter's
+``~camera_gamma`` (unset: the camera's gamma estimated over the stream and
+taken out where the model holds its reference, as ``sfanav localize`` does
+by default; true: the same, and one line for a model without it; false:
+off), the filter's
 ``~distance_noise``, ``~heading_noise``, ``~measurement_noise``,
 ``~turn_noise`` (default: the model's). Running it, the interpreter it
 needs and the launch file: ``docs/live.md``.
@@ -132,10 +134,11 @@ class Ros1Node:
             if rospy.has_param("~" + k):
                 noise[k] = float(p("~" + k))
         self.prep = Preprocessing.of_model(localizer)
+        gamma = p("~camera_gamma", None)  # unset: wherever the model holds the reference
         self.live = StreamingLocalizer(localizer, noise or None, window_ns=int(round(float(p("~window", 0.0)) * 1e9)),
                                        log=lambda m: rospy.loginfo(f"sfanav: {m}"),
                                        on_estimate=self._publish_estimate,
-                                       camera_gamma=bool(p("~camera_gamma", False)))
+                                       camera_gamma=None if gamma is None else bool(gamma))
         self.r2 = float(self.live.noise["measurement_noise"]) ** 2
         self.view = None
         if p("~rerun", ""):

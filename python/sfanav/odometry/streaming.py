@@ -30,7 +30,7 @@ from typing import Any, Callable
 import numpy as np
 
 from .._checks import as_real_array, check_int, check_nonneg_float, check_positive_float
-from ..data.camera_gamma import CameraGamma
+from ..data.camera_gamma import CameraGamma, predict_corrected
 from ..data.preprocessing import Preprocessing, Preprocessor
 from .dead_reckoning import increments, wrap_angle
 from .ekf import FilterStep, OdometryEKF
@@ -137,14 +137,17 @@ class StreamingLocalizer:
         ``novelty_exponent`` and ``novelty_knee``, as
         :func:`sfanav.odometry.fuse` does. None, or a model file without a
         novelty reference (one line through ``log`` says so): not scaled.
-    camera_gamma : bool, default False
+    camera_gamma : bool or None, default None
         Take the camera's gamma out of each image before the localizer sees
         it, as estimated over the stream so far against the training views
         where the images are placed (:class:`sfanav.data.camera_gamma.CameraGamma`;
-        a factor of 1 for the first images and within its dead zone; each
-        batch is localized twice while a factor applies). A model file without the training run's reference
-        (trained without a photometric normalisation, or before 2026-12-07):
-        one line through ``log`` says so, and the images are left as they are.
+        a factor of 1 for the first images and within its dead zone, so a
+        camera like the training run's is left exactly as it is; a batch is
+        localized again only while a factor applies). None (the default):
+        wherever the model file holds the training run's reference; True:
+        the same, and a model without it (trained without a photometric
+        normalisation, or before 2026-12-07) gets one line through ``log``;
+        False: never.
     on_estimate : callable, optional
         Called as ``on_estimate(stamp_ns, estimate)`` (estimate: ndarray (2,),
         metres, map frame) as soon as an image's single-image estimate is
@@ -194,7 +197,7 @@ class StreamingLocalizer:
                  image_shape: Iterable[int] | None = None, mirror: Any = None,
                  log: Callable[[str], None] | None = None, rotations: bool = False,
                  on_estimate: Callable[[int, np.ndarray], None] | None = None,
-                 novelty_threshold: float | None = NOVELTY_THRESHOLD, camera_gamma: bool = False) -> None:
+                 novelty_threshold: float | None = NOVELTY_THRESHOLD, camera_gamma: bool | None = None) -> None:
         if noise is None:
             noise = getattr(localizer, "info", {}).get("ekf_noise")
             if noise is None:
@@ -217,8 +220,8 @@ class StreamingLocalizer:
                 log("the model holds no novelty reference (a Localizer file written before 2026-12-06, or another "
                     "kind of model): the filter's measurement noise is not scaled by novelty")
             self.novelty_threshold = None
-        self.camera_gamma = CameraGamma.for_localizer(localizer) if camera_gamma else None
-        if camera_gamma and self.camera_gamma is None and log is not None:
+        self.camera_gamma = CameraGamma.for_localizer(localizer) if camera_gamma is not False else None
+        if camera_gamma is True and self.camera_gamma is None and log is not None:
             log("the model holds no camera gamma reference (trained without a photometric normalisation, or before "
                 "2026-12-07): the images' gamma is not corrected")
         if on_estimate is not None and not callable(on_estimate):
@@ -274,11 +277,11 @@ class StreamingLocalizer:
         out: list[LiveEstimate] = []
         if keep:
             batch = self._conform(imgs[keep])
-            xy, nov = self._localize(batch)
-            if self.camera_gamma is not None:  # the estimates place the images; localized again if corrected
-                fixed = self.camera_gamma.correct(batch, xy)
-                if fixed is not batch:
-                    xy, nov = self._localize(fixed)
+            if self.novelty_threshold is None:  # localized again once the camera's gamma is taken out
+                xy, nov = predict_corrected(self.localizer, self.camera_gamma, batch, rotations=self.rotations), None
+            else:
+                xy, nov = predict_corrected(self.localizer, self.camera_gamma, batch, novelty=True,
+                                            rotations=self.rotations)
             if nov is None:
                 ms = np.ones(len(xy))
             else:
@@ -293,12 +296,6 @@ class StreamingLocalizer:
                 self._add(stamps[i], 1, np.r_[z, m])  # the estimate and its measurement scale
             out = self._release()
         return out
-
-    def _localize(self, batch: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
-        """The estimates (N, 2) of conformed images and their novelty (None without novelty scaling)."""
-        if self.novelty_threshold is None:
-            return np.atleast_2d(self.localizer.predict(batch, rotations=self.rotations)), None
-        return self.localizer.predict_with_novelty(batch, rotations=self.rotations)
 
     def push_odometry(self, stamp_ns: int, pose: Any) -> list[LiveEstimate]:
         """One odometry pose ``(x [m], y [m], heading [rad])`` stamped

@@ -105,14 +105,16 @@ def _add_localize(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                    help="fuse the estimates with the run's odometry (EKF, CTRV; a dataset with odom_x, odom_y, "
                         "odom_heading): adds columns fused_x, fused_y, fused_heading; the noise comes from the "
                         "model's training run, the start pose from the first estimates")
-    p.add_argument("--camera-gamma", action="store_true",
+    p.add_argument("--camera-gamma", action=argparse.BooleanOptionalAction, default=None,
                    help="take the camera's gamma out of the images, estimated over the recording so far against "
                         "the training views where the images are placed (the median over the last 200 images, "
-                        "from the 20th on; ratios within 0.82..1.22 are taken as 1; each batch is localized "
-                        "twice while a factor applies): for a camera or image pipeline whose gamma differs "
-                        "from the one the model was trained with (docs/robustness.md, 'The camera's gamma from "
-                        "the stream'); needs a model trained with a photometric normalisation (the sfanav "
-                        "default) since 2026-12-07")
+                        "from the 20th on; ratios within 0.82..1.22 are taken as 1, so a camera like the training "
+                        "run's is left exactly as it is; a batch is localized again while a factor applies): a "
+                        "camera or image pipeline whose gamma differs from the training run's "
+                        "(docs/robustness.md, 'The camera's gamma from the stream'). Default: on wherever the "
+                        "model holds the training run's reference (a model trained with a photometric "
+                        "normalisation, the sfanav default, since 2026-12-07); --camera-gamma: required, an error "
+                        "for a model without it; --no-camera-gamma: off")
     p.add_argument("--rerun", default=None, metavar="NAME.rrd|viewer",
                    help="also log the images, estimates, fused track with covariance ellipses, the learned map and "
                         "the ground truth to a Rerun recording (NAME.rrd), a spawned viewer (viewer) or a running "
@@ -198,9 +200,8 @@ def _run_localize(args: argparse.Namespace) -> int:
         if "ekf_noise" not in loc.info:
             raise UsageError(f"{args.model} holds no EKF noise (its training run had no odometry): retrain it on a "
                               "run with odometry to use --odometry")
-    gamma = None
+    gamma = None if args.camera_gamma is False else CameraGamma.for_localizer(loc)
     if args.camera_gamma:
-        gamma = CameraGamma.for_localizer(loc)
         if gamma is None:
             raise UsageError(f"--camera-gamma: {args.model} holds no camera gamma reference (trained without a "
                              "photometric normalisation, or before 2026-12-07): retrain it, or leave --camera-gamma out")
@@ -255,7 +256,9 @@ def _run_localize(args: argparse.Namespace) -> int:
         log(f"camera gamma: the last {min(tracker.n_images_, tracker.window)} images' log spread is "
             f"{np.exp(-tracker.log_ratio_):.2f}x the training views' where they were placed; the images were taken "
             f"through a power of {tracker.factor_:.2f} (1 before the {tracker.min_images}th image and while the "
-            f"ratio is within {np.exp(-tracker.dead_zone):.2f}..{np.exp(tracker.dead_zone):.2f})")
+            f"ratio is within {np.exp(-tracker.dead_zone):.2f}..{np.exp(tracker.dead_zone):.2f})"
+            + (f"; {tracker.n_reverted_} corrected images were farther from the training views than as they came "
+               "and were localized as they came" if tracker.n_reverted_ else ""))
     frames = src.frames if src.frames is not None else np.arange(len(xy))
     if view is not None:
         if live is not None:  # the last batch's estimates, emitted at flush
