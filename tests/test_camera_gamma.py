@@ -212,7 +212,8 @@ def test_the_streaming_localizer_corrects_what_it_sees(model):
             live.push_images(np.arange(k, min(k + 16, len(y))) * 10**8, y[k:k + 16])
         if setting is not False:
             assert live.camera_gamma.factor_ == pytest.approx(1 / 1.4, rel=0.06)
-    want = predict_corrected(loc, CameraGamma.for_localizer(loc), y)
+    tracker = CameraGamma.for_localizer(loc)  # the same batches through one tracker
+    want = np.concatenate([predict_corrected(loc, tracker, y[k:k + 16]) for k in range(0, len(y), 16)])
     np.testing.assert_allclose(np.array(streams[None]), want, atol=1e-9)
     np.testing.assert_allclose(np.array(streams[True]), want, atol=1e-9)
     np.testing.assert_allclose(np.array(streams[False]), loc.predict(y), atol=1e-9)
@@ -250,6 +251,40 @@ def test_predict_corrected_with_novelty(model):
     xy, nov = predict_corrected(loc, CameraGamma.for_localizer(loc), y, novelty=True)
     np.testing.assert_allclose(xy, predict_corrected(loc, CameraGamma.for_localizer(loc), y), atol=1e-12)
     assert nov.shape == (len(y),) and np.isfinite(nov).all()
+
+
+def test_the_batch_in_which_the_window_fills_takes_its_first_factor():
+    x = run_of(n=30, seed=4)
+    y = gamma(x, 1.4)
+    xy = np.c_[np.arange(30) * 0.25, np.zeros(30)]
+    whole = CameraGamma(log_spread(x), xy, min_images=10).factors(y, xy)
+    assert np.all(whole[:10] == whole[9]) and whole[9] == pytest.approx(1 / 1.4, rel=0.08)  # one batch: no start at 1
+    cg = CameraGamma(log_spread(x), xy, min_images=10)
+    parts = [cg.factors(y[k:k + 4], xy[k:k + 4]) for k in range(0, 30, 4)]
+    assert np.all(parts[0] == 1.0) and np.all(parts[1] == 1.0)  # 8 images: not yet
+    assert parts[2][0] == parts[2][1] != 1.0  # the 10th image's batch (8..11): its first factor from image 8 on
+    np.testing.assert_allclose(np.concatenate(parts)[8:], whole[8:], atol=1e-12)  # then the same window
+
+
+def test_predict_corrected_corrects_the_cameras_own_pixels(model):
+    import cv2
+
+    loc, x = model
+    big = np.stack([cv2.resize(im, (96, 16), interpolation=cv2.INTER_CUBIC) for im in x])  # the camera's 96x16
+    conform = sfanav.data.Preprocessor(sfanav.data.Preprocessing(48, 8, False), log=lambda *a: None)
+    g = np.concatenate([gamma(big, 1.4)] * 2)
+    X = conform(g)
+    after = predict_corrected(loc, CameraGamma.for_localizer(loc), X)  # corrected after the resize
+    before = predict_corrected(loc, CameraGamma.for_localizer(loc), X, source=g, conform=conform)
+    tracker = CameraGamma.for_localizer(loc)
+    f = tracker.factors(X, loc.predict(X))
+    want = loc.predict(conform(apply_gamma(g, f)))
+    np.testing.assert_allclose(before, want, atol=1e-9)
+    assert not np.allclose(before, after)
+    with pytest.raises(ValueError, match="go together"):
+        predict_corrected(loc, None, X, source=g)
+    with pytest.raises(ValueError, match="one source image per image"):
+        predict_corrected(loc, None, X, source=g[:3], conform=conform)
 
 
 def test_keeps_while_the_correction_brings_the_images_nearer_the_training_views():

@@ -207,19 +207,22 @@ def run_demo(out: str | Path = "sfanav-demo", *, seed: int = 0, overwrite: bool 
     # the test walk as a ROS robot's image_transport sends it: JPEG at quality 90, compressed at the camera's size
     cam = ds.metadata["camera"]
     native, _ = load_run(test, Preprocessing(int(cam["width"]), int(cam["height"]), False), log=log)
-    X_jpeg = Preprocessor(prep, log=log)(corrupt(native, JPEG_TEST, seed=seed))
-    xy_jpeg, fused_jpeg = fuse_images(loc, X_jpeg, odo_test)
+    conform = Preprocessor(prep, log=log)
+    N_jpeg = corrupt(native, JPEG_TEST, seed=seed)
+    X_jpeg = conform(N_jpeg)
+    xy_jpeg, fused_jpeg = fuse_images(loc, X_jpeg, odo_test, source=N_jpeg, conform=conform)
     m_jpeg = localization_metrics(world.apply(xy_jpeg), xy_test, coordinate_range=crange)
     rows += _compact_rows(f"no ground truth, {JPEG_TEST} test images", m_jpeg)
     m_fj = localization_metrics(world.apply(fused_jpeg[:, :2]), xy_test, coordinate_range=crange)
     rows += _compact_rows(f"no ground truth, fused with odometry, {JPEG_TEST} test images", m_fj)
     # a camera whose gamma is not the training run's: the single images as sfanav localize reads them (the camera's
     # gamma estimated over the walk and taken out, the default) and as they are (sfanav localize --no-camera-gamma)
-    X_gamma = Preprocessor(prep, log=log)(corrupt(native, GAMMA_TEST, seed=seed))
+    N_gamma = corrupt(native, GAMMA_TEST, seed=seed)
+    X_gamma = conform(N_gamma)
     tracker = CameraGamma.for_localizer(loc)
     if tracker is not None:
-        m_gc = localization_metrics(world.apply(predict_corrected(loc, tracker, X_gamma)), xy_test,
-                                    coordinate_range=crange)
+        xy_gc = predict_corrected(loc, tracker, X_gamma, source=N_gamma, conform=conform)
+        m_gc = localization_metrics(world.apply(xy_gc), xy_test, coordinate_range=crange)
         rows += _compact_rows(f"no ground truth, {GAMMA_TEST} test images", m_gc)
     m_g = localization_metrics(world.apply(loc.predict(X_gamma)), xy_test, coordinate_range=crange)
     rows += _compact_rows(f"no ground truth, {GAMMA_TEST} test images, no camera gamma", m_g)

@@ -41,6 +41,7 @@ Examples
 from __future__ import annotations
 
 from collections import deque
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -60,7 +61,8 @@ as much. The photometric normalisation's own width."""
 WINDOW = 200
 """Recent images whose median log ratio :class:`CameraGamma` takes."""
 MIN_IMAGES = 20
-"""Images :class:`CameraGamma` waits for before it corrects (a factor of 1 until then)."""
+"""Ratios :class:`CameraGamma` waits for before it corrects (a factor of 1 until then, but for the images of the
+batch in which they are reached)."""
 NEIGHBOURS = 10
 """Training views nearest an image's estimate whose median spread is its reference."""
 MAX_FACTOR = 2.0
@@ -131,9 +133,12 @@ class CameraGamma:
     median spread of the ``neighbours`` training views nearest its position
     estimate over its own :func:`log_spread`; its factor is the exponential
     of the median log ratio of the last ``window`` images up to and
-    including it, 1 until ``min_images`` have been seen and while that
-    median is within the ``dead_zone``, and at most :data:`MAX_FACTOR` (or
-    at least its inverse); flat images (:data:`FLAT_SPREAD`) add no ratio.
+    including it, 1 while that median is within the ``dead_zone``, and at
+    most :data:`MAX_FACTOR` (or at least its inverse); flat images
+    (:data:`FLAT_SPREAD`) add no ratio. Before ``min_images`` ratios the
+    factor is 1, except for the images of the batch in which the window
+    fills: they take its first factor (a recording localized in batches
+    has no uncorrected start; a live stream of single images does).
 
     Parameters
     ----------
@@ -208,16 +213,18 @@ class CameraGamma:
         return cls(ref["spreads"], ref["positions"], offset=float(ref.get("offset", OFFSET)),
                    lowpass=float(ref.get("lowpass", LOWPASS)), **kwargs)
 
-    def correct(self, images: Any, positions: Any) -> np.ndarray:
-        """The next images of the stream (N, H, W[, C]), in order, with the
-        localizer's estimates of them (N, 2), each through its factor:
-        float32, or the images as given while every factor is 1."""
+    def factors(self, images: Any, positions: Any) -> np.ndarray:
+        """The factors (N,) of the next images of the stream (N, H, W[, C],
+        the localizer's input format), in order, with the localizer's
+        estimates of them (N, 2): each image's ratio joins the window, and
+        its factor is the window's as it stands then (see the class)."""
         a = as_image_batch(images)
         xy = as_matrix(positions, "positions", n_cols=2)
         check_same_length(a, xy, "images", "positions")
         _, nn = self._tree.query(xy, k=self.neighbours)
         ref = np.median(self.spreads[np.asarray(nn).reshape(len(xy), -1)], axis=1)
         factors = np.ones(len(a))
+        warming: list[int] = []  # images of this batch seen before the window had min_images ratios
         for i, s in enumerate(log_spread(a, offset=self.offset, lowpass=self.lowpass)):
             self.n_images_ += 1
             if s >= FLAT_SPREAD:  # a flat image tells nothing about the gamma
@@ -226,11 +233,22 @@ class CameraGamma:
                 self.log_ratio_ = float(np.median(self._ratios))
                 lr = float(np.clip(self.log_ratio_, -np.log(MAX_FACTOR), np.log(MAX_FACTOR)))
                 self.factor_ = float(np.exp(lr)) if abs(lr) > self.dead_zone else 1.0
+                if warming:  # the window's first factor for the images of this batch that came before it
+                    factors[warming] = self.factor_
+                    warming = []
+            else:
+                warming.append(i)
             factors[i] = self.factor_
-        if np.all(factors == 1.0):
-            return a
-        return apply_gamma(a, factors, offset=self.offset)
+        return factors
 
+    def correct(self, images: Any, positions: Any) -> np.ndarray:
+        """The next images of the stream (N, H, W[, C]), in order, with the
+        localizer's estimates of them (N, 2), each through its factor
+        (:meth:`factors`, :func:`apply_gamma`): float32, or the images as
+        given while every factor is 1."""
+        a = as_image_batch(images)
+        f = self.factors(a, positions)
+        return a if np.all(f == 1.0) else apply_gamma(a, f, offset=self.offset)
 
     def keeps(self, novelty_before: Any, novelty_after: Any) -> bool:
         """Whether the corrected images of the last :meth:`correct` are to be
@@ -262,7 +280,7 @@ class CameraGamma:
 
 
 def predict_corrected(localizer: Any, tracker: "CameraGamma | None", images: Any, *, novelty: bool = False,
-                      **kwargs: Any) -> Any:
+                      source: Any = None, conform: Callable[[Any], Any] | None = None, **kwargs: Any) -> Any:
     """``localizer.predict(images, **kwargs)`` with the camera's gamma taken
     out by ``tracker`` (None: plain): the images are localized once as they
     are, which places them for the tracker, and again once corrected when
@@ -271,7 +289,21 @@ def predict_corrected(localizer: Any, tracker: "CameraGamma | None", images: Any
     nearer the training views (:meth:`CameraGamma.keeps`). Returns the
     estimates (N, 2); with ``novelty``, ``(estimates, novelty (N,))`` from
     :meth:`sfanav.Localizer.predict_with_novelty` of the images whose
-    estimates are returned."""
+    estimates are returned.
+
+    ``source`` (N, H', W'[, C]) and ``conform``: the images as the camera
+    sent them and the callable that made ``images`` of them (a
+    :class:`sfanav.data.Preprocessor`): the factors are then applied to the
+    camera's own pixels and conformed again. A gamma acts on the camera's
+    pixels; a resize or an unwarping averages them, and a power of an
+    average is not the average of the powers, so a correction after them
+    leaves part of the gamma (the demo garden's 600x60 walk through gamma
+    1.4, resized to 350x40: 0.115 m corrected after the resize, 0.104 m
+    before; docs/robustness.md)."""
+    if (source is None) != (conform is None):
+        raise ValueError("source and conform go together: the camera's images and the callable that conformed them")
+    if source is not None and len(source) != len(images):
+        raise ValueError(f"source has {len(source)} images, images {len(images)}: one source image per image")
     with_novelty = novelty or (tracker is not None and getattr(localizer, "novelty_", None) is not None)
 
     def run(x: Any) -> Any:
@@ -282,8 +314,10 @@ def predict_corrected(localizer: Any, tracker: "CameraGamma | None", images: Any
 
     xy, nov = run(images)
     if tracker is not None:
-        fixed = tracker.correct(images, xy)
-        if fixed is not images:
+        f = tracker.factors(images, xy)
+        if not np.all(f == 1.0):
+            fixed = (apply_gamma(images, f, offset=tracker.offset) if source is None
+                     else conform(apply_gamma(source, f, offset=tracker.offset)))
             xy2, nov2 = run(fixed)
             if nov is None or tracker.keeps(nov, nov2):
                 xy, nov = xy2, nov2

@@ -98,12 +98,14 @@ def _med(pred: np.ndarray, xy: np.ndarray) -> float:
     return float(localization_metrics(pred, xy, coordinate_range=np.ones(2))["med"])
 
 
-def _localize(model: Any, X: np.ndarray) -> np.ndarray:
-    """A model's estimates of a test run's images X in their order: an sfanav model as ``sfanav localize`` runs it
-    (the camera's gamma taken out where the model holds the reference), an aligned one in the world frame, a peer
-    plainly."""
+def _localize(model: Any, X: np.ndarray, native: np.ndarray, conform: Any) -> np.ndarray:
+    """A model's estimates of a test run's images X in their order (``conform`` of the camera's images ``native``):
+    an sfanav model as ``sfanav localize`` runs it (the camera's gamma taken out of the camera's pixels where the
+    model holds the reference), an aligned one in the world frame, a peer plainly."""
+    if isinstance(model, _Aligned):
+        return model.frame.apply(_localize(model.loc, X, native, conform))
     if isinstance(model, Localizer):
-        return predict_corrected(model, CameraGamma.for_localizer(model), X)
+        return predict_corrected(model, CameraGamma.for_localizer(model), X, source=native, conform=conform)
     return model.predict(X)
 
 
@@ -115,12 +117,10 @@ class _Aligned:
     def __init__(self, loc: Localizer, X_tr: np.ndarray, xy_tr: np.ndarray) -> None:
         self.loc, self.frame = loc, align(loc.predict(X_tr), xy_tr)
 
-    def predict(self, X: np.ndarray) -> np.ndarray:
-        return self.frame.apply(_localize(self.loc, X))
-
-    def fused(self, X: np.ndarray, odometry: np.ndarray) -> np.ndarray:
-        """The fused track's positions (N, 2) of images X with their odometry (N, 3), in the world frame."""
-        return self.frame.apply(fuse_images(self.loc, X, odometry)[1][:, :2])
+    def fused(self, X: np.ndarray, native: np.ndarray, conform: Any, odometry: np.ndarray) -> np.ndarray:
+        """The fused track's positions (N, 2) of images X (``conform`` of the camera's ``native``) with their
+        odometry (N, 3), in the world frame."""
+        return self.frame.apply(fuse_images(self.loc, X, odometry, source=native, conform=conform)[1][:, :2])
 
 
 def _train(methods: tuple[str, ...], X: np.ndarray, xy: np.ndarray, odometry: np.ndarray | None,
@@ -183,18 +183,22 @@ def run_garden(out: Path, preset: str, train_run: str, test_run: str, *, quick: 
         default_network())
     conform = Preprocessor(prep, log=lambda *a, **k: None)
 
+    def camera(X0: np.ndarray, name: str, draw: int) -> np.ndarray:
+        return X0 if name == "clean" else corrupt(X0, name, seed=seed + draw)
+
     def images(X0: np.ndarray, name: str, draw: int) -> np.ndarray:
-        return conform(X0 if name == "clean" else corrupt(X0, name, seed=seed + draw))
+        return conform(camera(X0, name, draw))
 
     res: dict[str, Any] = {"test only": {}, "both runs": {}, "training (s)": {}}
     X_tr = images(X0_tr, "clean", 0)
     models, times = _train(METHODS, X_tr, xy_tr, odometry, elev, quick=quick, seed=seed)
     res["training (s)"] = times
     for name in ("clean",) + corruptions:
-        X_te = images(X0_te, name, 1)
-        r = {m: _med(_localize(model, X_te), xy_te) for m, model in models.items()}
+        N_te = camera(X0_te, name, 1)
+        X_te = conform(N_te)
+        r = {m: _med(_localize(model, X_te, N_te, conform), xy_te) for m, model in models.items()}
         if odometry_test is not None and "sfanav default, no ground truth" in models:  # the product path
-            r[FUSED] = _med(models["sfanav default, no ground truth"].fused(X_te, odometry_test), xy_te)
+            r[FUSED] = _med(models["sfanav default, no ground truth"].fused(X_te, N_te, conform, odometry_test), xy_te)
         if CameraGamma.for_localizer(models["sfanav default"]) is not None:  # what the tracker does
             r[NO_GAMMA] = _med(models["sfanav default"].predict(X_te), xy_te)
         res["test only"][name] = r = {m: r[m] for m in ROWS if m in r}
@@ -206,10 +210,11 @@ def run_garden(out: Path, preset: str, train_run: str, test_run: str, *, quick: 
                                           if m in BOTH_RUNS_METHODS or m == FUSED}
                 continue
             ms, _ = _train(BOTH_RUNS_METHODS, images(X0_tr, name, 2), xy_tr, odometry, elev, quick=quick, seed=seed)
-            X_te = images(X0_te, name, 1)
-            r = {m: _med(_localize(model, X_te), xy_te) for m, model in ms.items()}
+            N_te = camera(X0_te, name, 1)
+            X_te = conform(N_te)
+            r = {m: _med(_localize(model, X_te, N_te, conform), xy_te) for m, model in ms.items()}
             if odometry_test is not None and "sfanav default, no ground truth" in ms:  # the product path
-                r[FUSED] = _med(ms["sfanav default, no ground truth"].fused(X_te, odometry_test), xy_te)
+                r[FUSED] = _med(ms["sfanav default, no ground truth"].fused(X_te, N_te, conform, odometry_test), xy_te)
             res["both runs"][name] = r = {m: r[m] for m in ROWS if m in r}
             log(f"{preset} both runs {name}: " + ", ".join(f"{m} {v:.3f}" for m, v in r.items()))
     return res

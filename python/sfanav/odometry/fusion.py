@@ -362,7 +362,7 @@ def fuse(odometry: Any, estimates: Any, noise: Mapping[str, float], *, start_pos
 
 def fuse_images(localizer: Any, images: Any, odometry: Any, noise: Mapping[str, float] | None = None, *,
                 novelty_threshold: float | None = NOVELTY_THRESHOLD, camera_gamma: bool = True,
-                **kwargs: Any) -> tuple[np.ndarray, np.ndarray]:
+                source: Any = None, conform: Any = None, **kwargs: Any) -> tuple[np.ndarray, np.ndarray]:
     """A fitted :class:`sfanav.Localizer`'s estimates (N, 2) of ``images``
     (N, H, W[, C], the model's input format, in the order they were taken)
     and their fused track (N, 3) with ``odometry`` (N, 3): :func:`fuse` with
@@ -373,7 +373,10 @@ def fuse_images(localizer: Any, images: Any, odometry: Any, noise: Mapping[str, 
     scaled). ``camera_gamma`` (default True, as ``sfanav localize``): the
     camera's gamma estimated over the images so far and taken out
     (:class:`sfanav.data.camera_gamma.CameraGamma`, where the model holds
-    its reference; a camera like the training run's is left as it is).
+    its reference; a camera like the training run's is left as it is;
+    ``source`` and ``conform``, the camera's images and the callable that
+    made ``images`` of them, correct the camera's own pixels:
+    :func:`sfanav.data.camera_gamma.predict_corrected`).
     ``kwargs`` go to :func:`fuse` (``gyro``, ``stamps``, ``start_pose``,
     ...). Returns ``(estimates, fused)``. Raises ValueError for a model
     without filter noise and no ``noise``, and as :func:`fuse`.
@@ -386,8 +389,8 @@ def fuse_images(localizer: Any, images: Any, odometry: Any, noise: Mapping[str, 
             raise ValueError("the model holds no EKF noise (its training run had no odometry): pass noise")
     tracker = CameraGamma.for_localizer(localizer) if camera_gamma else None
     if novelty_threshold is not None and getattr(localizer, "novelty_", None) is not None:
-        est, nov = predict_corrected(localizer, tracker, images, novelty=True)
+        est, nov = predict_corrected(localizer, tracker, images, novelty=True, source=source, conform=conform)
         return est, fuse(odometry, est, noise, novelty=nov, novelty_threshold=novelty_threshold, **kwargs)
-    est = predict_corrected(localizer, tracker, images)
+    est = predict_corrected(localizer, tracker, images, source=source, conform=conform)
     return est, fuse(odometry, est, noise, **kwargs)
 

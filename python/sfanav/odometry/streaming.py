@@ -276,12 +276,14 @@ class StreamingLocalizer:
         keep = [i for i, s in enumerate(stamps) if not self._late(s, 1)]
         out: list[LiveEstimate] = []
         if keep:
-            batch = self._conform(imgs[keep])
-            if self.novelty_threshold is None:  # localized again once the camera's gamma is taken out
-                xy, nov = predict_corrected(self.localizer, self.camera_gamma, batch, rotations=self.rotations), None
+            raw = imgs[keep]
+            batch = self._conform(raw)
+            # localized again once the camera's gamma is taken out (of the camera's own pixels, then conformed)
+            kw = {"source": raw, "conform": self._conform, "rotations": self.rotations}
+            if self.novelty_threshold is None:
+                xy, nov = predict_corrected(self.localizer, self.camera_gamma, batch, **kw), None
             else:
-                xy, nov = predict_corrected(self.localizer, self.camera_gamma, batch, novelty=True,
-                                            rotations=self.rotations)
+                xy, nov = predict_corrected(self.localizer, self.camera_gamma, batch, novelty=True, **kw)
             if nov is None:
                 ms = np.ones(len(xy))
             else:

@@ -221,7 +221,8 @@ def _run_localize(args: argparse.Namespace) -> int:
     for batch in src.batches(args.batch_size):
         n = len(batch)
         if live is None:
-            preds.append(predict_corrected(loc, gamma, conform(batch), rotations=args.rotations))
+            preds.append(predict_corrected(loc, gamma, conform(batch), source=batch, conform=conform,
+                                           rotations=args.rotations))
         else:
             preds += live.push_images(stamps[i:i + n], batch)
             for j in range(i, i + n):
