@@ -74,6 +74,7 @@ def main() -> None:
         r = run_split(d, runs) if len(runs) > 1 else run_conditions(ds)
         res["scenes"][d.name] = r
         print(d.name, ", ".join(f"{k} {v:+.3f}" for k, v in r.items()), flush=True)
+    res["largest |log ratio| per scene"] = {n: max(abs(v) for v in r.values()) for n, r in res["scenes"].items()}
     every = [abs(v) for r in res["scenes"].values() for v in r.values()]
     res["largest |log ratio|"] = max(every)
     res["any factor applied"] = bool(max(every) > DEAD_ZONE)

@@ -256,13 +256,12 @@ class CameraGamma:
         corrected (:meth:`sfanav.Localizer.predict_with_novelty`): True while
         the median over the last ``window`` corrected images of ``before -
         after`` is above 0, i.e. the correction brings the images nearer the
-        training views. A camera with another gamma does (the demo garden's
-        walk through gamma 1.4: median novelty 3.39 -> 3.26); a walk the
+        training views. A camera with another gamma does; a walk the
         localizer cannot place (off the training run, a model too coarse to
         place it) can read as a gamma, and correcting it moves the images
-        away from every training view (a 60x8 test model: 2.46 -> 3.31):
-        those stay as they came. Raises ValueError for arrays of different
-        lengths."""
+        away from every training view: those stay as they came (measured:
+        docs/robustness.md, "The camera's gamma by default"). Raises
+        ValueError for arrays of different lengths."""
         b = np.asarray(novelty_before, dtype=np.float64).reshape(-1)
         a = np.asarray(novelty_after, dtype=np.float64).reshape(-1)
         if len(a) != len(b):
@@ -297,9 +296,8 @@ def predict_corrected(localizer: Any, tracker: "CameraGamma | None", images: Any
     camera's own pixels and conformed again. A gamma acts on the camera's
     pixels; a resize or an unwarping averages them, and a power of an
     average is not the average of the powers, so a correction after them
-    leaves part of the gamma (the demo garden's 600x60 walk through gamma
-    1.4, resized to 350x40: 0.115 m corrected after the resize, 0.104 m
-    before; docs/robustness.md)."""
+    leaves part of the gamma (docs/robustness.md, "The camera's gamma by
+    default")."""
     if (source is None) != (conform is None):
         raise ValueError("source and conform go together: the camera's images and the callable that conformed them")
     if source is not None and len(source) != len(images):
