@@ -22,11 +22,10 @@ from pathlib import Path
 
 import numpy as np
 
-from sfanav import load
-from sfanav.data import Dataset
+from _bagpath import raw_recording
+
 from sfanav.data.camera_gamma import apply_gamma
 from sfanav.data.sources import open_images
-from sfanav.localization.error_metrics import align
 from sfanav.odometry.streaming import StreamingLocalizer
 
 STRETCH = 15
@@ -47,11 +46,7 @@ def main() -> None:
     if len(sys.argv) != 3:
         sys.exit(__doc__)
     root, path = Path(sys.argv[1]), Path(sys.argv[2])
-    loc = load(root / "raw" / "model.sfa")
-    sim = Dataset(root / "sim")
-    train_csv = np.genfromtxt(root / "raw" / "train.csv", delimiter=",", names=True)
-    frame = align(np.c_[train_csv["x"], train_csv["y"]], sim.select(run="train").poses[:, :2])  # scoring only
-    truth = sim.select(run="test").poses[:, :2]
+    loc, frame, truth = raw_recording(root)
 
     def images(d: Path, run: str | None) -> tuple[np.ndarray, object]:
         src = open_images(d, run=run)

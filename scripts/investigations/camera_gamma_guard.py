@@ -20,24 +20,19 @@ from pathlib import Path
 
 import numpy as np
 
-from sfanav import load
-from sfanav.data import Dataset
+from _bagpath import raw_recording
+
 from sfanav.data.camera_gamma import CameraGamma, apply_gamma, predict_corrected
 from sfanav.data.corruptions import corrupt
 from sfanav.data.preprocessing import Preprocessing, Preprocessor
 from sfanav.data.sources import open_images
-from sfanav.localization.error_metrics import align
 
 
 def main() -> None:
     if len(sys.argv) != 3:
         sys.exit(__doc__)
     root, path = Path(sys.argv[1]), Path(sys.argv[2])
-    loc = load(root / "raw" / "model.sfa")
-    sim = Dataset(root / "sim")
-    train_csv = np.genfromtxt(root / "raw" / "train.csv", delimiter=",", names=True)
-    frame = align(np.c_[train_csv["x"], train_csv["y"]], sim.select(run="train").poses[:, :2])
-    truth = sim.select(run="test").poses[:, :2]
+    loc, frame, truth = raw_recording(root)
     native = np.concatenate(list(open_images(root / "raw" / "dataset", run="test").batches(64)))
     res: dict = {}
     for name in ("clean", "gamma-0.7", "gamma-1.4"):
