@@ -12,6 +12,11 @@
    pushed before it. Per image, the time from the message's bytes to the
    fused pose (decode, ``push_image``: preprocessing, network, readout,
    filter step) after the start frames; prints median, p90, p99 and max in ms.
+   With ``--pair-camera-gamma``, each image also goes through a second
+   localizer with the camera's gamma left in (``camera_gamma=False``; the
+   default takes it out, ``sfanav.data.camera_gamma``), the two in
+   alternating order, and the ratio of the median latencies is printed: the
+   per-image cost of the tracker where the camera is the training run's.
 2. Memory: M more images (cycled) with their odometry through the same
    object; the process's resident memory (``/proc/self/statm``) after every
    tenth of them. Prints the growth from the first tenth to the end, MB and
@@ -61,6 +66,8 @@ def main() -> int:
     ap.add_argument("--odometry-rate", type=int, default=5, help="odometry poses per image (default 5)")
     ap.add_argument("--encoding", choices=("jpeg", "raw"), default="jpeg")
     ap.add_argument("--json", metavar="OUT", help="also write the numbers as JSON")
+    ap.add_argument("--pair-camera-gamma", action="store_true",
+                    help="also time every image with the camera's gamma left in, paired (see above)")
     args = ap.parse_args()
 
     import cv2
@@ -98,31 +105,37 @@ def main() -> int:
     noise = loc.info.get("ekf_noise") or {"distance_noise": 0.02, "heading_noise": 0.02, "measurement_noise": 0.3,
                                           "turn_noise": 0.1}
     live = StreamingLocalizer(loc, noise)
+    plain = StreamingLocalizer(loc, noise, camera_gamma=False) if args.pair_camera_gamma else None
     period, k_odo = 100_000_000, args.odometry_rate
     t_img = 1_700_000_000_000_000_000
     cycle_offset = np.zeros(3)
 
-    def odometry_before(i: int, t: int) -> None:
+    def odometry_before(i: int, t: int, to=None) -> None:
         """K poses in the period before image i, interpolated from the run's odometry (cycled)."""
         j = i % n
         prev = odo[j - 1] if j else odo[0]
         for q in range(1, k_odo + 1):
             f = q / k_odo
             p = prev + f * (odo[j] - prev)
-            live.push_odometry(t - period + int(f * period), p + cycle_offset)
+            (to or live).push_odometry(t - period + int(f * period), p + cycle_offset)
 
-    lat = []
+    def timed(loc_, i: int, t: int) -> tuple[float, int, bool]:
+        odometry_before(i, t, loc_)
+        t0 = time.perf_counter()
+        out = loc_.push_image(t, decode(msgs[i % n]))
+        return (time.perf_counter() - t0) * 1e3, len(out), loc_.initialized_ and len(out) == 1
+
+    lat, lat_plain = [], []
     emitted = 0
     for i in range(args.images):
         t = t_img + i * period
-        odometry_before(i, t)
-        m = msgs[i % n]
-        t0 = time.perf_counter()
-        out = live.push_image(t, decode(m))
-        dt = time.perf_counter() - t0
-        emitted += len(out)
-        if live.initialized_ and len(out) == 1:
-            lat.append(dt * 1e3)
+        order = [(live, lat), (plain, lat_plain)] if plain is not None else [(live, lat)]
+        for loc_, into in (order if i % 2 == 0 else order[::-1]):  # alternating: neither always goes first
+            dt, k, ok = timed(loc_, i, t)
+            if loc_ is live:
+                emitted += k
+            if ok:
+                into.append(dt)
     lat = np.array(lat)
     res = {"model": str(model), "image": f"{w}x{h}", "encoding": args.encoding, "cores": os.cpu_count(),
            "timed_images": len(lat), "latency_ms": {"median": float(np.median(lat)), "p90": float(np.percentile(lat, 90)),
@@ -130,6 +143,13 @@ def main() -> int:
     print(f"latency, {args.encoding} {w}x{h} message -> fused pose, {len(lat)} images: median "
           f"{res['latency_ms']['median']:.2f} ms, p90 {res['latency_ms']['p90']:.2f}, p99 "
           f"{res['latency_ms']['p99']:.2f}, max {res['latency_ms']['max']:.2f}", flush=True)
+    if plain is not None:
+        res["latency_ms_camera_gamma_off"] = {"median": float(np.median(lat_plain)),
+                                              "p90": float(np.percentile(lat_plain, 90))}
+        res["camera_gamma_median_ratio"] = float(np.median(lat) / np.median(lat_plain))
+        print(f"the same images with the camera's gamma left in: median {np.median(lat_plain):.2f} ms; the default "
+              f"(taken out) costs {res['camera_gamma_median_ratio']:.2f}x (camera factor {live.camera_gamma.factor_:.2f})"
+              if live.camera_gamma is not None else "the model holds no camera gamma reference", flush=True)
 
     M = args.messages
     marks = []
