@@ -166,7 +166,7 @@ class CameraGamma:
     novelty_gain_ : float
         The median, over the last ``window`` corrected images, of how much
         nearer the training views the correction brought each one (its
-        novelty as it came over its novelty corrected,
+        novelty as it came minus its novelty corrected,
         :meth:`sfanav.Localizer.novelty`; NaN before any); see :meth:`keeps`.
     n_reverted_ : int
         Corrected images whose estimates were left uncorrected by :meth:`keeps`.
@@ -251,7 +251,7 @@ class CameraGamma:
         return a if np.all(f == 1.0) else apply_gamma(a, f, offset=self.offset)
 
     def keeps(self, novelty_before: Any, novelty_after: Any) -> bool:
-        """Whether the corrected images of the last :meth:`correct` are to be
+        """Whether the corrected images of the last :meth:`factors` are to be
         localized as corrected, from their novelty (N,) as they came and once
         corrected (:meth:`sfanav.Localizer.predict_with_novelty`): True while
         the median over the last ``window`` corrected images of ``before -

@@ -23,8 +23,8 @@ image's draw). Rows per garden, mode and corruption: the MED (m) of
   its estimates moved into the world frame by the rigid transform fitted on
   the training run, for evaluation only), and that model's estimates
   **fused with the test run's odometry** (the product path: the EKF noise
-  chosen on the training run, as ``sfanav localize --odometry``; test only,
-  where the test run has odometry), and the supervised default again
+  chosen on the training run, as ``sfanav localize --odometry``; where the
+  test run has odometry), and the supervised default again
   **without the camera's gamma** taken out (``sfanav localize
   --no-camera-gamma``; test only: what the tracker does);
 * the sfanav network with robustness ``"light"`` (no invariance training),
@@ -32,13 +32,15 @@ image's draw). Rows per garden, mode and corruption: the MED (m) of
   this study);
 * the **thesis configuration** (Table 5.1 network, all rows, quadratic
   regression of 8 outputs);
+* **perfect memory** (rotational image difference) and the **Fourier
+  signature** (nearest neighbour), on the same images;
 
 every sfanav model localizing a test run as ``sfanav localize`` does: the
-camera's gamma estimated over the run so far and taken out where the model
-holds the training run's reference (:class:`sfanav.data.camera_gamma.CameraGamma`;
-the robustness ``"none"`` and thesis models have none);
-* **perfect memory** (rotational image difference) and the **Fourier
-  signature** (nearest neighbour), on the same images.
+camera's gamma estimated over the run so far and taken out of the camera's
+pixels where the model holds the training run's reference
+(:class:`sfanav.data.camera_gamma.CameraGamma`; the robustness ``"none"``
+and thesis models have none). The ground-truth-free default and its fused
+track are in both modes.
 
 Summary rows give each sfanav row's worst ratio to its own clean MED and to
 the best peer's MED on the same images, and the cost on clean images against
@@ -78,8 +80,8 @@ METHODS = ("sfanav default", "sfanav default, no ground truth", "sfanav robustne
            "sfanav robustness none", "thesis configuration", "perfect memory", "Fourier signature")
 FUSED = "sfanav default, no ground truth, fused"
 """The product path: the ground-truth-free default's estimates of the test run fused with its odometry (EKF, the noise
-chosen on the training run, as ``sfanav localize --odometry``), in the test-only mode of a garden whose test run has
-odometry. Not a model of its own: the same network and readout as the row before it."""
+chosen on the training run, as ``sfanav localize --odometry``), in both modes of a garden whose test run has odometry.
+Not a model of its own: the same network and readout as the row before it."""
 NO_GAMMA = "sfanav default, no camera gamma"
 """The supervised default localizing the test run without the camera's gamma taken out (``sfanav localize
 --no-camera-gamma``), in the test-only mode: the same model as the default's row, the images as they are."""
