@@ -1,0 +1,66 @@
+#!/usr/bin/env python3
+"""The robustness's price on flawless images for the product path (docs/robustness.md, "The corruption suite"): in
+the corruption suite's three gardens (seed 0, the suite's runs), the default trained without ground truth with
+robustness "standard" (the default) and "none" (the thesis-era default), each localizing the clean test walk as
+``sfanav localize --odometry`` does (single images, and fused with the walk's odometry): MED (m) and the ratio
+standard / none. The suite's own "clean / none" compares supervised single images; this is the product's.
+
+    PYTHONPATH=python python3 scripts/investigations/product_clean_cost.py OUT docs/results/investigations/product-clean-cost.json [LEVEL...]
+
+LEVEL: the robustness levels (default: standard none; the JSON keeps the levels of earlier runs).
+
+OUT: the suite's --out (OUT/data holds its gardens). About 6 min.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from sfanav.data import Dataset
+from sfanav.data.preprocessing import Preprocessing, Preprocessor
+from sfanav.data.sources import load_run
+from sfanav.experiments.corruptions import GARDENS
+from sfanav.localization.error_metrics import align
+from sfanav.localization.recipe import default_network, recipe_for
+from sfanav.odometry.fusion import fuse_images
+from sfanav.pipeline import train_localizer
+
+
+def main() -> None:
+    if len(sys.argv) < 3:
+        sys.exit(__doc__)
+    out, path = Path(sys.argv[1]), Path(sys.argv[2])
+    levels = sys.argv[3:] or ["standard", "none"]
+    res: dict = json.loads(path.read_text()) if path.exists() else {}
+    for preset, tr, te in GARDENS:
+        ds = Dataset(out / "data" / f"{preset}-seed0")
+        cam = ds.metadata["camera"]
+        native = Preprocessing(int(cam["width"]), int(cam["height"]), False)
+        train, test = ds.select(run=tr), ds.select(run=te)
+        X0, xy = load_run(train, native)
+        T0, xyt = load_run(test, native)
+        conform = Preprocessor(Preprocessing.for_network(default_network()), log=lambda *a, **k: None)
+        X, T = conform(X0), conform(T0)
+        r: dict = res.get(preset, {})
+        for robustness in levels:
+            loc = train_localizer(X, odometry=train.odometry, supervision="odometry", network=default_network(),
+                                  recipe=recipe_for(robustness=robustness),
+                                  camera_elevation=tuple(cam.get("elevation_deg", (-30.0, 20.0))), seed=0)
+            frame = align(loc.predict(X), xy)  # scoring only
+            est, fused = fuse_images(loc, T, test.odometry, source=T0, conform=conform)
+            r[robustness] = {"MED (m) single images": float(np.linalg.norm(frame.apply(est) - xyt, axis=1).mean()),
+                             "MED (m) fused": float(np.linalg.norm(frame.apply(fused[:, :2]) - xyt, axis=1).mean())}
+            print(preset, robustness, r[robustness], flush=True)
+        for level in [v for v in r if v in ("standard", "light", "full")]:
+            if "none" in r:
+                r[f"{level} over none"] = {k: r[level][k] / r["none"][k] for k in r[level]}
+        res[preset] = r
+        path.write_text(json.dumps(res, indent=1) + "\n")
+
+
+if __name__ == "__main__":
+    main()
