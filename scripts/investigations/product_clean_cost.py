@@ -20,14 +20,11 @@ from pathlib import Path
 
 import numpy as np
 
-from sfanav.data import Dataset
-from sfanav.data.preprocessing import Preprocessing, Preprocessor
-from sfanav.data.sources import load_run
+from _suite_garden import load_garden
+
 from sfanav.experiments.corruptions import GARDENS
 from sfanav.localization.error_metrics import align
-from sfanav.localization.recipe import default_network, recipe_for
 from sfanav.odometry.fusion import fuse_images
-from sfanav.pipeline import train_localizer
 
 
 def main() -> None:
@@ -36,22 +33,15 @@ def main() -> None:
     out, path = Path(sys.argv[1]), Path(sys.argv[2])
     levels = sys.argv[3:] or ["standard", "none"]
     res: dict = json.loads(path.read_text()) if path.exists() else {}
-    for preset, tr, te in GARDENS:
-        ds = Dataset(out / "data" / f"{preset}-seed0")
-        cam = ds.metadata["camera"]
-        native = Preprocessing(int(cam["width"]), int(cam["height"]), False)
-        train, test = ds.select(run=tr), ds.select(run=te)
-        X0, xy = load_run(train, native)
-        T0, xyt = load_run(test, native)
-        conform = Preprocessor(Preprocessing.for_network(default_network()), log=lambda *a, **k: None)
-        X, T = conform(X0), conform(T0)
+    for preset, _, _ in GARDENS:
+        g = load_garden(out, preset)
+        X, T = g.conform(g.native[0]), g.conform(g.native[1])
+        xy, xyt, test = g.xy, g.xyt, g.test
         r: dict = res.get(preset, {})
         for robustness in levels:
-            loc = train_localizer(X, odometry=train.odometry, supervision="odometry", network=default_network(),
-                                  recipe=recipe_for(robustness=robustness),
-                                  camera_elevation=tuple(cam.get("elevation_deg", (-30.0, 20.0))), seed=0)
+            loc = g.product(robustness)
             frame = align(loc.predict(X), xy)  # scoring only
-            est, fused = fuse_images(loc, T, test.odometry, source=T0, conform=conform)
+            est, fused = fuse_images(loc, T, test.odometry, source=g.native[1], conform=g.conform)
             r[robustness] = {"MED (m) single images": float(np.linalg.norm(frame.apply(est) - xyt, axis=1).mean()),
                              "MED (m) fused": float(np.linalg.norm(frame.apply(fused[:, :2]) - xyt, axis=1).mean())}
             print(preset, robustness, r[robustness], flush=True)

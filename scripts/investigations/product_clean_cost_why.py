@@ -20,14 +20,10 @@ from pathlib import Path
 
 import numpy as np
 
-from sfanav.data import Dataset
-from sfanav.data.preprocessing import Preprocessing, Preprocessor
-from sfanav.data.sources import load_run
-from sfanav.experiments.corruptions import GARDENS
+from _suite_garden import load_garden
+
 from sfanav.localization.error_metrics import align
-from sfanav.localization.recipe import default_network, recipe_for
 from sfanav.odometry.fusion import fuse
-from sfanav.pipeline import train_localizer
 
 STRETCH = 15
 LAGS = (1, 5, 15)
@@ -37,24 +33,13 @@ def main() -> None:
     if len(sys.argv) < 4:
         sys.exit(__doc__)
     out, path = Path(sys.argv[1]), Path(sys.argv[2])
-    runs = {p: (tr, te) for p, tr, te in GARDENS}
     res: dict = json.loads(path.read_text()) if path.exists() else {}
     for g in sys.argv[3:]:
-        tr, te = runs[g]
-        ds = Dataset(out / "data" / f"{g}-seed0")
-        cam = ds.metadata["camera"]
-        native = Preprocessing(int(cam["width"]), int(cam["height"]), False)
-        train, test = ds.select(run=tr), ds.select(run=te)
-        X0, xy = load_run(train, native)
-        T0, xyt = load_run(test, native)
-        conform = Preprocessor(Preprocessing.for_network(default_network()), log=lambda *a, **k: None)
-        X, T = conform(X0), conform(T0)
-        models = {}
-        for rb in ("standard", "none"):
-            loc = train_localizer(X, odometry=train.odometry, supervision="odometry", network=default_network(),
-                                  recipe=recipe_for(robustness=rb),
-                                  camera_elevation=tuple(cam.get("elevation_deg", (-30.0, 20.0))), seed=0)
-            models[rb] = (loc, align(loc.predict(X), xy))
+        garden = load_garden(out, g)
+        T, xyt, test = garden.conform(garden.native[1]), garden.xyt, garden.test
+        X, xy = garden.conform(garden.native[0]), garden.xy
+        models = {rb: garden.product(rb) for rb in ("standard", "none")}
+        models = {rb: (loc, align(loc.predict(X), xy)) for rb, loc in models.items()}
         r: dict = {}
         for rb, (loc, frame) in models.items():
             est, nov = loc.predict_with_novelty(T)
