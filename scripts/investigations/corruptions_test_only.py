@@ -11,7 +11,9 @@ part the new rows are in (about 25 min on 2 cores).
     PYTHONPATH=python python3 scripts/investigations/corruptions_test_only.py --resummarize JSON   # the summary again
 
 OUT/data holds the simulated gardens (reused when there, as the experiment does). Writes the experiment's tables per
-garden ({corruption: {row: MED}}) and their summary ratios.
+garden ({corruption: {row: MED}}) and their summary ratios. The committed JSON is 2026-12-07's; since 2026-12-08 the
+suite itself has these rows, with the camera's gamma taken out by default (its row is now "sfanav default, no camera
+gamma"), so a rerun writes the present rows.
 """
 
 from __future__ import annotations
