@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any
 
@@ -12,8 +12,36 @@ from sfanav.data import Dataset
 from sfanav.data.preprocessing import Preprocessing, Preprocessor
 from sfanav.data.sources import load_run
 from sfanav.experiments.corruptions import GARDENS
-from sfanav.localization.recipe import default_network, recipe_for
+from sfanav.localization.recipe import Recipe, default_network, recipe_for
 from sfanav.pipeline import train_localizer
+
+
+class _Part(Recipe):
+    """The default's recipe with one part of robustness "light": the photometric normalisation only
+    ("photometric-only") or the readout's corrupted copies only ("copies-only")."""
+
+    def robust_kwargs(self, model=None):
+        kw = super().robust_kwargs() if model is None else super().robust_kwargs(model)
+        part = getattr(self, "_part", "")
+        if part == "photometric-only":
+            kw["readout_augmentation"] = None
+        elif part == "copies-only":
+            kw["photometric"] = None
+        return kw
+
+
+PARTS = ("photometric-only", "copies-only")
+"""Robustness levels of :meth:`Garden.product` beyond the library's: a part of ``"light"`` alone."""
+
+
+def recipe(robustness: str) -> Recipe:
+    """The default's recipe at a library robustness level or one of :data:`PARTS`."""
+    if robustness not in PARTS:
+        return recipe_for(robustness=robustness)
+    base = recipe_for(robustness="light")
+    r = _Part(**{f.name: getattr(base, f.name) for f in fields(base)})
+    object.__setattr__(r, "_part", robustness)
+    return r
 
 
 @dataclass
@@ -27,9 +55,10 @@ class Garden:
     elevation: tuple[float, float]
 
     def product(self, robustness: str):
-        """The ground-truth-free default with ``robustness``, seed 0, trained on the conformed training run."""
+        """The ground-truth-free default with ``robustness`` (a library level or one of :data:`PARTS`), seed 0,
+        trained on the conformed training run."""
         return train_localizer(self.conform(self.native[0]), odometry=self.train.odometry, supervision="odometry",
-                               network=default_network(), recipe=recipe_for(robustness=robustness),
+                               network=default_network(), recipe=recipe(robustness),
                                camera_elevation=self.elevation, seed=0)
 
 

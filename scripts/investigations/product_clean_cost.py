@@ -7,7 +7,9 @@ standard / none. The suite's own "clean / none" compares supervised single image
 
     PYTHONPATH=python python3 scripts/investigations/product_clean_cost.py OUT docs/results/investigations/product-clean-cost.json [LEVEL...]
 
-LEVEL: the robustness levels (default: standard none; the JSON keeps the levels of earlier runs).
+LEVEL: the robustness levels (default: standard none; the JSON keeps the levels of earlier runs), the library's
+or a part of "light" alone: "photometric-only" (the normalisation, no corrupted copies in the readout) or
+"copies-only" (the readout's corrupted copies, no normalisation).
 
 OUT: the suite's --out (OUT/data holds its gardens). About 6 min.
 """
@@ -45,7 +47,7 @@ def main() -> None:
             r[robustness] = {"MED (m) single images": float(np.linalg.norm(frame.apply(est) - xyt, axis=1).mean()),
                              "MED (m) fused": float(np.linalg.norm(frame.apply(fused[:, :2]) - xyt, axis=1).mean())}
             print(preset, robustness, r[robustness], flush=True)
-        for level in [v for v in r if v in ("standard", "light", "full")]:
+        for level in [v for v in r if v in ("standard", "light", "full", "photometric-only", "copies-only")]:
             if "none" in r:
                 r[f"{level} over none"] = {k: r[level][k] / r["none"][k] for k in r[level]}
         res[preset] = r
