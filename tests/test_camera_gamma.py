@@ -205,9 +205,11 @@ def test_the_streaming_localizer_corrects_what_it_sees(model):
     noise = {"distance_noise": 0.05, "heading_noise": 0.05, "measurement_noise": 0.2}
     got = []
     streams = {}
+    said = []
     for setting in (None, True, False):  # None: the default, wherever the model holds the reference
         got = streams[setting] = []
-        live = StreamingLocalizer(loc, noise, camera_gamma=setting, on_estimate=lambda t, z, got=got: got.append(z))
+        live = StreamingLocalizer(loc, noise, camera_gamma=setting, on_estimate=lambda t, z, got=got: got.append(z),
+                                  log=said.append if setting is None else None)
         for k in range(0, len(y), 16):  # in batches, as sfanav localize pushes a recording
             live.push_images(np.arange(k, min(k + 16, len(y))) * 10**8, y[k:k + 16])
         if setting is not False:
@@ -215,6 +217,8 @@ def test_the_streaming_localizer_corrects_what_it_sees(model):
     tracker = CameraGamma.for_localizer(loc)  # the same batches through one tracker
     want = np.concatenate([predict_corrected(loc, tracker, y[k:k + 16]) for k in range(0, len(y), 16)])
     np.testing.assert_allclose(np.array(streams[None]), want, atol=1e-9)
+    gamma_lines = [m for m in said if m.startswith("camera gamma:")]
+    assert len(gamma_lines) == 1 and "a power of 0.7" in gamma_lines[0], said  # said once, when it started
     np.testing.assert_allclose(np.array(streams[True]), want, atol=1e-9)
     np.testing.assert_allclose(np.array(streams[False]), loc.predict(y), atol=1e-9)
     assert not np.allclose(want, loc.predict(y))  # the correction changed the estimates
@@ -327,6 +331,10 @@ def test_localize_camera_gamma_on_the_command_line(tmp_path, capsys):
     # moves the images away from the training views, so they are localized as they came
     assert "localized as they came" in err
     assert (root / "default.csv").read_text() == (root / "light.csv").read_text()
+    code, out, err = run(capsys, "localize", root / "light.sfa", root / "data", "--run", "test", "--odometry",
+                         "--out", root / "fused.csv", "--no-progress")  # the streaming localizer says it as it goes
+    assert code == 0, err
+    assert "farther from the training views: images as they come" in err
     code, out, err = run(capsys, "localize", root / "light.sfa", root / "data", "--run", "test", "--no-camera-gamma",
                          "--out", root / "off.csv", "--no-progress")
     assert code == 0, err

@@ -234,6 +234,8 @@ class StreamingLocalizer:
                                   gate_probability=gate_probability, **off)
         self.filter.start((0.0, 0.0, 0.0))  # validates the noise and gate now, not at the first image
         self._last_pose: np.ndarray | None = None
+        self._log = log
+        self._said_gamma: tuple[float, bool] = (1.0, False)  # the tracker's factor and reverting, as last logged
         kw = {} if log is None else {"log": log}
         self._conform = Preprocessor(Preprocessing.of_model(localizer), mirror=mirror, **kw)
         self._events: list[tuple[int, int, int, Any]] = []  # heap of (stamp, kind, seq, payload); kind 0 odometry, 1 image
@@ -284,6 +286,7 @@ class StreamingLocalizer:
                 xy, nov = predict_corrected(self.localizer, self.camera_gamma, batch, **kw), None
             else:
                 xy, nov = predict_corrected(self.localizer, self.camera_gamma, batch, novelty=True, **kw)
+            self._say_gamma()
             if nov is None:
                 ms = np.ones(len(xy))
             else:
@@ -298,6 +301,27 @@ class StreamingLocalizer:
                 self._add(stamps[i], 1, np.r_[z, m])  # the estimate and its measurement scale
             out = self._release()
         return out
+
+    def _say_gamma(self) -> None:
+        """One line through ``log`` when the camera-gamma tracker starts, changes (by 5 % or more) or stops
+        correcting, or its guard starts or stops leaving the images as they came."""
+        cg = self.camera_gamma
+        if cg is None or self._log is None:
+            return
+        reverting = cg.novelty_gain_ <= 0  # NaN (no correction judged yet) compares False
+        f0, r0 = self._said_gamma
+        if abs(np.log(cg.factor_ / f0)) < np.log(1.05) and reverting == r0:
+            return
+        self._said_gamma = (cg.factor_, reverting)
+        if cg.factor_ == 1.0:
+            self._log(f"camera gamma: as the training run's (log spread ratio {np.exp(-cg.log_ratio_):.2f}); "
+                      "images as they come")
+        elif reverting:
+            self._log(f"camera gamma: a power of {cg.factor_:.2f} would take it out, but the corrected images are "
+                      "farther from the training views: images as they come")
+        else:
+            self._log(f"camera gamma: the images are taken through a power of {cg.factor_:.2f} (their log spread "
+                      f"{np.exp(-cg.log_ratio_):.2f}x the training views')")
 
     def push_odometry(self, stamp_ns: int, pose: Any) -> list[LiveEstimate]:
         """One odometry pose ``(x [m], y [m], heading [rad])`` stamped
