@@ -244,13 +244,17 @@ class StreamGamma:
     against the training views where they are placed (the model's stored reference), and localized again where a
     factor applies (predict_corrected), with a fresh tracker per run."""
 
-    def __init__(self, loc):
-        self.loc = loc
+    def __init__(self, loc, pixels=False):
+        self.loc, self.pixels = loc, pixels
 
-    def predict(self, X):
+    def predict(self, X, native=None, conform=None):
+        """``pixels`` (the library's default since 2026-12-08: the guard, the factors on the camera's ``native``
+        images before ``conform``, the warm-up batch corrected); else the tracker as measured on 2026-12-07 (the
+        factors on the conformed images; the guard and the warm-up batch now in the library apply to both)."""
         from sfanav.data.camera_gamma import CameraGamma, predict_corrected
 
-        return predict_corrected(self.loc, CameraGamma.for_localizer(self.loc), X)
+        kw = {"source": native, "conform": conform} if self.pixels and native is not None else {}
+        return predict_corrected(self.loc, CameraGamma.for_localizer(self.loc), X, **kw)
 
 
 def _batch(images):
@@ -377,6 +381,7 @@ CANDIDATES = {
     "rungammaq-0.25": ({"robustness": "standard", "photometric": "lowpass-2-flat"}, "rungammaq"),
     "rungammaf-0.25": ({"robustness": "standard", "photometric": "lowpass-2-flat"}, "rungammaf"),
     "camgamma-0.25": ({"robustness": "standard", "photometric": "lowpass-2-flat"}, "camgamma"),
+    "camgammapx-0.25": ({"robustness": "standard", "photometric": "lowpass-2-flat"}, "camgammapx"),
     "standard": ({"robustness": "standard"}, None),
     "standard-camgamma": ({"robustness": "standard"}, "camgamma"),
     **{f"gammafix{o}-0.25": ({"robustness": "standard", "photometric": f"gammafix{o}-default"}, None)
@@ -412,8 +417,9 @@ def train(name, X, xy, elev):
     kw.update(opts)
     if kw.get("photometric") != "lowpass-log-contrast":  # the script's own kinds set their low-pass in their name
         kw.pop("lowpass", None)
-    if pre == "camgamma":
-        return StreamGamma(fit_localizer(net, X, xy, rotation=Rotation(5, 1.0), progress=False, **kw))
+    if pre in ("camgamma", "camgammapx"):
+        return StreamGamma(fit_localizer(net, X, xy, rotation=Rotation(5, 1.0), progress=False, **kw),
+                           pixels=pre == "camgammapx")
     if pre in ("rungamma", "rungammaq", "rungammaf"):
         pre = RunGamma(spread={"rungamma": "std", "rungammaq": "quantile", "rungammaf": "flat-std"}[pre])
     if pre is None:
@@ -499,8 +505,9 @@ def main():
         T0, xyt = load_run(ds.select(run=te), native, log=lambda m: None)
         conform = Preprocessor(prep, log=lambda *m, **k: None)
         X = conform(X0)
-        tests = {"clean": conform(T0), **{c: conform(corrupt(T0, c, seed=1))
-                                          for c in CORRUPTIONS + (EXTRA_CORRUPTIONS if a.extra else [])}}
+        natives = {"clean": T0, **{c: corrupt(T0, c, seed=1) for c in CORRUPTIONS + (EXTRA_CORRUPTIONS if a.extra
+                                                                                   else [])}}
+        tests = {c: conform(N) for c, N in natives.items()}
         elev = tuple(cam["elevation_deg"])
         if a.matched:
             for name in a.candidates.split(","):
@@ -520,11 +527,12 @@ def main():
             t0 = time.perf_counter()
             model = train(name, X, xy, elev)
             secs = time.perf_counter() - t0
-            med = {c: localization_metrics(model.predict(T), xyt)["med"] for c, T in tests.items()}
+            med = {c: localization_metrics(model.predict(T, natives[c], conform) if isinstance(model, StreamGamma)
+                                           else model.predict(T), xyt)["med"] for c, T in tests.items()}
             out[f"{g}|{name}"] = {"MED (m)": med, "training (s)": secs}
             if isinstance(model, StreamGamma):  # the same model without the correction: the paired baseline
                 plain = {c: localization_metrics(model.loc.predict(T), xyt)["med"] for c, T in tests.items()}
-                out[f"{g}|{name.replace('-camgamma', '').replace('camgamma', 'lowpass-2-flat')}"] = {
+                out[f"{g}|{name.replace('-camgamma', '').replace('camgammapx', 'lowpass-2-flat').replace('camgamma', 'lowpass-2-flat')}"] = {
                     "MED (m)": plain, "training (s)": secs}
             ratios = {c: v / med["clean"] for c, v in med.items() if c != "clean"}
             print(f"{g:18s} {name:16s} clean {med['clean']:.3f} worst x{max(ratios.values()):.2f} "
