@@ -339,7 +339,7 @@ def test_localize_camera_gamma_on_the_command_line(tmp_path, capsys):
                          "--out", root / "off.csv", "--no-progress")
     assert code == 0, err
     assert "camera gamma:" not in err + out
-    assert (root / "off.csv").read_text() == (root / "light.csv").read_text()  # clean images: the factor stays 1
+    assert (root / "off.csv").read_text() == (root / "light.csv").read_text()  # the guard left them as they came
     code, out, err = run(capsys, "localize", root / "none.sfa", root / "data", "--run", "test",
                          "--out", root / "none.csv", "--no-progress")
     assert code == 0, err

@@ -119,10 +119,12 @@ class _Aligned:
     def __init__(self, loc: Localizer, X_tr: np.ndarray, xy_tr: np.ndarray) -> None:
         self.loc, self.frame = loc, align(loc.predict(X_tr), xy_tr)
 
-    def fused(self, X: np.ndarray, native: np.ndarray, conform: Any, odometry: np.ndarray) -> np.ndarray:
-        """The fused track's positions (N, 2) of images X (``conform`` of the camera's ``native``) with their
-        odometry (N, 3), in the world frame."""
-        return self.frame.apply(fuse_images(self.loc, X, odometry, source=native, conform=conform)[1][:, :2])
+    def fused(self, X: np.ndarray, native: np.ndarray, conform: Any,
+              odometry: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The estimates (N, 2) of images X (``conform`` of the camera's ``native``) and their fused track's
+        positions (N, 2) with the odometry (N, 3), both in the world frame: the product path."""
+        est, fused = fuse_images(self.loc, X, odometry, source=native, conform=conform)
+        return self.frame.apply(est), self.frame.apply(fused[:, :2])
 
 
 def _train(methods: tuple[str, ...], X: np.ndarray, xy: np.ndarray, odometry: np.ndarray | None,
@@ -191,16 +193,26 @@ def run_garden(out: Path, preset: str, train_run: str, test_run: str, *, quick: 
     def images(X0: np.ndarray, name: str, draw: int) -> np.ndarray:
         return conform(camera(X0, name, draw))
 
+    def localized(models: dict[str, Any], name: str) -> tuple[dict[str, float], np.ndarray]:
+        """Every model's MED on the test run under corruption ``name`` (the ground-truth-free model's estimates and,
+        where the test run has odometry, its fused track from one localization), and the test images."""
+        N_te = camera(X0_te, name, 1)
+        X_te = conform(N_te)
+        r = {}
+        for m, model in models.items():
+            if isinstance(model, _Aligned) and odometry_test is not None:  # the product path
+                est, fused = model.fused(X_te, N_te, conform, odometry_test)
+                r[m], r[FUSED] = _med(est, xy_te), _med(fused, xy_te)
+            else:
+                r[m] = _med(_localize(model, X_te, N_te, conform), xy_te)
+        return r, X_te
+
     res: dict[str, Any] = {"test only": {}, "both runs": {}, "training (s)": {}}
     X_tr = images(X0_tr, "clean", 0)
     models, times = _train(METHODS, X_tr, xy_tr, odometry, elev, quick=quick, seed=seed)
     res["training (s)"] = times
     for name in ("clean",) + corruptions:
-        N_te = camera(X0_te, name, 1)
-        X_te = conform(N_te)
-        r = {m: _med(_localize(model, X_te, N_te, conform), xy_te) for m, model in models.items()}
-        if odometry_test is not None and "sfanav default, no ground truth" in models:  # the product path
-            r[FUSED] = _med(models["sfanav default, no ground truth"].fused(X_te, N_te, conform, odometry_test), xy_te)
+        r, X_te = localized(models, name)
         if CameraGamma.for_localizer(models["sfanav default"]) is not None:  # what the tracker does
             r[NO_GAMMA] = _med(models["sfanav default"].predict(X_te), xy_te)
         res["test only"][name] = r = {m: r[m] for m in ROWS if m in r}
@@ -212,11 +224,7 @@ def run_garden(out: Path, preset: str, train_run: str, test_run: str, *, quick: 
                                           if m in BOTH_RUNS_METHODS or m == FUSED}
                 continue
             ms, _ = _train(BOTH_RUNS_METHODS, images(X0_tr, name, 2), xy_tr, odometry, elev, quick=quick, seed=seed)
-            N_te = camera(X0_te, name, 1)
-            X_te = conform(N_te)
-            r = {m: _med(_localize(model, X_te, N_te, conform), xy_te) for m, model in ms.items()}
-            if odometry_test is not None and "sfanav default, no ground truth" in ms:  # the product path
-                r[FUSED] = _med(ms["sfanav default, no ground truth"].fused(X_te, N_te, conform, odometry_test), xy_te)
+            r, _ = localized(ms, name)
             res["both runs"][name] = r = {m: r[m] for m in ROWS if m in r}
             log(f"{preset} both runs {name}: " + ", ".join(f"{m} {v:.3f}" for m, v in r.items()))
     return res

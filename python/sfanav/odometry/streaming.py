@@ -281,11 +281,10 @@ class StreamingLocalizer:
             raw = imgs[keep]
             batch = self._conform(raw)
             # localized again once the camera's gamma is taken out (of the camera's own pixels, then conformed)
-            kw = {"source": raw, "conform": self._conform, "rotations": self.rotations}
-            if self.novelty_threshold is None:
-                xy, nov = predict_corrected(self.localizer, self.camera_gamma, batch, **kw), None
-            else:
-                xy, nov = predict_corrected(self.localizer, self.camera_gamma, batch, novelty=True, **kw)
+            scaled = self.novelty_threshold is not None
+            got = predict_corrected(self.localizer, self.camera_gamma, batch, novelty=scaled, source=raw,
+                                    conform=self._conform, rotations=self.rotations)
+            xy, nov = got if scaled else (got, None)
             self._say_gamma()
             if nov is None:
                 ms = np.ones(len(xy))
